@@ -1,0 +1,155 @@
+//! The crate's error type. Every error that comes from user data names the
+//! file and, where known, the line, frame, agent and field, so a lighter can
+//! find the bad record without a debugger.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// Result with the crate's [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Where in a user file something went wrong.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Location {
+    /// File the data came from.
+    pub path: PathBuf,
+    /// 1-based line (text formats).
+    pub line: Option<usize>,
+    /// Frame number (cache frame or shot frame, as the message says).
+    pub frame: Option<i64>,
+    /// Agent id.
+    pub agent: Option<u32>,
+    /// Field or key name.
+    pub field: Option<String>,
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.path.display())?;
+        if let Some(l) = self.line {
+            write!(f, ":{l}")?;
+        }
+        let mut parts = Vec::new();
+        if let Some(fr) = self.frame {
+            parts.push(format!("frame {fr}"));
+        }
+        if let Some(a) = self.agent {
+            parts.push(format!("agent {a}"));
+        }
+        if let Some(k) = &self.field {
+            parts.push(format!("field `{k}`"));
+        }
+        if !parts.is_empty() {
+            write!(f, ": {}", parts.join(", "))?;
+        }
+        Ok(())
+    }
+}
+
+/// Everything that can go wrong in throng.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// Reading or writing a file failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// A user file holds bad data.
+    #[error("{at}: {msg}")]
+    Invalid {
+        /// Where.
+        at: Box<Location>,
+        /// What is wrong, in a lighter's words.
+        msg: String,
+    },
+    /// The command line asks for something impossible.
+    #[error("{0}")]
+    Usage(String),
+    /// A verb that exists in the design but is not built yet.
+    #[error("`throng {0}` is not built yet")]
+    NotBuilt(&'static str),
+}
+
+impl Error {
+    /// A bad-data error in `path`; add context with the builder methods.
+    pub fn invalid(path: impl AsRef<Path>, msg: impl Into<String>) -> Self {
+        Error::Invalid {
+            at: Box::new(Location { path: path.as_ref().to_path_buf(), ..Default::default() }),
+            msg: msg.into(),
+        }
+    }
+
+    /// An I/O error on `path`.
+    pub fn io(path: impl AsRef<Path>, source: std::io::Error) -> Self {
+        Error::Io { path: path.as_ref().to_path_buf(), source }
+    }
+
+    fn with(mut self, f: impl FnOnce(&mut Location)) -> Self {
+        if let Error::Invalid { at, .. } = &mut self {
+            f(at);
+        }
+        self
+    }
+
+    /// Adds the 1-based line number.
+    pub fn line(self, line: usize) -> Self {
+        self.with(|l| l.line = Some(line))
+    }
+    /// Adds the frame.
+    pub fn frame(self, frame: i64) -> Self {
+        self.with(|l| l.frame = Some(frame))
+    }
+    /// Adds the agent id.
+    pub fn agent(self, agent: u32) -> Self {
+        self.with(|l| l.agent = Some(agent))
+    }
+    /// Adds the field or key.
+    pub fn field(self, field: impl Into<String>) -> Self {
+        let field = field.into();
+        self.with(|l| l.field = Some(field))
+    }
+}
+
+/// Adds the path to `std::io::Result`s.
+pub trait IoContext<T> {
+    /// Maps an I/O error to [`Error::Io`] naming `path`.
+    fn at(self, path: impl AsRef<Path>) -> Result<T>;
+}
+
+impl<T> IoContext<T> for std::io::Result<T> {
+    fn at(self, path: impl AsRef<Path>) -> Result<T> {
+        self.map_err(|e| Error::io(path, e))
+    }
+}
+
+/// Writes a file atomically: `write` fills a temporary file beside `path`,
+/// which is renamed over `path` only when complete, so no reader ever sees a
+/// partial file under the final name (even after kill -9).
+pub fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> Result<()>,
+) -> Result<()> {
+    use std::io::Write;
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).at(dir)?;
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let result = (|| {
+        let file = std::fs::File::create(&tmp).at(&tmp)?;
+        let mut w = std::io::BufWriter::new(file);
+        write(&mut w)?;
+        w.flush().at(&tmp)?;
+        w.get_ref().sync_all().at(&tmp)?;
+        Ok(())
+    })();
+    match result {
+        Ok(()) => std::fs::rename(&tmp, path).at(path),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(e)
+        }
+    }
+}

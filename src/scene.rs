@@ -1,0 +1,162 @@
+//! The render-facing scene: meshes and materials loaded once and shared,
+//! and per-frame instances that reference them. Casting and the set loader
+//! produce these; the renderer and `throng export` consume them.
+//!
+//! INTERFACE (shared by casting, export and the renderer; keep stable).
+
+use glam::{Affine3A, Vec2, Vec3};
+
+/// Index into [`Library::meshes`].
+pub type MeshId = u32;
+/// Index into [`Library::materials`].
+pub type MaterialId = u32;
+
+/// A triangle mesh in object space.
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    /// Unique name, e.g. `parts/heads.glb#head_sphere` or `proxy_box`.
+    pub name: String,
+    /// Vertex positions.
+    pub positions: Vec<Vec3>,
+    /// Per-vertex normals (same length as positions, or empty for flat shading).
+    pub normals: Vec<Vec3>,
+    /// Per-vertex texture coordinates (same length as positions, or empty).
+    pub uvs: Vec<Vec2>,
+    /// Triangle list, three indices per triangle.
+    pub indices: Vec<u32>,
+}
+
+impl Mesh {
+    /// Axis-aligned bounds (min, max); zero box for an empty mesh.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let mut it = self.positions.iter();
+        let Some(&first) = it.next() else { return (Vec3::ZERO, Vec3::ZERO) };
+        it.fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p)))
+    }
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+    /// Bytes of geometry this mesh holds (positions, normals, uvs, indices).
+    pub fn bytes(&self) -> usize {
+        self.positions.len() * 12 + self.normals.len() * 12 + self.uvs.len() * 8 + self.indices.len() * 4
+    }
+}
+
+/// An RGBA texture in linear colour (sRGB decoded on load).
+#[derive(Clone, Debug, Default)]
+pub struct Texture {
+    /// Name (file or glTF image name).
+    pub name: String,
+    /// Width in texels.
+    pub width: u32,
+    /// Height in texels.
+    pub height: u32,
+    /// Row-major texels, top row first, linear RGBA.
+    pub texels: Vec<[f32; 4]>,
+}
+
+/// glTF metallic-roughness material.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    /// Unique name, e.g. `robots/chrome`.
+    pub name: String,
+    /// Linear base colour factor.
+    pub base_color: Vec3,
+    /// Optional base colour texture, index into [`Library::textures`]; multiplies the factor.
+    pub base_color_texture: Option<u32>,
+    /// Perceptual roughness 0..1.
+    pub roughness: f32,
+    /// Metalness 0..1.
+    pub metallic: f32,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material { name: "default".into(), base_color: Vec3::splat(0.8), base_color_texture: None, roughness: 0.5, metallic: 0.0 }
+    }
+}
+
+/// Meshes, materials and textures, each loaded once and shared by every
+/// instance that uses it.
+#[derive(Clone, Debug, Default)]
+pub struct Library {
+    /// Unique meshes.
+    pub meshes: Vec<Mesh>,
+    /// Unique materials.
+    pub materials: Vec<Material>,
+    /// Unique textures.
+    pub textures: Vec<Texture>,
+}
+
+/// Visibility bits of an instance, per ray type. Which bits an instance gets
+/// comes from the layer manifest, never from the renderer.
+pub mod vis {
+    /// Seen directly by camera rays and contributes colour and alpha.
+    pub const CAMERA: u8 = 1;
+    /// Blocks shadow rays.
+    pub const SHADOW: u8 = 2;
+    /// Seen by secondary (reflection / indirect) rays.
+    pub const INDIRECT: u8 = 4;
+    /// Holdout: occludes camera rays but gives alpha 0 and no colour.
+    pub const HOLDOUT: u8 = 8;
+    /// A normal, fully visible object.
+    pub const ALL: u8 = CAMERA | SHADOW | INDIRECT;
+}
+
+/// One placed copy of a mesh.
+#[derive(Clone, Copy, Debug)]
+pub struct Instance {
+    /// Which mesh.
+    pub mesh: MeshId,
+    /// Which material.
+    pub material: MaterialId,
+    /// Object to world.
+    pub world_from_object: Affine3A,
+    /// Cache agent id; `None` for the set.
+    pub agent: Option<u32>,
+    /// Slot index within the agent's rig (0 for the set).
+    pub part: u16,
+    /// [`vis`] bits.
+    pub visibility: u8,
+}
+
+/// A pinhole camera.
+#[derive(Clone, Copy, Debug)]
+pub struct Camera {
+    /// Camera to world; the camera looks down its local -Z with +Y up (glTF convention).
+    pub world_from_camera: Affine3A,
+    /// Vertical field of view in radians.
+    pub yfov: f32,
+}
+
+/// A distant sun with a finite angular size.
+#[derive(Clone, Copy, Debug)]
+pub struct Sun {
+    /// Unit vector from the scene towards the sun.
+    pub direction: Vec3,
+    /// Full angular diameter in radians (0.0093 for the real sun).
+    pub angular_diameter: f32,
+    /// Irradiance at normal incidence, linear RGB (W/m^2).
+    pub irradiance: Vec3,
+}
+
+/// A uniform sky dome.
+#[derive(Clone, Copy, Debug)]
+pub struct Sky {
+    /// Radiance, linear RGB.
+    pub radiance: Vec3,
+}
+
+/// Everything to trace for one frame of one layer.
+#[derive(Clone, Debug)]
+pub struct FrameScene {
+    /// Instances (agents' parts and the set).
+    pub instances: Vec<Instance>,
+    /// The camera at this frame.
+    pub camera: Camera,
+    /// The sun, if any.
+    pub sun: Option<Sun>,
+    /// The sky.
+    pub sky: Sky,
+}
