@@ -1,0 +1,699 @@
+//! The shot file (TOML, `version = 1`): ties a cache, rigs, wardrobes, a
+//! set, a camera, lights, layer and render settings together. Every path is
+//! relative to the shot file. Unknown keys, wrong types and missing files are
+//! errors naming the file, line and key. docs/shot.md documents every key.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use glam::{Affine3A, Vec3};
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::error::{Error, IoContext, Result};
+use crate::scene::{Camera, Sky, Sun};
+
+/// The shot file version this build reads.
+pub const SHOT_VERSION: u32 = 1;
+
+/// A parsed, validated shot with absolute paths.
+#[derive(Debug, Clone)]
+pub struct Shot {
+    /// The shot file itself.
+    pub path: PathBuf,
+    /// Shot name, used in output file names.
+    pub name: String,
+    /// Seed for casting and rendering.
+    pub seed: u64,
+    /// Frame range and rate.
+    pub frames: Frames,
+    /// The simulation cache.
+    pub cache: CacheRef,
+    /// Wardrobe files.
+    pub wardrobes: Vec<PathBuf>,
+    /// Rigs by name, as named in the cache.
+    pub rigs: BTreeMap<String, RigRef>,
+    /// The environment.
+    pub set: Option<SetRef>,
+    /// The camera.
+    pub camera: CameraSpec,
+    /// Sun and sky.
+    pub lights: Lights,
+    /// How to split agents into layers.
+    pub layers: LayerSettings,
+    /// Render settings.
+    pub render: RenderSettings,
+    /// Agents never rendered (still ranked, so removing one moves nobody else).
+    pub removed: Vec<u32>,
+    /// Agents on these cycles are not rendered.
+    pub culled_cycles: Vec<String>,
+    /// Agents on these cycles are never height-scaled.
+    pub no_scale_cycles: Vec<String>,
+    /// Part mesh names never cast in this shot.
+    pub exclude_parts: Vec<String>,
+}
+
+/// `[frames]`.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Frames {
+    /// First shot frame.
+    pub start: i32,
+    /// Last shot frame (inclusive).
+    pub end: i32,
+    /// Frames per second.
+    #[serde(default = "default_fps")]
+    pub fps: f32,
+}
+
+impl Frames {
+    /// The middle frame, the default reference frame for layering.
+    pub fn middle(&self) -> i32 {
+        self.start + (self.end - self.start) / 2
+    }
+    /// Whether `f` is in the shot.
+    pub fn contains(&self, f: i32) -> bool {
+        (self.start..=self.end).contains(&f)
+    }
+    /// Every shot frame.
+    pub fn iter(&self) -> impl Iterator<Item = i32> {
+        self.start..=self.end
+    }
+}
+
+/// `[cache]`.
+#[derive(Debug, Clone)]
+pub struct CacheRef {
+    /// The cache file.
+    pub path: PathBuf,
+    /// cache frame = shot frame + frame_offset.
+    pub frame_offset: i32,
+}
+
+impl CacheRef {
+    /// The cache frame that a shot frame reads.
+    pub fn cache_frame(&self, shot_frame: i32) -> i32 {
+        shot_frame + self.frame_offset
+    }
+    /// The shot frame a cache frame lands on.
+    pub fn shot_frame(&self, cache_frame: i32) -> i32 {
+        cache_frame - self.frame_offset
+    }
+}
+
+/// `[rigs.NAME]`.
+#[derive(Debug, Clone)]
+pub struct RigRef {
+    /// Rig glTF.
+    pub file: PathBuf,
+    /// Scheme name -> weight.
+    pub schemes: BTreeMap<String, f32>,
+    /// Height jitter: scale drawn uniformly from 1 +/- this.
+    pub height_jitter: f32,
+}
+
+/// `[set]`.
+#[derive(Debug, Clone)]
+pub struct SetRef {
+    /// Environment glTF.
+    pub file: PathBuf,
+}
+
+/// One camera keyframe.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraKey {
+    /// Shot frame.
+    pub frame: f32,
+    /// Camera position.
+    pub position: [f32; 3],
+    /// Point the camera looks at.
+    pub aim: [f32; 3],
+    /// Focal length in mm.
+    pub focal_length: f32,
+}
+
+/// `[camera]`: keyframes, or a camera node in a glTF file.
+#[derive(Debug, Clone)]
+pub struct CameraSpec {
+    /// Horizontal film back in mm.
+    pub sensor_width: f32,
+    /// Keyframes, sorted by frame.
+    pub keys: Vec<CameraKey>,
+    /// glTF file holding the camera node (instead of keys).
+    pub gltf: Option<(PathBuf, String)>,
+}
+
+/// `[lights]`.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Lights {
+    /// The sun.
+    pub sun: Option<SunSpec>,
+    /// The sky.
+    pub sky: SkySpec,
+}
+
+/// `[lights.sun]`.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SunSpec {
+    /// Direction towards the sun (normalised on load).
+    pub direction: [f32; 3],
+    /// Full angular diameter in degrees.
+    #[serde(default = "default_sun_diameter")]
+    pub angular_diameter: f32,
+    /// Irradiance in W/m^2.
+    #[serde(default = "one")]
+    pub intensity: f32,
+    /// Linear colour.
+    #[serde(default = "white")]
+    pub color: [f32; 3],
+}
+
+/// `[lights.sky]`.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SkySpec {
+    /// Linear colour.
+    #[serde(default = "white")]
+    pub color: [f32; 3],
+    /// Multiplier.
+    #[serde(default = "one")]
+    pub intensity: f32,
+}
+
+impl Default for SkySpec {
+    fn default() -> Self {
+        SkySpec { color: [0.3, 0.38, 0.5], intensity: 1.0 }
+    }
+}
+
+/// How agents are split into layers.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SplitMode {
+    /// N layers of equal agent count, nearest first.
+    Count,
+    /// Distance cut-offs in metres.
+    Cutoffs,
+    /// A memory budget per layer.
+    Budget,
+}
+
+/// An agent forced into a layer.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Pin {
+    /// Agent id.
+    pub agent: u32,
+    /// Layer index, 0 = nearest.
+    pub layer: usize,
+}
+
+/// `[layers]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LayerSettings {
+    /// Split mode.
+    #[serde(default = "default_split")]
+    pub split: SplitMode,
+    /// Layer count for `count`.
+    #[serde(default = "default_layer_count")]
+    pub count: usize,
+    /// Cut-offs for `cutoffs`, metres, increasing.
+    #[serde(default)]
+    pub cutoffs: Vec<f32>,
+    /// Budget for `budget`, e.g. "2.8GB".
+    #[serde(default)]
+    pub budget: Option<String>,
+    /// Reference frame (default: the middle of the shot).
+    #[serde(default)]
+    pub ref_frame: Option<i32>,
+    /// Pinned agents.
+    #[serde(default)]
+    pub pins: Vec<Pin>,
+    /// Projected height in pixels below which an agent renders as proxy boxes.
+    #[serde(default = "default_lod_px")]
+    pub lod_full_min_px: f32,
+    /// Other layers' agents appear in shadows and reflections as proxy boxes.
+    #[serde(default)]
+    pub proxy_shadow_casters: bool,
+}
+
+impl Default for LayerSettings {
+    fn default() -> Self {
+        LayerSettings {
+            split: SplitMode::Count,
+            count: default_layer_count(),
+            cutoffs: Vec::new(),
+            budget: None,
+            ref_frame: None,
+            pins: Vec::new(),
+            lod_full_min_px: default_lod_px(),
+            proxy_shadow_casters: false,
+        }
+    }
+}
+
+/// `[render]`.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderSettings {
+    /// Width, height in pixels.
+    #[serde(default = "default_resolution")]
+    pub resolution: [u32; 2],
+    /// Samples per pixel.
+    #[serde(default = "default_spp")]
+    pub spp: u32,
+    /// Maximum path depth after the camera ray.
+    #[serde(default = "default_bounces")]
+    pub max_bounces: u32,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings { resolution: default_resolution(), spp: default_spp(), max_bounces: default_bounces() }
+    }
+}
+
+fn default_fps() -> f32 {
+    24.0
+}
+fn default_sun_diameter() -> f32 {
+    0.53
+}
+fn one() -> f32 {
+    1.0
+}
+fn white() -> [f32; 3] {
+    [1.0; 3]
+}
+fn default_split() -> SplitMode {
+    SplitMode::Count
+}
+fn default_layer_count() -> usize {
+    3
+}
+fn default_lod_px() -> f32 {
+    40.0
+}
+fn default_resolution() -> [u32; 2] {
+    [960, 540]
+}
+fn default_spp() -> u32 {
+    16
+}
+fn default_bounces() -> u32 {
+    4
+}
+fn default_jitter() -> f32 {
+    0.1
+}
+fn default_sensor() -> f32 {
+    36.0
+}
+
+// ---- the file as written (paths still relative, with spans for errors) ----
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ShotFile {
+    version: Spanned<u32>,
+    name: String,
+    #[serde(default)]
+    seed: u64,
+    #[serde(default)]
+    wardrobes: Vec<Spanned<PathBuf>>,
+    #[serde(default)]
+    removed: Vec<u32>,
+    #[serde(default)]
+    culled_cycles: Vec<String>,
+    #[serde(default)]
+    no_scale_cycles: Vec<String>,
+    #[serde(default)]
+    exclude_parts: Vec<String>,
+    frames: Spanned<Frames>,
+    cache: CacheFile,
+    #[serde(default)]
+    rigs: BTreeMap<String, RigFile>,
+    set: Option<SetFile>,
+    camera: CameraFile,
+    #[serde(default)]
+    lights: LightsFile,
+    #[serde(default)]
+    layers: LayerSettings,
+    #[serde(default)]
+    render: RenderSettings,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CacheFile {
+    path: Spanned<PathBuf>,
+    #[serde(default)]
+    frame_offset: i32,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RigFile {
+    file: Spanned<PathBuf>,
+    #[serde(default)]
+    schemes: BTreeMap<String, f32>,
+    height_jitter: Option<Spanned<f32>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SetFile {
+    file: Spanned<PathBuf>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CameraFile {
+    #[serde(default = "default_sensor")]
+    sensor_width: f32,
+    #[serde(default)]
+    keys: Vec<CameraKey>,
+    gltf: Option<Spanned<PathBuf>>,
+    node: Option<String>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct LightsFile {
+    sun: Option<SunSpec>,
+    #[serde(default)]
+    sky: SkySpec,
+}
+
+/// Line (1-based) of a byte offset.
+fn line_of(text: &str, offset: usize) -> usize {
+    text.as_bytes()[..offset.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1
+}
+
+impl Shot {
+    /// Reads and validates a shot file.
+    pub fn load(path: &Path) -> Result<Shot> {
+        let text = std::fs::read_to_string(path).at(path)?;
+        Shot::parse(&text, path)
+    }
+
+    /// Parses shot text; `path` names the file in errors and anchors relative paths.
+    pub fn parse(text: &str, path: &Path) -> Result<Shot> {
+        let file: ShotFile = toml::from_str(text).map_err(|e| {
+            let mut err = Error::invalid(path, e.message().to_string());
+            if let Some(span) = e.span() {
+                let line = line_of(text, span.start);
+                err = err.line(line);
+                // Name the key on that line, since toml's messages for wrong
+                // types do not.
+                if let Some(key) = text.lines().nth(line - 1).and_then(|l| l.split_once('=')).map(|(k, _)| k.trim())
+                {
+                    if !key.is_empty() && !key.starts_with('[') {
+                        err = err.field(key.trim_matches('"'));
+                    }
+                }
+            }
+            err
+        })?;
+        let base = path.parent().unwrap_or(Path::new("")).to_path_buf();
+        let at = |span: std::ops::Range<usize>, key: &str, msg: String| {
+            Error::invalid(path, msg).line(line_of(text, span.start)).field(key)
+        };
+        // A referenced file that does not exist is an error naming its key.
+        let existing = |p: &Spanned<PathBuf>, key: &str| -> Result<PathBuf> {
+            let full = base.join(p.get_ref());
+            if full.exists() {
+                Ok(full)
+            } else {
+                Err(at(p.span(), key, format!("file not found: {}", full.display())))
+            }
+        };
+
+        if *file.version.get_ref() != SHOT_VERSION {
+            return Err(at(
+                file.version.span(),
+                "version",
+                format!("unsupported shot version {} (this throng reads version {SHOT_VERSION})", file.version.get_ref()),
+            ));
+        }
+        let frames = *file.frames.get_ref();
+        if frames.end < frames.start {
+            return Err(at(file.frames.span(), "frames", format!("end {} is before start {}", frames.end, frames.start)));
+        }
+        if !(frames.fps > 0.0 && frames.fps.is_finite()) {
+            return Err(at(file.frames.span(), "frames.fps", format!("fps must be positive, got {}", frames.fps)));
+        }
+
+        let cache = CacheRef { path: existing(&file.cache.path, "cache.path")?, frame_offset: file.cache.frame_offset };
+        let wardrobes =
+            file.wardrobes.iter().map(|w| existing(w, "wardrobes")).collect::<Result<Vec<_>>>()?;
+        let mut rigs = BTreeMap::new();
+        for (name, rig) in &file.rigs {
+            let jitter = rig.height_jitter.as_ref().map_or(default_jitter(), |j| *j.get_ref());
+            if !(0.0..1.0).contains(&jitter) {
+                return Err(at(
+                    rig.height_jitter.as_ref().map_or(rig.file.span(), |j| j.span()),
+                    &format!("rigs.{name}.height_jitter"),
+                    format!("must be in [0, 1), got {jitter}"),
+                ));
+            }
+            for (scheme, w) in &rig.schemes {
+                if !(*w >= 0.0 && w.is_finite()) {
+                    return Err(at(
+                        rig.file.span(),
+                        &format!("rigs.{name}.schemes.{scheme}"),
+                        format!("scheme weight must be >= 0, got {w}"),
+                    ));
+                }
+            }
+            rigs.insert(
+                name.clone(),
+                RigRef {
+                    file: existing(&rig.file, &format!("rigs.{name}.file"))?,
+                    schemes: rig.schemes.clone(),
+                    height_jitter: jitter,
+                },
+            );
+        }
+        let set = match &file.set {
+            Some(s) => Some(SetRef { file: existing(&s.file, "set.file")? }),
+            None => None,
+        };
+
+        let mut keys = file.camera.keys.clone();
+        keys.sort_by(|a, b| a.frame.total_cmp(&b.frame));
+        let gltf = match (&file.camera.gltf, &file.camera.node) {
+            (Some(g), Some(node)) => Some((existing(g, "camera.gltf")?, node.clone())),
+            (Some(g), None) => return Err(at(g.span(), "camera.node", "`camera.gltf` needs `camera.node`".into())),
+            (None, Some(_)) => {
+                return Err(Error::invalid(path, "`camera.node` needs `camera.gltf`").field("camera.node"))
+            }
+            (None, None) => None,
+        };
+        if keys.is_empty() && gltf.is_none() {
+            return Err(Error::invalid(path, "the camera needs `keys` or `gltf` + `node`").field("camera"));
+        }
+        for k in &keys {
+            if !(k.focal_length > 0.0) || Vec3::from(k.position) == Vec3::from(k.aim) {
+                return Err(Error::invalid(
+                    path,
+                    format!("camera key at frame {}: focal length must be > 0 and aim must differ from position", k.frame),
+                )
+                .field("camera.keys"));
+            }
+        }
+        if !(file.camera.sensor_width > 0.0) {
+            return Err(Error::invalid(path, "must be > 0").field("camera.sensor_width"));
+        }
+
+        if let Some(sun) = &file.lights.sun {
+            if Vec3::from(sun.direction).length_squared() == 0.0 {
+                return Err(Error::invalid(path, "sun direction is zero").field("lights.sun.direction"));
+            }
+        }
+        let layers = file.layers;
+        if layers.split == SplitMode::Count && layers.count == 0 {
+            return Err(Error::invalid(path, "must be at least 1").field("layers.count"));
+        }
+        if layers.cutoffs.windows(2).any(|w| !(w[0] < w[1])) {
+            return Err(Error::invalid(path, "cut-offs must increase").field("layers.cutoffs"));
+        }
+        if let Some(b) = &layers.budget {
+            parse_bytes(b).map_err(|m| Error::invalid(path, m).field("layers.budget"))?;
+        }
+        let render = file.render;
+        if render.resolution[0] == 0 || render.resolution[1] == 0 || render.spp == 0 {
+            return Err(Error::invalid(path, "resolution and spp must be > 0").field("render"));
+        }
+
+        Ok(Shot {
+            path: path.to_path_buf(),
+            name: file.name,
+            seed: file.seed,
+            frames,
+            cache,
+            wardrobes,
+            rigs,
+            set,
+            camera: CameraSpec { sensor_width: file.camera.sensor_width, keys, gltf },
+            lights: Lights { sun: file.lights.sun, sky: file.lights.sky },
+            layers,
+            render,
+            removed: file.removed,
+            culled_cycles: file.culled_cycles,
+            no_scale_cycles: file.no_scale_cycles,
+            exclude_parts: file.exclude_parts,
+        })
+    }
+
+    /// Image aspect ratio (width / height).
+    pub fn aspect(&self) -> f32 {
+        self.render.resolution[0] as f32 / self.render.resolution[1] as f32
+    }
+
+    /// The keyframed camera at a (fractional) shot frame: position, aim and
+    /// focal length interpolated linearly, held before the first and after
+    /// the last key. `None` when the camera comes from a glTF node.
+    pub fn keyed_camera(&self, frame: f32) -> Option<Camera> {
+        let keys = &self.camera.keys;
+        let first = keys.first()?;
+        let last = keys.last()?;
+        let (pos, aim, focal) = if frame <= first.frame {
+            (Vec3::from(first.position), Vec3::from(first.aim), first.focal_length)
+        } else if frame >= last.frame {
+            (Vec3::from(last.position), Vec3::from(last.aim), last.focal_length)
+        } else {
+            let i = keys.windows(2).position(|w| frame >= w[0].frame && frame <= w[1].frame).unwrap_or(0);
+            let (a, b) = (&keys[i], &keys[i + 1]);
+            let t = if b.frame > a.frame { (frame - a.frame) / (b.frame - a.frame) } else { 0.0 };
+            (
+                Vec3::from(a.position).lerp(Vec3::from(b.position), t),
+                Vec3::from(a.aim).lerp(Vec3::from(b.aim), t),
+                a.focal_length + (b.focal_length - a.focal_length) * t,
+            )
+        };
+        let sensor_height = self.camera.sensor_width / self.aspect();
+        let yfov = 2.0 * (sensor_height * 0.5 / focal).atan();
+        Some(Camera { world_from_camera: look_at(pos, aim), yfov })
+    }
+
+    /// The sun, in scene units.
+    pub fn sun(&self) -> Option<Sun> {
+        self.lights.sun.map(|s| Sun {
+            direction: Vec3::from(s.direction).normalize(),
+            angular_diameter: s.angular_diameter.to_radians(),
+            irradiance: Vec3::from(s.color) * s.intensity,
+        })
+    }
+
+    /// The sky.
+    pub fn sky(&self) -> Sky {
+        Sky { radiance: Vec3::from(self.lights.sky.color) * self.lights.sky.intensity }
+    }
+
+    /// Whether an agent on `cycle` is never height-scaled.
+    pub fn is_no_scale_cycle(&self, cycle: &str) -> bool {
+        self.no_scale_cycles.iter().any(|c| c == cycle)
+    }
+}
+
+/// Camera to world for a camera at `eye` looking at `aim`, +Y up; the camera
+/// looks down its local -Z (glTF convention).
+pub fn look_at(eye: Vec3, aim: Vec3) -> Affine3A {
+    let forward = (aim - eye).normalize();
+    let up = if forward.y.abs() > 0.999 { Vec3::Z } else { Vec3::Y };
+    let right = forward.cross(up).normalize();
+    let true_up = right.cross(forward);
+    Affine3A::from_cols(right.into(), true_up.into(), (-forward).into(), eye.into())
+}
+
+/// Parses a byte size such as `2.8GB`, `512MiB`, `1e9` (decimal units are
+/// powers of 1000, binary units powers of 1024).
+pub fn parse_bytes(s: &str) -> std::result::Result<u64, String> {
+    let t = s.trim();
+    let split = t.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let n: f64 = num.trim().parse().map_err(|_| format!("not a size: `{s}` (use e.g. 2.8GB or 512MiB)"))?;
+    let mult = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1.0,
+        "kb" | "k" => 1e3,
+        "mb" | "m" => 1e6,
+        "gb" | "g" => 1e9,
+        "tb" | "t" => 1e12,
+        "kib" => 1024.0,
+        "mib" => 1024.0 * 1024.0,
+        "gib" => 1024.0 * 1024.0 * 1024.0,
+        other => return Err(format!("unknown size unit `{other}` in `{s}` (B, KB, MB, GB, KiB, MiB, GiB)")),
+    };
+    if !(n >= 0.0 && n.is_finite()) {
+        return Err(format!("size must be positive: `{s}`"));
+    }
+    Ok((n * mult).round() as u64)
+}
+
+/// Parses an OpenCue-style frame list: `1001-1010`, `1001-1100x2`, `1001,1005`,
+/// or any comma-separated mix. Returns sorted, de-duplicated frames.
+pub fn parse_frame_list(s: &str) -> std::result::Result<Vec<i32>, String> {
+    let mut frames = Vec::new();
+    for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+        let bad = || format!("bad frame range `{item}` (use 1001-1010, 1001-1100x2 or 1001,1005)");
+        let (range, step) = match item.split_once('x') {
+            Some((r, st)) => (r, st.parse::<i32>().map_err(|_| bad())?),
+            None => (item, 1),
+        };
+        if step <= 0 {
+            return Err(bad());
+        }
+        // A leading '-' is a negative frame, not a range separator.
+        let dash = range.char_indices().skip(1).find(|&(_, c)| c == '-').map(|(i, _)| i);
+        let (a, b) = match dash {
+            Some(i) => (range[..i].parse::<i32>().map_err(|_| bad())?, range[i + 1..].parse::<i32>().map_err(|_| bad())?),
+            None => {
+                let f = range.parse::<i32>().map_err(|_| bad())?;
+                (f, f)
+            }
+        };
+        if b < a {
+            return Err(bad());
+        }
+        frames.extend((a..=b).step_by(step as usize));
+    }
+    if frames.is_empty() {
+        return Err(format!("no frames in `{s}`"));
+    }
+    frames.sort_unstable();
+    frames.dedup();
+    Ok(frames)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_lists() {
+        assert_eq!(parse_frame_list("1001-1003").unwrap(), vec![1001, 1002, 1003]);
+        assert_eq!(parse_frame_list("1001-1007x3,1002").unwrap(), vec![1001, 1002, 1004, 1007]);
+        assert_eq!(parse_frame_list("-2-1").unwrap(), vec![-2, -1, 0, 1]);
+        assert!(parse_frame_list("10-5").is_err());
+        assert!(parse_frame_list("abc").is_err());
+    }
+
+    #[test]
+    fn byte_sizes() {
+        assert_eq!(parse_bytes("2.8GB").unwrap(), 2_800_000_000);
+        assert_eq!(parse_bytes("1MiB").unwrap(), 1 << 20);
+        assert!(parse_bytes("3 parsecs").is_err());
+    }
+
+    #[test]
+    fn look_at_faces_aim() {
+        let m = look_at(Vec3::new(0.0, 1.0, 10.0), Vec3::new(0.0, 1.0, 0.0));
+        let fwd = m.transform_vector3(-Vec3::Z);
+        assert!((fwd - -Vec3::Z).length() < 1e-6);
+        assert!((m.transform_vector3(Vec3::Y) - Vec3::Y).length() < 1e-6);
+    }
+}
