@@ -4,7 +4,9 @@
 #![warn(missing_docs)]
 
 pub mod cache;
+pub mod casting;
 pub mod cli;
 pub mod error;
 pub mod scene;
 pub mod shot;
+pub mod wardrobe;

@@ -1,0 +1,189 @@
+//! Casting (the "frankenbot" stage): for every agent a scheme, one part per
+//! rig slot, a material per part and a height scale.
+//!
+//! Casting is a pure function of (shot seed, agent id, rig, wardrobes, shot
+//! exclusions). Every random choice draws from its own generator keyed by
+//! hash(seed, agent id, purpose), never from a shared sequence, so adding,
+//! removing or reordering agents changes no other agent.
+
+use std::path::PathBuf;
+
+use crate::error::{Error, Result};
+use crate::wardrobe::{Scheme, Wardrobes};
+
+/// A 64-bit mix (splitmix64's finaliser): a bijection with good avalanche.
+pub fn mix64(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// FNV-1a of a purpose string, so purposes are named, not numbered.
+fn fnv1a(s: &str) -> u64 {
+    s.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3))
+}
+
+/// A uniform number in [0, 1) keyed by (seed, agent id, purpose).
+pub fn uniform(seed: u64, agent: u32, purpose: &str) -> f64 {
+    let h = mix64(mix64(mix64(seed) ^ (agent as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)) ^ fnv1a(purpose));
+    (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+}
+
+/// Index drawn with probability proportional to `weights` (all >= 0);
+/// `None` when they sum to zero.
+pub fn weighted_pick(weights: &[f32], u: f64) -> Option<usize> {
+    let total: f64 = weights.iter().map(|&w| w.max(0.0) as f64).sum();
+    if total <= 0.0 {
+        return None;
+    }
+    let mut target = u * total;
+    let mut last = None;
+    for (i, &w) in weights.iter().enumerate() {
+        if w > 0.0 {
+            last = Some(i);
+            if target < w as f64 {
+                return Some(i);
+            }
+            target -= w as f64;
+        }
+    }
+    last // rounding at the very top of the range
+}
+
+/// The part chosen for one slot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CastPart {
+    /// glTF file.
+    pub file: PathBuf,
+    /// Mesh name in the file.
+    pub mesh: String,
+    /// Qualified wardrobe material (`wardrobe/name`) or `gltf` for the mesh's own.
+    pub material: String,
+    /// Scaled uniformly (heads) rather than per axis.
+    pub uniform: bool,
+}
+
+/// One slot of a cast agent.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlotCast {
+    /// Rig slot name.
+    pub slot: String,
+    /// The part, or `None` when the scheme has no candidate for this slot.
+    pub part: Option<CastPart>,
+}
+
+/// A cast agent.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AgentCast {
+    /// Cache id.
+    pub id: u32,
+    /// Rig name.
+    pub rig: String,
+    /// Wardrobe scheme.
+    pub scheme: String,
+    /// Height scale (1.0 for agents that are never scaled).
+    pub height_scale: f32,
+    /// Whether the height jitter applies (false for seated and no-scale agents).
+    pub scaled: bool,
+    /// Parts per rig slot, in rig slot order.
+    pub slots: Vec<SlotCast>,
+}
+
+/// What casting needs to know about one rig.
+#[derive(Debug, Clone)]
+pub struct RigCasting<'a> {
+    /// Rig name.
+    pub name: &'a str,
+    /// Slot names in rig order.
+    pub slots: &'a [String],
+    /// Scheme name -> weight, from the shot.
+    pub schemes: &'a std::collections::BTreeMap<String, f32>,
+    /// Height jitter fraction.
+    pub height_jitter: f32,
+}
+
+/// Casts one agent. `never_scale` is true when the agent is seated or on a
+/// no-scale cycle at any frame of the shot: it keeps height 1.0 throughout,
+/// so it never pops in size and never floats above or sinks into a bench.
+pub fn cast_agent(
+    seed: u64,
+    id: u32,
+    rig: &RigCasting,
+    wardrobes: &Wardrobes,
+    shot_excludes: &[String],
+    never_scale: bool,
+) -> Result<AgentCast> {
+    let bad = |msg: String| Error::Usage(format!("agent {id}: {msg}"));
+    let names: Vec<&String> = rig.schemes.keys().collect();
+    let weights: Vec<f32> = rig.schemes.values().copied().collect();
+    let pick = weighted_pick(&weights, uniform(seed, id, "scheme"))
+        .ok_or_else(|| bad(format!("rig `{}` has no scheme with a weight above 0 in the shot", rig.name)))?;
+    let scheme_name = names[pick].clone();
+    let scheme: &Scheme = wardrobes.schemes.get(&scheme_name).ok_or_else(|| {
+        bad(format!(
+            "rig `{}` asks for scheme `{scheme_name}`, which no wardrobe defines (known: {})",
+            rig.name,
+            wardrobes.schemes.keys().cloned().collect::<Vec<_>>().join(", ")
+        ))
+    })?;
+
+    let mut slots = Vec::with_capacity(rig.slots.len());
+    for slot in rig.slots {
+        let candidates: Vec<_> = scheme.candidates(slot, shot_excludes).collect();
+        let w: Vec<f32> = candidates.iter().map(|p| p.weight).collect();
+        let part = weighted_pick(&w, uniform(seed, id, &format!("part/{slot}"))).map(|i| {
+            let p = candidates[i];
+            let m = weighted_pick(&p.material_weight_list(), uniform(seed, id, &format!("material/{slot}"))).unwrap_or(0);
+            CastPart {
+                file: p.file.clone(),
+                mesh: p.mesh.clone(),
+                material: p.materials.get(m).cloned().unwrap_or_else(|| crate::wardrobe::GLTF_MATERIAL.into()),
+                uniform: scheme.is_uniform(slot),
+            }
+        });
+        slots.push(SlotCast { slot: slot.clone(), part });
+    }
+
+    // h' = h * (1 + U(-j, j)); drawn even for unscaled agents so that the
+    // draw never depends on anything but (seed, id, purpose).
+    let u = uniform(seed, id, "height") as f32;
+    let jittered = 1.0 + rig.height_jitter * (2.0 * u - 1.0);
+    Ok(AgentCast {
+        id,
+        rig: rig.name.to_string(),
+        scheme: scheme_name,
+        height_scale: if never_scale { 1.0 } else { jittered },
+        scaled: !never_scale,
+        slots,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uniform_is_keyed_and_in_range() {
+        let a = uniform(1, 7, "height");
+        assert_eq!(a, uniform(1, 7, "height"));
+        assert_ne!(a, uniform(2, 7, "height"));
+        assert_ne!(a, uniform(1, 8, "height"));
+        assert_ne!(a, uniform(1, 7, "scheme"));
+        for id in 0..1000 {
+            let u = uniform(3, id, "x");
+            assert!((0.0..1.0).contains(&u));
+        }
+    }
+
+    #[test]
+    fn weighted_pick_respects_weights() {
+        assert_eq!(weighted_pick(&[0.0, 0.0], 0.5), None);
+        assert_eq!(weighted_pick(&[0.0, 1.0, 0.0], 0.99), Some(1));
+        let mut counts = [0usize; 2];
+        for id in 0..10_000 {
+            counts[weighted_pick(&[3.0, 1.0], uniform(9, id, "w")).unwrap()] += 1;
+        }
+        let frac = counts[0] as f64 / 10_000.0;
+        assert!((frac - 0.75).abs() < 0.02, "{frac}");
+    }
+}

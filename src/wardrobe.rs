@@ -1,0 +1,238 @@
+//! Wardrobes (`wardrobes/*.toml`, `version = 1`): schemes of candidate body
+//! parts per slot, with weights, material variants and exclusions. The
+//! format is documented in docs/wardrobes.md.
+//!
+//! ```toml
+//! version = 1
+//! name = "robots"
+//! uniform_slots = ["head"]          # slots scaled uniformly (heads)
+//! [materials.chrome]
+//! base_color = [0.8, 0.8, 0.85]
+//! metallic = 1.0
+//! roughness = 0.25
+//! [schemes.LowEnd_good_heads]
+//! exclude = ["head_cone"]
+//! [[schemes.LowEnd_good_heads.parts]]
+//! slot = "head"
+//! file = "../demo/parts/heads.glb"
+//! mesh = "head_sphere"
+//! weight = 2.0
+//! materials = ["chrome", "rust"]    # "gltf" = the mesh's own material
+//! ```
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::error::{Error, IoContext, Result};
+
+/// The wardrobe file version this build reads.
+pub const WARDROBE_VERSION: u32 = 1;
+
+/// The material name meaning "the part mesh's own glTF material".
+pub const GLTF_MATERIAL: &str = "gltf";
+
+/// A material defined in a wardrobe.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSpec {
+    /// Linear base colour.
+    #[serde(default = "grey")]
+    pub base_color: [f32; 3],
+    /// Metalness.
+    #[serde(default)]
+    pub metallic: f32,
+    /// Perceptual roughness.
+    #[serde(default = "half")]
+    pub roughness: f32,
+    /// Optional base colour texture, relative to the wardrobe file (resolved on load).
+    #[serde(default)]
+    pub base_color_texture: Option<PathBuf>,
+}
+
+fn grey() -> [f32; 3] {
+    [0.8; 3]
+}
+fn half() -> f32 {
+    0.5
+}
+fn one() -> f32 {
+    1.0
+}
+
+/// A candidate part for one slot.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PartSpec {
+    /// Rig slot it dresses.
+    pub slot: String,
+    /// glTF file (resolved to absolute on load).
+    pub file: PathBuf,
+    /// Mesh name inside the file.
+    pub mesh: String,
+    /// Relative weight among the slot's candidates.
+    #[serde(default = "one")]
+    pub weight: f32,
+    /// Material variants (wardrobe material names, or "gltf").
+    #[serde(default = "gltf_only")]
+    pub materials: Vec<String>,
+    /// Optional weights for `materials` (default uniform).
+    #[serde(default)]
+    pub material_weights: Option<Vec<f32>>,
+}
+
+fn gltf_only() -> Vec<String> {
+    vec![GLTF_MATERIAL.to_string()]
+}
+
+impl PartSpec {
+    /// The weight of each material variant.
+    pub fn material_weight_list(&self) -> Vec<f32> {
+        self.material_weights.clone().unwrap_or_else(|| vec![1.0; self.materials.len()])
+    }
+}
+
+/// A scheme: candidate parts per slot.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Scheme {
+    /// Mesh names never used by this scheme.
+    #[serde(default)]
+    pub exclude: Vec<String>,
+    /// Candidate parts.
+    #[serde(default)]
+    pub parts: Vec<PartSpec>,
+    /// Which wardrobe the scheme came from (set on load).
+    #[serde(skip)]
+    pub wardrobe: String,
+    /// Slots scaled uniformly, from the wardrobe (set on load).
+    #[serde(skip)]
+    pub uniform_slots: Vec<String>,
+}
+
+impl Scheme {
+    /// Candidates for `slot`, without excluded meshes (scheme- or shot-level).
+    pub fn candidates<'a>(&'a self, slot: &'a str, shot_excludes: &'a [String]) -> impl Iterator<Item = &'a PartSpec> {
+        self.parts.iter().filter(move |p| {
+            p.slot == slot && p.weight > 0.0 && !self.exclude.contains(&p.mesh) && !shot_excludes.contains(&p.mesh)
+        })
+    }
+    /// Whether parts in `slot` scale uniformly.
+    pub fn is_uniform(&self, slot: &str) -> bool {
+        self.uniform_slots.iter().any(|s| s == slot)
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WardrobeFile {
+    version: u32,
+    name: String,
+    #[serde(default)]
+    uniform_slots: Vec<String>,
+    #[serde(default)]
+    materials: BTreeMap<String, MaterialSpec>,
+    #[serde(default)]
+    schemes: BTreeMap<String, Scheme>,
+}
+
+/// Every scheme and material from the shot's wardrobe files.
+#[derive(Debug, Clone, Default)]
+pub struct Wardrobes {
+    /// Schemes by name (names are unique across files).
+    pub schemes: BTreeMap<String, Scheme>,
+    /// Materials by qualified name `wardrobe/material`.
+    pub materials: BTreeMap<String, MaterialSpec>,
+}
+
+impl Wardrobes {
+    /// Loads and validates wardrobe files; scheme names must be unique across them.
+    pub fn load(paths: &[PathBuf]) -> Result<Wardrobes> {
+        let mut all = Wardrobes::default();
+        let mut origin: BTreeMap<String, PathBuf> = BTreeMap::new();
+        for path in paths {
+            let text = std::fs::read_to_string(path).at(path)?;
+            let file: WardrobeFile = toml::from_str(&text).map_err(|e| {
+                let mut err = Error::invalid(path, e.message().to_string());
+                if let Some(span) = e.span() {
+                    err = err.line(text[..span.start.min(text.len())].matches('\n').count() + 1);
+                }
+                err
+            })?;
+            if file.version != WARDROBE_VERSION {
+                return Err(Error::invalid(
+                    path,
+                    format!("unsupported wardrobe version {} (this throng reads {WARDROBE_VERSION})", file.version),
+                )
+                .field("version"));
+            }
+            let base = path.parent().unwrap_or(Path::new(""));
+            for (name, mut m) in file.materials {
+                if let Some(t) = &m.base_color_texture {
+                    let full = base.join(t);
+                    if !full.exists() {
+                        return Err(Error::invalid(path, format!("texture not found: {}", full.display()))
+                            .field(format!("materials.{name}.base_color_texture")));
+                    }
+                    m.base_color_texture = Some(full);
+                }
+                all.materials.insert(format!("{}/{name}", file.name), m);
+            }
+            for (name, mut scheme) in file.schemes {
+                if let Some(prev) = origin.get(&name) {
+                    return Err(Error::invalid(
+                        path,
+                        format!("scheme `{name}` is also defined in {}", prev.display()),
+                    )
+                    .field(format!("schemes.{name}")));
+                }
+                for (i, part) in scheme.parts.iter_mut().enumerate() {
+                    let key = format!("schemes.{name}.parts[{i}]");
+                    let full = base.join(&part.file);
+                    if !full.exists() {
+                        return Err(Error::invalid(path, format!("part file not found: {}", full.display()))
+                            .field(format!("{key}.file")));
+                    }
+                    part.file = full;
+                    if !(part.weight >= 0.0 && part.weight.is_finite()) {
+                        return Err(Error::invalid(path, format!("weight must be >= 0, got {}", part.weight))
+                            .field(format!("{key}.weight")));
+                    }
+                    if part.materials.is_empty() {
+                        return Err(Error::invalid(path, "needs at least one material").field(format!("{key}.materials")));
+                    }
+                    if let Some(w) = &part.material_weights {
+                        if w.len() != part.materials.len() || w.iter().any(|x| !(*x >= 0.0)) {
+                            return Err(Error::invalid(
+                                path,
+                                "needs one weight >= 0 per material",
+                            )
+                            .field(format!("{key}.material_weights")));
+                        }
+                    }
+                    for m in &mut part.materials {
+                        if m != GLTF_MATERIAL {
+                            let q = format!("{}/{m}", file.name);
+                            if !all.materials.contains_key(&q) {
+                                return Err(Error::invalid(path, format!("unknown material `{m}`"))
+                                    .field(format!("{key}.materials")));
+                            }
+                            *m = q;
+                        }
+                    }
+                }
+                scheme.wardrobe = file.name.clone();
+                scheme.uniform_slots = file.uniform_slots.clone();
+                origin.insert(name.clone(), path.clone());
+                all.schemes.insert(name, scheme);
+            }
+        }
+        Ok(all)
+    }
+
+    /// Every slot any scheme dresses.
+    pub fn slots(&self) -> BTreeSet<&str> {
+        self.schemes.values().flat_map(|s| s.parts.iter().map(|p| p.slot.as_str())).collect()
+    }
+}
