@@ -8,6 +8,8 @@
 
 use std::path::PathBuf;
 
+use glam::{Affine3A, Quat, Vec3};
+
 use crate::error::{Error, Result};
 use crate::wardrobe::{Scheme, Wardrobes};
 
@@ -158,9 +160,52 @@ pub fn cast_agent(
     })
 }
 
+/// The transform that fits a part mesh (bounds `mesh_lo..mesh_hi`) to its
+/// slot's proxy box (`box_lo..box_hi`), both in slot space.
+///
+/// Body parts scale per axis to fill the box. Uniform parts (heads) scale by
+/// the smallest axis ratio so they fit inside the box, rest on its bottom and
+/// are centred in X and Z: non-uniform heads looked "inflated and sickly".
+pub fn fit_part(mesh_lo: Vec3, mesh_hi: Vec3, box_lo: Vec3, box_hi: Vec3, uniform: bool) -> Affine3A {
+    let size = mesh_hi - mesh_lo;
+    let target = box_hi - box_lo;
+    // A flat mesh (zero extent on an axis) keeps its unit size on that axis.
+    let ratio = Vec3::select(size.cmpgt(Vec3::splat(1e-9)), target / size.max(Vec3::splat(1e-9)), Vec3::ONE);
+    if uniform {
+        let s = ratio.min_element();
+        let mesh_centre = (mesh_lo + mesh_hi) * 0.5;
+        let box_centre = (box_lo + box_hi) * 0.5;
+        let t = Vec3::new(box_centre.x - s * mesh_centre.x, box_lo.y - s * mesh_lo.y, box_centre.z - s * mesh_centre.z);
+        Affine3A::from_scale_rotation_translation(Vec3::splat(s), Quat::IDENTITY, t)
+    } else {
+        Affine3A::from_scale_rotation_translation(ratio, Quat::IDENTITY, box_lo - ratio * mesh_lo)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn body_parts_fill_the_box() {
+        let m = fit_part(Vec3::new(-1.0, 0.0, -2.0), Vec3::new(1.0, 4.0, 2.0), Vec3::new(0.0, -0.5, 0.0), Vec3::new(0.2, 0.0, 0.1), false);
+        assert!((m.transform_point3(Vec3::new(-1.0, 0.0, -2.0)) - Vec3::new(0.0, -0.5, 0.0)).length() < 1e-6);
+        assert!((m.transform_point3(Vec3::new(1.0, 4.0, 2.0)) - Vec3::new(0.2, 0.0, 0.1)).length() < 1e-6);
+    }
+
+    #[test]
+    fn heads_scale_uniformly_inside_the_box_resting_on_its_bottom() {
+        // A sphere-ish head of size 2 into a tall thin box: limited by x.
+        let (lo, hi) = (Vec3::splat(-1.0), Vec3::splat(1.0));
+        let (blo, bhi) = (Vec3::new(-0.1, 0.0, -0.2), Vec3::new(0.1, 0.5, 0.2));
+        let m = fit_part(lo, hi, blo, bhi, true);
+        let (scale, _, _) = m.to_scale_rotation_translation();
+        assert!((scale.x - scale.y).abs() < 1e-6 && (scale.y - scale.z).abs() < 1e-6, "{scale}");
+        let (a, b) = (m.transform_point3(lo), m.transform_point3(hi));
+        assert!(a.cmpge(blo - 1e-6).all() && b.cmple(bhi + 1e-6).all(), "{a} {b}");
+        assert!((a.y - blo.y).abs() < 1e-6, "rests on the bottom");
+        assert!(((a.z + b.z) * 0.5).abs() < 1e-6, "centred in z");
+    }
 
     #[test]
     fn uniform_is_keyed_and_in_range() {
