@@ -1,0 +1,333 @@
+//! The glue between the command line and the stages: each `cmd_*` loads
+//! what its verb needs, runs the stage and prints the result.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use glam::Vec3;
+use serde::Serialize;
+
+use crate::cache::AgentRecord;
+use crate::cli::{BotinfoArgs, CastArgs};
+use crate::error::{Error, Result};
+use crate::pose::ShotCrowd;
+
+/// One part row of the casting table.
+#[derive(Debug, Clone, Serialize)]
+pub struct PartRow {
+    /// Rig slot.
+    pub slot: String,
+    /// Mesh name, or null for an empty slot.
+    pub mesh: Option<String>,
+    /// glTF file of the mesh.
+    pub file: Option<String>,
+    /// Material name.
+    pub material: Option<String>,
+}
+
+/// One agent of the casting table.
+#[derive(Debug, Serialize)]
+pub struct CastRow {
+    /// Cache id.
+    pub id: u32,
+    /// Rig.
+    pub rig: String,
+    /// Scheme.
+    pub scheme: String,
+    /// Height scale.
+    pub height_scale: f32,
+    /// Whether the height jitter applies.
+    pub scaled: bool,
+    /// Parts per slot.
+    pub parts: Vec<PartRow>,
+}
+
+/// Instancing figures for `throng cast --stats`.
+#[derive(Debug, Serialize)]
+pub struct CastStats {
+    /// Agents cast.
+    pub agents: usize,
+    /// Part instances (agents x filled slots).
+    pub part_instances: usize,
+    /// Unique part meshes.
+    pub unique_parts: usize,
+    /// Unique materials.
+    pub unique_materials: usize,
+    /// Bytes of unique part geometry.
+    pub unique_geometry_bytes: usize,
+    /// Bytes if every agent had its own copy of its parts.
+    pub copied_geometry_bytes: usize,
+}
+
+fn cast_rows(crowd: &ShotCrowd) -> Vec<CastRow> {
+    let lib = crowd.library();
+    crowd
+        .casting
+        .values()
+        .map(|c| CastRow {
+            id: c.id,
+            rig: c.rig.clone(),
+            scheme: c.scheme.clone(),
+            height_scale: c.height_scale,
+            scaled: c.scaled,
+            parts: c
+                .slots
+                .iter()
+                .enumerate()
+                .map(|(i, s)| {
+                    let dressed = crowd.dressed.get(&c.id).and_then(|d| d.iter().find(|p| p.slot == i));
+                    PartRow {
+                        slot: s.slot.clone(),
+                        mesh: s.part.as_ref().map(|p| p.mesh.clone()),
+                        file: s.part.as_ref().map(|p| p.file.display().to_string()),
+                        material: dressed.map(|d| lib.materials[d.material as usize].name.clone()),
+                    }
+                })
+                .collect(),
+        })
+        .collect()
+}
+
+/// Instancing figures for the whole cast.
+pub fn cast_stats(crowd: &ShotCrowd) -> CastStats {
+    let lib = crowd.library();
+    let mut meshes = std::collections::BTreeSet::new();
+    let mut materials = std::collections::BTreeSet::new();
+    let mut copied = 0;
+    let mut instances = 0;
+    for parts in crowd.dressed.values() {
+        for p in parts {
+            meshes.insert(p.mesh);
+            materials.insert(p.material);
+            copied += lib.meshes[p.mesh as usize].bytes();
+            instances += 1;
+        }
+    }
+    CastStats {
+        agents: crowd.casting.len(),
+        part_instances: instances,
+        unique_parts: meshes.len(),
+        unique_materials: materials.len(),
+        unique_geometry_bytes: meshes.iter().map(|&m| lib.meshes[m as usize].bytes()).sum(),
+        copied_geometry_bytes: copied,
+    }
+}
+
+/// `throng cast`.
+pub fn cmd_cast(args: &CastArgs) -> Result<()> {
+    let crowd = ShotCrowd::load(&args.shot)?;
+    let rows = cast_rows(&crowd);
+    if args.json {
+        #[derive(Serialize)]
+        struct Out<'a> {
+            version: u32,
+            shot: &'a str,
+            seed: u64,
+            agents: &'a [CastRow],
+            #[serde(skip_serializing_if = "Option::is_none")]
+            stats: Option<CastStats>,
+        }
+        let out = Out {
+            version: 1,
+            shot: &crowd.shot.name,
+            seed: crowd.shot.seed,
+            agents: &rows,
+            stats: args.stats.then(|| cast_stats(&crowd)),
+        };
+        println!("{}", serde_json::to_string_pretty(&out).map_err(|e| Error::Usage(e.to_string()))?);
+        return Ok(());
+    }
+    if args.stats {
+        print!("{}", format_stats(&cast_stats(&crowd)));
+        return Ok(());
+    }
+    println!("{:>6}  {:<12} {:<20} {:>6}  {:<16} {}", "id", "rig", "scheme", "height", "head", "parts");
+    for r in &rows {
+        let head = crowd.casting[&r.id]
+            .slots
+            .iter()
+            .find(|s| s.part.as_ref().is_some_and(|p| p.uniform))
+            .and_then(|s| s.part.as_ref())
+            .map_or("-", |p| p.mesh.as_str());
+        let filled = r.parts.iter().filter(|p| p.mesh.is_some()).count();
+        println!(
+            "{:>6}  {:<12} {:<20} {:>6.3}  {:<16} {}/{}",
+            r.id,
+            r.rig,
+            r.scheme,
+            r.height_scale,
+            head,
+            filled,
+            r.parts.len()
+        );
+    }
+    Ok(())
+}
+
+fn mib(b: usize) -> String {
+    format!("{:.2} MiB", b as f64 / (1024.0 * 1024.0))
+}
+
+/// Human-readable instancing figures.
+pub fn format_stats(s: &CastStats) -> String {
+    let mut o = String::new();
+    let _ = writeln!(o, "agents               {}", s.agents);
+    let _ = writeln!(o, "part instances       {}", s.part_instances);
+    let _ = writeln!(o, "unique parts         {}", s.unique_parts);
+    let _ = writeln!(o, "unique materials     {}", s.unique_materials);
+    let _ = writeln!(o, "unique geometry      {}", mib(s.unique_geometry_bytes));
+    let _ = writeln!(
+        o,
+        "if copied per agent  {}  ({:.0}x more)",
+        mib(s.copied_geometry_bytes),
+        s.copied_geometry_bytes as f64 / s.unique_geometry_bytes.max(1) as f64
+    );
+    o
+}
+
+/// Everything botinfo says about one agent.
+#[derive(Debug, Serialize)]
+pub struct BotInfo {
+    /// Cache id ("Robot ID").
+    pub id: u32,
+    /// Rig.
+    pub rig: String,
+    /// Cycle at the frame.
+    pub cycle: String,
+    /// Cycle frame at the frame.
+    pub cycle_frame: f32,
+    /// Shot frame asked about.
+    pub shot_frame: i32,
+    /// Wardrobe scheme.
+    pub scheme: String,
+    /// Height scale.
+    pub height_scale: f32,
+    /// Foot position.
+    pub position: [f32; 3],
+    /// Heading in degrees.
+    pub heading_deg: f32,
+    /// Distance from the camera to the agent, metres.
+    pub distance: f32,
+    /// Seated at this frame.
+    pub seated: bool,
+    /// Removed in the shot.
+    pub removed: bool,
+    /// Layer, once the shot has a layer manifest.
+    pub layer: Option<String>,
+    /// LOD, once the shot has a layer manifest.
+    pub lod: Option<String>,
+    /// Parts per slot.
+    pub parts: Vec<PartRow>,
+}
+
+/// Ids closest to `id` among those that exist, for "did you mean".
+pub fn nearest_ids(existing: impl Iterator<Item = u32>, id: u32, n: usize) -> Vec<u32> {
+    let mut all: Vec<u32> = existing.collect();
+    all.sort_by_key(|&e| ((e as i64 - id as i64).abs(), e));
+    all.truncate(n);
+    all
+}
+
+/// The botInfo block of agents at a frame.
+pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInfo>> {
+    let block = crowd.agents_at(frame)?;
+    let camera = crowd.camera(frame)?;
+    let cam_pos = Vec3::from(camera.world_from_camera.translation);
+    let rows = cast_rows(crowd);
+    let mut out = Vec::new();
+    for &id in ids {
+        let Some(cast) = crowd.casting.get(&id) else {
+            let near = nearest_ids(crowd.casting.keys().copied(), id, 5);
+            return Err(Error::Usage(format!(
+                "agent {id} is not in shot {} (frames {}-{}); nearest ids: {}",
+                crowd.shot.name,
+                crowd.shot.frames.start,
+                crowd.shot.frames.end,
+                near.iter().map(u32::to_string).collect::<Vec<_>>().join(", ")
+            )));
+        };
+        let rec: Option<&AgentRecord> = block.agents.iter().find(|a| a.id == id);
+        let Some(a) = rec else {
+            return Err(Error::Usage(format!(
+                "agent {id} is in shot {} but not at frame {frame}; try another --frame",
+                crowd.shot.name
+            )));
+        };
+        let centre = a.position + Vec3::Y * 0.9 * cast.height_scale;
+        let row = rows.iter().find(|r| r.id == id);
+        out.push(BotInfo {
+            id,
+            rig: cast.rig.clone(),
+            cycle: crowd.cycle_name(a).to_string(),
+            cycle_frame: a.cycle_frame,
+            shot_frame: frame,
+            scheme: cast.scheme.clone(),
+            height_scale: cast.height_scale,
+            position: a.position.to_array(),
+            heading_deg: a.heading.to_degrees(),
+            distance: (centre - cam_pos).length(),
+            seated: a.seated(),
+            removed: crowd.shot.removed.contains(&id),
+            layer: None,
+            lod: None,
+            parts: row.map(|r| r.parts.clone()).unwrap_or_default(),
+        });
+    }
+    Ok(out)
+}
+
+/// The aligned, botInfo-style block.
+pub fn format_bot_info(b: &BotInfo) -> String {
+    let mut o = String::new();
+    let _ = writeln!(o, "Robot ID  {}", b.id);
+    let _ = writeln!(o, "Rig       {}", b.rig);
+    let _ = writeln!(o, "Cycle     {}", b.cycle);
+    let _ = writeln!(o, "Frame     {:.2}  (cycle frame at shot frame {})", b.cycle_frame, b.shot_frame);
+    let _ = writeln!(o, "Scheme    {}", b.scheme);
+    let _ = writeln!(o, "Height    {:.3}{}", b.height_scale, if b.seated { "  (seated)" } else { "" });
+    let _ = writeln!(o, "Position  {:.2} {:.2} {:.2}", b.position[0], b.position[1], b.position[2]);
+    let _ = writeln!(o, "Heading   {:.1} deg", b.heading_deg);
+    let _ = writeln!(o, "Distance  {:.2} m", b.distance);
+    if let (Some(l), Some(lod)) = (&b.layer, &b.lod) {
+        let _ = writeln!(o, "Layer     {l}  (LOD {lod}){}", if b.removed { "  REMOVED" } else { "" });
+    } else if b.removed {
+        let _ = writeln!(o, "Layer     -  REMOVED");
+    }
+    let _ = writeln!(o, "Parts");
+    for p in &b.parts {
+        let _ = writeln!(
+            o,
+            "  {:<12} {:<22} {}",
+            p.slot,
+            p.mesh.as_deref().unwrap_or("-"),
+            p.material.as_deref().unwrap_or("-")
+        );
+    }
+    o
+}
+
+/// `throng botinfo`.
+pub fn cmd_botinfo(args: &BotinfoArgs) -> Result<()> {
+    let Some(shot) = &args.shot else {
+        return Err(Error::Usage("botinfo needs a shot file".into()));
+    };
+    if args.ids.is_empty() {
+        return Err(Error::Usage("name at least one agent id".into()));
+    }
+    let crowd = ShotCrowd::load(Path::new(shot))?;
+    let frame = args.frame.unwrap_or(crowd.shot.frames.start);
+    if !crowd.shot.frames.contains(frame) {
+        return Err(Error::Usage(format!(
+            "frame {frame} is outside shot {} ({}-{})",
+            crowd.shot.name, crowd.shot.frames.start, crowd.shot.frames.end
+        )));
+    }
+    let infos = bot_info(&crowd, &args.ids, frame)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&infos).map_err(|e| Error::Usage(e.to_string()))?);
+    } else {
+        let blocks: Vec<String> = infos.iter().map(format_bot_info).collect();
+        print!("{}", blocks.join("\n"));
+    }
+    Ok(())
+}
