@@ -65,6 +65,8 @@ pub struct ShotCrowd {
     pub dressed: BTreeMap<u32, Vec<DressedPart>>,
     /// The unit cube used for proxy boxes.
     pub proxy_mesh: MeshId,
+    /// The set's instances (agent `None`), fully visible.
+    pub set: Vec<Instance>,
 }
 
 /// Unit cube [0,1]^3 with flat normals: the proxy box of every slot.
@@ -215,7 +217,22 @@ impl ShotCrowd {
             dressed.insert(id, parts);
             casting.insert(id, cast);
         }
-        Ok(ShotCrowd { shot, wardrobes, rigs, cache, casting, assets, dressed, proxy_mesh })
+        let set = match &shot.set {
+            Some(s) => assets
+                .load_scene_instances(&s.file)?
+                .into_iter()
+                .map(|(mesh, material, world_from_object)| Instance {
+                    mesh,
+                    material,
+                    world_from_object,
+                    agent: None,
+                    part: 0,
+                    visibility: vis::ALL,
+                })
+                .collect(),
+            None => Vec::new(),
+        };
+        Ok(ShotCrowd { shot, wardrobes, rigs, cache, casting, assets, dressed, proxy_mesh, set })
     }
 
     /// The shared meshes, materials and textures.
