@@ -3,7 +3,9 @@
 //! cache -> casting -> layers -> scene -> render -> comp.
 #![warn(missing_docs)]
 
+pub mod assets;
 pub mod cache;
 pub mod cli;
 pub mod error;
+pub mod rig;
 pub mod scene;
