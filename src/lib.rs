@@ -3,10 +3,12 @@
 //! cache -> casting -> layers -> scene -> render -> comp.
 #![warn(missing_docs)]
 
+pub mod assets;
 pub mod cache;
 pub mod casting;
 pub mod cli;
 pub mod error;
+pub mod rig;
 pub mod scene;
 pub mod shot;
 pub mod wardrobe;

@@ -1,0 +1,654 @@
+//! glTF asset loading into the shared [`crate::scene`] types.
+//!
+//! [`AssetCache`] imports each file once and hands out one [`MeshId`] /
+//! [`MaterialId`] per unique (file, name) key, so every agent that wears a
+//! part shares the same mesh and material (DESIGN.md: parts *and materials*
+//! are instanced). Textures are shared the same way, per (file, image).
+//!
+//! Library names are `<path as given>#<name>`, e.g. `parts/heads.glb#head_sphere`.
+//!
+//! A glTF mesh may have several primitives, each with its own material.
+//! [`AssetCache::mesh`] merges them into one [`Mesh`] (what a wardrobe part
+//! is), and [`AssetCache::gltf_material`] gives the material that covers the
+//! most triangles of that mesh. Where every primitive's own material matters
+//! (the set, multi-material parts), use [`AssetCache::mesh_primitives`] or
+//! [`AssetCache::load_scene_instances`], which keep one mesh per primitive.
+//!
+//! Accessors are checked (type, count, stride, range) before they are read,
+//! so a malformed file gives an error naming the file and mesh or animation,
+//! never a panic.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use glam::{Affine3A, Mat4, Quat, Vec2, Vec3};
+use gltf::accessor::{Accessor, DataType, Dimensions};
+
+use crate::error::{Error, Result};
+use crate::scene::{Camera, Library, Material, MaterialId, Mesh, MeshId, Texture};
+
+/// One parsed glTF file with its buffers loaded (images are decoded only on
+/// demand, so a rig never needs its textures).
+pub struct GltfFile {
+    /// The file, as given by the caller (used in errors and names).
+    pub path: PathBuf,
+    /// The parsed glTF document.
+    pub doc: gltf::Document,
+    /// Buffer contents, by buffer index.
+    pub buffers: Vec<gltf::buffer::Data>,
+}
+
+impl GltfFile {
+    /// Reads and parses `path` (`.gltf` with external or embedded buffers, or `.glb`).
+    pub fn open(path: impl AsRef<Path>) -> Result<GltfFile> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let gltf::Gltf { document, mut blob } = gltf::Gltf::from_slice(&bytes)
+            .map_err(|e| Error::invalid(path, format!("not a valid glTF file: {e}")))?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        let mut buffers = Vec::new();
+        for buffer in document.buffers() {
+            let what = match buffer.source() {
+                gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => format!("buffer {} (embedded)", buffer.index()),
+                gltf::buffer::Source::Uri(uri) => format!("buffer {} (`{uri}`)", buffer.index()),
+                gltf::buffer::Source::Bin => format!("buffer {} (GLB chunk)", buffer.index()),
+            };
+            let data = gltf::buffer::Data::from_source_and_blob(buffer.source(), Some(base), &mut blob)
+                .map_err(|e| Error::invalid(path, format!("cannot load {what}: {e}")))?;
+            if data.len() < buffer.length() {
+                return Err(Error::invalid(
+                    path,
+                    format!("{what} holds {} bytes, the file declares {}", data.len(), buffer.length()),
+                ));
+            }
+            buffers.push(data);
+        }
+        Ok(GltfFile { path: path.to_path_buf(), doc: document, buffers })
+    }
+
+    /// The bytes of a buffer, for gltf's readers.
+    pub fn buffer_data(&self, buffer: gltf::Buffer) -> Option<&[u8]> {
+        self.buffers.get(buffer.index()).map(|d| &d.0[..])
+    }
+
+    /// An error about this file.
+    pub fn err(&self, msg: impl Into<String>) -> Error {
+        Error::invalid(&self.path, msg)
+    }
+
+    /// The mesh named `name`; the error lists the mesh names in the file.
+    pub fn mesh_by_name(&self, name: &str) -> Result<gltf::Mesh<'_>> {
+        if let Some(mesh) = self.doc.meshes().find(|m| m.name() == Some(name)) {
+            return Ok(mesh);
+        }
+        let names: Vec<&str> = self.doc.meshes().filter_map(|m| m.name()).collect();
+        Err(self.err(format!("no mesh named `{name}`; meshes in this file: {}", list(&names))))
+    }
+
+    /// The node named `name`; the error lists the node names in the file.
+    pub fn node_by_name(&self, name: &str) -> Result<gltf::Node<'_>> {
+        if let Some(node) = self.doc.nodes().find(|n| n.name() == Some(name)) {
+            return Ok(node);
+        }
+        let names: Vec<&str> = self.doc.nodes().filter_map(|n| n.name()).collect();
+        Err(self.err(format!("no node named `{name}`; nodes in this file: {}", list(&names))))
+    }
+
+    /// Parent index of every node, checked to be a forest (no node with two
+    /// parents, no cycles), because we compose transforms up the chain.
+    pub fn parents(&self) -> Result<Vec<Option<usize>>> {
+        let mut parents = vec![None; self.doc.nodes().len()];
+        for node in self.doc.nodes() {
+            for child in node.children() {
+                if parents[child.index()].is_some() {
+                    return Err(self.err(format!("node {} has more than one parent", node_label(&child))));
+                }
+                parents[child.index()] = Some(node.index());
+            }
+        }
+        for start in 0..parents.len() {
+            let (mut at, mut steps) = (start, 0);
+            while let Some(p) = parents[at] {
+                at = p;
+                steps += 1;
+                if steps > parents.len() {
+                    return Err(self.err(format!("node {start} is its own ancestor (cycle in the node hierarchy)")));
+                }
+            }
+        }
+        Ok(parents)
+    }
+
+    /// World transform of every node (parents composed), in node order.
+    pub fn world_transforms(&self) -> Result<Vec<Affine3A>> {
+        let parents = self.parents()?;
+        let locals: Vec<Affine3A> = self.doc.nodes().map(|n| node_affine(&n)).collect();
+        let mut world: Vec<Option<Affine3A>> = vec![None; locals.len()];
+        for i in 0..locals.len() {
+            // Climb to the first resolved ancestor (or a root), then resolve downwards.
+            let mut chain = vec![i];
+            while let Some(p) = chain.last().and_then(|&n| parents[n]).filter(|&p| world[p].is_none()) {
+                chain.push(p);
+            }
+            for &n in chain.iter().rev() {
+                if world[n].is_none() {
+                    let parent = parents[n].and_then(|p| world[p]).unwrap_or(Affine3A::IDENTITY);
+                    world[n] = Some(parent * locals[n]);
+                }
+            }
+        }
+        Ok(world.into_iter().map(|w| w.unwrap_or(Affine3A::IDENTITY)).collect())
+    }
+}
+
+/// A node's local transform as an affine (glTF: T * R * S, or its matrix).
+pub fn node_affine(node: &gltf::Node) -> Affine3A {
+    Affine3A::from_mat4(Mat4::from_cols_array_2d(&node.transform().matrix()))
+}
+
+/// `name` or `#index` for messages about unnamed nodes.
+pub fn node_label(node: &gltf::Node) -> String {
+    node.name().map(|n| format!("`{n}`")).unwrap_or_else(|| format!("#{}", node.index()))
+}
+
+fn mesh_label(mesh: &gltf::Mesh) -> String {
+    mesh.name().map(|n| format!("`{n}`")).unwrap_or_else(|| format!("#{}", mesh.index()))
+}
+
+fn list(names: &[&str]) -> String {
+    if names.is_empty() {
+        "(none)".into()
+    } else {
+        names.join(", ")
+    }
+}
+
+/// Checks that an accessor can be read as `dims` of one of `types` without
+/// tripping the gltf crate's asserts (which would panic on a bad file).
+pub fn check_accessor(acc: &Accessor, dims: Dimensions, types: &[DataType]) -> std::result::Result<(), String> {
+    let id = acc.index();
+    if acc.dimensions() != dims {
+        return Err(format!("accessor {id} is {:?}, expected {dims:?}", acc.dimensions()));
+    }
+    if !types.contains(&acc.data_type()) {
+        return Err(format!("accessor {id} has component type {:?}, expected one of {types:?}", acc.data_type()));
+    }
+    if acc.count() == 0 {
+        return Err(format!("accessor {id} is empty"));
+    }
+    if let Some(stride) = acc.view().and_then(|v| v.stride()) {
+        if stride < acc.size() {
+            return Err(format!("accessor {id}: byte stride {stride} is smaller than its element ({} bytes)", acc.size()));
+        }
+    }
+    if let Some(sparse) = acc.sparse() {
+        if sparse.count() == 0 {
+            return Err(format!("accessor {id}: sparse count is 0"));
+        }
+        if sparse.values().view().stride().is_some_and(|s| s < acc.size()) {
+            return Err(format!("accessor {id}: sparse values have a byte stride smaller than the element"));
+        }
+    }
+    Ok(())
+}
+
+/// Error text for an accessor whose bytes lie outside its buffer.
+pub fn out_of_range(acc: &Accessor) -> String {
+    format!("accessor {} reaches outside its buffer", acc.index())
+}
+
+/// Reads one glTF mesh primitive (triangles only) into a [`Mesh`] named `name`.
+fn read_primitive(file: &GltfFile, mesh: &gltf::Mesh, prim: &gltf::Primitive, name: String) -> Result<Mesh> {
+    let ctx = |msg: String| file.err(format!("mesh {} primitive {}: {msg}", mesh_label(mesh), prim.index()));
+    if prim.mode() != gltf::mesh::Mode::Triangles {
+        return Err(ctx(format!("mode {:?} is not supported (triangles only)", prim.mode())));
+    }
+    let reader = prim.reader(|b| file.buffer_data(b));
+    let pos_acc = prim.get(&gltf::Semantic::Positions).ok_or_else(|| ctx("has no POSITION".into()))?;
+    check_accessor(&pos_acc, Dimensions::Vec3, &[DataType::F32]).map_err(ctx)?;
+    let positions: Vec<Vec3> =
+        reader.read_positions().ok_or_else(|| ctx(out_of_range(&pos_acc)))?.map(Vec3::from).collect();
+    let n = positions.len();
+
+    let mut normals = Vec::new();
+    if let Some(acc) = prim.get(&gltf::Semantic::Normals) {
+        check_accessor(&acc, Dimensions::Vec3, &[DataType::F32]).map_err(ctx)?;
+        normals = reader.read_normals().ok_or_else(|| ctx(out_of_range(&acc)))?.map(Vec3::from).collect();
+        if normals.len() != n {
+            return Err(ctx(format!("{} normals for {n} positions", normals.len())));
+        }
+    }
+    let mut uvs = Vec::new();
+    if let Some(acc) = prim.get(&gltf::Semantic::TexCoords(0)) {
+        check_accessor(&acc, Dimensions::Vec2, &[DataType::F32, DataType::U8, DataType::U16]).map_err(ctx)?;
+        uvs = reader.read_tex_coords(0).ok_or_else(|| ctx(out_of_range(&acc)))?.into_f32().map(Vec2::from).collect();
+        if uvs.len() != n {
+            return Err(ctx(format!("{} texture coordinates for {n} positions", uvs.len())));
+        }
+    }
+    let indices: Vec<u32> = match prim.indices() {
+        Some(acc) => {
+            check_accessor(&acc, Dimensions::Scalar, &[DataType::U8, DataType::U16, DataType::U32]).map_err(ctx)?;
+            reader.read_indices().ok_or_else(|| ctx(out_of_range(&acc)))?.into_u32().collect()
+        }
+        None => (0..n as u32).collect(),
+    };
+    if indices.len() % 3 != 0 {
+        return Err(ctx(format!("{} indices is not a whole number of triangles", indices.len())));
+    }
+    if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {
+        return Err(ctx(format!("index {bad} is out of range ({n} vertices)")));
+    }
+    let mut out = Mesh { name, positions, normals, uvs, indices };
+    if out.normals.is_empty() {
+        out.normals = smooth_normals(&out);
+    }
+    Ok(out)
+}
+
+/// All primitives of `mesh` merged into one triangle mesh named `name`.
+pub fn read_mesh(file: &GltfFile, mesh: &gltf::Mesh, name: String) -> Result<Mesh> {
+    let mut merged = Mesh { name, ..Default::default() };
+    for prim in mesh.primitives() {
+        append_mesh(&mut merged, read_primitive(file, mesh, &prim, String::new())?);
+    }
+    Ok(merged)
+}
+
+/// Area-weighted vertex normals, for meshes exported without normals.
+/// Shared vertices come out smooth; split vertices (hard edges) stay flat.
+fn smooth_normals(mesh: &Mesh) -> Vec<Vec3> {
+    let mut normals = vec![Vec3::ZERO; mesh.positions.len()];
+    for tri in mesh.indices.chunks_exact(3) {
+        let [a, b, c] = [tri[0] as usize, tri[1] as usize, tri[2] as usize];
+        // Cross product length is twice the area: larger faces weigh more.
+        let n = (mesh.positions[b] - mesh.positions[a]).cross(mesh.positions[c] - mesh.positions[a]);
+        for i in [a, b, c] {
+            normals[i] += n;
+        }
+    }
+    normals.into_iter().map(|n| n.try_normalize().unwrap_or(Vec3::Y)).collect()
+}
+
+/// Appends `part` to `into`, offsetting indices. Attributes one side lacks
+/// are filled (zero uvs) so the arrays stay parallel.
+fn append_mesh(into: &mut Mesh, mut part: Mesh) {
+    let base = into.positions.len() as u32;
+    if into.uvs.is_empty() && !part.uvs.is_empty() {
+        into.uvs = vec![Vec2::ZERO; into.positions.len()];
+    }
+    if part.uvs.is_empty() && !into.uvs.is_empty() {
+        part.uvs = vec![Vec2::ZERO; part.positions.len()];
+    }
+    into.positions.extend(part.positions);
+    into.normals.extend(part.normals);
+    into.uvs.extend(part.uvs);
+    into.indices.extend(part.indices.into_iter().map(|i| i + base));
+}
+
+/// Converts an 8-bit sRGB-encoded channel value (0..1) to linear.
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// A directional light (KHR_lights_punctual) found in a scene file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DirectionalLight {
+    /// Name of the node carrying the light (or `#index`).
+    pub node: String,
+    /// Unit vector from the scene towards the light (the node's world +Z;
+    /// the light shines down its local -Z).
+    pub direction: Vec3,
+    /// Linear RGB colour.
+    pub color: Vec3,
+    /// Intensity as stored in the file (lux for glTF directional lights).
+    pub intensity: f32,
+}
+
+#[derive(Clone, PartialEq, Eq, Hash)]
+enum MeshKey {
+    /// All primitives of a mesh, merged (file, mesh name).
+    Merged(PathBuf, String),
+    /// One primitive (file, mesh index, primitive index).
+    Primitive(PathBuf, usize, usize),
+}
+
+/// A loaded file with its cache key (canonical path) and the path as given.
+struct Source {
+    key: PathBuf,
+    shown: String,
+    file: Arc<GltfFile>,
+}
+
+/// Loads glTF files once and shares their meshes, materials and textures.
+#[derive(Default)]
+pub struct AssetCache {
+    library: Library,
+    /// Parsed files by canonical path.
+    files: HashMap<PathBuf, Arc<GltfFile>>,
+    meshes: HashMap<MeshKey, MeshId>,
+    /// glTF materials by (file, material index; `None` for primitives without one).
+    gltf_materials: HashMap<(PathBuf, Option<usize>), MaterialId>,
+    materials_by_name: HashMap<String, MaterialId>,
+    textures: HashMap<(PathBuf, usize), u32>,
+}
+
+impl AssetCache {
+    /// An empty cache.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Everything loaded so far.
+    pub fn library(&self) -> &Library {
+        &self.library
+    }
+
+    /// Gives up the cache, keeping what was loaded.
+    pub fn into_library(self) -> Library {
+        self.library
+    }
+
+    /// The parsed file, read on first use. Keyed by canonical path so
+    /// `a/../b.glb` and `b.glb` are one file.
+    fn source(&mut self, path: &Path) -> Result<Source> {
+        let key = std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?;
+        let file = match self.files.get(&key) {
+            Some(file) => file.clone(),
+            None => {
+                let file = Arc::new(GltfFile::open(path)?);
+                self.files.insert(key.clone(), file.clone());
+                file
+            }
+        };
+        Ok(Source { key, shown: path.display().to_string(), file })
+    }
+
+    fn push_mesh(&mut self, mesh: Mesh) -> MeshId {
+        self.library.meshes.push(mesh);
+        (self.library.meshes.len() - 1) as MeshId
+    }
+
+    /// The glTF mesh `mesh_name` in `path`, all primitives merged into one
+    /// triangle mesh named `<path>#<mesh_name>`. Loaded once; later calls
+    /// return the same id.
+    pub fn mesh(&mut self, path: impl AsRef<Path>, mesh_name: &str) -> Result<MeshId> {
+        let src = self.source(path.as_ref())?;
+        let key = MeshKey::Merged(src.key.clone(), mesh_name.to_string());
+        if let Some(&id) = self.meshes.get(&key) {
+            return Ok(id);
+        }
+        let gmesh = src.file.mesh_by_name(mesh_name)?;
+        let merged = read_mesh(&src.file, &gmesh, format!("{}#{mesh_name}", src.shown))?;
+        let id = self.push_mesh(merged);
+        self.meshes.insert(key, id);
+        // A one-primitive mesh is the same geometry as its only primitive: share it.
+        if gmesh.primitives().len() == 1 {
+            self.meshes.insert(MeshKey::Primitive(src.key, gmesh.index(), 0), id);
+        }
+        Ok(id)
+    }
+
+    /// One (mesh, material) per primitive of glTF mesh `index`.
+    fn primitives_of(&mut self, src: &Source, index: usize) -> Result<Vec<(MeshId, MaterialId)>> {
+        let file = src.file.clone();
+        let gmesh = file.doc.meshes().nth(index).ok_or_else(|| file.err(format!("no mesh #{index}")))?;
+        let label = gmesh.name().map(str::to_string).unwrap_or_else(|| format!("mesh{index}"));
+        let single = gmesh.primitives().len() == 1;
+        let mut out = Vec::new();
+        for prim in gmesh.primitives() {
+            let key = MeshKey::Primitive(src.key.clone(), index, prim.index());
+            let mesh = match self.meshes.get(&key) {
+                Some(&id) => id,
+                None => {
+                    let name = if single {
+                        format!("{}#{label}", src.shown)
+                    } else {
+                        format!("{}#{label}/{}", src.shown, prim.index())
+                    };
+                    let id = self.push_mesh(read_primitive(&file, &gmesh, &prim, name)?);
+                    self.meshes.insert(key, id);
+                    id
+                }
+            };
+            let material = self.material_of(src, prim.material().index())?;
+            out.push((mesh, material));
+        }
+        Ok(out)
+    }
+
+    /// The mesh `mesh_name` split by primitive: one (mesh, its own glTF
+    /// material) pair per primitive, for parts with several materials.
+    pub fn mesh_primitives(&mut self, path: impl AsRef<Path>, mesh_name: &str) -> Result<Vec<(MeshId, MaterialId)>> {
+        let src = self.source(path.as_ref())?;
+        let index = src.file.mesh_by_name(mesh_name)?.index();
+        self.primitives_of(&src, index)
+    }
+
+    /// The glTF material of mesh `mesh_name`: the material of its primitive
+    /// with the most triangles (the first on ties), since
+    /// [`AssetCache::mesh`] merges primitives into one mesh with one material.
+    pub fn gltf_material(&mut self, path: impl AsRef<Path>, mesh_name: &str) -> Result<MaterialId> {
+        let src = self.source(path.as_ref())?;
+        let gmesh = src.file.mesh_by_name(mesh_name)?;
+        let mut best: Option<(usize, Option<usize>)> = None;
+        for prim in gmesh.primitives() {
+            // Count from the accessors; no need to read the data.
+            let count = match prim.indices() {
+                Some(acc) => acc.count(),
+                None => prim.get(&gltf::Semantic::Positions).map_or(0, |a| a.count()),
+            };
+            if best.is_none_or(|(c, _)| count > c) {
+                best = Some((count, prim.material().index()));
+            }
+        }
+        let Some((_, material)) = best else {
+            return Err(src.file.err(format!("mesh `{mesh_name}` has no primitives")));
+        };
+        self.material_of(&src, material)
+    }
+
+    /// Material `index` of a file. Primitives without a material get
+    /// [`Material::default`] (grey dielectric) named `<path>#default`: the
+    /// glTF default (white metal) looks wrong in a render.
+    fn material_of(&mut self, src: &Source, index: Option<usize>) -> Result<MaterialId> {
+        if let Some(&id) = self.gltf_materials.get(&(src.key.clone(), index)) {
+            return Ok(id);
+        }
+        let file = src.file.clone();
+        let mut material = Material { name: format!("{}#default", src.shown), ..Material::default() };
+        if let Some(m) = index.and_then(|i| file.doc.materials().nth(i)) {
+            let label = m.name().map(str::to_string).unwrap_or_else(|| format!("material{}", m.index().unwrap_or(0)));
+            let pbr = m.pbr_metallic_roughness();
+            let [r, g, b, _] = pbr.base_color_factor();
+            let texture = match pbr.base_color_texture() {
+                Some(info) => Some(self.texture(src, info.texture().source().index())?),
+                None => None,
+            };
+            material = Material {
+                name: format!("{}#{label}", src.shown),
+                base_color: Vec3::new(r, g, b),
+                base_color_texture: texture,
+                roughness: pbr.roughness_factor(),
+                metallic: pbr.metallic_factor(),
+            };
+        }
+        self.library.materials.push(material.clone());
+        let id = (self.library.materials.len() - 1) as MaterialId;
+        self.gltf_materials.insert((src.key.clone(), index), id);
+        self.materials_by_name.entry(material.name).or_insert(id);
+        Ok(id)
+    }
+
+    /// Image `index` of a file as a linear RGBA texture (colour channels
+    /// sRGB-decoded: glTF base colour textures are sRGB; alpha is linear).
+    fn texture(&mut self, src: &Source, index: usize) -> Result<u32> {
+        if let Some(&id) = self.textures.get(&(src.key.clone(), index)) {
+            return Ok(id);
+        }
+        let file = &src.file;
+        let image = file.doc.images().nth(index).ok_or_else(|| file.err(format!("no image #{index}")))?;
+        let label = image.name().map(str::to_string).unwrap_or_else(|| format!("image{index}"));
+        let ctx = |msg: String| file.err(format!("image `{label}`: {msg}"));
+        // gltf slices buffer views without a range check; check first.
+        if let gltf::image::Source::View { view, .. } = image.source() {
+            let len = file.buffers.get(view.buffer().index()).map_or(0, |b| b.len());
+            if view.offset() + view.length() > len {
+                return Err(ctx("buffer view reaches outside its buffer".into()));
+            }
+        }
+        let base = file.path.parent().unwrap_or(Path::new("."));
+        let data = gltf::image::Data::from_source(image.source(), Some(base), &file.buffers)
+            .map_err(|e| ctx(format!("cannot decode: {e}")))?;
+        let texels = decode_texels(&data).ok_or_else(|| ctx(format!("unsupported pixel format {:?}", data.format)))?;
+        let texture = Texture { name: format!("{}#{label}", src.shown), width: data.width, height: data.height, texels };
+        self.library.textures.push(texture);
+        let id = (self.library.textures.len() - 1) as u32;
+        self.textures.insert((src.key.clone(), index), id);
+        Ok(id)
+    }
+
+    /// Adds a material (e.g. from a wardrobe), deduplicated by name: a
+    /// material whose name is already present returns the existing id.
+    pub fn add_material(&mut self, material: Material) -> MaterialId {
+        if let Some(&id) = self.materials_by_name.get(&material.name) {
+            return id;
+        }
+        self.library.materials.push(material.clone());
+        let id = (self.library.materials.len() - 1) as MaterialId;
+        self.materials_by_name.insert(material.name, id);
+        id
+    }
+
+    /// Adds a mesh built in code (e.g. the proxy box), deduplicated by name.
+    pub fn add_mesh(&mut self, mesh: Mesh) -> MeshId {
+        let key = MeshKey::Merged(PathBuf::new(), mesh.name.clone());
+        if let Some(&id) = self.meshes.get(&key) {
+            return id;
+        }
+        let id = self.push_mesh(mesh);
+        self.meshes.insert(key, id);
+        id
+    }
+
+    /// Every mesh primitive placed by the file's default scene (or its first
+    /// scene): (mesh, the primitive's own material, world_from_object with
+    /// parent transforms composed), depth-first in file order.
+    pub fn load_scene_instances(&mut self, path: impl AsRef<Path>) -> Result<Vec<(MeshId, MaterialId, Affine3A)>> {
+        let src = self.source(path.as_ref())?;
+        let file = src.file.clone();
+        file.parents()?; // a forest, so the walk below ends
+        let scene = file.doc.default_scene().or_else(|| file.doc.scenes().next()).ok_or_else(|| file.err("has no scene"))?;
+        let mut stack: Vec<(gltf::Node, Affine3A)> = scene.nodes().map(|n| (n.clone(), node_affine(&n))).collect();
+        stack.reverse();
+        let mut out = Vec::new();
+        while let Some((node, world)) = stack.pop() {
+            if let Some(mesh) = node.mesh() {
+                for (mesh, material) in self.primitives_of(&src, mesh.index())? {
+                    out.push((mesh, material, world));
+                }
+            }
+            let children: Vec<_> = node.children().collect();
+            for child in children.into_iter().rev() {
+                let child_world = world * node_affine(&child);
+                stack.push((child, child_world));
+            }
+        }
+        Ok(out)
+    }
+
+    /// The camera on node `node_name`. `world_from_camera` keeps the node's
+    /// world rotation and translation but drops scale (a scaled camera node
+    /// would skew rays).
+    pub fn find_camera(&mut self, path: impl AsRef<Path>, node_name: &str) -> Result<Camera> {
+        let file = self.source(path.as_ref())?.file;
+        let node = file.node_by_name(node_name)?;
+        let camera = node.camera().ok_or_else(|| file.err(format!("node `{node_name}` has no camera")))?;
+        let yfov = match camera.projection() {
+            gltf::camera::Projection::Perspective(p) => p.yfov(),
+            gltf::camera::Projection::Orthographic(_) => {
+                return Err(file.err(format!("camera on node `{node_name}` is orthographic; only perspective is supported")))
+            }
+        };
+        if !(yfov.is_finite() && yfov > 0.0 && yfov < std::f32::consts::PI) {
+            return Err(file.err(format!("camera on node `{node_name}` has yfov {yfov}")));
+        }
+        let world = file.world_transforms()?[node.index()];
+        let (_, rotation, translation) = world.to_scale_rotation_translation();
+        Ok(Camera { world_from_camera: Affine3A::from_rotation_translation(rotation.normalize(), translation), yfov })
+    }
+
+    /// Directional lights (KHR_lights_punctual) on any node of the file, in node order.
+    pub fn directional_lights(&mut self, path: impl AsRef<Path>) -> Result<Vec<DirectionalLight>> {
+        let file = self.source(path.as_ref())?.file;
+        let world = file.world_transforms()?;
+        let mut out = Vec::new();
+        for node in file.doc.nodes() {
+            let Some(light) = node.light() else { continue };
+            if !matches!(light.kind(), gltf::khr_lights_punctual::Kind::Directional) {
+                continue;
+            }
+            let direction = world[node.index()].transform_vector3(Vec3::Z).try_normalize().unwrap_or(Vec3::Y);
+            out.push(DirectionalLight {
+                node: node.name().map(str::to_string).unwrap_or_else(|| format!("#{}", node.index())),
+                direction,
+                color: Vec3::from(light.color()),
+                intensity: light.intensity(),
+            });
+        }
+        Ok(out)
+    }
+}
+
+/// Linear RGBA texels from decoded image data; `None` for formats we do not read.
+fn decode_texels(data: &gltf::image::Data) -> Option<Vec<[f32; 4]>> {
+    use gltf::image::Format;
+    let px = &data.pixels;
+    let u16_at = |i: usize| u16::from_ne_bytes([px[2 * i], px[2 * i + 1]]) as f32 / 65535.0;
+    let (channels, wide) = match data.format {
+        Format::R8 => (1, false),
+        Format::R8G8 => (2, false),
+        Format::R8G8B8 => (3, false),
+        Format::R8G8B8A8 => (4, false),
+        Format::R16 => (1, true),
+        Format::R16G16 => (2, true),
+        Format::R16G16B16 => (3, true),
+        Format::R16G16B16A16 => (4, true),
+        _ => return None,
+    };
+    let count = data.width as usize * data.height as usize;
+    let bytes_per = if wide { 2 } else { 1 };
+    if px.len() < count * channels * bytes_per {
+        return None;
+    }
+    let get = |i: usize| if wide { u16_at(i) } else { px[i] as f32 / 255.0 };
+    let texels = (0..count)
+        .map(|t| {
+            let c: Vec<f32> = (0..channels).map(|k| get(t * channels + k)).collect();
+            let (rgb, a) = match channels {
+                1 => ([c[0]; 3], 1.0),
+                2 => ([c[0]; 3], c[1]),
+                3 => ([c[0], c[1], c[2]], 1.0),
+                _ => ([c[0], c[1], c[2]], c[3]),
+            };
+            [srgb_to_linear(rgb[0]), srgb_to_linear(rgb[1]), srgb_to_linear(rgb[2]), a]
+        })
+        .collect();
+    Some(texels)
+}
+
+/// Quaternion from glTF `[x, y, z, w]`, normalised (files may carry slightly
+/// unnormalised rotations); identity if degenerate.
+pub fn quat_from_gltf(q: [f32; 4]) -> Quat {
+    let q = Quat::from_array(q);
+    if q.length_squared() > 1e-12 && q.is_finite() {
+        q.normalize()
+    } else {
+        Quat::IDENTITY
+    }
+}
