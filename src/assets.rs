@@ -536,6 +536,26 @@ impl AssetCache {
         id
     }
 
+    /// A PNG file as a linear RGBA texture (colour sRGB-decoded), loaded once
+    /// per path: wardrobe materials' `base_color_texture`.
+    pub fn texture_png(&mut self, path: impl AsRef<Path>) -> Result<u32> {
+        let path = path.as_ref();
+        let key = (std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?, usize::MAX);
+        if let Some(&id) = self.textures.get(&key) {
+            return Ok(id);
+        }
+        let img = image::open(path).map_err(|e| Error::invalid(path, format!("cannot decode texture: {e}")))?.to_rgba32f();
+        let texels = img
+            .pixels()
+            .map(|p| [srgb_to_linear(p[0]), srgb_to_linear(p[1]), srgb_to_linear(p[2]), p[3]])
+            .collect();
+        let texture = Texture { name: path.display().to_string(), width: img.width(), height: img.height(), texels };
+        self.library.textures.push(texture);
+        let id = (self.library.textures.len() - 1) as u32;
+        self.textures.insert(key, id);
+        Ok(id)
+    }
+
     /// Every mesh primitive placed by the file's default scene (or its first
     /// scene): (mesh, the primitive's own material, world_from_object with
     /// parent transforms composed), depth-first in file order.

@@ -67,6 +67,8 @@ pub struct ShotCrowd {
     pub proxy_mesh: MeshId,
     /// The set's instances (agent `None`), fully visible.
     pub set: Vec<Instance>,
+    /// The camera from a glTF node, when the shot names one instead of keys.
+    gltf_camera: Option<Camera>,
 }
 
 /// Unit cube [0,1]^3 with flat normals: the proxy box of every slot.
@@ -232,7 +234,11 @@ impl ShotCrowd {
                 .collect(),
             None => Vec::new(),
         };
-        Ok(ShotCrowd { shot, wardrobes, rigs, cache, casting, assets, dressed, proxy_mesh, set })
+        let gltf_camera = match &shot.camera.gltf {
+            Some((file, node)) => Some(assets.find_camera(file, node)?),
+            None => None,
+        };
+        Ok(ShotCrowd { shot, wardrobes, rigs, cache, casting, assets, dressed, proxy_mesh, set, gltf_camera })
     }
 
     /// The shared meshes, materials and textures.
@@ -316,9 +322,6 @@ impl ShotCrowd {
         if let Some(c) = self.shot.keyed_camera(shot_frame as f32) {
             return Ok(c);
         }
-        match &self.shot.camera.gltf {
-            Some((file, node)) => crate::assets::find_camera(file, node),
-            None => Err(Error::invalid(&self.shot.path, "no camera").field("camera")),
-        }
+        self.gltf_camera.ok_or_else(|| Error::invalid(&self.shot.path, "no camera").field("camera"))
     }
 }
