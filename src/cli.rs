@@ -245,9 +245,9 @@ pub fn run(cli: Cli) -> Result<()> {
 
         Verb::Sim(_args) => Err(Error::NotBuilt("sim")),
 
-        Verb::Cast(_args) => Err(Error::NotBuilt("cast")),
+        Verb::Cast(args) => crate::commands::cmd_cast(&args),
 
-        Verb::Botinfo(_args) => Err(Error::NotBuilt("botinfo")),
+        Verb::Botinfo(args) => crate::commands::cmd_botinfo(&args),
 
         Verb::Layers(_args) => Err(Error::NotBuilt("layers")),
 
