@@ -100,12 +100,18 @@ impl ShotCrowd {
     /// appears in the shot's frame range.
     pub fn load(shot_path: &Path) -> Result<ShotCrowd> {
         let shot = Shot::load(shot_path)?;
+        let cache = CacheReader::open(&shot.cache.path)?;
+        ShotCrowd::new(shot, cache)
+    }
+
+    /// Casts a shot against an already opened cache (tests use this to
+    /// remove or reorder agents without writing files).
+    pub fn new(shot: Shot, cache: CacheReader) -> Result<ShotCrowd> {
         let wardrobes = Wardrobes::load(&shot.wardrobes)?;
         let mut rigs = BTreeMap::new();
         for (name, r) in &shot.rigs {
             rigs.insert(name.clone(), Rig::load(&r.file)?);
         }
-        let cache = CacheReader::open(&shot.cache.path)?;
 
         // First pass over the shot's frames: each agent's rig (at its first
         // appearance) and whether it is ever seated or on a no-scale cycle.

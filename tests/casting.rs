@@ -1,0 +1,177 @@
+//! Casting on the bundled demo shot: uniform heads, height jitter, stability
+//! under removal and reordering, determinism, exclusions, posing, export.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use throng::cache::{self, CacheReader};
+use throng::casting::{cast_agent, RigCasting};
+use throng::pose::{Lod, ShotCrowd};
+use throng::shot::Shot;
+use throng::wardrobe::Wardrobes;
+
+fn demo_shot() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/shot.toml")
+}
+
+fn load_with(edit: impl FnOnce(&mut Shot, &mut cache::Crowd)) -> ShotCrowd {
+    let mut shot = Shot::load(&demo_shot()).unwrap();
+    let mut crowd = cache::read(&shot.cache.path).unwrap();
+    edit(&mut shot, &mut crowd);
+    let path = shot.cache.path.clone();
+    ShotCrowd::new(shot, CacheReader::from_crowd(path, crowd)).unwrap()
+}
+
+#[test]
+fn heads_are_uniform_and_inside_their_box() {
+    let crowd = ShotCrowd::load(&demo_shot()).unwrap();
+    let mut heads = 0;
+    for (id, parts) in &crowd.dressed {
+        let cast = &crowd.casting[id];
+        let rig = &crowd.rigs[&cast.rig];
+        for p in parts {
+            let slot = &rig.slots()[p.slot];
+            let uniform = cast.slots[p.slot].part.as_ref().unwrap().uniform;
+            let (lo, hi) = crowd.library().meshes[p.mesh as usize].bounds();
+            let (a, b) = (p.slot_from_part.transform_point3(lo), p.slot_from_part.transform_point3(hi));
+            let eps = 1e-4;
+            assert!(a.cmpge(slot.proxy_min - eps).all() && b.cmple(slot.proxy_max + eps).all(), "agent {id} slot {}", slot.name);
+            if uniform {
+                heads += 1;
+                let (s, _, _) = p.slot_from_part.to_scale_rotation_translation();
+                assert!((s.x - s.y).abs() < 1e-5 && (s.y - s.z).abs() < 1e-5, "agent {id} head scale {s}");
+                assert!((a.y - slot.proxy_min.y).abs() < 1e-4, "agent {id}: head rests on the box bottom");
+            } else {
+                // Body parts fill their box on every axis.
+                assert!((a - slot.proxy_min).abs().max_element() < 1e-4 && (b - slot.proxy_max).abs().max_element() < 1e-4);
+            }
+        }
+    }
+    assert!(heads > 100, "demo has heads: {heads}");
+}
+
+#[test]
+fn height_scales_are_uniform_within_range() {
+    let shot = Shot::load(&demo_shot()).unwrap();
+    let wardrobes = Wardrobes::load(&shot.wardrobes).unwrap();
+    let (name, rig) = shot.rigs.iter().next().unwrap();
+    let slots = vec!["head".to_string()];
+    let rc = RigCasting { name, slots: &slots, schemes: &rig.schemes, height_jitter: 0.1 };
+    let n = 10_000;
+    let mut h: Vec<f64> = (1..=n)
+        .map(|id| cast_agent(shot.seed, id, &rc, &wardrobes, &[], false).unwrap().height_scale as f64)
+        .collect();
+    assert!(h.iter().all(|&x| (0.9..=1.1).contains(&x)));
+    h.sort_by(f64::total_cmp);
+    // Kolmogorov-Smirnov against U(0.9, 1.1): D < 1.63 / sqrt(n) is alpha = 0.01.
+    let d = h
+        .iter()
+        .enumerate()
+        .map(|(i, &x)| {
+            let f = (x - 0.9) / 0.2;
+            (f - i as f64 / n as f64).abs().max(((i + 1) as f64 / n as f64 - f).abs())
+        })
+        .fold(0.0, f64::max);
+    assert!(d < 1.63 / (n as f64).sqrt(), "KS D = {d}");
+    // Never-scaled agents keep 1.0.
+    assert_eq!(cast_agent(shot.seed, 5, &rc, &wardrobes, &[], true).unwrap().height_scale, 1.0);
+}
+
+#[test]
+fn seated_agents_are_never_scaled() {
+    let crowd = ShotCrowd::load(&demo_shot()).unwrap();
+    let block = crowd.agents_at(crowd.shot.frames.start).unwrap();
+    let seated: Vec<_> = block.agents.iter().filter(|a| a.seated()).collect();
+    assert!(!seated.is_empty());
+    for a in seated {
+        assert_eq!(crowd.casting[&a.id].height_scale, 1.0, "agent {}", a.id);
+    }
+}
+
+#[test]
+fn removal_and_reordering_change_no_other_agent() {
+    let base = ShotCrowd::load(&demo_shot()).unwrap();
+    let victim = *base.casting.keys().nth(7).unwrap();
+    let removed = load_with(|_, c| {
+        for f in &mut c.frames {
+            f.agents.retain(|a| a.id != victim);
+        }
+    });
+    let reordered = load_with(|_, c| {
+        for f in &mut c.frames {
+            f.agents.reverse();
+        }
+    });
+    assert!(!removed.casting.contains_key(&victim));
+    for (id, cast) in &base.casting {
+        if *id != victim {
+            assert_eq!(&removed.casting[id], cast, "agent {id} changed when {victim} was removed");
+        }
+        assert_eq!(&reordered.casting[id], cast, "agent {id} changed on reordering");
+    }
+}
+
+#[test]
+fn same_seed_same_cast_other_seed_differs() {
+    let a = ShotCrowd::load(&demo_shot()).unwrap();
+    let b = ShotCrowd::load(&demo_shot()).unwrap();
+    assert_eq!(a.casting, b.casting);
+    let c = load_with(|s, _| s.seed += 1);
+    let differ = a.casting.iter().filter(|(id, cast)| c.casting[*id] != **cast).count();
+    assert!(differ > a.casting.len() / 2, "only {differ} agents changed with another seed");
+}
+
+#[test]
+fn excluded_parts_and_culled_cycles_never_appear() {
+    let base = ShotCrowd::load(&demo_shot()).unwrap();
+    // Exclude the most used head.
+    let mut counts = std::collections::BTreeMap::new();
+    for c in base.casting.values() {
+        for s in &c.slots {
+            if let Some(p) = s.part.as_ref().filter(|p| p.uniform) {
+                *counts.entry(p.mesh.clone()).or_insert(0) += 1;
+            }
+        }
+    }
+    let (top, _) = counts.iter().max_by_key(|(_, n)| **n).unwrap();
+    let top = top.clone();
+    let culled = "IdleA".to_string();
+    let edited = load_with(|s, _| {
+        s.exclude_parts.push(top.clone());
+        s.culled_cycles.push(culled.clone());
+    });
+    for c in edited.casting.values() {
+        assert!(c.slots.iter().all(|s| s.part.as_ref().is_none_or(|p| p.mesh != top)), "agent {} wears {top}", c.id);
+    }
+    for f in edited.shot.frames.iter() {
+        let block = edited.agents_at(f).unwrap();
+        let instances = edited.frame_instances(f, |_| Lod::Full).unwrap();
+        let ids: BTreeSet<u32> = instances.iter().filter_map(|i| i.agent).collect();
+        for a in &block.agents {
+            if edited.cycle_name(a) == culled {
+                assert!(!ids.contains(&a.id), "agent {} on culled cycle rendered at {f}", a.id);
+            }
+        }
+    }
+}
+
+#[test]
+fn posed_agents_stand_on_the_floor() {
+    let crowd = ShotCrowd::load(&demo_shot()).unwrap();
+    let f = crowd.shot.frames.start;
+    let block = crowd.agents_at(f).unwrap();
+    for a in block.agents.iter().filter(|a| !a.seated()) {
+        let mut insts = Vec::new();
+        crowd.agent_instances(a, Lod::Proxy, throng::scene::vis::ALL, &mut insts).unwrap();
+        let lowest = insts
+            .iter()
+            .flat_map(|i| {
+                (0..8).map(move |c| {
+                    let p = glam::Vec3::new((c & 1) as f32, ((c >> 1) & 1) as f32, ((c >> 2) & 1) as f32);
+                    i.world_from_object.transform_point3(p).y
+                })
+            })
+            .fold(f32::INFINITY, f32::min);
+        assert!(lowest > -0.1 && lowest < 0.25, "agent {}: lowest proxy corner at y = {lowest}", a.id);
+    }
+}
