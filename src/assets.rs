@@ -384,12 +384,15 @@ impl AssetCache {
             return Ok(id);
         }
         let gmesh = src.file.mesh_by_name(mesh_name)?;
-        let merged = read_mesh(&src.file, &gmesh, format!("{}#{mesh_name}", src.shown))?;
-        let id = self.push_mesh(merged);
-        self.meshes.insert(key, id);
         // A one-primitive mesh is the same geometry as its only primitive: share it.
-        if gmesh.primitives().len() == 1 {
-            self.meshes.insert(MeshKey::Primitive(src.key, gmesh.index(), 0), id);
+        let single = (gmesh.primitives().len() == 1).then(|| MeshKey::Primitive(src.key.clone(), gmesh.index(), 0));
+        let id = match single.as_ref().and_then(|k| self.meshes.get(k)) {
+            Some(&id) => id,
+            None => self.push_mesh(read_mesh(&src.file, &gmesh, format!("{}#{mesh_name}", src.shown))?),
+        };
+        self.meshes.insert(key, id);
+        if let Some(single) = single {
+            self.meshes.insert(single, id);
         }
         Ok(id)
     }
