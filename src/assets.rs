@@ -234,7 +234,7 @@ fn read_primitive(file: &GltfFile, mesh: &gltf::Mesh, prim: &gltf::Primitive, na
         }
         None => (0..n as u32).collect(),
     };
-    if indices.len() % 3 != 0 {
+    if !indices.len().is_multiple_of(3) {
         return Err(ctx(format!("{} indices is not a whole number of triangles", indices.len())));
     }
     if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {

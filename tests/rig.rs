@@ -179,7 +179,8 @@ fn cubic_rotation_uses_scaled_tangents_and_normalises() {
     let v1 = Vec4::new(0.0, 0.0, -0.38268346, 0.92387956);
     let out1 = Vec4::new(0.0, 0.0, -0.0478909, 0.99885267);
     let in2 = Vec4::new(0.0, 0.0, -0.035464317, 0.999371);
-    let v2 = Vec4::new(0.0, 0.0, -0.70710683, 0.70710683);
+    let s = std::f32::consts::FRAC_1_SQRT_2;
+    let v2 = Vec4::new(0.0, 0.0, -s, s);
     let dt = ROT_T[2] - ROT_T[1];
     let u: f32 = 0.25;
     let (u2, u3) = (u * u, u * u * u);
@@ -200,7 +201,7 @@ fn step_translation_holds_previous_key() {
     let a = interpolation_test();
     let ch = channel(&a, "Step Translation");
     let t = [0.0, 0.45833334, 0.8333333, 1.2916666, 1.7083334];
-    let y = [6.665226459503174, 10.0, 6.0, 10.0, 6.0];
+    let y = [6.665_226, 10.0, 6.0, 10.0, 6.0];
     for i in 0..4 {
         let mid = (t[i] + t[i + 1]) / 2.0;
         close3(ch.sample_vec3(mid), Vec3::new(0.0, y[i], 0.0), &format!("between keys {i} and {}", i + 1));
@@ -214,7 +215,7 @@ fn linear_translation_interpolates() {
     let a = interpolation_test();
     let ch = channel(&a, "Linear Translation");
     let t = [0.0, 0.41666666, 0.8333333, 1.25, 1.6666666];
-    let y = [6.621014595031738, 10.0, 6.0, 10.0, 6.0];
+    let y = [6.621_015, 10.0, 6.0, 10.0, 6.0];
     let x = -3.2975807;
     for i in 0..4 {
         for u in [0.5, 0.25] {
@@ -230,7 +231,7 @@ fn cubic_translation_follows_hermite_basis() {
     let a = interpolation_test();
     let ch = channel(&a, "CubicSpline Translation");
     let t = [0.0, 0.41666666, 0.8333333, 1.25, 1.6666666];
-    let y = [6.640117168426514, 10.0, 6.0, 10.0, 6.0];
+    let y = [6.640_117, 10.0, 6.0, 10.0, 6.0];
     let x = 3.3051798;
     let (h00, h01) = (27.0 / 32.0, 5.0 / 32.0); // zero tangents, u = 1/4
     for i in 0..4 {
