@@ -270,3 +270,40 @@ fn interpolation_test_meshes_load_without_their_image() {
     let err = cache.gltf_material(&path, "Plane.001").err().map(|e| e.to_string()).unwrap_or_default();
     assert!(err.contains("l.jpg"), "{err}");
 }
+
+#[test]
+fn malformed_meshes_are_errors_naming_the_mesh() {
+    let text = std::fs::read_to_string(set()).unwrap_or_else(|e| panic!("{e}"));
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let load = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut json: serde_json::Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
+        edit(&mut json);
+        let path = dir.path().join("bad_set.gltf");
+        std::fs::write(&path, json.to_string()).unwrap_or_else(|e| panic!("{e}"));
+        let err = AssetCache::new().mesh(&path, "floor").err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(err.contains("bad_set.gltf") && err.contains("`floor`"), "{err}");
+        err
+    };
+    // Floor positions swapped for the 3-vertex triangle's: index 3 is out of range.
+    let err = load(&|j| {
+        let tri_positions = j["meshes"][1]["primitives"][0]["attributes"]["POSITION"].clone();
+        let prim = &mut j["meshes"][0]["primitives"][0];
+        prim["attributes"]["POSITION"] = tri_positions;
+        if let Some(a) = prim["attributes"].as_object_mut() {
+            a.remove("TEXCOORD_0");
+        }
+    });
+    assert!(err.contains("index 3 is out of range (3 vertices)"), "{err}");
+    // Indices pointing at a VEC3 accessor.
+    let err = load(&|j| j["meshes"][0]["primitives"][0]["indices"] = j["meshes"][0]["primitives"][0]["attributes"]["POSITION"].clone());
+    assert!(err.contains("expected Scalar"), "{err}");
+    // A zero-count accessor.
+    let err = load(&|j| {
+        let acc = j["meshes"][0]["primitives"][0]["indices"].as_u64().unwrap_or(0) as usize;
+        j["accessors"][acc]["count"] = 0.into();
+    });
+    assert!(err.contains("empty"), "{err}");
+    // Triangle strips are refused.
+    let err = load(&|j| j["meshes"][0]["primitives"][0]["mode"] = 5.into());
+    assert!(err.contains("TriangleStrip"), "{err}");
+}

@@ -354,3 +354,72 @@ fn non_rig_files_are_rejected_with_a_reason() {
     let err = Rig::load(fixture("missing.glb")).err().map(|e| e.to_string()).unwrap_or_default();
     assert!(err.contains("missing.glb"), "{err}");
 }
+
+// ---- malformed rigs: errors that name the file and the thing, never panics ----
+
+/// rig_small.gltf with `edit` applied to its JSON, written to a temp dir.
+fn broken_rig(edit: impl FnOnce(&mut serde_json::Value)) -> String {
+    let text = std::fs::read_to_string(fixture("rig_small.gltf")).unwrap_or_else(|e| panic!("{e}"));
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
+    edit(&mut json);
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let path = dir.path().join("broken_rig.gltf");
+    std::fs::write(&path, json.to_string()).unwrap_or_else(|e| panic!("{e}"));
+    let err = match Rig::load(&path) {
+        Ok(_) => String::from("loaded"),
+        Err(e) => e.to_string(),
+    };
+    assert!(err.contains("broken_rig.gltf"), "names the file: {err}");
+    err
+}
+
+#[test]
+fn malformed_animation_data_is_an_error() {
+    // Sampler input pointing at a VEC3 accessor.
+    let err = broken_rig(|j| j["animations"][0]["samplers"][0]["input"] = j["animations"][0]["samplers"][0]["output"].clone());
+    assert!(err.contains("WalkA") && err.contains("root") && err.contains("Scalar"), "{err}");
+    // Output count that no longer matches the keys (and runs past its view).
+    let err = broken_rig(|j| {
+        let out = j["animations"][0]["samplers"][1]["output"].as_u64().unwrap_or(0) as usize;
+        j["accessors"][out]["count"] = 1000.into();
+    });
+    assert!(err.contains("WalkA") && err.contains("hips") && err.contains("do not fit"), "{err}");
+    // A huge count must not overflow.
+    let err = broken_rig(|j| {
+        let out = j["animations"][0]["samplers"][0]["output"].as_u64().unwrap_or(0) as usize;
+        j["accessors"][out]["count"] = (u64::MAX / 2).into();
+    });
+    assert!(err.contains("WalkA"), "{err}");
+    // Fewer outputs than keys.
+    let err = broken_rig(|j| {
+        let out = j["animations"][0]["samplers"][0]["output"].as_u64().unwrap_or(0) as usize;
+        j["accessors"][out]["count"] = 2.into();
+    });
+    assert!(err.contains("2 output values for 3 keys"), "{err}");
+    // A byte stride smaller than the element.
+    let err = broken_rig(|j| {
+        let out = j["animations"][0]["samplers"][0]["output"].as_u64().unwrap_or(0) as usize;
+        let view = j["accessors"][out]["bufferView"].as_u64().unwrap_or(0) as usize;
+        j["bufferViews"][view]["byteStride"] = 4.into();
+    });
+    assert!(err.contains("stride"), "{err}");
+}
+
+#[test]
+fn malformed_slots_are_errors() {
+    let err = broken_rig(|j| j["nodes"][4]["extras"]["proxy_box"]["min"] = serde_json::json!([0, 0]));
+    assert!(err.contains("`head`") && err.contains("proxy_box"), "{err}");
+    let err = broken_rig(|j| j["nodes"][4]["extras"]["proxy_box"]["min"] = serde_json::json!([1, 1, 1]));
+    assert!(err.contains("exceeds"), "{err}");
+    let err = broken_rig(|j| j["nodes"][4]["extras"]["slot"] = "torso".into());
+    assert!(err.contains("`torso`") && err.contains("more than one"), "{err}");
+    let err = broken_rig(|j| j["nodes"][4]["extras"] = serde_json::json!({"slot": 3}));
+    assert!(err.contains("must be a string"), "{err}");
+    let err = broken_rig(|j| j["nodes"][5]["extras"] = serde_json::json!({"slot": "tail"}));
+    assert!(err.contains("tail") && err.contains("neither"), "{err}");
+    let err = broken_rig(|j| j["nodes"][1]["name"] = "base".into());
+    assert!(err.contains("`root`"), "{err}");
+    // A cycle in the hierarchy (head -> rigSmall).
+    let err = broken_rig(|j| j["nodes"][4]["children"] = serde_json::json!([0]));
+    assert!(err.contains("cycle") || err.contains("ancestor") || err.contains("parent"), "{err}");
+}
