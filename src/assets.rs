@@ -54,6 +54,11 @@ impl GltfFile {
                 gltf::buffer::Source::Uri(uri) => format!("buffer {} (`{uri}`)", buffer.index()),
                 gltf::buffer::Source::Bin => format!("buffer {} (GLB chunk)", buffer.index()),
             };
+            if let gltf::buffer::Source::Uri(uri) = buffer.source() {
+                if !uri.contains(':') && !uri_decodes(uri) {
+                    return Err(Error::invalid(path, format!("{what}: URI is not valid percent-encoded UTF-8")));
+                }
+            }
             let data = gltf::buffer::Data::from_source_and_blob(buffer.source(), Some(base), &mut blob)
                 .map_err(|e| Error::invalid(path, format!("cannot load {what}: {e}")))?;
             if data.len() < buffer.length() {
@@ -156,11 +161,12 @@ fn mesh_label(mesh: &gltf::Mesh) -> String {
     mesh.name().map(|n| format!("`{n}`")).unwrap_or_else(|| format!("#{}", mesh.index()))
 }
 
+/// `a`, `b`, `c` -- quoted, since glTF names may hold spaces.
 fn list(names: &[&str]) -> String {
     if names.is_empty() {
         "(none)".into()
     } else {
-        names.join(", ")
+        names.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")
     }
 }
 
@@ -177,20 +183,63 @@ pub fn check_accessor(acc: &Accessor, dims: Dimensions, types: &[DataType]) -> s
     if acc.count() == 0 {
         return Err(format!("accessor {id} is empty"));
     }
-    if let Some(stride) = acc.view().and_then(|v| v.stride()) {
-        if stride < acc.size() {
-            return Err(format!("accessor {id}: byte stride {stride} is smaller than its element ({} bytes)", acc.size()));
-        }
+    if let Some(view) = acc.view() {
+        fits(id, "", &view, acc.offset(), acc.count(), acc.size())?;
     }
     if let Some(sparse) = acc.sparse() {
         if sparse.count() == 0 {
             return Err(format!("accessor {id}: sparse count is 0"));
         }
-        if sparse.values().view().stride().is_some_and(|s| s < acc.size()) {
-            return Err(format!("accessor {id}: sparse values have a byte stride smaller than the element"));
-        }
+        let values = sparse.values();
+        fits(id, "sparse values ", &values.view(), values.offset(), sparse.count(), acc.size())?;
+        let indices = sparse.indices();
+        let index_size = indices.index_type().size();
+        fits(id, "sparse indices ", &indices.view(), indices.offset(), sparse.count(), index_size)?;
     }
     Ok(())
+}
+
+/// Checks that `count` elements of `size` bytes from `offset` lie inside
+/// `view` (checked arithmetic: a huge count must not overflow).
+fn fits(id: usize, what: &str, view: &gltf::buffer::View, offset: usize, count: usize, size: usize) -> std::result::Result<(), String> {
+    if view.offset().checked_add(view.length()).is_none_or(|end| end > view.buffer().length()) {
+        return Err(format!("accessor {id}: {what}buffer view {} reaches outside its buffer", view.index()));
+    }
+    let stride = view.stride().unwrap_or(size);
+    if stride < size {
+        return Err(format!("accessor {id}: {what}byte stride {stride} is smaller than its element ({size} bytes)"));
+    }
+    let end = count
+        .checked_sub(1)
+        .and_then(|n| n.checked_mul(stride))
+        .and_then(|n| n.checked_add(offset))
+        .and_then(|n| n.checked_add(size));
+    match end {
+        Some(end) if end <= view.length() => Ok(()),
+        _ => Err(format!("accessor {id}: {what}{count} elements do not fit in buffer view {}", view.index())),
+    }
+}
+
+/// True when a relative URI's percent-escapes decode to UTF-8; the gltf
+/// crate panics on any that do not.
+fn uri_decodes(uri: &str) -> bool {
+    let bytes = uri.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let hex = bytes.get(i + 1..i + 3).and_then(|h| std::str::from_utf8(h).ok()).and_then(|h| u8::from_str_radix(h, 16).ok());
+        match (bytes[i], hex) {
+            (b'%', Some(b)) => {
+                out.push(b);
+                i += 3;
+            }
+            (c, _) => {
+                out.push(c);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8(out).is_ok()
 }
 
 /// Error text for an accessor whose bytes lie outside its buffer.
@@ -234,7 +283,7 @@ fn read_primitive(file: &GltfFile, mesh: &gltf::Mesh, prim: &gltf::Primitive, na
         }
         None => (0..n as u32).collect(),
     };
-    if indices.len() % 3 != 0 {
+    if !indices.len().is_multiple_of(3) {
         return Err(ctx(format!("{} indices is not a whole number of triangles", indices.len())));
     }
     if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {
@@ -384,12 +433,15 @@ impl AssetCache {
             return Ok(id);
         }
         let gmesh = src.file.mesh_by_name(mesh_name)?;
-        let merged = read_mesh(&src.file, &gmesh, format!("{}#{mesh_name}", src.shown))?;
-        let id = self.push_mesh(merged);
-        self.meshes.insert(key, id);
         // A one-primitive mesh is the same geometry as its only primitive: share it.
-        if gmesh.primitives().len() == 1 {
-            self.meshes.insert(MeshKey::Primitive(src.key, gmesh.index(), 0), id);
+        let single = (gmesh.primitives().len() == 1).then(|| MeshKey::Primitive(src.key.clone(), gmesh.index(), 0));
+        let id = match single.as_ref().and_then(|k| self.meshes.get(k)) {
+            Some(&id) => id,
+            None => self.push_mesh(read_mesh(&src.file, &gmesh, format!("{}#{mesh_name}", src.shown))?),
+        };
+        self.meshes.insert(key, id);
+        if let Some(single) = single {
+            self.meshes.insert(single, id);
         }
         Ok(id)
     }
@@ -495,11 +547,19 @@ impl AssetCache {
         let image = file.doc.images().nth(index).ok_or_else(|| file.err(format!("no image #{index}")))?;
         let label = image.name().map(str::to_string).unwrap_or_else(|| format!("image{index}"));
         let ctx = |msg: String| file.err(format!("image `{label}`: {msg}"));
-        // gltf slices buffer views without a range check; check first.
-        if let gltf::image::Source::View { view, .. } = image.source() {
-            let len = file.buffers.get(view.buffer().index()).map_or(0, |b| b.len());
-            if view.offset() + view.length() > len {
-                return Err(ctx("buffer view reaches outside its buffer".into()));
+        // The gltf crate slices buffer views unchecked and unwraps URI
+        // decoding; check both first so a bad file cannot panic.
+        match image.source() {
+            gltf::image::Source::View { view, .. } => {
+                let len = file.buffers.get(view.buffer().index()).map_or(0, |b| b.len());
+                if view.offset().checked_add(view.length()).is_none_or(|end| end > len) {
+                    return Err(ctx("buffer view reaches outside its buffer".into()));
+                }
+            }
+            gltf::image::Source::Uri { uri, .. } => {
+                if !uri.contains(':') && !uri_decodes(uri) {
+                    return Err(ctx("URI is not valid percent-encoded UTF-8".into()));
+                }
             }
         }
         let base = file.path.parent().unwrap_or(Path::new("."));

@@ -188,8 +188,7 @@ impl Channel {
 
     fn sample_raw(&self, t: f32) -> Vec4 {
         let n = self.times.len();
-        // Written so NaN also lands on the first key.
-        if !(t > self.times[0]) || n == 1 {
+        if n == 1 || t.is_nan() || t <= self.times[0] {
             return self.key(0);
         }
         if t >= self.times[n - 1] {
@@ -310,11 +309,11 @@ impl Clip {
             let input = sampler.input();
             check_accessor(&input, Dimensions::Scalar, &[DataType::F32]).map_err(ctx)?;
             let times: Vec<f32> = reader.read_inputs().ok_or_else(|| ctx(out_of_range(&input)))?.collect();
-            if let Some(w) = times.windows(2).find(|w| !(w[1] > w[0])) {
-                return Err(ctx(format!("key times must increase ({} then {})", w[0], w[1])));
-            }
             if times.iter().any(|t| !t.is_finite()) {
                 return Err(ctx("key time is not a finite number".into()));
+            }
+            if let Some(w) = times.windows(2).find(|w| w[1] <= w[0]) {
+                return Err(ctx(format!("key times must increase ({} then {})", w[0], w[1])));
             }
             let output = sampler.output();
             let values: Vec<Vec4> = match property {
