@@ -428,9 +428,10 @@ pub fn build_rig(spec: &RigSpec) -> Result<Vec<u8>> {
     let mut glb = GlbBuilder::new();
     glb.set_generator("throng examples/make_demo.rs");
     let nodes = build_nodes(&mut glb, spec)?;
-    let walk_a = WalkStyle { thigh: 0.45, knee: 0.9, knee_rest: 0.08, arm: 0.35, elbow: 0.4, bob: 0.025, sway: 0.08, cubic_root: false };
+    // Bob is about leg * (1 - cos thigh): the hips drop when the legs are spread.
+    let walk_a = WalkStyle { thigh: 0.38, knee: 0.9, knee_rest: 0.08, arm: 0.35, elbow: 0.4, bob: 0.05, sway: 0.08, cubic_root: false };
     // WalkB: a longer, slower, bouncier stride.
-    let walk_b = WalkStyle { thigh: 0.6, knee: 1.1, knee_rest: 0.1, arm: 0.5, elbow: 0.6, bob: 0.06, sway: 0.12, cubic_root: true };
+    let walk_b = WalkStyle { thigh: 0.5, knee: 1.1, knee_rest: 0.1, arm: 0.5, elbow: 0.6, bob: 0.09, sway: 0.12, cubic_root: true };
     glb.add_animation(&walk(&nodes, spec.walk_a, &walk_a))?;
     glb.add_animation(&walk(&nodes, spec.walk_b, &walk_b))?;
     glb.add_animation(&idle(&nodes, spec.idle))?;
