@@ -255,6 +255,6 @@ pub fn run(cli: Cli) -> Result<()> {
 
         Verb::Comp(_args) => Err(Error::NotBuilt("comp")),
 
-        Verb::Export(_args) => Err(Error::NotBuilt("export")),
+        Verb::Export(args) => crate::commands::cmd_export(&args),
     }
 }

@@ -331,3 +331,27 @@ pub fn cmd_botinfo(args: &BotinfoArgs) -> Result<()> {
     }
     Ok(())
 }
+
+/// `throng export`.
+pub fn cmd_export(args: &crate::cli::ExportArgs) -> Result<()> {
+    let crowd = ShotCrowd::load(&args.shot)?;
+    if !crowd.shot.frames.contains(args.frame) {
+        return Err(Error::Usage(format!(
+            "frame {} is outside shot {} ({}-{})",
+            args.frame, crowd.shot.name, crowd.shot.frames.start, crowd.shot.frames.end
+        )));
+    }
+    if args.layer.is_some() {
+        return Err(Error::Usage("--layer needs a layer manifest: run `throng layers` first".into()));
+    }
+    let s = crate::export::export_frame(&crowd, args.frame, None, &args.out)?;
+    println!(
+        "wrote {}: {} agents, {} mesh nodes sharing {} meshes, {} instanced triangles",
+        args.out.display(),
+        s.agents,
+        s.mesh_nodes,
+        s.meshes,
+        s.instanced_triangles
+    );
+    Ok(())
+}

@@ -9,6 +9,8 @@ pub mod casting;
 pub mod cli;
 pub mod commands;
 pub mod error;
+pub mod export;
+pub mod gltf_out;
 pub mod pose;
 pub mod rig;
 pub mod scene;

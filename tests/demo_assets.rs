@@ -1,0 +1,366 @@
+//! The committed demo assets (made by `cargo run --example make_demo`) open
+//! and agree with SPEC and with each other.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+const SLOTS: [&str; 11] = [
+    "head",
+    "torso",
+    "hips",
+    "upper_arm_l",
+    "lower_arm_l",
+    "upper_arm_r",
+    "lower_arm_r",
+    "upper_leg_l",
+    "lower_leg_l",
+    "upper_leg_r",
+    "lower_leg_r",
+];
+const CLIPS: [&str; 4] = ["WalkA", "WalkB", "IdleA", "SitA"];
+const FPS: f32 = 24.0;
+
+fn crate_path(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+}
+
+fn import(rel: &str) -> (gltf::Document, Vec<gltf::buffer::Data>, Vec<gltf::image::Data>) {
+    gltf::import(crate_path(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+fn extras(node: &gltf::Node) -> Option<serde_json::Value> {
+    node.extras().as_ref().map(|r| serde_json::from_str(r.get()).unwrap())
+}
+
+#[test]
+fn every_demo_glb_imports() {
+    let mut count = 0;
+    for dir in ["demo/parts", "demo/rigs", "demo/set"] {
+        for entry in std::fs::read_dir(crate_path(dir)).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "glb") {
+                gltf::import(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                count += 1;
+            }
+        }
+    }
+    assert!(count >= 8, "only {count} glb files");
+}
+
+fn mesh_tris(mesh: &gltf::Mesh) -> usize {
+    mesh.primitives().map(|p| p.indices().map_or(0, |a| a.count()) / 3).sum()
+}
+
+#[test]
+fn parts_are_named_meshes_with_normals_and_uvs() {
+    let (heads, _, _) = import("demo/parts/heads.glb");
+    assert!(heads.meshes().count() >= 8);
+    for m in heads.meshes() {
+        let tris = mesh_tris(&m);
+        assert!((100..=600).contains(&tris), "{:?}: {tris} triangles", m.name());
+    }
+    let (torsos, _, _) = import("demo/parts/torsos.glb");
+    assert_eq!(torsos.meshes().count(), 3);
+    let (limbs, _, _) = import("demo/parts/limbs.glb");
+    let names: Vec<String> = limbs.meshes().filter_map(|m| m.name().map(str::to_string)).collect();
+    for prefix in ["upper_arm_", "lower_arm_", "upper_leg_", "lower_leg_", "hips_"] {
+        assert!(names.iter().filter(|n| n.starts_with(prefix)).count() >= 2, "{prefix}");
+    }
+    for doc in [&heads, &torsos, &limbs] {
+        let mut seen = BTreeSet::new();
+        for m in doc.meshes() {
+            let name = m.name().expect("named mesh").to_string();
+            assert!(seen.insert(name.clone()), "duplicate {name}");
+            for p in m.primitives() {
+                assert!(p.get(&gltf::Semantic::Normals).is_some(), "{name} normals");
+                assert!(p.get(&gltf::Semantic::TexCoords(0)).is_some(), "{name} uvs");
+            }
+        }
+    }
+}
+
+struct Clip {
+    frames: f32,
+    stride: f32,
+}
+
+/// Per rig: clip name -> length in frames and root Z travel.
+fn rig_clips(rel: &str) -> BTreeMap<String, Clip> {
+    let (doc, buffers, _) = import(rel);
+    let root = doc.nodes().find(|n| n.name() == Some("root")).expect("root node");
+    let mut out = BTreeMap::new();
+    for anim in doc.animations() {
+        let mut end = 0.0f32;
+        let mut stride = 0.0;
+        for ch in anim.channels() {
+            let r = ch.reader(|b| Some(&buffers[b.index()]));
+            let times: Vec<f32> = r.read_inputs().unwrap().collect();
+            end = end.max(*times.last().unwrap());
+            if ch.target().node().index() == root.index() && ch.target().property() == gltf::animation::Property::Translation {
+                let v: Vec<[f32; 3]> = match r.read_outputs().unwrap() {
+                    gltf::animation::util::ReadOutputs::Translations(t) => t.collect(),
+                    _ => unreachable!(),
+                };
+                // CUBICSPLINE stores (in-tangent, value, out-tangent) per key.
+                let cubic = ch.sampler().interpolation() == gltf::animation::Interpolation::CubicSpline;
+                let (first, last) = if cubic { (v[1], v[v.len() - 2]) } else { (v[0], v[v.len() - 1]) };
+                stride = last[2] - first[2];
+            }
+        }
+        out.insert(anim.name().unwrap().to_string(), Clip { frames: (end * FPS).round(), stride });
+    }
+    out
+}
+
+#[test]
+fn rigs_follow_spec() {
+    for (rig, height) in [("bipedThinA", 1.75), ("bipedTallB", 2.05)] {
+        let rel = format!("demo/rigs/{rig}.glb");
+        let (doc, _, _) = import(&rel);
+        let top = doc.default_scene().unwrap().nodes().next().unwrap();
+        assert_eq!(top.name(), Some(rig));
+        assert_eq!(top.transform().matrix(), glam::Mat4::IDENTITY.to_cols_array_2d());
+        assert_eq!(top.children().next().unwrap().name(), Some("root"));
+
+        // World-space rest pose: feet on the floor, height about right.
+        let mut world = vec![glam::Mat4::IDENTITY; doc.nodes().count()];
+        fn walk(n: gltf::Node, parent: glam::Mat4, world: &mut [glam::Mat4]) {
+            let m = parent * glam::Mat4::from_cols_array_2d(&n.transform().matrix());
+            world[n.index()] = m;
+            for c in n.children() {
+                walk(c, m, world);
+            }
+        }
+        walk(top.clone(), glam::Mat4::IDENTITY, &mut world);
+        let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+        let mut slots = BTreeSet::new();
+        for node in doc.nodes() {
+            let Some(ex) = extras(&node) else { continue };
+            let slot = ex["slot"].as_str().unwrap().to_string();
+            assert_eq!(node.name(), Some(slot.as_str()));
+            let bmin: Vec<f32> = ex["proxy_box"]["min"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+            let bmax: Vec<f32> = ex["proxy_box"]["max"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+            assert!((0..3).all(|k| bmin[k] < bmax[k]), "{rig} {slot} box");
+            let bb = node.mesh().expect("slot mesh").primitives().next().unwrap().bounding_box();
+            assert_eq!((bb.min.to_vec(), bb.max.to_vec()), (bmin.clone(), bmax.clone()), "{rig} {slot} mesh matches proxy_box");
+            for corner in [glam::Vec3::from_slice(&bmin), glam::Vec3::from_slice(&bmax)] {
+                let y = world[node.index()].transform_point3(corner).y;
+                lo = lo.min(y);
+                hi = hi.max(y);
+            }
+            slots.insert(slot);
+        }
+        assert_eq!(slots, SLOTS.iter().map(|s| s.to_string()).collect());
+        assert!(lo.abs() < 1e-4, "{rig}: feet at {lo}");
+        assert!((hi - height).abs() < 0.05, "{rig}: height {hi}");
+
+        let clips = rig_clips(&rel);
+        assert_eq!(clips.keys().cloned().collect::<BTreeSet<_>>(), CLIPS.iter().map(|s| s.to_string()).collect());
+        assert!(clips["WalkA"].stride > 1.0 && clips["WalkB"].stride > clips["WalkA"].stride);
+        assert_eq!(clips["IdleA"].stride, 0.0);
+        assert_eq!(clips["SitA"].stride, 0.0);
+        let modes: BTreeSet<String> =
+            doc.animations().flat_map(|a| a.samplers().map(|s| format!("{:?}", s.interpolation())).collect::<Vec<_>>()).collect();
+        for m in ["Step", "Linear", "CubicSpline"] {
+            assert!(modes.contains(m), "{rig}: no {m} sampler");
+        }
+    }
+}
+
+#[test]
+fn set_has_benches_camera_and_sun() {
+    let (doc, _, _) = import("demo/set/set.glb");
+    let mut benches: Vec<[f32; 3]> = doc
+        .nodes()
+        .filter(|n| n.name().is_some_and(|s| s.starts_with("bench_")))
+        .map(|n| n.transform().decomposed().0)
+        .collect();
+    benches.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    assert_eq!(benches, [[-9.0, 0.0, -4.0], [-3.0, 0.0, -4.0], [3.0, 0.0, -4.0], [9.0, 0.0, -4.0]]);
+    let bench = doc.meshes().find(|m| m.name() == Some("bench")).unwrap();
+    let bb = bench.primitives().next().unwrap().bounding_box();
+    assert_eq!(bb.min, [-1.5, 0.0, -0.25]);
+    assert_eq!(bb.max, [1.5, 0.9, 0.25]);
+    let cam = doc.nodes().find(|n| n.name() == Some("shotcam")).unwrap();
+    assert!(cam.camera().is_some());
+    assert_eq!(cam.transform().decomposed().0, [0.0, 1.7, 24.0]);
+    let sun = doc.nodes().find(|n| n.light().is_some()).unwrap();
+    assert!(matches!(sun.light().unwrap().kind(), gltf::khr_lights_punctual::Kind::Directional));
+    let floor = doc.meshes().find(|m| m.name() == Some("floor")).unwrap();
+    let mat = floor.primitives().next().unwrap().material();
+    assert!((mat.pbr_metallic_roughness().roughness_factor() - 0.2).abs() < 0.05);
+    assert_eq!(mat.pbr_metallic_roughness().metallic_factor(), 0.0);
+    let bb = floor.primitives().next().unwrap().bounding_box();
+    assert_eq!((bb.min, bb.max), ([-40.0, 0.0, -40.0], [40.0, 0.0, 40.0]));
+    assert!(doc.meshes().filter(|m| m.name().is_some_and(|s| s.starts_with("building"))).count() >= 6);
+}
+
+struct Row {
+    frame: u32,
+    id: u32,
+    x: f32,
+    z: f32,
+    rig: String,
+    cycle: String,
+    cycle_frame: f32,
+    seated: bool,
+}
+
+fn read_csv() -> Vec<Row> {
+    let text = std::fs::read_to_string(crate_path("demo/cache/demo.csv")).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags"));
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            assert_eq!(f.len(), 10, "{l}");
+            assert_eq!(f[3], "0");
+            assert!(f[9].is_empty() || f[9] == "seated", "{l}");
+            Row {
+                frame: f[0].parse().unwrap(),
+                id: f[1].parse().unwrap(),
+                x: f[2].parse().unwrap(),
+                z: f[4].parse().unwrap(),
+                rig: f[6].to_string(),
+                cycle: f[7].to_string(),
+                cycle_frame: f[8].parse().unwrap(),
+                seated: f[9] == "seated",
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn cache_csv_is_a_plausible_crowd() {
+    let rows = read_csv();
+    let frames: BTreeSet<u32> = rows.iter().map(|r| r.frame).collect();
+    assert_eq!(frames, (1..=48).collect());
+    let ids: BTreeSet<u32> = rows.iter().map(|r| r.id).collect();
+    assert!((280..=320).contains(&ids.len()), "{} agents", ids.len());
+    assert!(*ids.iter().next_back().unwrap() as usize > ids.len(), "ids have gaps");
+    let seated: BTreeSet<u32> = rows.iter().filter(|r| r.seated).map(|r| r.id).collect();
+    assert_eq!(seated.len(), 12);
+    for r in rows.iter().filter(|r| r.seated) {
+        assert_eq!(r.cycle, "SitA");
+        assert_eq!(r.z, -3.55);
+        assert!([-9.0f32, -3.0, 3.0, 9.0].iter().any(|b| [-1.0f32, 0.0, 1.0].contains(&(r.x - b))), "seat x {}", r.x);
+    }
+    let clips: BTreeMap<String, BTreeMap<String, Clip>> = ["bipedThinA", "bipedTallB"]
+        .iter()
+        .map(|r| (r.to_string(), rig_clips(&format!("demo/rigs/{r}.glb"))))
+        .collect();
+
+    // Per agent tracks.
+    let mut tracks: BTreeMap<u32, Vec<&Row>> = BTreeMap::new();
+    for r in &rows {
+        tracks.entry(r.id).or_default().push(r);
+        assert!((-18.0..=18.0).contains(&r.x) && (-30.0..=12.0).contains(&r.z));
+    }
+    let (mut entering, mut leaving, mut idle) = (0, 0, 0);
+    for (id, t) in &tracks {
+        let first = t[0].frame;
+        let last = t[t.len() - 1].frame;
+        assert_eq!(t.len() as u32, last - first + 1, "agent {id} track is contiguous");
+        entering += (first > 1) as usize;
+        leaving += (last < 48) as usize;
+        idle += (t[0].cycle == "IdleA") as usize;
+        let clip = &clips[&t[0].rig][&t[0].cycle];
+        for w in t.windows(2) {
+            assert_eq!(w[1].cycle_frame, (w[0].cycle_frame + 1.0) % clip.frames, "agent {id}");
+            let step = ((w[1].x - w[0].x).powi(2) + (w[1].z - w[0].z).powi(2)).sqrt();
+            let expect = clip.stride / clip.frames;
+            assert!((step - expect).abs() < 0.003, "agent {id}: moved {step}, stride says {expect}");
+        }
+    }
+    assert!(entering >= 3 && leaving >= 3, "{entering} entering, {leaving} leaving");
+    assert!(idle >= 10);
+
+    // Nobody overlaps.
+    for f in 1..=48 {
+        let here: Vec<&Row> = rows.iter().filter(|r| r.frame == f).collect();
+        for i in 0..here.len() {
+            for j in i + 1..here.len() {
+                let d = ((here[i].x - here[j].x).powi(2) + (here[i].z - here[j].z).powi(2)).sqrt();
+                assert!(d >= 0.7, "frame {f}: agents {} and {} are {d} m apart", here[i].id, here[j].id);
+            }
+        }
+    }
+}
+
+fn toml_file(rel: &str) -> toml::Value {
+    toml::from_str(&std::fs::read_to_string(crate_path(rel)).unwrap()).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+/// scheme name -> wardrobe; checks every part's file, mesh, slot and materials.
+fn check_wardrobe(rel: &str, schemes: &mut BTreeMap<String, String>) {
+    let w = toml_file(rel);
+    assert_eq!(w["version"].as_integer(), Some(1));
+    let dir = crate_path(rel).parent().unwrap().to_path_buf();
+    let materials: BTreeSet<String> =
+        w.get("materials").and_then(|m| m.as_table()).map(|t| t.keys().cloned().collect()).unwrap_or_default();
+    for m in w.get("materials").and_then(|m| m.as_table()).into_iter().flatten() {
+        if let Some(tex) = m.1.get("base_color_texture").and_then(|t| t.as_str()) {
+            assert!(dir.join(tex).is_file(), "{rel}: texture {tex}");
+        }
+    }
+    for (name, scheme) in w["schemes"].as_table().unwrap() {
+        schemes.insert(name.clone(), rel.to_string());
+        for part in scheme["parts"].as_array().unwrap() {
+            let slot = part["slot"].as_str().unwrap();
+            assert!(SLOTS.contains(&slot), "{rel} {name}: slot {slot}");
+            let file = dir.join(part["file"].as_str().unwrap());
+            let (doc, _, _) = gltf::import(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+            let mesh = part["mesh"].as_str().unwrap();
+            assert!(doc.meshes().any(|m| m.name() == Some(mesh)), "{rel} {name}: no mesh {mesh}");
+            let mats = part["materials"].as_array().unwrap();
+            for m in mats {
+                let m = m.as_str().unwrap();
+                assert!(m == "gltf" || materials.contains(m), "{rel} {name}: material {m}");
+            }
+            if let Some(w) = part.get("material_weights") {
+                assert_eq!(w.as_array().unwrap().len(), mats.len());
+            }
+        }
+    }
+}
+
+#[test]
+fn wardrobes_and_shot_agree() {
+    let mut schemes = BTreeMap::new();
+    check_wardrobe("wardrobes/robots.toml", &mut schemes);
+    check_wardrobe("wardrobes/kenney_alien.toml", &mut schemes);
+    let robots = toml_file("wardrobes/robots.toml");
+    assert!(robots["materials"].as_table().unwrap().len() >= 8);
+    let heads_in = |scheme: &str| -> BTreeSet<String> {
+        let s = &robots["schemes"][scheme];
+        let excluded: BTreeSet<&str> = s["exclude"].as_array().unwrap().iter().filter_map(|v| v.as_str()).collect();
+        s["parts"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|p| p["slot"].as_str() == Some("head"))
+            .filter_map(|p| p["mesh"].as_str())
+            .filter(|m| !excluded.contains(m))
+            .map(str::to_string)
+            .collect()
+    };
+    assert!(heads_in("LowEnd_good_heads").len() < heads_in("HighEnd").len());
+    assert!(heads_in("HighEnd").len() >= 8);
+
+    let shot = toml_file("demo/shot.toml");
+    assert_eq!(shot["frames"]["start"].as_integer(), Some(1001));
+    assert_eq!(shot["frames"]["end"].as_integer(), Some(1048));
+    assert_eq!(shot["cache"]["frame_offset"].as_integer(), Some(-1000));
+    assert!(crate_path("demo").join(shot["cache"]["path"].as_str().unwrap()).is_file());
+    assert!(crate_path("demo").join(shot["set"]["file"].as_str().unwrap()).is_file());
+    for w in shot["wardrobes"].as_array().unwrap() {
+        assert!(crate_path("demo").join(w.as_str().unwrap()).is_file());
+    }
+    for (rig, spec) in shot["rigs"].as_table().unwrap() {
+        assert!(crate_path("demo").join(spec["file"].as_str().unwrap()).is_file(), "{rig}");
+        for scheme in spec["schemes"].as_table().unwrap().keys() {
+            assert!(schemes.contains_key(scheme), "{rig}: unknown scheme {scheme}");
+        }
+    }
+    assert_eq!(shot["layers"]["count"].as_integer(), Some(3));
+}
