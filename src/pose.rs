@@ -8,7 +8,7 @@
 //! instance references them by id.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use glam::{Affine3A, Quat, Vec3};
 
@@ -45,6 +45,9 @@ pub struct DressedPart {
     pub slot_from_part: Affine3A,
     /// The unit proxy cube mapped onto the slot's proxy box.
     pub slot_from_proxy: Affine3A,
+    /// Whether this piece stands for its slot at proxy LOD (one per slot,
+    /// wearing the part's first material).
+    pub proxy: bool,
 }
 
 /// The shot, its wardrobes, rigs, cache and casting, loaded once.
@@ -154,7 +157,7 @@ impl ShotCrowd {
         let mut dressed = BTreeMap::new();
         // Fits depend only on (rig, slot, mesh): compute each once.
         let mut fits: HashMap<(String, usize, MeshId), Affine3A> = HashMap::new();
-        let mut materials: HashMap<(String, PathBuf, String), MaterialId> = HashMap::new();
+        let mut materials: HashMap<String, MaterialId> = HashMap::new();
         for (&id, s) in &seen {
             let rig_name = cache.rigs().get(s.rig as usize).cloned().unwrap_or_default();
             let (rig, rig_ref) = match (rigs.get(&rig_name), shot.rigs.get(&rig_name)) {
@@ -183,44 +186,56 @@ impl ShotCrowd {
             let mut parts = Vec::new();
             for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
                 let Some(part) = &slot_cast.part else { continue };
-                let mesh = assets.mesh(&part.file, &part.mesh)?;
-                let material = match materials.get(&(part.material.clone(), part.file.clone(), part.mesh.clone())) {
-                    Some(&m) => m,
-                    None => {
-                        let m = if part.material == GLTF_MATERIAL {
-                            assets.gltf_material(&part.file, &part.mesh)?
-                        } else {
+                // A part wearing its own glTF materials keeps one piece per
+                // primitive (a multi-material mesh); otherwise one mesh, one material.
+                let pieces: Vec<(MeshId, MaterialId)> = if part.material == GLTF_MATERIAL {
+                    assets.mesh_primitives(&part.file, &part.mesh)?
+                } else {
+                    let mesh = assets.mesh(&part.file, &part.mesh)?;
+                    let material = match materials.get(&part.material) {
+                        Some(&m) => m,
+                        None => {
                             let spec = &wardrobes.materials[&part.material];
                             let texture = match &spec.base_color_texture {
                                 Some(t) => Some(assets.texture_png(t)?),
                                 None => None,
                             };
-                            assets.add_material(Material {
+                            let m = assets.add_material(Material {
                                 name: part.material.clone(),
                                 base_color: Vec3::from(spec.base_color),
                                 base_color_texture: texture,
                                 roughness: spec.roughness,
                                 metallic: spec.metallic,
-                            })
-                        };
-                        // Wardrobe materials do not depend on the mesh; glTF ones do.
-                        materials.insert((part.material.clone(), part.file.clone(), part.mesh.clone()), m);
-                        m
-                    }
+                            });
+                            materials.insert(part.material.clone(), m);
+                            m
+                        }
+                    };
+                    vec![(mesh, material)]
                 };
+                let Some(&(first_mesh, _)) = pieces.first() else { continue };
                 let slot = &rig.slots()[slot_index];
-                let fit = *fits.entry((rig_name.clone(), slot_index, mesh)).or_insert_with(|| {
-                    let (lo, hi) = assets.library().meshes[mesh as usize].bounds();
+                let fit = *fits.entry((rig_name.clone(), slot_index, first_mesh)).or_insert_with(|| {
+                    // Fit the whole part (all its pieces) to the box.
+                    let lib = assets.library();
+                    let (lo, hi) = pieces
+                        .iter()
+                        .map(|&(m, _)| lib.meshes[m as usize].bounds())
+                        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+                        .unwrap_or((Vec3::ZERO, Vec3::ZERO));
                     fit_part(lo, hi, slot.proxy_min, slot.proxy_max, part.uniform)
                 });
                 let size = (slot.proxy_max - slot.proxy_min).max(Vec3::splat(1e-4));
-                parts.push(DressedPart {
-                    slot: slot_index,
-                    mesh,
-                    material,
-                    slot_from_part: fit,
-                    slot_from_proxy: Affine3A::from_scale_rotation_translation(size, Quat::IDENTITY, slot.proxy_min),
-                });
+                for (i, &(mesh, material)) in pieces.iter().enumerate() {
+                    parts.push(DressedPart {
+                        slot: slot_index,
+                        mesh,
+                        material,
+                        slot_from_part: fit,
+                        slot_from_proxy: Affine3A::from_scale_rotation_translation(size, Quat::IDENTITY, slot.proxy_min),
+                        proxy: i == 0,
+                    });
+                }
             }
             dressed.insert(id, parts);
             casting.insert(id, cast);
@@ -299,7 +314,8 @@ impl ShotCrowd {
             let world_from_slot = slots[p.slot];
             let (mesh, world_from_object) = match lod {
                 Lod::Full => (p.mesh, world_from_slot * p.slot_from_part),
-                Lod::Proxy => (self.proxy_mesh, world_from_slot * p.slot_from_proxy),
+                Lod::Proxy if p.proxy => (self.proxy_mesh, world_from_slot * p.slot_from_proxy),
+                Lod::Proxy => continue,
             };
             out.push(Instance {
                 mesh,

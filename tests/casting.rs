@@ -29,16 +29,24 @@ fn heads_are_uniform_and_inside_their_box() {
     for (id, parts) in &crowd.dressed {
         let cast = &crowd.casting[id];
         let rig = &crowd.rigs[&cast.rig];
+        // A part may be several pieces (one per glTF material): check the
+        // union of its pieces, as fitted.
+        let mut by_slot: std::collections::BTreeMap<usize, (glam::Vec3, glam::Vec3, glam::Affine3A)> = Default::default();
         for p in parts {
-            let slot = &rig.slots()[p.slot];
-            let uniform = cast.slots[p.slot].part.as_ref().unwrap().uniform;
             let (lo, hi) = crowd.library().meshes[p.mesh as usize].bounds();
             let (a, b) = (p.slot_from_part.transform_point3(lo), p.slot_from_part.transform_point3(hi));
+            let e = by_slot.entry(p.slot).or_insert((a, b, p.slot_from_part));
+            e.0 = e.0.min(a);
+            e.1 = e.1.max(b);
+        }
+        for (slot_index, (a, b, fit)) in by_slot {
+            let slot = &rig.slots()[slot_index];
+            let uniform = cast.slots[slot_index].part.as_ref().unwrap().uniform;
             let eps = 1e-4;
             assert!(a.cmpge(slot.proxy_min - eps).all() && b.cmple(slot.proxy_max + eps).all(), "agent {id} slot {}", slot.name);
             if uniform {
                 heads += 1;
-                let (s, _, _) = p.slot_from_part.to_scale_rotation_translation();
+                let (s, _, _) = fit.to_scale_rotation_translation();
                 assert!((s.x - s.y).abs() < 1e-5 && (s.y - s.z).abs() < 1e-5, "agent {id} head scale {s}");
                 assert!((a.y - slot.proxy_min.y).abs() < 1e-4, "agent {id}: head rests on the box bottom");
             } else {
