@@ -183,3 +183,24 @@ fn posed_agents_stand_on_the_floor() {
         assert!(lowest > -0.1 && lowest < 0.25, "agent {}: lowest proxy corner at y = {lowest}", a.id);
     }
 }
+
+#[test]
+fn export_reopens_with_shared_meshes() {
+    let crowd = ShotCrowd::load(&demo_shot()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("frame.glb");
+    let frame = crowd.shot.frames.middle();
+    let s = throng::export::export_frame(&crowd, frame, None, &out).unwrap();
+    let (doc, _, _) = gltf::import(&out).unwrap();
+    let rendered = crowd.agents_at(frame).unwrap().agents.iter().filter(|a| crowd.renders(a)).count();
+    assert_eq!(s.agents, rendered);
+    let agent_nodes = doc.nodes().filter(|n| n.name().is_some_and(|x| x.starts_with("agent_") && !x.contains('/'))).count();
+    assert_eq!(agent_nodes, rendered);
+    let mesh_nodes = doc.nodes().filter(|n| n.mesh().is_some()).count();
+    assert_eq!(mesh_nodes, s.mesh_nodes);
+    // Instanced: far fewer meshes than nodes that draw them.
+    assert_eq!(doc.meshes().count(), s.meshes);
+    assert!(doc.meshes().count() * 5 < mesh_nodes, "{} meshes for {mesh_nodes} nodes", doc.meshes().count());
+    assert_eq!(doc.cameras().count(), 1);
+    assert!(doc.lights().is_some_and(|l| l.count() == 1));
+}
