@@ -7,6 +7,7 @@ pub mod cache;
 pub mod casting;
 pub mod cli;
 pub mod error;
+pub mod layers;
 pub mod scene;
 pub mod shot;
 pub mod wardrobe;
