@@ -88,9 +88,11 @@ pub struct LayerRecord {
     pub rendered: usize,
     /// Agents assigned but removed.
     pub removed: usize,
-    /// Nearest assigned agent, metres (null when empty).
+    /// Agents here by a pin (counted in `agents`).
+    pub pinned: usize,
+    /// Nearest agent the split put here (pinned agents excluded), metres; null when none.
     pub distance_min_m: Option<f32>,
-    /// Farthest assigned agent, metres (null when empty).
+    /// Farthest agent the split put here (pinned agents excluded), metres; null when none.
     pub distance_max_m: Option<f32>,
     /// Rendered agents at full LOD (at the reference frame).
     pub lod_full: usize,
@@ -110,6 +112,7 @@ impl LayerRecord {
             agents: 0,
             rendered: 0,
             removed: 0,
+            pinned: 0,
             distance_min_m: None,
             distance_max_m: None,
             lod_full: 0,
@@ -472,7 +475,7 @@ pub fn summary(m: &Manifest) -> String {
         m.frame_range[1],
         m.lod_full_min_px
     );
-    let rows: Vec<[String; 7]> = m
+    let rows: Vec<[String; 8]> = m
         .layers
         .iter()
         .map(|l| {
@@ -480,6 +483,7 @@ pub fn summary(m: &Manifest) -> String {
                 l.name.clone(),
                 l.rendered.to_string(),
                 l.removed.to_string(),
+                l.pinned.to_string(),
                 distance_range(l),
                 l.lod_full.to_string(),
                 l.lod_proxy.to_string(),
@@ -487,14 +491,14 @@ pub fn summary(m: &Manifest) -> String {
             ]
         })
         .collect();
-    let head = ["layer", "agents", "removed", "distance", "full", "proxy", "memory"];
+    let head = ["layer", "agents", "removed", "pinned", "distance", "full", "proxy", "memory"];
     let mut width = head.map(str::len);
     for r in &rows {
         for (w, c) in width.iter_mut().zip(r) {
             *w = (*w).max(c.len());
         }
     }
-    let line = |s: &mut String, r: [&str; 7]| {
+    let line = |s: &mut String, r: [&str; 8]| {
         let mut out = format!("{:<w$}", r[0], w = width[0]);
         for (c, w) in r.iter().zip(width).skip(1) {
             out += &format!("  {c:>w$}");
@@ -503,7 +507,7 @@ pub fn summary(m: &Manifest) -> String {
     };
     line(&mut s, head);
     for r in &rows {
-        line(&mut s, [&r[0], &r[1], &r[2], &r[3], &r[4], &r[5], &r[6]]);
+        line(&mut s, [&r[0], &r[1], &r[2], &r[3], &r[4], &r[5], &r[6], &r[7]]);
     }
     let _ = writeln!(
         s,

@@ -289,6 +289,7 @@ fn top_down(cv: &mut Canvas, m: &Manifest, opts: &MapOptions, at: (f32, f32), si
         m.agents.iter().map(|a| 0.5 * a.height_m).sum::<f32>() / m.agents.len() as f32
     };
     let dy = cam.y - mid_h;
+    let mut labels = Vec::new();
     for (i, b) in m.split.boundaries_m.iter().enumerate() {
         let Some(d) = b else { continue };
         let r = (d * d - dy * dy).max(0.0).sqrt();
@@ -296,12 +297,14 @@ fn top_down(cv: &mut Canvas, m: &Manifest, opts: &MapOptions, at: (f32, f32), si
         cv.dashed_circle(c.x, c.y, r * k, col, 1.5, clip);
         if fwd.length() > 1e-3 {
             let p = c + fwd.normalize() * r * k;
-            cv.text(p.x + 4.0, p.y - ((font::H + 3) * s) as f32, s, &format!("{d:.1} M"), col);
+            // Name the layer that begins at this ring, on a dark backing so dots don't hide it.
+            let label = format!("CROWD{} FROM {d:.1} M", i + 1);
+            labels.push((p.x + 4.0, p.y - ((font::H + 4) * s) as f32, label, col));
         }
     }
 
     // Agents: filled = full LOD, ring = proxy, white ring = pinned, cross = removed.
-    let dot = (0.22 * k).clamp(1.5, 5.0 * s as f32);
+    let dot = (0.3 * k).clamp(2.0, 4.0 * s as f32);
     for a in far_to_near(m) {
         let p = to_px(a.position[0], a.position[2]);
         let col = layer_color(a.layer);
@@ -317,6 +320,11 @@ fn top_down(cv: &mut Canvas, m: &Manifest, opts: &MapOptions, at: (f32, f32), si
             cv.cross(p.x, p.y, dot + 1.0, WHITE, 1.0, clip);
         }
     }
+    for (lx, ly, label, col) in labels {
+        let (tw, th) = (font::text_width(&label, s) as f32, ((font::H + 1) * s) as f32);
+        cv.rect(lx - 2.0, ly - 2.0, tw + 4.0, th + 3.0, [28, 30, 34, 210], clip);
+        cv.text(lx, ly, s, &label, col);
+    }
     // The camera on top.
     cv.circle(c.x, c.y, 4.0 * s as f32, WHITE, None, clip);
     cv.text(c.x + 6.0 * s as f32, c.y - 3.0 * s as f32, s, "CAMERA", WHITE);
@@ -326,7 +334,8 @@ fn camera_view(cv: &mut Canvas, m: &Manifest, at: (f32, f32), size: (f32, f32), 
     let (w, h) = (cv.pm.width(), cv.pm.height());
     let pad = (6 * s) as f32;
     let [iw, ih] = m.camera.image_size;
-    cv.text(at.0 + pad, at.1 + pad, s, &format!("CAMERA VIEW AT FRAME {} ({iw}X{ih})", m.ref_frame), DIM);
+    let caption = format!("CAMERA VIEW AT FRAME {} ({iw}X{ih}), FULL LOD FROM {} PX TALL", m.ref_frame, m.lod_full_min_px);
+    cv.text(at.0 + pad, at.1 + pad, s, &caption, DIM);
     let avail = (size.0 - 2.0 * pad, size.1 - 2.0 * pad - lh);
     let k = (avail.0 / iw.max(1) as f32).min(avail.1 / ih.max(1) as f32).max(1e-6);
     let (fw, fh) = (iw as f32 * k, ih as f32 * k);
@@ -343,6 +352,7 @@ fn camera_view(cv: &mut Canvas, m: &Manifest, at: (f32, f32), size: (f32, f32), 
     if flat.length() > 1e-3 {
         if let Some((_, y, _)) = m.camera.project(cam + flat.normalize() * 1e4 - Vec3::Y * cam.y) {
             let y = fy + y * k;
+            cv.rect(fx, y, fw, (fy + fh - y).max(0.0), [48, 52, 58, 255], clip);
             cv.polyline(&[Vec2::new(fx, y), Vec2::new(fx + fw, y)], [255, 255, 255, 40], 1.0, false, false, clip);
         }
     }
@@ -383,7 +393,14 @@ fn legend(cv: &mut Canvas, m: &Manifest, x: f32, y: f32, s: u32, lh: f32, shown:
     let mut y = y;
     for l in m.layers.iter().take(shown) {
         cv.rect(x, y, sw, sw, layer_color(l.index), None);
-        let removed = if l.removed > 0 { format!("  ({} REMOVED)", l.removed) } else { String::new() };
+        let mut notes = Vec::new();
+        if l.removed > 0 {
+            notes.push(format!("{} REMOVED", l.removed));
+        }
+        if l.pinned > 0 {
+            notes.push(format!("{} PINNED", l.pinned));
+        }
+        let removed = if notes.is_empty() { String::new() } else { format!("  ({})", notes.join(", ")) };
         let line = format!(
             "{:<7} {:>6} AGENTS  {:>14}  FULL {:>5}  PROXY {:>5}  {:>9}{removed}",
             l.name,
@@ -405,7 +422,7 @@ fn legend(cv: &mut Canvas, m: &Manifest, x: f32, y: f32, s: u32, lh: f32, shown:
     cv.text(tx, y, s, "SET     BACKGROUND. COMP: SET, THEN CROWD LAYERS FAR TO NEAR", TEXT);
     y += lh;
     // Key.
-    let r = 0.4 * sw;
+    let r = 0.5 * sw;
     let cy = y + 0.5 * sw;
     let mut kx = x + r;
     let step = |cv: &mut Canvas, kx: &mut f32, label: &str| {
@@ -423,7 +440,13 @@ fn legend(cv: &mut Canvas, m: &Manifest, x: f32, y: f32, s: u32, lh: f32, shown:
     kx += r;
     cv.cross(kx, cy, r + 1.0, WHITE, 1.2, None);
     step(cv, &mut kx, "REMOVED (RANKED, NOT RENDERED)");
-    kx += r;
-    cv.dashed_circle(kx + 3.0 * r, cy + 3.0 * r, 3.5 * r, DIM, 1.5, None);
-    step(cv, &mut kx, "   LAYER BOUNDARY");
+    let dash = Stroke { width: 1.5, dash: StrokeDash::new(vec![6.0, 5.0], 0.0), ..Stroke::default() };
+    let mut pb = PathBuilder::new();
+    pb.move_to(kx, cy);
+    pb.line_to(kx + 6.0 * r, cy);
+    if let Some(path) = pb.finish() {
+        cv.pm.stroke_path(&path, &paint(DIM), &dash, Transform::identity(), None);
+    }
+    kx += 5.0 * r;
+    step(cv, &mut kx, "LAYER BOUNDARY (DISTANCE TO CAMERA)");
 }

@@ -440,8 +440,14 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
                 Lod::Proxy => rec.lod_proxy += 1,
             }
         }
-        rec.distance_min_m = Some(rec.distance_min_m.map_or(s.distance, |d: f32| d.min(s.distance)));
-        rec.distance_max_m = Some(rec.distance_max_m.map_or(s.distance, |d: f32| d.max(s.distance)));
+        let pinned = prep.pins.contains_key(&i);
+        if pinned {
+            rec.pinned += 1;
+        } else {
+            // The range shows the split; a pinned agent would stretch it.
+            rec.distance_min_m = Some(rec.distance_min_m.map_or(s.distance, |d: f32| d.min(s.distance)));
+            rec.distance_max_m = Some(rec.distance_max_m.map_or(s.distance, |d: f32| d.max(s.distance)));
+        }
         agents.push(AgentRecord {
             id: a.id,
             layer: l,
@@ -450,7 +456,7 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
             projected_px: s.px,
             behind_camera: s.behind,
             removed: a.removed,
-            pinned: prep.pins.contains_key(&i),
+            pinned,
             ranked_frame: input.frames[s.frame_idx],
             position: s.pos.to_array(),
             height_m: a.height_m,
