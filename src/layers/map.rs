@@ -82,6 +82,7 @@ impl Canvas {
         }
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn stroke_rect(&mut self, x: f32, y: f32, w: f32, h: f32, c: Rgba, width: f32, clip: Option<&Mask>) {
         if let Some(r) = Rect::from_xywh(x, y, w.max(0.5), h.max(0.5)) {
             let path = PathBuilder::from_rect(r);

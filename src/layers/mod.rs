@@ -160,6 +160,8 @@ struct Prepared {
     plan: Plan,
     ref_idx: usize,
     pins: HashMap<usize, usize>,
+    /// Agent indices in id order.
+    by_id: Vec<u32>,
 }
 
 fn prepare(input: &LayerInput) -> Result<Prepared> {
@@ -188,8 +190,7 @@ fn prepare(input: &LayerInput) -> Result<Prepared> {
             ),
         )
     })?;
-    let mut index = HashMap::with_capacity(input.agents.len());
-    for (i, a) in input.agents.iter().enumerate() {
+    for a in &input.agents {
         if a.positions.len() != input.frames.len() {
             return Err(Error::invalid(
                 &input.source,
@@ -203,10 +204,18 @@ fn prepare(input: &LayerInput) -> Result<Prepared> {
         if let Some(p) = a.positions.iter().flatten().find(|p| !p.is_finite()) {
             return Err(Error::invalid(&input.source, format!("position is not finite: {p}")).agent(a.id));
         }
-        if index.insert(a.id, i).is_some() {
-            return Err(Error::invalid(&input.source, "agent id appears twice").agent(a.id));
-        }
     }
+    // Agents by id: finds duplicates and pinned agents, and orders the
+    // manifest, without a hash map (1M inserts cost more than the sort).
+    let mut by_id: Vec<u64> = input.agents.iter().enumerate().map(|(i, a)| (u64::from(a.id) << 32) | i as u64).collect();
+    by_id.sort_unstable();
+    if let Some(w) = by_id.windows(2).find(|w| w[0] >> 32 == w[1] >> 32) {
+        return Err(Error::invalid(&input.source, "agent id appears twice").agent((w[0] >> 32) as u32));
+    }
+    let by_id: Vec<u32> = by_id.into_iter().map(|k| k as u32).collect();
+    let index_of = |id: u32| {
+        by_id.binary_search_by_key(&id, |&i| input.agents[i as usize].id).ok().map(|k| by_id[k] as usize)
+    };
     let plan = match s.split {
         SplitMode::Count => {
             if s.count == 0 {
@@ -241,7 +250,7 @@ fn prepare(input: &LayerInput) -> Result<Prepared> {
     }
     let mut pins = HashMap::new();
     for pin in &s.pins {
-        let i = *index.get(&pin.agent).ok_or_else(|| {
+        let i = index_of(pin.agent).ok_or_else(|| {
             Error::invalid(&input.source, "pinned agent is not in the crowd").agent(pin.agent).field("layers.pins")
         })?;
         if pin.layer > MAX_PIN_LAYER {
@@ -255,7 +264,7 @@ fn prepare(input: &LayerInput) -> Result<Prepared> {
                 .field("layers.pins"));
         }
     }
-    Ok(Prepared { plan, ref_idx, pins })
+    Ok(Prepared { plan, ref_idx, pins, by_id })
 }
 
 /// The split at one frame.
@@ -279,26 +288,29 @@ fn assign(
     full_lod: &dyn Fn(usize, &Sample) -> bool,
 ) -> Result<Assigned> {
     let samples: Vec<Option<Sample>> = input.agents.iter().map(|a| sample(input, a, fi)).collect();
-    // Rank on (distance, id): deterministic, ties broken by agent id.
-    let mut order: Vec<(f32, u32, u32)> = samples
+    // Rank on (distance, id): deterministic, ties broken by agent id. The
+    // key packs both in a u64 (a non-negative f32's bits sort like the
+    // float), so the sort compares integers.
+    let mut keyed: Vec<(u64, u32)> = samples
         .iter()
         .enumerate()
-        .filter_map(|(i, s)| s.map(|s| (s.distance, input.agents[i].id, i as u32)))
+        .filter_map(|(i, s)| s.map(|s| ((u64::from(s.distance.to_bits()) << 32) | u64::from(input.agents[i].id), i as u32)))
         .collect();
-    order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    keyed.sort_unstable_by_key(|k| k.0);
+    let order: Vec<(f32, u32)> = keyed.into_iter().map(|(k, i)| (f32::from_bits((k >> 32) as u32), i)).collect();
 
     let mut layer = vec![u32::MAX; input.agents.len()];
     let n = order.len();
     let mut n_layers = match &prep.plan {
         Plan::Count(c) => {
             // Equal counts by rank over ALL agents, removed included, so removing one moves nobody.
-            for (rank, &(_, _, i)) in order.iter().enumerate() {
+            for (rank, &(_, i)) in order.iter().enumerate() {
                 layer[i as usize] = (rank * c / n.max(1)) as u32;
             }
             *c
         }
         Plan::Cutoffs(cuts) => {
-            for &(d, _, i) in &order {
+            for &(d, i) in &order {
                 layer[i as usize] = cuts.partition_point(|&c| c <= d) as u32;
             }
             cuts.len() + 1
@@ -307,17 +319,27 @@ fn assign(
             // Greedy nearest-first fill. Removed agents are charged too, so
             // removing one never moves another.
             let shared = input.options.shared_bytes;
+            // Charges in input order first: the fill then reads 8 bytes per
+            // agent in rank order instead of whole agents.
+            let charge: Vec<u64> = input
+                .agents
+                .iter()
+                .zip(&samples)
+                .enumerate()
+                .map(|(i, (a, s))| {
+                    if s.as_ref().is_some_and(|s| full_lod(i, s)) {
+                        a.memory_full
+                    } else {
+                        a.memory_proxy
+                    }
+                })
+                .collect();
             let mut current = 0u32;
             let mut used = shared;
             let mut count = 0usize;
-            for &(_, _, i) in &order {
+            for &(_, i) in &order {
                 let i = i as usize;
-                let a = &input.agents[i];
-                let m = if samples[i].as_ref().is_some_and(|s| full_lod(i, s)) {
-                    a.memory_full
-                } else {
-                    a.memory_proxy
-                };
+                let m = charge[i];
                 if shared.saturating_add(m) > *budget {
                     return Err(Error::invalid(
                         &input.source,
@@ -330,7 +352,7 @@ fn assign(
                             format_bytes(*budget)
                         ),
                     )
-                    .agent(a.id)
+                    .agent(input.agents[i].id)
                     .field("layers.budget"));
                 }
                 if count > 0 && used + m > *budget {
@@ -347,7 +369,7 @@ fn assign(
     };
     // Where each layer begins: the first-ranked agent of that layer.
     let mut boundaries = vec![None; n_layers.saturating_sub(1)];
-    for &(d, _, i) in order.iter().rev() {
+    for &(d, i) in order.iter().rev() {
         let l = layer[i as usize] as usize;
         if l > 0 && l - 1 < boundaries.len() {
             boundaries[l - 1] = Some(d);
@@ -414,7 +436,9 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
         .collect();
     let mut agents = Vec::with_capacity(input.agents.len());
     let mut absent = Vec::new();
-    for (i, a) in input.agents.iter().enumerate() {
+    for &i in &prep.by_id {
+        let i = i as usize;
+        let a = &input.agents[i];
         let Some(s) = asg.samples[i] else {
             absent.push(a.id);
             continue;
@@ -464,8 +488,6 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
             lod_changes: spans.as_ref().map(|sp| sp[i].clone()).unwrap_or_default(),
         });
     }
-    agents.sort_unstable_by_key(|a| a.id);
-    absent.sort_unstable();
 
     if let Plan::Budget(budget) = prep.plan {
         // Only pins can push a layer over: name them.
@@ -574,6 +596,12 @@ fn count_pops(input: &LayerInput, prep: &Prepared, full_lod: &dyn Fn(usize, &Sam
         prev = Some(layer);
     }
     Ok(Pops { agents_changed: changed.iter().filter(|&&c| c).count() as u64, changes })
+}
+
+/// Where `throng layers` writes the manifest unless `--out` says otherwise:
+/// `<shot dir>/<shot name>.layers.json`.
+pub fn default_manifest_path(shot_path: &std::path::Path, shot_name: &str) -> PathBuf {
+    shot_path.parent().unwrap_or(std::path::Path::new("")).join(format!("{shot_name}.layers.json"))
 }
 
 /// Applies `throng layers` flags over the shot's `[layers]` table.
