@@ -43,8 +43,14 @@ fn main() -> throng::error::Result<()> {
     println!("built {n} synthetic agents in {:.2} s (not timed below)", t.elapsed().as_secs_f64());
     let splits = [
         ("count 8", LayerSettings { split: SplitMode::Count, count: 8, ..Default::default() }),
-        ("cutoffs 10,25,60,150", LayerSettings { split: SplitMode::Cutoffs, cutoffs: vec![10.0, 25.0, 60.0, 150.0], ..Default::default() }),
-        ("budget 2.8GB", LayerSettings { split: SplitMode::Budget, budget: Some("2.8GB".into()), ..Default::default() }),
+        (
+            "cutoffs 10,25,60,150",
+            LayerSettings { split: SplitMode::Cutoffs, cutoffs: vec![10.0, 25.0, 60.0, 150.0], ..Default::default() },
+        ),
+        (
+            "budget 2.8GB",
+            LayerSettings { split: SplitMode::Budget, budget: Some("2.8GB".into()), ..Default::default() },
+        ),
     ];
     let mut input = LayerInput {
         shot: "bench".into(),

@@ -1,5 +1,5 @@
 //! Draws the layer map and prints the summary for a synthetic demo-like
-//! crowd (no cache needed): `cargo run --example layers_map -- OUT.png [count|cutoffs|budget]`.
+//! crowd (no cache needed): `cargo run --example layers_map -- OUT.png [count|cutoffs|budget] [MANIFEST.json]`.
 
 use glam::Vec3;
 use throng::layers::{build_manifest, draw_map, summary, AgentInput, LayerInput, LayerOptions, MapOptions};
@@ -51,6 +51,9 @@ fn main() -> throng::error::Result<()> {
     };
     let m = build_manifest(&input)?;
     print!("{}", summary(&m));
+    if let Some(json) = args.get(3) {
+        throng::layers::write_manifest(std::path::Path::new(json), &m)?;
+    }
     let set = Some((Vec3::new(-40.0, 0.0, -40.0), Vec3::new(40.0, 20.0, 40.0)));
     draw_map(&m, &MapOptions { size: (1600, 900), set_bounds: set }, std::path::Path::new(out))
 }

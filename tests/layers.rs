@@ -128,7 +128,13 @@ fn layers_are_ordered_by_distance() {
         assert!(m.layers.len() >= 3, "{:?}: {} layers", settings.split, m.layers.len());
         for w in m.layers.windows(2) {
             if let (Some(near), Some(far)) = (w[0].distance_max_m, w[1].distance_min_m) {
-                assert!(near <= far, "{:?}: {} ends at {near}, {} starts at {far}", settings.split, w[0].name, w[1].name);
+                assert!(
+                    near <= far,
+                    "{:?}: {} ends at {near}, {} starts at {far}",
+                    settings.split,
+                    w[0].name,
+                    w[1].name
+                );
             }
         }
         let total: usize = m.layers.iter().map(|l| l.agents).sum();
@@ -153,10 +159,8 @@ fn layers_are_ordered_by_distance() {
 fn ties_are_broken_by_agent_id() {
     // Two agents mirrored about the camera axis are at the same distance.
     let n = FRAMES.count();
-    let agents = vec![
-        agent(7, vec![Some(Vec3::new(3.0, 0.0, 0.0)); n]),
-        agent(3, vec![Some(Vec3::new(-3.0, 0.0, 0.0)); n]),
-    ];
+    let agents =
+        vec![agent(7, vec![Some(Vec3::new(3.0, 0.0, 0.0)); n]), agent(3, vec![Some(Vec3::new(-3.0, 0.0, 0.0)); n])];
     let mut agents = agents;
     agents[0].height_m = 1.8;
     agents[1].height_m = 1.8;
@@ -330,9 +334,8 @@ fn bad_settings_are_clear_errors() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("layers.budget"), "{err}");
-    let err = build_manifest(&input(grid(2, 2), LayerSettings { ref_frame: Some(900), ..count(2) }))
-        .unwrap_err()
-        .to_string();
+    let err =
+        build_manifest(&input(grid(2, 2), LayerSettings { ref_frame: Some(900), ..count(2) })).unwrap_err().to_string();
     assert!(err.contains("900") && err.contains("ref_frame"), "{err}");
     let mut agents = grid(2, 2);
     agents[1].id = agents[0].id;
@@ -362,7 +365,8 @@ fn map_decodes_as_png_of_the_requested_size() {
     let mut settings = count(3);
     settings.pins = vec![Pin { agent: 5, layer: 0 }];
     let m = build_manifest(&input(agents, settings)).unwrap();
-    let opts = MapOptions { size: (1200, 700), set_bounds: Some((Vec3::new(-40.0, 0.0, -40.0), Vec3::new(40.0, 20.0, 40.0))) };
+    let opts =
+        MapOptions { size: (1200, 700), set_bounds: Some((Vec3::new(-40.0, 0.0, -40.0), Vec3::new(40.0, 20.0, 40.0))) };
     let png = render_map(&m, &opts).unwrap();
     let img = image::load_from_memory_with_format(&png, image::ImageFormat::Png).unwrap();
     assert_eq!((img.width(), img.height()), (1200, 700));
@@ -372,4 +376,31 @@ fn map_decodes_as_png_of_the_requested_size() {
     let img = image::open(&path).unwrap();
     assert_eq!((img.width(), img.height()), (400, 240));
     assert!(render_map(&m, &MapOptions { size: (0, 10), set_bounds: None }).is_err());
+}
+
+#[test]
+fn command_line_flags_override_the_shot() {
+    use clap::Parser;
+    use throng::cli::{Cli, Verb};
+    use throng::layers::settings_with_args;
+    let parse = |args: &[&str]| match Cli::try_parse_from(args).unwrap().verb {
+        Verb::Layers(a) => a,
+        _ => unreachable!(),
+    };
+    let shot = count(3);
+    let a = parse(&["throng", "layers", "shot.toml", "--cutoffs", "10,25,60", "--ref-frame", "1010", "--per-frame"]);
+    let (s, o) = settings_with_args(&shot, &a).unwrap();
+    assert_eq!(
+        (s.split, s.cutoffs.clone(), s.ref_frame, o.per_frame),
+        (SplitMode::Cutoffs, vec![10.0, 25.0, 60.0], Some(1010), true)
+    );
+    let a = parse(&["throng", "layers", "shot.toml", "--budget", "2.8GB", "--lod-px", "25", "--lod-per-frame"]);
+    let (s, o) = settings_with_args(&shot, &a).unwrap();
+    assert_eq!(
+        (s.split, s.budget.as_deref(), s.lod_full_min_px, o.lod_per_frame),
+        (SplitMode::Budget, Some("2.8GB"), 25.0, true)
+    );
+    let a = parse(&["throng", "layers", "shot.toml", "--budget", "lots"]);
+    assert!(settings_with_args(&shot, &a).unwrap_err().to_string().contains("--budget"));
+    assert!(Cli::try_parse_from(["throng", "layers", "s.toml", "--count", "2", "--budget", "1GB"]).is_err());
 }

@@ -458,10 +458,9 @@ pub fn summary(m: &Manifest) -> String {
     let mut s = String::new();
     let split = match m.split.mode.as_str() {
         "count" => format!("count {}", m.split.count.unwrap_or(0)),
-        "cutoffs" => format!(
-            "cut-offs {} m",
-            m.split.cutoffs_m.iter().map(|c| format!("{c}")).collect::<Vec<_>>().join(", ")
-        ),
+        "cutoffs" => {
+            format!("cut-offs {} m", m.split.cutoffs_m.iter().map(|c| format!("{c}")).collect::<Vec<_>>().join(", "))
+        }
         "budget" => format!("budget {} per layer", format_bytes(m.split.budget_bytes.unwrap_or(0))),
         other => other.to_string(),
     };

@@ -177,10 +177,9 @@ pub fn render_map(m: &Manifest, opts: &MapOptions) -> Result<Vec<u8>> {
     // Title.
     let split = match m.split.mode.as_str() {
         "count" => format!("COUNT {}", m.split.count.unwrap_or(0)),
-        "cutoffs" => format!(
-            "CUT-OFFS {} M",
-            m.split.cutoffs_m.iter().map(|c| format!("{c}")).collect::<Vec<_>>().join(", ")
-        ),
+        "cutoffs" => {
+            format!("CUT-OFFS {} M", m.split.cutoffs_m.iter().map(|c| format!("{c}")).collect::<Vec<_>>().join(", "))
+        }
         "budget" => format!("BUDGET {} PER LAYER", format_bytes(m.split.budget_bytes.unwrap_or(0))),
         other => other.to_uppercase(),
     };
@@ -335,7 +334,8 @@ fn camera_view(cv: &mut Canvas, m: &Manifest, at: (f32, f32), size: (f32, f32), 
     let (w, h) = (cv.pm.width(), cv.pm.height());
     let pad = (6 * s) as f32;
     let [iw, ih] = m.camera.image_size;
-    let caption = format!("CAMERA VIEW AT FRAME {} ({iw}X{ih}), FULL LOD FROM {} PX TALL", m.ref_frame, m.lod_full_min_px);
+    let caption =
+        format!("CAMERA VIEW AT FRAME {} ({iw}X{ih}), FULL LOD FROM {} PX TALL", m.ref_frame, m.lod_full_min_px);
     cv.text(at.0 + pad, at.1 + pad, s, &caption, DIM);
     let avail = (size.0 - 2.0 * pad, size.1 - 2.0 * pad - lh);
     let k = (avail.0 / iw.max(1) as f32).min(avail.1 / ih.max(1) as f32).max(1e-6);

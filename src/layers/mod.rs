@@ -22,8 +22,8 @@ use std::path::PathBuf;
 use glam::Vec3;
 
 use crate::error::{Error, Result};
-use crate::shot::{parse_bytes, LayerSettings, SplitMode};
 use crate::scene::Camera;
+use crate::shot::{parse_bytes, LayerSettings, SplitMode};
 
 pub use manifest::{
     estimate_agent_memory, estimate_proxy_memory, format_bytes, read_manifest, summary, write_manifest, AgentRecord,
@@ -207,15 +207,15 @@ fn prepare(input: &LayerInput) -> Result<Prepared> {
     }
     // Agents by id: finds duplicates and pinned agents, and orders the
     // manifest, without a hash map (1M inserts cost more than the sort).
-    let mut by_id: Vec<u64> = input.agents.iter().enumerate().map(|(i, a)| (u64::from(a.id) << 32) | i as u64).collect();
+    let mut by_id: Vec<u64> =
+        input.agents.iter().enumerate().map(|(i, a)| (u64::from(a.id) << 32) | i as u64).collect();
     by_id.sort_unstable();
     if let Some(w) = by_id.windows(2).find(|w| w[0] >> 32 == w[1] >> 32) {
         return Err(Error::invalid(&input.source, "agent id appears twice").agent((w[0] >> 32) as u32));
     }
     let by_id: Vec<u32> = by_id.into_iter().map(|k| k as u32).collect();
-    let index_of = |id: u32| {
-        by_id.binary_search_by_key(&id, |&i| input.agents[i as usize].id).ok().map(|k| by_id[k] as usize)
-    };
+    let index_of =
+        |id: u32| by_id.binary_search_by_key(&id, |&i| input.agents[i as usize].id).ok().map(|k| by_id[k] as usize);
     let plan = match s.split {
         SplitMode::Count => {
             if s.count == 0 {
@@ -228,12 +228,18 @@ fn prepare(input: &LayerInput) -> Result<Prepared> {
                 return Err(bad("layers.cutoffs", "a cut-off split needs at least one distance, e.g. 10,25,60".into()));
             }
             if s.cutoffs.iter().any(|c| !(*c > 0.0 && c.is_finite())) || s.cutoffs.windows(2).any(|w| !(w[0] < w[1])) {
-                return Err(bad("layers.cutoffs", format!("cut-offs must be positive and increase, got {:?}", s.cutoffs)));
+                return Err(bad(
+                    "layers.cutoffs",
+                    format!("cut-offs must be positive and increase, got {:?}", s.cutoffs),
+                ));
             }
             Plan::Cutoffs(s.cutoffs.clone())
         }
         SplitMode::Budget => {
-            let text = s.budget.as_deref().ok_or_else(|| bad("layers.budget", "a budget split needs a budget, e.g. 2.8GB".into()))?;
+            let text = s
+                .budget
+                .as_deref()
+                .ok_or_else(|| bad("layers.budget", "a budget split needs a budget, e.g. 2.8GB".into()))?;
             let bytes = parse_bytes(text).map_err(|m| bad("layers.budget", m))?;
             if bytes == 0 {
                 return Err(bad("layers.budget", "budget must be > 0".into()));
@@ -294,7 +300,9 @@ fn assign(
     let mut keyed: Vec<(u64, u32)> = samples
         .iter()
         .enumerate()
-        .filter_map(|(i, s)| s.map(|s| ((u64::from(s.distance.to_bits()) << 32) | u64::from(input.agents[i].id), i as u32)))
+        .filter_map(|(i, s)| {
+            s.map(|s| ((u64::from(s.distance.to_bits()) << 32) | u64::from(input.agents[i].id), i as u32))
+        })
         .collect();
     keyed.sort_unstable_by_key(|k| k.0);
     let order: Vec<(f32, u32)> = keyed.into_iter().map(|(k, i)| (f32::from_bits((k >> 32) as u32), i)).collect();
@@ -326,13 +334,15 @@ fn assign(
                 .iter()
                 .zip(&samples)
                 .enumerate()
-                .map(|(i, (a, s))| {
-                    if s.as_ref().is_some_and(|s| full_lod(i, s)) {
-                        a.memory_full
-                    } else {
-                        a.memory_proxy
-                    }
-                })
+                .map(
+                    |(i, (a, s))| {
+                        if s.as_ref().is_some_and(|s| full_lod(i, s)) {
+                            a.memory_full
+                        } else {
+                            a.memory_proxy
+                        }
+                    },
+                )
                 .collect();
             let mut current = 0u32;
             let mut used = shared;
@@ -418,16 +428,21 @@ fn lod_spans(input: &LayerInput) -> Vec<Vec<LodChange>> {
         .collect()
 }
 
+/// Whether agent `i` is charged its full-parts memory: full LOD at the
+/// ranked frame, or with per-frame LOD, full at any frame.
+fn charged_full(spans: &Option<Vec<Vec<LodChange>>>, min_px: f32, i: usize, s: &Sample) -> bool {
+    match spans {
+        Some(sp) => sp[i].iter().any(|c| c.lod == Lod::Full),
+        None => !s.behind && s.px >= min_px,
+    }
+}
+
 /// Ranks, splits and chooses LOD: the layer manifest for this input.
 pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
     let prep = prepare(input)?;
     let min_px = input.settings.lod_full_min_px;
     let spans = if input.options.lod_per_frame { Some(lod_spans(input)) } else { None };
-    // Per-frame LOD charges full memory if the agent is ever full.
-    let full_lod = |i: usize, s: &Sample| match &spans {
-        Some(sp) => sp[i].iter().any(|c| c.lod == Lod::Full),
-        None => !s.behind && s.px >= min_px,
-    };
+    let full_lod = |i: usize, s: &Sample| charged_full(&spans, min_px, i, s);
     let asg = assign(input, &prep, prep.ref_idx, &full_lod)?;
     let ref_frame = input.frames[prep.ref_idx];
 
@@ -447,7 +462,9 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
         let full = full_lod(i, &s);
         let lod = match &spans {
             // The LOD at the reference frame, for the summary.
-            Some(sp) => sp[i].iter().rev().find(|c| c.frame <= ref_frame).or(sp[i].first()).map_or(Lod::Proxy, |c| c.lod),
+            Some(sp) => {
+                sp[i].iter().rev().find(|c| c.frame <= ref_frame).or(sp[i].first()).map_or(Lod::Proxy, |c| c.lod)
+            }
             None if full => Lod::Full,
             None => Lod::Proxy,
         };
@@ -549,7 +566,8 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
 pub fn membership(input: &LayerInput, ranking: Ranking) -> Result<Vec<Vec<Option<usize>>>> {
     let prep = prepare(input)?;
     let min_px = input.settings.lod_full_min_px;
-    let full_lod = |_: usize, s: &Sample| !s.behind && s.px >= min_px;
+    let spans = if input.options.lod_per_frame { Some(lod_spans(input)) } else { None };
+    let full_lod = |i: usize, s: &Sample| charged_full(&spans, min_px, i, s);
     let to_vec = |a: &Assigned| a.layer.iter().map(|&l| (l != u32::MAX).then_some(l as usize)).collect::<Vec<_>>();
     match ranking {
         Ranking::Fixed => {
@@ -605,7 +623,10 @@ pub fn default_manifest_path(shot_path: &std::path::Path, shot_name: &str) -> Pa
 }
 
 /// Applies `throng layers` flags over the shot's `[layers]` table.
-pub fn settings_with_args(shot: &LayerSettings, args: &crate::cli::LayersArgs) -> Result<(LayerSettings, LayerOptions)> {
+pub fn settings_with_args(
+    shot: &LayerSettings,
+    args: &crate::cli::LayersArgs,
+) -> Result<(LayerSettings, LayerOptions)> {
     let mut s = shot.clone();
     if let Some(c) = args.count {
         s.split = SplitMode::Count;
