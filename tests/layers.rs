@@ -404,3 +404,57 @@ fn command_line_flags_override_the_shot() {
     assert!(settings_with_args(&shot, &a).unwrap_err().to_string().contains("--budget"));
     assert!(Cli::try_parse_from(["throng", "layers", "s.toml", "--count", "2", "--budget", "1GB"]).is_err());
 }
+
+#[test]
+fn input_from_a_shot_and_crowd() {
+    use throng::cache::{AgentRecord as Rec, Crowd, FrameBlock};
+    use throng::layers::shot_input;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("c.crowd"), b"").unwrap();
+    let text = r#"
+version = 1
+name = "tiny"
+removed = [2]
+[frames]
+start = 1001
+end = 1005
+[cache]
+path = "c.crowd"
+frame_offset = -1000
+[camera]
+[[camera.keys]]
+frame = 1001
+position = [0.0, 1.7, 24.0]
+aim = [0.0, 1.0, -2.0]
+focal_length = 35.0
+[layers]
+count = 2
+"#;
+    let shot = throng::shot::Shot::parse(text, &dir.path().join("shot.toml")).unwrap();
+    let rec = |id: u32, z: f32| Rec {
+        id,
+        position: Vec3::new(0.0, 0.0, z),
+        heading: 0.0,
+        rig: 0,
+        cycle: 0,
+        cycle_frame: 0.0,
+        flags: 0,
+    };
+    // Cache frames 1..=5; agent 3 only appears from cache frame 4.
+    let frames = (1..=5)
+        .map(|f| FrameBlock {
+            frame: f,
+            agents: [rec(1, 10.0), rec(2, 0.0)].into_iter().chain((f >= 4).then(|| rec(3, -10.0))).collect(),
+        })
+        .collect();
+    let crowd = Crowd { rigs: vec!["r".into()], cycles: vec!["c".into()], frames };
+    let input =
+        shot_input(&shot, &crowd, None, shot.layers.clone(), LayerOptions::default(), |_| (1.8, 1_000_000, 1_000))
+            .unwrap();
+    assert_eq!(input.frames, vec![1001, 1002, 1003, 1004, 1005]);
+    let m = build_manifest(&input).unwrap();
+    assert_eq!(m.ref_frame, 1003);
+    assert_eq!(m.agents.iter().map(|a| (a.id, a.layer)).collect::<Vec<_>>(), vec![(1, 0), (2, 0), (3, 1)]);
+    assert!(m.agent(2).unwrap().removed);
+    assert_eq!(m.agent(3).unwrap().ranked_frame, 1004);
+}

@@ -616,6 +616,59 @@ fn count_pops(input: &LayerInput, prep: &Prepared, full_lod: &dyn Fn(usize, &Sam
     Ok(Pops { agents_changed: changed.iter().filter(|&&c| c).count() as u64, changes })
 }
 
+/// Every agent's foot position at each shot frame (`None` where the cache
+/// has no record for it), sorted by id: the positions half of a
+/// [`LayerInput`]. Hidden agents count as present (they are still simulated).
+pub fn shot_positions(shot: &crate::shot::Shot, crowd: &crate::cache::Crowd) -> Vec<(u32, Vec<Option<Vec3>>)> {
+    let frames: Vec<i32> = shot.frames.iter().collect();
+    let mut by_id: std::collections::BTreeMap<u32, Vec<Option<Vec3>>> = Default::default();
+    for (fi, &f) in frames.iter().enumerate() {
+        let cache_frame = shot.cache.cache_frame(f);
+        let Ok(b) = crowd.frames.binary_search_by_key(&cache_frame, |b| b.frame) else { continue };
+        for a in &crowd.frames[b].agents {
+            by_id.entry(a.id).or_insert_with(|| vec![None; frames.len()])[fi] = Some(a.position);
+        }
+    }
+    by_id.into_iter().collect()
+}
+
+/// A [`LayerInput`] for a shot: positions from the crowd, cameras from the
+/// shot's keys (pass `cameras` for a glTF camera), removals from the shot,
+/// and `info(id) -> (height_m, memory_full, memory_proxy)` from casting.
+pub fn shot_input(
+    shot: &crate::shot::Shot,
+    crowd: &crate::cache::Crowd,
+    cameras: Option<Vec<Camera>>,
+    settings: LayerSettings,
+    options: LayerOptions,
+    info: impl Fn(u32) -> (f32, u64, u64),
+) -> Result<LayerInput> {
+    let frames: Vec<i32> = shot.frames.iter().collect();
+    let cameras = match cameras {
+        Some(c) => c,
+        None => frames.iter().map(|&f| shot.keyed_camera(f as f32)).collect::<Option<Vec<_>>>().ok_or_else(|| {
+            Error::invalid(&shot.path, "the camera has no keys; pass the glTF camera").field("camera")
+        })?,
+    };
+    let agents = shot_positions(shot, crowd)
+        .into_iter()
+        .map(|(id, positions)| {
+            let (height_m, memory_full, memory_proxy) = info(id);
+            AgentInput { id, positions, height_m, memory_full, memory_proxy, removed: shot.removed.contains(&id) }
+        })
+        .collect();
+    Ok(LayerInput {
+        shot: shot.name.clone(),
+        source: shot.path.clone(),
+        frames,
+        cameras,
+        image_size: (shot.render.resolution[0], shot.render.resolution[1]),
+        agents,
+        settings,
+        options,
+    })
+}
+
 /// Where `throng layers` writes the manifest unless `--out` says otherwise:
 /// `<shot dir>/<shot name>.layers.json`.
 pub fn default_manifest_path(shot_path: &std::path::Path, shot_name: &str) -> PathBuf {
