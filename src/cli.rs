@@ -166,6 +166,13 @@ pub struct LayersArgs {
     /// Rank on every frame instead, and report agents that change layer.
     #[arg(long)]
     pub per_frame: bool,
+    /// Projected height in pixels below which an agent renders as proxy boxes
+    /// (default: the shot's `lod_full_min_px`).
+    #[arg(long)]
+    pub lod_px: Option<f32>,
+    /// Choose LOD on every frame, with hysteresis, instead of once at the reference frame.
+    #[arg(long)]
+    pub lod_per_frame: bool,
     /// Draw the layer map to this PNG.
     #[arg(long)]
     pub map: Option<PathBuf>,
@@ -249,7 +256,7 @@ pub fn run(cli: Cli) -> Result<()> {
 
         Verb::Botinfo(args) => crate::commands::cmd_botinfo(&args),
 
-        Verb::Layers(_args) => Err(Error::NotBuilt("layers")),
+        Verb::Layers(args) => crate::commands::cmd_layers(&args),
 
         Verb::Render(_args) => Err(Error::NotBuilt("render")),
 

@@ -355,3 +355,111 @@ pub fn cmd_export(args: &crate::cli::ExportArgs) -> Result<()> {
     );
     Ok(())
 }
+
+/// Standing height of each rig in metres: the top of its proxy boxes in the
+/// rest pose.
+pub fn rig_heights(crowd: &ShotCrowd) -> std::collections::BTreeMap<String, f32> {
+    crowd
+        .rigs
+        .iter()
+        .map(|(name, rig)| {
+            let top = rig
+                .rest_pose()
+                .slot_transforms()
+                .into_iter()
+                .flat_map(|(i, m)| {
+                    let s = &rig.slots()[i];
+                    (0..8).map(move |c| {
+                        let p = Vec3::select(
+                            glam::BVec3::new(c & 1 != 0, c & 2 != 0, c & 4 != 0),
+                            s.proxy_max,
+                            s.proxy_min,
+                        );
+                        m.transform_point3(p).y
+                    })
+                })
+                .fold(0.0f32, f32::max);
+            (name.clone(), top)
+        })
+        .collect()
+}
+
+/// World bounds of the set's instances, for the layer map.
+pub fn set_bounds(crowd: &ShotCrowd) -> Option<(Vec3, Vec3)> {
+    let lib = crowd.library();
+    crowd
+        .set
+        .iter()
+        .flat_map(|i| {
+            let (lo, hi) = lib.meshes[i.mesh as usize].bounds();
+            (0..8).map(move |c| {
+                let p = Vec3::select(glam::BVec3::new(c & 1 != 0, c & 2 != 0, c & 4 != 0), hi, lo);
+                i.world_from_object.transform_point3(p)
+            })
+        })
+        .fold(None, |acc: Option<(Vec3, Vec3)>, p| Some(acc.map_or((p, p), |(lo, hi)| (lo.min(p), hi.max(p)))))
+}
+
+/// Builds the layer manifest of a cast shot with `args` over the shot's `[layers]`.
+pub fn build_layers(crowd: &ShotCrowd, args: &crate::cli::LayersArgs) -> Result<crate::layers::Manifest> {
+    use crate::layers;
+    let (settings, options) = layers::settings_with_args(&crowd.shot.layers, args)?;
+    let heights = rig_heights(crowd);
+    let lib = crowd.library();
+    // How many part instances share each mesh: shared geometry is split between its users.
+    let mut users: std::collections::HashMap<u32, u64> = Default::default();
+    for parts in crowd.dressed.values() {
+        for p in parts {
+            *users.entry(p.mesh).or_default() += 1;
+        }
+    }
+    let all = crowd.cache.read_all()?;
+    let cameras = match crowd.shot.keyed_camera(crowd.shot.frames.start as f32) {
+        Some(_) => None,
+        None => Some(crowd.shot.frames.iter().map(|f| crowd.camera(f)).collect::<Result<Vec<_>>>()?),
+    };
+    let input = layers::shot_input(&crowd.shot, &all, cameras, settings, options, |id| {
+        let Some(cast) = crowd.casting.get(&id) else { return (1.8, 0, 0) };
+        let parts = crowd.dressed.get(&id).map(Vec::as_slice).unwrap_or(&[]);
+        let costs: Vec<layers::PartCost> = parts
+            .iter()
+            .map(|p| {
+                let m = &lib.meshes[p.mesh as usize];
+                layers::PartCost {
+                    mesh_bytes: m.bytes() as u64,
+                    triangles: m.triangle_count() as u64,
+                    users: users.get(&p.mesh).copied().unwrap_or(1),
+                }
+            })
+            .collect();
+        let proxies = parts.iter().filter(|p| p.proxy).count();
+        (
+            heights.get(&cast.rig).copied().unwrap_or(1.8) * cast.height_scale,
+            layers::estimate_agent_memory(&costs),
+            layers::estimate_proxy_memory(proxies),
+        )
+    })?;
+    layers::build_manifest(&input)
+}
+
+/// `throng layers`.
+pub fn cmd_layers(args: &crate::cli::LayersArgs) -> Result<()> {
+    use crate::layers;
+    let crowd = ShotCrowd::load(&args.shot)?;
+    let manifest = build_layers(&crowd, args)?;
+    let out = args.out.clone().unwrap_or_else(|| layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
+    layers::write_manifest(&out, &manifest)?;
+    if let Some(map) = &args.map {
+        layers::draw_map(&manifest, &layers::MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, map)?;
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&manifest.summary_json()).map_err(|e| Error::Usage(e.to_string()))?);
+    } else {
+        print!("{}", layers::summary(&manifest));
+        println!("manifest  {}", out.display());
+        if let Some(map) = &args.map {
+            println!("map       {}", map.display());
+        }
+    }
+    Ok(())
+}

@@ -11,6 +11,7 @@ pub mod commands;
 pub mod error;
 pub mod export;
 pub mod gltf_out;
+pub mod layers;
 pub mod pose;
 pub mod rig;
 pub mod scene;

@@ -1,0 +1,460 @@
+//! Layering: fixed-frame membership, distance order, budget, removal
+//! invariance, pins, per-frame pops, LOD, the manifest and the map.
+
+use glam::Vec3;
+use throng::layers::{
+    build_manifest, draw_map, membership, pops_in, read_manifest, render_map, summary, write_manifest, AgentInput,
+    LayerInput, LayerOptions, Lod, MapOptions, Ranking,
+};
+use throng::scene::{vis, Camera};
+use throng::shot::{look_at, LayerSettings, Pin, SplitMode};
+
+const FRAMES: std::ops::RangeInclusive<i32> = 1001..=1024;
+
+/// The demo camera: near (0, 1.7, 24) looking towards -Z, 35 mm on a 36 mm back, 16:9.
+fn camera() -> Camera {
+    let yfov = 2.0 * ((36.0 / (16.0 / 9.0)) * 0.5f32 / 35.0).atan();
+    Camera { world_from_camera: look_at(Vec3::new(0.0, 1.7, 24.0), Vec3::new(0.0, 1.0, -2.0)), yfov }
+}
+
+fn agent(id: u32, positions: Vec<Option<Vec3>>) -> AgentInput {
+    AgentInput {
+        id,
+        positions,
+        height_m: 1.75 + (id % 5) as f32 * 0.05,
+        memory_full: 40_000_000 + (id as u64 % 7) * 1_000_000,
+        memory_proxy: 1_500,
+        removed: false,
+    }
+}
+
+/// A standing grid of `nx * nz` agents in x [-18, 18], z [-30, 12].
+fn grid(nx: u32, nz: u32) -> Vec<AgentInput> {
+    let n = FRAMES.count();
+    let mut v = Vec::new();
+    for j in 0..nz {
+        for i in 0..nx {
+            let x = -18.0 + 36.0 * i as f32 / (nx - 1).max(1) as f32;
+            let z = -30.0 + 42.0 * j as f32 / (nz - 1).max(1) as f32;
+            v.push(agent(j * nx + i, vec![Some(Vec3::new(x, 0.0, z)); n]));
+        }
+    }
+    v
+}
+
+/// Agents walking across the frame at different depths, so their order by
+/// distance changes during the shot.
+fn crossing(n: u32) -> Vec<AgentInput> {
+    (0..n)
+        .map(|id| {
+            let z = 14.0 - id as f32 * 1.5;
+            let dir = if id % 2 == 0 { 1.0 } else { -1.0 };
+            let positions = FRAMES
+                .enumerate()
+                .map(|(f, _)| Some(Vec3::new(dir * (-16.0 + (id % 4) as f32 * 4.0 + 1.4 * f as f32), 0.0, z)))
+                .collect();
+            agent(id, positions)
+        })
+        .collect()
+}
+
+fn input(agents: Vec<AgentInput>, settings: LayerSettings) -> LayerInput {
+    let frames: Vec<i32> = FRAMES.collect();
+    LayerInput {
+        shot: "test".into(),
+        source: "test/shot.toml".into(),
+        cameras: vec![camera(); frames.len()],
+        frames,
+        image_size: (960, 540),
+        agents,
+        settings,
+        options: LayerOptions::default(),
+    }
+}
+
+fn count(n: usize) -> LayerSettings {
+    LayerSettings { split: SplitMode::Count, count: n, ..Default::default() }
+}
+
+fn cutoffs(c: &[f32]) -> LayerSettings {
+    LayerSettings { split: SplitMode::Cutoffs, cutoffs: c.to_vec(), ..Default::default() }
+}
+
+fn budget(b: &str) -> LayerSettings {
+    LayerSettings { split: SplitMode::Budget, budget: Some(b.into()), ..Default::default() }
+}
+
+fn layers_by_id(m: &throng::layers::Manifest) -> Vec<(u32, usize)> {
+    m.agents.iter().map(|a| (a.id, a.layer)).collect()
+}
+
+#[test]
+fn fixed_membership_is_identical_on_every_frame() {
+    let inp = input(crossing(30), count(3));
+    let table = membership(&inp, Ranking::Fixed).unwrap();
+    assert_eq!(table.len(), FRAMES.count());
+    assert!(table.iter().all(|f| f == &table[0]));
+    assert_eq!(pops_in(&table).agents_changed, 0);
+    // And it is the manifest's membership.
+    let m = build_manifest(&inp).unwrap();
+    for (a, l) in inp.agents.iter().zip(&table[0]) {
+        assert_eq!(m.agent(a.id).map(|r| r.layer), *l);
+    }
+    assert_eq!(m.ref_frame, 1012, "middle of 1001-1024");
+    assert_eq!((m.pops.agents_changed, m.pops.changes), (0, 0));
+    assert!(m.agents.iter().all(|a| a.ranked_frame == 1012));
+}
+
+#[test]
+fn per_frame_finds_pops_when_agents_cross_the_camera() {
+    let mut inp = input(crossing(30), count(3));
+    let table = membership(&inp, Ranking::PerFrame).unwrap();
+    let pops = pops_in(&table);
+    assert!(pops.agents_changed > 0, "{pops:?}");
+    inp.options.per_frame = true;
+    let m = build_manifest(&inp).unwrap();
+    assert_eq!(m.ranking, Ranking::PerFrame);
+    assert_eq!(m.pops, pops);
+    // Membership in the manifest is still the reference frame's.
+    let fixed = build_manifest(&input(crossing(30), count(3))).unwrap();
+    assert_eq!(layers_by_id(&m), layers_by_id(&fixed));
+    assert!(summary(&m).contains(&format!("would pop {} agents", pops.agents_changed)));
+}
+
+#[test]
+fn layers_are_ordered_by_distance() {
+    for settings in [count(4), cutoffs(&[15.0, 25.0, 40.0]), budget("400MB")] {
+        let m = build_manifest(&input(grid(12, 10), settings.clone())).unwrap();
+        assert!(m.layers.len() >= 3, "{:?}: {} layers", settings.split, m.layers.len());
+        for w in m.layers.windows(2) {
+            if let (Some(near), Some(far)) = (w[0].distance_max_m, w[1].distance_min_m) {
+                assert!(
+                    near <= far,
+                    "{:?}: {} ends at {near}, {} starts at {far}",
+                    settings.split,
+                    w[0].name,
+                    w[1].name
+                );
+            }
+        }
+        let total: usize = m.layers.iter().map(|l| l.agents).sum();
+        assert_eq!(total, 120);
+        assert_eq!(m.comp_order.first().map(String::as_str), Some("set"));
+        assert_eq!(m.comp_order.last().map(String::as_str), Some("crowd0"));
+    }
+    // Cut-offs: every agent sits in its interval.
+    let cuts = [15.0, 25.0, 40.0];
+    let m = build_manifest(&input(grid(12, 10), cutoffs(&cuts))).unwrap();
+    for a in &m.agents {
+        let lo = if a.layer == 0 { 0.0 } else { cuts[a.layer - 1] };
+        let hi = cuts.get(a.layer).copied().unwrap_or(f32::INFINITY);
+        assert!(a.distance_m >= lo && a.distance_m < hi, "agent {} at {} in layer {}", a.id, a.distance_m, a.layer);
+    }
+    // Count: equal sizes.
+    let m = build_manifest(&input(grid(12, 10), count(4))).unwrap();
+    assert!(m.layers.iter().all(|l| l.agents == 30));
+}
+
+#[test]
+fn ties_are_broken_by_agent_id() {
+    // Two agents mirrored about the camera axis are at the same distance.
+    let n = FRAMES.count();
+    let agents =
+        vec![agent(7, vec![Some(Vec3::new(3.0, 0.0, 0.0)); n]), agent(3, vec![Some(Vec3::new(-3.0, 0.0, 0.0)); n])];
+    let mut agents = agents;
+    agents[0].height_m = 1.8;
+    agents[1].height_m = 1.8;
+    let m = build_manifest(&input(agents, count(2))).unwrap();
+    assert_eq!(m.agent(3).unwrap().layer, 0);
+    assert_eq!(m.agent(7).unwrap().layer, 1);
+}
+
+#[test]
+fn budget_split_keeps_every_layer_under_budget() {
+    let b = 300_000_000u64;
+    let mut inp = input(grid(12, 10), budget("300MB"));
+    inp.options.shared_bytes = 20_000_000;
+    let m = build_manifest(&inp).unwrap();
+    assert!(m.layers.len() > 2);
+    for l in &m.layers {
+        assert!(l.memory_bytes <= b, "{} needs {}", l.name, l.memory_bytes);
+        assert!(l.agents > 0);
+    }
+    assert_eq!(m.split.budget_bytes, Some(b));
+    // Near agents are full LOD (expensive), far ones proxies: near layers hold fewer agents.
+    assert!(m.layers[0].agents < m.layers[m.layers.len() - 1].agents);
+}
+
+#[test]
+fn budget_split_fails_clearly_when_one_agent_exceeds_it() {
+    let mut agents = grid(4, 4);
+    // Agent 13 is near the camera (full LOD) and huge.
+    agents[13].memory_full = 5_000_000_000;
+    let err = build_manifest(&input(agents, budget("2.8GB"))).unwrap_err().to_string();
+    assert!(err.contains("agent 13"), "{err}");
+    assert!(err.contains("5.00 GB"), "{err}");
+    assert!(err.contains("2.80 GB"), "{err}");
+    assert!(err.contains("layers.budget"), "{err}");
+}
+
+#[test]
+fn removing_an_agent_moves_no_other_agent() {
+    for settings in [count(3), cutoffs(&[12.0, 30.0]), budget("500MB")] {
+        let base = build_manifest(&input(grid(10, 8), settings.clone())).unwrap();
+        for removed in [0u32, 17, 42, 79] {
+            let mut agents = grid(10, 8);
+            agents[removed as usize].removed = true;
+            let m = build_manifest(&input(agents, settings.clone())).unwrap();
+            assert_eq!(layers_by_id(&m), layers_by_id(&base), "{:?}, removing {removed}", settings.split);
+            let r = m.agent(removed).unwrap();
+            assert!(r.removed);
+            assert_eq!(m.layers[r.layer].removed, 1);
+            assert_eq!(m.agent_visibility(&m.layers[r.layer].name, removed, 1001), None, "removed is never rendered");
+            assert_eq!(m.agent_visibility("set", removed, 1001), None);
+        }
+    }
+}
+
+#[test]
+fn pins_move_only_the_pinned_agent() {
+    let base = build_manifest(&input(grid(10, 8), count(3))).unwrap();
+    let far = base.agents.iter().max_by(|a, b| a.distance_m.total_cmp(&b.distance_m)).unwrap().id;
+    let mut settings = count(3);
+    settings.pins = vec![Pin { agent: far, layer: 0 }, Pin { agent: 5, layer: 4 }];
+    let m = build_manifest(&input(grid(10, 8), settings)).unwrap();
+    assert_eq!(m.agent(far).unwrap().layer, 0);
+    assert!(m.agent(far).unwrap().pinned);
+    assert_eq!(m.agent(5).unwrap().layer, 4);
+    assert_eq!(m.layers.len(), 5, "pinning to layer 4 creates crowd3 and crowd4");
+    assert_eq!(m.layers[3].agents, 0);
+    for (a, b) in m.agents.iter().zip(&base.agents) {
+        if a.id != far && a.id != 5 {
+            assert_eq!(a.layer, b.layer, "agent {}", a.id);
+        }
+    }
+    // A pin for an agent not in the crowd is an error naming it.
+    let mut settings = count(3);
+    settings.pins = vec![Pin { agent: 9999, layer: 0 }];
+    let err = build_manifest(&input(grid(3, 3), settings)).unwrap_err().to_string();
+    assert!(err.contains("agent 9999") && err.contains("layers.pins"), "{err}");
+}
+
+#[test]
+fn absent_agents_are_ranked_at_their_nearest_frame() {
+    let n = FRAMES.count();
+    let mut agents = grid(3, 3);
+    // Present only from frame 1020 on, walking away.
+    let late: Vec<Option<Vec3>> =
+        (0..n).map(|f| (f >= 19).then(|| Vec3::new(0.0, 0.0, 10.0 - (f - 19) as f32))).collect();
+    agents.push(agent(100, late));
+    agents.push(agent(101, vec![None; n]));
+    let m = build_manifest(&input(agents, count(2))).unwrap();
+    let a = m.agent(100).unwrap();
+    assert_eq!(a.ranked_frame, 1020);
+    assert_eq!(a.position, [0.0, 0.0, 10.0]);
+    assert!(m.agent(101).is_none());
+    assert_eq!(m.absent, vec![101]);
+}
+
+#[test]
+fn lod_from_projected_height() {
+    let n = FRAMES.count();
+    let agents = vec![
+        agent(1, vec![Some(Vec3::new(0.0, 0.0, 18.0)); n]),  // 6 m away: big
+        agent(2, vec![Some(Vec3::new(0.0, 0.0, -30.0)); n]), // 54 m away: small
+        agent(3, vec![Some(Vec3::new(0.0, 0.0, 30.0)); n]),  // behind the camera
+    ];
+    let m = build_manifest(&input(agents, count(1))).unwrap();
+    let (near, far, behind) = (m.agent(1).unwrap(), m.agent(2).unwrap(), m.agent(3).unwrap());
+    assert_eq!(near.lod, Lod::Full);
+    assert_eq!(far.lod, Lod::Proxy);
+    assert!(near.projected_px > 100.0 && far.projected_px < 40.0, "{} {}", near.projected_px, far.projected_px);
+    assert!(behind.behind_camera && behind.lod == Lod::Proxy && behind.projected_px == 0.0);
+    // Projected height: 1.8 m at depth d fills 1.8 / (2 d tan(yfov/2)) of 540 px.
+    let cam = camera();
+    let eye = Vec3::new(0.0, 1.7, 24.0);
+    let fwd = cam.world_from_camera.transform_vector3(-Vec3::Z);
+    let depth = (Vec3::new(0.0, 0.9, 18.0) - eye).dot(fwd);
+    let want = 1.8 / (2.0 * depth * (0.5 * cam.yfov).tan()) * 540.0;
+    assert!((m.agent(1).unwrap().projected_px - want).abs() < 0.5, "{} vs {want}", near.projected_px);
+}
+
+#[test]
+fn per_frame_lod_uses_hysteresis() {
+    let n = FRAMES.count();
+    // Walks towards the camera, then jitters around the threshold distance.
+    let positions: Vec<Option<Vec3>> = (0..n)
+        .map(|f| {
+            let z = if f < 12 { -40.0 + 4.0 * f as f32 } else { -6.0 + if f % 2 == 0 { 0.3 } else { -0.3 } };
+            Some(Vec3::new(0.0, 0.0, z))
+        })
+        .collect();
+    let mut inp = input(vec![agent(1, positions)], LayerSettings { lod_full_min_px: 50.0, ..count(1) });
+    inp.options.lod_per_frame = true;
+    let m = build_manifest(&inp).unwrap();
+    let a = m.agent(1).unwrap();
+    assert!(!a.lod_changes.is_empty());
+    assert_eq!(a.lod_at(1001), Lod::Proxy);
+    assert!(a.lod_changes.len() <= 2, "hysteresis stops flicker: {:?}", a.lod_changes);
+    assert_eq!(a.memory_bytes, inp.agents[0].memory_full, "charged full memory when ever full");
+}
+
+#[test]
+fn visibility_per_layer() {
+    let mut settings = count(2);
+    settings.proxy_shadow_casters = true;
+    let m = build_manifest(&input(grid(4, 4), settings)).unwrap();
+    let a = m.agents.iter().find(|a| a.layer == 0 && a.lod == Lod::Full).unwrap();
+    assert_eq!(m.agent_visibility("crowd0", a.id, 1001), Some((vis::ALL, Lod::Full)));
+    assert_eq!(m.agent_visibility("crowd1", a.id, 1001), Some((vis::SHADOW | vis::INDIRECT, Lod::Proxy)));
+    assert_eq!(m.agent_visibility("set", a.id, 1001), Some((vis::SHADOW | vis::INDIRECT, Lod::Proxy)));
+    assert_eq!(m.set_visibility("crowd0"), Some(vis::HOLDOUT | vis::SHADOW | vis::INDIRECT));
+    assert_eq!(m.set_visibility("set"), Some(vis::ALL));
+    assert_eq!(m.agent_visibility("crowd9", a.id, 1001), None);
+}
+
+#[test]
+fn manifest_round_trips_and_checks_its_version() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("layers.json");
+    let m = build_manifest(&input(grid(5, 5), count(3))).unwrap();
+    write_manifest(&path, &m).unwrap();
+    assert_eq!(read_manifest(&path).unwrap(), m);
+    let text = std::fs::read_to_string(&path).unwrap().replacen("\"version\": 1", "\"version\": 7", 1);
+    std::fs::write(&path, text).unwrap();
+    let err = read_manifest(&path).unwrap_err().to_string();
+    assert!(err.contains("version 7") && err.contains("layers.json"), "{err}");
+}
+
+#[test]
+fn bad_settings_are_clear_errors() {
+    let err = build_manifest(&input(grid(2, 2), cutoffs(&[20.0, 10.0]))).unwrap_err().to_string();
+    assert!(err.contains("layers.cutoffs"), "{err}");
+    let err = build_manifest(&input(grid(2, 2), LayerSettings { split: SplitMode::Budget, ..Default::default() }))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("layers.budget"), "{err}");
+    let err =
+        build_manifest(&input(grid(2, 2), LayerSettings { ref_frame: Some(900), ..count(2) })).unwrap_err().to_string();
+    assert!(err.contains("900") && err.contains("ref_frame"), "{err}");
+    let mut agents = grid(2, 2);
+    agents[1].id = agents[0].id;
+    assert!(build_manifest(&input(agents, count(2))).unwrap_err().to_string().contains("twice"));
+}
+
+#[test]
+fn summary_has_one_aligned_line_per_layer() {
+    let mut agents = grid(8, 6);
+    agents[3].removed = true;
+    let m = build_manifest(&input(agents, count(3))).unwrap();
+    let s = summary(&m);
+    let lines: Vec<&str> = s.lines().filter(|l| l.starts_with("crowd")).collect();
+    assert_eq!(lines.len(), 3, "{s}");
+    // Aligned: the memory column ends at the same place on every line.
+    assert!(lines.iter().all(|l| l.len() == lines[0].len()), "{s}");
+    assert!(s.contains("comp order, back to front: set, crowd2, crowd1, crowd0"), "{s}");
+    assert!(s.contains("0 pops"), "{s}");
+    let json = m.summary_json();
+    assert!(json.get("agents").is_none() && json["layers"].as_array().unwrap().len() == 3);
+}
+
+#[test]
+fn map_decodes_as_png_of_the_requested_size() {
+    let mut agents = grid(12, 10);
+    agents[30].removed = true;
+    let mut settings = count(3);
+    settings.pins = vec![Pin { agent: 5, layer: 0 }];
+    let m = build_manifest(&input(agents, settings)).unwrap();
+    let opts =
+        MapOptions { size: (1200, 700), set_bounds: Some((Vec3::new(-40.0, 0.0, -40.0), Vec3::new(40.0, 20.0, 40.0))) };
+    let png = render_map(&m, &opts).unwrap();
+    let img = image::load_from_memory_with_format(&png, image::ImageFormat::Png).unwrap();
+    assert_eq!((img.width(), img.height()), (1200, 700));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("map.png");
+    draw_map(&m, &MapOptions { size: (400, 240), set_bounds: None }, &path).unwrap();
+    let img = image::open(&path).unwrap();
+    assert_eq!((img.width(), img.height()), (400, 240));
+    assert!(render_map(&m, &MapOptions { size: (0, 10), set_bounds: None }).is_err());
+}
+
+#[test]
+fn command_line_flags_override_the_shot() {
+    use clap::Parser;
+    use throng::cli::{Cli, Verb};
+    use throng::layers::settings_with_args;
+    let parse = |args: &[&str]| match Cli::try_parse_from(args).unwrap().verb {
+        Verb::Layers(a) => a,
+        _ => unreachable!(),
+    };
+    let shot = count(3);
+    let a = parse(&["throng", "layers", "shot.toml", "--cutoffs", "10,25,60", "--ref-frame", "1010", "--per-frame"]);
+    let (s, o) = settings_with_args(&shot, &a).unwrap();
+    assert_eq!(
+        (s.split, s.cutoffs.clone(), s.ref_frame, o.per_frame),
+        (SplitMode::Cutoffs, vec![10.0, 25.0, 60.0], Some(1010), true)
+    );
+    let a = parse(&["throng", "layers", "shot.toml", "--budget", "2.8GB", "--lod-px", "25", "--lod-per-frame"]);
+    let (s, o) = settings_with_args(&shot, &a).unwrap();
+    assert_eq!(
+        (s.split, s.budget.as_deref(), s.lod_full_min_px, o.lod_per_frame),
+        (SplitMode::Budget, Some("2.8GB"), 25.0, true)
+    );
+    let a = parse(&["throng", "layers", "shot.toml", "--budget", "lots"]);
+    assert!(settings_with_args(&shot, &a).unwrap_err().to_string().contains("--budget"));
+    assert!(Cli::try_parse_from(["throng", "layers", "s.toml", "--count", "2", "--budget", "1GB"]).is_err());
+}
+
+#[test]
+fn input_from_a_shot_and_crowd() {
+    use throng::cache::{AgentRecord as Rec, Crowd, FrameBlock};
+    use throng::layers::shot_input;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("c.crowd"), b"").unwrap();
+    let text = r#"
+version = 1
+name = "tiny"
+removed = [2]
+[frames]
+start = 1001
+end = 1005
+[cache]
+path = "c.crowd"
+frame_offset = -1000
+[camera]
+[[camera.keys]]
+frame = 1001
+position = [0.0, 1.7, 24.0]
+aim = [0.0, 1.0, -2.0]
+focal_length = 35.0
+[layers]
+count = 2
+"#;
+    let shot = throng::shot::Shot::parse(text, &dir.path().join("shot.toml")).unwrap();
+    let rec = |id: u32, z: f32| Rec {
+        id,
+        position: Vec3::new(0.0, 0.0, z),
+        heading: 0.0,
+        rig: 0,
+        cycle: 0,
+        cycle_frame: 0.0,
+        flags: 0,
+    };
+    // Cache frames 1..=5; agent 3 only appears from cache frame 4.
+    let frames = (1..=5)
+        .map(|f| FrameBlock {
+            frame: f,
+            agents: [rec(1, 10.0), rec(2, 0.0)].into_iter().chain((f >= 4).then(|| rec(3, -10.0))).collect(),
+        })
+        .collect();
+    let crowd = Crowd { rigs: vec!["r".into()], cycles: vec!["c".into()], frames };
+    let input =
+        shot_input(&shot, &crowd, None, shot.layers.clone(), LayerOptions::default(), |_| (1.8, 1_000_000, 1_000))
+            .unwrap();
+    assert_eq!(input.frames, vec![1001, 1002, 1003, 1004, 1005]);
+    let m = build_manifest(&input).unwrap();
+    assert_eq!(m.ref_frame, 1003);
+    assert_eq!(m.agents.iter().map(|a| (a.id, a.layer)).collect::<Vec<_>>(), vec![(1, 0), (2, 0), (3, 1)]);
+    assert!(m.agent(2).unwrap().removed);
+    assert_eq!(m.agent(3).unwrap().ranked_frame, 1004);
+}
