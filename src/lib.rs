@@ -7,3 +7,4 @@ pub mod cache;
 pub mod cli;
 pub mod error;
 pub mod scene;
+pub mod sim;
