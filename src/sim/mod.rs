@@ -50,6 +50,9 @@ pub struct Model {
     pub min_speed: f32,
     /// Agent radius (metres) when an agent gives none.
     pub agent_radius: f32,
+    /// Attenuate other agents by chase (the paper's model; off only to
+    /// show the shaking it prevents).
+    pub chase: bool,
 }
 
 impl Default for Model {
@@ -61,6 +64,7 @@ impl Default for Model {
             power: 12.0,
             min_speed: 0.9,
             agent_radius: 0.3,
+            chase: true,
         }
     }
 }
@@ -284,6 +288,7 @@ struct RawModel {
     power: Option<f32>,
     min_speed: Option<f32>,
     agent_radius: Option<f32>,
+    chase: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -479,6 +484,7 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
         power: m.power.unwrap_or(d.power),
         min_speed: m.min_speed.unwrap_or(d.min_speed),
         agent_radius: m.agent_radius.unwrap_or(d.agent_radius),
+        chase: m.chase.unwrap_or(d.chase),
     };
     check(path, model.max_turn.is_finite() && model.max_turn > 0.0, "model.max_turn_deg", "must be > 0")?;
     check(path, model.relax_distance.is_finite() && model.relax_distance >= 0.0, "model.relax_distance", "must be >= 0")?;
@@ -872,7 +878,7 @@ impl<'a> Simulation<'a> {
                     return;
                 }
                 // Chase: dot of the two normalised velocities (standing agents have none).
-                let atten = if o.speed > 0.0 { steer::chase_attenuation(fwd.dot(forward(o.heading))) } else { 1.0 };
+                let atten = if model.chase && o.speed > 0.0 { steer::chase_attenuation(fwd.dot(forward(o.heading))) } else { 1.0 };
                 st.add(model, fwd, to, gap, w.agents, atten);
             });
         }
