@@ -239,9 +239,9 @@ pub fn run(cli: Cli) -> Result<()> {
     match cli.verb {
         Verb::Demo(_args) => Err(Error::NotBuilt("demo")),
 
-        Verb::Cache(CacheVerb::Info(_args)) => Err(Error::NotBuilt("cache info")),
+        Verb::Cache(CacheVerb::Info(args)) => crate::cache::cmd_info(&args),
 
-        Verb::Cache(CacheVerb::Convert(_args)) => Err(Error::NotBuilt("cache convert")),
+        Verb::Cache(CacheVerb::Convert(args)) => crate::cache::cmd_convert(&args),
 
         Verb::Sim(_args) => Err(Error::NotBuilt("sim")),
 

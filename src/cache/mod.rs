@@ -63,3 +63,346 @@ pub struct Crowd {
     /// Frames in strictly increasing order.
     pub frames: Vec<FrameBlock>,
 }
+
+// ---------------------------------------------------------------------------
+// Formats, readers and checks (added by the cache stage; the types above are
+// the shared interface).
+
+pub mod binary;
+pub mod csv;
+mod info;
+pub mod jupedsim;
+
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use crate::error::{Error, Result};
+
+pub use info::{cmd_convert, cmd_info, info, CacheInfo, NameCount};
+pub use jupedsim::ImportOptions;
+
+/// Longest rig or cycle name, in UTF-8 bytes.
+pub const MAX_NAME_LEN: usize = 255;
+
+/// A cache file format, chosen by file extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// `.crowd`: our binary format (docs/cache-format.md).
+    Binary,
+    /// `.csv`: one row per agent per frame.
+    Csv,
+    /// `.sqlite` (also `.sqlite3`, `.db`): JuPedSim trajectories, read only.
+    JuPedSim,
+}
+
+impl Format {
+    /// The format of `path`, from its extension (case-insensitive).
+    pub fn of(path: &Path) -> Result<Format> {
+        let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("crowd") => Ok(Format::Binary),
+            Some("csv") => Ok(Format::Csv),
+            Some("sqlite" | "sqlite3" | "db") => Ok(Format::JuPedSim),
+            _ => Err(Error::Usage(format!(
+                "{}: unknown cache format; expected a .crowd, .csv or .sqlite (JuPedSim) file",
+                path.display()
+            ))),
+        }
+    }
+
+    /// Short name used in `cache info`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Binary => "crowd",
+            Format::Csv => "csv",
+            Format::JuPedSim => "jupedsim",
+        }
+    }
+}
+
+/// Reads a whole cache; the format comes from the extension. JuPedSim files
+/// are imported with [`ImportOptions::default`].
+pub fn read(path: impl AsRef<Path>) -> Result<Crowd> {
+    read_with(path, &ImportOptions::default())
+}
+
+/// Reads a whole cache, importing simulator files with `opts`.
+pub fn read_with(path: impl AsRef<Path>, opts: &ImportOptions) -> Result<Crowd> {
+    let path = path.as_ref();
+    match Format::of(path)? {
+        Format::Binary => binary::read(path),
+        Format::Csv => csv::read(path),
+        Format::JuPedSim => jupedsim::read(path, opts),
+    }
+}
+
+/// Writes a whole cache atomically (never a partial file under `path`); the
+/// format comes from the extension. The crowd is validated first. Binary
+/// files store the rig and cycle tables in order of first use (see
+/// [`first_use_tables`]), so `read(write(c)) == c` when `c` is already in
+/// that order.
+pub fn write(path: impl AsRef<Path>, crowd: &Crowd) -> Result<()> {
+    let path = path.as_ref();
+    let format = Format::of(path)?;
+    validate(path, crowd)?;
+    match format {
+        Format::Binary => binary::write(path, crowd),
+        Format::Csv => csv::write(path, crowd),
+        Format::JuPedSim => Err(Error::Usage(format!(
+            "{}: JuPedSim files are read only; write a .crowd or .csv cache",
+            path.display()
+        ))),
+    }
+}
+
+/// Random access to a cache's frames. Binary caches read only the header and
+/// index on open and one block per [`CacheReader::read_frame`]; CSV and
+/// JuPedSim files are read whole into memory.
+#[derive(Debug)]
+pub enum CacheReader {
+    /// A `.crowd` file, read frame by frame.
+    Binary(binary::BinaryReader),
+    /// A cache held in memory.
+    Memory {
+        /// The file it came from (for error messages).
+        path: PathBuf,
+        /// The crowd.
+        crowd: Crowd,
+        /// Its frame numbers, for [`CacheReader::frames`].
+        frames: Vec<i32>,
+    },
+}
+
+impl CacheReader {
+    /// Opens a cache; the format comes from the extension.
+    pub fn open(path: impl AsRef<Path>) -> Result<CacheReader> {
+        Self::open_with(path, &ImportOptions::default())
+    }
+
+    /// Opens a cache, importing simulator files with `opts`.
+    pub fn open_with(path: impl AsRef<Path>, opts: &ImportOptions) -> Result<CacheReader> {
+        let path = path.as_ref();
+        match Format::of(path)? {
+            Format::Binary => Ok(CacheReader::Binary(binary::BinaryReader::open(path)?)),
+            Format::Csv => Ok(Self::from_crowd(path, csv::read(path)?)),
+            Format::JuPedSim => Ok(Self::from_crowd(path, jupedsim::read(path, opts)?)),
+        }
+    }
+
+    /// Wraps an in-memory crowd (already validated) that came from `path`.
+    pub fn from_crowd(path: impl Into<PathBuf>, crowd: Crowd) -> CacheReader {
+        let frames = crowd.frames.iter().map(|b| b.frame).collect();
+        CacheReader::Memory { path: path.into(), crowd, frames }
+    }
+
+    /// Frame numbers, strictly increasing.
+    pub fn frames(&self) -> &[i32] {
+        match self {
+            CacheReader::Binary(r) => r.frames(),
+            CacheReader::Memory { frames, .. } => frames,
+        }
+    }
+
+    /// Rig names, indexed by [`AgentRecord::rig`].
+    pub fn rigs(&self) -> &[String] {
+        match self {
+            CacheReader::Binary(r) => r.rigs(),
+            CacheReader::Memory { crowd, .. } => &crowd.rigs,
+        }
+    }
+
+    /// Cycle names, indexed by [`AgentRecord::cycle`].
+    pub fn cycles(&self) -> &[String] {
+        match self {
+            CacheReader::Binary(r) => r.cycles(),
+            CacheReader::Memory { crowd, .. } => &crowd.cycles,
+        }
+    }
+
+    /// The file this reader reads.
+    pub fn path(&self) -> &Path {
+        match self {
+            CacheReader::Binary(r) => r.path(),
+            CacheReader::Memory { path, .. } => path,
+        }
+    }
+
+    /// One frame's agents. A frame the cache does not hold is an error.
+    pub fn read_frame(&self, frame: i32) -> Result<FrameBlock> {
+        match self {
+            CacheReader::Binary(r) => r.read_frame(frame),
+            CacheReader::Memory { path, crowd, frames } => match frames.binary_search(&frame) {
+                Ok(i) => crowd.frames.get(i).cloned().ok_or_else(|| missing_frame(path, frames, frame)),
+                Err(_) => Err(missing_frame(path, frames, frame)),
+            },
+        }
+    }
+
+    /// Reads every frame into a [`Crowd`].
+    pub fn read_all(&self) -> Result<Crowd> {
+        match self {
+            CacheReader::Binary(r) => r.read_all(),
+            CacheReader::Memory { crowd, .. } => Ok(crowd.clone()),
+        }
+    }
+}
+
+/// The error for asking a cache for a frame it does not hold.
+pub(crate) fn missing_frame(path: impl AsRef<Path>, frames: &[i32], frame: i32) -> Error {
+    let range = match (frames.first(), frames.last()) {
+        (Some(a), Some(b)) => format!("the cache holds frames {a}-{b}"),
+        _ => "the cache holds no frames".to_string(),
+    };
+    Error::invalid(path, format!("no frame {frame}: {range}")).frame(frame.into())
+}
+
+/// Checks a rig or cycle name: names travel through CSV unquoted, so they
+/// may not hold commas, quotes or control characters.
+pub fn check_name(name: &str) -> std::result::Result<(), String> {
+    if name.is_empty() {
+        return Err("empty name".into());
+    }
+    if name.len() > MAX_NAME_LEN {
+        return Err(format!("name longer than {MAX_NAME_LEN} bytes"));
+    }
+    if name.trim() != name {
+        return Err(format!("name `{name}` has leading or trailing spaces"));
+    }
+    if name.chars().any(|c| c == ',' || c == '"' || c.is_control()) {
+        return Err(format!("name `{}` holds a comma, quote or control character", name.escape_debug()));
+    }
+    Ok(())
+}
+
+/// Checks a rig or cycle table: valid, unique names that fit a u16 index.
+pub fn validate_names(path: &Path, kind: &str, names: &[String]) -> Result<()> {
+    if names.len() > usize::from(u16::MAX) + 1 {
+        return Err(Error::invalid(path, format!("{} {kind} names; at most 65536 fit a u16 index", names.len())));
+    }
+    let mut seen = HashSet::new();
+    for name in names {
+        check_name(name).map_err(|m| Error::invalid(path, format!("bad {kind} name: {m}")).field(kind))?;
+        if !seen.insert(name.as_str()) {
+            return Err(Error::invalid(path, format!("{kind} name `{name}` appears twice in the table")).field(kind));
+        }
+    }
+    Ok(())
+}
+
+/// Checks one agent record: finite numbers, known rig and cycle, no
+/// reserved flag bits. The error names the frame and agent.
+pub fn validate_record(path: &Path, frame: i32, a: &AgentRecord, rigs: usize, cycles: usize) -> Result<()> {
+    let bad = |msg: String, field: &str| Err(Error::invalid(path, msg).frame(frame.into()).agent(a.id).field(field));
+    for (v, field) in [(a.position.x, "x"), (a.position.y, "y"), (a.position.z, "z")] {
+        if !v.is_finite() {
+            return bad(format!("position {field} is {v}; positions must be finite"), field);
+        }
+    }
+    if !a.heading.is_finite() {
+        return bad(format!("heading is {}; it must be finite", a.heading), "heading");
+    }
+    if !a.cycle_frame.is_finite() {
+        return bad(format!("cycle frame is {}; it must be finite", a.cycle_frame), "cycle_frame");
+    }
+    if usize::from(a.rig) >= rigs {
+        return bad(format!("unknown rig index {} (the cache names {rigs} rigs)", a.rig), "rig");
+    }
+    if usize::from(a.cycle) >= cycles {
+        return bad(format!("unknown cycle index {} (the cache names {cycles} cycles)", a.cycle), "cycle");
+    }
+    if a.flags & !(SEATED | HIDDEN) != 0 {
+        return bad(format!("unknown flag bits {:#04x} (only seated=1, hidden=2 exist)", a.flags), "flags");
+    }
+    Ok(())
+}
+
+/// Checks one frame: every record, and no agent id twice.
+pub fn validate_frame(path: &Path, block: &FrameBlock, rigs: usize, cycles: usize) -> Result<()> {
+    let mut ids = HashSet::with_capacity(block.agents.len());
+    for a in &block.agents {
+        validate_record(path, block.frame, a, rigs, cycles)?;
+        if !ids.insert(a.id) {
+            return Err(Error::invalid(path, format!("agent {} appears twice in frame {}", a.id, block.frame))
+                .frame(block.frame.into())
+                .agent(a.id));
+        }
+    }
+    Ok(())
+}
+
+/// Checks frame order: strictly increasing. `frames` yields frame numbers.
+pub fn validate_frame_order(path: &Path, frames: impl IntoIterator<Item = i32>) -> Result<()> {
+    let mut prev: Option<i32> = None;
+    for f in frames {
+        if let Some(p) = prev {
+            if f <= p {
+                return Err(Error::invalid(path, format!("frame {f} follows frame {p}; frames must increase"))
+                    .frame(f.into()));
+            }
+        }
+        prev = Some(f);
+    }
+    Ok(())
+}
+
+/// The checks every reader (and [`write`]) applies: names, frame order, and
+/// every frame's records. `path` names the file in errors.
+pub fn validate(path: &Path, crowd: &Crowd) -> Result<()> {
+    validate_names(path, "rig", &crowd.rigs)?;
+    validate_names(path, "cycle", &crowd.cycles)?;
+    validate_frame_order(path, crowd.frames.iter().map(|b| b.frame))?;
+    for block in &crowd.frames {
+        validate_frame(path, block, crowd.rigs.len(), crowd.cycles.len())?;
+    }
+    Ok(())
+}
+
+/// Rig and cycle tables in order of first use (frames in order, agents in
+/// cache order), dropping unused names, with old-index -> new-index maps.
+/// This is the order CSV can reproduce, so binary -> CSV -> binary is
+/// byte-identical. Assumes a validated crowd (indices in range).
+pub fn first_use_tables(crowd: &Crowd) -> (Vec<String>, Vec<u16>, Vec<String>, Vec<u16>) {
+    fn table(names: &[String], used: impl Iterator<Item = u16>) -> (Vec<String>, Vec<u16>) {
+        let mut map = vec![u16::MAX; names.len()];
+        let mut out = Vec::new();
+        for old in used {
+            if let Some(slot) = map.get_mut(usize::from(old)) {
+                if *slot == u16::MAX && out.len() <= usize::from(u16::MAX) {
+                    *slot = out.len() as u16;
+                    out.push(names.get(usize::from(old)).cloned().unwrap_or_default());
+                }
+            }
+        }
+        (out, map)
+    }
+    let agents = || crowd.frames.iter().flat_map(|b| b.agents.iter());
+    let (rigs, rig_map) = table(&crowd.rigs, agents().map(|a| a.rig));
+    let (cycles, cycle_map) = table(&crowd.cycles, agents().map(|a| a.cycle));
+    (rigs, rig_map, cycles, cycle_map)
+}
+
+/// `crowd` with its rig and cycle tables in first-use order (what a `.crowd`
+/// file stores). Assumes a validated crowd.
+pub fn canonical(crowd: &Crowd) -> Crowd {
+    let (rigs, rig_map, cycles, cycle_map) = first_use_tables(crowd);
+    let remap = |map: &[u16], i: u16| map.get(usize::from(i)).copied().unwrap_or(i);
+    let frames = crowd
+        .frames
+        .iter()
+        .map(|b| FrameBlock {
+            frame: b.frame,
+            agents: b
+                .agents
+                .iter()
+                .map(|a| AgentRecord { rig: remap(&rig_map, a.rig), cycle: remap(&cycle_map, a.cycle), ..*a })
+                .collect(),
+        })
+        .collect();
+    Crowd { rigs, cycles, frames }
+}
+
+/// A poisoned lock still holds a usable file handle.
+pub(crate) fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}

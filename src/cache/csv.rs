@@ -1,0 +1,184 @@
+//! CSV caches: one row per agent per frame, rigs and cycles by name.
+//!
+//! Dialect (docs/cache-format.md): UTF-8, comma-separated, no quoting (names
+//! may not hold commas or quotes), LF line endings written (CRLF read), the
+//! header `frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags`, rows grouped
+//! by frame in increasing order. Floats use Rust's shortest round-trip
+//! form, so values survive exactly. `flags` is empty, `seated`, `hidden` or
+//! `seated|hidden`. A frame with no agents is a row holding only the frame
+//! number (`42,,,,,,,,,`). Rig and cycle tables are rebuilt in order of
+//! first appearance, which is the order `.crowd` files store, so
+//! binary -> CSV -> binary is byte-identical.
+
+use std::collections::{HashMap, HashSet};
+use std::io::Write;
+use std::path::Path;
+
+use glam::Vec3;
+
+use super::{check_name, validate, validate_record, AgentRecord, Crowd, FrameBlock, HIDDEN, SEATED};
+use crate::error::{write_atomic, Error, IoContext, Result};
+
+/// The header line.
+pub const HEADER: &str = "frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags";
+const COLUMNS: [&str; 10] = ["frame", "id", "x", "y", "z", "heading", "rig", "cycle", "cycle_frame", "flags"];
+
+/// Flags as written: names joined by `|`, in bit order.
+pub fn flags_to_str(flags: u8) -> String {
+    let mut names = Vec::new();
+    if flags & SEATED != 0 {
+        names.push("seated");
+    }
+    if flags & HIDDEN != 0 {
+        names.push("hidden");
+    }
+    names.join("|")
+}
+
+fn parse_flags(s: &str) -> std::result::Result<u8, String> {
+    let mut flags = 0;
+    for name in s.split('|').map(str::trim).filter(|n| !n.is_empty()) {
+        flags |= match name {
+            "seated" => SEATED,
+            "hidden" => HIDDEN,
+            _ => return Err(format!("unknown flag `{name}` (expected seated, hidden, or both joined by `|`)")),
+        };
+    }
+    Ok(flags)
+}
+
+/// Reads a CSV cache.
+pub fn read(path: &Path) -> Result<Crowd> {
+    let bytes = std::fs::read(path).at(path)?;
+    match std::str::from_utf8(&bytes) {
+        Ok(text) => parse_str(path, text),
+        Err(e) => {
+            let line = bytes.get(..e.valid_up_to()).unwrap_or_default().iter().filter(|&&b| b == b'\n').count() + 1;
+            Err(Error::invalid(path, "not UTF-8 text").line(line))
+        }
+    }
+}
+
+/// Interns a rig or cycle name, in order of first appearance.
+fn intern(names: &mut Vec<String>, lookup: &mut HashMap<String, u16>, name: &str) -> std::result::Result<u16, String> {
+    if let Some(&i) = lookup.get(name) {
+        return Ok(i);
+    }
+    check_name(name)?;
+    let i = u16::try_from(names.len()).map_err(|_| "more than 65536 distinct names".to_string())?;
+    names.push(name.to_string());
+    lookup.insert(name.to_string(), i);
+    Ok(i)
+}
+
+/// Parses CSV text; `path` names it in errors.
+pub fn parse_str(path: &Path, text: &str) -> Result<Crowd> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text); // spreadsheets add a BOM
+    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim_end_matches('\r')));
+    match lines.next() {
+        Some((_, h)) if h.split(',').map(str::trim).eq(COLUMNS) => {}
+        Some((n, h)) => {
+            return Err(Error::invalid(path, format!("expected the header `{HEADER}`, found `{}`", h.escape_debug())).line(n))
+        }
+        None => return Err(Error::invalid(path, format!("empty file: expected the header `{HEADER}`")).line(1)),
+    }
+
+    let mut crowd = Crowd::default();
+    let (mut rig_ids, mut cycle_ids) = (HashMap::new(), HashMap::new());
+    let mut seen = HashSet::new(); // agent ids in the current frame
+    for (n, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let cols: Vec<&str> = line.split(',').map(str::trim).collect();
+        if cols.len() != COLUMNS.len() {
+            return Err(Error::invalid(path, format!("expected {} columns, found {}", COLUMNS.len(), cols.len())).line(n));
+        }
+        let col = |i: usize| cols.get(i).copied().unwrap_or_default();
+        let field_err = |i: usize, msg: String| {
+            let name = COLUMNS.get(i).copied().unwrap_or_default();
+            Error::invalid(path, format!("column {} ({name}): {msg}", i + 1)).line(n).field(name)
+        };
+        let num = |i: usize| -> Result<f32> {
+            col(i).parse::<f32>().map_err(|_| field_err(i, format!("cannot read `{}` as a number", col(i))))
+        };
+        let frame: i32 = col(0).parse().map_err(|_| field_err(0, format!("cannot read `{}` as a frame number", col(0))))?;
+
+        // Start a new block when the frame changes; frames must increase.
+        match crowd.frames.last() {
+            Some(b) if b.frame == frame => {}
+            Some(b) if b.frame > frame => {
+                return Err(Error::invalid(path, format!("frame {frame} follows frame {}; rows must be grouped by increasing frame", b.frame))
+                    .line(n)
+                    .frame(frame.into()))
+            }
+            _ => {
+                crowd.frames.push(FrameBlock { frame, agents: Vec::new() });
+                seen.clear();
+            }
+        }
+        // A row holding only the frame number marks a frame with no agents.
+        if cols.iter().skip(1).all(|c| c.is_empty()) {
+            continue;
+        }
+
+        let id: u32 = col(1).parse().map_err(|_| field_err(1, format!("cannot read `{}` as an agent id", col(1))))?;
+        let with_agent = |e: Error| e.frame(frame.into()).agent(id);
+        let rig = intern(&mut crowd.rigs, &mut rig_ids, col(6)).map_err(|m| with_agent(field_err(6, m)))?;
+        let cycle = intern(&mut crowd.cycles, &mut cycle_ids, col(7)).map_err(|m| with_agent(field_err(7, m)))?;
+        let a = AgentRecord {
+            id,
+            position: Vec3::new(num(2).map_err(with_agent)?, num(3).map_err(with_agent)?, num(4).map_err(with_agent)?),
+            heading: num(5).map_err(with_agent)?,
+            rig,
+            cycle,
+            cycle_frame: num(8).map_err(with_agent)?,
+            flags: parse_flags(col(9)).map_err(|m| with_agent(field_err(9, m)))?,
+        };
+        validate_record(path, frame, &a, crowd.rigs.len(), crowd.cycles.len()).map_err(|e| e.line(n))?;
+        if !seen.insert(id) {
+            return Err(Error::invalid(path, format!("agent {id} appears twice in frame {frame}"))
+                .line(n)
+                .frame(frame.into())
+                .agent(id));
+        }
+        if let Some(b) = crowd.frames.last_mut() {
+            b.agents.push(a);
+        }
+    }
+    validate(path, &crowd)?;
+    Ok(crowd)
+}
+
+/// Writes `crowd` (validated) as CSV through [`write_atomic`].
+pub fn write(path: &Path, crowd: &Crowd) -> Result<()> {
+    let name = |names: &[String], i: u16| names.get(usize::from(i)).cloned().unwrap_or_default();
+    write_atomic(path, |w| {
+        writeln!(w, "{HEADER}").at(path)?;
+        for b in &crowd.frames {
+            if b.agents.is_empty() {
+                writeln!(w, "{},,,,,,,,,", b.frame).at(path)?;
+            }
+            for a in &b.agents {
+                // `{}` on f32 prints the shortest string that parses back to
+                // the same bits, so CSV loses nothing.
+                writeln!(
+                    w,
+                    "{},{},{},{},{},{},{},{},{},{}",
+                    b.frame,
+                    a.id,
+                    a.position.x,
+                    a.position.y,
+                    a.position.z,
+                    a.heading,
+                    name(&crowd.rigs, a.rig),
+                    name(&crowd.cycles, a.cycle),
+                    a.cycle_frame,
+                    flags_to_str(a.flags)
+                )
+                .at(path)?;
+            }
+        }
+        Ok(())
+    })
+}

@@ -1,0 +1,277 @@
+//! Import of JuPedSim SQLite trajectory files (SqliteTrajectoryWriter,
+//! database versions 1 and 2; schema in docs/cache-format.md).
+//!
+//! Mapping. JuPedSim is planar: (x, y) on the ground, z up, right-handed.
+//! Our world is Y up, right-handed. We map native (x, y) to world
+//! (x, 0, -y): a rotation of -90 degrees about X, which keeps handedness, so
+//! the layout seen from above is the same picture, not a mirror image
+//! (z = +y would mirror it). Headings use the same mapping: a native
+//! direction (dx, dy) is the world direction (dx, 0, -dy), and heading =
+//! atan2(world x, world z) (0 faces +Z).
+//!
+//! Heading comes from the orientation vector (ori_x, ori_y); where that is
+//! (0, 0) (JuPedSim writes it before an agent first moves) it comes from the
+//! agent's motion since its previous row, or for its first row from its next
+//! movement; an agent that never moves nor turns keeps the nearest known
+//! heading, or 0.
+//!
+//! Cycle frame: feet must not slide, so the walk cycle advances by distance
+//! walked / stride * cycle length, modulo the cycle length. Each agent starts
+//! at a phase fixed by its id (golden-ratio spread) so the crowd does not
+//! step in unison. Cache frames are JuPedSim's frame numbers, unchanged (its
+//! fps is the file's `fps` metadata, 25 for the bundled sample).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use glam::Vec3;
+use rusqlite::{Connection, OpenFlags};
+
+use super::{validate, AgentRecord, Crowd, FrameBlock};
+use crate::cli::ImportArgs;
+use crate::error::{Error, IoContext, Result};
+
+/// Stride (metres per walk cycle) when neither --stride nor a rig gives one.
+pub const DEFAULT_STRIDE: f32 = 1.4;
+/// Walk cycle length in frames when --cycle-length is not given.
+pub const DEFAULT_CYCLE_LENGTH: f32 = 32.0;
+
+/// How imported trajectories become agents.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImportOptions {
+    /// Rig given to every agent.
+    pub rig: String,
+    /// Walk cycle given to every agent.
+    pub cycle: String,
+    /// Metres per cycle; `None` means [`DEFAULT_STRIDE`].
+    pub stride: Option<f32>,
+    /// Cycle length in frames; `None` means [`DEFAULT_CYCLE_LENGTH`].
+    pub cycle_length: Option<f32>,
+}
+
+impl Default for ImportOptions {
+    fn default() -> Self {
+        ImportOptions { rig: "bipedThinA".into(), cycle: "WalkA".into(), stride: None, cycle_length: None }
+    }
+}
+
+impl ImportOptions {
+    /// Options from the command line.
+    pub fn from_args(args: &ImportArgs) -> Result<ImportOptions> {
+        if args.rig_file.is_some() {
+            // TODO(lead): read the stride and cycle length from the rig's clip once the rig module lands.
+            return Err(Error::Usage(
+                "--rig-file is not supported yet; pass --stride (metres per cycle) and --cycle-length (frames)".into(),
+            ));
+        }
+        let opts = ImportOptions {
+            rig: args.rig.clone(),
+            cycle: args.cycle.clone(),
+            stride: args.stride,
+            cycle_length: args.cycle_length,
+        };
+        opts.check()?;
+        Ok(opts)
+    }
+
+    /// Metres per cycle.
+    pub fn stride(&self) -> f32 {
+        self.stride.unwrap_or(DEFAULT_STRIDE)
+    }
+    /// Cycle length in frames.
+    pub fn cycle_length(&self) -> f32 {
+        self.cycle_length.unwrap_or(DEFAULT_CYCLE_LENGTH)
+    }
+
+    /// One line for humans, marking defaults.
+    pub fn describe(&self) -> String {
+        let dflt = |o: Option<f32>| if o.is_none() { " (default)" } else { "" };
+        format!(
+            "rig {}, cycle {}, stride {} m{}, cycle length {} frames{}",
+            self.rig,
+            self.cycle,
+            self.stride(),
+            dflt(self.stride),
+            self.cycle_length(),
+            dflt(self.cycle_length)
+        )
+    }
+
+    fn check(&self) -> Result<()> {
+        for (v, flag) in [(self.stride(), "--stride"), (self.cycle_length(), "--cycle-length")] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::Usage(format!("{flag} must be a positive number, not {v}")));
+            }
+        }
+        for (name, flag) in [(&self.rig, "--rig"), (&self.cycle, "--cycle")] {
+            super::check_name(name).map_err(|m| Error::Usage(format!("{flag}: {m}")))?;
+        }
+        Ok(())
+    }
+}
+
+/// One trajectory row, native coordinates.
+struct Sample {
+    frame: i32,
+    x: f64,
+    y: f64,
+    ori_x: f64,
+    ori_y: f64,
+}
+
+/// Native planar direction -> heading about +Y (world direction (dx, 0, -dy)).
+fn heading_of(dx: f64, dy: f64) -> Option<f64> {
+    (dx.hypot(dy) > 1e-9).then(|| dx.atan2(-dy))
+}
+
+/// Headings for one agent's samples (see the module comment).
+fn headings(s: &[Sample]) -> Vec<f32> {
+    let motion = |a: &Sample, b: &Sample| heading_of(b.x - a.x, b.y - a.y);
+    let mut h: Vec<Option<f64>> = s
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            heading_of(p.ori_x, p.ori_y).or_else(|| match i {
+                0 => s.get(1).and_then(|n| motion(p, n)),
+                _ => s.get(i - 1).and_then(|prev| motion(prev, p)),
+            })
+        })
+        .collect();
+    // Fill gaps: forward from the last known heading, then backward.
+    let mut last = None;
+    for v in h.iter_mut() {
+        *v = v.or(last);
+        last = *v;
+    }
+    let mut next = None;
+    for v in h.iter_mut().rev() {
+        *v = v.or(next);
+        next = *v;
+    }
+    h.into_iter().map(|v| v.unwrap_or(0.0) as f32).collect()
+}
+
+/// Cycle frames for one agent: start phase from the id, then distance.
+fn cycle_frames(id: u32, s: &[Sample], stride: f64, length: f64) -> Vec<f32> {
+    // Golden-ratio spread: neighbouring ids get well-separated phases.
+    let mut walked = (f64::from(id) * 0.618_033_988_749_895).fract() * stride;
+    let mut prev: Option<&Sample> = None;
+    s.iter()
+        .map(|p| {
+            if let Some(q) = prev {
+                walked += (p.x - q.x).hypot(p.y - q.y);
+            }
+            prev = Some(p);
+            let f = ((walked / stride) * length).rem_euclid(length) as f32;
+            // Rounding to f32 can land exactly on the length; that is frame 0.
+            if f >= length as f32 {
+                0.0
+            } else {
+                f
+            }
+        })
+        .collect()
+}
+
+fn sql_err(path: &Path) -> impl Fn(rusqlite::Error) -> Error + '_ {
+    move |e| Error::invalid(path, format!("cannot read as a JuPedSim SQLite file: {e}"))
+}
+
+fn has_table(conn: &Connection, path: &Path, name: &str) -> Result<bool> {
+    conn.query_row("SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = ?1", [name], |r| {
+        r.get::<_, i64>(0)
+    })
+    .map(|n| n > 0)
+    .map_err(sql_err(path))
+}
+
+/// Imports a JuPedSim trajectory file.
+pub fn read(path: &Path, opts: &ImportOptions) -> Result<Crowd> {
+    opts.check()?;
+    std::fs::metadata(path).at(path)?; // a clear "not found" before SQLite's message
+    let conn = Connection::open_with_flags(path, OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX)
+        .map_err(sql_err(path))?;
+    if !has_table(&conn, path, "trajectory_data")? {
+        return Err(Error::invalid(path, "no `trajectory_data` table: not a JuPedSim trajectory file")
+            .field("trajectory_data"));
+    }
+    if has_table(&conn, path, "metadata")? {
+        let version: Option<String> = conn
+            .query_row("SELECT value FROM metadata WHERE key = 'version'", [], |r| r.get(0))
+            .map(Some)
+            .or_else(|e| match e {
+                rusqlite::Error::QueryReturnedNoRows => Ok(None),
+                e => Err(e),
+            })
+            .map_err(sql_err(path))?;
+        if let Some(v) = version.filter(|v| !matches!(v.trim(), "1" | "2")) {
+            return Err(Error::invalid(path, format!("JuPedSim database version {v}; throng reads versions 1 and 2"))
+                .field("metadata.version"));
+        }
+    }
+
+    // Rows by agent, then frame, so each trajectory is walked in order.
+    let mut stmt = conn
+        .prepare("SELECT frame, id, pos_x, pos_y, ori_x, ori_y FROM trajectory_data ORDER BY id, frame")
+        .map_err(sql_err(path))?;
+    let mut rows = stmt.query([]).map_err(sql_err(path))?;
+    let mut agents: Vec<(u32, Vec<Sample>)> = Vec::new();
+    while let Some(row) = rows.next().map_err(sql_err(path))? {
+        let frame: i64 = row.get(0).map_err(|e| sql_err(path)(e).field("frame"))?;
+        let id: i64 = row.get(1).map_err(|e| sql_err(path)(e).frame(frame).field("id"))?;
+        let frame32 = i32::try_from(frame)
+            .map_err(|_| Error::invalid(path, format!("frame {frame} is out of range")).frame(frame).field("frame"))?;
+        let id32 = u32::try_from(id).map_err(|_| {
+            Error::invalid(path, format!("agent id {id} is out of range (0 to {})", u32::MAX)).frame(frame).field("id")
+        })?;
+        let real = |i: usize, name: &str| -> Result<f64> {
+            row.get::<_, f64>(i).map_err(|e| {
+                Error::invalid(path, format!("{name} is not a number ({e})")).frame(frame).agent(id32).field(name)
+            })
+        };
+        let s = Sample {
+            frame: frame32,
+            x: real(2, "pos_x")?,
+            y: real(3, "pos_y")?,
+            ori_x: real(4, "ori_x")?,
+            ori_y: real(5, "ori_y")?,
+        };
+        match agents.last_mut() {
+            Some((last, samples)) if *last == id32 => {
+                if samples.last().is_some_and(|p| p.frame == frame32) {
+                    return Err(Error::invalid(path, format!("agent {id32} appears twice in frame {frame32}"))
+                        .frame(frame)
+                        .agent(id32));
+                }
+                samples.push(s)
+            }
+            _ => agents.push((id32, vec![s])),
+        }
+    }
+
+    let (stride, length) = (f64::from(opts.stride()), f64::from(opts.cycle_length()));
+    let mut frames: BTreeMap<i32, Vec<AgentRecord>> = BTreeMap::new();
+    for (id, s) in &agents {
+        let hs = headings(s);
+        let cs = cycle_frames(*id, s, stride, length);
+        for ((p, heading), cycle_frame) in s.iter().zip(hs).zip(cs) {
+            frames.entry(p.frame).or_default().push(AgentRecord {
+                id: *id,
+                position: Vec3::new(p.x as f32, 0.0, -p.y as f32),
+                heading,
+                rig: 0,
+                cycle: 0,
+                cycle_frame,
+                flags: 0,
+            });
+        }
+    }
+    // Agents were visited by increasing id, so each frame is in id order.
+    let crowd = Crowd {
+        rigs: vec![opts.rig.clone()],
+        cycles: vec![opts.cycle.clone()],
+        frames: frames.into_iter().map(|(frame, agents)| FrameBlock { frame, agents }).collect(),
+    };
+    validate(path, &crowd)?;
+    Ok(crowd)
+}

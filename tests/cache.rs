@@ -1,0 +1,611 @@
+//! Integration tests for the cache stage: formats, round trips, random
+//! access, bad input (library errors and CLI exit codes), JuPedSim import.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use glam::Vec3;
+use throng::cache::{self, binary, AgentRecord, CacheReader, Crowd, FrameBlock, ImportOptions, HIDDEN, SEATED};
+
+fn rec(id: u32, x: f32, z: f32, rig: u16, cycle: u16, cf: f32, flags: u8) -> AgentRecord {
+    AgentRecord { id, position: Vec3::new(x, 0.0, z), heading: x * 0.1, rig, cycle, cycle_frame: cf, flags }
+}
+
+/// A crowd whose tables are in first-use order (what .crowd stores), with
+/// awkward floats, agents entering and leaving, and an empty frame.
+fn sample() -> Crowd {
+    Crowd {
+        rigs: vec!["bipedThinA".into(), "bipedTallB".into()],
+        cycles: vec!["WalkA".into(), "SitA".into(), "IdleA".into()],
+        frames: vec![
+            FrameBlock {
+                frame: -2,
+                agents: vec![
+                    rec(7, 0.1, -3.55, 0, 0, 0.0, 0),
+                    rec(3, -0.0, 1e-40, 1, 1, 31.999998, SEATED),
+                    AgentRecord { heading: -std::f32::consts::PI, ..rec(1000000, 1.0e30, -7.25, 0, 2, 12.5, HIDDEN) },
+                ],
+            },
+            FrameBlock { frame: 0, agents: vec![rec(3, 1.0 / 3.0, 2.0 / 3.0, 1, 1, 0.1, SEATED | HIDDEN)] },
+            FrameBlock { frame: 5, agents: vec![] },
+            FrameBlock {
+                frame: 7,
+                agents: vec![rec(9, 4.5, -2.0, 1, 0, 3.25, 0), rec(7, 0.2, -3.5, 0, 0, 1.0, 0), rec(3, 5.0, 6.0, 1, 2, 2.0, 0)],
+            },
+        ],
+    }
+}
+
+fn throng(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_throng")).args(args).output().expect("run throng")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 temp path")
+}
+
+fn err_text<T: std::fmt::Debug>(r: throng::error::Result<T>) -> String {
+    match r {
+        Ok(v) => panic!("expected an error, got {v:?}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+fn assert_has(msg: &str, parts: &[&str]) {
+    for p in parts {
+        assert!(msg.contains(p), "message {msg:?} lacks {p:?}");
+    }
+}
+
+// --- round trips ---------------------------------------------------------
+
+#[test]
+fn binary_write_read_equal() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("a.crowd");
+    cache::write(&p, &sample()).unwrap();
+    assert_eq!(cache::read(&p).unwrap(), sample());
+    // Negative zero and subnormals keep their bits.
+    let back = cache::read(&p).unwrap();
+    assert_eq!(back.frames[0].agents[1].position.x.to_bits(), (-0.0f32).to_bits());
+    assert_eq!(back.frames[0].agents[1].position.z, 1e-40);
+}
+
+#[test]
+fn csv_write_read_equal() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("a.csv");
+    cache::write(&p, &sample()).unwrap();
+    assert_eq!(cache::read(&p).unwrap(), sample());
+    let text = std::fs::read_to_string(&p).unwrap();
+    assert!(text.starts_with("frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags\n"));
+    assert!(text.contains("\n5,,,,,,,,,\n"), "empty frame row: {text}");
+    assert!(text.contains(",seated|hidden\n"));
+}
+
+#[test]
+fn binary_csv_binary_is_byte_identical() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, c, b) = (dir.path().join("a.crowd"), dir.path().join("a.csv"), dir.path().join("b.crowd"));
+    cache::write(&a, &sample()).unwrap();
+    // Through the CLI, as a lighter would.
+    assert!(throng(&["cache", "convert", s(&a), s(&c)]).status.success());
+    assert!(throng(&["cache", "convert", s(&c), s(&b)]).status.success());
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    // And CSV -> binary -> CSV.
+    let c2 = dir.path().join("c2.csv");
+    cache::write(&c2, &cache::read(&b).unwrap()).unwrap();
+    assert_eq!(std::fs::read(&c).unwrap(), std::fs::read(&c2).unwrap());
+}
+
+#[test]
+fn tables_are_stored_in_first_use_order() {
+    // Unused and out-of-order names: the binary keeps each agent's names
+    // but stores the tables as CSV would rebuild them.
+    let mut crowd = sample();
+    crowd.rigs = vec!["unused".into(), "bipedTallB".into(), "bipedThinA".into()];
+    for b in &mut crowd.frames {
+        for a in &mut b.agents {
+            a.rig = if a.rig == 0 { 2 } else { 1 };
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let (a, c, b) = (dir.path().join("a.crowd"), dir.path().join("a.csv"), dir.path().join("b.crowd"));
+    cache::write(&a, &crowd).unwrap();
+    let back = cache::read(&a).unwrap();
+    assert_eq!(back, sample());
+    assert_eq!(back, cache::canonical(&crowd));
+    cache::write(&c, &crowd).unwrap();
+    cache::write(&b, &cache::read(&c).unwrap()).unwrap();
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+}
+
+#[test]
+fn writes_are_deterministic() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a.crowd"), dir.path().join("b.crowd"));
+    cache::write(&a, &sample()).unwrap();
+    cache::write(&b, &sample()).unwrap();
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    assert_eq!(binary::parse_bytes(&std::fs::read(&a).unwrap()).unwrap(), sample());
+}
+
+#[test]
+fn random_access_equals_full_read() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["a.crowd", "a.csv"] {
+        let p = dir.path().join(name);
+        cache::write(&p, &sample()).unwrap();
+        let full = cache::read(&p).unwrap();
+        let r = CacheReader::open(&p).unwrap();
+        assert_eq!(r.frames(), &[-2, 0, 5, 7]);
+        assert_eq!(r.rigs(), &full.rigs[..]);
+        assert_eq!(r.cycles(), &full.cycles[..]);
+        // Backwards, to show order does not matter.
+        for b in full.frames.iter().rev() {
+            assert_eq!(&r.read_frame(b.frame).unwrap(), b);
+        }
+        assert_has(&err_text(r.read_frame(3)), &[name, "no frame 3", "-2-7"]);
+    }
+}
+
+#[test]
+fn binary_reader_reads_only_the_frame_asked_for() {
+    // Corrupt the last block: opening and reading other frames still work,
+    // so neither reads the whole file.
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("a.crowd");
+    cache::write(&p, &sample()).unwrap();
+    let mut bytes = std::fs::read(&p).unwrap();
+    let n = bytes.len();
+    bytes[n - 10] ^= 0xff;
+    std::fs::write(&p, &bytes).unwrap();
+    let r = CacheReader::open(&p).unwrap();
+    assert_eq!(r.read_frame(0).unwrap(), sample().frames[1]);
+    assert_has(&err_text(r.read_frame(7)), &["a.crowd", "frame 7", "checksum mismatch"]);
+}
+
+#[test]
+fn info_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("a.crowd");
+    cache::write(&p, &sample()).unwrap();
+    let i = cache::info(&CacheReader::open(&p).unwrap()).unwrap();
+    assert_eq!((i.frame_first, i.frame_last, i.frames), (Some(-2), Some(7), 4));
+    assert_eq!((i.agents, i.agent_frames), (4, 7));
+    assert_eq!((i.agents_per_frame_min, i.agents_per_frame_max), (0, 3));
+    assert_eq!((i.seated_agents, i.seated_agent_frames, i.hidden_agent_frames), (1, 2, 2));
+    let rigs: Vec<_> = i.rigs.iter().map(|n| (n.name.as_str(), n.agent_frames, n.agents)).collect();
+    assert_eq!(rigs, [("bipedThinA", 3, 2), ("bipedTallB", 4, 2)]);
+    let cycles: Vec<_> = i.cycles.iter().map(|n| (n.name.as_str(), n.agent_frames, n.agents)).collect();
+    assert_eq!(cycles, [("WalkA", 3, 2), ("SitA", 2, 1), ("IdleA", 2, 2)]);
+    let b = i.bounds.unwrap();
+    assert_eq!((b.min[0], b.max[0], b.min[2], b.max[2]), (-0.0, 1.0e30, -7.25, 6.0));
+
+    let out = throng(&["cache", "info", s(&p), "--json"]);
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in ["file", "format", "frame_first", "frame_last", "frames", "agents", "agent_frames"] {
+        assert!(v.get(key).is_some(), "--json lacks {key}");
+    }
+    assert_eq!(v["format"], "crowd");
+    assert_eq!(v["rigs"][1]["name"], "bipedTallB");
+    let out = throng(&["cache", "info", s(&p)]);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert_has(&text, &["frames   -2-7 (4 frames)", "agents   4 (0-3 per frame, 7 agent-frames)"]);
+}
+
+// --- bad binary input ------------------------------------------------------
+
+/// Recomputes every CRC of a .crowd file from its documented layout, so a
+/// test can plant bad values that only the content checks catch.
+fn fix_crcs(b: &mut [u8]) {
+    let u32_at = |b: &[u8], o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap());
+    let h = crc32fast::hash(&b[..28]);
+    b[28..32].copy_from_slice(&h.to_le_bytes());
+    let meta_len = u32_at(b, 12) as usize;
+    let frames = u32_at(b, 16) as usize;
+    let index_start = 32 + meta_len - 4 - 24 * frames;
+    for i in 0..frames {
+        let e = index_start + 24 * i;
+        let off = u64::from_le_bytes(b[e + 8..e + 16].try_into().unwrap()) as usize;
+        let len = u64::from_le_bytes(b[e + 16..e + 24].try_into().unwrap()) as usize;
+        let c = crc32fast::hash(&b[off..off + len - 4]);
+        b[off + len - 4..off + len].copy_from_slice(&c.to_le_bytes());
+    }
+    let c = crc32fast::hash(&b[32..32 + meta_len - 4]);
+    b[32 + meta_len - 4..32 + meta_len].copy_from_slice(&c.to_le_bytes());
+}
+
+/// Byte offset of record `agent` in the block of index entry `entry`.
+fn record_at(p: &Path, entry: usize, agent: usize) -> usize {
+    let r = binary::BinaryReader::open(p).unwrap();
+    r.index()[entry].offset as usize + 8 + 32 * agent
+}
+
+/// Writes the sample, lets `edit` change its bytes, and returns the reader
+/// error and the CLI's stderr for the result.
+fn corrupt(name: &str, edit: impl FnOnce(&Path, &mut Vec<u8>)) -> (String, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join(name);
+    cache::write(&p, &sample()).unwrap();
+    let mut bytes = std::fs::read(&p).unwrap();
+    edit(&p, &mut bytes);
+    std::fs::write(&p, &bytes).unwrap();
+    let lib = err_text(cache::read(&p));
+    // The fuzz entry point agrees without panicking.
+    assert!(binary::parse_bytes(&bytes).is_err());
+    let out = throng(&["cache", "info", s(&p)]);
+    assert!(!out.status.success(), "exit 0 for {name}");
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert_has(&stderr, &["throng: error:", name]);
+    (lib, stderr)
+}
+
+#[test]
+fn truncated_binary() {
+    let full = {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("x.crowd");
+        cache::write(&p, &sample()).unwrap();
+        std::fs::read(&p).unwrap().len()
+    };
+    for cut in [0, 5, 20, 31, 40, full - 70, full - 1] {
+        let (msg, _) = corrupt("cut.crowd", |_, b| b.truncate(cut));
+        assert_has(&msg, &["cut.crowd", "truncated"]);
+    }
+    // Cut inside the last block: the error names that frame.
+    let (msg, _) = corrupt("cut.crowd", |_, b| b.truncate(full - 1));
+    assert_has(&msg, &["frame 7", "truncated"]);
+    let (msg, _) = corrupt("long.crowd", |_, b| b.push(0));
+    assert_has(&msg, &["trailing bytes"]);
+}
+
+#[test]
+fn wrong_magic_unknown_version_and_checksums() {
+    let (msg, _) = corrupt("magic.crowd", |_, b| b[0] = b'X');
+    assert_has(&msg, &["magic.crowd", "not a throng .crowd cache", "magic"]);
+    let (msg, _) = corrupt("version.crowd", |_, b| b[8] = 2);
+    assert_has(&msg, &["version.crowd", "unknown .crowd version 2"]);
+    let (msg, _) = corrupt("header.crowd", |_, b| b[16] ^= 1);
+    assert_has(&msg, &["header.crowd", "header checksum mismatch"]);
+    let (msg, _) = corrupt("index.crowd", |_, b| b[34] ^= 1);
+    assert_has(&msg, &["index.crowd", "index checksum mismatch"]);
+    let (msg, stderr) = corrupt("block.crowd", |p, b| {
+        let at = record_at(p, 3, 1);
+        b[at + 4] ^= 1
+    });
+    assert_has(&msg, &["block.crowd", "frame 7", "frame block checksum mismatch"]);
+    assert_has(&stderr, &["frame 7"]);
+    // A header whose counts promise more than the file holds.
+    let (msg, _) = corrupt("counts.crowd", |_, b| {
+        b[16..20].copy_from_slice(&u32::MAX.to_le_bytes());
+        fix_crcs_header(b);
+    });
+    assert_has(&msg, &["counts.crowd", "corrupt header"]);
+    let (msg, _) = corrupt("metalen.crowd", |_, b| {
+        b[12..16].copy_from_slice(&u32::MAX.to_le_bytes());
+        fix_crcs_header(b);
+    });
+    assert_has(&msg, &["metalen.crowd", "truncated"]);
+}
+
+fn fix_crcs_header(b: &mut [u8]) {
+    let h = crc32fast::hash(&b[..28]);
+    b[28..32].copy_from_slice(&h.to_le_bytes());
+}
+
+#[test]
+fn bad_records_in_binary() {
+    // Frame 7 (index entry 3) holds agents 9, 7, 3.
+    let (msg, stderr) = corrupt("nan.crowd", |p, b| {
+        let at = record_at(p, 3, 1) + 4;
+        b[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+        fix_crcs(b);
+    });
+    assert_has(&msg, &["nan.crowd", "frame 7", "agent 7", "field `x`", "finite"]);
+    assert_has(&stderr, &["frame 7", "agent 7"]);
+
+    let (msg, _) = corrupt("inf.crowd", |p, b| {
+        let at = record_at(p, 3, 2) + 8;
+        b[at..at + 4].copy_from_slice(&f32::INFINITY.to_le_bytes());
+        fix_crcs(b);
+    });
+    assert_has(&msg, &["inf.crowd", "frame 7", "agent 3", "field `y`", "inf"]);
+
+    let (msg, _) = corrupt("heading.crowd", |p, b| {
+        let at = record_at(p, 3, 0) + 16;
+        b[at..at + 4].copy_from_slice(&f32::NEG_INFINITY.to_le_bytes());
+        fix_crcs(b);
+    });
+    assert_has(&msg, &["frame 7", "agent 9", "heading"]);
+
+    let (msg, _) = corrupt("dup.crowd", |p, b| {
+        let at = record_at(p, 3, 2);
+        b[at..at + 4].copy_from_slice(&9u32.to_le_bytes());
+        fix_crcs(b);
+    });
+    assert_has(&msg, &["dup.crowd", "frame 7", "agent 9", "appears twice"]);
+
+    let (msg, _) = corrupt("rig.crowd", |p, b| {
+        let at = record_at(p, 3, 1) + 20;
+        b[at..at + 2].copy_from_slice(&5u16.to_le_bytes());
+        fix_crcs(b);
+    });
+    assert_has(&msg, &["rig.crowd", "frame 7", "agent 7", "unknown rig index 5"]);
+
+    let (msg, _) = corrupt("cycle.crowd", |p, b| {
+        let at = record_at(p, 3, 1) + 22;
+        b[at..at + 2].copy_from_slice(&3u16.to_le_bytes());
+        fix_crcs(b);
+    });
+    assert_has(&msg, &["frame 7", "agent 7", "unknown cycle index 3"]);
+
+    let (msg, _) = corrupt("order.crowd", |p, b| {
+        // Frame 5 -> 0: index entry and block header both, checksums fixed.
+        let r = binary::BinaryReader::open(p).unwrap();
+        let e = r.index()[2];
+        let meta_len = u32::from_le_bytes(b[12..16].try_into().unwrap()) as usize;
+        let entry = 32 + meta_len - 4 - 24 * (4 - 2);
+        b[entry..entry + 4].copy_from_slice(&0i32.to_le_bytes());
+        b[e.offset as usize..e.offset as usize + 4].copy_from_slice(&0i32.to_le_bytes());
+        fix_crcs(b);
+    });
+    assert_has(&msg, &["order.crowd", "frame 0 follows frame 0", "frames must increase"]);
+}
+
+// --- bad CSV input ---------------------------------------------------------
+
+const HEADER: &str = "frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags";
+
+fn csv_error(body: &str) -> (String, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("bad.csv");
+    std::fs::write(&p, format!("{HEADER}\n{body}")).unwrap();
+    let lib = err_text(cache::read(&p));
+    let out_path = dir.path().join("out.crowd");
+    let out = throng(&["cache", "convert", s(&p), s(&out_path)]);
+    assert_eq!(out.status.code(), Some(2));
+    // No output, not even a temporary file, after a failed convert.
+    assert!(!out_path.exists());
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left, vec![std::ffi::OsString::from("bad.csv")]);
+    (lib, String::from_utf8(out.stderr).unwrap())
+}
+
+#[test]
+fn bad_csv_lines() {
+    let ok = "1,4,0,0,0,0,R,C,0,\n";
+    let (msg, stderr) = csv_error(&format!("{ok}1,5,0,0,0,R,C,0,\n"));
+    assert_has(&msg, &["bad.csv:3", "expected 10 columns, found 9"]);
+    assert_has(&stderr, &["bad.csv:3"]);
+
+    let (msg, _) = csv_error(&format!("{ok}1,5,0,abc,0,0,R,C,0,\n"));
+    assert_has(&msg, &["bad.csv:3", "column 4 (y)", "`abc`", "field `y`", "agent 5", "frame 1"]);
+
+    let (msg, _) = csv_error("x1,5,0,0,0,0,R,C,0,\n");
+    assert_has(&msg, &["bad.csv:2", "column 1 (frame)"]);
+
+    let (msg, _) = csv_error("1,-5,0,0,0,0,R,C,0,\n");
+    assert_has(&msg, &["bad.csv:2", "column 2 (id)", "agent id"]);
+
+    let (msg, _) = csv_error(&format!("{ok}1,5,0,0,0,0,R,C,0,sitting\n"));
+    assert_has(&msg, &["bad.csv:3", "unknown flag `sitting`", "field `flags`"]);
+
+    let (msg, _) = csv_error(&format!("{ok}1,5,NaN,0,0,0,R,C,0,\n"));
+    assert_has(&msg, &["bad.csv:3", "frame 1", "agent 5", "field `x`", "finite"]);
+
+    let (msg, _) = csv_error(&format!("{ok}1,5,0,0,0,0,R,C,inf,\n"));
+    assert_has(&msg, &["bad.csv:3", "agent 5", "cycle_frame"]);
+
+    let (msg, _) = csv_error(&format!("{ok}1,4,1,0,0,0,R,C,0,\n"));
+    assert_has(&msg, &["bad.csv:3", "frame 1", "agent 4", "appears twice"]);
+
+    let (msg, _) = csv_error(&format!("{ok}2,4,0,0,0,0,R,C,0,\n0,4,0,0,0,0,R,C,0,\n"));
+    assert_has(&msg, &["bad.csv:4", "frame 0 follows frame 2"]);
+
+    let (msg, _) = csv_error(&format!("{ok}1,5,0,0,0,0,,C,0,\n"));
+    assert_has(&msg, &["bad.csv:3", "column 7 (rig)", "empty name"]);
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("head.csv");
+    std::fs::write(&p, "frame,id,x,y,z\n1,2,3,4,5\n").unwrap();
+    assert_has(&err_text(cache::read(&p)), &["head.csv:1", "expected the header"]);
+    std::fs::write(&p, b"frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags\n1,2,\xff").unwrap();
+    assert_has(&err_text(cache::read(&p)), &["head.csv:2", "not UTF-8"]);
+    // CRLF and a BOM are accepted.
+    std::fs::write(&p, format!("\u{feff}{HEADER}\r\n{ok}").replace('\n', "\r\n")).unwrap();
+    assert_eq!(cache::read(&p).unwrap().frames[0].agents[0].id, 4);
+}
+
+// --- usage errors ------------------------------------------------------------
+
+#[test]
+fn usage_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("a.crowd");
+    cache::write(&p, &sample()).unwrap();
+    let out = throng(&["cache", "convert", s(&p), s(&dir.path().join("a.sqlite"))]);
+    assert_eq!(out.status.code(), Some(2));
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["read only"]);
+    let out = throng(&["cache", "info", s(&dir.path().join("a.txt"))]);
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["a.txt", "unknown cache format"]);
+    let out = throng(&["cache", "info", s(&dir.path().join("missing.crowd"))]);
+    assert_eq!(out.status.code(), Some(2));
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["missing.crowd"]);
+    let out = throng(&["cache", "info", s(&fixture()), "--rig-file", "rig.glb"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["--rig-file", "--stride"]);
+    let out = throng(&["cache", "info", s(&fixture()), "--stride", "0"]);
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["--stride must be a positive number"]);
+    // Writing a NaN is refused before any file appears.
+    let mut bad = sample();
+    bad.frames[1].agents[0].position.y = f32::NAN;
+    let q = dir.path().join("nan.crowd");
+    assert_has(&err_text(cache::write(&q, &bad)), &["nan.crowd", "frame 0", "agent 3"]);
+    assert!(!q.exists());
+}
+
+// --- JuPedSim ----------------------------------------------------------------
+
+fn fixture() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/jupedsim_small.sqlite")
+}
+
+/// (frame, id) -> (pos_x, pos_y, ori_x, ori_y) straight from SQLite.
+fn raw_rows(p: &Path) -> std::collections::BTreeMap<(i32, u32), [f64; 4]> {
+    let conn = rusqlite::Connection::open(p).unwrap();
+    let mut st = conn.prepare("SELECT frame, id, pos_x, pos_y, ori_x, ori_y FROM trajectory_data").unwrap();
+    let rows = st
+        .query_map([], |r| Ok(((r.get(0)?, r.get(1)?), [r.get(2)?, r.get(3)?, r.get(4)?, r.get(5)?])))
+        .unwrap();
+    rows.map(|r| r.unwrap()).collect()
+}
+
+#[test]
+fn jupedsim_fixture_import() {
+    let crowd = cache::read(fixture()).unwrap();
+    assert_eq!(crowd.rigs, ["bipedThinA"]);
+    assert_eq!(crowd.cycles, ["WalkA"]);
+    assert_eq!(crowd.frames.len(), 50);
+    assert_eq!((crowd.frames[0].frame, crowd.frames[49].frame), (0, 49));
+    assert!(crowd.frames.iter().all(|b| b.agents.len() == 5));
+    let raw = raw_rows(&fixture());
+    for b in &crowd.frames {
+        for a in &b.agents {
+            let [x, y, ox, oy] = raw[&(b.frame, a.id)];
+            // (x, y) -> (x, 0, -y), and the heading's direction matches ori.
+            assert_eq!(a.position, Vec3::new(x as f32, 0.0, -y as f32));
+            if ox != 0.0 || oy != 0.0 {
+                let (dx, dz) = (a.heading.sin(), a.heading.cos());
+                assert!((dx as f64 - ox).abs() < 1e-5 && (dz as f64 + oy).abs() < 1e-5, "heading {}", a.heading);
+            }
+        }
+    }
+    // Frame 0 has ori (0, 0): heading from the agent's next movement.
+    for a in &crowd.frames[0].agents {
+        let [x0, y0, ox, oy] = raw[&(0, a.id)];
+        assert_eq!((ox, oy), (0.0, 0.0));
+        let [x1, y1, ..] = raw[&(1, a.id)];
+        let want = ((x1 - x0) as f32).atan2(-(y1 - y0) as f32);
+        assert!((a.heading - want).abs() < 1e-5, "agent {} heading {} want {want}", a.id, a.heading);
+    }
+}
+
+#[test]
+fn jupedsim_heading_from_motion_and_cycle_advance() {
+    // Zero one agent's orientation mid-walk: the heading follows its motion.
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("edit.sqlite");
+    std::fs::copy(fixture(), &p).unwrap();
+    let conn = rusqlite::Connection::open(&p).unwrap();
+    conn.execute("UPDATE trajectory_data SET ori_x = 0, ori_y = 0 WHERE id = 2 AND frame = 20", []).unwrap();
+    drop(conn);
+    let opts = ImportOptions { stride: Some(0.7), cycle_length: Some(24.0), ..ImportOptions::default() };
+    let crowd = cache::read_with(&p, &opts).unwrap();
+    let raw = raw_rows(&p);
+    let a20 = crowd.frames[20].agents.iter().find(|a| a.id == 2).unwrap();
+    let ([x19, y19, ..], [x20, y20, ..]) = (raw[&(19, 2)], raw[&(20, 2)]);
+    let want = ((x20 - x19) as f32).atan2(-(y20 - y19) as f32);
+    assert!((a20.heading - want).abs() < 1e-5);
+
+    // The cycle frame advances by distance / stride * length (mod length).
+    for id in 1..=5u32 {
+        for f in 1..50usize {
+            let find = |b: &FrameBlock| *b.agents.iter().find(|a| a.id == id).unwrap();
+            let (a, b) = (find(&crowd.frames[f - 1]), find(&crowd.frames[f]));
+            let dist = (b.position - a.position).length();
+            let got = (b.cycle_frame - a.cycle_frame).rem_euclid(24.0);
+            let want = dist / 0.7 * 24.0;
+            assert!((got - want).abs() < 1e-3, "agent {id} frame {f}: {got} vs {want}");
+            assert!((0.0..24.0).contains(&b.cycle_frame));
+        }
+    }
+    // Options reach the tables.
+    let opts = ImportOptions { rig: "bipedTallB".into(), cycle: "WalkB".into(), ..ImportOptions::default() };
+    let crowd = cache::read_with(fixture(), &opts).unwrap();
+    assert_eq!((crowd.rigs[0].as_str(), crowd.cycles[0].as_str()), ("bipedTallB", "WalkB"));
+}
+
+fn sqlite_error(name: &str, setup: &str) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join(name);
+    std::fs::copy(fixture(), &p).unwrap();
+    rusqlite::Connection::open(&p).unwrap().execute_batch(setup).unwrap();
+    let msg = err_text(cache::read(&p));
+    let out = throng(&["cache", "info", s(&p)]);
+    assert_eq!(out.status.code(), Some(2));
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &[name]);
+    msg
+}
+
+#[test]
+fn bad_jupedsim_files() {
+    let msg = sqlite_error("notraj.sqlite", "DROP TABLE trajectory_data;");
+    assert_has(&msg, &["notraj.sqlite", "no `trajectory_data` table"]);
+    let msg = sqlite_error("nocol.sqlite", "ALTER TABLE trajectory_data DROP COLUMN ori_y;");
+    assert_has(&msg, &["nocol.sqlite", "ori_y"]);
+    let msg = sqlite_error("inf.sqlite", "UPDATE trajectory_data SET pos_x = 1e999 WHERE id = 3 AND frame = 7;");
+    assert_has(&msg, &["inf.sqlite", "frame 7", "agent 3", "field `x`", "finite"]);
+    let msg = sqlite_error("text.sqlite", "UPDATE trajectory_data SET pos_y = 'abc' WHERE id = 4 AND frame = 9;");
+    assert_has(&msg, &["text.sqlite", "frame 9", "agent 4", "pos_y"]);
+    let msg = sqlite_error("dup.sqlite", "INSERT INTO trajectory_data SELECT * FROM trajectory_data WHERE id = 2 AND frame = 5;");
+    assert_has(&msg, &["dup.sqlite", "frame 5", "agent 2", "appears twice"]);
+    let msg = sqlite_error("ver.sqlite", "UPDATE metadata SET value = '9' WHERE key = 'version';");
+    assert_has(&msg, &["ver.sqlite", "version 9"]);
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("junk.sqlite");
+    std::fs::write(&p, b"this is not a database, just text that is long enough to have a header").unwrap();
+    assert_has(&err_text(cache::read(&p)), &["junk.sqlite", "JuPedSim SQLite"]);
+}
+
+/// The done criterion, on the real file when ../shared is present.
+#[test]
+fn real_jupedsim_file_info() {
+    let real = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/assets/crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
+    let real = if real.exists() {
+        real
+    } else {
+        let alt = PathBuf::from("/work/shared/assets/crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
+        if !alt.exists() {
+            eprintln!("skipped: the shared JuPedSim file is not here");
+            return;
+        }
+        alt
+    };
+    let out = throng(&["cache", "info", s(&real), "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["agents"], 200);
+    assert_eq!((v["frame_first"].as_i64(), v["frame_last"].as_i64(), v["frames"].as_i64()), (Some(0), Some(999), Some(1000)));
+    assert_eq!(v["agents_per_frame_max"], 200);
+    assert_eq!(v["agent_frames"], 171336);
+    assert_eq!(v["bounds"]["min"][1], 0.0);
+    assert_eq!(v["import"]["stride"].as_f64(), Some(1.4));
+}
+
+/// Timings for the report: `cargo test --test cache -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn timings_on_real_file() {
+    let real = PathBuf::from("/work/shared/assets/crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("real.crowd");
+    let t = std::time::Instant::now();
+    let crowd = cache::read(&real).unwrap();
+    eprintln!("import sqlite: {:?}", t.elapsed());
+    let t = std::time::Instant::now();
+    cache::write(&p, &crowd).unwrap();
+    eprintln!("write .crowd: {:?} ({} bytes)", t.elapsed(), std::fs::metadata(&p).unwrap().len());
+    let t = std::time::Instant::now();
+    let r = CacheReader::open(&p).unwrap();
+    let b = r.read_frame(500).unwrap();
+    eprintln!("open + read frame 500 ({} agents): {:?}", b.agents.len(), t.elapsed());
+    let t = std::time::Instant::now();
+    let all = cache::read(&p).unwrap();
+    eprintln!("read whole .crowd ({} frames): {:?}", all.frames.len(), t.elapsed());
+    assert_eq!(all, crowd);
+}
