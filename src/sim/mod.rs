@@ -501,6 +501,7 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
     let mut cycles = Vec::new();
     for (name, c) in &raw.cycles {
         let f = format!("cycles.{name}");
+        crate::cache::check_name(name).map_err(|m| Error::invalid(path, m).field(f.clone()))?;
         check(path, c.length.is_finite() && c.length >= 1.0, format!("{f}.length"), "must be >= 1 frame")?;
         check(path, c.stride.is_finite() && c.stride >= 0.0, format!("{f}.stride"), "must be >= 0 metres")?;
         let mut next = Vec::new();
@@ -600,6 +601,9 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
         rig_names.extend(s.rigs.keys().map(String::as_str));
     }
     check(path, rig_names.len() <= usize::from(u16::MAX), "agents", "too many rigs")?;
+    for name in &rig_names {
+        crate::cache::check_name(name).map_err(|m| Error::invalid(path, format!("bad rig name: {m}")).field("rig"))?;
+    }
     let rigs: Vec<String> = rig_names.iter().map(|s| s.to_string()).collect();
     let rig_index: HashMap<&str, u16> = rig_names.iter().enumerate().map(|(i, s)| (*s, i as u16)).collect();
 
@@ -963,7 +967,9 @@ fn nearest_target(scene: &Scene, spec: &AgentSpec, from: Vec2, visited: u64) -> 
     best.map(|b| b.1)
 }
 
-/// Runs the whole scene and returns frames `start..=end` as a cache.
+/// Runs the whole scene and returns frames `start..=end` as a cache, its
+/// rig and cycle tables in first-use order ([`crate::cache::canonical`]), so
+/// reading the written file back gives this crowd exactly.
 pub fn run(scene: &Scene) -> Crowd {
     let mut sim = Simulation::new(scene);
     let mut frames = Vec::with_capacity((scene.end - scene.start + 1) as usize);
@@ -976,9 +982,9 @@ pub fn run(scene: &Scene) -> Crowd {
         }
         sim.step();
     }
-    Crowd {
+    crate::cache::canonical(&Crowd {
         rigs: scene.rigs.clone(),
         cycles: scene.cycles.iter().map(|c| c.name.clone()).collect(),
         frames,
-    }
+    })
 }
