@@ -90,9 +90,22 @@ impl Grid {
         self.cell
     }
 
+    /// Point indices in cell order: slot `k` holds point `items()[k]`.
+    /// Callers copy per-point data into this order so a query reads memory
+    /// that neighbours share.
+    pub fn items(&self) -> &[u32] {
+        &self.items
+    }
+
     /// Calls `f` with the index of every point that may lie within `radius`
     /// of `p` (a superset: callers test the distance), in a fixed order.
     pub fn for_each_near(&self, p: Vec2, radius: f32, mut f: impl FnMut(usize)) {
+        self.for_each_slot_near(p, radius, |k| f(self.items[k] as usize));
+    }
+
+    /// Like [`Grid::for_each_near`] but gives slots (positions in
+    /// [`Grid::items`]), in increasing slot order within each cell row.
+    pub fn for_each_slot_near(&self, p: Vec2, radius: f32, mut f: impl FnMut(usize)) {
         if !p.is_finite() || self.items.is_empty() {
             return;
         }
@@ -100,11 +113,9 @@ impl Grid {
         let (x1, z1) = self.coords(p + Vec2::splat(radius));
         for iz in z0..=z1 {
             let row = iz * self.nx;
-            for ix in x0..=x1 {
-                let c = row + ix;
-                for &i in &self.items[self.starts[c] as usize..self.starts[c + 1] as usize] {
-                    f(i as usize);
-                }
+            // Cells of one row are contiguous in `items`.
+            for k in self.starts[row + x0] as usize..self.starts[row + x1 + 1] as usize {
+                f(k);
             }
         }
     }

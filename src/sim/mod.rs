@@ -811,10 +811,25 @@ impl<'a> Simulation<'a> {
     pub fn step(&mut self) {
         let reach = self.scene.model.relax_distance + 2.0 * self.max_radius;
         let points: Vec<Vec2> = self.states.iter().map(|s| s.position).collect();
-        let grid = grid::Grid::build(&points, reach.max(0.5));
+        let grid = grid::Grid::build(&points, (0.5 * reach).max(0.5));
+        // Neighbour data copied into grid order: a query reads it contiguously.
+        let packed: Vec<Neighbour> = grid
+            .items()
+            .iter()
+            .map(|&i| {
+                let s = &self.states[i as usize];
+                Neighbour {
+                    position: s.position,
+                    // Normalised velocity; zero for standing agents (no chase).
+                    dir: if s.speed > 0.0 { forward(s.heading) } else { Vec2::ZERO },
+                    radius: self.scene.agents[i as usize].radius,
+                    index: i,
+                }
+            })
+            .collect();
+        let near = Near { grid: &grid, packed: &packed, reach };
         let prev = &self.states;
-        let next: Vec<AgentState> =
-            (0..prev.len()).into_par_iter().map(|i| self.step_agent(i, prev, &grid, reach)).collect();
+        let next: Vec<AgentState> = (0..prev.len()).into_par_iter().map(|i| self.step_agent(i, prev, &near)).collect();
         self.states = next;
         self.frame += 1;
     }
@@ -839,7 +854,7 @@ impl<'a> Simulation<'a> {
         FrameBlock { frame: self.frame, agents }
     }
 
-    fn step_agent(&self, i: usize, prev: &[AgentState], grid: &grid::Grid, reach: f32) -> AgentState {
+    fn step_agent(&self, i: usize, prev: &[AgentState], near: &Near) -> AgentState {
         let scene = self.scene;
         let model = &scene.model;
         let spec = &scene.agents[i];
@@ -871,18 +886,19 @@ impl<'a> Simulation<'a> {
         let w = spec.weights;
         let mut st = Steer::default();
         if w.agents != 0.0 {
-            grid.for_each_near(p, reach, |j| {
-                if j == i {
+            let reach2 = near.reach * near.reach;
+            near.grid.for_each_slot_near(p, near.reach, |k| {
+                let o = &near.packed[k];
+                let to = o.position - p;
+                if o.index as usize == i || to.length_squared() > reach2 {
                     return;
                 }
-                let o = &prev[j];
-                let to = o.position - p;
-                let gap = to.length() - spec.radius - scene.agents[j].radius;
+                let gap = to.length() - spec.radius - o.radius;
                 if gap > model.relax_distance {
                     return;
                 }
                 // Chase: dot of the two normalised velocities (standing agents have none).
-                let atten = if model.chase && o.speed > 0.0 { steer::chase_attenuation(fwd.dot(forward(o.heading))) } else { 1.0 };
+                let atten = if model.chase { steer::chase_attenuation(fwd.dot(o.dir)) } else { 1.0 };
                 st.add(model, fwd, to, gap, w.agents, atten);
             });
         }
@@ -950,6 +966,21 @@ impl<'a> Simulation<'a> {
             s.target = nearest_target(scene, spec, s.position, s.visited);
         }
     }
+}
+
+/// Another agent as a neighbour query sees it (previous frame).
+struct Neighbour {
+    position: Vec2,
+    dir: Vec2,
+    radius: f32,
+    index: u32,
+}
+
+/// Neighbour search for one frame.
+struct Near<'g> {
+    grid: &'g grid::Grid,
+    packed: &'g [Neighbour],
+    reach: f32,
 }
 
 /// The nearest of the agent's targets not in `visited` (ties: file order).
