@@ -249,11 +249,11 @@ pub fn run(cli: Cli) -> Result<()> {
             let crowd = crate::sim::run(&scene);
             crate::cache::write(&args.out, &crowd)?;
             println!(
-                "throng sim: {} agents, frames {}-{} ({} simulated), {:.2} s -> {}",
+                "throng sim: {} agents, frames {}-{} (simulated from {}), {:.2} s -> {}",
                 scene.agents.len(),
                 scene.start,
                 scene.end,
-                scene.end - scene.first_frame(),
+                scene.first_frame(),
                 clock.elapsed().as_secs_f64(),
                 args.out.display()
             );

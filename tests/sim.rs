@@ -556,3 +556,52 @@ fn cli_writes_cache_and_reports() {
     assert!(stderr.contains("s.toml") && stderr.contains("cycles.W.length"), "{stderr}");
     assert!(!bad_out.exists());
 }
+
+#[test]
+fn faster_walker_does_not_pass_through_slower_one() {
+    // WalkA (1.5 m / 32 frames) behind WalkB (1.2 m / 28 frames) on one course:
+    // chase would hide the leader, but touching agents repel in full.
+    let body = format!(
+        "[[targets]]\nname = \"far\"\nposition = [0.0, 200.0]\n{}\
+         [[agents]]\nid = 2\nposition = [0.0, 0.7]\nrig = \"bipedThinA\"\ncycle = \"WalkB\"\ncycle_frame = 0.0\n",
+        walker(1, 0.0, 0.0, 0.0, "")
+    );
+    let c = run(&scene((1, 600), &body));
+    let min = (0..c.frames.len()).map(|f| pos(&c, f, 0).distance(pos(&c, f, 1))).fold(f32::MAX, f32::min);
+    assert!(min > 0.45, "closest approach {min}");
+    let last = c.frames.len() - 1;
+    assert!(pos(&c, last, 0).y > pos(&c, last, 1).y, "the faster walker overtook");
+}
+
+#[test]
+fn demo_scene_matches_spec_and_committed_cache() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scene::load(root.join("demo/sim/demo.toml")).unwrap();
+    assert_eq!((s.start, s.end), (1, 48));
+    assert!((290..=310).contains(&s.agents.len()));
+    let c = run(&s);
+    let seated: Vec<_> = c.frames[0].agents.iter().filter(|a| a.seated()).collect();
+    assert_eq!(seated.len(), 12);
+    for a in &seated {
+        assert_eq!(c.cycles[a.cycle as usize], "SitA");
+        assert_eq!(a.heading, 0.0);
+        assert_eq!(a.position.z, -3.55);
+        let bench = [-9.0f32, -3.0, 3.0, 9.0].iter().any(|b| [-1.0, 0.0, 1.0].contains(&(a.position.x - b)));
+        assert!(bench, "{:?}", a.position);
+    }
+    for f in &c.frames {
+        for a in &f.agents {
+            assert!((-18.0..=18.0).contains(&a.position.x) && (-30.0..=12.0).contains(&a.position.z), "{a:?}");
+        }
+    }
+    let mut rigs = c.rigs.clone();
+    rigs.sort();
+    assert_eq!(rigs, ["bipedTallB", "bipedThinA"]);
+    // The committed demo cache is this scene's output, byte for byte
+    // (regenerate: cargo run -- sim demo/sim/demo.toml --out demo/cache/demo.crowd).
+    let dir = tempfile::tempdir().unwrap();
+    let fresh = dir.path().join("demo.crowd");
+    throng::cache::write(&fresh, &c).unwrap();
+    let committed = std::fs::read(root.join("demo/cache/demo.crowd")).unwrap();
+    assert!(std::fs::read(&fresh).unwrap() == committed, "demo/cache/demo.crowd is stale");
+}

@@ -897,8 +897,11 @@ impl<'a> Simulation<'a> {
                 if gap > model.relax_distance {
                     return;
                 }
-                // Chase: dot of the two normalised velocities (standing agents have none).
-                let atten = if model.chase { steer::chase_attenuation(fwd.dot(o.dir)) } else { 1.0 };
+                // Chase: dot of the two normalised velocities (standing agents have
+                // none). It stops a file of walkers shaking; agents already touching
+                // get no attenuation, so a faster walker does not pass through a
+                // slower one ahead on the same course.
+                let atten = if model.chase && gap > 0.0 { steer::chase_attenuation(fwd.dot(o.dir)) } else { 1.0 };
                 st.add(model, fwd, to, gap, w.agents, atten);
             });
         }
