@@ -332,15 +332,13 @@ fn walk_cycle_advances_with_distance_and_standers_stand() {
 
 #[test]
 fn cycles_switch_only_at_cycle_end() {
-    let text = format!(
-        "version = 1\nseed = 3\n[frames]\nstart = 1\nend = 400\n\
-         [cycles.WalkA]\nlength = 32\nstride = 1.5\nnext = {{ WalkA = 1, WalkB = 1, IdleA = 1 }}\n\
-         [cycles.WalkB]\nlength = 28\nstride = 1.2\nnext = {{ WalkA = 1, WalkB = 1 }}\n\
-         [cycles.IdleA]\nlength = 48\nstride = 0\nnext = {{ IdleA = 1, WalkA = 1 }}\n\
+    let text = "version = 1\nseed = 3\n[frames]\nstart = 1\nend = 400\n\
+         [cycles.WalkA]\nlength = 32\nstride = 1.5\nnext = { WalkA = 1, WalkB = 1, IdleA = 1 }\n\
+         [cycles.WalkB]\nlength = 28\nstride = 1.2\nnext = { WalkA = 1, WalkB = 1 }\n\
+         [cycles.IdleA]\nlength = 48\nstride = 0\nnext = { IdleA = 1, WalkA = 1 }\n\
          [[spawn]]\ncount = 40\nfirst_id = 100\nmin = [-40.0, -40.0]\nmax = [40.0, 40.0]\nheading_jitter_deg = 180\n\
-         rigs = {{ bipedThinA = 1 }}\ncycles = {{ WalkA = 1, IdleA = 1 }}\n"
-    );
-    let s = Scene::parse(&text, "cycles.toml").unwrap();
+         rigs = { bipedThinA = 1 }\ncycles = { WalkA = 1, IdleA = 1 }\n";
+    let s = Scene::parse(text, "cycles.toml").unwrap();
     let c = run(&s);
     let len = |k: u16| match c.cycles[k as usize].as_str() {
         "WalkA" => 32.0f32,
