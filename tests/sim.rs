@@ -346,10 +346,14 @@ fn cycles_switch_only_at_cycle_end() {
         _ => 48.0,
     };
     let mut switches = 0;
+    let mut idle_to_walk = 0;
     for f in 1..c.frames.len() {
         for (a, b) in c.frames[f - 1].agents.iter().zip(&c.frames[f].agents) {
             if a.cycle != b.cycle {
                 switches += 1;
+                if c.cycles[a.cycle as usize] == "IdleA" {
+                    idle_to_walk += 1;
+                }
                 // Switched only because the old cycle ran out.
                 assert!(a.cycle_frame + 1.0 >= len(a.cycle) - 1e-3, "switched mid-cycle at {}", a.cycle_frame);
                 assert!(b.cycle_frame < 1.0);
@@ -357,7 +361,14 @@ fn cycles_switch_only_at_cycle_end() {
             assert!(b.cycle_frame >= 0.0 && b.cycle_frame < len(b.cycle));
         }
     }
-    assert!(switches > 20, "{switches}");
+    assert!(switches > 20 && idle_to_walk > 3, "{switches} {idle_to_walk}");
+    // Standing agents stand, walkers walk: position changes iff the cycle walks.
+    for f in 1..c.frames.len() {
+        for (a, b) in c.frames[f - 1].agents.iter().zip(&c.frames[f].agents) {
+            let moved = a.position != b.position;
+            assert_eq!(moved, c.cycles[a.cycle as usize] != "IdleA", "frame {f} agent {}", a.id);
+        }
+    }
 }
 
 // ---------------------------------------------------------------------------
@@ -493,6 +504,12 @@ fn errors_name_file_key_and_agent() {
          [[agents]]\nid = 4\nposition = [1.0, 0.0]\nrig = \"r\"\ncycle = \"WalkA\"\n",
     );
     assert!(e.contains("used twice"), "{e}");
+    let e = bad("[[spawn]]\ncount = 4000000000\nfirst_id = 0\nmin = [0.0, 0.0]\nmax = [1.0, 1.0]\nrigs = { r = 1 }\ncycles = { WalkA = 1 }\n");
+    assert!(e.contains("spawn[0].count"), "{e}");
+    let e = Scene::parse("version = 1\nseed = 1\n[frames]\nstart = -2147483648\nend = 2147483647\n[cycles.W]\nlength = 1\nstride = 0\n", "f.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("f.toml") && e.contains("frames"), "{e}");
     let e = Scene::parse("version = 2\n", "v.toml").unwrap_err().to_string();
     assert!(e.contains("v.toml") && e.contains("version"), "{e}");
     let e = Scene::parse("version = 1\nseed = [\n", "s.toml").unwrap_err().to_string();

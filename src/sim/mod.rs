@@ -30,6 +30,10 @@ use steer::{forward, heading_of, wrap_angle, Steer};
 /// Most targets a scene may declare (each agent keeps its visited targets
 /// in a 64-bit mask).
 pub const MAX_TARGETS: usize = 64;
+/// Most agents in a scene (a guard against typos such as `count = 1e9`).
+pub const MAX_AGENTS: usize = 10_000_000;
+/// Most frames a scene may simulate (warm-up included).
+pub const MAX_FRAMES: i64 = 1_000_000;
 
 // ---------------------------------------------------------------------------
 // Resolved scene
@@ -125,7 +129,8 @@ impl Obstacle {
         for w in self.path.windows(2) {
             let ((fa, a), (fb, b)) = (w[0], w[1]);
             if frame <= fb {
-                let t = (frame - fa) as f32 / (fb - fa) as f32;
+                // i64: frame numbers may be far apart without overflowing.
+                let t = ((i64::from(frame) - i64::from(fa)) as f64 / (i64::from(fb) - i64::from(fa)) as f64) as f32;
                 return a.lerp(b, t);
             }
         }
@@ -474,6 +479,8 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
         .ok()
         .filter(|w| raw.frames.start.checked_sub(*w).is_some())
         .ok_or_else(|| Error::invalid(path, "too large").field("frames.warmup"))?;
+    let span = i64::from(raw.frames.end) - i64::from(raw.frames.start) + i64::from(warmup);
+    check(path, span <= MAX_FRAMES, "frames", format!("at most {MAX_FRAMES} simulated frames"))?;
 
     let d = Model::default();
     let m = &raw.model;
@@ -659,6 +666,7 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
         check(path, (0.0..=1.0).contains(&s.jitter), format!("{f}.jitter"), "must be in [0, 1]")?;
         finite(path, &[s.heading_deg, s.heading_jitter_deg], &format!("{f}.heading_deg"))?;
         check(path, s.first_id.checked_add(s.count).is_some(), format!("{f}.count"), "ids overflow u32")?;
+        check(path, s.count as usize <= MAX_AGENTS, format!("{f}.count"), format!("at most {MAX_AGENTS} agents"))?;
         let mut rig_mix = Vec::new();
         for (n, w) in &s.rigs {
             check(path, w.is_finite() && *w >= 0.0, format!("{f}.rigs.{n}"), "weight must be >= 0")?;
@@ -717,6 +725,7 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
         }
     }
 
+    check(path, agents.len() <= MAX_AGENTS, "spawn", format!("at most {MAX_AGENTS} agents in a scene"))?;
     agents.sort_by_key(|a| a.id);
     for w in agents.windows(2) {
         if w[0].id == w[1].id {
@@ -1006,7 +1015,7 @@ fn nearest_target(scene: &Scene, spec: &AgentSpec, from: Vec2, visited: u64) -> 
 /// reading the written file back gives this crowd exactly.
 pub fn run(scene: &Scene) -> Crowd {
     let mut sim = Simulation::new(scene);
-    let mut frames = Vec::with_capacity((scene.end - scene.start + 1) as usize);
+    let mut frames = Vec::with_capacity((i64::from(scene.end) - i64::from(scene.start) + 1).clamp(0, 100_000) as usize);
     loop {
         if sim.frame() >= scene.start {
             frames.push(sim.record());
