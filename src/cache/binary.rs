@@ -354,10 +354,11 @@ fn push_name(out: &mut Vec<u8>, name: &str) {
     out.extend_from_slice(name.as_bytes());
 }
 
-/// Writes `crowd` as a `.crowd` file through [`write_atomic`]. The crowd
-/// must be validated ([`super::validate`]); rig and cycle tables are written
-/// in first-use order. The output depends only on the crowd.
+/// Writes `crowd` as a `.crowd` file through [`write_atomic`], after
+/// [`super::validate`]; rig and cycle tables are written in first-use order.
+/// The output depends only on the crowd.
 pub fn write(path: &Path, crowd: &Crowd) -> Result<()> {
+    super::validate(path, crowd)?;
     let too_big = |what: &str| Error::invalid(path, format!("too many {what} for one .crowd file"));
     let (rigs, rig_map, cycles, cycle_map) = first_use_tables(crowd);
 

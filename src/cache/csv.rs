@@ -150,8 +150,9 @@ pub fn parse_str(path: &Path, text: &str) -> Result<Crowd> {
     Ok(crowd)
 }
 
-/// Writes `crowd` (validated) as CSV through [`write_atomic`].
+/// Writes `crowd` as CSV through [`write_atomic`], after [`validate`].
 pub fn write(path: &Path, crowd: &Crowd) -> Result<()> {
+    validate(path, crowd)?;
     let name = |names: &[String], i: u16| names.get(usize::from(i)).cloned().unwrap_or_default();
     write_atomic(path, |w| {
         writeln!(w, "{HEADER}").at(path)?;

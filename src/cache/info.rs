@@ -114,10 +114,8 @@ pub fn info(reader: &CacheReader) -> Result<CacheInfo> {
             cycle_agents.insert((a.cycle, a.id));
             let p = a.position.to_array();
             let b = bounds.get_or_insert(Bounds { min: p, max: p });
-            for k in 0..3 {
-                b.min[k] = b.min[k].min(p[k]);
-                b.max[k] = b.max[k].max(p[k]);
-            }
+            b.min = glam::Vec3::from(b.min).min(a.position).to_array();
+            b.max = glam::Vec3::from(b.max).max(a.position).to_array();
         }
     }
     let counts = |names: &[String], frames: &[u64], pairs: &HashSet<(u16, u32)>| {

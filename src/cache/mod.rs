@@ -144,9 +144,7 @@ pub fn read_with(path: impl AsRef<Path>, opts: &ImportOptions) -> Result<Crowd> 
 /// that order.
 pub fn write(path: impl AsRef<Path>, crowd: &Crowd) -> Result<()> {
     let path = path.as_ref();
-    let format = Format::of(path)?;
-    validate(path, crowd)?;
-    match format {
+    match Format::of(path)? {
         Format::Binary => binary::write(path, crowd),
         Format::Csv => csv::write(path, crowd),
         Format::JuPedSim => Err(Error::Usage(format!(
