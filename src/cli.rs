@@ -250,7 +250,22 @@ pub fn run(cli: Cli) -> Result<()> {
 
         Verb::Cache(CacheVerb::Convert(args)) => crate::cache::cmd_convert(&args),
 
-        Verb::Sim(_args) => Err(Error::NotBuilt("sim")),
+        Verb::Sim(args) => {
+            let clock = std::time::Instant::now();
+            let scene = crate::sim::Scene::load(&args.scene)?;
+            let crowd = crate::sim::run(&scene);
+            crate::cache::write(&args.out, &crowd)?;
+            println!(
+                "throng sim: {} agents, frames {}-{} (simulated from {}), {:.2} s -> {}",
+                scene.agents.len(),
+                scene.start,
+                scene.end,
+                scene.first_frame(),
+                clock.elapsed().as_secs_f64(),
+                args.out.display()
+            );
+            Ok(())
+        }
 
         Verb::Cast(args) => crate::commands::cmd_cast(&args),
 

@@ -16,4 +16,5 @@ pub mod pose;
 pub mod rig;
 pub mod scene;
 pub mod shot;
+pub mod sim;
 pub mod wardrobe;
