@@ -6,4 +6,5 @@
 pub mod cache;
 pub mod cli;
 pub mod error;
+pub mod render;
 pub mod scene;
