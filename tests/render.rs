@@ -409,15 +409,20 @@ fn glossy_floor_reflects_indirect_only_object() {
 
 #[test]
 fn no_shadow_acne_far_from_origin() {
-    // The same floor twice: baked at 500 m, and at the origin moved 500 m by its instance.
+    // The same slightly tilted floor twice (tilted so rounding is not trivially exact):
+    // baked at 500 m, and built at the origin and moved 500 m by its instance.
     let far = Vec3::new(500.0, 0.0, -500.0);
+    let tilt = Quat::from_axis_angle(Vec3::new(1.0, 0.0, 1.0).normalize(), 0.1);
+    let mut baked = quad(30.0, Vec3::ZERO);
+    baked.positions.iter_mut().for_each(|p| *p = far + tilt * *p);
     let lib = Library {
-        meshes: vec![quad(30.0, far), quad(30.0, Vec3::ZERO)],
+        meshes: vec![baked, quad(30.0, Vec3::ZERO)],
         materials: vec![material("floor", Vec3::splat(0.5), 0.0, 1.0)],
         textures: vec![],
     };
     let blas = BlasSet::build(&lib);
-    for inst in [instance(0, 0, Affine3A::IDENTITY, None, vis::ALL), instance(1, 0, Affine3A::from_translation(far), None, vis::ALL)] {
+    let moved = Affine3A::from_rotation_translation(tilt, far);
+    for inst in [instance(0, 0, Affine3A::IDENTITY, None, vis::ALL), instance(1, 0, moved, None, vis::ALL)] {
         let scene = FrameScene {
             instances: vec![inst],
             camera: camera(far + Vec3::new(0.0, 4.0, 8.0), far, 40.0),

@@ -7,7 +7,8 @@
 //!   i.e. premultiplied by coverage like RGB.
 //! - `z`, `agent_id`: from the single sample nearest the pixel centre (never
 //!   filtered, so ids stay exact and depths are never blends of two surfaces).
-//!   `z` is camera-space depth, positive forward, +inf where that sample missed.
+//!   `z` is camera-space depth, positive forward, +inf where that sample
+//!   missed or hit a holdout.
 //!   `agent_id` is 0 for "no agent" (sky, set, holdout), else cache id + 1.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -71,6 +72,14 @@ impl Film {
             albedo: vec![[0.0; 3]; n],
             agent_id: vec![0; n],
         }
+    }
+
+    /// Nearest and farthest finite depth (for the EXR `near`/`far`), if any.
+    pub fn depth_range(&self) -> Option<(f32, f32)> {
+        self.z.iter().filter(|z| z.is_finite()).fold(None, |acc, &z| match acc {
+            None => Some((z, z)),
+            Some((lo, hi)) => Some((z.min(lo), z.max(hi))),
+        })
     }
 
     /// Index of pixel (x, y).
