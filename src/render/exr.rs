@@ -162,11 +162,11 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
         }
         Ok(v)
     };
-    let [r, g, b, a] = ["R", "G", "B", "A"].map(|c| floats(c));
+    let [r, g, b, a] = ["R", "G", "B", "A"].map(&floats);
     let (r, g, b, a) = (r?, g?, b?, a?);
-    let [nx, ny, nz] = ["N.X", "N.Y", "N.Z"].map(|c| floats(c));
+    let [nx, ny, nz] = ["N.X", "N.Y", "N.Z"].map(&floats);
     let (nx, ny, nz) = (nx?, ny?, nz?);
-    let [ar, ag, ab] = ["albedo.R", "albedo.G", "albedo.B"].map(|c| floats(c));
+    let [ar, ag, ab] = ["albedo.R", "albedo.G", "albedo.B"].map(&floats);
     let (ar, ag, ab) = (ar?, ag?, ab?);
     let z = floats("Z")?;
     let agent_id = match &find("agent.id")?.sample_data {

@@ -210,10 +210,10 @@ fn check(blas: &BlasSet, lib: &Library, scene: &FrameScene, s: &RenderSettings) 
             lib.meshes.len()
         )));
     }
-    if !scene.camera.world_from_camera.is_finite()
-        || !(scene.camera.yfov > 0.0 && scene.camera.yfov < std::f32::consts::PI)
-        || scene.camera.world_from_camera.matrix3.determinant().abs() < 1e-12
-    {
+    let camera = &scene.camera;
+    let fov_ok = camera.yfov > 0.0 && camera.yfov < std::f32::consts::PI; // false for NaN too
+    let det = camera.world_from_camera.matrix3.determinant();
+    if !fov_ok || !camera.world_from_camera.is_finite() || det.abs() < 1e-12 {
         return Err(Error::invalid(here, format!("camera is degenerate (yfov {} rad)", scene.camera.yfov)).field("camera"));
     }
     for (i, inst) in scene.instances.iter().enumerate() {
