@@ -524,3 +524,60 @@ fn exr_round_trip() {
     write_preview_png(&png, &film).unwrap();
     assert!(std::fs::metadata(&png).unwrap().len() > 50);
 }
+
+#[test]
+fn degenerate_crowd_at_one_point_traces_correctly() {
+    // Uninitialised cache rows put many agents at exactly the same spot: the
+    // trees must stay within obvhs' fixed traversal stack (validate checks depth).
+    let lib = Library { meshes: vec![cube()], materials: vec![Material::default()], textures: vec![] };
+    let blas = BlasSet::build(&lib);
+    let instances: Vec<Instance> =
+        (0..20_000).map(|i| instance(0, 0, Affine3A::from_translation(Vec3::new(0.0, 0.5, 0.0)), Some(i), vis::ALL)).collect();
+    for kind in [TlasKind::Bvh2, TlasKind::CwBvh] {
+        let tlas = Tlas::build_with(&blas, &instances, kind);
+        tlas.validate();
+        let ray = WorldRay { origin: Vec3::new(0.0, 0.5, 5.0), direction: -Vec3::Z, tmax: f32::INFINITY };
+        let hit = tlas.intersect(&ray, vis::CAMERA).expect("hits the stack of cubes");
+        assert!((hit.t - 4.5).abs() < 1e-4);
+        assert!(tlas.occluded(&ray, vis::SHADOW));
+    }
+}
+
+#[test]
+fn degenerate_mesh_triangles_are_dropped() {
+    // 5000 copies of one triangle, 5000 collapsed triangles, one bad index.
+    let mut m = Mesh { name: "junk".into(), positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y], ..Default::default() };
+    for _ in 0..5000 {
+        m.indices.extend_from_slice(&[0, 1, 2, 1, 1, 1]);
+    }
+    m.indices.extend_from_slice(&[0, 1, 7]);
+    let lib = Library { meshes: vec![m], materials: vec![Material::default()], textures: vec![] };
+    let blas = BlasSet::build(&lib);
+    blas.validate();
+    assert_eq!(blas.get(0).unwrap().triangle_count(), 1);
+    let tlas = Tlas::build(&blas, &[instance(0, 0, Affine3A::IDENTITY, None, vis::ALL)]);
+    let hit = tlas.intersect(&WorldRay { origin: Vec3::new(0.2, 0.2, 1.0), direction: -Vec3::Z, tmax: f32::INFINITY }, vis::ALL).unwrap();
+    assert_eq!(hit.triangle, 0);
+}
+
+#[test]
+fn axis_aligned_rays_hit_shared_edges_and_signed_zeros() {
+    // Regressions: obvhs' triangle test rejects barycentrics of -0.0 (a ray
+    // exactly on a face diagonal went through the box), and a -0.0 direction
+    // component made traversal miss.
+    let tri = Mesh { name: "t".into(), positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y], indices: vec![0, 1, 2], ..Default::default() };
+    let lib = Library { meshes: vec![tri, cube()], materials: vec![Material::default()], textures: vec![] };
+    let blas = BlasSet::build(&lib);
+    let turned = Affine3A::from_rotation_y(PI); // object-space directions pick up -0.0 too
+    for kind in [TlasKind::Bvh2, TlasKind::CwBvh] {
+        for (mesh, m, expected_t) in [(0, Affine3A::IDENTITY, 1.0), (1, Affine3A::IDENTITY, 0.5), (1, turned, 0.5)] {
+            let tlas = Tlas::build_with(&blas, &[instance(mesh, 0, m, None, vis::ALL)], kind);
+            for d in [-Vec3::Z, Vec3::new(0.0, 0.0, -1.0)] {
+                let ray = WorldRay { origin: Vec3::new(0.2, 0.2, 1.0), direction: d, tmax: f32::INFINITY };
+                let hit = tlas.intersect(&ray, vis::ALL);
+                let t = hit.map(|h| h.t);
+                assert_eq!(t, Some(expected_t), "{kind:?} mesh {mesh} dir {d:?}");
+            }
+        }
+    }
+}

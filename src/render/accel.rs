@@ -3,6 +3,7 @@
 //! instances' world bounds (rebuilt per frame). The only file that names
 //! obvhs, so the BVH library can change without touching the integrator.
 
+use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
 use glam::{Affine3A, Vec3, Vec3A};
@@ -33,16 +34,26 @@ pub struct Blas {
 
 impl Blas {
     /// Builds the BLAS of `mesh`. Triangles with out-of-range indices or
-    /// non-finite vertices are left out (never hit) rather than failing.
+    /// non-finite vertices are left out rather than failing, and so are
+    /// zero-area triangles and exact duplicates: they can never be the
+    /// (first) hit, and thousands of them at one point would make a
+    /// degenerate, over-deep tree.
     pub fn build(mesh: &Mesh) -> Blas {
         let mut tris = Vec::with_capacity(mesh.triangle_count());
         let mut original = Vec::with_capacity(mesh.triangle_count());
+        let mut seen = std::collections::HashSet::with_capacity(mesh.triangle_count());
         for (i, idx) in mesh.indices.chunks_exact(3).enumerate() {
             let vertex = |k: u32| mesh.positions.get(k as usize).copied().filter(|p| p.is_finite());
-            if let (Some(a), Some(b), Some(c)) = (vertex(idx[0]), vertex(idx[1]), vertex(idx[2])) {
-                tris.push(Triangle { v0: a.into(), v1: b.into(), v2: c.into() });
-                original.push(i as u32);
+            let (Some(a), Some(b), Some(c)) = (vertex(idx[0]), vertex(idx[1]), vertex(idx[2])) else { continue };
+            if (b - a).cross(c - a) == Vec3::ZERO {
+                continue;
             }
+            let key = [a, b, c].map(|p| p.to_array().map(f32::to_bits));
+            if !seen.insert(key) {
+                continue;
+            }
+            tris.push(Triangle { v0: a.into(), v1: b.into(), v2: c.into() });
+            original.push(i as u32);
         }
         if tris.is_empty() {
             return Blas { bvh: CwBvh::default(), tris: Vec::new(), triangle_index: Vec::new() };
@@ -83,13 +94,13 @@ impl Blas {
     fn intersect(&self, ray: Ray) -> Option<(u32, f32)> {
         let mut hit = RayHit::none();
         self.bvh
-            .ray_traverse(ray, &mut hit, |r, s| self.tris[s].intersect(r))
+            .ray_traverse(ray, &mut hit, |r, s| intersect_triangle(&self.tris[s], r))
             .then_some((hit.primitive_id, hit.t))
     }
 
     #[inline]
     fn occluded(&self, ray: Ray) -> bool {
-        !self.bvh.ray_traverse_miss(ray, |r, s| self.tris[s].intersect(r))
+        !self.bvh.ray_traverse_miss(ray, |r, s| intersect_triangle(&self.tris[s], r))
     }
 
     /// Runs obvhs' structural checks (panics on a broken tree; tests only).
@@ -99,6 +110,26 @@ impl Blas {
             self.bvh.validate(&self.tris, true);
         }
     }
+}
+
+/// Möller-Trumbore on obvhs' `RtTriangle` layout, as `RtTriangle::intersect`
+/// but with comparisons instead of sign-bit tests: obvhs rejects barycentrics
+/// of -0.0, so a ray exactly on the shared edge of two triangles (an
+/// axis-aligned ray on a box's face diagonal) missed both and went through.
+#[inline(always)]
+fn intersect_triangle(tri: &RtTriangle, ray: &Ray) -> f32 {
+    let c = tri.v0 - ray.origin;
+    let r = ray.direction.cross(c);
+    let inv_det = 1.0 / tri.ng.dot(ray.direction);
+    let u = r.dot(tri.e2) * inv_det;
+    let v = r.dot(tri.e1) * inv_det;
+    if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && inv_det.is_finite() {
+        let t = tri.ng.dot(c) * inv_det;
+        if t >= ray.tmin && t <= ray.tmax {
+            return t;
+        }
+    }
+    f32::INFINITY
 }
 
 /// One BLAS per [`Library::meshes`] entry, indexed by `MeshId`.
@@ -209,12 +240,19 @@ pub struct Hit {
 }
 
 /// Top-level BVH over one frame's instances.
+///
+/// The tree's primitives are *clusters*: runs of instances with bit-identical
+/// world bounds. Many agents at exactly one spot (uninitialised cache rows,
+/// stacked duplicate parts) would otherwise make PLOC build a chain thousands
+/// deep, overflowing obvhs' fixed traversal stacks silently.
 pub struct Tlas<'a> {
     blas: &'a BlasSet,
     tree: TlasTree,
-    /// Instances in TLAS slot order.
+    /// Instances grouped by cluster, clusters in TLAS slot order.
     instances: Vec<TlasInstance>,
-    /// World bounds in slot order (kept for `validate`).
+    /// Per TLAS slot: range of `instances`.
+    clusters: Vec<(u32, u32)>,
+    /// World bounds per TLAS slot (kept for `validate`).
     aabbs: Vec<Aabb>,
     /// Wall time of the build.
     pub build_time: Duration,
@@ -233,15 +271,24 @@ fn world_bounds(b: &Aabb, world_from_object: &Affine3A) -> Aabb {
     out
 }
 
+/// The obvhs ray of a [`WorldRay`]. Adding +0.0 turns -0.0 direction
+/// components into +0.0: obvhs derives traversal octants from sign bits, and
+/// an axis-aligned ray with a -0.0 component missed boxes it passes through.
+#[inline]
+fn world_ray(ray: &WorldRay) -> Ray {
+    Ray::new(ray.origin.into(), (ray.direction + Vec3::ZERO).into(), 0.0, ray.tmax)
+}
+
 /// Transforms a world ray into an instance's object space. The direction is
 /// not renormalised, so `t` means the same distance in both spaces.
 #[inline]
-fn object_ray(inst: &TlasInstance, r: &Ray) -> Ray {
+fn object_ray(inst: &TlasInstance, r: &Ray, tmax: f32) -> Ray {
     Ray::new(
         inst.object_from_world.transform_point3a(r.origin),
-        inst.object_from_world.transform_vector3a(r.direction),
+        // + 0.0: no -0.0 components (see `world_ray`).
+        inst.object_from_world.transform_vector3a(r.direction) + Vec3A::ZERO,
         r.tmin,
-        r.tmax,
+        tmax,
     )
 }
 
@@ -256,8 +303,10 @@ impl<'a> Tlas<'a> {
     /// Builds the TLAS with a chosen tree kind (for benchmarks).
     pub fn build_with(blas: &'a BlasSet, instances: &[Instance], kind: TlasKind) -> Tlas<'a> {
         let start = Instant::now();
-        let mut kept = Vec::with_capacity(instances.len());
-        let mut aabbs = Vec::with_capacity(instances.len());
+        // Group instances by exact world bounds, clusters in first-seen order (deterministic).
+        let mut cluster_of: HashMap<[u32; 6], usize> = HashMap::with_capacity(instances.len());
+        let mut members: Vec<Vec<TlasInstance>> = Vec::new();
+        let mut aabbs = Vec::new();
         for (i, inst) in instances.iter().enumerate() {
             let Some(b) = blas.get(inst.mesh) else { continue };
             let m = &inst.world_from_object;
@@ -265,15 +314,21 @@ impl<'a> Tlas<'a> {
             if b.is_empty() || inst.visibility == 0 || !det.is_finite() || det.abs() < 1e-18 || !m.is_finite() {
                 continue;
             }
-            aabbs.push(world_bounds(&b.bounds(), m));
-            kept.push(TlasInstance {
+            let bounds = world_bounds(&b.bounds(), m);
+            let key = [bounds.min.x, bounds.min.y, bounds.min.z, bounds.max.x, bounds.max.y, bounds.max.z].map(f32::to_bits);
+            let c = *cluster_of.entry(key).or_insert_with(|| {
+                aabbs.push(bounds);
+                members.push(Vec::new());
+                members.len() - 1
+            });
+            members[c].push(TlasInstance {
                 object_from_world: m.inverse(),
                 index: i as u32,
                 mesh: inst.mesh,
                 visibility: inst.visibility,
             });
         }
-        let (tree, order) = if kept.is_empty() {
+        let (tree, order) = if aabbs.is_empty() {
             (TlasTree::Empty, Vec::new())
         } else {
             match kind {
@@ -289,11 +344,16 @@ impl<'a> Tlas<'a> {
                 }
             }
         };
-        // Reorder instances into slot order: one fewer indirection per visit.
-        let mut slots: Vec<Option<TlasInstance>> = kept.into_iter().map(Some).collect();
-        let instances = order.iter().filter_map(|&k| slots[k as usize].take()).collect();
-        let aabbs = order.iter().map(|&k| aabbs[k as usize]).collect();
-        Tlas { blas, tree, instances, aabbs, build_time: start.elapsed() }
+        // Lay clusters out in slot order: one fewer indirection per visit.
+        let mut instances = Vec::with_capacity(instances.len());
+        let mut clusters = Vec::with_capacity(order.len());
+        for &c in &order {
+            let run = std::mem::take(&mut members[c as usize]);
+            clusters.push((instances.len() as u32, run.len() as u32));
+            instances.extend(run);
+        }
+        let aabbs = order.iter().map(|&c| aabbs[c as usize]).collect();
+        Tlas { blas, tree, instances, clusters, aabbs, build_time: start.elapsed() }
     }
 
     /// Number of instances in the tree.
@@ -306,25 +366,34 @@ impl<'a> Tlas<'a> {
         self.instances.is_empty()
     }
 
+    #[inline]
+    fn cluster(&self, slot: usize) -> std::ops::Range<usize> {
+        let (start, len) = self.clusters[slot];
+        start as usize..(start + len) as usize
+    }
+
     /// Closest hit among instances whose visibility shares a bit with `mask`.
     pub fn intersect(&self, ray: &WorldRay, mask: u8) -> Option<Hit> {
-        let world = Ray::new(ray.origin.into(), ray.direction.into(), 0.0, ray.tmax);
-        // (TLAS slot, BLAS slot) of the closest hit so far.
-        let mut best = (u32::MAX, u32::MAX);
+        let world = world_ray(ray);
+        // (instance position, BLAS slot) of the closest hit so far.
+        let mut best = (usize::MAX, u32::MAX);
         let mut visit = |r: &Ray, slot: usize| {
-            let inst = &self.instances[slot];
-            if inst.visibility & mask == 0 {
-                return f32::INFINITY;
-            }
-            let Some(b) = self.blas.get(inst.mesh) else { return f32::INFINITY };
-            // r.tmax is the closest hit so far, which prunes the BLAS walk.
-            match b.intersect(object_ray(inst, r)) {
-                Some((s, t)) => {
-                    best = (slot as u32, s);
-                    t
+            // r.tmax is the closest hit so far, which prunes each BLAS walk.
+            let mut closest = r.tmax;
+            let mut found = f32::INFINITY;
+            for k in self.cluster(slot) {
+                let inst = &self.instances[k];
+                if inst.visibility & mask == 0 {
+                    continue;
                 }
-                None => f32::INFINITY,
+                let Some(b) = self.blas.get(inst.mesh) else { continue };
+                if let Some((s, t)) = b.intersect(object_ray(inst, r, closest)) {
+                    if t < closest {
+                        (closest, found, best) = (t, t, (k, s));
+                    }
+                }
             }
+            found
         };
         let mut hit = RayHit::none();
         let found = match &self.tree {
@@ -332,12 +401,12 @@ impl<'a> Tlas<'a> {
             TlasTree::Bvh2(bvh) => bvh.ray_traverse(world, &mut hit, &mut visit),
             TlasTree::CwBvh(bvh) => bvh.ray_traverse(world, &mut hit, &mut visit),
         };
-        if !found || best.0 == u32::MAX {
+        if !found || best.0 == usize::MAX {
             return None;
         }
-        let inst = &self.instances[best.0 as usize];
+        let inst = &self.instances[best.0];
         let b = self.blas.get(inst.mesh)?;
-        let local = object_ray(inst, &world);
+        let local = object_ray(inst, &world, world.tmax);
         let uv = b.tris[best.1 as usize].compute_barycentric(&local);
         Some(Hit {
             instance: inst.index,
@@ -351,16 +420,18 @@ impl<'a> Tlas<'a> {
     /// True when any instance whose visibility shares a bit with `mask`
     /// blocks the ray within (0, tmax).
     pub fn occluded(&self, ray: &WorldRay, mask: u8) -> bool {
-        let world = Ray::new(ray.origin.into(), ray.direction.into(), 0.0, ray.tmax);
+        let world = world_ray(ray);
         let visit = |r: &Ray, slot: usize| {
-            let inst = &self.instances[slot];
-            if inst.visibility & mask == 0 {
-                return f32::INFINITY;
-            }
-            match self.blas.get(inst.mesh) {
-                // Any value below tmax stops the walk.
-                Some(b) if b.occluded(object_ray(inst, r)) => 0.0,
-                _ => f32::INFINITY,
+            let blocked = self.cluster(slot).any(|k| {
+                let inst = &self.instances[k];
+                inst.visibility & mask != 0
+                    && self.blas.get(inst.mesh).is_some_and(|b| b.occluded(object_ray(inst, r, r.tmax)))
+            });
+            // Any value below tmax stops the walk.
+            if blocked {
+                0.0
+            } else {
+                f32::INFINITY
             }
         };
         match &self.tree {
