@@ -94,7 +94,7 @@ fn camera(eye: Vec3, target: Vec3, yfov_deg: f32) -> Camera {
 }
 
 fn settings(width: u32, height: u32, spp: u32) -> RenderSettings {
-    RenderSettings { width, height, spp, max_bounces: 3, seed: 1234, frame: 1001, layer: 0, sky_visible: false, threads: 2 }
+    RenderSettings { width, height, spp, max_bounces: 3, seed: 1234, frame: 1001, layer: 0, sky_visible: false, threads: 2, indirect_clamp: 10.0 }
 }
 
 fn luminance(p: [f32; 4]) -> f32 {
@@ -580,4 +580,30 @@ fn axis_aligned_rays_hit_shared_edges_and_signed_zeros() {
             }
         }
     }
+}
+
+#[test]
+fn base_color_texture_reaches_the_albedo_aov() {
+    // Left half of the texture red, right half green, on a floor seen from above.
+    let texture = throng::scene::Texture {
+        name: "split".into(),
+        width: 2,
+        height: 1,
+        texels: vec![[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0]],
+    };
+    let mut tiles = material("tiles", Vec3::ONE, 0.0, 0.8);
+    tiles.base_color_texture = Some(0);
+    let lib = Library { meshes: vec![quad(4.0, Vec3::ZERO)], materials: vec![tiles], textures: vec![texture] };
+    let blas = BlasSet::build(&lib);
+    let scene = FrameScene {
+        instances: vec![instance(0, 0, Affine3A::IDENTITY, None, vis::ALL)],
+        camera: Camera { world_from_camera: Affine3A::from_rotation_translation(Quat::from_rotation_x(-PI / 2.0), Vec3::new(0.0, 3.0, 0.0)), yfov: 0.5 },
+        sun: None,
+        sky: Sky { radiance: Vec3::ONE },
+    };
+    let film = render_frame(&blas, &lib, &scene, &settings(32, 16, 4), None).unwrap();
+    // The camera looks down with +Y up on screen = -Z in the world; u runs along +X (image left to right).
+    let (left, right) = (film.albedo[film.index(5, 8)], film.albedo[film.index(26, 8)]); // near texel centres
+    assert!(left[0] > 0.85 && left[1] < 0.15, "{left:?}");
+    assert!(right[1] > 0.85 && right[0] < 0.15, "{right:?}");
 }

@@ -306,6 +306,20 @@ impl<'a> Integrator<'a> {
         Some(SurfaceHit { p, ng, ns, base_color, material: material_index })
     }
 
+    /// Scales an indirect contribution down to `settings.indirect_clamp`
+    /// (largest component), keeping its hue: trades a little energy for no
+    /// fireflies from the sun seen through glossy paths.
+    #[inline]
+    fn clamp_indirect(&self, c: Vec3) -> Vec3 {
+        let limit = self.settings.indirect_clamp;
+        let m = c.max_element();
+        if limit > 0.0 && m > limit {
+            c * (limit / m)
+        } else {
+            c
+        }
+    }
+
     fn material(&self, index: usize) -> &Material {
         self.lib.materials.get(index).unwrap_or(&self.default_material)
     }
@@ -329,10 +343,11 @@ impl<'a> Integrator<'a> {
                         out.alpha = 1.0;
                     }
                 } else {
-                    radiance += throughput * self.scene.sky.radiance;
+                    let mut escaped = self.scene.sky.radiance;
                     if let Some(sun) = self.sun.filter(|s| s.contains(dir)) {
-                        radiance += throughput * sun.radiance * power_heuristic(prev_bsdf_pdf, sun.pdf);
+                        escaped += sun.radiance * power_heuristic(prev_bsdf_pdf, sun.pdf);
                     }
+                    radiance += self.clamp_indirect(throughput * escaped);
                 }
                 break;
             };
@@ -376,7 +391,8 @@ impl<'a> Integrator<'a> {
                                 let weight = power_heuristic(sun.pdf, bsdf.pdf(wo, wi_local));
                                 f * wi_local.z * sun.radiance * (weight / sun.pdf)
                             };
-                            radiance += throughput * contribution;
+                            let contribution = throughput * contribution;
+                            radiance += if depth == 0 { contribution } else { self.clamp_indirect(contribution) };
                         }
                     }
                 }
@@ -434,6 +450,23 @@ mod tests {
             assert!(q.y > p.y);
             assert!((q.x - p.x).abs() <= 1e-6 * p.x.abs() + 1e-9);
         }
+    }
+
+    #[test]
+    fn texture_is_bilinear_and_wraps() {
+        let tex = Texture {
+            name: "t".into(),
+            width: 2,
+            height: 2,
+            texels: vec![[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0], [0.0, 0.0, 1.0, 1.0], [1.0, 1.0, 1.0, 1.0]],
+        };
+        // Texel centres are exact; v = 0 is the top row.
+        assert_eq!(sample_texture(&tex, Vec2::new(0.25, 0.25)), Vec4::new(1.0, 0.0, 0.0, 1.0));
+        assert_eq!(sample_texture(&tex, Vec2::new(0.75, 0.75)), Vec4::ONE);
+        // Halfway between the two top texels, and wrapping past u = 1.
+        assert_eq!(sample_texture(&tex, Vec2::new(0.5, 0.25)), Vec4::new(0.5, 0.5, 0.0, 1.0));
+        assert_eq!(sample_texture(&tex, Vec2::new(1.0, 0.25)), Vec4::new(0.5, 0.5, 0.0, 1.0));
+        assert_eq!(sample_texture(&tex, Vec2::new(-0.75, 1.25)), Vec4::new(1.0, 0.0, 0.0, 1.0));
     }
 
     #[test]

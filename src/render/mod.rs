@@ -43,6 +43,10 @@ pub struct RenderSettings {
     pub sky_visible: bool,
     /// Render threads; 0 = all cores.
     pub threads: usize,
+    /// Largest RGB component any single indirect contribution (bounce 1 and
+    /// later) may add to a sample; 0 = no clamp. Like Arnold's indirect
+    /// sample clamp: removes fireflies at the cost of a little energy.
+    pub indirect_clamp: f32,
 }
 
 impl Default for RenderSettings {
@@ -57,6 +61,7 @@ impl Default for RenderSettings {
             layer: 0,
             sky_visible: false,
             threads: 0,
+            indirect_clamp: 10.0,
         }
     }
 }
