@@ -377,7 +377,7 @@ impl<'a> Tlas<'a> {
         let world = world_ray(ray);
         // (instance position, BLAS slot) of the closest hit so far.
         let mut best = (usize::MAX, u32::MAX);
-        let mut visit = |r: &Ray, slot: usize| {
+        let visit = |r: &Ray, slot: usize| {
             // r.tmax is the closest hit so far, which prunes each BLAS walk.
             let mut closest = r.tmax;
             let mut found = f32::INFINITY;
@@ -398,8 +398,9 @@ impl<'a> Tlas<'a> {
         let mut hit = RayHit::none();
         let found = match &self.tree {
             TlasTree::Empty => false,
-            TlasTree::Bvh2(bvh) => bvh.ray_traverse(world, &mut hit, &mut visit),
-            TlasTree::CwBvh(bvh) => bvh.ray_traverse(world, &mut hit, &mut visit),
+            // `visit` moves into whichever arm runs, so it inlines into the traversal.
+            TlasTree::Bvh2(bvh) => bvh.ray_traverse(world, &mut hit, visit),
+            TlasTree::CwBvh(bvh) => bvh.ray_traverse(world, &mut hit, visit),
         };
         if !found || best.0 == usize::MAX {
             return None;
