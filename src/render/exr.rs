@@ -94,7 +94,7 @@ fn half(values: impl Iterator<Item = f32>) -> FlatSamples {
 pub fn write_layer(path: &Path, film: &Film, meta: &LayerMeta) -> Result<()> {
     let (w, h) = (film.width as usize, film.height as usize);
     let rgba = |c: usize| half(film.rgba.iter().map(move |p| p[c]));
-    let vec3 = |v: &[[f32; 3]], c: usize| half(v.iter().map(|p| p[c]).collect::<Vec<_>>().into_iter());
+    let vec3 = |v: &[[f32; 3]], c: usize| half(v.iter().map(|p| p[c]));
     let channels = AnyChannels::sort(SmallVec::from_vec(vec![
         AnyChannel::new("R", rgba(0)),
         AnyChannel::new("G", rgba(1)),
