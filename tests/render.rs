@@ -607,3 +607,26 @@ fn base_color_texture_reaches_the_albedo_aov() {
     assert!(left[0] > 0.85 && left[1] < 0.15, "{left:?}");
     assert!(right[1] > 0.85 && right[0] < 0.15, "{right:?}");
 }
+
+#[test]
+fn empty_scene_renders_sky_and_reports_progress() {
+    let lib = Library::default();
+    let blas = BlasSet::build(&lib);
+    let scene = FrameScene {
+        instances: vec![],
+        camera: camera(Vec3::ZERO, -Vec3::Z, 40.0),
+        sun: None,
+        sky: Sky { radiance: Vec3::new(0.25, 0.5, 1.0) },
+    };
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let report = |n: usize| {
+        done.fetch_max(n, std::sync::atomic::Ordering::Relaxed);
+    };
+    let set_layer = RenderSettings { sky_visible: true, ..settings(20, 10, 1) };
+    let film = render_frame(&blas, &lib, &scene, &set_layer, Some(&report)).unwrap();
+    assert!(film.rgba.iter().all(|p| *p == [0.25, 0.5, 1.0, 1.0]));
+    assert_eq!(done.into_inner(), 200);
+    // A crowd layer sees no sky: black, alpha 0.
+    let film = render_frame(&blas, &lib, &scene, &settings(20, 10, 1), None).unwrap();
+    assert!(film.rgba.iter().all(|p| *p == [0.0; 4]) && film.z.iter().all(|z| z.is_infinite()));
+}
