@@ -13,6 +13,7 @@ pub mod export;
 pub mod gltf_out;
 pub mod layers;
 pub mod pose;
+pub mod render;
 pub mod rig;
 pub mod scene;
 pub mod shot;

@@ -1,0 +1,469 @@
+//! Two-level ray acceleration: one BLAS per unique mesh (object space, built
+//! once per run and shared by every frame and layer) and a TLAS over the
+//! instances' world bounds (rebuilt per frame). The only file that names
+//! obvhs, so the BVH library can change without touching the integrator.
+
+use std::collections::HashMap;
+use std::time::{Duration, Instant};
+
+use glam::{Affine3A, Vec3, Vec3A};
+use obvhs::{
+    aabb::Aabb,
+    bvh2::{builder::build_bvh2, Bvh2},
+    cwbvh::{
+        builder::{build_cwbvh, build_cwbvh_from_tris},
+        CwBvh,
+    },
+    ray::{Ray, RayHit},
+    rt_triangle::RtTriangle,
+    triangle::Triangle,
+    BvhBuildParams,
+};
+use rayon::prelude::*;
+
+use crate::scene::{Instance, Library, Mesh};
+
+/// Bottom-level BVH of one mesh, in object space.
+pub struct Blas {
+    bvh: CwBvh,
+    /// Triangles in BVH slot order, so traversal needs no indirection.
+    tris: Vec<RtTriangle>,
+    /// Original triangle index (into `Mesh::indices / 3`) of each BVH slot.
+    triangle_index: Vec<u32>,
+}
+
+impl Blas {
+    /// Builds the BLAS of `mesh`. Triangles with out-of-range indices or
+    /// non-finite vertices are left out rather than failing, and so are
+    /// zero-area triangles and exact duplicates: they can never be the
+    /// (first) hit, and thousands of them at one point would make a
+    /// degenerate, over-deep tree.
+    pub fn build(mesh: &Mesh) -> Blas {
+        let mut tris = Vec::with_capacity(mesh.triangle_count());
+        let mut original = Vec::with_capacity(mesh.triangle_count());
+        let mut seen = std::collections::HashSet::with_capacity(mesh.triangle_count());
+        for (i, idx) in mesh.indices.chunks_exact(3).enumerate() {
+            let vertex = |k: u32| mesh.positions.get(k as usize).copied().filter(|p| p.is_finite());
+            let (Some(a), Some(b), Some(c)) = (vertex(idx[0]), vertex(idx[1]), vertex(idx[2])) else { continue };
+            if (b - a).cross(c - a) == Vec3::ZERO {
+                continue;
+            }
+            let key = [a, b, c].map(|p| p.to_array().map(f32::to_bits));
+            if !seen.insert(key) {
+                continue;
+            }
+            tris.push(Triangle { v0: a.into(), v1: b.into(), v2: c.into() });
+            original.push(i as u32);
+        }
+        if tris.is_empty() {
+            return Blas { bvh: CwBvh::default(), tris: Vec::new(), triangle_index: Vec::new() };
+        }
+        let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut Duration::default());
+        let (rt, triangle_index) = bvh
+            .primitive_indices
+            .iter()
+            .map(|&s| (RtTriangle::from(&tris[s as usize]), original[s as usize]))
+            .unzip();
+        Blas { bvh, tris: rt, triangle_index }
+    }
+
+    /// True when the mesh has no valid triangle.
+    pub fn is_empty(&self) -> bool {
+        self.tris.is_empty()
+    }
+
+    /// Number of triangles in the BVH.
+    pub fn triangle_count(&self) -> usize {
+        self.tris.len()
+    }
+
+    /// Approximate heap bytes of the BVH and its triangles.
+    pub fn bytes(&self) -> usize {
+        self.bvh.nodes.len() * std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>()
+            + self.bvh.primitive_indices.len() * 4
+            + self.tris.len() * std::mem::size_of::<RtTriangle>()
+            + self.triangle_index.len() * 4
+    }
+
+    fn bounds(&self) -> Aabb {
+        self.bvh.total_aabb
+    }
+
+    /// Closest hit in object space: (BVH slot, t).
+    #[inline]
+    fn intersect(&self, ray: Ray) -> Option<(u32, f32)> {
+        let mut hit = RayHit::none();
+        self.bvh
+            .ray_traverse(ray, &mut hit, |r, s| intersect_triangle(&self.tris[s], r))
+            .then_some((hit.primitive_id, hit.t))
+    }
+
+    #[inline]
+    fn occluded(&self, ray: Ray) -> bool {
+        !self.bvh.ray_traverse_miss(ray, |r, s| intersect_triangle(&self.tris[s], r))
+    }
+
+    /// Runs obvhs' structural checks (panics on a broken tree; tests only).
+    #[doc(hidden)]
+    pub fn validate(&self) {
+        if !self.is_empty() {
+            self.bvh.validate(&self.tris, true);
+        }
+    }
+}
+
+/// Möller-Trumbore on obvhs' `RtTriangle` layout, as `RtTriangle::intersect`
+/// but with comparisons instead of sign-bit tests: obvhs rejects barycentrics
+/// of -0.0, so a ray exactly on the shared edge of two triangles (an
+/// axis-aligned ray on a box's face diagonal) missed both and went through.
+#[inline(always)]
+fn intersect_triangle(tri: &RtTriangle, ray: &Ray) -> f32 {
+    let c = tri.v0 - ray.origin;
+    let r = ray.direction.cross(c);
+    let inv_det = 1.0 / tri.ng.dot(ray.direction);
+    let u = r.dot(tri.e2) * inv_det;
+    let v = r.dot(tri.e1) * inv_det;
+    if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && inv_det.is_finite() {
+        let t = tri.ng.dot(c) * inv_det;
+        if t >= ray.tmin && t <= ray.tmax {
+            return t;
+        }
+    }
+    f32::INFINITY
+}
+
+/// One BLAS per [`Library::meshes`] entry, indexed by `MeshId`.
+pub struct BlasSet {
+    blas: Vec<Blas>,
+    /// Wall time of the whole build.
+    pub build_time: Duration,
+}
+
+impl BlasSet {
+    /// Builds every mesh's BLAS in parallel (on the current rayon pool).
+    pub fn build(lib: &Library) -> BlasSet {
+        let start = Instant::now();
+        let blas = lib.meshes.par_iter().map(Blas::build).collect();
+        BlasSet { blas, build_time: start.elapsed() }
+    }
+
+    /// The BLAS of mesh `id`, if it exists.
+    pub fn get(&self, id: u32) -> Option<&Blas> {
+        self.blas.get(id as usize)
+    }
+
+    /// Number of BLASes (= meshes).
+    pub fn len(&self) -> usize {
+        self.blas.len()
+    }
+
+    /// True when there are no meshes.
+    pub fn is_empty(&self) -> bool {
+        self.blas.is_empty()
+    }
+
+    /// Approximate heap bytes of all BLASes.
+    pub fn bytes(&self) -> usize {
+        self.blas.iter().map(Blas::bytes).sum()
+    }
+
+    /// Validates every BLAS (tests only).
+    #[doc(hidden)]
+    pub fn validate(&self) {
+        self.blas.iter().for_each(Blas::validate);
+    }
+}
+
+/// Which obvhs tree the TLAS uses. Measured with `examples/render_bench.rs`
+/// (single-thread incoherent rays): Bvh2 builds 2-3x faster and traces as
+/// fast or faster up to ~10k instances; at ~100k instances CwBvh traces
+/// 1.5x faster, which outweighs its slower build.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TlasKind {
+    /// Binary BVH, `fastest_build`.
+    Bvh2,
+    /// Compressed 8-wide BVH, `fast_build`.
+    CwBvh,
+}
+
+impl TlasKind {
+    /// The faster tree for `instances` instances.
+    pub fn for_count(instances: usize) -> TlasKind {
+        if instances < 16_384 {
+            TlasKind::Bvh2
+        } else {
+            TlasKind::CwBvh
+        }
+    }
+}
+
+enum TlasTree {
+    Empty,
+    Bvh2(Bvh2),
+    CwBvh(CwBvh),
+}
+
+/// An instance as the TLAS stores it, in TLAS slot order.
+struct TlasInstance {
+    object_from_world: Affine3A,
+    /// Index into `FrameScene::instances`.
+    index: u32,
+    mesh: u32,
+    visibility: u8,
+}
+
+/// A ray in world space. The direction need not be normalised; `t` is in
+/// units of its length.
+#[derive(Clone, Copy, Debug)]
+pub struct WorldRay {
+    /// Origin.
+    pub origin: Vec3,
+    /// Direction.
+    pub direction: Vec3,
+    /// Largest accepted `t`.
+    pub tmax: f32,
+}
+
+/// Closest hit through both levels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Index into `FrameScene::instances`.
+    pub instance: u32,
+    /// Original triangle index within the instance's mesh.
+    pub triangle: u32,
+    /// Ray parameter.
+    pub t: f32,
+    /// Barycentric weight of vertex 1: p = v0 (1-u-v) + v1 u + v2 v.
+    pub u: f32,
+    /// Barycentric weight of vertex 2.
+    pub v: f32,
+}
+
+/// Top-level BVH over one frame's instances.
+///
+/// The tree's primitives are *clusters*: runs of instances with bit-identical
+/// world bounds. Many agents at exactly one spot (uninitialised cache rows,
+/// stacked duplicate parts) would otherwise make PLOC build a chain thousands
+/// deep, overflowing obvhs' fixed traversal stacks silently.
+pub struct Tlas<'a> {
+    blas: &'a BlasSet,
+    tree: TlasTree,
+    /// Instances grouped by cluster, clusters in TLAS slot order.
+    instances: Vec<TlasInstance>,
+    /// Per TLAS slot: range of `instances`.
+    clusters: Vec<(u32, u32)>,
+    /// World bounds per TLAS slot (kept for `validate`).
+    aabbs: Vec<Aabb>,
+    /// Wall time of the build.
+    pub build_time: Duration,
+}
+
+fn world_bounds(b: &Aabb, world_from_object: &Affine3A) -> Aabb {
+    let mut out = Aabb::INVALID;
+    for i in 0..8 {
+        let corner = Vec3A::new(
+            if i & 1 == 0 { b.min.x } else { b.max.x },
+            if i & 2 == 0 { b.min.y } else { b.max.y },
+            if i & 4 == 0 { b.min.z } else { b.max.z },
+        );
+        out.extend(world_from_object.transform_point3a(corner));
+    }
+    out
+}
+
+/// The obvhs ray of a [`WorldRay`]. Adding +0.0 turns -0.0 direction
+/// components into +0.0: obvhs derives traversal octants from sign bits, and
+/// an axis-aligned ray with a -0.0 component missed boxes it passes through.
+#[inline]
+fn world_ray(ray: &WorldRay) -> Ray {
+    Ray::new(ray.origin.into(), (ray.direction + Vec3::ZERO).into(), 0.0, ray.tmax)
+}
+
+/// Transforms a world ray into an instance's object space. The direction is
+/// not renormalised, so `t` means the same distance in both spaces.
+#[inline]
+fn object_ray(inst: &TlasInstance, r: &Ray, tmax: f32) -> Ray {
+    Ray::new(
+        inst.object_from_world.transform_point3a(r.origin),
+        // + 0.0: no -0.0 components (see `world_ray`).
+        inst.object_from_world.transform_vector3a(r.direction) + Vec3A::ZERO,
+        r.tmin,
+        tmax,
+    )
+}
+
+impl<'a> Tlas<'a> {
+    /// Builds the TLAS of `instances` with the tree kind suited to their
+    /// number. Instances with an unknown or empty mesh, a singular or
+    /// non-finite transform, or no visibility bits are left out.
+    pub fn build(blas: &'a BlasSet, instances: &[Instance]) -> Tlas<'a> {
+        Self::build_with(blas, instances, TlasKind::for_count(instances.len()))
+    }
+
+    /// Builds the TLAS with a chosen tree kind (for benchmarks).
+    pub fn build_with(blas: &'a BlasSet, instances: &[Instance], kind: TlasKind) -> Tlas<'a> {
+        let start = Instant::now();
+        // Group instances by exact world bounds, clusters in first-seen order (deterministic).
+        let mut cluster_of: HashMap<[u32; 6], usize> = HashMap::with_capacity(instances.len());
+        let mut members: Vec<Vec<TlasInstance>> = Vec::new();
+        let mut aabbs = Vec::new();
+        for (i, inst) in instances.iter().enumerate() {
+            let Some(b) = blas.get(inst.mesh) else { continue };
+            let m = &inst.world_from_object;
+            let det = m.matrix3.determinant();
+            if b.is_empty() || inst.visibility == 0 || !det.is_finite() || det.abs() < 1e-18 || !m.is_finite() {
+                continue;
+            }
+            let bounds = world_bounds(&b.bounds(), m);
+            let key = [bounds.min.x, bounds.min.y, bounds.min.z, bounds.max.x, bounds.max.y, bounds.max.z].map(f32::to_bits);
+            let c = *cluster_of.entry(key).or_insert_with(|| {
+                aabbs.push(bounds);
+                members.push(Vec::new());
+                members.len() - 1
+            });
+            members[c].push(TlasInstance {
+                object_from_world: m.inverse(),
+                index: i as u32,
+                mesh: inst.mesh,
+                visibility: inst.visibility,
+            });
+        }
+        let (tree, order) = if aabbs.is_empty() {
+            (TlasTree::Empty, Vec::new())
+        } else {
+            match kind {
+                TlasKind::Bvh2 => {
+                    let bvh = build_bvh2(&aabbs, BvhBuildParams::fastest_build(), &mut Duration::default());
+                    let order = bvh.primitive_indices.clone();
+                    (TlasTree::Bvh2(bvh), order)
+                }
+                TlasKind::CwBvh => {
+                    let bvh = build_cwbvh(&aabbs, BvhBuildParams::fast_build(), &mut Duration::default());
+                    let order = bvh.primitive_indices.clone();
+                    (TlasTree::CwBvh(bvh), order)
+                }
+            }
+        };
+        // Lay clusters out in slot order: one fewer indirection per visit.
+        let mut instances = Vec::with_capacity(instances.len());
+        let mut clusters = Vec::with_capacity(order.len());
+        for &c in &order {
+            let run = std::mem::take(&mut members[c as usize]);
+            clusters.push((instances.len() as u32, run.len() as u32));
+            instances.extend(run);
+        }
+        let aabbs = order.iter().map(|&c| aabbs[c as usize]).collect();
+        Tlas { blas, tree, instances, clusters, aabbs, build_time: start.elapsed() }
+    }
+
+    /// Number of instances in the tree.
+    pub fn len(&self) -> usize {
+        self.instances.len()
+    }
+
+    /// True when nothing can be hit.
+    pub fn is_empty(&self) -> bool {
+        self.instances.is_empty()
+    }
+
+    #[inline]
+    fn cluster(&self, slot: usize) -> std::ops::Range<usize> {
+        let (start, len) = self.clusters[slot];
+        start as usize..(start + len) as usize
+    }
+
+    /// Closest hit among instances whose visibility shares a bit with `mask`.
+    pub fn intersect(&self, ray: &WorldRay, mask: u8) -> Option<Hit> {
+        let world = world_ray(ray);
+        // (instance position, BLAS slot) of the closest hit so far.
+        let mut best = (usize::MAX, u32::MAX);
+        let visit = |r: &Ray, slot: usize| {
+            // r.tmax is the closest hit so far, which prunes each BLAS walk.
+            let mut closest = r.tmax;
+            let mut found = f32::INFINITY;
+            for k in self.cluster(slot) {
+                let inst = &self.instances[k];
+                if inst.visibility & mask == 0 {
+                    continue;
+                }
+                let Some(b) = self.blas.get(inst.mesh) else { continue };
+                if let Some((s, t)) = b.intersect(object_ray(inst, r, closest)) {
+                    if t < closest {
+                        (closest, found, best) = (t, t, (k, s));
+                    }
+                }
+            }
+            found
+        };
+        let mut hit = RayHit::none();
+        let found = match &self.tree {
+            TlasTree::Empty => false,
+            // `visit` moves into whichever arm runs, so it inlines into the traversal.
+            TlasTree::Bvh2(bvh) => bvh.ray_traverse(world, &mut hit, visit),
+            TlasTree::CwBvh(bvh) => bvh.ray_traverse(world, &mut hit, visit),
+        };
+        if !found || best.0 == usize::MAX {
+            return None;
+        }
+        let inst = &self.instances[best.0];
+        let b = self.blas.get(inst.mesh)?;
+        let local = object_ray(inst, &world, world.tmax);
+        let uv = b.tris[best.1 as usize].compute_barycentric(&local);
+        Some(Hit {
+            instance: inst.index,
+            triangle: b.triangle_index[best.1 as usize],
+            t: hit.t,
+            u: uv.x,
+            v: uv.y,
+        })
+    }
+
+    /// True when any instance whose visibility shares a bit with `mask`
+    /// blocks the ray within (0, tmax).
+    pub fn occluded(&self, ray: &WorldRay, mask: u8) -> bool {
+        let world = world_ray(ray);
+        let visit = |r: &Ray, slot: usize| {
+            let blocked = self.cluster(slot).any(|k| {
+                let inst = &self.instances[k];
+                inst.visibility & mask != 0
+                    && self.blas.get(inst.mesh).is_some_and(|b| b.occluded(object_ray(inst, r, r.tmax)))
+            });
+            // Any value below tmax stops the walk.
+            if blocked {
+                0.0
+            } else {
+                f32::INFINITY
+            }
+        };
+        match &self.tree {
+            TlasTree::Empty => false,
+            TlasTree::Bvh2(bvh) => !bvh.ray_traverse_miss(world, visit),
+            TlasTree::CwBvh(bvh) => !bvh.ray_traverse_miss(world, visit),
+        }
+    }
+
+    /// World-space bounds of everything in the tree (`None` when empty).
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let aabb = match &self.tree {
+            TlasTree::Empty => return None,
+            TlasTree::Bvh2(bvh) => *bvh.nodes.first()?.aabb(),
+            TlasTree::CwBvh(bvh) => bvh.total_aabb,
+        };
+        Some((aabb.min.into(), aabb.max.into()))
+    }
+
+    /// Runs obvhs' structural checks on the tree (panics if broken; tests only).
+    #[doc(hidden)]
+    pub fn validate(&self) {
+        let aabbs = &self.aabbs;
+        match &self.tree {
+            TlasTree::Empty => {}
+            TlasTree::Bvh2(bvh) => {
+                bvh.validate(aabbs, true, false);
+            }
+            TlasTree::CwBvh(bvh) => {
+                bvh.validate(aabbs, true);
+            }
+        }
+    }
+}

@@ -1,0 +1,229 @@
+//! OpenEXR output (the only file that names the exr crate) and PNG previews.
+//!
+//! One single-part scanline file per (layer, frame), ZIP16, increasing lines,
+//! channels (sorted): `A B G R` (half, premultiplied), `N.X N.Y N.Z` (half),
+//! `Z` (float, camera-space depth, +inf = no hit), `agent.id` (uint, 0 = no
+//! agent, else cache id + 1), `albedo.B albedo.G albedo.R` (half).
+
+use std::path::Path;
+
+use exr::prelude::{
+    f16, AnyChannel, AnyChannels, AttributeValue, Blocks, Compression, Encoding, FlatSamples, Image, Layer,
+    LayerAttributes, LineOrder, ReadChannels, ReadLayers, SmallVec, Text, WritableImage,
+};
+use glam::{Mat4, Vec3, Vec4};
+
+use super::film::Film;
+use crate::error::{write_atomic, Error, Result};
+use crate::scene::Camera;
+
+/// What `agent.id` means, written to `throng/idMapping`.
+pub const ID_MAPPING: &str = "agent.id = cache agent id + 1; 0 = no agent (sky, set or holdout)";
+
+/// Header metadata of one layer file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LayerMeta {
+    /// Shot name.
+    pub shot: String,
+    /// Layer name (also the EXR part name).
+    pub layer: String,
+    /// Shot frame.
+    pub frame: i32,
+    /// Shot seed (written as decimal text: EXR has no 64-bit integer attribute).
+    pub seed: u64,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// The `agent.id` convention.
+    pub id_mapping: String,
+    /// `worldToCamera`, Imath layout (see [`camera_matrices`]).
+    pub world_to_camera: [f32; 16],
+    /// `worldToNDC`, Imath layout (see [`camera_matrices`]).
+    pub world_to_ndc: [f32; 16],
+    /// Near clip distance (metres).
+    pub near: f32,
+    /// Far clip distance (metres).
+    pub far: f32,
+}
+
+/// The `worldToCamera` and `worldToNDC` header matrices of `camera` for a
+/// `width` x `height` image.
+///
+/// Derivation: OpenEXR camera space is RenderMan-style, left-handed, +z the
+/// view direction, y up; ours (glTF) looks down -z. So
+/// `worldToCamera = flip_z * camera_from_world` as a column-vector matrix.
+/// Imath multiplies row vectors (p' = p M) and stores M row-major; the
+/// row-vector form of a column-vector matrix is its transpose, and the
+/// row-major storage of a transpose is the column-major storage of the
+/// original: so the attribute is `to_cols_array()` of our matrix, no
+/// transposing by hand. NDC: after the divide by w (= camera depth), x and y
+/// run -1..1 across the image (x right, y up) and z -1..1 from near to far
+/// (OpenGL-style depth on a +z-forward camera).
+pub fn camera_matrices(camera: &Camera, width: u32, height: u32, near: f32, far: f32) -> ([f32; 16], [f32; 16]) {
+    let camera_from_world = Mat4::from(camera.world_from_camera.inverse());
+    let exr_camera_from_world = Mat4::from_scale(Vec3::new(1.0, 1.0, -1.0)) * camera_from_world;
+    let tan_half_y = (0.5 * camera.yfov).tan();
+    let aspect = width as f32 / height.max(1) as f32;
+    let (a, b) = if far > near { ((far + near) / (far - near), -2.0 * far * near / (far - near)) } else { (1.0, 0.0) };
+    let ndc_from_camera = Mat4::from_cols(
+        Vec4::new(1.0 / (aspect * tan_half_y), 0.0, 0.0, 0.0),
+        Vec4::new(0.0, 1.0 / tan_half_y, 0.0, 0.0),
+        Vec4::new(0.0, 0.0, a, 1.0),
+        Vec4::new(0.0, 0.0, b, 0.0),
+    );
+    (exr_camera_from_world.to_cols_array(), (ndc_from_camera * exr_camera_from_world).to_cols_array())
+}
+
+fn text(s: &str) -> Result<Text> {
+    // Text::from(&str) panics on non-Latin-1; names come from user files.
+    Text::new_or_none(s).ok_or_else(|| Error::Usage(format!("`{s}` cannot be written to an EXR header (not Latin-1)")))
+}
+
+fn exr_error(path: &Path, e: exr::error::Error) -> Error {
+    match e {
+        exr::error::Error::Io(io) => Error::io(path, io),
+        other => Error::invalid(path, format!("OpenEXR: {other}")),
+    }
+}
+
+fn half(values: impl Iterator<Item = f32>) -> FlatSamples {
+    // Clamp so very bright samples (the sun disc) stay finite in half.
+    FlatSamples::F16(values.map(|v| f16::from_f32(v.clamp(-65504.0, 65504.0))).collect())
+}
+
+/// Writes `film` atomically to `path` (temporary name, then rename).
+pub fn write_layer(path: &Path, film: &Film, meta: &LayerMeta) -> Result<()> {
+    let (w, h) = (film.width as usize, film.height as usize);
+    let rgba = |c: usize| half(film.rgba.iter().map(move |p| p[c]));
+    let vec3 = |v: &[[f32; 3]], c: usize| half(v.iter().map(|p| p[c]));
+    let channels = AnyChannels::sort(SmallVec::from_vec(vec![
+        AnyChannel::new("R", rgba(0)),
+        AnyChannel::new("G", rgba(1)),
+        AnyChannel::new("B", rgba(2)),
+        AnyChannel::new("A", rgba(3)),
+        AnyChannel::new("Z", FlatSamples::F32(film.z.clone())),
+        AnyChannel::new("N.X", vec3(&film.normal, 0)),
+        AnyChannel::new("N.Y", vec3(&film.normal, 1)),
+        AnyChannel::new("N.Z", vec3(&film.normal, 2)),
+        AnyChannel::new("albedo.R", vec3(&film.albedo, 0)),
+        AnyChannel::new("albedo.G", vec3(&film.albedo, 1)),
+        AnyChannel::new("albedo.B", vec3(&film.albedo, 2)),
+        AnyChannel::new("agent.id", FlatSamples::U32(film.agent_id.clone())),
+    ]));
+
+    let mut attrs = LayerAttributes::named(text(&meta.layer)?);
+    attrs.software_name = Some(text(&format!("throng {}", env!("CARGO_PKG_VERSION")))?);
+    attrs.near_clip_plane = Some(meta.near);
+    attrs.far_clip_plane = Some(meta.far);
+    attrs.world_to_camera = Some(meta.world_to_camera);
+    attrs.world_to_normalized_device = Some(meta.world_to_ndc);
+    let mut put = |k: &str, v: AttributeValue| -> Result<()> {
+        attrs.other.insert(text(k)?, v);
+        Ok(())
+    };
+    put("throng/shot", AttributeValue::Text(text(&meta.shot)?))?;
+    put("throng/layer", AttributeValue::Text(text(&meta.layer)?))?;
+    put("throng/frame", AttributeValue::I32(meta.frame))?;
+    put("throng/seed", AttributeValue::Text(text(&meta.seed.to_string())?))?;
+    put("throng/spp", AttributeValue::I32(meta.spp.min(i32::MAX as u32) as i32))?;
+    put("throng/zConvention", AttributeValue::Text(text("cameraDepth")?))?;
+    put("throng/idMapping", AttributeValue::Text(text(&meta.id_mapping)?))?;
+
+    let encoding = Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing };
+    let image = Image::from_layer(Layer::new((w, h), attrs, encoding, channels));
+    write_atomic(path, |out| image.write().to_buffered(out).map_err(|e| exr_error(path, e)))
+}
+
+/// Reads a file written by [`write_layer`] back (tests, resume, botinfo).
+pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| exr_error(path, e))?;
+    let layer = &image.layer_data;
+    let (w, h) = (layer.size.width(), layer.size.height());
+    let n = w * h;
+    let find = |name: &str| {
+        layer
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name.to_string() == name)
+            .ok_or_else(|| Error::invalid(path, format!("channel `{name}` is missing")).field(name.to_string()))
+    };
+    let floats = |name: &str| -> Result<Vec<f32>> {
+        let c = find(name)?;
+        let v: Vec<f32> = c.sample_data.values_as_f32().collect();
+        if v.len() != n {
+            return Err(Error::invalid(path, format!("channel `{name}` has {} samples, expected {n}", v.len())));
+        }
+        Ok(v)
+    };
+    let [r, g, b, a] = ["R", "G", "B", "A"].map(&floats);
+    let (r, g, b, a) = (r?, g?, b?, a?);
+    let [nx, ny, nz] = ["N.X", "N.Y", "N.Z"].map(&floats);
+    let (nx, ny, nz) = (nx?, ny?, nz?);
+    let [ar, ag, ab] = ["albedo.R", "albedo.G", "albedo.B"].map(&floats);
+    let (ar, ag, ab) = (ar?, ag?, ab?);
+    let z = floats("Z")?;
+    let agent_id = match &find("agent.id")?.sample_data {
+        FlatSamples::U32(v) if v.len() == n => v.clone(),
+        _ => return Err(Error::invalid(path, "channel `agent.id` is not uint").field("agent.id")),
+    };
+    let film = Film {
+        width: w as u32,
+        height: h as u32,
+        rgba: (0..n).map(|i| [r[i], g[i], b[i], a[i]]).collect(),
+        z,
+        normal: (0..n).map(|i| [nx[i], ny[i], nz[i]]).collect(),
+        albedo: (0..n).map(|i| [ar[i], ag[i], ab[i]]).collect(),
+        agent_id,
+    };
+
+    let attrs = &layer.attributes;
+    let other = |k: &str| attrs.other.get(&Text::new_or_none(k)?).or_else(|| image.attributes.other.get(&Text::new_or_none(k)?));
+    let get_text = |k: &str| match other(k) {
+        Some(AttributeValue::Text(t)) => Ok(t.to_string()),
+        _ => Err(Error::invalid(path, format!("header attribute `{k}` is missing or not text")).field(k.to_string())),
+    };
+    let get_i32 = |k: &str| match other(k) {
+        Some(AttributeValue::I32(v)) => Ok(*v),
+        _ => Err(Error::invalid(path, format!("header attribute `{k}` is missing or not int")).field(k.to_string())),
+    };
+    let seed_text = get_text("throng/seed")?;
+    let meta = LayerMeta {
+        shot: get_text("throng/shot")?,
+        layer: get_text("throng/layer")?,
+        frame: get_i32("throng/frame")?,
+        seed: seed_text
+            .parse()
+            .map_err(|_| Error::invalid(path, format!("throng/seed `{seed_text}` is not a number")).field("throng/seed"))?,
+        spp: get_i32("throng/spp")?.max(0) as u32,
+        id_mapping: get_text("throng/idMapping")?,
+        world_to_camera: attrs.world_to_camera.unwrap_or_default(),
+        world_to_ndc: attrs.world_to_normalized_device.unwrap_or_default(),
+        near: attrs.near_clip_plane.unwrap_or(0.0),
+        far: attrs.far_clip_plane.unwrap_or(0.0),
+    };
+    Ok((film, meta))
+}
+
+/// sRGB transfer function (IEC 61966-2-1).
+fn srgb_encode(linear: f32) -> u8 {
+    let c = linear.clamp(0.0, 1.0);
+    let v = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+    (v * 255.0 + 0.5) as u8
+}
+
+/// Writes an 8-bit sRGB PNG preview: premultiplied RGB over black, clamped.
+pub fn write_preview_png(path: &Path, film: &Film) -> Result<()> {
+    let pixels: Vec<u8> = film.rgba.iter().flat_map(|p| [srgb_encode(p[0]), srgb_encode(p[1]), srgb_encode(p[2])]).collect();
+    let img = image::RgbImage::from_raw(film.width, film.height, pixels)
+        .ok_or_else(|| Error::invalid(path, "film buffer does not match its size"))?;
+    write_atomic(path, |out| {
+        img.write_to(out, image::ImageFormat::Png).map_err(|e| Error::invalid(path, format!("PNG: {e}")))
+    })
+}

@@ -1,0 +1,238 @@
+//! The film (per-pixel output buffers) and the tiled, parallel frame loop.
+//!
+//! Buffers are row-major, top row first (the order EXR stores scanlines).
+//! - `rgba`: premultiplied linear RGB and alpha, the mean of all samples
+//!   (each sample already filter-weighted by its position: weight 1).
+//! - `normal`, `albedo`: means over all samples, misses contributing zero,
+//!   i.e. premultiplied by coverage like RGB.
+//! - `z`, `agent_id`: from the single sample nearest the pixel centre (never
+//!   filtered, so ids stay exact and depths are never blends of two surfaces).
+//!   `z` is camera-space depth, positive forward, +inf where that sample
+//!   missed or hit a holdout.
+//!   `agent_id` is 0 for "no agent" (sky, set, holdout), else cache id + 1.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::accel::{BlasSet, Tlas};
+use super::integrator::{Integrator, RayCounts, SampleResult};
+use super::RenderSettings;
+use crate::error::{Error, Result};
+use crate::scene::{FrameScene, Library};
+
+/// Tile edge in pixels: small enough to balance load, large enough to keep a
+/// thread on coherent rays.
+const TILE: u32 = 16;
+
+/// Timings and ray counts of one frame.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RenderStats {
+    /// TLAS build time.
+    pub tlas_build: Duration,
+    /// Time spent tracing (all threads, wall clock).
+    pub trace: Duration,
+    /// Rays traced.
+    pub rays: RayCounts,
+    /// Instances in the TLAS.
+    pub instances: usize,
+}
+
+/// The rendered image and its AOVs. See the module docs for conventions.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Film {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Premultiplied RGBA.
+    pub rgba: Vec<[f32; 4]>,
+    /// Camera-space depth (positive forward), +inf for no hit.
+    pub z: Vec<f32>,
+    /// World shading normal (coverage-weighted mean).
+    pub normal: Vec<[f32; 3]>,
+    /// Albedo (coverage-weighted mean).
+    pub albedo: Vec<[f32; 3]>,
+    /// 0 = no agent, else cache agent id + 1.
+    pub agent_id: Vec<u32>,
+}
+
+impl Film {
+    /// A black, empty film.
+    pub fn new(width: u32, height: u32) -> Film {
+        let n = width as usize * height as usize;
+        Film {
+            width,
+            height,
+            rgba: vec![[0.0; 4]; n],
+            z: vec![f32::INFINITY; n],
+            normal: vec![[0.0; 3]; n],
+            albedo: vec![[0.0; 3]; n],
+            agent_id: vec![0; n],
+        }
+    }
+
+    /// Nearest and farthest finite depth (for the EXR `near`/`far`), if any.
+    pub fn depth_range(&self) -> Option<(f32, f32)> {
+        self.z.iter().filter(|z| z.is_finite()).fold(None, |acc, &z| match acc {
+            None => Some((z, z)),
+            Some((lo, hi)) => Some((z.min(lo), z.max(hi))),
+        })
+    }
+
+    /// Index of pixel (x, y).
+    pub fn index(&self, x: u32, y: u32) -> usize {
+        y as usize * self.width as usize + x as usize
+    }
+}
+
+/// One pixel's finished values.
+#[derive(Clone, Copy)]
+struct Pixel {
+    rgba: [f32; 4],
+    z: f32,
+    normal: [f32; 3],
+    albedo: [f32; 3],
+    agent: u32,
+}
+
+fn render_pixel(integrator: &Integrator, x: u32, y: u32, spp: u32, counts: &mut RayCounts) -> Pixel {
+    let (mut rgb, mut alpha, mut normal, mut albedo) = (Vec3::ZERO, 0.0f32, Vec3::ZERO, Vec3::ZERO);
+    let mut nearest = (f32::INFINITY, SampleResult { z: f32::INFINITY, ..Default::default() });
+    // Samples summed in index order: the float result is independent of threading.
+    for s in 0..spp {
+        let (r, offset) = integrator.sample_pixel(x, y, s, counts);
+        rgb += r.rgb;
+        alpha += r.alpha;
+        normal += r.normal;
+        albedo += r.albedo;
+        let d2 = offset.length_squared();
+        if d2 < nearest.0 {
+            nearest = (d2, r);
+        }
+    }
+    let inv = 1.0 / spp as f32;
+    Pixel {
+        rgba: (rgb * inv).extend(alpha * inv).to_array(),
+        z: nearest.1.z,
+        normal: (normal * inv).to_array(),
+        albedo: (albedo * inv).to_array(),
+        agent: nearest.1.agent,
+    }
+}
+
+/// Renders one frame of one layer. `blas` must be built from `lib`.
+/// `progress`, if given, is called with the number of pixels finished so far
+/// (from render threads, in no particular order).
+pub fn render_frame(
+    blas: &BlasSet,
+    lib: &Library,
+    scene: &FrameScene,
+    settings: &RenderSettings,
+    progress: Option<&(dyn Fn(usize) + Sync)>,
+) -> Result<Film> {
+    Ok(render_frame_with_stats(blas, lib, scene, settings, progress)?.0)
+}
+
+/// As [`render_frame`], also returning timings and ray counts.
+pub fn render_frame_with_stats(
+    blas: &BlasSet,
+    lib: &Library,
+    scene: &FrameScene,
+    settings: &RenderSettings,
+    progress: Option<&(dyn Fn(usize) + Sync)>,
+) -> Result<(Film, RenderStats)> {
+    check(blas, lib, scene, settings)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(settings.threads)
+        .build()
+        .map_err(|e| Error::Usage(format!("cannot start {} render threads: {e}", settings.threads)))?;
+    pool.install(|| {
+        let tlas = Tlas::build(blas, &scene.instances);
+        let mut stats = RenderStats { tlas_build: tlas.build_time, instances: tlas.len(), ..Default::default() };
+        let integrator = Integrator::new(lib, scene, &tlas, settings);
+        let (w, h) = (settings.width, settings.height);
+        let tiles: Vec<(u32, u32)> =
+            (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE))).collect();
+        let done = AtomicUsize::new(0);
+        let start = Instant::now();
+        let rendered: Vec<(Vec<Pixel>, RayCounts)> = tiles
+            .par_iter()
+            .map(|&(x0, y0)| {
+                let mut counts = RayCounts::default();
+                let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
+                let mut pixels = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+                for y in y0..y1 {
+                    for x in x0..x1 {
+                        pixels.push(render_pixel(&integrator, x, y, settings.spp, &mut counts));
+                    }
+                }
+                if let Some(report) = progress {
+                    report(done.fetch_add(pixels.len(), Ordering::Relaxed) + pixels.len());
+                }
+                (pixels, counts)
+            })
+            .collect();
+        stats.trace = start.elapsed();
+
+        let mut film = Film::new(w, h);
+        for (&(x0, y0), (pixels, counts)) in tiles.iter().zip(&rendered) {
+            stats.rays += *counts;
+            let tw = (x0 + TILE).min(w) - x0;
+            for (k, px) in pixels.iter().enumerate() {
+                let i = film.index(x0 + k as u32 % tw, y0 + k as u32 / tw);
+                film.rgba[i] = px.rgba;
+                film.z[i] = px.z;
+                film.normal[i] = px.normal;
+                film.albedo[i] = px.albedo;
+                film.agent_id[i] = px.agent;
+            }
+        }
+        Ok((film, stats))
+    })
+}
+
+/// Rejects settings and scenes the renderer cannot trace, naming the culprit.
+fn check(blas: &BlasSet, lib: &Library, scene: &FrameScene, s: &RenderSettings) -> Result<()> {
+    let here = "frame scene";
+    if s.width == 0 || s.height == 0 {
+        return Err(Error::Usage(format!("render resolution {}x{} is empty", s.width, s.height)));
+    }
+    if s.spp == 0 {
+        return Err(Error::Usage("render spp must be at least 1".into()));
+    }
+    if blas.len() != lib.meshes.len() {
+        return Err(Error::invalid(here, format!(
+            "BLAS set has {} meshes but the library has {} (built from another library?)",
+            blas.len(),
+            lib.meshes.len()
+        )));
+    }
+    let camera = &scene.camera;
+    let fov_ok = camera.yfov > 0.0 && camera.yfov < std::f32::consts::PI; // false for NaN too
+    let det = camera.world_from_camera.matrix3.determinant();
+    if !fov_ok || !camera.world_from_camera.is_finite() || det.abs() < 1e-12 {
+        return Err(Error::invalid(here, format!("camera is degenerate (yfov {} rad)", scene.camera.yfov)).field("camera"));
+    }
+    for (i, inst) in scene.instances.iter().enumerate() {
+        let err = |msg: String| {
+            let e = Error::invalid(here, format!("instance {i}: {msg}")).field("instances");
+            match inst.agent {
+                Some(a) => e.agent(a),
+                None => e,
+            }
+        };
+        if inst.mesh as usize >= lib.meshes.len() {
+            return Err(err(format!("mesh {} does not exist ({} meshes)", inst.mesh, lib.meshes.len())));
+        }
+        if inst.material as usize >= lib.materials.len() {
+            return Err(err(format!("material {} does not exist ({} materials)", inst.material, lib.materials.len())));
+        }
+        if !inst.world_from_object.is_finite() {
+            return Err(err("transform is not finite".into()));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,481 @@
+//! Unidirectional path tracer (pbrt's "path" integrator, simplified): next-event
+//! estimation to the sun cone with MIS against BSDF sampling, the uniform sky
+//! picked up by BSDF-sampled rays, Russian roulette after a few bounces.
+//!
+//! Visibility per ray type (scene::vis): camera rays see CAMERA | HOLDOUT
+//! instances (a holdout hit ends the path with no colour and alpha 0), shadow
+//! rays are blocked by SHADOW instances, bounce rays see INDIRECT instances.
+
+use std::f32::consts::PI;
+
+use glam::{Affine3A, Mat3A, Vec2, Vec3, Vec4};
+
+use super::accel::{Hit, Tlas, WorldRay};
+use super::bsdf::{Bsdf, ShadingFrame};
+use super::sampler::Sampler;
+use super::RenderSettings;
+use crate::scene::{vis, FrameScene, Library, Material, Texture};
+
+/// Bounces before Russian roulette may end a path.
+const RR_START: u32 = 3;
+/// Sampler dimensions used per bounce (sun 2, lobe 1, direction 2, roulette 1, spare 2).
+const DIMS_PER_BOUNCE: u32 = 8;
+/// Pixel filter: a radially truncated Gaussian, importance-sampled exactly.
+pub const FILTER_RADIUS: f32 = 1.5;
+const FILTER_SIGMA: f32 = 0.5;
+
+/// What one camera sample returns.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SampleResult {
+    /// Radiance (already zero where alpha is zero, i.e. premultiplied).
+    pub rgb: Vec3,
+    /// Coverage 0 or 1.
+    pub alpha: f32,
+    /// Camera-space depth (positive forward) of the first hit; +inf for none.
+    pub z: f32,
+    /// World shading normal at the first hit (zero for none).
+    pub normal: Vec3,
+    /// Albedo (textured base colour) at the first hit (zero for none).
+    pub albedo: Vec3,
+    /// 0 = no agent, else cache agent id + 1.
+    pub agent: u32,
+}
+
+/// Ray counts, summed per tile (integers, so any thread count gives the same totals).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayCounts {
+    /// Primary rays.
+    pub camera: u64,
+    /// BSDF-sampled bounce rays.
+    pub bounce: u64,
+    /// Shadow rays to the sun.
+    pub shadow: u64,
+}
+
+impl std::ops::AddAssign for RayCounts {
+    fn add_assign(&mut self, o: RayCounts) {
+        self.camera += o.camera;
+        self.bounce += o.bounce;
+        self.shadow += o.shadow;
+    }
+}
+
+/// The sun as the integrator samples it: a uniform cone.
+#[derive(Clone, Copy, Debug)]
+struct SunLight {
+    direction: Vec3,
+    frame: ShadingFrame,
+    cos_max: f32,
+    /// Radiance inside the cone (irradiance / solid angle); for a point-like
+    /// sun (zero diameter) the irradiance itself.
+    radiance: Vec3,
+    /// 1 / solid angle; zero marks a delta sun.
+    pdf: f32,
+}
+
+impl SunLight {
+    fn new(sun: &crate::scene::Sun) -> Option<SunLight> {
+        let direction = sun.direction.normalize_or_zero();
+        if direction == Vec3::ZERO || !sun.irradiance.is_finite() || sun.irradiance.max_element() <= 0.0 {
+            return None;
+        }
+        let half = (0.5 * sun.angular_diameter).clamp(0.0, 0.5 * PI);
+        let cos_max = half.cos();
+        let solid_angle = 2.0 * PI * (1.0 - cos_max);
+        let frame = ShadingFrame::from_normal(direction);
+        if solid_angle < 1e-9 {
+            return Some(SunLight { direction, frame, cos_max: 1.0, radiance: sun.irradiance, pdf: 0.0 });
+        }
+        Some(SunLight { direction, frame, cos_max, radiance: sun.irradiance / solid_angle, pdf: 1.0 / solid_angle })
+    }
+
+    /// A direction towards the sun disc.
+    fn sample(&self, u: Vec2) -> Vec3 {
+        if self.pdf == 0.0 {
+            return self.direction;
+        }
+        let cos = 1.0 - u.x * (1.0 - self.cos_max);
+        let sin = (1.0 - cos * cos).max(0.0).sqrt();
+        let phi = 2.0 * PI * u.y;
+        self.frame.to_world(Vec3::new(sin * phi.cos(), sin * phi.sin(), cos)).normalize()
+    }
+
+    fn contains(&self, d: Vec3) -> bool {
+        self.pdf > 0.0 && d.dot(self.direction) >= self.cos_max
+    }
+}
+
+/// Power heuristic with beta = 2.
+#[inline]
+fn power_heuristic(f: f32, g: f32) -> f32 {
+    let (f2, g2) = (f * f, g * g);
+    if f2 + g2 > 0.0 {
+        f2 / (f2 + g2)
+    } else {
+        0.0
+    }
+}
+
+/// Offsets a surface point along the geometric normal `n` (pointing to the
+/// side the new ray leaves from) by a few hundred ULPs of each coordinate, so
+/// the offset grows with |p| and works hundreds of metres from the origin
+/// (Waechter and Binder, "A Fast and Robust Method for Avoiding
+/// Self-Intersection", Ray Tracing Gems, 2019).
+pub fn offset_ray_origin(p: Vec3, n: Vec3) -> Vec3 {
+    const ORIGIN: f32 = 1.0 / 32.0;
+    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
+    const INT_SCALE: f32 = 256.0;
+    let one = |p: f32, n: f32| {
+        if p.abs() < ORIGIN {
+            return p + FLOAT_SCALE * n;
+        }
+        let of = (INT_SCALE * n) as i32;
+        let of = if p < 0.0 { -of } else { of };
+        f32::from_bits((p.to_bits() as i32).wrapping_add(of) as u32)
+    };
+    Vec3::new(one(p.x, n.x), one(p.y, n.y), one(p.z, n.z))
+}
+
+/// Bilinear lookup with wrap (glTF REPEAT); v = 0 is the top row.
+pub fn sample_texture(tex: &Texture, uv: Vec2) -> Vec4 {
+    let (w, h) = (tex.width as usize, tex.height as usize);
+    if w == 0 || h == 0 || tex.texels.len() < w * h || !uv.is_finite() {
+        return Vec4::ONE;
+    }
+    let x = uv.x * w as f32 - 0.5;
+    let y = uv.y * h as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let wrap = |i: f32, n: usize| (i as i64).rem_euclid(n as i64) as usize;
+    let (xa, xb) = (wrap(x0, w), wrap(x0 + 1.0, w));
+    let (ya, yb) = (wrap(y0, h), wrap(y0 + 1.0, h));
+    let t = |x: usize, y: usize| Vec4::from_array(tex.texels[y * w + x]);
+    let top = t(xa, ya).lerp(t(xb, ya), fx);
+    let bottom = t(xa, yb).lerp(t(xb, yb), fx);
+    top.lerp(bottom, fy)
+}
+
+/// Pinhole camera: looks down its local -Z, +Y up, vertical field of view.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraRays {
+    world_from_camera: Affine3A,
+    camera_from_world: Affine3A,
+    tan_half_y: f32,
+    aspect: f32,
+    width: f32,
+    height: f32,
+}
+
+impl CameraRays {
+    /// Camera for an image of `width` x `height` pixels.
+    pub fn new(camera: &crate::scene::Camera, width: u32, height: u32) -> CameraRays {
+        CameraRays {
+            world_from_camera: camera.world_from_camera,
+            camera_from_world: camera.world_from_camera.inverse(),
+            tan_half_y: (0.5 * camera.yfov).tan(),
+            aspect: width as f32 / height.max(1) as f32,
+            width: width as f32,
+            height: height as f32,
+        }
+    }
+
+    /// The world ray (origin, unit direction) through film position
+    /// (fx, fy) in pixels, y down, (0, 0) the top-left corner.
+    pub fn ray(&self, fx: f32, fy: f32) -> (Vec3, Vec3) {
+        let sx = (2.0 * fx / self.width - 1.0) * self.aspect * self.tan_half_y;
+        let sy = (1.0 - 2.0 * fy / self.height) * self.tan_half_y;
+        let d = self.world_from_camera.transform_vector3(Vec3::new(sx, sy, -1.0)).normalize();
+        (self.world_from_camera.translation.into(), d)
+    }
+
+    /// Camera-space depth of a world point, positive in front of the camera.
+    pub fn depth(&self, p: Vec3) -> f32 {
+        -self.camera_from_world.transform_point3(p).z
+    }
+}
+
+/// Everything a render thread reads: immutable, shared by reference.
+pub struct Integrator<'a> {
+    lib: &'a Library,
+    scene: &'a FrameScene,
+    tlas: &'a Tlas<'a>,
+    /// Per instance: transpose of the inverse 3x3, to carry normals to world space.
+    world_normal_from_object: Vec<Mat3A>,
+    camera: CameraRays,
+    sun: Option<SunLight>,
+    settings: &'a RenderSettings,
+    default_material: Material,
+}
+
+/// The surface at a hit, in world space.
+struct SurfaceHit {
+    p: Vec3,
+    /// Geometric normal, flipped to face the incoming ray.
+    ng: Vec3,
+    /// Shading normal, on the same side as `ng` and facing the incoming ray.
+    ns: Vec3,
+    base_color: Vec3,
+    material: usize,
+}
+
+impl<'a> Integrator<'a> {
+    /// Prepares per-frame data. `tlas` must be built from `scene.instances`.
+    pub fn new(lib: &'a Library, scene: &'a FrameScene, tlas: &'a Tlas<'a>, settings: &'a RenderSettings) -> Self {
+        let world_normal_from_object = scene
+            .instances
+            .iter()
+            .map(|i| {
+                let m = i.world_from_object.matrix3;
+                if m.determinant().abs() > 1e-30 {
+                    m.inverse().transpose()
+                } else {
+                    Mat3A::IDENTITY
+                }
+            })
+            .collect();
+        Integrator {
+            lib,
+            scene,
+            tlas,
+            world_normal_from_object,
+            camera: CameraRays::new(&scene.camera, settings.width, settings.height),
+            sun: scene.sun.as_ref().and_then(SunLight::new),
+            settings,
+            default_material: Material::default(),
+        }
+    }
+
+    /// The camera this integrator renders through.
+    pub fn camera(&self) -> &CameraRays {
+        &self.camera
+    }
+
+    /// Traces camera sample `sample` of pixel (x, y). Returns the sample
+    /// result and its film offset from the pixel centre (for nearest-sample AOVs).
+    pub fn sample_pixel(&self, x: u32, y: u32, sample: u32, counts: &mut RayCounts) -> (SampleResult, Vec2) {
+        let s = self.settings;
+        let mut sampler = Sampler::new(s.seed, s.frame, s.layer, x, y, sample);
+        let offset = sample_filter(sampler.next_2d());
+        let (origin, dir) = self.camera.ray(x as f32 + 0.5 + offset.x, y as f32 + 0.5 + offset.y);
+        let mut result = self.trace_path(origin, dir, &mut sampler, counts);
+        if !(result.rgb.is_finite()) {
+            result.rgb = Vec3::ZERO; // one bad sample must not poison the pixel
+        }
+        (result, offset)
+    }
+
+    fn surface(&self, hit: &Hit, dir: Vec3) -> Option<SurfaceHit> {
+        let inst = self.scene.instances.get(hit.instance as usize)?;
+        let mesh = self.lib.meshes.get(inst.mesh as usize)?;
+        let tri = hit.triangle as usize * 3;
+        let idx = mesh.indices.get(tri..tri + 3)?;
+        let idx = [idx[0] as usize, idx[1] as usize, idx[2] as usize];
+        let (u, v) = (hit.u, hit.v);
+        let w = 1.0 - u - v;
+        let (p0, p1, p2) = (*mesh.positions.get(idx[0])?, *mesh.positions.get(idx[1])?, *mesh.positions.get(idx[2])?);
+        // Interpolate in object space, then transform: error scales with |p|, which the offset covers.
+        let p = inst.world_from_object.transform_point3(p0 * w + p1 * u + p2 * v);
+        let nmat = self.world_normal_from_object[hit.instance as usize];
+        let mut ng = (nmat * (p1 - p0).cross(p2 - p0)).normalize_or_zero();
+        if ng == Vec3::ZERO {
+            return None;
+        }
+        if ng.dot(dir) > 0.0 {
+            ng = -ng; // two-sided: face the incoming ray
+        }
+        let mut ns = ng;
+        if mesh.normals.len() == mesh.positions.len() {
+            let [n0, n1, n2] = idx.map(|i| mesh.normals[i]);
+            let n = (nmat * (n0 * w + n1 * u + n2 * v)).normalize_or_zero();
+            if n.is_finite() && n != Vec3::ZERO {
+                ns = if n.dot(ng) < 0.0 { -n } else { n };
+                if ns.dot(-dir) <= 1e-4 {
+                    ns = ng; // interpolated normal faces away from the viewer
+                }
+            }
+        }
+        let material_index = inst.material as usize;
+        let material = self.lib.materials.get(material_index).unwrap_or(&self.default_material);
+        let mut base_color = material.base_color;
+        if let Some(tex) = material.base_color_texture.and_then(|t| self.lib.textures.get(t as usize)) {
+            if mesh.uvs.len() == mesh.positions.len() {
+                let [t0, t1, t2] = idx.map(|i| mesh.uvs[i]);
+                base_color *= sample_texture(tex, t0 * w + t1 * u + t2 * v).truncate();
+            }
+        }
+        Some(SurfaceHit { p, ng, ns, base_color, material: material_index })
+    }
+
+    /// Scales an indirect contribution down to `settings.indirect_clamp`
+    /// (largest component), keeping its hue: trades a little energy for no
+    /// fireflies from the sun seen through glossy paths.
+    #[inline]
+    fn clamp_indirect(&self, c: Vec3) -> Vec3 {
+        let limit = self.settings.indirect_clamp;
+        let m = c.max_element();
+        if limit > 0.0 && m > limit {
+            c * (limit / m)
+        } else {
+            c
+        }
+    }
+
+    fn material(&self, index: usize) -> &Material {
+        self.lib.materials.get(index).unwrap_or(&self.default_material)
+    }
+
+    fn trace_path(&self, mut origin: Vec3, mut dir: Vec3, sampler: &mut Sampler, counts: &mut RayCounts) -> SampleResult {
+        let mut out = SampleResult { z: f32::INFINITY, ..Default::default() };
+        let mut radiance = Vec3::ZERO;
+        let mut throughput = Vec3::ONE;
+        let mut prev_bsdf_pdf = 0.0f32;
+        counts.camera += 1;
+        for depth in 0.. {
+            let mask = if depth == 0 { vis::CAMERA | vis::HOLDOUT } else { vis::INDIRECT };
+            let hit = self.tlas.intersect(&WorldRay { origin, direction: dir, tmax: f32::INFINITY }, mask);
+            let Some(hit) = hit else {
+                if depth == 0 {
+                    if self.settings.sky_visible {
+                        radiance += self.scene.sky.radiance;
+                        if let Some(sun) = self.sun.filter(|s| s.contains(dir)) {
+                            radiance += sun.radiance;
+                        }
+                        out.alpha = 1.0;
+                    }
+                } else {
+                    let mut escaped = self.scene.sky.radiance;
+                    if let Some(sun) = self.sun.filter(|s| s.contains(dir)) {
+                        escaped += sun.radiance * power_heuristic(prev_bsdf_pdf, sun.pdf);
+                    }
+                    radiance += self.clamp_indirect(throughput * escaped);
+                }
+                break;
+            };
+            let Some(surface) = self.surface(&hit, dir) else { break };
+            if depth == 0 {
+                let inst = &self.scene.instances[hit.instance as usize];
+                if inst.visibility & vis::HOLDOUT != 0 {
+                    return SampleResult { z: f32::INFINITY, ..Default::default() };
+                }
+                out.alpha = 1.0;
+                out.z = self.camera.depth(surface.p);
+                out.normal = surface.ns;
+                out.albedo = surface.base_color;
+                out.agent = inst.agent.map_or(0, |a| a.wrapping_add(1));
+            }
+
+            let material = self.material(surface.material);
+            let bsdf = Bsdf::new(surface.base_color, material.metallic, material.roughness);
+            let frame = ShadingFrame::from_normal(surface.ns);
+            let wo = frame.to_local(-dir);
+            sampler.set_dimension(2 + depth * DIMS_PER_BOUNCE);
+
+            // Next-event estimation: one shadow ray towards the sun disc.
+            let u_sun = sampler.next_2d();
+            if let Some(sun) = &self.sun {
+                let wi = sun.sample(u_sun);
+                if wi.dot(surface.ng) > 0.0 {
+                    let wi_local = frame.to_local(wi);
+                    let f = bsdf.eval(wo, wi_local);
+                    if f != Vec3::ZERO {
+                        counts.shadow += 1;
+                        let shadow = WorldRay {
+                            origin: offset_ray_origin(surface.p, surface.ng),
+                            direction: wi,
+                            tmax: f32::INFINITY,
+                        };
+                        if !self.tlas.occluded(&shadow, vis::SHADOW) {
+                            let contribution = if sun.pdf == 0.0 {
+                                f * wi_local.z * sun.radiance
+                            } else {
+                                let weight = power_heuristic(sun.pdf, bsdf.pdf(wo, wi_local));
+                                f * wi_local.z * sun.radiance * (weight / sun.pdf)
+                            };
+                            let contribution = throughput * contribution;
+                            radiance += if depth == 0 { contribution } else { self.clamp_indirect(contribution) };
+                        }
+                    }
+                }
+            }
+
+            if depth >= self.settings.max_bounces {
+                break;
+            }
+            let u_lobe = sampler.next_1d();
+            let u_dir = sampler.next_2d();
+            let Some(bs) = bsdf.sample(wo, u_lobe, u_dir) else { break };
+            let wi = frame.to_world(bs.wi);
+            if wi.dot(surface.ng) <= 0.0 {
+                break; // below the true surface: would leak through
+            }
+            throughput *= bs.weight;
+            prev_bsdf_pdf = bs.pdf;
+            if depth + 1 >= RR_START {
+                let survive = throughput.max_element().min(0.95);
+                if sampler.next_1d() >= survive {
+                    break;
+                }
+                throughput /= survive;
+            }
+            if throughput == Vec3::ZERO {
+                break;
+            }
+            counts.bounce += 1;
+            origin = offset_ray_origin(surface.p, surface.ng);
+            dir = wi.normalize();
+        }
+        out.rgb = radiance;
+        out
+    }
+}
+
+/// Maps a uniform 2D point to a film offset (pixels) distributed as the
+/// truncated Gaussian filter, so every sample has weight 1 (filter
+/// importance sampling): inverse CDF of the radial distribution.
+pub fn sample_filter(u: Vec2) -> Vec2 {
+    let tail = 1.0 - (-FILTER_RADIUS * FILTER_RADIUS / (2.0 * FILTER_SIGMA * FILTER_SIGMA)).exp();
+    let r = FILTER_SIGMA * (-2.0 * (1.0 - u.x * tail).ln()).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec2::new(r * phi.cos(), r * phi.sin())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn offset_moves_off_the_surface_far_from_origin() {
+        for p in [Vec3::new(500.0, 0.0, -500.0), Vec3::new(0.01, 0.0, 0.02), Vec3::new(-3000.0, 1.0, 7.0)] {
+            let q = offset_ray_origin(p, Vec3::Y);
+            assert!(q.y > p.y);
+            assert!((q.x - p.x).abs() <= 1e-6 * p.x.abs() + 1e-9);
+        }
+    }
+
+    #[test]
+    fn texture_is_bilinear_and_wraps() {
+        let tex = Texture {
+            name: "t".into(),
+            width: 2,
+            height: 2,
+            texels: vec![[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0], [0.0, 0.0, 1.0, 1.0], [1.0, 1.0, 1.0, 1.0]],
+        };
+        // Texel centres are exact; v = 0 is the top row.
+        assert_eq!(sample_texture(&tex, Vec2::new(0.25, 0.25)), Vec4::new(1.0, 0.0, 0.0, 1.0));
+        assert_eq!(sample_texture(&tex, Vec2::new(0.75, 0.75)), Vec4::ONE);
+        // Halfway between the two top texels, and wrapping past u = 1.
+        assert_eq!(sample_texture(&tex, Vec2::new(0.5, 0.25)), Vec4::new(0.5, 0.5, 0.0, 1.0));
+        assert_eq!(sample_texture(&tex, Vec2::new(1.0, 0.25)), Vec4::new(0.5, 0.5, 0.0, 1.0));
+        assert_eq!(sample_texture(&tex, Vec2::new(-0.75, 1.25)), Vec4::new(1.0, 0.0, 0.0, 1.0));
+    }
+
+    #[test]
+    fn filter_stays_in_radius() {
+        for i in 0..64 {
+            for j in 0..64 {
+                let o = sample_filter(Vec2::new(i as f32 / 64.0, j as f32 / 64.0));
+                assert!(o.length() <= FILTER_RADIUS + 1e-4);
+            }
+        }
+    }
+}
