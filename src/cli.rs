@@ -207,6 +207,15 @@ pub struct RenderArgs {
     /// Skip frames whose EXR already exists and reads back whole.
     #[arg(long)]
     pub resume: bool,
+    /// Layer manifest (default: `<shot dir>/<shot name>.layers.json`, from `throng layers`).
+    #[arg(long)]
+    pub manifest: Option<PathBuf>,
+    /// Also write a tone-mapped PNG preview beside each EXR.
+    #[arg(long)]
+    pub png: bool,
+    /// Image size override, e.g. 480x270 (default: the shot's).
+    #[arg(long)]
+    pub resolution: Option<String>,
 }
 
 /// `throng comp`.
@@ -273,7 +282,7 @@ pub fn run(cli: Cli) -> Result<()> {
 
         Verb::Layers(args) => crate::commands::cmd_layers(&args),
 
-        Verb::Render(_args) => Err(Error::NotBuilt("render")),
+        Verb::Render(args) => crate::commands::cmd_render(&args),
 
         Verb::Comp(_args) => Err(Error::NotBuilt("comp")),
 

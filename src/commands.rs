@@ -463,3 +463,67 @@ pub fn cmd_layers(args: &crate::cli::LayersArgs) -> Result<()> {
     }
     Ok(())
 }
+
+/// Parses `WIDTHxHEIGHT`.
+pub fn parse_resolution(s: &str) -> Result<[u32; 2]> {
+    let bad = || Error::Usage(format!("bad resolution `{s}` (use e.g. 480x270)"));
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h): (u32, u32) = (w.trim().parse().map_err(|_| bad())?, h.trim().parse().map_err(|_| bad())?);
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(bad());
+    }
+    Ok([w, h])
+}
+
+/// `throng render`.
+pub fn cmd_render(args: &crate::cli::RenderArgs) -> Result<()> {
+    use crate::render::job::{self, RenderJob, FULL_LAYER};
+    let crowd = ShotCrowd::load(&args.shot)?;
+    let manifest_path = args
+        .manifest
+        .clone()
+        .unwrap_or_else(|| crate::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
+    let manifest = if manifest_path.exists() {
+        Some(crate::layers::read_manifest(&manifest_path)?)
+    } else if args.layer == FULL_LAYER {
+        None
+    } else {
+        return Err(Error::Usage(format!(
+            "no layer manifest at {}: run `throng layers {}` first (or render --layer full)",
+            manifest_path.display(),
+            args.shot.display()
+        )));
+    };
+    if let Some(m) = &manifest {
+        if m.shot != crowd.shot.name {
+            return Err(Error::invalid(&manifest_path, format!("manifest is for shot `{}`, not `{}`", m.shot, crowd.shot.name)));
+        }
+    }
+    let layers = match (args.layer.as_str(), &manifest) {
+        ("all", Some(m)) => job::all_layers(m),
+        (l, _) => vec![l.to_string()],
+    };
+    let frames = match &args.frames {
+        Some(f) => crate::shot::parse_frame_list(f).map_err(Error::Usage)?,
+        None => crowd.shot.frames.iter().collect(),
+    };
+    let job = RenderJob {
+        layers,
+        frames,
+        spp: args.spp.unwrap_or(crowd.shot.render.spp).max(1),
+        threads: args.threads.unwrap_or(0),
+        out: args.out.clone(),
+        resume: args.resume,
+        png: args.png,
+        resolution: args.resolution.as_deref().map(parse_resolution).transpose()?,
+    };
+    let done = job::run(&crowd, manifest.as_ref(), &job)?;
+    let rendered = done.iter().filter(|d| !d.skipped).count();
+    let secs: f64 = done.iter().map(|d| d.seconds).sum();
+    println!(
+        "rendered {rendered} layer-frames ({} skipped as complete) in {secs:.1} s into {}",
+        done.len() - rendered,
+        args.out.display()
+    );
+    Ok(())
+}

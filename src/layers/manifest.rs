@@ -26,15 +26,8 @@ pub enum Ranking {
     PerFrame,
 }
 
-/// Level of detail.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Lod {
-    /// Every cast part.
-    Full,
-    /// One box per part (the rig's proxy boxes), wearing the same materials.
-    Proxy,
-}
+/// Level of detail (shared with posing).
+pub use crate::pose::Lod;
 
 /// A ray type an object is visible to; see [`crate::scene::vis`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -15,6 +15,7 @@ pub mod bsdf;
 pub mod exr;
 pub mod film;
 pub mod integrator;
+pub mod job;
 pub mod sampler;
 
 pub use accel::{BlasSet, Tlas};

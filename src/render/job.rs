@@ -1,0 +1,222 @@
+//! A render job: the frames and layers of a shot, each traced from the cast
+//! crowd and the layer manifest into `OUT/<layer>/<shot>.<layer>.<frame:04>.exr`.
+//!
+//! The manifest decides every instance's visibility; this module never
+//! re-ranks. BLASes are built once per run and shared by every frame and
+//! layer; only the TLAS is rebuilt per (frame, layer).
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::error::{Error, Result};
+use crate::layers::Manifest;
+use crate::pose::{Lod, ShotCrowd};
+use crate::render::{exr, film::render_frame_with_stats, BlasSet, RenderSettings};
+use crate::scene::{vis, FrameScene, Instance};
+
+/// The render that needs no manifest: the set and every agent, fully visible.
+pub const FULL_LAYER: &str = "full";
+
+/// What to render.
+#[derive(Debug, Clone)]
+pub struct RenderJob {
+    /// Layer names in render order (`set`, crowd layers, or `full`).
+    pub layers: Vec<String>,
+    /// Shot frames.
+    pub frames: Vec<i32>,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Threads (0 = all cores).
+    pub threads: usize,
+    /// Output directory.
+    pub out: PathBuf,
+    /// Skip frames whose EXR exists and reads back whole.
+    pub resume: bool,
+    /// Also write a PNG preview beside each EXR.
+    pub png: bool,
+    /// Image size override (width, height); the shot's when `None`.
+    pub resolution: Option<[u32; 2]>,
+}
+
+/// One file the job wrote or skipped.
+#[derive(Debug, Clone)]
+pub struct RenderedLayer {
+    /// Layer name.
+    pub layer: String,
+    /// Shot frame.
+    pub frame: i32,
+    /// The EXR.
+    pub path: PathBuf,
+    /// Whether `--resume` found it complete and skipped it.
+    pub skipped: bool,
+    /// Seconds spent (0 when skipped).
+    pub seconds: f64,
+    /// Instances traced.
+    pub instances: usize,
+}
+
+/// `OUT/<layer>/<shot>.<layer>.<frame:04>.exr`.
+pub fn layer_path(out: &Path, shot: &str, layer: &str, frame: i32) -> PathBuf {
+    out.join(layer).join(format!("{shot}.{layer}.{frame:04}.exr"))
+}
+
+/// The instances of one (frame, layer) render.
+pub fn frame_scene(crowd: &ShotCrowd, manifest: Option<&Manifest>, layer: &str, frame: i32) -> Result<FrameScene> {
+    let block = crowd.agents_at(frame)?;
+    let mut instances: Vec<Instance> = Vec::new();
+    let set_bits = if layer == FULL_LAYER {
+        Some(vis::ALL)
+    } else {
+        let m = manifest.ok_or_else(|| Error::Usage(format!("layer `{layer}` needs a layer manifest")))?;
+        m.set_visibility(layer)
+    };
+    for a in block.agents.iter().filter(|a| crowd.renders(a)) {
+        let how = match manifest {
+            _ if layer == FULL_LAYER => {
+                Some((vis::ALL, manifest.and_then(|m| m.agent(a.id)).map_or(Lod::Full, |r| r.lod_at(frame))))
+            }
+            Some(m) => m.agent_visibility(layer, a.id, frame),
+            None => None,
+        };
+        if let Some((bits, lod)) = how {
+            if bits != 0 {
+                crowd.agent_instances(a, lod, bits, &mut instances)?;
+            }
+        }
+    }
+    if let Some(bits) = set_bits.filter(|&b| b != 0) {
+        instances.extend(crowd.set.iter().map(|i| Instance { visibility: bits, ..*i }));
+    }
+    Ok(FrameScene { instances, camera: crowd.camera(frame)?, sun: crowd.shot.sun(), sky: crowd.shot.sky() })
+}
+
+/// Every layer a manifest renders, back to front (`set`, then crowd layers far to near).
+pub fn all_layers(manifest: &Manifest) -> Vec<String> {
+    manifest.comp_order.clone()
+}
+
+/// A one-line progress display on a terminal; silent otherwise.
+struct Progress {
+    on: bool,
+    start: Instant,
+    total: usize,
+}
+
+impl Progress {
+    fn show(&self, done: usize, frame: i32, layer: &str, frac: f64) {
+        if !self.on {
+            return;
+        }
+        let progress = (done as f64 + frac) / self.total.max(1) as f64;
+        let elapsed = self.start.elapsed().as_secs_f64();
+        let eta = if progress > 0.0 { elapsed / progress - elapsed } else { 0.0 };
+        eprint!(
+            "\r\x1b[2Kframe {frame} layer {layer:<8} [{}/{}] {:>5.1}%  elapsed {:.0}s  ETA {:.0}s",
+            done + 1,
+            self.total,
+            progress * 100.0,
+            elapsed,
+            eta
+        );
+    }
+    fn finish(&self) {
+        if self.on {
+            eprintln!();
+        }
+    }
+}
+
+/// Renders every (frame, layer) of the job.
+pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> Result<Vec<RenderedLayer>> {
+    let [w, h] = job.resolution.unwrap_or(crowd.shot.render.resolution);
+    for layer in &job.layers {
+        let known = layer == FULL_LAYER || manifest.is_some_and(|m| m.comp_order.contains(layer));
+        if !known {
+            let names = manifest.map(|m| m.comp_order.join(", ")).unwrap_or_default();
+            return Err(Error::Usage(format!("no layer `{layer}` in the manifest (layers: {names}, or `full`)")));
+        }
+    }
+    for &f in &job.frames {
+        if !crowd.shot.frames.contains(f) {
+            return Err(Error::Usage(format!(
+                "frame {f} is outside shot {} ({}-{})",
+                crowd.shot.name, crowd.shot.frames.start, crowd.shot.frames.end
+            )));
+        }
+    }
+    let blas = BlasSet::build(crowd.library());
+    let progress = Progress {
+        on: std::io::stderr().is_terminal(),
+        start: Instant::now(),
+        total: job.frames.len() * job.layers.len(),
+    };
+    let mut out = Vec::new();
+    for &frame in &job.frames {
+        for layer in &job.layers {
+            let path = layer_path(&job.out, &crowd.shot.name, layer, frame);
+            if job.resume && exr::read_layer(&path).is_ok() {
+                out.push(RenderedLayer { layer: layer.clone(), frame, path, skipped: true, seconds: 0.0, instances: 0 });
+                continue;
+            }
+            let started = Instant::now();
+            progress.show(out.len(), frame, layer, 0.0);
+            let scene = frame_scene(crowd, manifest, layer, frame)?;
+            // The layer index keys the random streams, so layers are
+            // independent samples; `full` and `set` get fixed indices.
+            let index = manifest
+                .and_then(|m| m.comp_order.iter().position(|l| l == layer))
+                .unwrap_or(u32::MAX as usize) as u32;
+            let settings = RenderSettings {
+                width: w,
+                height: h,
+                spp: job.spp,
+                max_bounces: crowd.shot.render.max_bounces,
+                seed: crowd.shot.seed,
+                frame: frame as i64,
+                layer: index,
+                sky_visible: layer == FULL_LAYER || manifest.is_some_and(|m| *layer == m.set.name),
+                threads: job.threads,
+                ..RenderSettings::default()
+            };
+            let pixels = (w as usize * h as usize).max(1);
+            let done = out.len();
+            let report = |p: usize| progress.show(done, frame, layer, p as f64 / pixels as f64);
+            let (film, _stats) = render_frame_with_stats(
+                &blas,
+                crowd.library(),
+                &scene,
+                &settings,
+                if progress.on { Some(&report) } else { None },
+            )?;
+            let (near, far) = film.depth_range().unwrap_or((0.1, 1000.0));
+            let (world_to_camera, world_to_ndc) = exr::camera_matrices(&scene.camera, w, h, near, far);
+            let meta = exr::LayerMeta {
+                shot: crowd.shot.name.clone(),
+                layer: layer.clone(),
+                frame,
+                seed: crowd.shot.seed,
+                spp: job.spp,
+                id_mapping: exr::ID_MAPPING.to_string(),
+                world_to_camera,
+                world_to_ndc,
+                near,
+                far,
+            };
+            exr::write_layer(&path, &film, &meta)?;
+            if job.png {
+                exr::write_preview_png(&path.with_extension("png"), &film)?;
+            }
+            out.push(RenderedLayer {
+                layer: layer.clone(),
+                frame,
+                path,
+                skipped: false,
+                seconds: started.elapsed().as_secs_f64(),
+                instances: scene.instances.len(),
+            });
+        }
+    }
+    progress.finish();
+    Ok(out)
+}
