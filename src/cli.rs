@@ -46,6 +46,12 @@ pub struct DemoArgs {
     /// Where to write the demo's outputs.
     #[arg(long, default_value = "out/demo")]
     pub out: PathBuf,
+    /// The shot (default: the bundled demo/shot.toml).
+    #[arg(long)]
+    pub shot: Option<PathBuf>,
+    /// Samples per pixel for the demo renders.
+    #[arg(long, default_value_t = 16)]
+    pub spp: u32,
 }
 
 /// `throng cache ...`.
@@ -253,7 +259,7 @@ pub struct ExportArgs {
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> Result<()> {
     match cli.verb {
-        Verb::Demo(_args) => Err(Error::NotBuilt("demo")),
+        Verb::Demo(args) => crate::commands::cmd_demo(&args),
 
         Verb::Cache(CacheVerb::Info(args)) => crate::cache::cmd_info(&args),
 

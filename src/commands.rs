@@ -276,6 +276,16 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
     Ok(out)
 }
 
+/// Fills in each agent's layer and LOD from a layer manifest.
+pub fn add_layers(infos: &mut [BotInfo], manifest: &crate::layers::Manifest) {
+    for b in infos {
+        if let Some(a) = manifest.agent(b.id) {
+            b.layer = manifest.layers.get(a.layer).map(|l| l.name.clone());
+            b.lod = Some(format!("{:?}", a.lod_at(b.shot_frame)).to_lowercase());
+        }
+    }
+}
+
 /// The aligned, botInfo-style block.
 pub fn format_bot_info(b: &BotInfo) -> String {
     let mut o = String::new();
@@ -322,7 +332,12 @@ pub fn cmd_botinfo(args: &BotinfoArgs) -> Result<()> {
             crowd.shot.name, crowd.shot.frames.start, crowd.shot.frames.end
         )));
     }
-    let infos = bot_info(&crowd, &args.ids, frame)?;
+    let mut infos = bot_info(&crowd, &args.ids, frame)?;
+    let manifest_path = crate::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name);
+    if manifest_path.exists() {
+        let manifest = crate::layers::read_manifest(&manifest_path)?;
+        add_layers(&mut infos, &manifest);
+    }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&infos).map_err(|e| Error::Usage(e.to_string()))?);
     } else {
@@ -525,5 +540,110 @@ pub fn cmd_render(args: &crate::cli::RenderArgs) -> Result<()> {
         done.len() - rendered,
         args.out.display()
     );
+    Ok(())
+}
+
+/// `throng demo`: every stage on the bundled demo shot.
+pub fn cmd_demo(args: &crate::cli::DemoArgs) -> Result<()> {
+    use crate::render::job::{self, RenderJob, FULL_LAYER};
+    use std::time::Instant;
+    let started = Instant::now();
+    let shot_path = match &args.shot {
+        Some(p) => p.clone(),
+        None => {
+            // From the repository, or wherever the binary was built from.
+            let here = std::path::PathBuf::from("demo/shot.toml");
+            if here.exists() { here } else { Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/shot.toml") }
+        }
+    };
+    let out = &args.out;
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    println!("throng demo: {}", shot_path.display());
+
+    let t = Instant::now();
+    let crowd = ShotCrowd::load(&shot_path)?;
+    let info = crate::cache::info(&crowd.cache)?;
+    println!(
+        "  cache    {} agents over cache frames {}-{}, {} rigs, {} cycles",
+        info.agents,
+        info.frame_first.unwrap_or(0),
+        info.frame_last.unwrap_or(0),
+        info.rigs.len(),
+        info.cycles.len()
+    );
+    let stats = cast_stats(&crowd);
+    println!(
+        "  cast     {} agents, {} part instances of {} unique parts and {} materials ({} shared vs {} copied)  [{:.2} s]",
+        stats.agents,
+        stats.part_instances,
+        stats.unique_parts,
+        stats.unique_materials,
+        mib(stats.unique_geometry_bytes),
+        mib(stats.copied_geometry_bytes),
+        t.elapsed().as_secs_f64()
+    );
+
+    let t = Instant::now();
+    let layer_args = crate::cli::LayersArgs {
+        shot: shot_path.clone(),
+        count: None,
+        cutoffs: None,
+        budget: None,
+        ref_frame: None,
+        per_frame: true,
+        map: None,
+        out: None,
+        json: false,
+        lod_px: None,
+        lod_per_frame: false,
+    };
+    let manifest = build_layers(&crowd, &layer_args)?;
+    let manifest_path = out.join(format!("{}.layers.json", crowd.shot.name));
+    crate::layers::write_manifest(&manifest_path, &manifest)?;
+    let map = out.join("layers_map.png");
+    crate::layers::draw_map(&manifest, &crate::layers::MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, &map)?;
+    println!(
+        "  layers   {} crowd layers + set, ranked at frame {}: 0 pops fixed (per-frame ranking would pop {} agents)  [{:.2} s]",
+        manifest.layers.len(),
+        manifest.ref_frame,
+        manifest.pops.agents_changed,
+        t.elapsed().as_secs_f64()
+    );
+
+    let t = Instant::now();
+    let glb = out.join(format!("{}.{}.glb", crowd.shot.name, manifest.ref_frame));
+    let s = crate::export::export_frame(&crowd, manifest.ref_frame, None, &glb)?;
+    println!("  export   {} agents, {} mesh nodes sharing {} meshes  [{:.2} s]", s.agents, s.mesh_nodes, s.meshes, t.elapsed().as_secs_f64());
+
+    let t = Instant::now();
+    let f = crowd.shot.frames;
+    let mut layers = job::all_layers(&manifest);
+    layers.push(FULL_LAYER.to_string());
+    let render = RenderJob {
+        layers,
+        frames: vec![f.start, manifest.ref_frame, f.end],
+        spp: args.spp,
+        threads: 0,
+        out: out.join("render"),
+        resume: false,
+        png: true,
+        resolution: None,
+    };
+    let done = job::run(&crowd, Some(&manifest), &render)?;
+    let [w, h] = crowd.shot.render.resolution;
+    println!(
+        "  render   {} layer-frames at {w}x{h}, {} spp  [{:.1} s]",
+        done.len(),
+        render.spp,
+        t.elapsed().as_secs_f64()
+    );
+
+    println!("done in {:.1} s. Wrote under {}:", started.elapsed().as_secs_f64(), out.display());
+    println!("  {}                 the layer manifest (docs/layers.md)", manifest_path.display());
+    println!("  {}                      the layer map: who is in which layer", map.display());
+    println!("  {}                 frame {} as glTF (open in Blender)", glb.display(), manifest.ref_frame);
+    println!("  {}/<layer>/{}.<layer>.<frame>.exr  multi-channel EXR layers, PNG previews beside them", render.out.display(), crowd.shot.name);
+    println!("Look at the PNGs, or the EXRs with `exrheader FILE` (Debian: openexr) or any compositor.");
+    println!("Ask about an agent: throng botinfo {} 78 --frame {}", shot_path.display(), manifest.ref_frame);
     Ok(())
 }
