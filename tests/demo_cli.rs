@@ -1,0 +1,120 @@
+//! The verbs on the bundled demo shot, through the library and the binary.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use throng::cache::CacheReader;
+use throng::cli::LayersArgs;
+use throng::commands::build_layers;
+use throng::pose::ShotCrowd;
+use throng::shot::Shot;
+
+fn demo_shot() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/shot.toml")
+}
+
+fn layer_args(per_frame: bool) -> LayersArgs {
+    LayersArgs {
+        shot: demo_shot(),
+        count: None,
+        cutoffs: None,
+        budget: None,
+        ref_frame: None,
+        per_frame,
+        map: None,
+        out: None,
+        json: false,
+        lod_px: None,
+        lod_per_frame: false,
+    }
+}
+
+fn throng(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_throng")).args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn fixed_layers_do_not_pop_and_per_frame_ranking_does() {
+    let crowd = ShotCrowd::load(&demo_shot()).unwrap();
+    let fixed = build_layers(&crowd, &layer_args(false)).unwrap();
+    assert_eq!(fixed.pops.agents_changed, 0);
+    assert_eq!(fixed.ref_frame, crowd.shot.frames.middle());
+    let per_frame = build_layers(&crowd, &layer_args(true)).unwrap();
+    assert!(per_frame.pops.agents_changed > 0, "the demo's walkers cross layer boundaries");
+    // Layers are ordered by distance, nearest first.
+    for w in fixed.layers.windows(2) {
+        assert!(w[0].distance_max_m.unwrap() <= w[1].distance_min_m.unwrap() + 1e-3, "{} then {}", w[0].name, w[1].name);
+    }
+}
+
+#[test]
+fn removing_an_agent_moves_no_other_agent_between_layers() {
+    let crowd = ShotCrowd::load(&demo_shot()).unwrap();
+    let before = build_layers(&crowd, &layer_args(false)).unwrap();
+    // Remove the agent on a layer boundary: the nearest of layer 1.
+    let victim = before
+        .agents
+        .iter()
+        .filter(|a| a.layer == 1)
+        .min_by(|a, b| a.distance_m.total_cmp(&b.distance_m))
+        .unwrap()
+        .id;
+    let mut shot = Shot::load(&demo_shot()).unwrap();
+    shot.removed.push(victim);
+    let cache = CacheReader::open(&shot.cache.path).unwrap();
+    let removed = ShotCrowd::new(shot, cache).unwrap();
+    let after = build_layers(&removed, &layer_args(false)).unwrap();
+    for a in &before.agents {
+        let b = after.agent(a.id).unwrap();
+        assert_eq!(a.layer, b.layer, "agent {} moved when {victim} was removed", a.id);
+        assert_eq!(a.lod, b.lod);
+        assert_eq!(b.removed, a.id == victim);
+    }
+    // The removed agent is in no render.
+    for l in &after.comp_order {
+        assert!(after.agent_visibility(l, victim, after.ref_frame).is_none());
+    }
+}
+
+#[test]
+fn botinfo_prints_the_block_and_names_nearest_ids() {
+    let shot = demo_shot();
+    let shot = shot.to_str().unwrap();
+    let (code, out, err) = throng(&["botinfo", shot, "78", "--frame", "1010"]);
+    assert_eq!(code, 0, "{err}");
+    for key in ["Robot ID  78", "Rig", "Cycle", "Frame", "Scheme", "Height", "Distance", "head"] {
+        assert!(out.contains(key), "missing {key} in\n{out}");
+    }
+    let (code, _, err) = throng(&["botinfo", shot, "99999"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("agent 99999 is not in shot demo") && err.contains("nearest ids"), "{err}");
+    let (code, out, _) = throng(&["botinfo", shot, "78", "--json"]);
+    assert_eq!(code, 0);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v[0]["id"], 78);
+}
+
+#[test]
+fn cast_stats_show_instancing() {
+    let (code, out, err) = throng(&["cast", demo_shot().to_str().unwrap(), "--stats", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let s = &v["stats"];
+    assert!(s["copied_geometry_bytes"].as_u64().unwrap() > 10 * s["unique_geometry_bytes"].as_u64().unwrap());
+    assert_eq!(v["agents"].as_array().unwrap().len(), s["agents"].as_u64().unwrap() as usize);
+}
+
+#[test]
+fn verbs_report_bad_input_with_exit_code_2() {
+    let (code, _, err) = throng(&["cast", "no/such/shot.toml"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("no/such/shot.toml"), "{err}");
+    let (code, _, err) = throng(&["export", demo_shot().to_str().unwrap(), "--frame", "5", "--out", "/tmp/x.glb"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("outside shot demo"), "{err}");
+}
