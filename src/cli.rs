@@ -103,7 +103,8 @@ pub struct ImportArgs {
     /// Metres walked per cycle; the cycle frame advances by distance / stride.
     #[arg(long)]
     pub stride: Option<f32>,
-    /// Rig glTF to read the cycle's length and stride (root travel) from.
+    /// Rig glTF to read the cycle's length (frames at 24 fps) and stride (root
+    /// travel) from; its rig name must match --rig. --stride and --cycle-length override it.
     #[arg(long)]
     pub rig_file: Option<PathBuf>,
 }

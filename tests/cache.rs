@@ -436,7 +436,7 @@ fn usage_errors() {
     assert_has(&String::from_utf8(out.stderr).unwrap(), &["missing.crowd"]);
     let out = throng(&["cache", "info", s(&fixture()), "--rig-file", "rig.glb"]);
     assert_eq!(out.status.code(), Some(2));
-    assert_has(&String::from_utf8(out.stderr).unwrap(), &["--rig-file", "--stride"]);
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["rig.glb"]);
     let out = throng(&["cache", "info", s(&fixture()), "--stride", "0"]);
     assert_has(&String::from_utf8(out.stderr).unwrap(), &["--stride must be a positive number"]);
     // Writing a NaN is refused before any file appears.
@@ -526,6 +526,84 @@ fn jupedsim_heading_from_motion_and_cycle_advance() {
     let opts = ImportOptions { rig: "bipedTallB".into(), cycle: "WalkB".into(), ..ImportOptions::default() };
     let crowd = cache::read_with(fixture(), &opts).unwrap();
     assert_eq!((crowd.rigs[0].as_str(), crowd.cycles[0].as_str()), ("bipedTallB", "WalkB"));
+}
+
+fn import_args(rig: &str, cycle: &str, rig_file: Option<&str>) -> throng::cli::ImportArgs {
+    throng::cli::ImportArgs {
+        rig: rig.into(),
+        cycle: cycle.into(),
+        cycle_length: None,
+        stride: None,
+        rig_file: rig_file.map(|f| Path::new(env!("CARGO_MANIFEST_DIR")).join(f)),
+    }
+}
+
+/// Cycle frame advance per frame == distance / stride * length (mod length).
+fn assert_feet_planted(crowd: &Crowd, stride: f32, length: f32) {
+    let mut checked = 0;
+    for w in crowd.frames.windows(2) {
+        for (a, b) in w[0].agents.iter().zip(&w[1].agents) {
+            assert_eq!(a.id, b.id);
+            let dist = (b.position - a.position).length();
+            let got = (b.cycle_frame - a.cycle_frame).rem_euclid(length);
+            let want = (dist / stride * length).rem_euclid(length);
+            assert!((got - want).abs() < 1e-3, "agent {} frame {}: {got} vs {want}", b.id, w[1].frame);
+            assert!((0.0..length).contains(&b.cycle_frame));
+            checked += (dist > 0.0) as usize;
+        }
+    }
+    assert!(checked > 100, "{checked} moving agent-frames");
+}
+
+#[test]
+fn jupedsim_rig_file_gives_stride_and_length() {
+    // bipedThinA's WalkA: 1.5 m per cycle, 32 frames at the shot's 24 fps
+    // (not JuPedSim's 25: cycle frames are shot frames, driven by distance).
+    let opts = ImportOptions::from_args(&import_args("bipedThinA", "WalkA", Some("demo/rigs/bipedThinA.glb"))).unwrap();
+    assert!((opts.stride() - 1.5).abs() < 1e-4 && (opts.cycle_length() - 32.0).abs() < 1e-3, "{}", opts.describe());
+    assert_has(&opts.describe(), &["stride 1.5", "bipedThinA.glb"]);
+    let crowd = cache::read_with(fixture(), &opts).unwrap();
+    assert_eq!((crowd.rigs[0].as_str(), crowd.cycles[0].as_str()), ("bipedThinA", "WalkA"));
+    assert_feet_planted(&crowd, opts.stride(), opts.cycle_length());
+
+    // Another clip of the same rig: WalkB, 1.9 m in 40 frames.
+    let opts = ImportOptions::from_args(&import_args("bipedThinA", "WalkB", Some("demo/rigs/bipedThinA.glb"))).unwrap();
+    assert!((opts.stride() - 1.9).abs() < 1e-4 && (opts.cycle_length() - 40.0).abs() < 1e-3);
+    assert_feet_planted(&cache::read_with(fixture(), &opts).unwrap(), 1.9, 40.0);
+
+    // --stride and --cycle-length override the rig, each on its own.
+    let mut args = import_args("bipedThinA", "WalkA", Some("demo/rigs/bipedThinA.glb"));
+    args.stride = Some(0.7);
+    let opts = ImportOptions::from_args(&args).unwrap();
+    assert_eq!((opts.stride(), opts.cycle_length()), (0.7, 32.0));
+    assert_has(&opts.describe(), &["stride 0.7 m,", "32 frames (rig file"]);
+    args.cycle_length = Some(24.0);
+    let opts = ImportOptions::from_args(&args).unwrap();
+    assert_eq!((opts.stride(), opts.cycle_length()), (0.7, 24.0));
+    assert_feet_planted(&cache::read_with(fixture(), &opts).unwrap(), 0.7, 24.0);
+
+    // Errors name the rig file and what is wrong.
+    let e = err_text(ImportOptions::from_args(&import_args("bipedThinA", "IdleA", Some("demo/rigs/bipedThinA.glb"))));
+    assert_has(&e, &["bipedThinA.glb", "IdleA", "stride 0", "--stride"]);
+    let e = err_text(ImportOptions::from_args(&import_args("bipedThinA", "RunZ", Some("demo/rigs/bipedThinA.glb"))));
+    assert_has(&e, &["bipedThinA.glb", "RunZ", "WalkA"]);
+    let e = err_text(ImportOptions::from_args(&import_args("bipedTallB", "WalkA", Some("demo/rigs/bipedThinA.glb"))));
+    assert_has(&e, &["bipedThinA.glb", "--rig bipedThinA"]);
+
+    // The command line: settings and their source are reported.
+    let rig = Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/rigs/bipedTallB.glb");
+    let out = throng(&["cache", "info", s(&fixture()), "--rig", "bipedTallB", "--rig-file", s(&rig), "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!((v["import"]["stride"].as_f64().unwrap() - 1.7).abs() < 1e-4, "{v}");
+    assert!((v["import"]["cycle_length"].as_f64().unwrap() - 32.0).abs() < 1e-3, "{v}");
+    assert!(v["import"]["rig_file"].as_str().unwrap().ends_with("bipedTallB.glb"), "{v}");
+    let dir = tempfile::tempdir().unwrap();
+    let outp = dir.path().join("j.crowd");
+    let out = throng(&["cache", "convert", s(&fixture()), s(&outp), "--rig", "bipedTallB", "--rig-file", s(&rig)]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_has(&String::from_utf8(out.stdout).unwrap(), &["stride 1.7", "(rig file"]);
+    assert_feet_planted(&cache::read(&outp).unwrap(), 1.7, 32.0);
 }
 
 fn sqlite_error(name: &str, setup: &str) -> String {

@@ -195,93 +195,85 @@ fn set_has_benches_camera_and_sun() {
     assert!(doc.meshes().filter(|m| m.name().is_some_and(|s| s.starts_with("building"))).count() >= 6);
 }
 
-struct Row {
-    frame: u32,
-    id: u32,
-    x: f32,
-    z: f32,
-    rig: String,
-    cycle: String,
-    cycle_frame: f32,
-    seated: bool,
-}
-
-fn read_csv() -> Vec<Row> {
-    let text = std::fs::read_to_string(crate_path("demo/cache/demo.csv")).unwrap();
-    let mut lines = text.lines();
-    assert_eq!(lines.next(), Some("frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags"));
-    lines
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            assert_eq!(f.len(), 10, "{l}");
-            assert_eq!(f[3], "0");
-            assert!(f[9].is_empty() || f[9] == "seated", "{l}");
-            Row {
-                frame: f[0].parse().unwrap(),
-                id: f[1].parse().unwrap(),
-                x: f[2].parse().unwrap(),
-                z: f[4].parse().unwrap(),
-                rig: f[6].to_string(),
-                cycle: f[7].to_string(),
-                cycle_frame: f[8].parse().unwrap(),
-                seated: f[9] == "seated",
-            }
-        })
-        .collect()
-}
-
 #[test]
-fn cache_csv_is_a_plausible_crowd() {
-    let rows = read_csv();
-    let frames: BTreeSet<u32> = rows.iter().map(|r| r.frame).collect();
-    assert_eq!(frames, (1..=48).collect());
-    let ids: BTreeSet<u32> = rows.iter().map(|r| r.id).collect();
+fn cache_crowd_is_a_plausible_crowd() {
+    // demo/cache/demo.crowd is the reference simulation's output
+    // (demo/sim/demo.toml; tests/sim.rs checks it is up to date).
+    let crowd = throng::cache::read(crate_path("demo/cache/demo.crowd")).unwrap();
+    let frames: Vec<i32> = crowd.frames.iter().map(|f| f.frame).collect();
+    assert_eq!(frames, (1..=48).collect::<Vec<_>>());
+    let ids: BTreeSet<u32> = crowd.frames[0].agents.iter().map(|a| a.id).collect();
     assert!((280..=320).contains(&ids.len()), "{} agents", ids.len());
-    assert!(*ids.iter().next_back().unwrap() as usize > ids.len(), "ids have gaps");
-    let seated: BTreeSet<u32> = rows.iter().filter(|r| r.seated).map(|r| r.id).collect();
-    assert_eq!(seated.len(), 12);
-    for r in rows.iter().filter(|r| r.seated) {
-        assert_eq!(r.cycle, "SitA");
-        assert_eq!(r.z, -3.55);
-        assert!([-9.0f32, -3.0, 3.0, 9.0].iter().any(|b| [-1.0f32, 0.0, 1.0].contains(&(r.x - b))), "seat x {}", r.x);
+    for f in &crowd.frames {
+        assert_eq!(f.agents.iter().map(|a| a.id).collect::<BTreeSet<_>>(), ids, "frame {}: every agent in every frame", f.frame);
     }
+    let mut rigs = crowd.rigs.clone();
+    rigs.sort();
+    assert_eq!(rigs, ["bipedTallB", "bipedThinA"]);
+    let mut cycles = crowd.cycles.clone();
+    cycles.sort();
+    assert_eq!(cycles, ["IdleA", "SitA", "WalkA", "WalkB"]);
+
+    // Twelve seated agents on the benches (SPEC "Demo set layout"), still.
+    let seated: Vec<_> = crowd.frames[0].agents.iter().filter(|a| a.seated()).collect();
+    assert_eq!(seated.len(), 12);
+    let mut seats = BTreeSet::new();
+    for f in &crowd.frames {
+        for a in f.agents.iter().filter(|a| a.seated()) {
+            assert_eq!(crowd.cycles[a.cycle as usize], "SitA", "agent {}", a.id);
+            assert_eq!((a.position.z, a.position.y, a.heading), (-3.55, 0.0, 0.0), "agent {}", a.id);
+            let x = a.position.x;
+            assert!([-9.0f32, -3.0, 3.0, 9.0].iter().any(|b| [-1.0f32, 0.0, 1.0].contains(&(x - b))), "seat x {x}");
+            seats.insert((x * 10.0) as i32);
+        }
+    }
+    assert_eq!(seats.len(), 12, "one agent per seat");
+
+    // Feet do not slide: a walker's distance per cycle frame is its own rig's
+    // stride / cycle length; standers stand and play their cycle at 1 frame per frame.
     let clips: BTreeMap<String, BTreeMap<String, Clip>> = ["bipedThinA", "bipedTallB"]
         .iter()
         .map(|r| (r.to_string(), rig_clips(&format!("demo/rigs/{r}.glb"))))
         .collect();
-
-    // Per agent tracks.
-    let mut tracks: BTreeMap<u32, Vec<&Row>> = BTreeMap::new();
-    for r in &rows {
-        tracks.entry(r.id).or_default().push(r);
-        assert!((-18.0..=18.0).contains(&r.x) && (-30.0..=12.0).contains(&r.z));
-    }
-    let (mut entering, mut leaving, mut idle) = (0, 0, 0);
-    for (id, t) in &tracks {
-        let first = t[0].frame;
-        let last = t[t.len() - 1].frame;
-        assert_eq!(t.len() as u32, last - first + 1, "agent {id} track is contiguous");
-        entering += (first > 1) as usize;
-        leaving += (last < 48) as usize;
-        idle += (t[0].cycle == "IdleA") as usize;
-        let clip = &clips[&t[0].rig][&t[0].cycle];
-        for w in t.windows(2) {
-            assert_eq!(w[1].cycle_frame, (w[0].cycle_frame + 1.0) % clip.frames, "agent {id}");
-            let step = ((w[1].x - w[0].x).powi(2) + (w[1].z - w[0].z).powi(2)).sqrt();
-            let expect = clip.stride / clip.frames;
-            assert!((step - expect).abs() < 0.003, "agent {id}: moved {step}, stride says {expect}");
+    let (mut walked, mut stood) = (BTreeMap::<(String, String), usize>::new(), 0);
+    let mut idle = BTreeSet::new();
+    for w in crowd.frames.windows(2) {
+        for (a, b) in w[0].agents.iter().zip(&w[1].agents) {
+            assert_eq!(a.id, b.id);
+            assert!((-18.0..=18.0).contains(&b.position.x) && (-30.0..=12.0).contains(&b.position.z), "{b:?}");
+            let (rig, cycle) = (&crowd.rigs[b.rig as usize], &crowd.cycles[b.cycle as usize]);
+            if cycle == "IdleA" {
+                idle.insert(b.id);
+            }
+            if a.cycle != b.cycle || b.cycle_frame < a.cycle_frame {
+                continue; // a cycle ended this frame
+            }
+            let clip = &clips[rig][cycle];
+            let adv = b.cycle_frame - a.cycle_frame;
+            let step = (b.position - a.position).length();
+            if clip.stride == 0.0 {
+                assert_eq!(step, 0.0, "agent {} on {cycle} moved", b.id);
+                assert!((adv - 1.0).abs() < 1e-4, "agent {}: {adv}", b.id);
+                stood += 1;
+            } else {
+                assert!((0.89..=1.0001).contains(&adv), "agent {} frame {}: advance {adv}", b.id, w[1].frame);
+                let expect = clip.stride / clip.frames;
+                assert!((step / adv - expect).abs() < 1e-4, "agent {} ({rig} {cycle}) frame {}: {step} m per {adv} frames, stride says {expect}", b.id, w[1].frame);
+                *walked.entry((rig.clone(), cycle.clone())).or_default() += 1;
+            }
         }
     }
-    assert!(entering >= 3 && leaving >= 3, "{entering} entering, {leaving} leaving");
-    assert!(idle >= 10);
+    assert_eq!(walked.len(), 4, "both rigs walk both walks: {walked:?}");
+    assert!(walked.values().all(|&n| n > 200), "{walked:?}");
+    assert!(stood > 1000 && idle.len() >= 10, "{stood} standing agent-frames, {} idlers", idle.len());
 
-    // Nobody overlaps.
-    for f in 1..=48 {
-        let here: Vec<&Row> = rows.iter().filter(|r| r.frame == f).collect();
-        for i in 0..here.len() {
-            for j in i + 1..here.len() {
-                let d = ((here[i].x - here[j].x).powi(2) + (here[i].z - here[j].z).powi(2)).sqrt();
-                assert!(d >= 0.7, "frame {f}: agents {} and {} are {d} m apart", here[i].id, here[j].id);
+    // Nobody overlaps badly (agent radius 0.3: centres 0.6 m apart touch).
+    for f in &crowd.frames {
+        let a = &f.agents;
+        for i in 0..a.len() {
+            for j in i + 1..a.len() {
+                let d = (a[i].position - a[j].position).length();
+                assert!(d >= 0.45, "frame {}: agents {} and {} are {d} m apart", f.frame, a[i].id, a[j].id);
             }
         }
     }
@@ -351,6 +343,7 @@ fn wardrobes_and_shot_agree() {
     assert_eq!(shot["frames"]["start"].as_integer(), Some(1001));
     assert_eq!(shot["frames"]["end"].as_integer(), Some(1048));
     assert_eq!(shot["cache"]["frame_offset"].as_integer(), Some(-1000));
+    assert_eq!(shot["cache"]["path"].as_str(), Some("cache/demo.crowd"));
     assert!(crate_path("demo").join(shot["cache"]["path"].as_str().unwrap()).is_file());
     assert!(crate_path("demo").join(shot["set"]["file"].as_str().unwrap()).is_file());
     for w in shot["wardrobes"].as_array().unwrap() {

@@ -330,6 +330,115 @@ fn walk_cycle_advances_with_distance_and_standers_stand() {
     assert!(!c.frames[10].agents[1].seated());
 }
 
+/// A scene whose cycle lengths and strides come from the demo rig files.
+fn rig_scene(frames: (i32, i32), cycles: &str, body: &str) -> Result<Scene, String> {
+    let rigs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/rigs");
+    let text = format!(
+        "version = 1\nseed = 7\n[frames]\nstart = {}\nend = {}\n\
+         [rigs]\nbipedThinA = {:?}\nbipedTallB = {:?}\n{cycles}\n{body}",
+        frames.0,
+        frames.1,
+        rigs.join("bipedThinA.glb").display().to_string(),
+        rigs.join("bipedTallB.glb").display().to_string(),
+    );
+    Scene::parse(&text, "rigs.toml").map_err(|e| e.to_string())
+}
+
+#[test]
+fn cycle_advance_matches_each_rigs_stride() {
+    // The rig files give each rig its own stride: feet do not slide on either.
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let cycles = "[cycles.WalkA]\n[cycles.WalkB]\n";
+    let mut body = String::new();
+    for (k, (rig, cycle)) in
+        [("bipedThinA", "WalkA"), ("bipedTallB", "WalkA"), ("bipedThinA", "WalkB"), ("bipedTallB", "WalkB")].iter().enumerate()
+    {
+        // Side by side, a few obstacles ahead so speeds vary below the full stride.
+        body += &format!(
+            "[[agents]]\nid = {}\nposition = [{}, 0.0]\nrig = \"{rig}\"\ncycle = \"{cycle}\"\ncycle_frame = 0.0\n",
+            k + 1,
+            4.0 * k as f32
+        );
+        body += &format!("[[obstacles]]\ncenter = [{}, 3.0]\nradius = 0.4\n", 4.0 * k as f32 + 0.3);
+    }
+    let s = rig_scene((1, 120), cycles, &body).unwrap();
+    let c = run(&s);
+    let figures = [("bipedThinA", "WalkA", 32.0, 1.5), ("bipedTallB", "WalkA", 32.0, 1.7), ("bipedThinA", "WalkB", 40.0, 1.9), ("bipedTallB", "WalkB", 40.0, 2.1)];
+    for (k, &(rig_name, cycle, frames, stride)) in figures.iter().enumerate() {
+        let rig = throng::rig::Rig::load(root.join(format!("demo/rigs/{rig_name}.glb"))).unwrap();
+        let clip = rig.cycle(cycle).unwrap();
+        let (length, stride_rig) = (clip.frames(24.0), clip.stride());
+        assert!((length - frames).abs() < 1e-3 && (stride_rig - stride).abs() < 1e-3, "{rig_name} {cycle}: {length} frames, {stride_rig} m");
+        let r = s.rigs.iter().position(|n| n == rig_name).unwrap() as u16;
+        let ci = s.cycles.iter().position(|n| n.name == cycle).unwrap() as u16;
+        assert_eq!(s.timing(r, ci), throng::sim::CycleTiming { length, stride: stride_rig });
+        let (mut walked, mut advanced) = (0.0f64, 0.0f64);
+        for f in 1..c.frames.len() {
+            let (a, b) = (&c.frames[f - 1].agents[k], &c.frames[f].agents[k]);
+            assert_eq!(c.cycles[b.cycle as usize], cycle, "no `next`: the agent keeps its cycle");
+            let mut adv = b.cycle_frame - a.cycle_frame;
+            if adv < 0.0 {
+                adv += length;
+            }
+            let dist = pos(&c, f, k).distance(pos(&c, f - 1, k));
+            assert!(adv > 0.0 && adv <= 1.0 + 1e-4, "{rig_name} {cycle} frame {f}: advance {adv}");
+            assert!((dist / adv - stride_rig / length).abs() < 1e-4, "{rig_name} {cycle} frame {f}: {dist} m for {adv} frames");
+            walked += f64::from(dist);
+            advanced += f64::from(adv);
+        }
+        let ratio = walked / advanced;
+        assert!((ratio - f64::from(stride / frames)).abs() < 1e-4, "{rig_name} {cycle}: {ratio} m per cycle frame");
+    }
+    // Same cycle, different rigs: different distances per frame.
+    assert!(pos(&c, 60, 1).distance(pos(&c, 0, 1)) > pos(&c, 60, 0).distance(pos(&c, 0, 0)) + 0.1);
+}
+
+#[test]
+fn rig_files_precedence_and_errors() {
+    let walker = |rig: &str, cycle: &str| format!("[[agents]]\nid = 9\nposition = [0.0, 0.0]\nrig = \"{rig}\"\ncycle = \"{cycle}\"\n");
+    // A rig without a file takes the explicit values; a rig with one, its clip.
+    let s = rig_scene(
+        (1, 2),
+        "[cycles.WalkA]\n[cycles.RunZ]\nlength = 20\nstride = 3.0\n",
+        &format!("{}[[agents]]\nid = 10\nposition = [3.0, 0.0]\nrig = \"proxyBot\"\ncycle = \"RunZ\"\n", walker("bipedThinA", "WalkA")),
+    )
+    .unwrap();
+    let r = |n: &str| s.rigs.iter().position(|x| x == n).unwrap() as u16;
+    let c = |n: &str| s.cycles.iter().position(|x| x.name == n).unwrap() as u16;
+    assert_eq!(s.timing(r("proxyBot"), c("RunZ")), throng::sim::CycleTiming { length: 20.0, stride: 3.0 });
+    assert!((s.timing(r("bipedThinA"), c("WalkA")).stride - 1.5).abs() < 1e-3);
+    assert!(s.rig_files[r("bipedThinA") as usize].as_ref().unwrap().ends_with("bipedThinA.glb"));
+    assert!(s.rig_files[r("proxyBot") as usize].is_none());
+
+    // A cycle missing from a rig file: the message names the rig file and the key.
+    let e = rig_scene((1, 2), "[cycles.RunZ]\n", &walker("bipedTallB", "RunZ")).unwrap_err();
+    assert!(e.contains("rigs.toml") && e.contains("bipedTallB.glb") && e.contains("RunZ") && e.contains("agents[0].cycle"), "{e}");
+    // Reached through `next`: the key is the `next` entry.
+    let e = rig_scene((1, 2), "[cycles.WalkA]\nnext = { RunZ = 1 }\n[cycles.RunZ]\n", &walker("bipedTallB", "WalkA")).unwrap_err();
+    assert!(e.contains("bipedTallB.glb") && e.contains("cycles.WalkA.next.RunZ"), "{e}");
+    // ...and through a spawn mix.
+    let spawn = "[[spawn]]\ncount = 2\nfirst_id = 1\nmin = [0.0, 0.0]\nmax = [2.0, 2.0]\nrigs = { bipedThinA = 1 }\ncycles = { RunZ = 1 }\n";
+    let e = rig_scene((1, 2), "[cycles.RunZ]\n", spawn).unwrap_err();
+    assert!(e.contains("bipedThinA.glb") && e.contains("spawn[0].cycles.RunZ"), "{e}");
+    // Explicit values every user of which reads a file would be ignored: an error.
+    let e = rig_scene((1, 2), "[cycles.WalkA]\nlength = 28\nstride = 1.2\n", &walker("bipedThinA", "WalkA")).unwrap_err();
+    assert!(e.contains("cycles.WalkA.length") && e.contains("remove"), "{e}");
+    // A rig without a file and no explicit value.
+    let e = rig_scene((1, 2), "[cycles.WalkA]\n", &walker("proxyBot", "WalkA")).unwrap_err();
+    assert!(e.contains("cycles.WalkA.length") && e.contains("proxyBot") && e.contains("agents[0].cycle"), "{e}");
+    // A rig file that does not load.
+    let e = Scene::parse(
+        &format!("version = 1\nseed = 1\n[frames]\nstart = 1\nend = 2\n[rigs]\nbipedThinA = \"nope.glb\"\n[cycles.WalkA]\n{}", walker("bipedThinA", "WalkA")),
+        "dir/s.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("s.toml") && e.contains("rigs.bipedThinA") && e.contains("nope.glb"), "{e}");
+    // Seated agents need a cycle that stands on their rig.
+    let e = rig_scene((1, 2), "[cycles.WalkA]\n", &format!("{}seated = true\n", walker("bipedThinA", "WalkA"))).unwrap_err();
+    assert!(e.contains("stride 0") && e.contains("bipedThinA"), "{e}");
+}
+
 #[test]
 fn cycles_switch_only_at_cycle_end() {
     let text = "version = 1\nseed = 3\n[frames]\nstart = 1\nend = 400\n\
@@ -612,6 +721,32 @@ fn demo_scene_matches_spec_and_committed_cache() {
     let mut rigs = c.rigs.clone();
     rigs.sort();
     assert_eq!(rigs, ["bipedTallB", "bipedThinA"]);
+    // Cycle lengths and strides are each rig's own clip's.
+    for (r, name) in s.rigs.iter().enumerate() {
+        let rig = throng::rig::Rig::load(root.join(format!("demo/rigs/{name}.glb"))).unwrap();
+        for (k, cycle) in s.cycles.iter().enumerate() {
+            let clip = rig.cycle(&cycle.name).unwrap();
+            let t = s.timing(r as u16, k as u16);
+            assert_eq!((t.length, t.stride), (clip.frames(24.0), clip.stride()), "{name} {}", cycle.name);
+        }
+    }
+    // Walkers' feet do not slide: distance per cycle frame is their rig's stride / length.
+    let (rig_of, cycle_of) = (|i: u16| s.rigs.iter().position(|n| *n == c.rigs[i as usize]).unwrap() as u16, |i: u16| {
+        s.cycles.iter().position(|n| n.name == c.cycles[i as usize]).unwrap() as u16
+    });
+    let mut checked = 0;
+    for f in 1..c.frames.len() {
+        for (k, (a, b)) in c.frames[f - 1].agents.iter().zip(&c.frames[f].agents).enumerate() {
+            let t = s.timing(rig_of(b.rig), cycle_of(b.cycle));
+            if a.cycle != b.cycle || !t.moves() || b.cycle_frame < a.cycle_frame {
+                continue;
+            }
+            let dist = pos(&c, f, k).distance(pos(&c, f - 1, k));
+            assert!((dist - (b.cycle_frame - a.cycle_frame) * t.travel()).abs() < 1e-4, "agent {} frame {f}", b.id);
+            checked += 1;
+        }
+    }
+    assert!(checked > 8000, "{checked}");
     // The committed demo cache is this scene's output, byte for byte
     // (regenerate: cargo run -- sim demo/sim/demo.toml --out demo/cache/demo.crowd).
     let dir = tempfile::tempdir().unwrap();

@@ -1,5 +1,7 @@
-//! Generates the bundled demo shot: parts, rigs, set, wardrobes, shot file
-//! and an interim crowd cache. Deterministic (fixed seeds, no clock).
+//! Generates the bundled demo shot: parts, rigs, set, wardrobes and shot
+//! file. Deterministic (fixed seeds, no clock). The crowd cache the shot
+//! reads, demo/cache/demo.crowd, is made by the reference simulation from
+//! these rigs: `cargo run -- sim demo/sim/demo.toml --out demo/cache/demo.crowd`.
 //!
 //! ```text
 //! cargo run --example make_demo
@@ -7,10 +9,9 @@
 //!
 //! Writes under the crate root: demo/parts/{heads,torsos,limbs,kenney_alien_facing_z}.glb,
 //! demo/rigs/{bipedThinA,bipedTallB}.glb, demo/set/set.glb, demo/shot.toml,
-//! demo/cache/demo.csv, wardrobes/{robots,kenney_alien}.toml, wardrobes/textures/hazard.png.
+//! wardrobes/{robots,kenney_alien}.toml, wardrobes/textures/hazard.png.
 //! demo/parts/kenney_alien.glb (the CC0 original) is an input, not an output.
 
-mod crowd;
 mod geometry;
 mod parts;
 mod rigs;
@@ -47,8 +48,8 @@ fn shot_toml() -> String {
          removed = []\nculled_cycles = []\nno_scale_cycles = [\"SitA\"]\nexclude_parts = []\n",
     );
     let _ = write!(s, "\n[frames]\nstart = {FRAME_START}\nend = {FRAME_END}\nfps = {FPS:?}\n");
-    // The interim cache is CSV; frame 1 of the cache is shot frame 1001.
-    let _ = write!(s, "\n[cache]\npath = \"cache/demo.csv\"\nframe_offset = {}\n", 1 - FRAME_START);
+    // The simulation's cache (demo/sim/demo.toml); frame 1 of the cache is shot frame 1001.
+    let _ = write!(s, "\n[cache]\npath = \"cache/demo.crowd\"\nframe_offset = {}\n", 1 - FRAME_START);
     s.push_str(
         "\n[rigs.bipedThinA]\nfile = \"rigs/bipedThinA.glb\"\n\
          schemes = { LowEnd_good_heads = 3.0, HighEnd = 1.0, KenneyAlien = 0.5 }\nheight_jitter = 0.1\n\
@@ -138,12 +139,6 @@ fn run() -> Result<()> {
 
     wardrobe::write_text(&demo.join("shot.toml"), &shot_toml())?;
     println!("shot.toml");
-
-    let stats = crowd::write_cache(&demo.join("cache/demo.csv"), &rig_specs)?;
-    println!(
-        "cache/demo.csv: {} agents ({} walking, {} idle, {} seated; {} enter late, {} leave early), closest {:.2} m",
-        stats.agents, stats.walking, stats.idle, stats.seated, stats.entering, stats.leaving, stats.min_gap
-    );
     Ok(())
 }
 

@@ -21,10 +21,8 @@ const SEAT_THICKNESS: f32 = 0.06;
 pub const BACKREST_TOP: f32 = 0.9;
 const BACKREST_THICKNESS: f32 = 0.06;
 const BENCH_LEG: f32 = 0.06;
-/// Seated agents' foot Z (SPEC).
-pub const SEATED_Z: f32 = -3.55;
-/// Seated agents sit at bench_x + these offsets.
-pub const SEAT_OFFSETS: [f32; 3] = [-1.0, 0.0, 1.0];
+// Seated agents (foot z = -3.55 at bench_x + {-1, 0, +1}, SPEC) are placed
+// by the simulation scene, demo/sim/demo.toml.
 
 /// Shot frame range and rate.
 pub const FRAME_START: i32 = 1001;

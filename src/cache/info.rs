@@ -40,6 +40,8 @@ pub struct ImportInfo {
     pub stride: f32,
     /// Cycle length in frames.
     pub cycle_length: f32,
+    /// Rig glTF the stride and length were read from (`--rig-file`), if any.
+    pub rig_file: Option<String>,
 }
 
 /// Summary of a cache; the `--json` keys are these field names (documented
@@ -221,6 +223,7 @@ pub fn cmd_info(args: &CacheInfoArgs) -> Result<()> {
             cycle: opts.cycle.clone(),
             stride: opts.stride(),
             cycle_length: opts.cycle_length(),
+            rig_file: opts.rig_clip.as_ref().map(|c| c.file.display().to_string()),
         });
     }
     if args.json {

@@ -20,9 +20,17 @@
 //! at a phase fixed by its id (golden-ratio spread) so the crowd does not
 //! step in unison. Cache frames are JuPedSim's frame numbers, unchanged (its
 //! fps is the file's `fps` metadata, 25 for the bundled sample).
+//!
+//! Fps. A cache's cycle frame is in frames at the SHOT fps (24: the renderer
+//! samples a cycle at time cycle_frame / 24), whatever the cache's own frame
+//! rate. The cycle frame is driven by distance, not time, so JuPedSim's 25 fps
+//! does not enter it: with `--rig-file` the cycle length is the clip's
+//! duration x 24 ([`SHOT_FPS`]), and cycle_frame = (distance / stride) x
+//! length puts the clip at the pose where its root has travelled `distance`
+//! (mod one stride), i.e. the feet stay planted.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use rusqlite::{Connection, OpenFlags};
@@ -35,6 +43,52 @@ use crate::error::{Error, IoContext, Result};
 pub const DEFAULT_STRIDE: f32 = 1.4;
 /// Walk cycle length in frames when --cycle-length is not given.
 pub const DEFAULT_CYCLE_LENGTH: f32 = 32.0;
+/// Frames per second cycle frames are counted in (SPEC: shot fps 24), so a
+/// rig clip's length is `duration * SHOT_FPS` frames.
+pub const SHOT_FPS: f32 = 24.0;
+
+/// A walk cycle's length and stride read from a rig glTF (`--rig-file`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RigClip {
+    /// The rig file.
+    pub file: PathBuf,
+    /// Metres the clip's root travels per cycle.
+    pub stride: f32,
+    /// Clip length in frames at [`SHOT_FPS`].
+    pub cycle_length: f32,
+}
+
+impl RigClip {
+    /// Reads cycle `cycle` of the rig in `file`. The rig's name (its top
+    /// node, the parent of `root`) must be `rig` when the file gives one, so
+    /// the cache does not name one rig and walk at another's stride.
+    pub fn load(file: &Path, rig: &str, cycle: &str) -> Result<RigClip> {
+        let r = crate::rig::Rig::load(file)?;
+        let h = r.hierarchy();
+        if let Some(top) = h.nodes.get(r.root()).and_then(|n| n.parent).and_then(|p| h.nodes.get(p)) {
+            if top.name != rig {
+                return Err(Error::invalid(
+                    file,
+                    format!("this is rig `{}` but --rig is `{rig}`; pass --rig {}", top.name, top.name),
+                )
+                .field("--rig"));
+            }
+        }
+        let c = r.cycle(cycle).map_err(|e| e.field("--cycle"))?;
+        let (stride, cycle_length) = (c.stride(), c.frames(SHOT_FPS));
+        if !(stride.is_finite() && stride > 0.0) {
+            return Err(Error::invalid(
+                file,
+                format!("cycle `{cycle}` has stride {stride} m (its root does not walk forward); pick a walk cycle with --cycle or pass --stride"),
+            )
+            .field("--cycle"));
+        }
+        if !(cycle_length.is_finite() && cycle_length > 0.0) {
+            return Err(Error::invalid(file, format!("cycle `{cycle}` is {cycle_length} frames long")).field("--cycle"));
+        }
+        Ok(RigClip { file: file.to_path_buf(), stride, cycle_length })
+    }
+}
 
 /// How imported trajectories become agents.
 #[derive(Clone, Debug, PartialEq)]
@@ -43,57 +97,67 @@ pub struct ImportOptions {
     pub rig: String,
     /// Walk cycle given to every agent.
     pub cycle: String,
-    /// Metres per cycle; `None` means [`DEFAULT_STRIDE`].
+    /// Metres per cycle (`--stride`); `None`: the rig clip's, else [`DEFAULT_STRIDE`].
     pub stride: Option<f32>,
-    /// Cycle length in frames; `None` means [`DEFAULT_CYCLE_LENGTH`].
+    /// Cycle length in frames at the shot fps (`--cycle-length`); `None`:
+    /// the rig clip's, else [`DEFAULT_CYCLE_LENGTH`].
     pub cycle_length: Option<f32>,
+    /// The cycle as read from `--rig-file`; `stride` and `cycle_length`
+    /// override it.
+    pub rig_clip: Option<RigClip>,
 }
 
 impl Default for ImportOptions {
     fn default() -> Self {
-        ImportOptions { rig: "bipedThinA".into(), cycle: "WalkA".into(), stride: None, cycle_length: None }
+        ImportOptions { rig: "bipedThinA".into(), cycle: "WalkA".into(), stride: None, cycle_length: None, rig_clip: None }
     }
 }
 
 impl ImportOptions {
     /// Options from the command line.
     pub fn from_args(args: &ImportArgs) -> Result<ImportOptions> {
-        if args.rig_file.is_some() {
-            // TODO(lead): read the stride and cycle length from the rig's clip once the rig module lands.
-            return Err(Error::Usage(
-                "--rig-file is not supported yet; pass --stride (metres per cycle) and --cycle-length (frames)".into(),
-            ));
-        }
-        let opts = ImportOptions {
+        let mut opts = ImportOptions {
             rig: args.rig.clone(),
             cycle: args.cycle.clone(),
             stride: args.stride,
             cycle_length: args.cycle_length,
+            rig_clip: None,
         };
+        opts.check()?;
+        if let Some(file) = &args.rig_file {
+            // Only what the flags leave open is needed from the rig, but a
+            // bad rig file or cycle is an error either way.
+            opts.rig_clip = Some(RigClip::load(file, &opts.rig, &opts.cycle)?);
+        }
         opts.check()?;
         Ok(opts)
     }
 
-    /// Metres per cycle.
+    /// Metres per cycle: `--stride`, else the rig clip's, else [`DEFAULT_STRIDE`].
     pub fn stride(&self) -> f32 {
-        self.stride.unwrap_or(DEFAULT_STRIDE)
+        self.stride.or(self.rig_clip.as_ref().map(|c| c.stride)).unwrap_or(DEFAULT_STRIDE)
     }
-    /// Cycle length in frames.
+    /// Cycle length in frames at the shot fps: `--cycle-length`, else the
+    /// rig clip's, else [`DEFAULT_CYCLE_LENGTH`].
     pub fn cycle_length(&self) -> f32 {
-        self.cycle_length.unwrap_or(DEFAULT_CYCLE_LENGTH)
+        self.cycle_length.or(self.rig_clip.as_ref().map(|c| c.cycle_length)).unwrap_or(DEFAULT_CYCLE_LENGTH)
     }
 
-    /// One line for humans, marking defaults.
+    /// One line for humans, marking where each value came from.
     pub fn describe(&self) -> String {
-        let dflt = |o: Option<f32>| if o.is_none() { " (default)" } else { "" };
+        let from = |o: Option<f32>| match (o, &self.rig_clip) {
+            (Some(_), _) => String::new(),
+            (None, Some(c)) => format!(" (rig file {})", c.file.display()),
+            (None, None) => " (default)".into(),
+        };
         format!(
             "rig {}, cycle {}, stride {} m{}, cycle length {} frames{}",
             self.rig,
             self.cycle,
             self.stride(),
-            dflt(self.stride),
+            from(self.stride),
             self.cycle_length(),
-            dflt(self.cycle_length)
+            from(self.cycle_length)
         )
     }
 

@@ -34,6 +34,10 @@ pub const MAX_TARGETS: usize = 64;
 pub const MAX_AGENTS: usize = 10_000_000;
 /// Most frames a scene may simulate (warm-up included).
 pub const MAX_FRAMES: i64 = 1_000_000;
+/// Frames per second when `[frames] fps` is not given (SPEC: shot fps 24).
+pub const DEFAULT_FPS: f32 = 24.0;
+/// Most (rig, cycle) pairs a scene may have (the timing table's size).
+pub const MAX_RIG_CYCLES: usize = 1 << 20;
 
 // ---------------------------------------------------------------------------
 // Resolved scene
@@ -73,21 +77,32 @@ impl Default for Model {
     }
 }
 
-/// An animation cycle as the simulation sees it.
+/// An animation cycle as the simulation sees it: its name and what follows
+/// it. Its length and stride depend on the rig ([`Scene::timing`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cycle {
-    /// Name, as in the rig's animations.
+    /// Name, as in the rigs' animations.
     pub name: String,
-    /// Length in frames.
-    pub length: f32,
-    /// Metres walked per cycle (root Z travel); 0 for idle and sit cycles.
-    pub stride: f32,
+    /// Explicit length in frames (`[cycles.X] length`), for rigs without a file.
+    pub length: Option<f32>,
+    /// Explicit stride in metres (`[cycles.X] stride`), for rigs without a file.
+    pub stride: Option<f32>,
     /// Cycles to switch to when this one ends: (cycle index, weight).
     /// Empty: the agent stays on this cycle.
     pub next: Vec<(u16, f32)>,
 }
 
-impl Cycle {
+/// Length and stride of one cycle on one rig: from the rig's glTF file, or
+/// the scene's explicit `[cycles.X]` values for a rig without a file.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CycleTiming {
+    /// Length in frames at the scene's fps.
+    pub length: f32,
+    /// Metres walked per cycle (root Z travel); 0 for idle and sit cycles.
+    pub stride: f32,
+}
+
+impl CycleTiming {
     /// Forward travel per frame at full speed (stride / length).
     pub fn travel(&self) -> f32 {
         self.stride / self.length
@@ -234,12 +249,22 @@ pub struct Scene {
     /// Frames simulated before `start` and not written; agents start at
     /// frame `start - warmup`.
     pub warmup: i32,
+    /// Frames per second of the cache (cycle lengths from rig files are
+    /// `duration * fps`).
+    pub fps: f32,
     /// Model constants.
     pub model: Model,
     /// Rig names (sorted).
     pub rigs: Vec<String>,
+    /// Rig files by rig index (`[rigs]`, resolved against the scene file's
+    /// folder); `None` for rigs that take explicit `[cycles.X]` values.
+    pub rig_files: Vec<Option<PathBuf>>,
     /// Cycles (sorted by name).
     pub cycles: Vec<Cycle>,
+    /// Length and stride per (rig, cycle): index `rig * cycles.len() + cycle`
+    /// (see [`Scene::timing`]). Pairs no agent can reach hold a stand-in
+    /// (1 frame, stride 0).
+    pub timings: Vec<CycleTiming>,
     /// Targets in file order.
     pub targets: Vec<Target>,
     /// Obstacles.
@@ -262,6 +287,8 @@ struct RawScene {
     frames: RawFrames,
     #[serde(default)]
     model: RawModel,
+    #[serde(default)]
+    rigs: BTreeMap<String, PathBuf>,
     cycles: BTreeMap<String, RawCycle>,
     #[serde(default)]
     targets: Vec<RawTarget>,
@@ -282,6 +309,7 @@ struct RawFrames {
     end: i32,
     #[serde(default)]
     warmup: u32,
+    fps: Option<f32>,
 }
 
 #[derive(Deserialize, Default)]
@@ -299,8 +327,8 @@ struct RawModel {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawCycle {
-    length: f32,
-    stride: f32,
+    length: Option<f32>,
+    stride: Option<f32>,
     #[serde(default)]
     next: BTreeMap<String, f32>,
 }
@@ -439,6 +467,12 @@ impl Scene {
         resolve(raw, path)
     }
 
+    /// Length and stride of `cycle` on `rig` (indices into [`Scene::rigs`]
+    /// and [`Scene::cycles`]).
+    pub fn timing(&self, rig: u16, cycle: u16) -> CycleTiming {
+        self.timings[rig as usize * self.cycles.len() + cycle as usize]
+    }
+
     /// Simulated frames: from `start - warmup` to `end`.
     pub fn first_frame(&self) -> i32 {
         self.start - self.warmup
@@ -500,7 +534,11 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
     check(path, (0.0..=1.0).contains(&model.min_speed), "model.min_speed", "must be in [0, 1]")?;
     check(path, model.agent_radius.is_finite() && model.agent_radius >= 0.0, "model.agent_radius", "must be >= 0")?;
 
-    // Cycles, sorted by name (BTreeMap order).
+    let fps = raw.frames.fps.unwrap_or(DEFAULT_FPS);
+    check(path, fps.is_finite() && fps > 0.0, "frames.fps", "must be > 0")?;
+
+    // Cycles, sorted by name (BTreeMap order). Their length and stride come
+    // per rig, after the agents (see `timings`).
     check(path, !raw.cycles.is_empty(), "cycles", "declare at least one cycle")?;
     check(path, raw.cycles.len() <= usize::from(u16::MAX), "cycles", "too many cycles")?;
     let cycle_index: HashMap<&str, u16> =
@@ -509,8 +547,12 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
     for (name, c) in &raw.cycles {
         let f = format!("cycles.{name}");
         crate::cache::check_name(name).map_err(|m| Error::invalid(path, m).field(f.clone()))?;
-        check(path, c.length.is_finite() && c.length >= 1.0, format!("{f}.length"), "must be >= 1 frame")?;
-        check(path, c.stride.is_finite() && c.stride >= 0.0, format!("{f}.stride"), "must be >= 0 metres")?;
+        if let Some(l) = c.length {
+            check(path, l.is_finite() && l >= 1.0, format!("{f}.length"), "must be >= 1 frame")?;
+        }
+        if let Some(st) = c.stride {
+            check(path, st.is_finite() && st >= 0.0, format!("{f}.stride"), "must be >= 0 metres")?;
+        }
         let mut next = Vec::new();
         for (n, w) in &c.next {
             let Some(&i) = cycle_index.get(n.as_str()) else {
@@ -602,7 +644,7 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
         walls.push(Wall { shape, radius: w.radius });
     }
 
-    // Rigs: every name the file mentions, sorted.
+    // Rigs: every name the agents and spawns mention, sorted.
     let mut rig_names: BTreeSet<&str> = raw.agents.iter().map(|a| a.rig.as_str()).collect();
     for s in &raw.spawn {
         rig_names.extend(s.rigs.keys().map(String::as_str));
@@ -611,8 +653,47 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
     for name in &rig_names {
         crate::cache::check_name(name).map_err(|m| Error::invalid(path, format!("bad rig name: {m}")).field("rig"))?;
     }
+    check(
+        path,
+        rig_names.len() * cycles.len() <= MAX_RIG_CYCLES,
+        "cycles",
+        format!("at most {MAX_RIG_CYCLES} (rig, cycle) pairs"),
+    )?;
     let rigs: Vec<String> = rig_names.iter().map(|s| s.to_string()).collect();
     let rig_index: HashMap<&str, u16> = rig_names.iter().enumerate().map(|(i, s)| (*s, i as u16)).collect();
+    // Rig files are relative to the scene file.
+    let base = path.parent().unwrap_or(Path::new(""));
+    let rig_files: Vec<Option<PathBuf>> = rigs.iter().map(|r| raw.rigs.get(r).map(|f| base.join(f))).collect();
+
+    // Every (rig, cycle) pair an agent can be on, with the key that first
+    // puts it there (for messages): start cycles, then the `next` closure.
+    let mut reach: BTreeMap<(u16, u16), String> = BTreeMap::new();
+    for (i, a) in raw.agents.iter().enumerate() {
+        if let Some(&c) = cycle_index.get(a.cycle.as_str()) {
+            reach.entry((rig_index[a.rig.as_str()], c)).or_insert_with(|| format!("agents[{i}].cycle"));
+        }
+    }
+    for (i, s) in raw.spawn.iter().enumerate() {
+        for (r, rw) in &s.rigs {
+            for (c, cw) in &s.cycles {
+                if let (true, Some(&ci)) = (*rw > 0.0 && *cw > 0.0, cycle_index.get(c.as_str())) {
+                    reach.entry((rig_index[r.as_str()], ci)).or_insert_with(|| format!("spawn[{i}].cycles.{c}"));
+                }
+            }
+        }
+    }
+    let mut todo: Vec<(u16, u16)> = reach.keys().copied().collect();
+    while let Some((r, c)) = todo.pop() {
+        for &(n, w) in &cycles[c as usize].next {
+            if w > 0.0 && !reach.contains_key(&(r, n)) {
+                reach.insert((r, n), format!("cycles.{}.next.{}", cycles[c as usize].name, cycles[n as usize].name));
+                todo.push((r, n));
+            }
+        }
+    }
+    let timings = timings(path, fps, &rigs, &rig_files, &cycles, &reach)?;
+    let ncycles = cycles.len();
+    let timing = |rig: u16, cycle: u16| timings[rig as usize * ncycles + cycle as usize];
 
     let radius = |r: Option<f32>, field: String| -> Result<f32> {
         let r = r.unwrap_or(model.agent_radius);
@@ -620,8 +701,10 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
         Ok(r)
     };
     let seed = raw.seed;
-    let phase = |id: u32, cycle: u16| (rng::unit(seed, id, Purpose::Phase, 0) as f32 * cycles[cycle as usize].length)
-        .min(cycles[cycle as usize].length - 1e-3);
+    let phase = |id: u32, rig: u16, cycle: u16| {
+        let length = timing(rig, cycle).length;
+        (rng::unit(seed, id, Purpose::Phase, 0) as f32 * length).min(length - 1e-3)
+    };
 
     let mut agents = Vec::new();
     for (i, a) in raw.agents.iter().enumerate() {
@@ -634,20 +717,24 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
             return Err(inv("must be finite".into(), "heading_deg"));
         }
         let cycle = *cycle_index.get(a.cycle.as_str()).ok_or_else(|| inv(format!("unknown cycle `{}`", a.cycle), "cycle"))?;
-        let c = &cycles[cycle as usize];
+        let rig = rig_index[a.rig.as_str()];
+        let c = timing(rig, cycle);
         if a.seated && c.moves() {
-            return Err(inv(format!("seated agents need a cycle with stride 0, `{}` walks", a.cycle), "cycle"));
+            return Err(inv(
+                format!("seated agents need a cycle with stride 0, `{}` walks {} m on rig `{}`", a.cycle, c.stride, a.rig),
+                "cycle",
+            ));
         }
         let cycle_frame = match a.cycle_frame {
             Some(cf) if cf.is_finite() && cf >= 0.0 && cf < c.length => cf,
-            Some(_) => return Err(inv(format!("must be in [0, {})", c.length), "cycle_frame")),
-            None => phase(a.id, cycle),
+            Some(_) => return Err(inv(format!("must be in [0, {}) (`{}` on rig `{}`)", c.length, a.cycle, a.rig), "cycle_frame")),
+            None => phase(a.id, rig, cycle),
         };
         agents.push(AgentSpec {
             id: a.id,
             position: Vec2::from(a.position),
             heading: wrap_angle(a.heading_deg.to_radians()),
-            rig: rig_index[a.rig.as_str()],
+            rig,
             cycle,
             cycle_frame,
             seated: a.seated,
@@ -716,7 +803,7 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
                 heading,
                 rig,
                 cycle,
-                cycle_frame: phase(id, cycle),
+                cycle_frame: phase(id, rig, cycle),
                 seated: false,
                 targets: mask,
                 weights: w,
@@ -739,14 +826,102 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
         start: raw.frames.start,
         end: raw.frames.end,
         warmup,
+        fps,
         model,
         rigs,
+        rig_files,
         cycles,
+        timings,
         targets,
         obstacles,
         walls,
         agents,
     })
+}
+
+/// Length and stride of every reachable (rig, cycle) pair: from the rig's
+/// glTF file when `[rigs]` names one (the file wins: its clip is what the
+/// renderer plays), else the cycle's explicit `length` and `stride`.
+/// Explicit values that no reachable rig without a file uses are an error,
+/// so an edit that would be ignored is not silently ignored.
+fn timings(
+    path: &Path,
+    fps: f32,
+    rigs: &[String],
+    rig_files: &[Option<PathBuf>],
+    cycles: &[Cycle],
+    reach: &BTreeMap<(u16, u16), String>,
+) -> Result<Vec<CycleTiming>> {
+    let stand_in = CycleTiming { length: 1.0, stride: 0.0 };
+    let mut out = vec![stand_in; rigs.len() * cycles.len()];
+    let mut loaded: Vec<Option<crate::rig::Rig>> = vec![None; rigs.len()];
+    let mut explicit_used = vec![false; cycles.len()];
+    for (&(r, c), key) in reach {
+        let (rig_name, cycle) = (&rigs[r as usize], &cycles[c as usize]);
+        let timing = match &rig_files[r as usize] {
+            Some(file) => {
+                let rig: &crate::rig::Rig = match &mut loaded[r as usize] {
+                    Some(rig) => rig,
+                    slot @ None => slot.insert(crate::rig::Rig::load(file).map_err(|e| {
+                        Error::invalid(path, format!("rig `{rig_name}`: {e}")).field(format!("rigs.{rig_name}"))
+                    })?),
+                };
+                let Some(clip) = rig.cycles().iter().find(|k| k.name() == cycle.name) else {
+                    let names: Vec<&str> = rig.cycles().iter().map(|k| k.name()).collect();
+                    return Err(Error::invalid(
+                        path,
+                        format!(
+                            "rig `{rig_name}` ({}) has no cycle `{}` (its cycles: {})",
+                            file.display(),
+                            cycle.name,
+                            names.join(", ")
+                        ),
+                    )
+                    .field(key.clone()));
+                };
+                let t = CycleTiming { length: clip.frames(fps), stride: clip.stride() };
+                let what = format!("rig `{rig_name}` ({}) cycle `{}`", file.display(), cycle.name);
+                check(path, t.length.is_finite() && t.length >= 1.0, key.clone(), format!("{what} is {} frames long; needs >= 1", t.length))?;
+                check(path, t.stride.is_finite() && t.stride >= 0.0, key.clone(), format!("{what} has stride {} m; needs >= 0 (root walks along +Z)", t.stride))?;
+                t
+            }
+            None => {
+                explicit_used[c as usize] = true;
+                let missing = |k: &str| {
+                    Error::invalid(
+                        path,
+                        format!("rig `{rig_name}` has no file in [rigs], so `{}` needs an explicit {k} (used by {key})", cycle.name),
+                    )
+                    .field(format!("cycles.{}.{k}", cycle.name))
+                };
+                let length = cycle.length.ok_or_else(|| missing("length"))?;
+                let stride = cycle.stride.ok_or_else(|| missing("stride"))?;
+                CycleTiming { length, stride }
+            }
+        };
+        out[r as usize * cycles.len() + c as usize] = timing;
+    }
+    for (c, cycle) in cycles.iter().enumerate() {
+        let on_files: Vec<&str> = reach
+            .keys()
+            .filter(|&&(r, k)| k as usize == c && rig_files[r as usize].is_some())
+            .map(|&(r, _)| rigs[r as usize].as_str())
+            .collect();
+        for (k, given) in [("length", cycle.length.is_some()), ("stride", cycle.stride.is_some())] {
+            if given && !explicit_used[c] && !on_files.is_empty() {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "every rig on `{}` ({}) takes its {k} from its file in [rigs]; remove the explicit value",
+                        cycle.name,
+                        on_files.join(", ")
+                    ),
+                )
+                .field(format!("cycles.{}.{k}", cycle.name)));
+            }
+        }
+    }
+    Ok(out)
 }
 
 // ---------------------------------------------------------------------------
@@ -787,7 +962,7 @@ impl<'a> Simulation<'a> {
             .agents
             .iter()
             .map(|a| {
-                let c = &scene.cycles[a.cycle as usize];
+                let c = scene.timing(a.rig, a.cycle);
                 let mut s = AgentState {
                     position: a.position,
                     heading: a.heading,
@@ -869,7 +1044,8 @@ impl<'a> Simulation<'a> {
         let spec = &scene.agents[i];
         let s = prev[i];
         let mut n = s;
-        let cycle = &scene.cycles[s.cycle as usize];
+        // This agent's own rig's clip: strides differ per rig.
+        let cycle = scene.timing(spec.rig, s.cycle);
         if spec.seated || !cycle.moves() {
             // Seated and idle agents stand still and play their cycle.
             n.speed = 0.0;
@@ -962,19 +1138,20 @@ impl<'a> Simulation<'a> {
     /// agent may switch cycle (seeded per agent and frame).
     fn advance_cycle(&self, spec: &AgentSpec, s: &mut AgentState, by: f32) {
         let scene = self.scene;
-        let cycle = &scene.cycles[s.cycle as usize];
+        let length = scene.timing(spec.rig, s.cycle).length;
         s.cycle_frame += by;
-        if s.cycle_frame < cycle.length {
+        if s.cycle_frame < length {
             return;
         }
-        let rest = s.cycle_frame - cycle.length;
-        if !spec.seated && !cycle.next.is_empty() {
+        let rest = s.cycle_frame - length;
+        let next = &scene.cycles[s.cycle as usize].next;
+        if !spec.seated && !next.is_empty() {
             let u = rng::unit(scene.seed, spec.id, Purpose::NextCycle, i64::from(self.frame) + 1);
-            s.cycle = rng::choose(&cycle.next, u).unwrap_or(s.cycle);
+            s.cycle = rng::choose(next, u).unwrap_or(s.cycle);
         }
-        let len = scene.cycles[s.cycle as usize].length;
-        s.cycle_frame = rest.rem_euclid(len);
-        if scene.cycles[s.cycle as usize].moves() && s.target.is_none() {
+        let now = scene.timing(spec.rig, s.cycle);
+        s.cycle_frame = rest.rem_euclid(now.length);
+        if now.moves() && s.target.is_none() {
             s.target = nearest_target(scene, spec, s.position, s.visited);
         }
     }
