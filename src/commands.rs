@@ -644,6 +644,8 @@ pub fn cmd_demo(args: &crate::cli::DemoArgs) -> Result<()> {
     println!("  {}                 frame {} as glTF (open in Blender)", glb.display(), manifest.ref_frame);
     println!("  {}/<layer>/{}.<layer>.<frame>.exr  multi-channel EXR layers, PNG previews beside them", render.out.display(), crowd.shot.name);
     println!("Look at the PNGs, or the EXRs with `exrheader FILE` (Debian: openexr) or any compositor.");
-    println!("Ask about an agent: throng botinfo {} 78 --frame {}", shot_path.display(), manifest.ref_frame);
+    if let Some(a) = manifest.agents.iter().find(|a| a.layer == 0 && !a.removed) {
+        println!("Ask about an agent: throng botinfo {} {} --frame {}", shot_path.display(), a.id, manifest.ref_frame);
+    }
     Ok(())
 }

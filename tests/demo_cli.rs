@@ -85,18 +85,18 @@ fn removing_an_agent_moves_no_other_agent_between_layers() {
 fn botinfo_prints_the_block_and_names_nearest_ids() {
     let shot = demo_shot();
     let shot = shot.to_str().unwrap();
-    let (code, out, err) = throng(&["botinfo", shot, "78", "--frame", "1010"]);
+    let (code, out, err) = throng(&["botinfo", shot, "142", "--frame", "1010"]);
     assert_eq!(code, 0, "{err}");
-    for key in ["Robot ID  78", "Rig", "Cycle", "Frame", "Scheme", "Height", "Distance", "head"] {
+    for key in ["Robot ID  142", "Rig", "Cycle", "Frame", "Scheme", "Height", "Distance", "head"] {
         assert!(out.contains(key), "missing {key} in\n{out}");
     }
     let (code, _, err) = throng(&["botinfo", shot, "99999"]);
     assert_eq!(code, 2);
     assert!(err.contains("agent 99999 is not in shot demo") && err.contains("nearest ids"), "{err}");
-    let (code, out, _) = throng(&["botinfo", shot, "78", "--json"]);
+    let (code, out, _) = throng(&["botinfo", shot, "142", "--json"]);
     assert_eq!(code, 0);
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
-    assert_eq!(v[0]["id"], 78);
+    assert_eq!(v[0]["id"], 142);
 }
 
 #[test]
