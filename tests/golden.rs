@@ -495,6 +495,8 @@ fn demo_layers_match_golden() {
         return;
     }
 
+    // Evidence of an earlier failure must not outlive it.
+    let _ = std::fs::remove_dir_all(diff_dir());
     let (lines, failures) = check_against_golden(&rendered, &crowd.shot.name, GOLDEN_POINTS, true);
     for l in &lines {
         println!("{l}");
