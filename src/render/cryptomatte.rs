@@ -251,6 +251,7 @@ pub fn parse_manifest(json: &str, what: &Path) -> Result<BTreeMap<String, u32>> 
 /// Decodes every Cryptomatte type described in one EXR part's header.
 /// `exr_path` resolves sidecar manifests (`manif_file`, relative to the
 /// EXR's directory). Types whose rank channels are missing are errors.
+/// Sorted by type name.
 pub fn decode_part(part: &RawPart, exr_path: &Path) -> Result<Vec<Cryptomatte>> {
     // Keys as `cryptomatte/<key>/<field>`; tolerate Nuke's `exr/` prefix.
     let mut types: BTreeMap<String, BTreeMap<String, String>> = BTreeMap::new();
@@ -273,11 +274,18 @@ pub fn decode_part(part: &RawPart, exr_path: &Path) -> Result<Vec<Cryptomatte>> 
         if let Some(c) = field("conversion").filter(|&c| c != CONVERSION) {
             return Err(err(format!("cryptomatte `{name}` uses conversion `{c}`; only {CONVERSION} is supported")));
         }
-        // Rank channels: {name}00.R/G/B/A, {name}01..., in order, any case.
+        // Rank channels: {name}00.R/G/B/A, {name}01..., in order; writers
+        // spell the suffixes R, r or red (and so on).
         let channel = |level: usize, c: char| {
-            let upper = format!("{name}{level:02}.{c}");
-            let lower = format!("{name}{level:02}.{}", c.to_ascii_lowercase());
-            part.channels.get(&upper).or_else(|| part.channels.get(&lower))
+            let long = match c {
+                'R' => "red",
+                'G' => "green",
+                'B' => "blue",
+                _ => "alpha",
+            };
+            [c.to_string(), c.to_ascii_lowercase().to_string(), long.to_string()]
+                .iter()
+                .find_map(|suffix| part.channels.get(&format!("{name}{level:02}.{suffix}")))
         };
         let mut levels: Vec<[&Vec<f32>; 4]> = Vec::new();
         while let (Some(r), Some(g), Some(b), Some(a)) =
@@ -309,6 +317,7 @@ pub fn decode_part(part: &RawPart, exr_path: &Path) -> Result<Vec<Cryptomatte>> 
         }
         out.push(m);
     }
+    out.sort_by(|a, b| a.name.cmp(&b.name));
     Ok(out)
 }
 
