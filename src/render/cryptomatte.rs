@@ -468,6 +468,11 @@ mod tests {
         assert_eq!((hash_to_float(0).to_bits() >> 23) & 0xff, 1);
         assert_eq!((hash_to_float(0x7f80_0001).to_bits() >> 23) & 0xff, 254);
         assert!(hash_to_float(u32::MAX).is_finite());
+        // The keys and ids quoted in docs/cryptomatte.md.
+        assert_eq!((layer_key(AGENT_MATTE).as_str(), layer_key(PART_MATTE).as_str()), ("f7945dc", "3201c4f"));
+        assert_eq!(id_hex(name_id(&agent_name(78))), "26e5095d");
+        assert_eq!(id_hex(name_id(SET_NAME)), "5ecc6fe8");
+        assert_eq!(id_hex(name_id(&part_name(78, "head"))), "ff7184e5");
     }
 
     #[test]
