@@ -223,6 +223,10 @@ pub struct RenderArgs {
     /// Image size override, e.g. 480x270 (default: the shot's).
     #[arg(long)]
     pub resolution: Option<String>,
+    /// Cryptomatte mattes (CryptoAgent, CryptoPart): `header` (manifest in
+    /// the EXR header), `sidecar` (manifest in a JSON beside the EXR) or `off`.
+    #[arg(long, default_value = "header")]
+    pub cryptomatte: String,
 }
 
 /// `throng comp`.

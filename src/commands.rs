@@ -531,6 +531,14 @@ pub fn cmd_render(args: &crate::cli::RenderArgs) -> Result<()> {
         resume: args.resume,
         png: args.png,
         resolution: args.resolution.as_deref().map(parse_resolution).transpose()?,
+        cryptomatte: match args.cryptomatte.as_str() {
+            "header" => job::CryptoOutput::Header,
+            "sidecar" => job::CryptoOutput::Sidecar,
+            "off" => job::CryptoOutput::Off,
+            other => {
+                return Err(Error::Usage(format!("--cryptomatte `{other}`: expected header, sidecar or off")))
+            }
+        },
     };
     let done = job::run(&crowd, manifest.as_ref(), &job)?;
     let rendered = done.iter().filter(|d| !d.skipped).count();

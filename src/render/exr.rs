@@ -3,8 +3,12 @@
 //! One single-part scanline file per (layer, frame), ZIP16, increasing lines,
 //! channels (sorted): `A B G R` (half, premultiplied), `N.X N.Y N.Z` (half),
 //! `Z` (float, camera-space depth, +inf = no hit), `agent.id` (uint, 0 = no
-//! agent, else cache id + 1), `albedo.B albedo.G albedo.R` (half).
+//! agent, else cache id + 1), `albedo.B albedo.G albedo.R` (half), and when
+//! the film has them the Cryptomatte rank channels `CryptoAgent00.R ...`,
+//! `CryptoPart00.R ...` (float) with their `cryptomatte/<key>/...` header
+//! (see [`super::cryptomatte`]).
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use exr::prelude::{
@@ -13,6 +17,7 @@ use exr::prelude::{
 };
 use glam::{Mat4, Vec3, Vec4};
 
+use super::cryptomatte;
 use super::film::Film;
 use crate::error::{write_atomic, Error, Result};
 use crate::scene::Camera;
@@ -90,12 +95,49 @@ fn half(values: impl Iterator<Item = f32>) -> FlatSamples {
     FlatSamples::F16(values.map(|v| f16::from_f32(v.clamp(-65504.0, 65504.0))).collect())
 }
 
-/// Writes `film` atomically to `path` (temporary name, then rename).
+/// Where the Cryptomatte manifests go.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ManifestMode {
+    /// In the header (`cryptomatte/<key>/manifest`), the default.
+    #[default]
+    Header,
+    /// In a sidecar JSON beside the EXR, named by `cryptomatte/<key>/manif_file`:
+    /// `<exr file stem>.<type name>.json`.
+    Sidecar,
+}
+
+/// Output options of [`write_layer_with`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WriteOptions {
+    /// Where Cryptomatte manifests go.
+    pub manifest: ManifestMode,
+}
+
+/// The sidecar manifest file name of Cryptomatte type `type_name` for the EXR `exr_path`.
+pub fn sidecar_name(exr_path: &Path, type_name: &str) -> String {
+    let stem = exr_path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    format!("{stem}.{type_name}.json")
+}
+
+/// Text from UTF-8 bytes (Cryptomatte names and manifests are UTF-8;
+/// OpenEXR text attributes are byte strings).
+fn utf8_text(s: &str) -> Text {
+    Text::from_slice_unchecked(s.as_bytes())
+}
+
+/// Writes `film` atomically to `path` (temporary name, then rename), with
+/// Cryptomatte manifests in the header.
 pub fn write_layer(path: &Path, film: &Film, meta: &LayerMeta) -> Result<()> {
+    write_layer_with(path, film, meta, &WriteOptions::default())
+}
+
+/// As [`write_layer`], with options. Sidecar manifests are written (atomically)
+/// before the EXR, so an EXR that exists has its sidecars.
+pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &WriteOptions) -> Result<()> {
     let (w, h) = (film.width as usize, film.height as usize);
     let rgba = |c: usize| half(film.rgba.iter().map(move |p| p[c]));
     let vec3 = |v: &[[f32; 3]], c: usize| half(v.iter().map(|p| p[c]));
-    let channels = AnyChannels::sort(SmallVec::from_vec(vec![
+    let mut list = vec![
         AnyChannel::new("R", rgba(0)),
         AnyChannel::new("G", rgba(1)),
         AnyChannel::new("B", rgba(2)),
@@ -108,7 +150,25 @@ pub fn write_layer(path: &Path, film: &Film, meta: &LayerMeta) -> Result<()> {
         AnyChannel::new("albedo.G", vec3(&film.albedo, 1)),
         AnyChannel::new("albedo.B", vec3(&film.albedo, 2)),
         AnyChannel::new("agent.id", FlatSamples::U32(film.agent_id.clone())),
-    ]));
+    ];
+    for m in &film.cryptomatte {
+        if m.width != film.width || m.height != film.height || m.pairs.len() != w * h * m.ranks {
+            return Err(Error::invalid(path, format!("cryptomatte `{}` does not match the film size", m.name)));
+        }
+        // Level l holds ranks 2l (R id, G coverage) and 2l+1 (B id, A coverage).
+        for level in 0..m.ranks.div_ceil(2) {
+            for (c, rank, part) in [('R', 0, 0), ('G', 0, 1), ('B', 1, 0), ('A', 1, 1)] {
+                let r = 2 * level + rank;
+                let values: Vec<f32> = if r < m.ranks {
+                    m.pairs.chunks_exact(m.ranks).map(|px| px[r][part]).collect()
+                } else {
+                    vec![0.0; w * h]
+                };
+                list.push(AnyChannel::new(utf8_text(&format!("{}{level:02}.{c}", m.name)), FlatSamples::F32(values)));
+            }
+        }
+    }
+    let channels = AnyChannels::sort(SmallVec::from_vec(list));
 
     let mut attrs = LayerAttributes::named(text(&meta.layer)?);
     attrs.software_name = Some(text(&format!("throng {}", env!("CARGO_PKG_VERSION")))?);
@@ -127,6 +187,28 @@ pub fn write_layer(path: &Path, film: &Film, meta: &LayerMeta) -> Result<()> {
     put("throng/spp", AttributeValue::I32(meta.spp.min(i32::MAX as u32) as i32))?;
     put("throng/zConvention", AttributeValue::Text(text("cameraDepth")?))?;
     put("throng/idMapping", AttributeValue::Text(text(&meta.id_mapping)?))?;
+    for m in &film.cryptomatte {
+        let key = m.key();
+        let mut put_utf8 = |field: &str, v: &str| {
+            attrs.other.insert(utf8_text(&format!("cryptomatte/{key}/{field}")), AttributeValue::Text(utf8_text(v)));
+        };
+        put_utf8("name", &m.name);
+        put_utf8("hash", cryptomatte::HASH);
+        put_utf8("conversion", cryptomatte::CONVERSION);
+        match options.manifest {
+            ManifestMode::Header => put_utf8("manifest", &m.manifest_json()),
+            ManifestMode::Sidecar => {
+                let name = sidecar_name(path, &m.name);
+                let side = path.parent().unwrap_or(Path::new("")).join(&name);
+                let json = m.manifest_json();
+                write_atomic(&side, |out| {
+                    use std::io::Write;
+                    out.write_all(json.as_bytes()).map_err(|e| Error::io(&side, e))
+                })?;
+                put_utf8("manif_file", &name);
+            }
+        }
+    }
 
     let encoding = Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing };
     let image = Image::from_layer(Layer::new((w, h), attrs, encoding, channels));
@@ -181,6 +263,7 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
         normal: (0..n).map(|i| [nx[i], ny[i], nz[i]]).collect(),
         albedo: (0..n).map(|i| [ar[i], ag[i], ab[i]]).collect(),
         agent_id,
+        cryptomatte: cryptomatte::decode_part(&raw_part(layer, &image.attributes, |n| n.starts_with("Crypto")), path)?,
     };
 
     let attrs = &layer.attributes;
@@ -209,6 +292,67 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
         far: attrs.far_clip_plane.unwrap_or(0.0),
     };
     Ok((film, meta))
+}
+
+/// One part (layer) of an EXR as plain data: what the Cryptomatte decoder needs.
+#[derive(Clone, Debug, Default)]
+pub struct RawPart {
+    /// Part name, if the file names it.
+    pub name: Option<String>,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Text header attributes (shared and the part's own), UTF-8 decoded.
+    pub attributes: BTreeMap<String, String>,
+    /// Channels as f32, row-major, by full channel name.
+    pub channels: BTreeMap<String, Vec<f32>>,
+}
+
+fn lossy(t: &Text) -> String {
+    String::from_utf8_lossy(t.bytes()).into_owned()
+}
+
+fn raw_part(
+    layer: &Layer<AnyChannels<FlatSamples>>,
+    shared: &exr::meta::header::ImageAttributes,
+    keep: impl Fn(&str) -> bool,
+) -> RawPart {
+    let mut attributes = BTreeMap::new();
+    for (k, v) in shared.other.iter().chain(layer.attributes.other.iter()) {
+        if let AttributeValue::Text(t) = v {
+            attributes.insert(lossy(k), lossy(t));
+        }
+    }
+    let channels = layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| (lossy(&c.name), c))
+        .filter(|(n, _)| keep(n))
+        .map(|(n, c)| (n, c.sample_data.values_as_f32().collect()))
+        .collect();
+    RawPart {
+        name: layer.attributes.layer_name.as_ref().map(lossy),
+        width: layer.size.width() as u32,
+        height: layer.size.height() as u32,
+        attributes,
+        channels,
+    }
+}
+
+/// Reads every part of any scanline or tiled EXR (largest resolution level,
+/// no deep data), keeping the channels whose full name passes `keep`.
+pub fn read_parts(path: &Path, keep: impl Fn(&str) -> bool) -> Result<Vec<RawPart>> {
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .all_layers()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| exr_error(path, e))?;
+    Ok(image.layer_data.iter().map(|l| raw_part(l, &image.attributes, &keep)).collect())
 }
 
 /// sRGB transfer function (IEC 61966-2-1).

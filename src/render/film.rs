@@ -10,6 +10,10 @@
 //!   `z` is camera-space depth, positive forward, +inf where that sample
 //!   missed or hit a holdout.
 //!   `agent_id` is 0 for "no agent" (sky, set, holdout), else cache id + 1.
+//! - `cryptomatte`: when rendered with [`CryptoNames`], the `CryptoAgent` and
+//!   `CryptoPart` mattes: per pixel the top [`RANKS`] (id, coverage) pairs,
+//!   ranked from a fixed-size per-pixel accumulator over the samples in
+//!   index order (so also independent of threading).
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -18,6 +22,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::accel::{BlasSet, Tlas};
+use super::cryptomatte::{CryptoNames, Cryptomatte, RankAccumulator, AGENT_MATTE, PART_MATTE, RANKS};
 use super::integrator::{Integrator, RayCounts, SampleResult};
 use super::RenderSettings;
 use crate::error::{Error, Result};
@@ -57,6 +62,8 @@ pub struct Film {
     pub albedo: Vec<[f32; 3]>,
     /// 0 = no agent, else cache agent id + 1.
     pub agent_id: Vec<u32>,
+    /// Cryptomatte types (`CryptoAgent`, `CryptoPart`); empty when not rendered.
+    pub cryptomatte: Vec<Cryptomatte>,
 }
 
 impl Film {
@@ -71,6 +78,7 @@ impl Film {
             normal: vec![[0.0; 3]; n],
             albedo: vec![[0.0; 3]; n],
             agent_id: vec![0; n],
+            cryptomatte: Vec::new(),
         }
     }
 
@@ -96,14 +104,30 @@ struct Pixel {
     normal: [f32; 3],
     albedo: [f32; 3],
     agent: u32,
+    /// Ranked (id, coverage) of the agent and part mattes (when enabled).
+    crypto: [[[f32; 2]; RANKS]; 2],
 }
 
-fn render_pixel(integrator: &Integrator, x: u32, y: u32, spp: u32, counts: &mut RayCounts) -> Pixel {
+fn render_pixel(
+    integrator: &Integrator,
+    x: u32,
+    y: u32,
+    spp: u32,
+    crypto: Option<&CryptoNames>,
+    counts: &mut RayCounts,
+) -> Pixel {
     let (mut rgb, mut alpha, mut normal, mut albedo) = (Vec3::ZERO, 0.0f32, Vec3::ZERO, Vec3::ZERO);
     let mut nearest = (f32::INFINITY, SampleResult { z: f32::INFINITY, ..Default::default() });
+    let mut acc = [RankAccumulator::default(), RankAccumulator::default()];
     // Samples summed in index order: the float result is independent of threading.
     for s in 0..spp {
         let (r, offset) = integrator.sample_pixel(x, y, s, counts);
+        if let Some(names) = crypto {
+            // Each sample has filter weight 1 (importance-sampled filter).
+            let ids = r.instance.map_or([0, 0], |i| names.ids(i));
+            acc[0].add(ids[0]);
+            acc[1].add(ids[1]);
+        }
         rgb += r.rgb;
         alpha += r.alpha;
         normal += r.normal;
@@ -114,12 +138,18 @@ fn render_pixel(integrator: &Integrator, x: u32, y: u32, spp: u32, counts: &mut 
         }
     }
     let inv = 1.0 / spp as f32;
+    let mut ranked = [[[0.0f32; 2]; RANKS]; 2];
+    if crypto.is_some() {
+        acc[0].write_ranked(spp, &mut ranked[0]);
+        acc[1].write_ranked(spp, &mut ranked[1]);
+    }
     Pixel {
         rgba: (rgb * inv).extend(alpha * inv).to_array(),
         z: nearest.1.z,
         normal: (normal * inv).to_array(),
         albedo: (albedo * inv).to_array(),
         agent: nearest.1.agent,
+        crypto: ranked,
     }
 }
 
@@ -144,6 +174,20 @@ pub fn render_frame_with_stats(
     settings: &RenderSettings,
     progress: Option<&(dyn Fn(usize) + Sync)>,
 ) -> Result<(Film, RenderStats)> {
+    render_frame_with_cryptomatte(blas, lib, scene, settings, None, progress)
+}
+
+/// As [`render_frame_with_stats`], also rendering the `CryptoAgent` and
+/// `CryptoPart` mattes when `crypto` (built from `scene.instances`) is given.
+/// Their manifests list only the names present in this image.
+pub fn render_frame_with_cryptomatte(
+    blas: &BlasSet,
+    lib: &Library,
+    scene: &FrameScene,
+    settings: &RenderSettings,
+    crypto: Option<&CryptoNames>,
+    progress: Option<&(dyn Fn(usize) + Sync)>,
+) -> Result<(Film, RenderStats)> {
     check(blas, lib, scene, settings)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(settings.threads)
@@ -166,7 +210,7 @@ pub fn render_frame_with_stats(
                 let mut pixels = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
                 for y in y0..y1 {
                     for x in x0..x1 {
-                        pixels.push(render_pixel(&integrator, x, y, settings.spp, &mut counts));
+                        pixels.push(render_pixel(&integrator, x, y, settings.spp, crypto, &mut counts));
                     }
                 }
                 if let Some(report) = progress {
@@ -178,6 +222,10 @@ pub fn render_frame_with_stats(
         stats.trace = start.elapsed();
 
         let mut film = Film::new(w, h);
+        let mut mattes = match crypto {
+            Some(_) => vec![Cryptomatte::new(AGENT_MATTE, w, h, RANKS), Cryptomatte::new(PART_MATTE, w, h, RANKS)],
+            None => Vec::new(),
+        };
         for (&(x0, y0), (pixels, counts)) in tiles.iter().zip(&rendered) {
             stats.rays += *counts;
             let tw = (x0 + TILE).min(w) - x0;
@@ -188,8 +236,17 @@ pub fn render_frame_with_stats(
                 film.normal[i] = px.normal;
                 film.albedo[i] = px.albedo;
                 film.agent_id[i] = px.agent;
+                for (m, ranked) in mattes.iter_mut().zip(&px.crypto) {
+                    m.pairs[i * RANKS..(i + 1) * RANKS].copy_from_slice(ranked);
+                }
             }
         }
+        if let Some(names) = crypto {
+            for (k, m) in mattes.iter_mut().enumerate() {
+                m.manifest = names.manifest(k, &m.ids_present());
+            }
+        }
+        film.cryptomatte = mattes;
         Ok((film, stats))
     })
 }

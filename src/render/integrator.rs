@@ -39,6 +39,8 @@ pub struct SampleResult {
     pub albedo: Vec3,
     /// 0 = no agent, else cache agent id + 1.
     pub agent: u32,
+    /// Index in `scene.instances` of the first hit; `None` for a miss or a holdout.
+    pub instance: Option<u32>,
 }
 
 /// Ray counts, summed per tile (integers, so any thread count gives the same totals).
@@ -362,6 +364,7 @@ impl<'a> Integrator<'a> {
                 out.normal = surface.ns;
                 out.albedo = surface.base_color;
                 out.agent = inst.agent.map_or(0, |a| a.wrapping_add(1));
+                out.instance = Some(hit.instance);
             }
 
             let material = self.material(surface.material);

@@ -12,7 +12,8 @@ use std::time::Instant;
 use crate::error::{Error, Result};
 use crate::layers::Manifest;
 use crate::pose::{Lod, ShotCrowd};
-use crate::render::{exr, film::render_frame_with_stats, BlasSet, RenderSettings};
+use crate::render::cryptomatte::CryptoNames;
+use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, RenderSettings};
 use crate::scene::{vis, FrameScene, Instance};
 
 /// The render that needs no manifest: the set and every agent, fully visible.
@@ -37,6 +38,30 @@ pub struct RenderJob {
     pub png: bool,
     /// Image size override (width, height); the shot's when `None`.
     pub resolution: Option<[u32; 2]>,
+    /// Cryptomatte output (`CryptoAgent`, `CryptoPart`).
+    pub cryptomatte: CryptoOutput,
+}
+
+/// Whether and how a job writes Cryptomatte mattes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum CryptoOutput {
+    /// No Cryptomatte channels.
+    Off,
+    /// Mattes with their manifests in the EXR header (the default).
+    #[default]
+    Header,
+    /// Mattes with sidecar manifests `<exr stem>.<type>.json` (`manif_file`).
+    Sidecar,
+}
+
+/// The Cryptomatte names of a frame scene's instances: slot names from each
+/// agent's rig.
+pub fn crypto_names(crowd: &ShotCrowd, scene: &FrameScene) -> CryptoNames {
+    CryptoNames::new(&scene.instances, |agent, part| {
+        let cast = crowd.casting.get(&agent)?;
+        let rig = crowd.rigs.get(&cast.rig)?;
+        rig.slots().get(part as usize).map(|s| s.name.as_str())
+    })
 }
 
 /// One file the job wrote or skipped.
@@ -182,11 +207,13 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
             let pixels = (w as usize * h as usize).max(1);
             let done = out.len();
             let report = |p: usize| progress.show(done, frame, layer, p as f64 / pixels as f64);
-            let (film, _stats) = render_frame_with_stats(
+            let names = (job.cryptomatte != CryptoOutput::Off).then(|| crypto_names(crowd, &scene));
+            let (film, _stats) = render_frame_with_cryptomatte(
                 &blas,
                 crowd.library(),
                 &scene,
                 &settings,
+                names.as_ref(),
                 if progress.on { Some(&report) } else { None },
             )?;
             let (near, far) = film.depth_range().unwrap_or((0.1, 1000.0));
@@ -203,7 +230,11 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                 near,
                 far,
             };
-            exr::write_layer(&path, &film, &meta)?;
+            let manifest = match job.cryptomatte {
+                CryptoOutput::Sidecar => exr::ManifestMode::Sidecar,
+                _ => exr::ManifestMode::Header,
+            };
+            exr::write_layer_with(&path, &film, &meta, &exr::WriteOptions { manifest })?;
             if job.png {
                 exr::write_preview_png(&path.with_extension("png"), &film)?;
             }

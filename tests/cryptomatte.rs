@@ -1,0 +1,353 @@
+//! Cryptomatte: ids against the specification's 432 test vectors, the
+//! decoder on Psyop's sample files, and our own agent / part mattes (ranking,
+//! coverage, manifest, determinism, EXR round trip, sidecar manifests).
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use glam::{Affine3A, Vec2, Vec3};
+use throng::render::accel::BlasSet;
+use throng::render::cryptomatte::{
+    self, agent_name, id_hex, layer_key, name_id, part_name, CryptoNames, Cryptomatte, AGENT_MATTE, PART_MATTE, RANKS,
+    SET_NAME,
+};
+use throng::render::exr::{
+    camera_matrices, read_layer, read_parts, write_layer, write_layer_with, LayerMeta, ManifestMode, WriteOptions,
+    ID_MAPPING,
+};
+use throng::render::film::{render_frame_with_cryptomatte, Film};
+use throng::render::RenderSettings;
+use throng::scene::{vis, Camera, FrameScene, Instance, Library, Material, Mesh, Sky};
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/cryptomatte")
+}
+
+/// The larger Psyop samples live in shared/ (not copied into the repo).
+fn shared_sample(name: &str) -> Option<PathBuf> {
+    [
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/assets/exr/cryptomatte_psyop").join(name),
+        PathBuf::from("/work/shared/assets/exr/cryptomatte_psyop").join(name),
+    ]
+    .into_iter()
+    .find(|p| p.exists())
+}
+
+// ------------------------------------------------------------ ids
+
+#[test]
+fn all_432_test_vectors() {
+    let text = std::fs::read_to_string(fixtures().join("manifest_test_vectors.json")).unwrap();
+    let vectors: Vec<serde_json::Value> = serde_json::from_str(&text).unwrap();
+    assert_eq!(vectors.len(), 432);
+    for v in &vectors {
+        let name = v["name"].as_str().unwrap();
+        assert_eq!(id_hex(name_id(name)), v["hash_hex"].as_str().unwrap(), "name `{name}`");
+        let id = name_id(name);
+        assert!(id.is_finite() && id != 0.0 && id.is_normal(), "`{name}` -> {id}");
+        assert_eq!(layer_key(v["layer"].as_str().unwrap()), v["layer_key"].as_str().unwrap());
+    }
+}
+
+// ------------------------------------------------- decoder on real files
+
+/// Plausibility of a decoded third-party matte: every manifest name that is
+/// on screen has a non-empty matte, coverage never exceeds 1 over the ranks
+/// and ranks are sorted by coverage.
+fn check_plausible(m: &Cryptomatte, sorted: bool) {
+    assert_eq!(m.ranks, 6, "{}", m.name);
+    for (i, s) in m.coverage_sum().iter().enumerate() {
+        assert!(*s <= 1.0 + 1e-3, "{}: pixel {i} coverage sum {s}", m.name);
+        let px = m.pixel(i);
+        // (The Cornell box sample is not sorted everywhere; the others are.)
+        for w in px.windows(2).filter(|_| sorted) {
+            assert!(w[0][1] >= w[1][1] - 1e-6, "{}: pixel {i} ranks unsorted {px:?}", m.name);
+        }
+    }
+    for (name, &bits) in &m.manifest {
+        assert_eq!(bits, name_id(name).to_bits(), "{}: manifest `{name}`", m.name);
+    }
+}
+
+#[test]
+fn special_chars_sample() {
+    let path = fixtures().join("special_chars.exr");
+    let mattes = cryptomatte::read(&path).unwrap();
+    assert_eq!(mattes.len(), 1);
+    let m = &mattes[0];
+    assert_eq!(m.name, "special_chars");
+    assert_eq!((m.width, m.height), (64, 64));
+    check_plausible(m, true);
+    let names: BTreeSet<&str> = m.manifest.keys().map(String::as_str).collect();
+    assert!(names.contains("равнина") && names.contains("name, with, comma"), "{names:?}");
+    for name in m.manifest.keys() {
+        let matte = m.matte(name);
+        let area: f32 = matte.iter().sum();
+        assert!(area > 1.0, "`{name}` matte is empty");
+    }
+    // The four objects cover most of the frame and their mattes sum to ~1 there.
+    let full = m.coverage_sum().iter().filter(|&&s| (s - 1.0).abs() < 1e-3).count();
+    assert!(full > 64 * 64 / 2, "{full} fully covered pixels");
+}
+
+#[test]
+fn sidecar_manifest_sample() {
+    let path = fixtures().join("sidecar_manifest.exr");
+    let mattes = cryptomatte::read(&path).unwrap();
+    assert_eq!(mattes.len(), 1);
+    let m = &mattes[0];
+    assert_eq!(m.name, "crypto_asset");
+    assert_eq!(m.manifest.len(), 8, "manifest read from the sidecar");
+    check_plausible(m, true);
+    let on_screen: Vec<&String> = m.manifest.keys().filter(|n| m.matte(n).iter().any(|&c| c > 0.0)).collect();
+    assert!(on_screen.len() >= 2, "{on_screen:?}");
+    assert!(m.matte("default").iter().sum::<f32>() > 1.0);
+}
+
+#[test]
+fn multichannel_and_cornell_samples() {
+    let Some(path) = shared_sample("multichannel.exr") else {
+        eprintln!("skipped: shared/assets/exr/cryptomatte_psyop not present");
+        return;
+    };
+    let mattes = cryptomatte::read(&path).unwrap();
+    let names: Vec<&str> = mattes.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names.len(), 3, "{names:?}");
+    for m in &mattes {
+        check_plausible(m, true);
+        assert!(!m.manifest.is_empty());
+        // At least one named object is visible with full coverage somewhere.
+        let best = m.manifest.keys().map(|n| m.matte(n).iter().cloned().fold(0.0, f32::max)).fold(0.0, f32::max);
+        assert!(best > 0.99, "{}: best matte peak {best}", m.name);
+    }
+    let object = mattes.iter().find(|m| m.name == "crypto_object").unwrap();
+    assert_eq!(object.manifest.len(), 407);
+    let asset = mattes.iter().find(|m| m.name == "crypto_asset").unwrap();
+    // Two assets: their mattes are non-empty and disjoint-ish (sum <= 1 per pixel).
+    let (a, b) = (asset.matte("ball_asset"), asset.matte("toroidal_asset"));
+    assert!(a.iter().sum::<f32>() > 10.0 && b.iter().sum::<f32>() > 10.0);
+    assert!(a.iter().zip(&b).all(|(x, y)| x + y <= 1.0 + 1e-3));
+
+    let Some(path) = shared_sample("cornellBox_CryptoWildcard.0001.exr") else { return };
+    let mattes = cryptomatte::read(&path).unwrap();
+    assert_eq!(mattes.len(), 1);
+    let m = &mattes[0];
+    assert_eq!(m.name, "uCryptoWildcard");
+    check_plausible(m, false);
+    let area = m.matte("rect_[_top").iter().sum::<f32>();
+    assert!(area > 100.0, "rect_[_top covers {area} pixels");
+}
+
+// -------------------------------------------------------- our own mattes
+
+fn cube() -> Mesh {
+    let p: Vec<Vec3> = (0..8)
+        .map(|i| Vec3::new((i & 1) as f32 - 0.5, ((i >> 1) & 1) as f32 - 0.5, ((i >> 2) & 1) as f32 - 0.5))
+        .collect();
+    let faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
+    let indices = faces.iter().flat_map(|f| [f[0], f[1], f[2], f[0], f[2], f[3]]).collect();
+    Mesh { name: "cube".into(), positions: p, indices, ..Default::default() }
+}
+
+fn floor() -> Mesh {
+    let positions = [(-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (-20.0, 20.0)].map(|(x, z)| Vec3::new(x, 0.0, z)).to_vec();
+    Mesh {
+        name: "floor".into(),
+        normals: vec![Vec3::Y; 4],
+        uvs: vec![Vec2::ZERO; 4],
+        positions,
+        indices: vec![0, 2, 1, 0, 3, 2],
+    }
+}
+
+fn camera(eye: Vec3, target: Vec3, yfov_deg: f32) -> Camera {
+    let forward = (target - eye).normalize();
+    let right = forward.cross(Vec3::Y).normalize();
+    let up = right.cross(forward);
+    Camera { world_from_camera: Affine3A::from_cols(right.into(), up.into(), (-forward).into(), eye.into()), yfov: yfov_deg.to_radians() }
+}
+
+const SLOTS: [&str; 2] = ["torso", "head"];
+
+/// A floor (set), agents 3, 78 and 1000 as two stacked boxes (torso, head),
+/// agent 5 far off screen, and a holdout box over part of agent 1000.
+fn crowd_scene() -> (Library, FrameScene) {
+    let lib = Library {
+        meshes: vec![floor(), cube()],
+        materials: vec![Material { name: "grey".into(), base_color: Vec3::splat(0.5), base_color_texture: None, roughness: 0.5, metallic: 0.0 }],
+        textures: vec![],
+    };
+    let inst = |mesh, m: Affine3A, agent, part, visibility| Instance { mesh, material: 0, world_from_object: m, agent, part, visibility };
+    let mut instances = vec![inst(0, Affine3A::IDENTITY, None, 0, vis::ALL)];
+    for (agent, x) in [(3u32, -1.2f32), (78, 0.0), (1000, 1.3), (5, 60.0)] {
+        let torso = Affine3A::from_scale_rotation_translation(Vec3::new(0.8, 1.0, 0.5), Default::default(), Vec3::new(x, 0.5, 0.0));
+        let head = Affine3A::from_scale_rotation_translation(Vec3::splat(0.4), Default::default(), Vec3::new(x, 1.2, 0.0));
+        instances.push(inst(1, torso, Some(agent), 0, vis::ALL));
+        instances.push(inst(1, head, Some(agent), 1, vis::ALL));
+    }
+    let holdout = Affine3A::from_scale_rotation_translation(Vec3::splat(0.3), Default::default(), Vec3::new(1.5, 0.4, 0.6));
+    instances.push(inst(1, holdout, None, 0, vis::HOLDOUT | vis::SHADOW));
+    let scene = FrameScene {
+        instances,
+        camera: camera(Vec3::new(0.0, 1.0, 4.5), Vec3::new(0.0, 0.7, 0.0), 40.0),
+        sun: None,
+        sky: Sky { radiance: Vec3::splat(0.5) },
+    };
+    (lib, scene)
+}
+
+fn names(scene: &FrameScene) -> CryptoNames {
+    CryptoNames::new(&scene.instances, |_, part| SLOTS.get(part as usize).copied())
+}
+
+fn settings(spp: u32, threads: usize) -> RenderSettings {
+    RenderSettings { width: 48, height: 36, spp, max_bounces: 1, seed: 7, frame: 1001, layer: 0, sky_visible: false, threads, indirect_clamp: 10.0 }
+}
+
+fn render(spp: u32, threads: usize) -> (FrameScene, Film) {
+    let (lib, scene) = crowd_scene();
+    let blas = BlasSet::build(&lib);
+    let crypto = names(&scene);
+    let (film, _) = render_frame_with_cryptomatte(&blas, &lib, &scene, &settings(spp, threads), Some(&crypto), None).unwrap();
+    (scene, film)
+}
+
+fn meta(film: &Film, scene: &FrameScene) -> LayerMeta {
+    let (world_to_camera, world_to_ndc) = camera_matrices(&scene.camera, film.width, film.height, 0.1, 100.0);
+    LayerMeta {
+        shot: "demo".into(),
+        layer: "crowd_0".into(),
+        frame: 1001,
+        seed: 7,
+        spp: 16,
+        id_mapping: ID_MAPPING.into(),
+        world_to_camera,
+        world_to_ndc,
+        near: 0.1,
+        far: 100.0,
+    }
+}
+
+#[test]
+fn agent_and_part_mattes_match_the_render() {
+    let (_, film) = render(16, 2);
+    assert_eq!(film.cryptomatte.len(), 2);
+    let (agents, parts) = (&film.cryptomatte[0], &film.cryptomatte[1]);
+    assert_eq!((agents.name.as_str(), parts.name.as_str()), (AGENT_MATTE, PART_MATTE));
+    assert_eq!(agents.ranks, RANKS);
+
+    // Manifests: only what is on screen (agent 5 is off to the side, the holdout is nameless).
+    let expect: Vec<String> = [agent_name(1000), agent_name(3), agent_name(78), SET_NAME.to_string()].to_vec();
+    assert_eq!(agents.manifest.keys().cloned().collect::<Vec<_>>(), expect);
+    assert_eq!(parts.manifest.len(), 7, "{:?}", parts.manifest);
+    assert!(parts.manifest.contains_key(&part_name(78, "head")) && parts.manifest.contains_key(SET_NAME));
+    for (name, &bits) in agents.manifest.iter().chain(&parts.manifest) {
+        assert_eq!(bits, name_id(name).to_bits());
+    }
+
+    // With at most 6 objects under a pixel the ranks hold every sample:
+    // coverage over the ranks is exactly the alpha (sky and holdout are id 0).
+    let (agent_cov, part_cov) = (agents.coverage_sum(), parts.coverage_sum());
+    for (i, px) in film.rgba.iter().enumerate() {
+        assert!((agent_cov[i] - px[3]).abs() < 1e-5, "pixel {i}: coverage {} alpha {}", agent_cov[i], px[3]);
+        assert!((part_cov[i] - px[3]).abs() < 1e-5);
+    }
+
+    for agent in [3u32, 78, 1000] {
+        let matte = agents.matte(&agent_name(agent));
+        let head = parts.matte(&part_name(agent, "head"));
+        let torso = parts.matte(&part_name(agent, "torso"));
+        let mut pixels_with_id = 0;
+        for i in 0..matte.len() {
+            // The agent matte is the sum of its parts' mattes.
+            assert!((matte[i] - head[i] - torso[i]).abs() < 1e-5);
+            // agent.id comes from the sample nearest the pixel centre: where it
+            // names this agent, the matte has that sample at least.
+            if film.agent_id[i] == agent + 1 {
+                pixels_with_id += 1;
+                assert!(matte[i] >= 1.0 / 16.0, "agent {agent} pixel {i}: matte {}", matte[i]);
+            }
+            // Full coverage means every sample, so also the nearest one, hit it.
+            if matte[i] == 1.0 {
+                assert_eq!(film.agent_id[i], agent + 1);
+            }
+        }
+        // Area agrees with the id AOV within the filter's edge blur.
+        let area: f32 = matte.iter().sum();
+        assert!(pixels_with_id > 20, "agent {agent} barely visible");
+        let rel = (area - pixels_with_id as f32).abs() / pixels_with_id as f32;
+        assert!(rel < 0.15, "agent {agent}: matte area {area} vs {pixels_with_id} id pixels");
+        // Partial coverage only along edges, and a solid interior.
+        assert!(matte.iter().filter(|&&c| c == 1.0).count() > pixels_with_id / 3);
+    }
+    assert!(agents.matte(&agent_name(5)).iter().all(|&c| c == 0.0));
+}
+
+#[test]
+fn mattes_are_identical_for_any_thread_count() {
+    let (_, a) = render(8, 1);
+    let (_, b) = render(8, 3);
+    assert!(a.cryptomatte == b.cryptomatte, "mattes differ between 1 and 3 threads");
+    assert!(a == b, "films differ between 1 and 3 threads");
+}
+
+#[test]
+fn exr_round_trip_and_header() {
+    let (scene, film) = render(4, 2);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("demo.crowd_0.1001.exr");
+    write_layer(&path, &film, &meta(&film, &scene)).unwrap();
+    let (back, _) = read_layer(&path).unwrap();
+    assert!(back.cryptomatte == film.cryptomatte, "read_layer round trip differs");
+
+    let parts = read_parts(&path, |_| true).unwrap();
+    assert_eq!(parts.len(), 1);
+    let p = &parts[0];
+    for (i, m) in film.cryptomatte.iter().enumerate() {
+        let key = layer_key(&m.name);
+        assert_eq!(key, m.key());
+        assert_eq!(p.attributes[&format!("cryptomatte/{key}/name")], m.name);
+        assert_eq!(p.attributes[&format!("cryptomatte/{key}/hash")], "MurmurHash3_32");
+        assert_eq!(p.attributes[&format!("cryptomatte/{key}/conversion")], "uint32_to_float32");
+        let manifest = cryptomatte::parse_manifest(&p.attributes[&format!("cryptomatte/{key}/manifest")], &path).unwrap();
+        assert_eq!(manifest, m.manifest);
+        for level in ["00", "01", "02"] {
+            for c in ["R", "G", "B", "A"] {
+                assert!(p.channels.contains_key(&format!("{}{level}.{c}", m.name)), "{}{level}.{c}", m.name);
+            }
+        }
+        assert!(!p.channels.contains_key(&format!("{}03.R", m.name)));
+        // R = id rank 0, G = its coverage.
+        let r0: Vec<f32> = m.pairs.chunks(RANKS).map(|px| px[0][0]).collect();
+        assert!(p.channels[&format!("{}00.R", m.name)] == r0, "matte {i}: R is not rank 0's id");
+    }
+    let decoded = cryptomatte::read(&path).unwrap();
+    assert!(decoded == film.cryptomatte, "decoder round trip differs");
+}
+
+#[test]
+fn sidecar_manifest_option() {
+    let (scene, film) = render(4, 2);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("demo.crowd_0.1001.exr");
+    write_layer_with(&path, &film, &meta(&film, &scene), &WriteOptions { manifest: ManifestMode::Sidecar }).unwrap();
+    let side = dir.path().join("demo.crowd_0.1001.CryptoAgent.json");
+    assert!(side.exists() && dir.path().join("demo.crowd_0.1001.CryptoPart.json").exists());
+    let p = &read_parts(&path, |_| false).unwrap()[0];
+    let key = layer_key(AGENT_MATTE);
+    assert_eq!(p.attributes[&format!("cryptomatte/{key}/manif_file")], "demo.crowd_0.1001.CryptoAgent.json");
+    assert!(!p.attributes.contains_key(&format!("cryptomatte/{key}/manifest")));
+    assert!(cryptomatte::read(&path).unwrap() == film.cryptomatte, "sidecar round trip differs");
+    // A missing sidecar is an error naming it.
+    std::fs::remove_file(&side).unwrap();
+    let err = cryptomatte::read(&path).unwrap_err().to_string();
+    assert!(err.contains("CryptoAgent.json"), "{err}");
+}
+
+#[test]
+fn no_cryptomatte_without_names() {
+    let (lib, scene) = crowd_scene();
+    let blas = BlasSet::build(&lib);
+    let (film, _) = render_frame_with_cryptomatte(&blas, &lib, &scene, &settings(2, 1), None, None).unwrap();
+    assert!(film.cryptomatte.is_empty());
+}
