@@ -21,7 +21,13 @@ use throng::render::Film;
 
 const SHOT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/stack_shot/shot.toml");
 const FRAME: i32 = 1001;
+/// Samples per pixel; `THRONG_COMP_SPP` overrides it for the measurements
+/// in docs/compositing.md (output then goes to `target/tmp/comp-<spp>/`).
 const SPP: u32 = 128;
+
+fn spp() -> u32 {
+    std::env::var("THRONG_COMP_SPP").ok().and_then(|s| s.parse().ok()).unwrap_or(SPP)
+}
 /// Block edge for the per-region test.
 const BLOCK: u32 = 8;
 /// Per-block bound in standard errors. 84 blocks: a 5-sigma excursion of
@@ -44,7 +50,12 @@ struct Renders {
 }
 
 fn out_dir() -> PathBuf {
-    Path::new(env!("CARGO_TARGET_TMPDIR")).join("comp")
+    let tmp = Path::new(env!("CARGO_TARGET_TMPDIR"));
+    if spp() == SPP {
+        tmp.join("comp")
+    } else {
+        tmp.join(format!("comp-{}", spp()))
+    }
 }
 
 fn layers_args() -> LayersArgs {
@@ -67,7 +78,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
     let job = RenderJob {
         layers: layers.iter().map(|s| s.to_string()).collect(),
         frames: vec![FRAME],
-        spp: SPP,
+        spp: spp(),
         threads: 0,
         out: out.to_path_buf(),
         resume: false,
@@ -234,9 +245,14 @@ fn floor_shadows_and_reflections_are_in_the_set_layer() {
     let stack = comped(None);
     let bare_stack = comped(Some(&r.set_bare));
 
-    // Shadows: floor pixels (no agent in front) clearly darker with agents.
+    // Shadows: floor pixels (no agent in front) clearly darker with agents
+    // (the sky lights the shadows, and thin limbs cast partial ones at this size).
+    for t in [0.6, 0.7, 0.8, 0.9] {
+        let n = (0..set.rgba.len()).filter(|&i| full_a.agent_id[i] == 0 && lum(&set.rgba[i]) < t * lum(&r.set_bare.rgba[i])).count();
+        eprintln!("set pixels darker than {t} x bare: {n}");
+    }
     let shadow: Vec<usize> = (0..set.rgba.len())
-        .filter(|&i| full_a.agent_id[i] == 0 && stack.rgba[i][3] > 0.99 && lum(&set.rgba[i]) < 0.6 * lum(&r.set_bare.rgba[i]))
+        .filter(|&i| full_a.agent_id[i] == 0 && stack.rgba[i][3] > 0.99 && lum(&set.rgba[i]) < 0.8 * lum(&r.set_bare.rgba[i]))
         .collect();
     let (m, se) = diff_stats(&stack, &bare_stack, noise, &shadow, lum);
     eprintln!("floor shadow pixels: {}, stack darker by {m:.4} ({:.1} sigma)", shadow.len(), -m / se);
