@@ -194,12 +194,49 @@ fn stack_matches_full_render_within_noise() {
     assert!((m / se).abs() < K_MEAN, "mean differs by {:.2} sigma", m / se);
     assert!((m / level).abs() < 0.005, "mean differs by {:.3}%", 100.0 * m / level);
 
-    let (z, b, d) = worst_block(&stack, &full_a, noise, lum);
-    eprintln!("worst 8x8 block (luminance): #{b}, {z:.2} sigma ({d:+.5})");
-    assert!(z < K_BLOCK, "block {b} differs by {z:.2} sigma ({d:+.5})");
+    // Edges: pixels partly covered by some crowd layer, where premultiplied
+    // over is only an approximation of the full render (the set behind a
+    // silhouette is averaged over the whole pixel, not just the uncovered
+    // part; docs/compositing.md). Per block, interior pixels must match
+    // within noise; blocks with edges get 2% of their level on top.
+    let layers = ["crowd2", "crowd1", "crowd0"].map(|l| read(&r.a, l));
+    let is_edge = |i: usize| layers.iter().any(|l| l.rgba[i][3] > 0.02 && l.rgba[i][3] < 0.98);
+    let (mut worst_interior, mut worst_any) = ((0.0f64, 0usize), (0.0f64, 0usize, 0.0f64));
+    for (b, px) in blocks(&full_a).iter().enumerate() {
+        let interior: Vec<usize> = px.iter().copied().filter(|&i| !is_edge(i)).collect();
+        if interior.len() >= 16 {
+            let (m, se) = diff_stats(&stack, &full_a, noise, &interior, lum);
+            if (m / se).abs() > worst_interior.0 {
+                worst_interior = ((m / se).abs(), b);
+            }
+        }
+        let (m, se) = diff_stats(&stack, &full_a, noise, px, lum);
+        let block_level = px.iter().map(|&i| lum(&full_a.rgba[i])).sum::<f64>() / px.len() as f64;
+        if (m / se).abs() > worst_any.0 {
+            worst_any = ((m / se).abs(), b, m);
+        }
+        assert!(m.abs() < K_BLOCK * se + 0.02 * block_level, "block {b}: stack - full {m:+.5} (se {se:.5}, level {block_level:.4})");
+    }
+    eprintln!("worst 8x8 block, interior pixels (luminance): #{}, {:.2} sigma", worst_interior.1, worst_interior.0);
+    eprintln!("worst 8x8 block, all pixels (luminance): #{}, {:.2} sigma ({:+.5})", worst_any.1, worst_any.0, worst_any.2);
+    assert!(worst_interior.0 < K_BLOCK, "interior of block {} differs by {:.2} sigma", worst_interior.1, worst_interior.0);
     let (z, b, d) = worst_block(&stack, &full_a, noise, |p| p[3] as f64);
     eprintln!("worst 8x8 block (alpha): #{b}, {z:.2} sigma ({d:+.5})");
     assert!(z < K_BLOCK, "alpha block {b} differs by {z:.2} sigma");
+    let edge: Vec<usize> = all.iter().copied().filter(|&i| is_edge(i)).collect();
+    let (m, se) = diff_stats(&stack, &full_a, noise, &edge, lum);
+    let edge_level = edge.iter().map(|&i| lum(&full_a.rgba[i])).sum::<f64>() / edge.len().max(1) as f64;
+    eprintln!(
+        "edge pixels: {} of {}, level {edge_level:.4}, stack - full {m:+.5} (se {se:.5}, {:.2} sigma, {:+.2}%)",
+        edge.len(),
+        all.len(),
+        m / se,
+        100.0 * m / edge_level
+    );
+    assert!(m.abs() < K_BLOCK * se + 0.02 * edge_level);
+    let rgb_max = |p: &[f32; 4]| p[0].max(p[1]).max(p[2]) as f64;
+    let (z, b, d) = worst_block(&stack, &full_a, noise, rgb_max);
+    eprintln!("worst 8x8 block (max RGB): #{b}, {z:.2} sigma ({d:+.5})");
 
     // The stack's noise is comparable to a full render's (rms against the
     // other seed's full render).
@@ -209,14 +246,6 @@ fn stack_matches_full_render_within_noise() {
     let (rs, rf) = (rms(&stack, &r.full_b), rms(&full_a, &r.full_b));
     eprintln!("rms lum vs full(seed B): stack {rs:.5}, full(seed A) {rf:.5}");
     assert!(rs < 1.5 * rf);
-
-    // Edges: pixels partly covered by some crowd layer, where premultiplied
-    // over is only an approximation of the full render (docs/compositing.md).
-    let layers = ["crowd2", "crowd1", "crowd0"].map(|l| read(&r.a, l));
-    let edge: Vec<usize> = all.iter().copied().filter(|&i| layers.iter().any(|l| l.rgba[i][3] > 0.02 && l.rgba[i][3] < 0.98)).collect();
-    let (m, se) = diff_stats(&stack, &full_a, noise, &edge, lum);
-    eprintln!("edge pixels: {} of {}, stack - full {m:+.5} (se {se:.5}, {:.2} sigma)", edge.len(), all.len(), m / se);
-    assert!((m / se).abs() < K_BLOCK);
 
     // The AOVs stack too: ids agree wherever both centre samples agree on depth.
     let same = all.iter().filter(|&&i| stack.agent_id[i] == full_a.agent_id[i]).count();
