@@ -243,6 +243,10 @@ pub struct CompArgs {
     /// Also write a PNG preview.
     #[arg(long)]
     pub png: Option<PathBuf>,
+    /// Layer manifest giving the comp order and the layers that must be there
+    /// (default: scan DIR: `set`, then `crowdN` from the highest N down).
+    #[arg(long)]
+    pub manifest: Option<PathBuf>,
 }
 
 /// `throng export`.
@@ -295,7 +299,7 @@ pub fn run(cli: Cli) -> Result<()> {
 
         Verb::Render(args) => crate::commands::cmd_render(&args),
 
-        Verb::Comp(_args) => Err(Error::NotBuilt("comp")),
+        Verb::Comp(args) => crate::comp::cmd_comp(&args),
 
         Verb::Export(args) => crate::commands::cmd_export(&args),
     }

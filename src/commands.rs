@@ -316,31 +316,100 @@ pub fn format_bot_info(b: &BotInfo) -> String {
     o
 }
 
-/// `throng botinfo`.
+/// Parses `X,Y` pixel coordinates.
+pub fn parse_pixel(s: &str) -> Result<(u32, u32)> {
+    let bad = || Error::Usage(format!("bad --pixel `{s}` (use X,Y, e.g. 480,270; 0,0 is the top-left pixel)"));
+    let (x, y) = s.split_once(',').ok_or_else(bad)?;
+    Ok((x.trim().parse().map_err(|_| bad())?, y.trim().parse().map_err(|_| bad())?))
+}
+
+/// Fills each block's layer and LOD from the shot's default layer manifest,
+/// when there is one for this shot.
+/// `throng botinfo`: by ids, or by `--exr FILE --pixel X,Y` (the agent at
+/// that pixel of a rendered layer or comp, at the file's frame).
 pub fn cmd_botinfo(args: &BotinfoArgs) -> Result<()> {
+    if args.exr.is_some() && args.pixel.is_none() {
+        return Err(Error::Usage("--exr needs --pixel X,Y".into()));
+    }
+    let picked = match (&args.exr, &args.pixel) {
+        (Some(exr_path), Some(pixel)) => {
+            if !args.ids.is_empty() {
+                return Err(Error::Usage("give agent ids or --pixel, not both".into()));
+            }
+            let (x, y) = parse_pixel(pixel)?;
+            let (film, meta) = crate::render::exr::read_layer(exr_path)?;
+            let Some(shot) = &args.shot else {
+                return Err(Error::Usage(format!(
+                    "botinfo --exr needs the shot file too: {} is from shot `{}` (throng botinfo SHOT --exr FILE --pixel X,Y)",
+                    exr_path.display(),
+                    meta.shot
+                )));
+            };
+            if x >= film.width || y >= film.height {
+                return Err(Error::Usage(format!(
+                    "pixel {x},{y} is outside {} ({}x{}; 0,0 is the top-left pixel)",
+                    exr_path.display(),
+                    film.width,
+                    film.height
+                )));
+            }
+            if args.frame.is_some_and(|f| f != meta.frame) {
+                return Err(Error::Usage(format!(
+                    "--frame {} disagrees with {}, which is frame {}",
+                    args.frame.unwrap_or_default(),
+                    exr_path.display(),
+                    meta.frame
+                )));
+            }
+            let id = film.agent_id[film.index(x, y)];
+            if id == 0 {
+                println!("no agent at pixel {x},{y} (set or sky) in {} frame {}", exr_path.display(), meta.frame);
+                return Ok(());
+            }
+            Some((Path::new(shot).to_path_buf(), id - 1, meta, exr_path.clone()))
+        }
+        _ => None,
+    };
     let Some(shot) = &args.shot else {
         return Err(Error::Usage("botinfo needs a shot file".into()));
     };
-    if args.ids.is_empty() {
-        return Err(Error::Usage("name at least one agent id".into()));
+    if picked.is_none() && args.ids.is_empty() {
+        return Err(Error::Usage("name at least one agent id (or --exr FILE --pixel X,Y)".into()));
     }
     let crowd = ShotCrowd::load(Path::new(shot))?;
-    let frame = args.frame.unwrap_or(crowd.shot.frames.start);
+    let (ids, frame) = match &picked {
+        Some((_, id, meta, exr_path)) => {
+            if meta.shot != crowd.shot.name {
+                return Err(Error::invalid(
+                    exr_path,
+                    format!("EXR is from shot `{}` but {} is shot `{}`", meta.shot, Path::new(shot).display(), crowd.shot.name),
+                )
+                .field("throng/shot"));
+            }
+            (vec![*id], meta.frame)
+        }
+        None => (args.ids.clone(), args.frame.unwrap_or(crowd.shot.frames.start)),
+    };
     if !crowd.shot.frames.contains(frame) {
         return Err(Error::Usage(format!(
             "frame {frame} is outside shot {} ({}-{})",
             crowd.shot.name, crowd.shot.frames.start, crowd.shot.frames.end
         )));
     }
-    let mut infos = bot_info(&crowd, &args.ids, frame)?;
+    let mut infos = bot_info(&crowd, &ids, frame)?;
     let manifest_path = crate::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name);
     if manifest_path.exists() {
         let manifest = crate::layers::read_manifest(&manifest_path)?;
-        add_layers(&mut infos, &manifest);
+        if manifest.shot == crowd.shot.name {
+            add_layers(&mut infos, &manifest);
+        }
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&infos).map_err(|e| Error::Usage(e.to_string()))?);
     } else {
+        if let (Some((_, _, meta, exr_path)), Some(pixel)) = (&picked, &args.pixel) {
+            println!("pixel {pixel} of {} (layer {}, frame {})", exr_path.display(), meta.layer, meta.frame);
+        }
         let blocks: Vec<String> = infos.iter().map(format_bot_info).collect();
         print!("{}", blocks.join("\n"));
     }
@@ -636,6 +705,7 @@ pub fn cmd_demo(args: &crate::cli::DemoArgs) -> Result<()> {
         resume: false,
         png: true,
         resolution: None,
+        cryptomatte: job::CryptoOutput::Header,
     };
     let done = job::run(&crowd, Some(&manifest), &render)?;
     let [w, h] = crowd.shot.render.resolution;

@@ -8,6 +8,7 @@ pub mod cache;
 pub mod casting;
 pub mod cli;
 pub mod commands;
+pub mod comp;
 pub mod error;
 pub mod export;
 pub mod gltf_out;

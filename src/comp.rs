@@ -1,0 +1,349 @@
+//! Compositing: stacks one frame's set layer and crowd layers back into one
+//! image with the same channels as a layer file (docs/compositing.md).
+//!
+//! Conventions (the "comp rules"):
+//! - Order: back to front, the manifest's `comp_order` (`set`, then crowd
+//!   layers far to near). Without a manifest: `set`, then `crowdN` by
+//!   descending N (crowd0 is the nearest).
+//! - `R G B A`: premultiplied over, `out = front + (1 - front.A) * back`.
+//! - `N.*`, `albedo.*`: the renderer writes them as coverage-weighted means
+//!   (premultiplied by alpha, like colour), so they are composited with the
+//!   same over; that is what a single full render would hold.
+//! - `Z`, `agent.id`: never blended. Each layer's values come from its sample
+//!   nearest the pixel centre; the comp takes both from the layer with the
+//!   nearest finite Z at that pixel (ties: the front-most layer), so Z is the
+//!   minimum over the layers that hit something there and the id names the
+//!   surface that Z measures (0 when that surface is the set or sky).
+//!
+//! The header repeats the layers' shot, frame, seed and camera; the layer
+//! name is `comp`, `spp` the smallest of the layers', and near/far span the
+//! layers' (with `worldToNDC` rebuilt for them).
+
+use std::path::{Path, PathBuf};
+
+use glam::Mat4;
+
+use crate::error::{Error, Result};
+use crate::layers::Manifest;
+use crate::render::exr::{self, LayerMeta};
+use crate::render::job::{layer_path, FULL_LAYER};
+use crate::render::Film;
+
+/// The layer name written to composited files.
+pub const COMP_LAYER: &str = "comp";
+
+/// One layer file read for compositing.
+#[derive(Debug, Clone)]
+pub struct CompInput {
+    /// Layer name (from the file's header).
+    pub layer: String,
+    /// The file.
+    pub path: PathBuf,
+    /// Its pixels.
+    pub film: Film,
+    /// Its header.
+    pub meta: LayerMeta,
+}
+
+/// Stacks films back to front (index 0 is the farthest). All must have the
+/// same size; see the module docs for each channel's rule.
+pub fn over(films: &[&Film]) -> Result<Film> {
+    let Some(first) = films.first() else {
+        return Err(Error::Usage("nothing to composite: no layers".into()));
+    };
+    let (w, h) = (first.width, first.height);
+    if let Some(f) = films.iter().find(|f| f.width != w || f.height != h) {
+        return Err(Error::Usage(format!("layers differ in size: {w}x{h} and {}x{}", f.width, f.height)));
+    }
+    let mut out = Film::new(w, h);
+    for i in 0..out.rgba.len() {
+        let (mut rgba, mut n, mut albedo) = ([0.0f32; 4], [0.0f32; 3], [0.0f32; 3]);
+        let (mut z, mut id) = (f32::INFINITY, 0u32);
+        for f in films {
+            let a = f.rgba[i][3];
+            let keep = 1.0 - a;
+            for c in 0..4 {
+                rgba[c] = f.rgba[i][c] + keep * rgba[c];
+            }
+            for c in 0..3 {
+                n[c] = f.normal[i][c] + keep * n[c];
+                albedo[c] = f.albedo[i][c] + keep * albedo[c];
+            }
+            // `<=`: later (nearer in comp order) layers win ties.
+            let fz = f.z[i];
+            if fz.is_finite() && fz <= z {
+                z = fz;
+                id = f.agent_id[i];
+            }
+        }
+        out.rgba[i] = rgba;
+        out.normal[i] = n;
+        out.albedo[i] = albedo;
+        out.z[i] = z;
+        out.agent_id[i] = id;
+    }
+    Ok(out)
+}
+
+/// Crowd layer index of a `crowdN` name.
+fn crowd_index(name: &str) -> Option<usize> {
+    name.strip_prefix("crowd")?.parse().ok()
+}
+
+/// The layers of `frame` under render output `dir`, back to front.
+///
+/// With a manifest, its `comp_order`, and every layer must be there. Without
+/// one, `dir` is scanned for `<layer>/<shot>.<layer>.<frame:04>.exr` (the
+/// `full` reference is skipped): `set` first, then `crowdN` far to near, and
+/// a gap in the crowd numbering is reported as a missing layer.
+pub fn layer_files(dir: &Path, frame: i32, manifest: Option<&Manifest>) -> Result<Vec<(String, PathBuf)>> {
+    if !dir.is_dir() {
+        return Err(Error::Usage(format!("render directory {} does not exist", dir.display())));
+    }
+    if let Some(m) = manifest {
+        let mut out = Vec::new();
+        for layer in &m.comp_order {
+            let path = layer_path(dir, &m.shot, layer, frame);
+            if !path.is_file() {
+                return Err(Error::Usage(format!(
+                    "layer `{layer}` of shot {} frame {frame} is missing: no {} (render it with `throng render SHOT --layer {layer} --frames {frame}`)",
+                    m.shot,
+                    path.display()
+                )));
+            }
+            out.push((layer.clone(), path));
+        }
+        return Ok(out);
+    }
+
+    // Scan: DIR/<layer>/<shot>.<layer>.<frame:04>.exr.
+    let suffix = format!(".{frame:04}.exr");
+    let mut found: Vec<(String, String, PathBuf)> = Vec::new(); // (shot, layer, path)
+    let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
+    let mut subdirs: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_dir()).collect();
+    subdirs.sort();
+    for sub in subdirs {
+        let Some(layer) = sub.file_name().and_then(|s| s.to_str()).map(str::to_string) else { continue };
+        if layer == FULL_LAYER || layer == COMP_LAYER {
+            continue;
+        }
+        let files = std::fs::read_dir(&sub).map_err(|e| Error::io(&sub, e))?;
+        let mut names: Vec<String> =
+            files.filter_map(|e| e.ok()?.file_name().into_string().ok()).filter(|n| n.ends_with(&suffix)).collect();
+        names.sort();
+        for name in names {
+            let stem = &name[..name.len() - suffix.len()];
+            if let Some(shot) = stem.strip_suffix(&format!(".{layer}")) {
+                found.push((shot.to_string(), layer.clone(), sub.join(&name)));
+            }
+        }
+    }
+    let mut shots: Vec<&str> = found.iter().map(|f| f.0.as_str()).collect();
+    shots.sort();
+    shots.dedup();
+    match shots.len() {
+        0 => {
+            return Err(Error::Usage(format!(
+                "no layer files for frame {frame} under {} (expected <layer>/<shot>.<layer>.{frame:04}.exr)",
+                dir.display()
+            )))
+        }
+        1 => {}
+        _ => {
+            return Err(Error::Usage(format!(
+                "{} holds layers of several shots ({}); pass --manifest to choose",
+                dir.display(),
+                shots.join(", ")
+            )))
+        }
+    }
+    let shot = shots[0].to_string();
+    let mut set = None;
+    let mut crowd: Vec<(usize, String, PathBuf)> = Vec::new();
+    for (_, layer, path) in found {
+        if layer == "set" {
+            set = Some((layer, path));
+        } else if let Some(i) = crowd_index(&layer) {
+            crowd.push((i, layer, path));
+        } else {
+            return Err(Error::Usage(format!(
+                "cannot place layer `{layer}` ({}) in the comp order without a manifest; pass --manifest",
+                path.display()
+            )));
+        }
+    }
+    let Some(set) = set else {
+        return Err(Error::Usage(format!(
+            "layer `set` of shot {shot} frame {frame} is missing: no {}",
+            layer_path(dir, &shot, "set", frame).display()
+        )));
+    };
+    crowd.sort_by_key(|c| std::cmp::Reverse(c.0));
+    let n = crowd.first().map_or(0, |c| c.0 + 1);
+    if let Some(gap) = (0..n).find(|i| !crowd.iter().any(|c| c.0 == *i)) {
+        let name = format!("crowd{gap}");
+        return Err(Error::Usage(format!(
+            "layer `{name}` of shot {shot} frame {frame} is missing: no {}",
+            layer_path(dir, &shot, &name, frame).display()
+        )));
+    }
+    Ok(std::iter::once(set).chain(crowd.into_iter().map(|(_, l, p)| (l, p))).collect())
+}
+
+/// Reads the layer files and checks they belong together (same shot, frame,
+/// size, and each header names the layer its path says).
+pub fn read_inputs(files: &[(String, PathBuf)], frame: i32) -> Result<Vec<CompInput>> {
+    let mut out: Vec<CompInput> = Vec::new();
+    for (layer, path) in files {
+        let (film, meta) = exr::read_layer(path)?;
+        if meta.layer != *layer {
+            return Err(Error::invalid(path, format!("header says layer `{}`, expected `{layer}`", meta.layer))
+                .field("throng/layer"));
+        }
+        if meta.frame != frame {
+            return Err(Error::invalid(path, format!("header says frame {}, expected {frame}", meta.frame))
+                .field("throng/frame"));
+        }
+        if let Some(first) = out.first() {
+            if meta.shot != first.meta.shot {
+                return Err(Error::invalid(
+                    path,
+                    format!("layer is from shot `{}` but {} is from shot `{}`", meta.shot, first.path.display(), first.meta.shot),
+                )
+                .field("throng/shot"));
+            }
+            if (film.width, film.height) != (first.film.width, first.film.height) {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "layer is {}x{} but {} is {}x{}",
+                        film.width,
+                        film.height,
+                        first.path.display(),
+                        first.film.width,
+                        first.film.height
+                    ),
+                ));
+            }
+        }
+        out.push(CompInput { layer: layer.clone(), path: path.clone(), film, meta });
+    }
+    Ok(out)
+}
+
+/// The comp's header: the back layer's, renamed, with near/far spanning
+/// every layer and `worldToNDC` rebuilt for that range.
+pub fn comp_meta(inputs: &[CompInput]) -> Result<LayerMeta> {
+    let Some(back) = inputs.first() else {
+        return Err(Error::Usage("nothing to composite: no layers".into()));
+    };
+    let mut meta = back.meta.clone();
+    meta.layer = COMP_LAYER.to_string();
+    meta.spp = inputs.iter().map(|i| i.meta.spp).min().unwrap_or(0);
+    let near = inputs.iter().map(|i| i.meta.near).filter(|v| *v > 0.0).fold(f32::INFINITY, f32::min);
+    let far = inputs.iter().map(|i| i.meta.far).fold(0.0f32, f32::max);
+    if near.is_finite() && far > near && (near, far) != (back.meta.near, back.meta.far) {
+        // worldToNDC = P(near, far) * worldToCamera; swap P's depth terms.
+        let cam = Mat4::from_cols_array(&back.meta.world_to_camera);
+        if cam.determinant().abs() > 1e-12 {
+            let mut p = Mat4::from_cols_array(&back.meta.world_to_ndc) * cam.inverse();
+            p.z_axis.z = (far + near) / (far - near);
+            p.w_axis.z = -2.0 * far * near / (far - near);
+            meta.world_to_ndc = (p * cam).to_cols_array();
+            meta.near = near;
+            meta.far = far;
+        }
+    }
+    Ok(meta)
+}
+
+/// What [`comp_frame`] made.
+#[derive(Debug, Clone)]
+pub struct Comped {
+    /// The stacked image.
+    pub film: Film,
+    /// Its header.
+    pub meta: LayerMeta,
+    /// The layers used, back to front.
+    pub layers: Vec<(String, PathBuf)>,
+}
+
+/// Finds, reads and stacks the layers of `frame` under `dir`.
+pub fn comp_frame(dir: &Path, frame: i32, manifest: Option<&Manifest>) -> Result<Comped> {
+    let files = layer_files(dir, frame, manifest)?;
+    let inputs = read_inputs(&files, frame)?;
+    if let Some(m) = manifest {
+        if let Some(i) = inputs.iter().find(|i| i.meta.shot != m.shot) {
+            return Err(Error::invalid(&i.path, format!("layer is from shot `{}`, the manifest is for `{}`", i.meta.shot, m.shot))
+                .field("throng/shot"));
+        }
+    }
+    let films: Vec<&Film> = inputs.iter().map(|i| &i.film).collect();
+    let film = over(&films)?;
+    let meta = comp_meta(&inputs)?;
+    Ok(Comped { film, meta, layers: files })
+}
+
+/// `throng comp DIR --frame F --out FILE.exr [--png FILE.png] [--manifest FILE]`.
+pub fn cmd_comp(args: &crate::cli::CompArgs) -> Result<()> {
+    let manifest = args.manifest.as_deref().map(crate::layers::read_manifest).transpose()?;
+    let comped = comp_frame(&args.dir, args.frame, manifest.as_ref())?;
+    exr::write_layer(&args.out, &comped.film, &comped.meta)?;
+    if let Some(png) = &args.png {
+        exr::write_preview_png(png, &comped.film)?;
+    }
+    let names: Vec<&str> = comped.layers.iter().map(|l| l.0.as_str()).collect();
+    println!("comp {} frame {}: {} (back to front) -> {}", comped.meta.shot, args.frame, names.join(", "), args.out.display());
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn film(rgba: [f32; 4], z: f32, id: u32) -> Film {
+        let mut f = Film::new(1, 1);
+        f.rgba[0] = rgba;
+        f.z[0] = z;
+        f.agent_id[0] = id;
+        f.normal[0] = [0.0, rgba[3], 0.0];
+        f.albedo[0] = [rgba[3]; 3];
+        f
+    }
+
+    #[test]
+    fn over_is_premultiplied_and_ordered() {
+        let back = film([0.2, 0.4, 0.6, 1.0], 50.0, 0);
+        let mid = film([0.25, 0.0, 0.0, 0.5], 10.0, 8);
+        let front = film([0.0, 0.0, 0.1, 0.25], 5.0, 3);
+        let out = over(&[&back, &mid, &front]).unwrap();
+        let mid_on_back = [0.25 + 0.5 * 0.2, 0.5 * 0.4, 0.5 * 0.6, 1.0];
+        let want = [0.75 * mid_on_back[0], 0.75 * mid_on_back[1], 0.1 + 0.75 * mid_on_back[2], 1.0];
+        for c in 0..4 {
+            assert!((out.rgba[0][c] - want[c]).abs() < 1e-6, "{:?} vs {want:?}", out.rgba[0]);
+        }
+        assert_eq!((out.z[0], out.agent_id[0]), (5.0, 3));
+        // Coverage-weighted normals stack like colour: full coverage stays unit.
+        assert!((out.normal[0][1] - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn z_and_id_come_from_the_nearest_hit() {
+        let back = film([0.2, 0.2, 0.2, 1.0], 50.0, 0);
+        // A near layer whose centre sample missed: no Z, no id, some coverage.
+        let near_miss = film([0.1, 0.1, 0.1, 0.3], f32::INFINITY, 0);
+        let mid = film([0.2, 0.0, 0.0, 1.0], 12.0, 5);
+        let out = over(&[&back, &mid, &near_miss]).unwrap();
+        assert_eq!((out.z[0], out.agent_id[0]), (12.0, 5));
+        // The set in front of an agent (held out): the set's Z and id 0.
+        let set = film([0.2, 0.2, 0.2, 1.0], 4.0, 0);
+        let out = over(&[&set, &mid]).unwrap();
+        assert_eq!((out.z[0], out.agent_id[0]), (4.0, 0));
+    }
+
+    #[test]
+    fn sizes_must_match() {
+        assert!(over(&[&Film::new(2, 2), &Film::new(2, 3)]).is_err());
+        assert!(over(&[]).is_err());
+    }
+}
