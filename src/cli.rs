@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 
 /// throng: crowd renderer and level-of-detail layering tool for lighters.
 #[derive(Debug, Parser)]

@@ -68,9 +68,6 @@ pub enum Error {
     /// The command line asks for something impossible.
     #[error("{0}")]
     Usage(String),
-    /// A verb that exists in the design but is not built yet.
-    #[error("`throng {0}` is not built yet")]
-    NotBuilt(&'static str),
 }
 
 impl Error {

@@ -84,6 +84,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
         resume: false,
         png: true,
         resolution: None,
+        cryptomatte: job::CryptoOutput::Header,
     };
     job::run(crowd, Some(manifest), &job).unwrap();
 }

@@ -115,6 +115,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[String], out: &Path)
         resume: false,
         png: true,
         resolution: Some([WIDTH, HEIGHT]),
+        cryptomatte: job::CryptoOutput::Header,
     };
     let done = job::run(crowd, Some(manifest), &job).expect("demo renders");
     done.into_iter().map(|r| (r.layer, r.path)).collect()

@@ -308,12 +308,10 @@ fn output_is_byte_identical_for_1_and_2_threads() {
     assert_eq!(outs[0].keys().collect::<Vec<_>>(), outs[1].keys().collect::<Vec<_>>());
 }
 
-/// Strict byte identity of two runs, header attribute order included.
-/// Ignored until src/render/exr.rs writes its `throng/` attributes in a fixed
-/// order: the exr crate keeps custom attributes in a `HashMap` (random order
-/// per process), so two runs of the same render differ in header bytes only.
+/// Strict byte identity of two runs, header attribute order included
+/// (src/render/exr.rs sorts the header attributes the exr crate keeps in a
+/// `HashMap`).
 #[test]
-#[ignore = "EXR header attribute order varies per run (exr crate HashMap); fix belongs in src/render/exr.rs"]
 fn output_is_byte_identical_including_header_order() {
     let tmp = tempfile::tempdir().expect("temp dir");
     let (manifest, _) = manifest_in(tmp.path());

@@ -212,7 +212,54 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
 
     let encoding = Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing };
     let image = Image::from_layer(Layer::new((w, h), attrs, encoding, channels));
-    write_atomic(path, |out| image.write().to_buffered(out).map_err(|e| exr_error(path, e)))
+    let mut bytes = Vec::new();
+    image.write().to_buffered(std::io::Cursor::new(&mut bytes)).map_err(|e| exr_error(path, e))?;
+    sort_header_attributes(&mut bytes);
+    write_atomic(path, |out| std::io::Write::write_all(out, &bytes).map_err(|e| Error::io(path, e)))
+}
+
+/// The exr crate keeps custom attributes in a `HashMap`, so their order in
+/// the header changes from run to run. Sorting each header's attributes by
+/// name in place keeps the same bytes and length (chunk offsets stay valid)
+/// and makes the same render give the same file. Leaves anything it cannot
+/// parse untouched.
+pub fn sort_header_attributes(bytes: &mut [u8]) {
+    let nul_from = |b: &[u8], at: usize| b.get(at..)?.iter().position(|&c| c == 0).map(|p| at + p);
+    let Some(version) = bytes.get(4..8) else { return };
+    let multipart = u32::from_le_bytes([version[0], version[1], version[2], version[3]]) & 0x1000 != 0;
+    let mut pos = 8;
+    loop {
+        let start = pos;
+        let mut attrs: Vec<std::ops::Range<usize>> = Vec::new();
+        loop {
+            let Some(name_end) = nul_from(bytes, pos) else { return };
+            if name_end == pos {
+                pos += 1; // the header's terminating null
+                break;
+            }
+            let Some(type_end) = nul_from(bytes, name_end + 1) else { return };
+            let Some(size) = bytes.get(type_end + 1..type_end + 5) else { return };
+            let size = i32::from_le_bytes([size[0], size[1], size[2], size[3]]);
+            let Ok(size) = usize::try_from(size) else { return };
+            let end = type_end + 5 + size;
+            if end > bytes.len() {
+                return;
+            }
+            attrs.push(pos..end);
+            pos = end;
+        }
+        let name = |r: &std::ops::Range<usize>| {
+            let b: &[u8] = bytes;
+            b[r.start..nul_from(b, r.start).unwrap_or(r.start)].to_vec()
+        };
+        let mut sorted = attrs.clone();
+        sorted.sort_by_key(name);
+        let reordered: Vec<u8> = sorted.iter().flat_map(|r| bytes[r.clone()].to_vec()).collect();
+        bytes[start..start + reordered.len()].copy_from_slice(&reordered);
+        if !multipart || bytes.get(pos) == Some(&0) {
+            return;
+        }
+    }
 }
 
 /// Reads a file written by [`write_layer`] back (tests, resume, botinfo).
