@@ -43,7 +43,7 @@ use std::time::Instant;
 
 use glam::{Affine3A, Quat, Vec2, Vec3};
 use throng::assets::AssetCache;
-use throng::render::accel::{Tlas, WorldRay};
+use throng::render::accel::{Tlas, TlasKind, WorldRay};
 use throng::render::bsdf::{sample_cosine_hemisphere, ShadingFrame};
 use throng::render::exr::{camera_matrices, write_layer, write_preview_png, LayerMeta, ID_MAPPING};
 use throng::render::film::render_frame_with_stats;
@@ -383,10 +383,17 @@ fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u3
         .collect();
     let (pw, pc, ph) = rate(&tlas, &primary, vis::CAMERA);
     let (bw, bc, bh) = rate(&tlas, &bounce, vis::INDIRECT);
+    // The same bounce rays through the other TLAS kind (the renderer picks by instance count).
+    let other = match TlasKind::for_count(scene.instances.len()) {
+        TlasKind::Bvh2 => TlasKind::CwBvh,
+        TlasKind::CwBvh => TlasKind::Bvh2,
+    };
+    let (_, oc, _) = rate(&Tlas::build_with(blas, &scene.instances, other), &bounce, vis::INDIRECT);
     let m = |x: f64| (x / 1e4).round() / 100.0;
     serde_json::json!({
         "primary": {"rays": primary.len(), "mrays_s_1t": m(pw), "mrays_per_cpu_s_1t": m(pc), "hit_fraction": (ph * 1e4).round() / 1e4},
-        "bounce": {"rays": bounce.len(), "mrays_s_1t": m(bw), "mrays_per_cpu_s_1t": m(bc), "hit_fraction": (bh * 1e4).round() / 1e4},
+        "bounce": {"rays": bounce.len(), "mrays_s_1t": m(bw), "mrays_per_cpu_s_1t": m(bc), "hit_fraction": (bh * 1e4).round() / 1e4,
+                   "tlas": format!("{:?}", TlasKind::for_count(scene.instances.len())), "other_tlas_mrays_per_cpu_s_1t": m(oc)},
     })
 }
 
