@@ -235,7 +235,7 @@ fn main() {
             sun: Some(Sun { direction: Vec3::new(-0.4, 0.6, 0.5).normalize(), angular_diameter: 0.0093, irradiance: Vec3::new(3.0, 2.85, 2.64) }),
             sky: Sky { radiance: Vec3::new(0.3, 0.38, 0.5) },
         };
-        let settings = RenderSettings { width: 320, height: 180, spp: 4, max_bounces: 4, seed: 1, frame: 1001, layer: 0, sky_visible: true, threads: 0, indirect_clamp: 10.0 };
+        let settings = RenderSettings { width: 320, height: 180, spp: 4, max_bounces: 4, seed: 1, frame: 1001, layer: 0, sky_visible: true, threads: 0, indirect_clamp: 10.0, diffuse_only: false };
         let cpu = process_cpu_s();
         let (film, stats) = render_frame_with_stats(&blas, &lib, &scene, &settings, None).expect("render");
         let cpu = process_cpu_s() - cpu;

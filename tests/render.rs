@@ -94,7 +94,7 @@ fn camera(eye: Vec3, target: Vec3, yfov_deg: f32) -> Camera {
 }
 
 fn settings(width: u32, height: u32, spp: u32) -> RenderSettings {
-    RenderSettings { width, height, spp, max_bounces: 3, seed: 1234, frame: 1001, layer: 0, sky_visible: false, threads: 2, indirect_clamp: 10.0 }
+    RenderSettings { width, height, spp, max_bounces: 3, seed: 1234, frame: 1001, layer: 0, sky_visible: false, threads: 2, indirect_clamp: 10.0, diffuse_only: false }
 }
 
 fn luminance(p: [f32; 4]) -> f32 {
@@ -629,4 +629,43 @@ fn empty_scene_renders_sky_and_reports_progress() {
     // A crowd layer sees no sky: black, alpha 0.
     let film = render_frame(&blas, &lib, &scene, &settings(20, 10, 1), None).unwrap();
     assert!(film.rgba.iter().all(|p| *p == [0.0; 4]) && film.z.iter().all(|z| z.is_infinite()));
+}
+
+/// `diffuse_only`: even a glossy material shades as Lambert with its base
+/// colour, so a convex sphere under a white sky returns exactly its albedo.
+#[test]
+fn diffuse_only_is_lambert_furnace() {
+    let albedo = 0.5;
+    let lib = Library {
+        meshes: vec![sphere(48, 96)],
+        materials: vec![material("gloss", Vec3::splat(albedo), 0.0, 0.05)],
+        textures: vec![],
+    };
+    let blas = BlasSet::build(&lib);
+    let scene = FrameScene {
+        instances: vec![instance(0, 0, Affine3A::IDENTITY, None, vis::ALL)],
+        camera: camera(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, 40.0),
+        sun: None,
+        sky: Sky { radiance: Vec3::ONE },
+    };
+    let s = RenderSettings { sky_visible: true, diffuse_only: true, ..settings(48, 36, 16) };
+    let film = render_frame(&blas, &lib, &scene, &s, None).unwrap();
+    let (mut count, mut exact, mut sum) = (0, 0, 0.0f32);
+    for i in 0..film.rgba.len() {
+        if film.albedo[i] == [albedo; 3] {
+            // Bounce rays off a convex sphere escape: weight = base colour exactly, except
+            // near the silhouette, where a sample whose bounce dips below the geometric
+            // normal (smooth vs flat normal) ends the path.
+            exact += (0..3).all(|c| (film.rgba[i][c] - albedo).abs() < 1e-4) as usize;
+            sum += film.rgba[i][0];
+            count += 1;
+        }
+    }
+    assert!(exact * 10 >= count * 9, "only {exact} of {count} pixels are exactly the albedo");
+    assert!((sum / count as f32 - albedo).abs() < 0.005, "mean {}", sum / count as f32);
+    assert!(count > 200, "sphere covers too few pixels: {count}");
+    // Without the flag the glossy sphere is not Lambert (Fresnel reflection adds energy).
+    let film = render_frame(&blas, &lib, &scene, &RenderSettings { diffuse_only: false, ..s }, None).unwrap();
+    let gloss = film.rgba.iter().zip(&film.albedo).filter(|(_, a)| **a == [albedo; 3]).map(|(p, _)| p[0]).sum::<f32>() / count as f32;
+    assert!((gloss - albedo).abs() > 0.01, "gloss {gloss}");
 }

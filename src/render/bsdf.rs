@@ -81,6 +81,8 @@ pub struct Bsdf {
     diffuse: Vec3,
     f0: Vec3,
     alpha: f32,
+    /// No specular lobe and no Fresnel weighting: f = diffuse / pi.
+    lambert: bool,
 }
 
 /// One sampled direction.
@@ -104,7 +106,16 @@ impl Bsdf {
             diffuse: base_color * (1.0 - metallic),
             f0: Vec3::splat(0.04).lerp(base_color, metallic),
             alpha: (roughness * roughness).max(MIN_ALPHA),
+            lambert: false,
         }
+    }
+
+    /// A pure Lambertian BSDF, f = base colour / pi. Not what [`Bsdf::new`]
+    /// gives for metallic 0, roughness 1: that keeps a GGX lobe with F0 = 0.04
+    /// and weights the diffuse by (1 - F). For comparisons with renderers set
+    /// to plain diffuse materials (see `RenderSettings::diffuse_only`).
+    pub fn lambert(base_color: Vec3) -> Bsdf {
+        Bsdf { diffuse: base_color.clamp(Vec3::ZERO, Vec3::ONE), f0: Vec3::ZERO, alpha: 1.0, lambert: true }
     }
 
     /// GGX normal distribution.
@@ -145,6 +156,9 @@ impl Bsdf {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return Vec3::ZERO;
         }
+        if self.lambert {
+            return self.diffuse * FRAC_1_PI;
+        }
         let h = (wo + wi).normalize_or_zero();
         if h == Vec3::ZERO {
             return Vec3::ZERO;
@@ -160,6 +174,9 @@ impl Bsdf {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
+        if self.lambert {
+            return wi.z * FRAC_1_PI;
+        }
         let p_spec = self.specular_probability(wo);
         let h = (wo + wi).normalize_or_zero();
         // Visible-normal pdf reflected: G1(wo) D(h) / (4 cos_o).
@@ -172,7 +189,7 @@ impl Bsdf {
         if wo.z <= 0.0 {
             return None;
         }
-        let wi = if u_lobe < self.specular_probability(wo) {
+        let wi = if !self.lambert && u_lobe < self.specular_probability(wo) {
             let h = self.sample_visible_normal(wo, u);
             2.0 * wo.dot(h) * h - wo
         } else {
@@ -237,6 +254,39 @@ mod tests {
             assert!((uniform - sampled).abs() < 0.01, "{base} {metallic} {rough}: {uniform} vs {sampled}");
             assert!(sampled <= 1.0 && sampled > 0.0);
         }
+    }
+
+    /// Lambert: sampling weight is exactly the base colour; and the glTF BSDF
+    /// at metallic 0, roughness 1 is *not* Lambert (its albedo differs).
+    #[test]
+    fn lambert_is_pure_diffuse() {
+        let base = Vec3::new(0.5, 0.25, 0.75);
+        let lambert = Bsdf::lambert(base);
+        let gltf = Bsdf::new(base, 0.0, 1.0);
+        let n = 128u32;
+        let mut albedo = [0.0f64; 2];
+        for wo in [Vec3::Z, Vec3::new(0.8, 0.0, 0.6), Vec3::new(0.0, 0.995, 0.0999).normalize()] {
+            for i in 0..n {
+                for j in 0..n {
+                    let u = Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+                    let s = lambert.sample(wo, 0.05, u).expect("cosine sample above the horizon");
+                    assert!((s.weight - base).abs().max_element() < 1e-5);
+                    assert!((s.pdf - s.wi.z * FRAC_1_PI).abs() < 1e-5);
+                    assert!((lambert.eval(wo, s.wi) - base * FRAC_1_PI).abs().max_element() < 1e-6);
+                    // Reflectance of the green channel at grazing view, by uniform-hemisphere integration.
+                    let z = u.x;
+                    let r = (1.0 - z * z).sqrt();
+                    let wi = Vec3::new(r * (2.0 * PI * u.y).cos(), r * (2.0 * PI * u.y).sin(), z);
+                    if wo.z < 0.2 {
+                        albedo[0] += (lambert.eval(wo, wi).y * wi.z * 2.0 * PI) as f64;
+                        albedo[1] += (gltf.eval(wo, wi).y * wi.z * 2.0 * PI) as f64;
+                    }
+                }
+            }
+        }
+        let (l, g) = (albedo[0] / (n * n) as f64, albedo[1] / (n * n) as f64);
+        assert!((l - 0.25).abs() < 0.005, "lambert albedo {l}");
+        assert!((g - l).abs() > 0.01, "glTF metallic 0 roughness 1 albedo {g} should differ from Lambert {l}");
     }
 
     #[test]

@@ -368,7 +368,11 @@ impl<'a> Integrator<'a> {
             }
 
             let material = self.material(surface.material);
-            let bsdf = Bsdf::new(surface.base_color, material.metallic, material.roughness);
+            let bsdf = if self.settings.diffuse_only {
+                Bsdf::lambert(surface.base_color)
+            } else {
+                Bsdf::new(surface.base_color, material.metallic, material.roughness)
+            };
             let frame = ShadingFrame::from_normal(surface.ns);
             let wo = frame.to_local(-dir);
             sampler.set_dimension(2 + depth * DIMS_PER_BOUNCE);

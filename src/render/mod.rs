@@ -49,6 +49,10 @@ pub struct RenderSettings {
     /// later) may add to a sample; 0 = no clamp. Like Arnold's indirect
     /// sample clamp: removes fireflies at the cost of a little energy.
     pub indirect_clamp: f32,
+    /// Shade every material as pure Lambert with its (textured) base colour,
+    /// ignoring metallic and roughness. For comparisons with other renderers'
+    /// plain diffuse materials (benchmarks); off for production.
+    pub diffuse_only: bool,
 }
 
 impl Default for RenderSettings {
@@ -64,6 +68,7 @@ impl Default for RenderSettings {
             sky_visible: false,
             threads: 0,
             indirect_clamp: 10.0,
+            diffuse_only: false,
         }
     }
 }

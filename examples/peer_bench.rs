@@ -1,0 +1,544 @@
+//! throng's renderer on the peer harness's scenes and conventions
+//! (/work/shared/peers: Cycles, Mitsuba, Embree), for side-by-side figures.
+//! See docs/benchmarks.md for the commands and the measured numbers.
+//!
+//! ```text
+//! cargo run --release --example peer_bench -- SCENE.glb [--out PREFIX] [options]
+//! cargo run --release --example peer_bench -- --synthetic N [--out PREFIX] [options]
+//! options: --res W H (960 540)  --spp S (64)  --bounces B (5)  --threads T (2)
+//!          --sky R G B (0.30 0.38 0.50)  --seed S (0)  --materials diffuse|gltf (diffuse)
+//!          --camera NODE (first node with a perspective camera)  --no-rays  --no-render
+//! ```
+//! Any .glb with a perspective camera and a KHR_lights_punctual directional
+//! light (make_crowd.py output, `throng export` output). Conventions as the
+//! peers' scripts: sun irradiance W/m^2 = lux / 683, hard sun (angular
+//! diameter 0), uniform sky radiance visible to the camera, no clamping,
+//! pure Lambert materials from the base colour (`RenderSettings::diffuse_only`).
+//!
+//! Bounces: our `max_bounces` B traces up to B BSDF-sampled rays after the
+//! camera ray and does sun next-event estimation at every vertex 0..=B.
+//! Cycles `max_bounces = 4` / Mitsuba `max_depth = 6` trace 5 BSDF rays
+//! (from vertices 0..=4; the last can only pick up the sky) and sample the
+//! sun at vertices 0..=4. So the default B = 5 traces the same sky paths and
+//! the same number of bounce rays, plus one sun shadow ray at vertex 5 (a
+//! fifth-order sun bounce; B = 4 would instead drop the sky seen from vertex 4).
+//!
+//! `--synthetic N`: N agents x 11 rigid parts sharing 8 meshes (make_crowd.py's
+//! shape: ~1,060 triangles per agent, density 0.5 agents/m^2, a ground quad 4x
+//! the field), built in memory, to measure memory at 100,000 and 1,000,000 agents.
+//!
+//! Prints one JSON line: load_s (glb import or synthetic build), blas_build_s,
+//! tlas_build_s, first_sample_s (start of load to the first finished 16x16
+//! tile, an upper bound on the first sample), render_s (render call: TLAS
+//! build + tracing), trace_s, total_s, peak_rss_mib (VmHWM) after the render
+//! and at the end, triangles (instanced), unique_triangles, and the
+//! single-thread closest-hit ray rates measured like the peers' Embree script:
+//! `primary` (one ray per pixel centre) and `bounce` (one cosine-weighted ray
+//! from every primary hit), best wall time of 3 and per thread CPU second.
+
+use std::f32::consts::PI;
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::time::Instant;
+
+use glam::{Affine3A, Quat, Vec2, Vec3};
+use throng::assets::AssetCache;
+use throng::render::accel::{Tlas, TlasKind, WorldRay};
+use throng::render::bsdf::{sample_cosine_hemisphere, ShadingFrame};
+use throng::render::exr::{camera_matrices, write_layer, write_preview_png, LayerMeta, ID_MAPPING};
+use throng::render::film::render_frame_with_stats;
+use throng::render::integrator::{offset_ray_origin, CameraRays};
+use throng::render::{BlasSet, RenderSettings};
+use throng::scene::{vis, Camera, FrameScene, Instance, Library, Material, Mesh, Sky, Sun};
+
+/// Lumens per watt: the peers' (Blender glTF importer's) lux to W/m^2 factor.
+const LUMENS_PER_WATT: f32 = 683.0;
+
+struct Args {
+    scene: Option<PathBuf>,
+    synthetic: Option<usize>,
+    out: Option<PathBuf>,
+    res: (u32, u32),
+    spp: u32,
+    bounces: u32,
+    threads: usize,
+    sky: Vec3,
+    seed: u64,
+    diffuse: bool,
+    camera: Option<String>,
+    rays: bool,
+    render: bool,
+}
+
+fn parse_args() -> Result<Args, String> {
+    let mut a = Args {
+        scene: None,
+        synthetic: None,
+        out: None,
+        res: (960, 540),
+        spp: 64,
+        bounces: 5,
+        threads: 2,
+        sky: Vec3::new(0.30, 0.38, 0.50),
+        seed: 0,
+        diffuse: true,
+        camera: None,
+        rays: true,
+        render: true,
+    };
+    let mut it = std::env::args().skip(1);
+    fn num<T: std::str::FromStr>(it: &mut impl Iterator<Item = String>, flag: &str) -> Result<T, String> {
+        let v = it.next().ok_or(format!("{flag} needs a value"))?;
+        v.parse().map_err(|_| format!("{flag}: cannot parse `{v}`"))
+    }
+    while let Some(arg) = it.next() {
+        match arg.as_str() {
+            "--synthetic" => a.synthetic = Some(num(&mut it, &arg)?),
+            "--out" => a.out = Some(PathBuf::from(it.next().ok_or("--out needs a value")?)),
+            "--res" => a.res = (num(&mut it, &arg)?, num(&mut it, &arg)?),
+            "--spp" => a.spp = num(&mut it, &arg)?,
+            "--bounces" => a.bounces = num(&mut it, &arg)?,
+            "--threads" => a.threads = num(&mut it, &arg)?,
+            "--sky" => a.sky = Vec3::new(num(&mut it, &arg)?, num(&mut it, &arg)?, num(&mut it, &arg)?),
+            "--seed" => a.seed = num(&mut it, &arg)?,
+            "--materials" => {
+                a.diffuse = match it.next().as_deref() {
+                    Some("diffuse") => true,
+                    Some("gltf") => false,
+                    other => return Err(format!("--materials diffuse|gltf, not {other:?}")),
+                }
+            }
+            "--camera" => a.camera = Some(it.next().ok_or("--camera needs a node name")?),
+            "--no-rays" => a.rays = false,
+            "--no-render" => a.render = false,
+            s if s.starts_with("--") => return Err(format!("unknown flag {s}")),
+            s => a.scene = Some(PathBuf::from(s)),
+        }
+    }
+    if a.scene.is_none() == a.synthetic.is_none() {
+        return Err("give either SCENE.glb or --synthetic N".into());
+    }
+    Ok(a)
+}
+
+fn peak_rss_mib() -> f64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    status
+        .lines()
+        .find(|l| l.starts_with("VmHWM:"))
+        .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// CPU time of the calling thread: robust to other processes on the cores.
+fn thread_cpu_s() -> f64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
+        .map_or(f64::NAN, |ns| ns * 1e-9)
+}
+
+/// CPU seconds of the whole process (all threads, user + system), from
+/// /proc/self/stat: with other jobs on the cores, wall time overstates our cost.
+fn process_cpu_s() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // Fields after the ")" of the command name; utime and stime are fields 14 and 15.
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let tick = |i: usize| f.get(i).and_then(|x| x.parse::<f64>().ok()).unwrap_or(f64::NAN);
+    (tick(11) + tick(12)) / 100.0 // USER_HZ is 100 on Linux
+}
+
+/// A scene ready to render, with what loading it cost.
+struct Loaded {
+    lib: Library,
+    scene: FrameScene,
+    /// When loading started (the reference for `first_sample_s`).
+    started: Instant,
+    load_s: f64,
+}
+
+/// The first node with a perspective camera (the peers' scripts use the first camera).
+fn first_camera_node(path: &PathBuf) -> Result<String, String> {
+    let doc = gltf::Gltf::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let node = doc
+        .nodes()
+        .find(|n| n.camera().is_some_and(|c| matches!(c.projection(), gltf::camera::Projection::Perspective(_))))
+        .ok_or(format!("{}: no node with a perspective camera", path.display()))?;
+    node.name().map(str::to_string).ok_or(format!("{}: the camera node has no name (needed by find_camera)", path.display()))
+}
+
+fn load_glb(path: &PathBuf, args: &Args) -> Result<Loaded, String> {
+    let camera_node = match &args.camera {
+        Some(c) => c.clone(),
+        None => first_camera_node(path)?,
+    };
+    let start = Instant::now();
+    let mut cache = AssetCache::new();
+    let placed = cache.load_scene_instances(path).map_err(|e| e.to_string())?;
+    let camera = cache.find_camera(path, &camera_node).map_err(|e| e.to_string())?;
+    let lights = cache.directional_lights(path).map_err(|e| e.to_string())?;
+    let lib = cache.into_library();
+    let instances = placed
+        .into_iter()
+        .map(|(mesh, material, world_from_object)| Instance { mesh, material, world_from_object, agent: None, part: 0, visibility: vis::ALL })
+        .collect();
+    let load_s = start.elapsed().as_secs_f64();
+    if lights.len() > 1 {
+        eprintln!("note: {} directional lights, using the first ({})", lights.len(), lights[0].node);
+    }
+    let sun = lights.first().map(|l| Sun { direction: l.direction, angular_diameter: 0.0, irradiance: l.color * (l.intensity / LUMENS_PER_WATT) });
+    Ok(Loaded { lib, scene: FrameScene { instances, camera, sun, sky: Sky { radiance: args.sky } }, started: start, load_s })
+}
+
+// ------------------------------------------------------------ synthetic crowd
+
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f32 {
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// Unit cube centred on the origin, flat shaded.
+fn cube() -> Mesh {
+    let p: Vec<Vec3> = (0..8)
+        .map(|i| Vec3::new((i & 1) as f32 - 0.5, ((i >> 1) & 1) as f32 - 0.5, ((i >> 2) & 1) as f32 - 0.5))
+        .collect();
+    let faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
+    let indices = faces.iter().flat_map(|f| [f[0], f[1], f[2], f[0], f[2], f[3]]).collect();
+    Mesh { name: "cube".into(), positions: p, indices, ..Default::default() }
+}
+
+/// UV sphere of diameter 1 (2 x rings x segments triangles), smooth normals.
+fn sphere(name: &str, rings: u32, segments: u32) -> Mesh {
+    let mut m = Mesh { name: name.into(), ..Default::default() };
+    for r in 0..=rings {
+        let theta = PI * r as f32 / rings as f32;
+        for s in 0..=segments {
+            let phi = 2.0 * PI * s as f32 / segments as f32;
+            let p = 0.5 * Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+            m.positions.push(p);
+            m.normals.push(p * 2.0);
+        }
+    }
+    let row = segments + 1;
+    for r in 0..rings {
+        for s in 0..segments {
+            let (a, b) = (r * row + s, (r + 1) * row + s);
+            m.indices.extend_from_slice(&[a, a + 1, b, a + 1, b + 1, b]);
+        }
+    }
+    m
+}
+
+fn quad(half: f32) -> Mesh {
+    Mesh {
+        name: "ground".into(),
+        positions: vec![Vec3::new(-half, 0.0, -half), Vec3::new(half, 0.0, -half), Vec3::new(half, 0.0, half), Vec3::new(-half, 0.0, half)],
+        normals: vec![Vec3::Y; 4],
+        uvs: vec![],
+        indices: vec![0, 2, 1, 0, 3, 2],
+    }
+}
+
+/// make_crowd.py's shape in memory: ground, N agents of 11 parts (a ~500
+/// triangle head from 4 variants, box torso and pelvis, 8 capsule-ish limbs
+/// from 2 variants), 6 materials; camera auto-framed (yfov 40 deg, 28 deg
+/// elevation), sun at 50 deg elevation, 3 W/m^2.
+fn synthetic(n: usize, args: &Args) -> Loaded {
+    let start = Instant::now();
+    let density = 0.5f32;
+    let depth = (n.max(1) as f32 / density / 1.6).sqrt();
+    let width = depth * 1.6;
+    let ground_half = (2.0 * width).max(100.0);
+    let mut meshes = vec![quad(ground_half), cube()];
+    for (k, (rings, segs)) in [(16u32, 16u32), (15, 17), (14, 18), (16, 15)].iter().enumerate() {
+        meshes.push(sphere(&format!("head{k}"), *rings, *segs));
+    }
+    meshes.push(sphere("limb0", 6, 6));
+    meshes.push(sphere("limb1", 5, 7));
+    let m = |name: &str, c: [f32; 3]| Material { name: name.into(), base_color: Vec3::from(c), base_color_texture: None, roughness: 1.0, metallic: 0.0 };
+    let materials = vec![
+        m("ground", [0.5, 0.5, 0.5]),
+        m("skin", [0.6, 0.45, 0.35]),
+        m("shirt_red", [0.6, 0.1, 0.08]),
+        m("shirt_blue", [0.1, 0.2, 0.6]),
+        m("shirt_yellow", [0.7, 0.6, 0.1]),
+        m("trousers", [0.25, 0.22, 0.2]),
+    ];
+    // (mesh: 0 head, 1 box, 2 limb; centre; size; material: 0 skin, 1 shirt, 2 trousers)
+    let slots: [(u8, [f32; 3], [f32; 3], u8); 11] = [
+        (0, [0.0, 1.6, 0.0], [0.24, 0.27, 0.24], 0),
+        (1, [0.0, 1.2, 0.0], [0.4, 0.5, 0.22], 1),
+        (1, [0.0, 0.9, 0.0], [0.35, 0.15, 0.2], 2),
+        (2, [-0.27, 1.25, 0.0], [0.1, 0.3, 0.1], 1),
+        (2, [-0.27, 0.95, 0.0], [0.09, 0.3, 0.09], 0),
+        (2, [0.27, 1.25, 0.0], [0.1, 0.3, 0.1], 1),
+        (2, [0.27, 0.95, 0.0], [0.09, 0.3, 0.09], 0),
+        (2, [-0.1, 0.62, 0.0], [0.13, 0.4, 0.13], 2),
+        (2, [-0.1, 0.22, 0.0], [0.11, 0.42, 0.11], 2),
+        (2, [0.1, 0.62, 0.0], [0.13, 0.4, 0.13], 2),
+        (2, [0.1, 0.22, 0.0], [0.11, 0.42, 0.11], 2),
+    ];
+    let mut rng = Lcg(n as u64 ^ 0x5eed);
+    let mut instances = Vec::with_capacity(1 + 11 * n);
+    instances.push(Instance { mesh: 0, material: 0, world_from_object: Affine3A::IDENTITY, agent: None, part: 0, visibility: vis::ALL });
+    // Jittered grid, `cols` x `rows` cells over the field.
+    let cols = ((n as f32 * 1.6).sqrt().ceil() as usize).max(1);
+    let rows = n.div_ceil(cols).max(1);
+    let (cw, ch) = (width / cols as f32, depth / rows as f32);
+    for a in 0..n {
+        let (c, r) = (a % cols, a / cols);
+        let x = -0.5 * width + (c as f32 + 0.2 + 0.6 * rng.next()) * cw;
+        let z = -0.5 * depth + (r as f32 + 0.2 + 0.6 * rng.next()) * ch;
+        let scale = 0.9 + 0.2 * rng.next();
+        let agent = Affine3A::from_scale_rotation_translation(Vec3::splat(scale), Quat::from_rotation_y(rng.next() * 2.0 * PI), Vec3::new(x, 0.0, z));
+        let head = 2 + (rng.next() * 4.0) as u32 % 4;
+        let limb = 6 + (rng.next() * 2.0) as u32 % 2;
+        let shirt = 2 + (rng.next() * 3.0) as u32 % 3;
+        for (k, (kind, centre, size, mat)) in slots.iter().enumerate() {
+            let swing = if k >= 3 { (rng.next() - 0.5) * 0.6 } else { 0.0 };
+            let local = Affine3A::from_scale_rotation_translation(Vec3::from(*size), Quat::from_rotation_x(swing), Vec3::from(*centre));
+            instances.push(Instance {
+                mesh: [head, 1, limb][*kind as usize],
+                material: [1, shirt, 5][*mat as usize],
+                world_from_object: agent * local,
+                agent: Some(a as u32),
+                part: k as u16,
+                visibility: vis::ALL,
+            });
+        }
+    }
+    // Camera: 28 deg elevation, yfov 40 deg, far enough back to see the whole field.
+    let yfov = 40f32.to_radians();
+    let elevation = 28f32.to_radians();
+    let aspect = args.res.0 as f32 / args.res.1 as f32;
+    let distance = (0.5 * width / ((0.5 * yfov).tan() * aspect)).max(0.5 * depth / (0.5 * yfov).tan()) * 1.15 + 0.5 * depth;
+    let eye = Vec3::new(0.0, distance * elevation.sin(), distance * elevation.cos());
+    let forward = (Vec3::new(0.0, 0.8, 0.0) - eye).normalize();
+    let right = forward.cross(Vec3::Y).normalize();
+    let up = right.cross(forward);
+    let camera = Camera { world_from_camera: Affine3A::from_cols(right.into(), up.into(), (-forward).into(), eye.into()), yfov };
+    let sun_elevation = 50f32.to_radians();
+    let sun_direction = Vec3::new(-0.5 * sun_elevation.cos(), sun_elevation.sin(), 0.87 * sun_elevation.cos()).normalize();
+    let sun = Some(Sun { direction: sun_direction, angular_diameter: 0.0, irradiance: Vec3::splat(2049.0 / LUMENS_PER_WATT) });
+    let lib = Library { meshes, materials, textures: vec![] };
+    let load_s = start.elapsed().as_secs_f64();
+    Loaded { lib, scene: FrameScene { instances, camera, sun, sky: Sky { radiance: args.sky } }, started: start, load_s }
+}
+
+// ------------------------------------------------------------ ray rates
+
+/// Geometric normal of a hit, world space, unnormalised.
+fn hit_normal(lib: &Library, inst: &Instance, triangle: u32) -> Option<Vec3> {
+    let mesh = lib.meshes.get(inst.mesh as usize)?;
+    let i = triangle as usize * 3;
+    let idx = mesh.indices.get(i..i + 3)?;
+    let p = |k: u32| mesh.positions.get(k as usize).map(|&v| inst.world_from_object.transform_point3(v));
+    let (a, b, c) = (p(idx[0])?, p(idx[1])?, p(idx[2])?);
+    Some((b - a).cross(c - a))
+}
+
+/// Rays per second (best wall time of 3, and rays per thread-CPU second of
+/// the best run) tracing `rays` closest-hit on the calling thread; and the hit fraction.
+fn rate(tlas: &Tlas, rays: &[WorldRay], mask: u8) -> (f64, f64, f64) {
+    let (mut best_wall, mut best_cpu, mut hits) = (f64::INFINITY, f64::INFINITY, 0usize);
+    for _ in 0..3 {
+        let (t, c) = (Instant::now(), thread_cpu_s());
+        hits = rays.iter().filter(|r| tlas.intersect(r, mask).is_some()).count();
+        best_cpu = best_cpu.min(thread_cpu_s() - c);
+        best_wall = best_wall.min(t.elapsed().as_secs_f64());
+    }
+    let n = rays.len() as f64;
+    (n / best_wall, n / best_cpu, hits as f64 / n)
+}
+
+/// The peers' `embree_rays.py` primary and bounce sets, traced on one thread.
+fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u32)) -> serde_json::Value {
+    let tlas = Tlas::build(blas, &scene.instances);
+    let cam = CameraRays::new(&scene.camera, w, h);
+    let primary: Vec<WorldRay> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let (origin, direction) = cam.ray(x as f32 + 0.5, y as f32 + 0.5);
+            WorldRay { origin, direction, tmax: f32::INFINITY }
+        })
+        .collect();
+    let mut rng = Lcg(7);
+    let bounce: Vec<WorldRay> = primary
+        .iter()
+        .filter_map(|r| {
+            let hit = tlas.intersect(r, vis::CAMERA)?;
+            let inst = scene.instances.get(hit.instance as usize)?;
+            let mut n = hit_normal(lib, inst, hit.triangle)?.try_normalize()?;
+            if n.dot(r.direction) > 0.0 {
+                n = -n; // face the camera
+            }
+            let p = r.origin + r.direction * hit.t;
+            let d = ShadingFrame::from_normal(n).to_world(sample_cosine_hemisphere(Vec2::new(rng.next(), rng.next())));
+            Some(WorldRay { origin: offset_ray_origin(p, n), direction: d, tmax: f32::INFINITY })
+        })
+        .collect();
+    let (pw, pc, ph) = rate(&tlas, &primary, vis::CAMERA);
+    let (bw, bc, bh) = rate(&tlas, &bounce, vis::INDIRECT);
+    // The same bounce rays through the other TLAS kind (the renderer picks by instance count).
+    let other = match TlasKind::for_count(scene.instances.len()) {
+        TlasKind::Bvh2 => TlasKind::CwBvh,
+        TlasKind::CwBvh => TlasKind::Bvh2,
+    };
+    let (_, oc, _) = rate(&Tlas::build_with(blas, &scene.instances, other), &bounce, vis::INDIRECT);
+    let m = |x: f64| (x / 1e4).round() / 100.0;
+    serde_json::json!({
+        "primary": {"rays": primary.len(), "mrays_s_1t": m(pw), "mrays_per_cpu_s_1t": m(pc), "hit_fraction": (ph * 1e4).round() / 1e4},
+        "bounce": {"rays": bounce.len(), "mrays_s_1t": m(bw), "mrays_per_cpu_s_1t": m(bc), "hit_fraction": (bh * 1e4).round() / 1e4,
+                   "tlas": format!("{:?}", TlasKind::for_count(scene.instances.len())), "other_tlas_mrays_per_cpu_s_1t": m(oc)},
+    })
+}
+
+fn main() {
+    let args = match parse_args() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("peer_bench: {e}");
+            std::process::exit(2);
+        }
+    };
+    let t_all = Instant::now();
+    let cpu0 = process_cpu_s();
+    let loaded = match (&args.scene, args.synthetic) {
+        (Some(path), _) => match load_glb(path, &args) {
+            Ok(l) => l,
+            Err(e) => {
+                eprintln!("peer_bench: {e}");
+                std::process::exit(1);
+            }
+        },
+        (None, Some(n)) => synthetic(n, &args),
+        (None, None) => unreachable!("checked by parse_args"),
+    };
+    let Loaded { lib, scene, started: t0, load_s } = loaded;
+    let load_cpu_s = process_cpu_s() - cpu0;
+    let rss_load = peak_rss_mib();
+    let threads = args.threads;
+    let pool = match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("peer_bench: cannot start {threads} threads: {e}");
+            std::process::exit(1);
+        }
+    };
+    let cpu = process_cpu_s();
+    let blas = pool.install(|| BlasSet::build(&lib));
+    let blas_cpu_s = process_cpu_s() - cpu;
+    let blas_build_s = blas.build_time.as_secs_f64();
+    let unique: usize = lib.meshes.iter().map(Mesh::triangle_count).sum();
+    let instanced: usize = scene.instances.iter().filter_map(|i| lib.meshes.get(i.mesh as usize)).map(Mesh::triangle_count).sum();
+
+    let settings = RenderSettings {
+        width: args.res.0,
+        height: args.res.1,
+        spp: args.spp,
+        max_bounces: args.bounces,
+        seed: args.seed,
+        frame: 0,
+        layer: 0,
+        sky_visible: true,
+        threads,
+        indirect_clamp: 0.0,
+        diffuse_only: args.diffuse,
+    };
+    let mut out = serde_json::json!({
+        "tool": "throng peer_bench",
+        "scene": args.scene.as_ref().map(|p| p.display().to_string()),
+        "synthetic_agents": args.synthetic,
+        "res": [args.res.0, args.res.1], "spp": args.spp, "max_bounces": args.bounces, "threads": threads,
+        "materials": if args.diffuse { "diffuse" } else { "gltf" },
+        "instances": scene.instances.len(),
+        "triangles": instanced,
+        "unique_triangles": unique,
+        "unique_meshes": lib.meshes.len(),
+        "load_s": load_s,
+        "load_cpu_s": load_cpu_s,
+        "blas_build_s": blas_build_s,
+        "blas_cpu_s": blas_cpu_s,
+        "blas_mib": blas.bytes() as f64 / (1 << 20) as f64,
+        "peak_rss_after_load_mib": rss_load,
+    });
+    if args.render {
+        let first_tile = Mutex::new(None::<(f64, f64)>);
+        let progress = |_: usize| {
+            if let Ok(mut f) = first_tile.lock() {
+                f.get_or_insert_with(|| (t0.elapsed().as_secs_f64(), process_cpu_s() - cpu0));
+            }
+        };
+        let (t, cpu) = (Instant::now(), process_cpu_s());
+        let (film, stats) = match render_frame_with_stats(&blas, &lib, &scene, &settings, Some(&progress)) {
+            Ok(r) => r,
+            Err(e) => {
+                eprintln!("peer_bench: {e}");
+                std::process::exit(1);
+            }
+        };
+        let render_s = t.elapsed().as_secs_f64();
+        out["render_cpu_s"] = (process_cpu_s() - cpu).into();
+        let rss_render = peak_rss_mib();
+        let rays = stats.rays;
+        out["tlas_build_s"] = stats.tlas_build.as_secs_f64().into();
+        let first = first_tile.lock().ok().and_then(|f| *f);
+        out["first_sample_s"] = first.map(|f| f.0).into();
+        out["first_sample_cpu_s"] = first.map(|f| f.1).into();
+        out["render_s"] = render_s.into();
+        out["trace_s"] = stats.trace.as_secs_f64().into();
+        out["rays"] = serde_json::json!({"camera": rays.camera, "bounce": rays.bounce, "shadow": rays.shadow});
+        out["mrays_s_all_types"] = ((rays.camera + rays.bounce + rays.shadow) as f64 / stats.trace.as_secs_f64() / 1e6).into();
+        out["peak_rss_mib"] = rss_render.into();
+        let lum: f64 = film.rgba.iter().map(|p| (0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]) as f64).sum::<f64>() / film.rgba.len() as f64;
+        out["mean_luminance"] = lum.into();
+        if let Some(prefix) = &args.out {
+            let (near, far) = film.depth_range().unwrap_or((0.1, 1000.0));
+            let (world_to_camera, world_to_ndc) = camera_matrices(&scene.camera, settings.width, settings.height, near, far);
+            let meta = LayerMeta {
+                shot: "peer_bench".into(),
+                layer: "full".into(),
+                frame: 0,
+                seed: settings.seed,
+                spp: settings.spp,
+                id_mapping: ID_MAPPING.into(),
+                world_to_camera,
+                world_to_ndc,
+                near,
+                far,
+            };
+            let exr = prefix.with_extension("exr");
+            let png = prefix.with_extension("png");
+            for r in [write_layer(&exr, &film, &meta), write_preview_png(&png, &film)] {
+                if let Err(e) = r {
+                    eprintln!("peer_bench: {e}");
+                    std::process::exit(1);
+                }
+            }
+            out["exr"] = exr.display().to_string().into();
+        }
+    } else {
+        // Memory-only run: build the TLAS as a render would, then drop it.
+        let cpu = process_cpu_s();
+        let tlas = pool.install(|| Tlas::build(&blas, &scene.instances));
+        out["tlas_cpu_s"] = (process_cpu_s() - cpu).into();
+        out["tlas_build_s"] = tlas.build_time.as_secs_f64().into();
+        // Everything a render does before its first sample (plus the integrator's per-instance normal matrices, not built here).
+        out["first_sample_s"] = t0.elapsed().as_secs_f64().into();
+        out["first_sample_cpu_s"] = (process_cpu_s() - cpu0).into();
+        out["peak_rss_mib"] = peak_rss_mib().into();
+        drop(tlas);
+    }
+    if args.rays {
+        out["rays_1t"] = ray_rates(&blas, &lib, &scene, args.res);
+    }
+    out["total_s"] = t_all.elapsed().as_secs_f64().into();
+    out["total_cpu_s"] = (process_cpu_s() - cpu0).into();
+    out["loadavg_end"] = std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim().into();
+    out["peak_rss_end_mib"] = peak_rss_mib().into();
+    println!("{out}");
+}
