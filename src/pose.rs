@@ -298,9 +298,9 @@ impl ShotCrowd {
             Error::invalid(&self.shot.cache.path, "agent was not cast (not in the shot's frames)").agent(a.id)
         })?;
         let rig = &self.rigs[&cast.rig];
-        let cycle = rig.cycle(self.cycle_name(a)).map_err(|e| {
-            Error::invalid(&self.shot.cache.path, e.to_string()).agent(a.id).frame(self.shot.cache.shot_frame(0) as i64)
-        })?;
+        let cycle = rig
+            .cycle(self.cycle_name(a))
+            .map_err(|e| Error::invalid(&self.shot.cache.path, format!("rig `{}`: {e}", cast.rig)).agent(a.id))?;
         let pose = cycle.sample(a.cycle_frame, self.shot.frames.fps);
         let world_from_agent = self.world_from_agent(a);
         Ok(pose.slot_transforms().into_iter().map(|(_, m)| world_from_agent * m).collect())
