@@ -132,6 +132,16 @@ impl ShotCrowd {
             let block = cache.read_frame(cf)?;
             for a in &block.agents {
                 let cycle = cache.cycles().get(a.cycle as usize).map(String::as_str).unwrap_or("");
+                let rig_name = cache.rigs().get(a.rig as usize).map(String::as_str).unwrap_or("");
+                // A cycle the agent's rig lacks would only fail when posed; say so now.
+                if let Some(rig) = rigs.get(rig_name) {
+                    if let Err(e) = rig.cycle(cycle) {
+                        return Err(Error::invalid(cache.path(), format!("rig `{rig_name}`: {e}"))
+                            .frame(f as i64)
+                            .agent(a.id)
+                            .field("cycle"));
+                    }
+                }
                 let no_scale = a.seated() || shot.is_no_scale_cycle(cycle);
                 let e = seen.entry(a.id).or_insert(Seen { rig: a.rig, never_scale: false });
                 e.never_scale |= no_scale;

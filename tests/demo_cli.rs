@@ -118,3 +118,19 @@ fn verbs_report_bad_input_with_exit_code_2() {
     assert_eq!(code, 2);
     assert!(err.contains("outside shot demo"), "{err}");
 }
+
+#[test]
+fn a_cycle_the_rig_lacks_is_named_with_frame_and_agent() {
+    let shot = Shot::load(&demo_shot()).unwrap();
+    let mut crowd = throng::cache::read(&shot.cache.path).unwrap();
+    crowd.cycles.push("Moonwalk".into());
+    let last = (crowd.cycles.len() - 1) as u16;
+    let victim = crowd.frames[3].agents[5].id;
+    crowd.frames[3].agents[5].cycle = last;
+    let err = match ShotCrowd::new(shot.clone(), CacheReader::from_crowd(shot.cache.path.clone(), crowd)) {
+        Ok(_) => panic!("an unknown cycle was accepted"),
+        Err(e) => e.to_string(),
+    };
+    assert!(err.contains("Moonwalk") && err.contains(&format!("agent {victim}")), "{err}");
+    assert!(err.contains("frame 1004"), "names the shot frame: {err}");
+}
