@@ -425,10 +425,27 @@ pub fn cmd_export(args: &crate::cli::ExportArgs) -> Result<()> {
             args.frame, crowd.shot.name, crowd.shot.frames.start, crowd.shot.frames.end
         )));
     }
-    if args.layer.is_some() {
-        return Err(Error::Usage("--layer needs a layer manifest: run `throng layers` first".into()));
-    }
-    let s = crate::export::export_frame(&crowd, args.frame, None, &args.out)?;
+    // --layer: only that crowd layer's agents, from the manifest beside the shot.
+    let only = match &args.layer {
+        None => None,
+        Some(layer) => {
+            let path = crate::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name);
+            if !path.exists() {
+                return Err(Error::Usage(format!(
+                    "--layer needs the layer manifest {}: run `throng layers {}` first",
+                    path.display(),
+                    args.shot.display()
+                )));
+            }
+            let m = crate::layers::read_manifest(&path)?;
+            let index = m.layers.iter().position(|l| &l.name == layer).ok_or_else(|| {
+                let names: Vec<&str> = m.layers.iter().map(|l| l.name.as_str()).collect();
+                Error::Usage(format!("no crowd layer `{layer}` in {} (layers: {})", path.display(), names.join(", ")))
+            })?;
+            Some(m.agents.iter().filter(|a| a.layer == index && !a.removed).map(|a| a.id).collect())
+        }
+    };
+    let s = crate::export::export_frame(&crowd, args.frame, only.as_ref(), &args.out)?;
     println!(
         "wrote {}: {} agents, {} mesh nodes sharing {} meshes, {} instanced triangles",
         args.out.display(),
