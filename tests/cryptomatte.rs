@@ -201,7 +201,7 @@ fn names(scene: &FrameScene) -> CryptoNames {
 }
 
 fn settings(spp: u32, threads: usize) -> RenderSettings {
-    RenderSettings { width: 48, height: 36, spp, max_bounces: 1, seed: 7, frame: 1001, layer: 0, sky_visible: false, threads, indirect_clamp: 10.0 }
+    RenderSettings { width: 48, height: 36, spp, max_bounces: 1, seed: 7, frame: 1001, layer: 0, sky_visible: false, threads, indirect_clamp: 10.0, diffuse_only: false }
 }
 
 fn render(spp: u32, threads: usize) -> (FrameScene, Film) {
