@@ -734,10 +734,19 @@ pub fn cmd_demo(args: &crate::cli::DemoArgs) -> Result<()> {
     );
 
     println!("done in {:.1} s. Wrote under {}:", started.elapsed().as_secs_f64(), out.display());
-    println!("  {}                 the layer manifest (docs/layers.md)", manifest_path.display());
-    println!("  {}                      the layer map: who is in which layer", map.display());
-    println!("  {}                 frame {} as glTF (open in Blender)", glb.display(), manifest.ref_frame);
-    println!("  {}/<layer>/{}.<layer>.<frame>.exr  multi-channel EXR layers, PNG previews beside them", render.out.display(), crowd.shot.name);
+    let rows = [
+        (manifest_path.display().to_string(), "the layer manifest (docs/layers.md)".to_string()),
+        (map.display().to_string(), "the layer map: who is in which layer".to_string()),
+        (glb.display().to_string(), format!("frame {} as glTF (open in Blender)", manifest.ref_frame)),
+        (
+            format!("{}/<layer>/{}.<layer>.<frame>.exr", render.out.display(), crowd.shot.name),
+            "EXR layers (docs/render.md), PNG previews beside them".to_string(),
+        ),
+    ];
+    let width = rows.iter().map(|(p, _)| p.len()).max().unwrap_or(0);
+    for (path, what) in &rows {
+        println!("  {path:<width$}  {what}");
+    }
     println!("Look at the PNGs, or the EXRs with `exrheader FILE` (Debian: openexr) or any compositor.");
     if let Some(a) = manifest.agents.iter().find(|a| a.layer == 0 && !a.removed) {
         println!("Ask about an agent: throng botinfo {} {} --frame {}", shot_path.display(), a.id, manifest.ref_frame);
