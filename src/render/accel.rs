@@ -3,7 +3,6 @@
 //! instances' world bounds (rebuilt per frame). The only file that names
 //! obvhs, so the BVH library can change without touching the integrator.
 
-use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
 use glam::{Affine3A, Vec3, Vec3A};
@@ -303,10 +302,11 @@ impl<'a> Tlas<'a> {
     /// Builds the TLAS with a chosen tree kind (for benchmarks).
     pub fn build_with(blas: &'a BlasSet, instances: &[Instance], kind: TlasKind) -> Tlas<'a> {
         let start = Instant::now();
-        // Group instances by exact world bounds, clusters in first-seen order (deterministic).
-        let mut cluster_of: HashMap<[u32; 6], usize> = HashMap::with_capacity(instances.len());
-        let mut members: Vec<Vec<TlasInstance>> = Vec::new();
-        let mut aabbs = Vec::new();
+        // Group instances with identical world bounds into one leaf (a pile of
+        // them would otherwise build a degenerate chain). A sort over flat
+        // arrays, not a hash map: clusters come out in first-seen order and
+        // members in instance order, so the tree is deterministic.
+        let mut keyed: Vec<([u32; 6], u32, Aabb)> = Vec::with_capacity(instances.len());
         for (i, inst) in instances.iter().enumerate() {
             let Some(b) = blas.get(inst.mesh) else { continue };
             let m = &inst.world_from_object;
@@ -316,18 +316,19 @@ impl<'a> Tlas<'a> {
             }
             let bounds = world_bounds(&b.bounds(), m);
             let key = [bounds.min.x, bounds.min.y, bounds.min.z, bounds.max.x, bounds.max.y, bounds.max.z].map(f32::to_bits);
-            let c = *cluster_of.entry(key).or_insert_with(|| {
-                aabbs.push(bounds);
-                members.push(Vec::new());
-                members.len() - 1
-            });
-            members[c].push(TlasInstance {
-                object_from_world: m.inverse(),
-                index: i as u32,
-                mesh: inst.mesh,
-                visibility: inst.visibility,
-            });
+            keyed.push((key, i as u32, bounds));
         }
+        keyed.sort_unstable_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+        // Runs of equal keys are clusters; order them by their first instance.
+        let mut runs: Vec<(u32, std::ops::Range<usize>)> = Vec::new();
+        let mut at = 0;
+        while at < keyed.len() {
+            let end = keyed[at..].iter().position(|k| k.0 != keyed[at].0).map_or(keyed.len(), |n| at + n);
+            runs.push((keyed[at].1, at..end));
+            at = end;
+        }
+        runs.sort_unstable_by_key(|r| r.0);
+        let aabbs: Vec<Aabb> = runs.iter().map(|(_, r)| keyed[r.start].2).collect();
         let (tree, order) = if aabbs.is_empty() {
             (TlasTree::Empty, Vec::new())
         } else {
@@ -345,12 +346,21 @@ impl<'a> Tlas<'a> {
             }
         };
         // Lay clusters out in slot order: one fewer indirection per visit.
-        let mut instances = Vec::with_capacity(instances.len());
+        let source = instances;
+        let mut instances = Vec::with_capacity(keyed.len());
         let mut clusters = Vec::with_capacity(order.len());
         for &c in &order {
-            let run = std::mem::take(&mut members[c as usize]);
-            clusters.push((instances.len() as u32, run.len() as u32));
-            instances.extend(run);
+            let range = runs[c as usize].1.clone();
+            clusters.push((instances.len() as u32, range.len() as u32));
+            for &(_, i, _) in &keyed[range] {
+                let inst = &source[i as usize];
+                instances.push(TlasInstance {
+                    object_from_world: inst.world_from_object.inverse(),
+                    index: i,
+                    mesh: inst.mesh,
+                    visibility: inst.visibility,
+                });
+            }
         }
         let aabbs = order.iter().map(|&c| aabbs[c as usize]).collect();
         Tlas { blas, tree, instances, clusters, aabbs, build_time: start.elapsed() }
