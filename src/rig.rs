@@ -94,11 +94,11 @@ impl Hierarchy {
             })
             .collect();
         // Breadth-first from the top-level nodes: parents come first.
+        let children: Vec<Vec<usize>> = file.doc.nodes().map(|n| n.children().map(|c| c.index()).collect()).collect();
         let mut order: Vec<usize> = (0..nodes.len()).filter(|&i| nodes[i].parent.is_none()).collect();
         let mut next = 0;
-        while next < order.len() {
-            let at = order[next];
-            order.extend((0..nodes.len()).filter(|&c| nodes[c].parent == Some(at)));
+        while let Some(&at) = order.get(next) {
+            order.extend(&children[at]);
             next += 1;
         }
         Ok(Hierarchy { nodes, order })
