@@ -96,7 +96,7 @@ impl MeshData {
         if !self.uvs.is_empty() && self.uvs.len() != n {
             return bad(format!("mesh `{name}`: {} uvs for {n} positions", self.uvs.len()));
         }
-        if self.indices.len() % 3 != 0 {
+        if !self.indices.len().is_multiple_of(3) {
             return bad(format!("mesh `{name}`: {} indices is not a triangle list", self.indices.len()));
         }
         if let Some(i) = self.indices.iter().find(|&&i| i as usize >= n) {
@@ -361,7 +361,7 @@ impl GlbBuilder {
 
     /// Appends bytes as one buffer view, aligned to 4 bytes.
     fn push_view(&mut self, bytes: &[u8], target: Option<json::buffer::Target>) -> json::Index<json::buffer::View> {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let offset = self.bin.len();
@@ -647,10 +647,13 @@ impl GlbBuilder {
             self.root.extensions_used.push(EXT.to_string());
         }
         let mut json_node = self.node_json(&node)?;
-        json_node.extensions = Some(json::extensions::scene::Node {
+        // Other gltf features add fields to this struct; keep the default for them.
+        #[allow(clippy::needless_update)]
+        let ext = json::extensions::scene::Node {
             khr_lights_punctual: Some(klp::KhrLightsPunctual { light }),
             ..Default::default()
-        });
+        };
+        json_node.extensions = Some(ext);
         let index = self.root.push(json_node);
         Ok(NodeId(index.value() as u32))
     }
@@ -727,7 +730,7 @@ impl GlbBuilder {
     /// Serialises the document to .glb bytes (chunks padded to 4 bytes).
     pub fn finish(mut self) -> Result<Vec<u8>> {
         self.root.asset.generator = Some(self.generator.clone());
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         if !self.bin.is_empty() {

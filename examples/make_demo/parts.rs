@@ -168,9 +168,8 @@ pub fn torsos() -> Vec<Part> {
 /// joint at y = 0 (about 0.1 x 0.3 x 0.1 units); lower arms carry a hand,
 /// lower legs a foot pointing +Z. Hips are wide along X.
 pub fn limbs() -> Vec<Part> {
-    let mut out = Vec::new();
     // Box style.
-    out.push(part("upper_arm_box", cuboid([-0.05, -0.3, -0.05], [0.05, 0.0, 0.05])));
+    let mut out = vec![part("upper_arm_box", cuboid([-0.05, -0.3, -0.05], [0.05, 0.0, 0.05]))];
     out.push(part(
         "lower_arm_box",
         merge(&[cuboid([-0.045, -0.24, -0.045], [0.045, 0.0, 0.045]), cuboid([-0.05, -0.3, -0.06], [0.05, -0.24, 0.06])]),

@@ -233,7 +233,7 @@ pub fn write_kenney_turned(src: &Path, dst: &Path) -> Result<()> {
             let r = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
             let positions: Vec<[f32; 3]> =
                 r.read_positions().ok_or_else(|| Error::invalid(src, "primitive without POSITION").field(name.clone()))?.map(turn).collect();
-            let data = MeshData {
+            let mut data = MeshData {
                 normals: r.read_normals().map(|n| n.map(turn).collect()).unwrap_or_default(),
                 uvs: r.read_tex_coords(0).map(|t| t.into_f32().collect()).unwrap_or_default(),
                 indices: match r.read_indices() {
@@ -242,6 +242,7 @@ pub fn write_kenney_turned(src: &Path, dst: &Path) -> Result<()> {
                 },
                 positions,
             };
+            nudge_decal(&mut data);
             let mat = prim.material().index().and_then(|i| materials.get(i).copied());
             match id {
                 None => id = Some(glb.add_mesh(&name, &data, mat)?),
@@ -269,6 +270,24 @@ pub fn write_kenney_turned(src: &Path, dst: &Path) -> Result<()> {
         }
     }
     glb.write(dst)
+}
+
+/// How far a flat face decal is lifted off the surface it lies on (mesh units).
+const DECAL_LIFT: f32 = 0.002;
+
+/// The alien's face decals (eyes, mouth) are flat primitives lying exactly in
+/// the head's front plane; coplanar surfaces give a ray tracer speckles, so
+/// lift any primitive that is flat in Z a hair along its normal.
+fn nudge_decal(m: &mut MeshData) {
+    let (lo, hi) = m.bounds();
+    if hi[2] - lo[2] > 1e-6 || m.normals.is_empty() {
+        return;
+    }
+    let nz: f32 = m.normals.iter().map(|n| n[2]).sum();
+    let dz = DECAL_LIFT * nz.signum();
+    for p in &mut m.positions {
+        p[2] += dz;
+    }
 }
 
 /// Mesh names in a .glb (to check that a wardrobe names real meshes).
