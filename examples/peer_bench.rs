@@ -121,34 +121,6 @@ fn parse_args() -> Result<Args, String> {
     Ok(a)
 }
 
-fn peak_rss_mib() -> f64 {
-    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
-    status
-        .lines()
-        .find(|l| l.starts_with("VmHWM:"))
-        .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        .map_or(f64::NAN, |kb| kb / 1024.0)
-}
-
-/// CPU time of the calling thread: robust to other processes on the cores.
-fn thread_cpu_s() -> f64 {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()
-        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
-        .map_or(f64::NAN, |ns| ns * 1e-9)
-}
-
-/// CPU seconds of the whole process (all threads, user + system), from
-/// /proc/self/stat: with other jobs on the cores, wall time overstates our cost.
-fn process_cpu_s() -> f64 {
-    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
-    // Fields after the ")" of the command name; utime and stime are fields 14 and 15.
-    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let tick = |i: usize| f.get(i).and_then(|x| x.parse::<f64>().ok()).unwrap_or(f64::NAN);
-    (tick(11) + tick(12)) / 100.0 // USER_HZ is 100 on Linux
-}
-
 /// A scene ready to render, with what loading it cost.
 struct Loaded {
     lib: Library,
@@ -201,38 +173,6 @@ impl Lcg {
     }
 }
 
-/// Unit cube centred on the origin, flat shaded.
-fn cube() -> Mesh {
-    let p: Vec<Vec3> = (0..8)
-        .map(|i| Vec3::new((i & 1) as f32 - 0.5, ((i >> 1) & 1) as f32 - 0.5, ((i >> 2) & 1) as f32 - 0.5))
-        .collect();
-    let faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
-    let indices = faces.iter().flat_map(|f| [f[0], f[1], f[2], f[0], f[2], f[3]]).collect();
-    Mesh { name: "cube".into(), positions: p, indices, ..Default::default() }
-}
-
-/// UV sphere of diameter 1 (2 x rings x segments triangles), smooth normals.
-fn sphere(name: &str, rings: u32, segments: u32) -> Mesh {
-    let mut m = Mesh { name: name.into(), ..Default::default() };
-    for r in 0..=rings {
-        let theta = PI * r as f32 / rings as f32;
-        for s in 0..=segments {
-            let phi = 2.0 * PI * s as f32 / segments as f32;
-            let p = 0.5 * Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
-            m.positions.push(p);
-            m.normals.push(p * 2.0);
-        }
-    }
-    let row = segments + 1;
-    for r in 0..rings {
-        for s in 0..segments {
-            let (a, b) = (r * row + s, (r + 1) * row + s);
-            m.indices.extend_from_slice(&[a, a + 1, b, a + 1, b + 1, b]);
-        }
-    }
-    m
-}
-
 fn quad(half: f32) -> Mesh {
     Mesh {
         name: "ground".into(),
@@ -253,12 +193,12 @@ fn synthetic(n: usize, args: &Args) -> Loaded {
     let depth = (n.max(1) as f32 / density / 1.6).sqrt();
     let width = depth * 1.6;
     let ground_half = (2.0 * width).max(100.0);
-    let mut meshes = vec![quad(ground_half), cube()];
+    let mut meshes = vec![quad(ground_half), Mesh::cube("cube")];
     for (k, (rings, segs)) in [(16u32, 16u32), (15, 17), (14, 18), (16, 15)].iter().enumerate() {
-        meshes.push(sphere(&format!("head{k}"), *rings, *segs));
+        meshes.push(Mesh::uv_sphere(&format!("head{k}"), 0.5, *rings, *segs));
     }
-    meshes.push(sphere("limb0", 6, 6));
-    meshes.push(sphere("limb1", 5, 7));
+    meshes.push(Mesh::uv_sphere("limb0", 0.5, 6, 6));
+    meshes.push(Mesh::uv_sphere("limb1", 0.5, 5, 7));
     let m = |name: &str, c: [f32; 3]| Material { name: name.into(), base_color: Vec3::from(c), base_color_texture: None, roughness: 1.0, metallic: 0.0 };
     let materials = vec![
         m("ground", [0.5, 0.5, 0.5]),
@@ -346,9 +286,9 @@ fn hit_normal(lib: &Library, inst: &Instance, triangle: u32) -> Option<Vec3> {
 fn rate(tlas: &Tlas, rays: &[WorldRay], mask: u8) -> (f64, f64, f64) {
     let (mut best_wall, mut best_cpu, mut hits) = (f64::INFINITY, f64::INFINITY, 0usize);
     for _ in 0..3 {
-        let (t, c) = (Instant::now(), thread_cpu_s());
+        let (t, c) = (Instant::now(), throng::bench::thread_cpu_s());
         hits = rays.iter().filter(|r| tlas.intersect(r, mask).is_some()).count();
-        best_cpu = best_cpu.min(thread_cpu_s() - c);
+        best_cpu = best_cpu.min(throng::bench::thread_cpu_s() - c);
         best_wall = best_wall.min(t.elapsed().as_secs_f64());
     }
     let n = rays.len() as f64;
@@ -406,7 +346,7 @@ fn main() {
         }
     };
     let t_all = Instant::now();
-    let cpu0 = process_cpu_s();
+    let cpu0 = throng::bench::process_cpu_s();
     let loaded = match (&args.scene, args.synthetic) {
         (Some(path), _) => match load_glb(path, &args) {
             Ok(l) => l,
@@ -419,8 +359,8 @@ fn main() {
         (None, None) => unreachable!("checked by parse_args"),
     };
     let Loaded { lib, scene, started: t0, load_s } = loaded;
-    let load_cpu_s = process_cpu_s() - cpu0;
-    let rss_load = peak_rss_mib();
+    let load_cpu_s = throng::bench::process_cpu_s() - cpu0;
+    let rss_load = throng::bench::peak_rss_mib();
     let threads = args.threads;
     let pool = match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
         Ok(p) => p,
@@ -429,9 +369,9 @@ fn main() {
             std::process::exit(1);
         }
     };
-    let cpu = process_cpu_s();
+    let cpu = throng::bench::process_cpu_s();
     let blas = pool.install(|| BlasSet::build(&lib));
-    let blas_cpu_s = process_cpu_s() - cpu;
+    let blas_cpu_s = throng::bench::process_cpu_s() - cpu;
     let blas_build_s = blas.build_time.as_secs_f64();
     let unique: usize = lib.meshes.iter().map(Mesh::triangle_count).sum();
     let instanced: usize = scene.instances.iter().filter_map(|i| lib.meshes.get(i.mesh as usize)).map(Mesh::triangle_count).sum();
@@ -470,10 +410,10 @@ fn main() {
         let first_tile = Mutex::new(None::<(f64, f64)>);
         let progress = |_: usize| {
             if let Ok(mut f) = first_tile.lock() {
-                f.get_or_insert_with(|| (t0.elapsed().as_secs_f64(), process_cpu_s() - cpu0));
+                f.get_or_insert_with(|| (t0.elapsed().as_secs_f64(), throng::bench::process_cpu_s() - cpu0));
             }
         };
-        let (t, cpu) = (Instant::now(), process_cpu_s());
+        let (t, cpu) = (Instant::now(), throng::bench::process_cpu_s());
         let (film, stats) = match render_frame_with_stats(&blas, &lib, &scene, &settings, Some(&progress)) {
             Ok(r) => r,
             Err(e) => {
@@ -482,8 +422,8 @@ fn main() {
             }
         };
         let render_s = t.elapsed().as_secs_f64();
-        out["render_cpu_s"] = (process_cpu_s() - cpu).into();
-        let rss_render = peak_rss_mib();
+        out["render_cpu_s"] = (throng::bench::process_cpu_s() - cpu).into();
+        let rss_render = throng::bench::peak_rss_mib();
         let rays = stats.rays;
         out["tlas_build_s"] = stats.tlas_build.as_secs_f64().into();
         let first = first_tile.lock().ok().and_then(|f| *f);
@@ -523,22 +463,22 @@ fn main() {
         }
     } else {
         // Memory-only run: build the TLAS as a render would, then drop it.
-        let cpu = process_cpu_s();
+        let cpu = throng::bench::process_cpu_s();
         let tlas = pool.install(|| Tlas::build(&blas, &scene.instances));
-        out["tlas_cpu_s"] = (process_cpu_s() - cpu).into();
+        out["tlas_cpu_s"] = (throng::bench::process_cpu_s() - cpu).into();
         out["tlas_build_s"] = tlas.build_time.as_secs_f64().into();
         // Everything a render does before its first sample (plus the integrator's per-instance normal matrices, not built here).
         out["first_sample_s"] = t0.elapsed().as_secs_f64().into();
-        out["first_sample_cpu_s"] = (process_cpu_s() - cpu0).into();
-        out["peak_rss_mib"] = peak_rss_mib().into();
+        out["first_sample_cpu_s"] = (throng::bench::process_cpu_s() - cpu0).into();
+        out["peak_rss_mib"] = throng::bench::peak_rss_mib().into();
         drop(tlas);
     }
     if args.rays {
         out["rays_1t"] = ray_rates(&blas, &lib, &scene, args.res);
     }
     out["total_s"] = t_all.elapsed().as_secs_f64().into();
-    out["total_cpu_s"] = (process_cpu_s() - cpu0).into();
+    out["total_cpu_s"] = (throng::bench::process_cpu_s() - cpu0).into();
     out["loadavg_end"] = std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim().into();
-    out["peak_rss_end_mib"] = peak_rss_mib().into();
+    out["peak_rss_end_mib"] = throng::bench::peak_rss_mib().into();
     println!("{out}");
 }

@@ -7,7 +7,7 @@
 
 use std::f32::consts::PI;
 
-use glam::{Affine3A, Quat, Vec2, Vec3};
+use glam::{Affine3A, Quat, Vec3};
 use throng::render::accel::{BlasSet, Tlas, TlasKind, WorldRay};
 use throng::render::exr::write_preview_png;
 use throng::render::film::render_frame_with_stats;
@@ -20,37 +20,6 @@ impl Lcg {
         self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (self.0 >> 40) as f32 / (1u64 << 24) as f32
     }
-}
-
-fn cube() -> Mesh {
-    let p: Vec<Vec3> = (0..8)
-        .map(|i| Vec3::new((i & 1) as f32 - 0.5, ((i >> 1) & 1) as f32 - 0.5, ((i >> 2) & 1) as f32 - 0.5))
-        .collect();
-    let faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
-    let indices = faces.iter().flat_map(|f| [f[0], f[1], f[2], f[0], f[2], f[3]]).collect();
-    Mesh { name: "cube".into(), positions: p, indices, ..Default::default() }
-}
-
-fn sphere(rings: u32, segments: u32) -> Mesh {
-    let mut m = Mesh { name: format!("sphere{rings}"), ..Default::default() };
-    for r in 0..=rings {
-        let theta = PI * r as f32 / rings as f32;
-        for s in 0..=segments {
-            let phi = 2.0 * PI * s as f32 / segments as f32;
-            let p = 0.5 * Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
-            m.positions.push(p);
-            m.normals.push(p * 2.0);
-            m.uvs.push(Vec2::new(s as f32 / segments as f32, r as f32 / rings as f32));
-        }
-    }
-    let row = segments + 1;
-    for r in 0..rings {
-        for s in 0..segments {
-            let (a, b) = (r * row + s, (r + 1) * row + s);
-            m.indices.extend_from_slice(&[a, a + 1, b, a + 1, b + 1, b]);
-        }
-    }
-    m
 }
 
 fn ground(size: f32) -> Mesh {
@@ -74,7 +43,7 @@ fn library() -> Library {
     };
     Library {
         // Ground, a box part, a 2k-triangle head sphere, a 500-triangle limb sphere.
-        meshes: vec![ground(200.0), cube(), sphere(32, 32), sphere(16, 16)],
+        meshes: vec![ground(200.0), Mesh::cube("cube"), Mesh::uv_sphere(&format!("sphere{}", 32), 0.5, 32, 32), Mesh::uv_sphere(&format!("sphere{}", 16), 0.5, 16, 16)],
         materials: vec![
             m("ground", [0.5, 0.5, 0.5], 0.0, 0.2),
             m("chrome", [0.8, 0.8, 0.85], 1.0, 0.25),
@@ -129,34 +98,6 @@ fn crowd(n: usize) -> Vec<Instance> {
     out
 }
 
-/// CPU time of the calling thread (ns), from /proc/thread-self/schedstat:
-/// robust to other processes competing for the cores, unlike wall time.
-fn thread_cpu_s() -> f64 {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()
-        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
-        .map_or(f64::NAN, |ns| ns * 1e-9)
-}
-
-/// CPU seconds of the whole process (all threads), from /proc/self/stat.
-fn process_cpu_s() -> f64 {
-    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
-    // Fields after the ")" of the command name; utime and stime are fields 14 and 15.
-    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let tick = |i: usize| f.get(i).and_then(|x| x.parse::<f64>().ok()).unwrap_or(f64::NAN);
-    (tick(11) + tick(12)) / 100.0 // USER_HZ is 100 on Linux
-}
-
-fn peak_rss_mb() -> f64 {
-    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
-    status
-        .lines()
-        .find(|l| l.starts_with("VmHWM:"))
-        .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        .map_or(f64::NAN, |kb| kb / 1024.0)
-}
-
 /// Rays per second of incoherent "bounce" rays (closest hit) and shadow rays
 /// (any hit) on one thread: origins inside the crowd's box, random directions.
 fn ray_rates(tlas: &Tlas, n_rays: usize) -> (f64, f64, f64) {
@@ -172,19 +113,19 @@ fn ray_rates(tlas: &Tlas, n_rays: usize) -> (f64, f64, f64) {
             WorldRay { origin, direction: Vec3::new(r * phi.cos(), z, r * phi.sin()), tmax: f32::INFINITY }
         })
         .collect();
-    let start = thread_cpu_s();
+    let start = throng::bench::thread_cpu_s();
     let mut hits = 0usize;
     for r in &rays {
         hits += tlas.intersect(r, vis::INDIRECT).is_some() as usize;
     }
-    let bounce = n_rays as f64 / (thread_cpu_s() - start);
+    let bounce = n_rays as f64 / (throng::bench::thread_cpu_s() - start);
     let sun = Vec3::new(-0.4, 0.6, 0.5).normalize();
-    let start = thread_cpu_s();
+    let start = throng::bench::thread_cpu_s();
     let mut blocked = 0usize;
     for r in &rays {
         blocked += tlas.occluded(&WorldRay { direction: sun, ..*r }, vis::SHADOW) as usize;
     }
-    let shadow = n_rays as f64 / (thread_cpu_s() - start);
+    let shadow = n_rays as f64 / (throng::bench::thread_cpu_s() - start);
     let _ = blocked;
     (bounce, shadow, hits as f64 / n_rays as f64)
 }
@@ -236,9 +177,9 @@ fn main() {
             sky: Sky { radiance: Vec3::new(0.3, 0.38, 0.5) },
         };
         let settings = RenderSettings { width: 320, height: 180, spp: 4, max_bounces: 4, seed: 1, frame: 1001, layer: 0, sky_visible: true, threads: 0, indirect_clamp: 10.0, diffuse_only: false };
-        let cpu = process_cpu_s();
+        let cpu = throng::bench::process_cpu_s();
         let (film, stats) = render_frame_with_stats(&blas, &lib, &scene, &settings, None).expect("render");
-        let cpu = process_cpu_s() - cpu;
+        let cpu = throng::bench::process_cpu_s() - cpu;
         let total_rays = stats.rays.camera + stats.rays.bounce + stats.rays.shadow;
         println!(
             "{:>6} {:>8} | {:>9.2} {:>9.2} | {:>12.3e} {:>12.3e} {:>12.3e} {:>12.3e} | {:>10.1} {:>8.2} {:>9.1}",
@@ -252,7 +193,7 @@ fn main() {
             s8,
             stats.trace.as_secs_f64() * 1e3,
             total_rays as f64 / cpu / 1e6,
-            peak_rss_mb()
+            throng::bench::peak_rss_mib()
         );
         if let Some(dir) = &out_dir {
             let path = dir.join(format!("render_bench_{n}.png"));

@@ -4,6 +4,7 @@
 #![warn(missing_docs)]
 
 pub mod assets;
+pub mod bench;
 pub mod cache;
 pub mod casting;
 pub mod cli;

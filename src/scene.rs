@@ -37,6 +37,41 @@ impl Mesh {
     pub fn triangle_count(&self) -> usize {
         self.indices.len() / 3
     }
+    /// Unit cube centred on the origin, flat shaded (no normals or UVs):
+    /// test scenes and synthetic benchmark crowds.
+    pub fn cube(name: &str) -> Mesh {
+        let positions = (0..8)
+            .map(|i| Vec3::new((i & 1) as f32 - 0.5, ((i >> 1) & 1) as f32 - 0.5, ((i >> 2) & 1) as f32 - 0.5))
+            .collect();
+        let faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
+        let indices = faces.iter().flat_map(|f| [f[0], f[1], f[2], f[0], f[2], f[3]]).collect();
+        Mesh { name: name.into(), positions, indices, ..Default::default() }
+    }
+
+    /// UV sphere centred on the origin with smooth normals and UVs.
+    pub fn uv_sphere(name: &str, radius: f32, rings: u32, segments: u32) -> Mesh {
+        use std::f32::consts::PI;
+        let mut m = Mesh { name: name.into(), ..Default::default() };
+        for r in 0..=rings {
+            let theta = PI * r as f32 / rings as f32;
+            for s in 0..=segments {
+                let phi = 2.0 * PI * s as f32 / segments as f32;
+                let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+                m.positions.push(radius * n);
+                m.normals.push(n);
+                m.uvs.push(Vec2::new(s as f32 / segments as f32, r as f32 / rings as f32));
+            }
+        }
+        let row = segments + 1;
+        for r in 0..rings {
+            for s in 0..segments {
+                let (a, b) = (r * row + s, (r + 1) * row + s);
+                m.indices.extend_from_slice(&[a, a + 1, b, a + 1, b + 1, b]);
+            }
+        }
+        m
+    }
+
     /// Bytes of geometry this mesh holds (positions, normals, uvs, indices).
     pub fn bytes(&self) -> usize {
         self.positions.len() * 12 + self.normals.len() * 12 + self.uvs.len() * 8 + self.indices.len() * 4

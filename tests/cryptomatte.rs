@@ -140,15 +140,6 @@ fn multichannel_and_cornell_samples() {
 
 // -------------------------------------------------------- our own mattes
 
-fn cube() -> Mesh {
-    let p: Vec<Vec3> = (0..8)
-        .map(|i| Vec3::new((i & 1) as f32 - 0.5, ((i >> 1) & 1) as f32 - 0.5, ((i >> 2) & 1) as f32 - 0.5))
-        .collect();
-    let faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
-    let indices = faces.iter().flat_map(|f| [f[0], f[1], f[2], f[0], f[2], f[3]]).collect();
-    Mesh { name: "cube".into(), positions: p, indices, ..Default::default() }
-}
-
 fn floor() -> Mesh {
     let positions = [(-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (-20.0, 20.0)].map(|(x, z)| Vec3::new(x, 0.0, z)).to_vec();
     Mesh {
@@ -173,7 +164,7 @@ const SLOTS: [&str; 2] = ["torso", "head"];
 /// agent 5 far off screen, and a holdout box over part of agent 1000.
 fn crowd_scene() -> (Library, FrameScene) {
     let lib = Library {
-        meshes: vec![floor(), cube()],
+        meshes: vec![floor(), Mesh::cube("cube")],
         materials: vec![Material { name: "grey".into(), base_color: Vec3::splat(0.5), base_color_texture: None, roughness: 0.5, metallic: 0.0 }],
         textures: vec![],
     };

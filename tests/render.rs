@@ -43,39 +43,6 @@ fn quad(size: f32, centre: Vec3) -> Mesh {
     }
 }
 
-/// Unit cube centred on the origin, flat shaded (no normals).
-fn cube() -> Mesh {
-    let p: Vec<Vec3> = (0..8)
-        .map(|i| Vec3::new((i & 1) as f32 - 0.5, ((i >> 1) & 1) as f32 - 0.5, ((i >> 2) & 1) as f32 - 0.5))
-        .collect();
-    let faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
-    let indices = faces.iter().flat_map(|f| [f[0], f[1], f[2], f[0], f[2], f[3]]).collect();
-    Mesh { name: "cube".into(), positions: p, indices, ..Default::default() }
-}
-
-/// UV sphere of radius 1 with smooth normals.
-fn sphere(rings: u32, segments: u32) -> Mesh {
-    let mut m = Mesh { name: "sphere".into(), ..Default::default() };
-    for r in 0..=rings {
-        let theta = PI * r as f32 / rings as f32;
-        for s in 0..=segments {
-            let phi = 2.0 * PI * s as f32 / segments as f32;
-            let p = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
-            m.positions.push(p);
-            m.normals.push(p);
-            m.uvs.push(Vec2::new(s as f32 / segments as f32, r as f32 / rings as f32));
-        }
-    }
-    let row = segments + 1;
-    for r in 0..rings {
-        for s in 0..segments {
-            let (a, b) = (r * row + s, (r + 1) * row + s);
-            m.indices.extend_from_slice(&[a, a + 1, b, a + 1, b + 1, b]);
-        }
-    }
-    m
-}
-
 fn material(name: &str, base: Vec3, metallic: f32, roughness: f32) -> Material {
     Material { name: name.into(), base_color: base, base_color_texture: None, roughness, metallic }
 }
@@ -132,7 +99,7 @@ fn accel_matches_brute_force() {
         }
         soup.indices.extend_from_slice(&[3 * i, 3 * i + 1, 3 * i + 2]);
     }
-    lib.meshes = vec![soup, sphere(8, 12), cube(), Mesh::default()];
+    lib.meshes = vec![soup, Mesh::uv_sphere("sphere", 1.0, 8, 12), Mesh::cube("cube"), Mesh::default()];
     lib.materials = vec![Material::default()];
     let blas = BlasSet::build(&lib);
     blas.validate();
@@ -232,7 +199,7 @@ fn directional_albedo(bsdf: &Bsdf, cos_o: f32) -> f32 {
 fn furnace_convex_sphere_under_uniform_sky() {
     let albedo = 0.5;
     let lib = Library {
-        meshes: vec![sphere(48, 96)],
+        meshes: vec![Mesh::uv_sphere("sphere", 1.0, 48, 96)],
         materials: vec![material("grey", Vec3::splat(albedo), 0.0, 1.0)],
         textures: vec![],
     };
@@ -274,7 +241,7 @@ fn furnace_convex_sphere_under_uniform_sky() {
 /// Floor, a few boxes, a sphere and a sun: the common fixture.
 fn small_set() -> (Library, FrameScene) {
     let lib = Library {
-        meshes: vec![quad(20.0, Vec3::ZERO), cube(), sphere(16, 24)],
+        meshes: vec![quad(20.0, Vec3::ZERO), Mesh::cube("cube"), Mesh::uv_sphere("sphere", 1.0, 16, 24)],
         materials: vec![
             material("floor", Vec3::splat(0.6), 0.0, 0.6),
             material("red", Vec3::new(0.8, 0.1, 0.1), 0.0, 0.4),
@@ -353,7 +320,7 @@ fn holdout_gives_alpha_zero() {
 #[test]
 fn shadow_only_instance_is_invisible_but_casts_a_shadow() {
     let lib = Library {
-        meshes: vec![quad(20.0, Vec3::ZERO), cube()],
+        meshes: vec![quad(20.0, Vec3::ZERO), Mesh::cube("cube")],
         materials: vec![material("floor", Vec3::splat(0.6), 0.0, 0.8), material("box", Vec3::splat(0.6), 0.0, 0.8)],
         textures: vec![],
     };
@@ -383,7 +350,7 @@ fn shadow_only_instance_is_invisible_but_casts_a_shadow() {
 #[test]
 fn glossy_floor_reflects_indirect_only_object() {
     let lib = Library {
-        meshes: vec![quad(40.0, Vec3::ZERO), cube()],
+        meshes: vec![quad(40.0, Vec3::ZERO), Mesh::cube("cube")],
         materials: vec![material("mirror", Vec3::splat(0.9), 1.0, 0.05), material("red", Vec3::new(0.9, 0.02, 0.02), 0.0, 0.8)],
         textures: vec![],
     };
@@ -529,7 +496,7 @@ fn exr_round_trip() {
 fn degenerate_crowd_at_one_point_traces_correctly() {
     // Uninitialised cache rows put many agents at exactly the same spot: the
     // trees must stay within obvhs' fixed traversal stack (validate checks depth).
-    let lib = Library { meshes: vec![cube()], materials: vec![Material::default()], textures: vec![] };
+    let lib = Library { meshes: vec![Mesh::cube("cube")], materials: vec![Material::default()], textures: vec![] };
     let blas = BlasSet::build(&lib);
     let instances: Vec<Instance> =
         (0..20_000).map(|i| instance(0, 0, Affine3A::from_translation(Vec3::new(0.0, 0.5, 0.0)), Some(i), vis::ALL)).collect();
@@ -566,7 +533,7 @@ fn axis_aligned_rays_hit_shared_edges_and_signed_zeros() {
     // exactly on a face diagonal went through the box), and a -0.0 direction
     // component made traversal miss.
     let tri = Mesh { name: "t".into(), positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y], indices: vec![0, 1, 2], ..Default::default() };
-    let lib = Library { meshes: vec![tri, cube()], materials: vec![Material::default()], textures: vec![] };
+    let lib = Library { meshes: vec![tri, Mesh::cube("cube")], materials: vec![Material::default()], textures: vec![] };
     let blas = BlasSet::build(&lib);
     let turned = Affine3A::from_rotation_y(PI); // object-space directions pick up -0.0 too
     for kind in [TlasKind::Bvh2, TlasKind::CwBvh] {
@@ -637,7 +604,7 @@ fn empty_scene_renders_sky_and_reports_progress() {
 fn diffuse_only_is_lambert_furnace() {
     let albedo = 0.5;
     let lib = Library {
-        meshes: vec![sphere(48, 96)],
+        meshes: vec![Mesh::uv_sphere("sphere", 1.0, 48, 96)],
         materials: vec![material("gloss", Vec3::splat(albedo), 0.0, 0.05)],
         textures: vec![],
     };
