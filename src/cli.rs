@@ -191,6 +191,25 @@ pub struct LayersArgs {
     pub json: bool,
 }
 
+impl LayersArgs {
+    /// The shot's own `[layers]` settings, no overrides: what `throng layers SHOT` does.
+    pub fn for_shot(shot: PathBuf) -> LayersArgs {
+        LayersArgs {
+            shot,
+            count: None,
+            cutoffs: None,
+            budget: None,
+            ref_frame: None,
+            per_frame: false,
+            map: None,
+            out: None,
+            json: false,
+            lod_px: None,
+            lod_per_frame: false,
+        }
+    }
+}
+
 /// `throng render`.
 #[derive(Debug, Args)]
 pub struct RenderArgs {

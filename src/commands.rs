@@ -678,19 +678,7 @@ pub fn cmd_demo(args: &crate::cli::DemoArgs) -> Result<()> {
     );
 
     let t = Instant::now();
-    let layer_args = crate::cli::LayersArgs {
-        shot: shot_path.clone(),
-        count: None,
-        cutoffs: None,
-        budget: None,
-        ref_frame: None,
-        per_frame: true,
-        map: None,
-        out: None,
-        json: false,
-        lod_px: None,
-        lod_per_frame: false,
-    };
+    let layer_args = crate::cli::LayersArgs { per_frame: true, ..crate::cli::LayersArgs::for_shot(shot_path.clone()) };
     let manifest = build_layers(&crowd, &layer_args)?;
     let manifest_path = out.join(format!("{}.layers.json", crowd.shot.name));
     crate::layers::write_manifest(&manifest_path, &manifest)?;

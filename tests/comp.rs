@@ -59,19 +59,7 @@ fn out_dir() -> PathBuf {
 }
 
 fn layers_args() -> LayersArgs {
-    LayersArgs {
-        shot: PathBuf::from(SHOT),
-        count: None,
-        cutoffs: None,
-        budget: None,
-        ref_frame: None,
-        per_frame: false,
-        lod_px: None,
-        lod_per_frame: false,
-        map: None,
-        out: None,
-        json: false,
-    }
+    LayersArgs::for_shot(PathBuf::from(SHOT))
 }
 
 fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {

@@ -14,19 +14,7 @@ fn demo_shot() -> PathBuf {
 }
 
 fn layer_args(per_frame: bool) -> LayersArgs {
-    LayersArgs {
-        shot: demo_shot(),
-        count: None,
-        cutoffs: None,
-        budget: None,
-        ref_frame: None,
-        per_frame,
-        map: None,
-        out: None,
-        json: false,
-        lod_px: None,
-        lod_per_frame: false,
-    }
+    LayersArgs { per_frame, ..LayersArgs::for_shot(demo_shot()) }
 }
 
 fn throng(args: &[&str]) -> (i32, String, String) {

@@ -79,19 +79,7 @@ fn file_name(shot: &str, layer: &str) -> String {
 fn demo() -> (ShotCrowd, Manifest) {
     let shot = repo().join("demo/shot.toml");
     let crowd = ShotCrowd::load(&shot).expect("demo shot loads");
-    let args = LayersArgs {
-        shot,
-        count: None,
-        cutoffs: None,
-        budget: None,
-        ref_frame: None,
-        per_frame: false,
-        lod_px: None,
-        lod_per_frame: false,
-        map: None,
-        out: None,
-        json: false,
-    };
+    let args = LayersArgs::for_shot(shot);
     let manifest = build_layers(&crowd, &args).expect("demo layers");
     (crowd, manifest)
 }
