@@ -320,7 +320,14 @@ impl ShotCrowd {
     /// wearing the same materials.
     pub fn agent_instances(&self, a: &AgentRecord, lod: Lod, visibility: u8, out: &mut Vec<Instance>) -> Result<()> {
         let slots = self.slot_transforms(a)?;
-        for p in self.dressed.get(&a.id).into_iter().flatten() {
+        self.posed_instances(a.id, &slots, lod, visibility, out);
+        Ok(())
+    }
+
+    /// As [`ShotCrowd::agent_instances`], from slot transforms already
+    /// posed (a render poses each agent once per frame, not once per layer).
+    pub fn posed_instances(&self, id: u32, slots: &[Affine3A], lod: Lod, visibility: u8, out: &mut Vec<Instance>) {
+        for p in self.dressed.get(&id).into_iter().flatten() {
             let world_from_slot = slots[p.slot];
             let (mesh, world_from_object) = match lod {
                 Lod::Full => (p.mesh, world_from_slot * p.slot_from_part),
@@ -331,12 +338,11 @@ impl ShotCrowd {
                 mesh,
                 material: p.material,
                 world_from_object,
-                agent: Some(a.id),
+                agent: Some(id),
                 part: p.slot as u16,
                 visibility,
             });
         }
-        Ok(())
     }
 
     /// Every rendered agent at a shot frame, fully visible, at `lod(agent id)`.

@@ -86,9 +86,32 @@ pub fn layer_path(out: &Path, shot: &str, layer: &str, frame: i32) -> PathBuf {
     out.join(layer).join(format!("{shot}.{layer}.{frame:04}.exr"))
 }
 
+/// Every rendered agent of a frame with its posed slots (world_from_slot):
+/// posed once per frame and shared by every layer's scene.
+pub struct PosedFrame {
+    /// Shot frame.
+    pub frame: i32,
+    /// (agent id, world_from_slot per rig slot).
+    pub agents: Vec<(u32, Vec<glam::Affine3A>)>,
+}
+
+impl PosedFrame {
+    /// Reads the frame from the cache once and poses every rendered agent.
+    pub fn new(crowd: &ShotCrowd, frame: i32) -> Result<PosedFrame> {
+        let block = crowd.agents_at(frame)?;
+        let agents = block
+            .agents
+            .iter()
+            .filter(|a| crowd.renders(a))
+            .map(|a| Ok((a.id, crowd.slot_transforms(a)?)))
+            .collect::<Result<_>>()?;
+        Ok(PosedFrame { frame, agents })
+    }
+}
+
 /// The instances of one (frame, layer) render.
-pub fn frame_scene(crowd: &ShotCrowd, manifest: Option<&Manifest>, layer: &str, frame: i32) -> Result<FrameScene> {
-    let block = crowd.agents_at(frame)?;
+pub fn frame_scene(crowd: &ShotCrowd, manifest: Option<&Manifest>, layer: &str, posed: &PosedFrame) -> Result<FrameScene> {
+    let frame = posed.frame;
     let mut instances: Vec<Instance> = Vec::new();
     let set_bits = if layer == FULL_LAYER {
         Some(vis::ALL)
@@ -96,18 +119,16 @@ pub fn frame_scene(crowd: &ShotCrowd, manifest: Option<&Manifest>, layer: &str, 
         let m = manifest.ok_or_else(|| Error::Usage(format!("layer `{layer}` needs a layer manifest")))?;
         m.set_visibility(layer)
     };
-    for a in block.agents.iter().filter(|a| crowd.renders(a)) {
+    for (id, slots) in &posed.agents {
         let how = match manifest {
             _ if layer == FULL_LAYER => {
-                Some((vis::ALL, manifest.and_then(|m| m.agent(a.id)).map_or(Lod::Full, |r| r.lod_at(frame))))
+                Some((vis::ALL, manifest.and_then(|m| m.agent(*id)).map_or(Lod::Full, |r| r.lod_at(frame))))
             }
-            Some(m) => m.agent_visibility(layer, a.id, frame),
+            Some(m) => m.agent_visibility(layer, *id, frame),
             None => None,
         };
-        if let Some((bits, lod)) = how {
-            if bits != 0 {
-                crowd.agent_instances(a, lod, bits, &mut instances)?;
-            }
+        if let Some((bits, lod)) = how.filter(|&(bits, _)| bits != 0) {
+            crowd.posed_instances(*id, slots, lod, bits, &mut instances);
         }
     }
     if let Some(bits) = set_bits.filter(|&b| b != 0) {
@@ -178,6 +199,8 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
     };
     let mut out = Vec::new();
     for &frame in &job.frames {
+        // Read and pose lazily: a fully resumed frame needs neither.
+        let mut posed: Option<PosedFrame> = None;
         for layer in &job.layers {
             let path = layer_path(&job.out, &crowd.shot.name, layer, frame);
             if job.resume && exr::read_layer(&path).is_ok() {
@@ -186,7 +209,11 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
             }
             let started = Instant::now();
             progress.show(out.len(), frame, layer, 0.0);
-            let scene = frame_scene(crowd, manifest, layer, frame)?;
+            if posed.is_none() {
+                posed = Some(PosedFrame::new(crowd, frame)?);
+            }
+            let Some(posed) = posed.as_ref() else { continue };
+            let scene = frame_scene(crowd, manifest, layer, posed)?;
             // The layer index keys the random streams, so layers are
             // independent samples; `full` and `set` get fixed indices.
             let index = manifest
