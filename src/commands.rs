@@ -232,7 +232,6 @@ pub fn nearest_ids(existing: impl Iterator<Item = u32>, id: u32, n: usize) -> Ve
 pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInfo>> {
     let block = crowd.agents_at(frame)?;
     let camera = crowd.camera(frame)?;
-    let cam_pos = Vec3::from(camera.world_from_camera.translation);
     let rows = cast_rows(crowd);
     let mut out = Vec::new();
     for &id in ids {
@@ -253,7 +252,9 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
                 crowd.shot.name
             )));
         };
-        let centre = a.position + Vec3::Y * 0.9 * cast.height_scale;
+        let height = crowd.agent_height(id).unwrap_or(1.8);
+        let (distance, _, _) =
+            crate::layers::measure(&camera, crowd.shot.render.resolution[1], a.position, height);
         let row = rows.iter().find(|r| r.id == id);
         out.push(BotInfo {
             id,
@@ -265,7 +266,7 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
             height_scale: cast.height_scale,
             position: a.position.to_array(),
             heading_deg: a.heading.to_degrees(),
-            distance: (centre - cam_pos).length(),
+            distance,
             seated: a.seated(),
             removed: crowd.shot.removed.contains(&id),
             layer: None,
@@ -457,34 +458,6 @@ pub fn cmd_export(args: &crate::cli::ExportArgs) -> Result<()> {
     Ok(())
 }
 
-/// Standing height of each rig in metres: the top of its proxy boxes in the
-/// rest pose.
-pub fn rig_heights(crowd: &ShotCrowd) -> std::collections::BTreeMap<String, f32> {
-    crowd
-        .rigs
-        .iter()
-        .map(|(name, rig)| {
-            let top = rig
-                .rest_pose()
-                .slot_transforms()
-                .into_iter()
-                .flat_map(|(i, m)| {
-                    let s = &rig.slots()[i];
-                    (0..8).map(move |c| {
-                        let p = Vec3::select(
-                            glam::BVec3::new(c & 1 != 0, c & 2 != 0, c & 4 != 0),
-                            s.proxy_max,
-                            s.proxy_min,
-                        );
-                        m.transform_point3(p).y
-                    })
-                })
-                .fold(0.0f32, f32::max);
-            (name.clone(), top)
-        })
-        .collect()
-}
-
 /// World bounds of the set's instances, for the layer map.
 pub fn set_bounds(crowd: &ShotCrowd) -> Option<(Vec3, Vec3)> {
     let lib = crowd.library();
@@ -493,10 +466,7 @@ pub fn set_bounds(crowd: &ShotCrowd) -> Option<(Vec3, Vec3)> {
         .iter()
         .flat_map(|i| {
             let (lo, hi) = lib.meshes[i.mesh as usize].bounds();
-            (0..8).map(move |c| {
-                let p = Vec3::select(glam::BVec3::new(c & 1 != 0, c & 2 != 0, c & 4 != 0), hi, lo);
-                i.world_from_object.transform_point3(p)
-            })
+            crate::scene::box_corners(lo, hi).map(|p| i.world_from_object.transform_point3(p))
         })
         .fold(None, |acc: Option<(Vec3, Vec3)>, p| Some(acc.map_or((p, p), |(lo, hi)| (lo.min(p), hi.max(p)))))
 }
@@ -505,7 +475,6 @@ pub fn set_bounds(crowd: &ShotCrowd) -> Option<(Vec3, Vec3)> {
 pub fn build_layers(crowd: &ShotCrowd, args: &crate::cli::LayersArgs) -> Result<crate::layers::Manifest> {
     use crate::layers;
     let (settings, options) = layers::settings_with_args(&crowd.shot.layers, args)?;
-    let heights = rig_heights(crowd);
     let lib = crowd.library();
     // How many part instances share each mesh: shared geometry is split between its users.
     let mut users: std::collections::HashMap<u32, u64> = Default::default();
@@ -520,7 +489,8 @@ pub fn build_layers(crowd: &ShotCrowd, args: &crate::cli::LayersArgs) -> Result<
         None => Some(crowd.shot.frames.iter().map(|f| crowd.camera(f)).collect::<Result<Vec<_>>>()?),
     };
     let input = layers::shot_input(&crowd.shot, &all, cameras, settings, options, |id| {
-        let Some(cast) = crowd.casting.get(&id) else { return (1.8, 0, 0) };
+        // Every agent of the shot's frames was cast; others never reach here.
+        let Some(height) = crowd.agent_height(id) else { return (1.8, 0, 0) };
         let parts = crowd.dressed.get(&id).map(Vec::as_slice).unwrap_or(&[]);
         let costs: Vec<layers::PartCost> = parts
             .iter()
@@ -535,7 +505,7 @@ pub fn build_layers(crowd: &ShotCrowd, args: &crate::cli::LayersArgs) -> Result<
             .collect();
         let proxies = parts.iter().filter(|p| p.proxy).count();
         (
-            heights.get(&cast.rig).copied().unwrap_or(1.8) * cast.height_scale,
+            height,
             layers::estimate_agent_memory(&costs),
             layers::estimate_proxy_memory(proxies),
         )

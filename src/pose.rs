@@ -72,6 +72,8 @@ pub struct ShotCrowd {
     pub set: Vec<Instance>,
     /// The camera from a glTF node, when the shot names one instead of keys.
     gltf_camera: Option<Camera>,
+    /// Standing height of each rig, metres.
+    rig_heights: BTreeMap<String, f32>,
 }
 
 /// Unit cube [0,1]^3 with flat normals: the proxy box of every slot.
@@ -269,7 +271,8 @@ impl ShotCrowd {
             Some((file, node)) => Some(assets.find_camera(file, node)?),
             None => None,
         };
-        Ok(ShotCrowd { shot, wardrobes, rigs, cache, casting, assets, dressed, proxy_mesh, set, gltf_camera })
+        let rig_heights = rigs.iter().map(|(name, rig)| (name.clone(), rig.height())).collect();
+        Ok(ShotCrowd { shot, wardrobes, rigs, cache, casting, assets, dressed, proxy_mesh, set, gltf_camera, rig_heights })
     }
 
     /// The shared meshes, materials and textures.
@@ -295,6 +298,13 @@ impl ShotCrowd {
     pub fn world_from_agent(&self, a: &AgentRecord) -> Affine3A {
         let h = self.casting.get(&a.id).map_or(1.0, |c| c.height_scale);
         Affine3A::from_scale_rotation_translation(Vec3::splat(h), Quat::from_rotation_y(a.heading), a.position)
+    }
+
+    /// An agent's standing height in metres: its rig's height times its
+    /// height scale (`None` for an agent that was not cast).
+    pub fn agent_height(&self, id: u32) -> Option<f32> {
+        let cast = self.casting.get(&id)?;
+        Some(self.rig_heights.get(&cast.rig)? * cast.height_scale)
     }
 
     /// Whether an agent record is rendered at all (not removed, hidden or on a culled cycle).

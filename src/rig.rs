@@ -489,6 +489,19 @@ impl Rig {
     pub fn rest_pose(&self) -> Pose {
         Pose::new(self.shape.clone(), self.shape.hierarchy.rest_pose())
     }
+
+    /// Standing height in metres: the top of the proxy boxes in the rest
+    /// pose (the feet are on y = 0).
+    pub fn height(&self) -> f32 {
+        let pose = self.rest_pose();
+        pose.slot_transforms()
+            .into_iter()
+            .flat_map(|(i, m)| {
+                let s = &self.slots()[i];
+                crate::scene::box_corners(s.proxy_min, s.proxy_max).map(|p| m.transform_point3(p).y)
+            })
+            .fold(0.0f32, f32::max)
+    }
 }
 
 /// Reads a node's slot extras; `None` when the node is not a slot.

@@ -78,6 +78,11 @@ impl Mesh {
     }
 }
 
+/// The eight corners of the box `lo..hi`.
+pub fn box_corners(lo: Vec3, hi: Vec3) -> [Vec3; 8] {
+    std::array::from_fn(|c| Vec3::new(if c & 1 == 0 { lo.x } else { hi.x }, if c & 2 == 0 { lo.y } else { hi.y }, if c & 4 == 0 { lo.z } else { hi.z }))
+}
+
 /// An RGBA texture in linear colour (sRGB decoded on load).
 #[derive(Clone, Debug, Default)]
 pub struct Texture {

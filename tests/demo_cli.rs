@@ -122,3 +122,15 @@ fn a_cycle_the_rig_lacks_is_named_with_frame_and_agent() {
     assert!(err.contains("Moonwalk") && err.contains(&format!("agent {victim}")), "{err}");
     assert!(err.contains("frame 1004"), "names the shot frame: {err}");
 }
+
+#[test]
+fn botinfo_distance_is_the_manifests_distance_at_the_reference_frame() {
+    let crowd = ShotCrowd::load(&demo_shot()).unwrap();
+    let manifest = build_layers(&crowd, &layer_args(false)).unwrap();
+    let present: Vec<u32> = crowd.agents_at(manifest.ref_frame).unwrap().agents.iter().map(|a| a.id).take(20).collect();
+    let infos = throng::commands::bot_info(&crowd, &present, manifest.ref_frame).unwrap();
+    for b in infos {
+        let m = manifest.agent(b.id).unwrap();
+        assert!((b.distance - m.distance_m).abs() < 1e-4, "agent {}: botinfo {} vs manifest {}", b.id, b.distance, m.distance_m);
+    }
+}

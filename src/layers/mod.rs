@@ -135,10 +135,12 @@ fn nearest_present(positions: &[Option<Vec3>], fi: usize) -> Option<usize> {
     })
 }
 
-/// Distance and projected height of an agent standing at `pos` seen by `cam`.
+/// Distance and projected height (pixels) of an agent of `height` metres
+/// standing at `pos` seen by `cam`, and whether it is behind the camera.
 /// Distance is Euclidean from the camera to the agent's centre (half height),
-/// projected height uses the depth along the view axis.
-fn measure(cam: &Camera, image_h: u32, pos: Vec3, height: f32) -> (f32, f32, bool) {
+/// projected height uses the depth along the view axis. botinfo uses this
+/// too, so both report the same distance.
+pub fn measure(cam: &Camera, image_h: u32, pos: Vec3, height: f32) -> (f32, f32, bool) {
     let eye = Vec3::from(cam.world_from_camera.translation);
     let forward = cam.world_from_camera.transform_vector3(-Vec3::Z).normalize_or_zero();
     let to = pos + Vec3::Y * (0.5 * height) - eye;
