@@ -10,7 +10,6 @@ use std::path::PathBuf;
 
 use glam::{Affine3A, Quat, Vec3};
 
-use crate::error::{Error, Result};
 use crate::wardrobe::{Scheme, Wardrobes};
 
 /// A 64-bit mix (splitmix64's finaliser): a bijection with good avalanche.
@@ -104,7 +103,8 @@ pub struct RigCasting<'a> {
     pub height_jitter: f32,
 }
 
-/// Casts one agent. `never_scale` is true when the agent is seated or on a
+/// Casts one agent; an error says what is wrong with the shot or wardrobes
+/// for it (the caller adds the file and agent). `never_scale` is true when the agent is seated or on a
 /// no-scale cycle at any frame of the shot: it keeps height 1.0 throughout,
 /// so it never pops in size and never floats above or sinks into a bench.
 pub fn cast_agent(
@@ -114,19 +114,18 @@ pub fn cast_agent(
     wardrobes: &Wardrobes,
     shot_excludes: &[String],
     never_scale: bool,
-) -> Result<AgentCast> {
-    let bad = |msg: String| Error::Usage(format!("agent {id}: {msg}"));
+) -> std::result::Result<AgentCast, String> {
     let names: Vec<&String> = rig.schemes.keys().collect();
     let weights: Vec<f32> = rig.schemes.values().copied().collect();
     let pick = weighted_pick(&weights, uniform(seed, id, "scheme"))
-        .ok_or_else(|| bad(format!("rig `{}` has no scheme with a weight above 0 in the shot", rig.name)))?;
+        .ok_or_else(|| format!("rig `{}` has no scheme with a weight above 0 in the shot", rig.name))?;
     let scheme_name = names[pick].clone();
     let scheme: &Scheme = wardrobes.schemes.get(&scheme_name).ok_or_else(|| {
-        bad(format!(
+        format!(
             "rig `{}` asks for scheme `{scheme_name}`, which no wardrobe defines (known: {})",
             rig.name,
             wardrobes.schemes.keys().cloned().collect::<Vec<_>>().join(", ")
-        ))
+        )
     })?;
 
     let mut slots = Vec::with_capacity(rig.slots.len());

@@ -194,7 +194,7 @@ impl ShotCrowd {
                 height_jitter: rig_ref.height_jitter,
             };
             let cast = cast_agent(shot.seed, id, &rc, &wardrobes, &shot.exclude_parts, s.never_scale)
-                .map_err(|e| Error::invalid(&shot.path, e.to_string()).agent(id))?;
+                .map_err(|msg| Error::invalid(&shot.path, msg).agent(id).field(format!("rigs.{rig_name}.schemes")))?;
             let mut parts = Vec::new();
             for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
                 let Some(part) = &slot_cast.part else { continue };

@@ -134,3 +134,16 @@ fn botinfo_distance_is_the_manifests_distance_at_the_reference_frame() {
         assert!((b.distance - m.distance_m).abs() < 1e-4, "agent {}: botinfo {} vs manifest {}", b.id, b.distance, m.distance_m);
     }
 }
+
+#[test]
+fn an_unknown_scheme_names_file_agent_and_key_once() {
+    let mut shot = Shot::load(&demo_shot()).unwrap();
+    shot.rigs.get_mut("bipedTallB").unwrap().schemes = [("NoSuchScheme".to_string(), 1.0)].into();
+    let cache = CacheReader::open(&shot.cache.path).unwrap();
+    let err = match ShotCrowd::new(shot, cache) {
+        Ok(_) => panic!("an unknown scheme was accepted"),
+        Err(e) => e.to_string(),
+    };
+    assert!(err.contains("shot.toml") && err.contains("rigs.bipedTallB.schemes") && err.contains("NoSuchScheme"), "{err}");
+    assert_eq!(err.matches("agent ").count(), 1, "the agent is named once: {err}");
+}
