@@ -483,7 +483,7 @@ pub fn build_layers(crowd: &ShotCrowd, args: &crate::cli::LayersArgs) -> Result<
             *users.entry(p.mesh).or_default() += 1;
         }
     }
-    let all = crowd.cache.read_all()?;
+    let all = crowd.shot_crowd()?;
     let cameras = match crowd.shot.keyed_camera(crowd.shot.frames.start as f32) {
         Some(_) => None,
         None => Some(crowd.shot.frames.iter().map(|f| crowd.camera(f)).collect::<Result<Vec<_>>>()?),

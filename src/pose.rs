@@ -7,7 +7,7 @@
 //! Meshes and materials are loaded once into the shared [`AssetCache`]; every
 //! instance references them by id.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use glam::{Affine3A, Quat, Vec3};
@@ -125,10 +125,9 @@ impl ShotCrowd {
             never_scale: bool,
         }
         let mut seen: BTreeMap<u32, Seen> = BTreeMap::new();
-        let cache_frames: BTreeSet<i32> = cache.frames().iter().copied().collect();
         for f in shot.frames.iter() {
             let cf = shot.cache.cache_frame(f);
-            if !cache_frames.contains(&cf) {
+            if cache.frames().binary_search(&cf).is_err() {
                 continue;
             }
             let block = cache.read_frame(cf)?;
@@ -287,6 +286,19 @@ impl ShotCrowd {
             return Ok(FrameBlock { frame: cf, agents: Vec::new() });
         }
         self.cache.read_frame(cf)
+    }
+
+    /// Only the cache frames the shot reads (they keep their cache numbers),
+    /// without reading the rest of a long simulation.
+    pub fn shot_crowd(&self) -> Result<crate::cache::Crowd> {
+        let mut frames = Vec::new();
+        for f in self.shot.frames.iter() {
+            let cf = self.shot.cache.cache_frame(f);
+            if self.cache.frames().binary_search(&cf).is_ok() {
+                frames.push(self.cache.read_frame(cf)?);
+            }
+        }
+        Ok(crate::cache::Crowd { rigs: self.cache.rigs().to_vec(), cycles: self.cache.cycles().to_vec(), frames })
     }
 
     /// Name of a cycle index.
