@@ -79,6 +79,22 @@ impl Error {
         }
     }
 
+    /// A TOML parse error in `path` (whose text is `text`): the line, and the
+    /// key written on that line, since toml's messages for wrong types do
+    /// not name it.
+    pub fn toml(path: impl AsRef<Path>, text: &str, e: toml::de::Error) -> Self {
+        let mut err = Error::invalid(path, e.message().to_string());
+        if let Some(span) = e.span() {
+            let line = line_of(text, span.start);
+            err = err.line(line);
+            let key = text.lines().nth(line - 1).and_then(|l| l.split_once('=')).map(|(k, _)| k.trim());
+            if let Some(key) = key.filter(|k| !k.is_empty() && !k.starts_with('[')) {
+                err = err.field(key.trim_matches('"'));
+            }
+        }
+        err
+    }
+
     /// An I/O error on `path`.
     pub fn io(path: impl AsRef<Path>, source: std::io::Error) -> Self {
         Error::Io { path: path.as_ref().to_path_buf(), source }
@@ -108,6 +124,11 @@ impl Error {
         let field = field.into();
         self.with(|l| l.field = Some(field))
     }
+}
+
+/// The 1-based line of a byte offset in `text`.
+pub fn line_of(text: &str, offset: usize) -> usize {
+    text.as_bytes()[..offset.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1
 }
 
 /// Adds the path to `std::io::Result`s.

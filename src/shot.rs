@@ -10,7 +10,7 @@ use glam::{Affine3A, Vec3};
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::error::{Error, IoContext, Result};
+use crate::error::{line_of, Error, IoContext, Result};
 use crate::scene::{Camera, Sky, Sun};
 
 /// The shot file version this build reads.
@@ -388,11 +388,6 @@ struct LightsFile {
     sky: SkySpec,
 }
 
-/// Line (1-based) of a byte offset.
-fn line_of(text: &str, offset: usize) -> usize {
-    text.as_bytes()[..offset.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1
-}
-
 impl Shot {
     /// Reads and validates a shot file.
     pub fn load(path: &Path) -> Result<Shot> {
@@ -402,22 +397,7 @@ impl Shot {
 
     /// Parses shot text; `path` names the file in errors and anchors relative paths.
     pub fn parse(text: &str, path: &Path) -> Result<Shot> {
-        let file: ShotFile = toml::from_str(text).map_err(|e| {
-            let mut err = Error::invalid(path, e.message().to_string());
-            if let Some(span) = e.span() {
-                let line = line_of(text, span.start);
-                err = err.line(line);
-                // Name the key on that line, since toml's messages for wrong
-                // types do not.
-                if let Some(key) = text.lines().nth(line - 1).and_then(|l| l.split_once('=')).map(|(k, _)| k.trim())
-                {
-                    if !key.is_empty() && !key.starts_with('[') {
-                        err = err.field(key.trim_matches('"'));
-                    }
-                }
-            }
-            err
-        })?;
+        let file: ShotFile = toml::from_str(text).map_err(|e| Error::toml(path, text, e))?;
         let base = path.parent().unwrap_or(Path::new("")).to_path_buf();
         let at = |span: std::ops::Range<usize>, key: &str, msg: String| {
             Error::invalid(path, msg).line(line_of(text, span.start)).field(key)

@@ -153,13 +153,7 @@ impl Wardrobes {
         let mut origin: BTreeMap<String, PathBuf> = BTreeMap::new();
         for path in paths {
             let text = std::fs::read_to_string(path).at(path)?;
-            let file: WardrobeFile = toml::from_str(&text).map_err(|e| {
-                let mut err = Error::invalid(path, e.message().to_string());
-                if let Some(span) = e.span() {
-                    err = err.line(text[..span.start.min(text.len())].matches('\n').count() + 1);
-                }
-                err
-            })?;
+            let file: WardrobeFile = toml::from_str(&text).map_err(|e| Error::toml(path, &text, e))?;
             if file.version != WARDROBE_VERSION {
                 return Err(Error::invalid(
                     path,

@@ -147,3 +147,16 @@ fn an_unknown_scheme_names_file_agent_and_key_once() {
     assert!(err.contains("shot.toml") && err.contains("rigs.bipedTallB.schemes") && err.contains("NoSuchScheme"), "{err}");
     assert_eq!(err.matches("agent ").count(), 1, "the agent is named once: {err}");
 }
+
+#[test]
+fn a_wardrobe_type_error_names_file_line_and_key() {
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("wardrobes/robots.toml")).unwrap();
+    let (before, after) = text.split_once("roughness = ").unwrap();
+    let line = before.lines().count() + 1; // `before` ends at the start of that line
+    let broken = format!("{before}roughness = \"shiny\"{}", &after[after.find('\n').unwrap()..]);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("robots.toml");
+    std::fs::write(&path, broken).unwrap();
+    let err = throng::wardrobe::Wardrobes::load(&[path]).unwrap_err().to_string();
+    assert!(err.contains(&format!("robots.toml:{line}")) && err.contains("`roughness`"), "{err}");
+}

@@ -430,18 +430,6 @@ fn default_jitter() -> f32 {
     0.8
 }
 
-fn line_of(text: &str, offset: usize) -> usize {
-    text.as_bytes()[..offset.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1
-}
-
-fn toml_error(path: &Path, text: &str, e: toml::de::Error) -> Error {
-    let err = Error::invalid(path, e.message().to_string());
-    match e.span() {
-        Some(span) => err.line(line_of(text, span.start)),
-        None => err,
-    }
-}
-
 impl Scene {
     /// Reads and validates a scene file.
     pub fn load(path: impl AsRef<Path>) -> Result<Scene> {
@@ -454,7 +442,7 @@ impl Scene {
     pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Scene> {
         let path = path.as_ref();
         // Check the version before the strict schema, so a future file says so.
-        let table: toml::Table = toml::from_str(text).map_err(|e| toml_error(path, text, e))?;
+        let table: toml::Table = toml::from_str(text).map_err(|e| Error::toml(path, text, e))?;
         match table.get("version") {
             Some(toml::Value::Integer(1)) => {}
             Some(v) => {
@@ -463,7 +451,7 @@ impl Scene {
             }
             None => return Err(Error::invalid(path, "missing `version = 1`").field("version")),
         }
-        let raw: RawScene = toml::from_str(text).map_err(|e| toml_error(path, text, e))?;
+        let raw: RawScene = toml::from_str(text).map_err(|e| Error::toml(path, text, e))?;
         resolve(raw, path)
     }
 
