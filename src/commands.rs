@@ -60,32 +60,27 @@ pub struct CastStats {
 }
 
 fn cast_rows(crowd: &ShotCrowd) -> Vec<CastRow> {
+    crowd.casting.values().map(|c| cast_row(crowd, c)).collect()
+}
+
+/// One agent's row: its scheme, height, and part and material per slot.
+fn cast_row(crowd: &ShotCrowd, c: &crate::casting::AgentCast) -> CastRow {
     let lib = crowd.library();
-    crowd
-        .casting
-        .values()
-        .map(|c| CastRow {
-            id: c.id,
-            rig: c.rig.clone(),
-            scheme: c.scheme.clone(),
-            height_scale: c.height_scale,
-            scaled: c.scaled,
-            parts: c
-                .slots
-                .iter()
-                .enumerate()
-                .map(|(i, s)| {
-                    let dressed = crowd.dressed.get(&c.id).and_then(|d| d.iter().find(|p| p.slot == i));
-                    PartRow {
-                        slot: s.slot.clone(),
-                        mesh: s.part.as_ref().map(|p| p.mesh.clone()),
-                        file: s.part.as_ref().map(|p| p.file.display().to_string()),
-                        material: dressed.map(|d| lib.materials[d.material as usize].name.clone()),
-                    }
-                })
-                .collect(),
+    let parts = c
+        .slots
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let dressed = crowd.dressed.get(&c.id).and_then(|d| d.iter().find(|p| p.slot == i));
+            PartRow {
+                slot: s.slot.clone(),
+                mesh: s.part.as_ref().map(|p| p.mesh.clone()),
+                file: s.part.as_ref().map(|p| p.file.display().to_string()),
+                material: dressed.map(|d| lib.materials[d.material as usize].name.clone()),
+            }
         })
-        .collect()
+        .collect();
+    CastRow { id: c.id, rig: c.rig.clone(), scheme: c.scheme.clone(), height_scale: c.height_scale, scaled: c.scaled, parts }
 }
 
 /// Instancing figures for the whole cast.
@@ -232,7 +227,6 @@ pub fn nearest_ids(existing: impl Iterator<Item = u32>, id: u32, n: usize) -> Ve
 pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInfo>> {
     let block = crowd.agents_at(frame)?;
     let camera = crowd.camera(frame)?;
-    let rows = cast_rows(crowd);
     let mut out = Vec::new();
     for &id in ids {
         let Some(cast) = crowd.casting.get(&id) else {
@@ -255,7 +249,6 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
         let height = crowd.agent_height(id).unwrap_or(1.8);
         let (distance, _, _) =
             crate::layers::measure(&camera, crowd.shot.render.resolution[1], a.position, height);
-        let row = rows.iter().find(|r| r.id == id);
         out.push(BotInfo {
             id,
             rig: cast.rig.clone(),
@@ -271,7 +264,7 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
             removed: crowd.shot.removed.contains(&id),
             layer: None,
             lod: None,
-            parts: row.map(|r| r.parts.clone()).unwrap_or_default(),
+            parts: cast_row(crowd, cast).parts,
         });
     }
     Ok(out)
