@@ -55,5 +55,15 @@ fn main() -> throng::error::Result<()> {
         throng::layers::write_manifest(std::path::Path::new(json), &m)?;
     }
     let set = Some((Vec3::new(-40.0, 0.0, -40.0), Vec3::new(40.0, 20.0, 40.0)));
-    draw_map(&m, &MapOptions { size: (std::env::var("MAP_W").ok().and_then(|v| v.parse().ok()).unwrap_or(1600), std::env::var("MAP_H").ok().and_then(|v| v.parse().ok()).unwrap_or(900)), set_bounds: set }, std::path::Path::new(out))
+    draw_map(
+        &m,
+        &MapOptions {
+            size: (
+                std::env::var("MAP_W").ok().and_then(|v| v.parse().ok()).unwrap_or(1600),
+                std::env::var("MAP_H").ok().and_then(|v| v.parse().ok()).unwrap_or(900),
+            ),
+            set_bounds: set,
+        },
+        std::path::Path::new(out),
+    )
 }

@@ -42,13 +42,13 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use glam::{Affine3A, Quat, Vec2, Vec3};
-use throng::assets::AssetCache;
 use throng::render::accel::{Tlas, TlasKind, WorldRay};
 use throng::render::bsdf::{sample_cosine_hemisphere, ShadingFrame};
 use throng::render::exr::{camera_matrices, write_layer, write_preview_png, LayerMeta, ID_MAPPING};
 use throng::render::film::render_frame_with_stats;
 use throng::render::integrator::{offset_ray_origin, CameraRays};
 use throng::render::{BlasSet, RenderSettings};
+use throng::scene::gltf::AssetCache;
 use throng::scene::{vis, Camera, FrameScene, Instance, Library, Material, Mesh, Sky, Sun};
 
 /// Lumens per watt: the peers' (Blender glTF importer's) lux to W/m^2 factor.
@@ -137,7 +137,9 @@ fn first_camera_node(path: &PathBuf) -> Result<String, String> {
         .nodes()
         .find(|n| n.camera().is_some_and(|c| matches!(c.projection(), gltf::camera::Projection::Perspective(_))))
         .ok_or(format!("{}: no node with a perspective camera", path.display()))?;
-    node.name().map(str::to_string).ok_or(format!("{}: the camera node has no name (needed by find_camera)", path.display()))
+    node.name()
+        .map(str::to_string)
+        .ok_or(format!("{}: the camera node has no name (needed by find_camera)", path.display()))
 }
 
 fn load_glb(path: &PathBuf, args: &Args) -> Result<Loaded, String> {
@@ -153,14 +155,30 @@ fn load_glb(path: &PathBuf, args: &Args) -> Result<Loaded, String> {
     let lib = cache.into_library();
     let instances = placed
         .into_iter()
-        .map(|(mesh, material, world_from_object)| Instance { mesh, material, world_from_object, agent: None, part: 0, visibility: vis::ALL })
+        .map(|(mesh, material, world_from_object)| Instance {
+            mesh,
+            material,
+            world_from_object,
+            agent: None,
+            part: 0,
+            visibility: vis::ALL,
+        })
         .collect();
     let load_s = start.elapsed().as_secs_f64();
     if lights.len() > 1 {
         eprintln!("note: {} directional lights, using the first ({})", lights.len(), lights[0].node);
     }
-    let sun = lights.first().map(|l| Sun { direction: l.direction, angular_diameter: 0.0, irradiance: l.color * (l.intensity / LUMENS_PER_WATT) });
-    Ok(Loaded { lib, scene: FrameScene { instances, camera, sun, sky: Sky { radiance: args.sky } }, started: start, load_s })
+    let sun = lights.first().map(|l| Sun {
+        direction: l.direction,
+        angular_diameter: 0.0,
+        irradiance: l.color * (l.intensity / LUMENS_PER_WATT),
+    });
+    Ok(Loaded {
+        lib,
+        scene: FrameScene { instances, camera, sun, sky: Sky { radiance: args.sky } },
+        started: start,
+        load_s,
+    })
 }
 
 // ------------------------------------------------------------ synthetic crowd
@@ -176,7 +194,12 @@ impl Lcg {
 fn quad(half: f32) -> Mesh {
     Mesh {
         name: "ground".into(),
-        positions: vec![Vec3::new(-half, 0.0, -half), Vec3::new(half, 0.0, -half), Vec3::new(half, 0.0, half), Vec3::new(-half, 0.0, half)],
+        positions: vec![
+            Vec3::new(-half, 0.0, -half),
+            Vec3::new(half, 0.0, -half),
+            Vec3::new(half, 0.0, half),
+            Vec3::new(-half, 0.0, half),
+        ],
         normals: vec![Vec3::Y; 4],
         uvs: vec![],
         indices: vec![0, 2, 1, 0, 3, 2],
@@ -199,7 +222,13 @@ fn synthetic(n: usize, args: &Args) -> Loaded {
     }
     meshes.push(Mesh::uv_sphere("limb0", 0.5, 6, 6));
     meshes.push(Mesh::uv_sphere("limb1", 0.5, 5, 7));
-    let m = |name: &str, c: [f32; 3]| Material { name: name.into(), base_color: Vec3::from(c), base_color_texture: None, roughness: 1.0, metallic: 0.0 };
+    let m = |name: &str, c: [f32; 3]| Material {
+        name: name.into(),
+        base_color: Vec3::from(c),
+        base_color_texture: None,
+        roughness: 1.0,
+        metallic: 0.0,
+    };
     let materials = vec![
         m("ground", [0.5, 0.5, 0.5]),
         m("skin", [0.6, 0.45, 0.35]),
@@ -224,7 +253,14 @@ fn synthetic(n: usize, args: &Args) -> Loaded {
     ];
     let mut rng = Lcg(n as u64 ^ 0x5eed);
     let mut instances = Vec::with_capacity(1 + 11 * n);
-    instances.push(Instance { mesh: 0, material: 0, world_from_object: Affine3A::IDENTITY, agent: None, part: 0, visibility: vis::ALL });
+    instances.push(Instance {
+        mesh: 0,
+        material: 0,
+        world_from_object: Affine3A::IDENTITY,
+        agent: None,
+        part: 0,
+        visibility: vis::ALL,
+    });
     // Jittered grid, `cols` x `rows` cells over the field.
     let cols = ((n as f32 * 1.6).sqrt().ceil() as usize).max(1);
     let rows = n.div_ceil(cols).max(1);
@@ -234,13 +270,21 @@ fn synthetic(n: usize, args: &Args) -> Loaded {
         let x = -0.5 * width + (c as f32 + 0.2 + 0.6 * rng.next()) * cw;
         let z = -0.5 * depth + (r as f32 + 0.2 + 0.6 * rng.next()) * ch;
         let scale = 0.9 + 0.2 * rng.next();
-        let agent = Affine3A::from_scale_rotation_translation(Vec3::splat(scale), Quat::from_rotation_y(rng.next() * 2.0 * PI), Vec3::new(x, 0.0, z));
+        let agent = Affine3A::from_scale_rotation_translation(
+            Vec3::splat(scale),
+            Quat::from_rotation_y(rng.next() * 2.0 * PI),
+            Vec3::new(x, 0.0, z),
+        );
         let head = 2 + (rng.next() * 4.0) as u32 % 4;
         let limb = 6 + (rng.next() * 2.0) as u32 % 2;
         let shirt = 2 + (rng.next() * 3.0) as u32 % 3;
         for (k, (kind, centre, size, mat)) in slots.iter().enumerate() {
             let swing = if k >= 3 { (rng.next() - 0.5) * 0.6 } else { 0.0 };
-            let local = Affine3A::from_scale_rotation_translation(Vec3::from(*size), Quat::from_rotation_x(swing), Vec3::from(*centre));
+            let local = Affine3A::from_scale_rotation_translation(
+                Vec3::from(*size),
+                Quat::from_rotation_x(swing),
+                Vec3::from(*centre),
+            );
             instances.push(Instance {
                 mesh: [head, 1, limb][*kind as usize],
                 material: [1, shirt, 5][*mat as usize],
@@ -255,18 +299,30 @@ fn synthetic(n: usize, args: &Args) -> Loaded {
     let yfov = 40f32.to_radians();
     let elevation = 28f32.to_radians();
     let aspect = args.res.0 as f32 / args.res.1 as f32;
-    let distance = (0.5 * width / ((0.5 * yfov).tan() * aspect)).max(0.5 * depth / (0.5 * yfov).tan()) * 1.15 + 0.5 * depth;
+    let distance =
+        (0.5 * width / ((0.5 * yfov).tan() * aspect)).max(0.5 * depth / (0.5 * yfov).tan()) * 1.15 + 0.5 * depth;
     let eye = Vec3::new(0.0, distance * elevation.sin(), distance * elevation.cos());
     let forward = (Vec3::new(0.0, 0.8, 0.0) - eye).normalize();
     let right = forward.cross(Vec3::Y).normalize();
     let up = right.cross(forward);
-    let camera = Camera { world_from_camera: Affine3A::from_cols(right.into(), up.into(), (-forward).into(), eye.into()), yfov };
+    let camera =
+        Camera { world_from_camera: Affine3A::from_cols(right.into(), up.into(), (-forward).into(), eye.into()), yfov };
     let sun_elevation = 50f32.to_radians();
-    let sun_direction = Vec3::new(-0.5 * sun_elevation.cos(), sun_elevation.sin(), 0.87 * sun_elevation.cos()).normalize();
-    let sun = Some(Sun { direction: sun_direction, angular_diameter: 0.0, irradiance: Vec3::splat(2049.0 / LUMENS_PER_WATT) });
+    let sun_direction =
+        Vec3::new(-0.5 * sun_elevation.cos(), sun_elevation.sin(), 0.87 * sun_elevation.cos()).normalize();
+    let sun = Some(Sun {
+        direction: sun_direction,
+        angular_diameter: 0.0,
+        irradiance: Vec3::splat(2049.0 / LUMENS_PER_WATT),
+    });
     let lib = Library { meshes, materials, textures: vec![] };
     let load_s = start.elapsed().as_secs_f64();
-    Loaded { lib, scene: FrameScene { instances, camera, sun, sky: Sky { radiance: args.sky } }, started: start, load_s }
+    Loaded {
+        lib,
+        scene: FrameScene { instances, camera, sun, sky: Sky { radiance: args.sky } },
+        started: start,
+        load_s,
+    }
 }
 
 // ------------------------------------------------------------ ray rates
@@ -374,7 +430,8 @@ fn main() {
     let blas_cpu_s = throng::bench::process_cpu_s() - cpu;
     let blas_build_s = blas.build_time.as_secs_f64();
     let unique: usize = lib.meshes.iter().map(Mesh::triangle_count).sum();
-    let instanced: usize = scene.instances.iter().filter_map(|i| lib.meshes.get(i.mesh as usize)).map(Mesh::triangle_count).sum();
+    let instanced: usize =
+        scene.instances.iter().filter_map(|i| lib.meshes.get(i.mesh as usize)).map(Mesh::triangle_count).sum();
 
     let settings = RenderSettings {
         width: args.res.0,
@@ -432,13 +489,16 @@ fn main() {
         out["render_s"] = render_s.into();
         out["trace_s"] = stats.trace.as_secs_f64().into();
         out["rays"] = serde_json::json!({"camera": rays.camera, "bounce": rays.bounce, "shadow": rays.shadow});
-        out["mrays_s_all_types"] = ((rays.camera + rays.bounce + rays.shadow) as f64 / stats.trace.as_secs_f64() / 1e6).into();
+        out["mrays_s_all_types"] =
+            ((rays.camera + rays.bounce + rays.shadow) as f64 / stats.trace.as_secs_f64() / 1e6).into();
         out["peak_rss_mib"] = rss_render.into();
-        let lum: f64 = film.rgba.iter().map(|p| (0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]) as f64).sum::<f64>() / film.rgba.len() as f64;
+        let lum: f64 = film.rgba.iter().map(|p| (0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]) as f64).sum::<f64>()
+            / film.rgba.len() as f64;
         out["mean_luminance"] = lum.into();
         if let Some(prefix) = &args.out {
             let (near, far) = film.depth_range().unwrap_or((0.1, 1000.0));
-            let (world_to_camera, world_to_ndc) = camera_matrices(&scene.camera, settings.width, settings.height, near, far);
+            let (world_to_camera, world_to_ndc) =
+                camera_matrices(&scene.camera, settings.width, settings.height, near, far);
             let meta = LayerMeta {
                 shot: "peer_bench".into(),
                 layer: "full".into(),

@@ -43,7 +43,12 @@ fn library() -> Library {
     };
     Library {
         // Ground, a box part, a 2k-triangle head sphere, a 500-triangle limb sphere.
-        meshes: vec![ground(200.0), Mesh::cube("cube"), Mesh::uv_sphere(&format!("sphere{}", 32), 0.5, 32, 32), Mesh::uv_sphere(&format!("sphere{}", 16), 0.5, 16, 16)],
+        meshes: vec![
+            ground(200.0),
+            Mesh::cube("cube"),
+            Mesh::uv_sphere(&format!("sphere{}", 32), 0.5, 32, 32),
+            Mesh::uv_sphere(&format!("sphere{}", 16), 0.5, 16, 16),
+        ],
         materials: vec![
             m("ground", [0.5, 0.5, 0.5], 0.0, 0.2),
             m("chrome", [0.8, 0.8, 0.85], 1.0, 0.25),
@@ -88,7 +93,8 @@ fn crowd(n: usize) -> Vec<Instance> {
             out.push(Instance {
                 mesh: *mesh,
                 material: 1 + ((a + k) % 3) as u32,
-                world_from_object: agent_from_world * Affine3A::from_scale_rotation_translation(Vec3::from(*s), Quat::IDENTITY, Vec3::from(*c)),
+                world_from_object: agent_from_world
+                    * Affine3A::from_scale_rotation_translation(Vec3::from(*s), Quat::IDENTITY, Vec3::from(*c)),
                 agent: Some(a as u32),
                 part: k as u16,
                 visibility: vis::ALL,
@@ -146,7 +152,17 @@ fn main() {
     );
     println!(
         "{:>6} {:>8} | {:>9} {:>9} | {:>12} {:>12} {:>12} {:>12} | {:>10} {:>8} {:>9}",
-        "agents", "insts", "Bvh2 ms", "CwBvh ms", "Bvh2 bnc/s", "CwBvh bnc/s", "Bvh2 shd/s", "CwBvh shd/s", "frame ms", "Mray/cpu-s", "RSS MB"
+        "agents",
+        "insts",
+        "Bvh2 ms",
+        "CwBvh ms",
+        "Bvh2 bnc/s",
+        "CwBvh bnc/s",
+        "Bvh2 shd/s",
+        "CwBvh shd/s",
+        "frame ms",
+        "Mray/cpu-s",
+        "RSS MB"
     );
     for n in [100usize, 1000, 10000] {
         let instances = crowd(n);
@@ -170,13 +186,32 @@ fn main() {
         let scene = FrameScene {
             instances,
             camera: Camera {
-                world_from_camera: Affine3A::from_rotation_translation(Quat::from_rotation_x(-0.05), Vec3::new(0.0, 1.7, 24.0)),
+                world_from_camera: Affine3A::from_rotation_translation(
+                    Quat::from_rotation_x(-0.05),
+                    Vec3::new(0.0, 1.7, 24.0),
+                ),
                 yfov: 0.6,
             },
-            sun: Some(Sun { direction: Vec3::new(-0.4, 0.6, 0.5).normalize(), angular_diameter: 0.0093, irradiance: Vec3::new(3.0, 2.85, 2.64) }),
+            sun: Some(Sun {
+                direction: Vec3::new(-0.4, 0.6, 0.5).normalize(),
+                angular_diameter: 0.0093,
+                irradiance: Vec3::new(3.0, 2.85, 2.64),
+            }),
             sky: Sky { radiance: Vec3::new(0.3, 0.38, 0.5) },
         };
-        let settings = RenderSettings { width: 320, height: 180, spp: 4, max_bounces: 4, seed: 1, frame: 1001, layer: 0, sky_visible: true, threads: 0, indirect_clamp: 10.0, diffuse_only: false };
+        let settings = RenderSettings {
+            width: 320,
+            height: 180,
+            spp: 4,
+            max_bounces: 4,
+            seed: 1,
+            frame: 1001,
+            layer: 0,
+            sky_visible: true,
+            threads: 0,
+            indirect_clamp: 10.0,
+            diffuse_only: false,
+        };
         let cpu = throng::bench::process_cpu_s();
         let (film, stats) = render_frame_with_stats(&blas, &lib, &scene, &settings, None).expect("render");
         let cpu = throng::bench::process_cpu_s() - cpu;

@@ -31,12 +31,15 @@ fn main() {
     }
     for k in 0..20 {
         let a = k as f32 / 20.0 * std::f32::consts::TAU;
-        text += &format!("[[obstacles]]\ncenter = [{}, {}]\nradius = 1.0\n", 0.4 * half * a.cos(), 0.4 * half * a.sin());
+        text +=
+            &format!("[[obstacles]]\ncenter = [{}, {}]\nradius = 1.0\n", 0.4 * half * a.cos(), 0.4 * half * a.sin());
     }
-    for (p, n) in [([half, 0.0], [-1.0, 0.0]), ([-half, 0.0], [1.0, 0.0]), ([0.0, half], [0.0, -1.0]), ([0.0, -half], [0.0, 1.0])] {
+    for (p, n) in
+        [([half, 0.0], [-1.0, 0.0]), ([-half, 0.0], [1.0, 0.0]), ([0.0, half], [0.0, -1.0]), ([0.0, -half], [0.0, 1.0])]
+    {
         text += &format!("[[walls]]\npoint = [{}, {}]\nnormal = [{}, {}]\n", p[0], p[1], n[0], n[1]);
     }
-    let scene = match throng::sim::Scene::parse(&text, "sim_bench.toml") {
+    let scene = match throng::sim::SimScene::parse(&text, "sim_bench.toml") {
         Ok(s) => s,
         Err(e) => {
             eprintln!("sim_bench: {e}");

@@ -1,23 +1,24 @@
 //! throng: a crowd renderer and level-of-detail layering tool for film
-//! lighters. Stages, in pipeline order (see DESIGN.md):
-//! cache -> casting -> layers -> scene -> render -> comp.
+//! lighters. Modules in pipeline order; docs/architecture.md says what each
+//! owns and what passes between them.
 #![warn(missing_docs)]
+#![forbid(unsafe_code)]
+#![allow(
+    clippy::neg_cmp_op_on_partial_ord,
+    reason = "`!(x > 0.0)` is how input checks reject NaN along with out-of-range values"
+)]
 
-pub mod assets;
 pub mod bench;
-pub mod cache;
-pub mod casting;
-pub mod cli;
-pub mod commands;
-pub mod comp;
-pub mod error;
-pub mod export;
-pub mod gltf_out;
-pub mod layers;
-pub mod pose;
-pub mod render;
-pub mod rig;
-pub mod scene;
-pub mod shot;
-pub mod sim;
-pub mod wardrobe;
+pub mod botinfo; // a cast crowd + agent ids -> the botInfo block of each
+pub mod cache; // simulation caches (.crowd, CSV, JuPedSim) -> per-frame agent samples
+pub mod casting; // shot + cache + rigs + wardrobes -> `ShotCrowd`: every agent dressed, any frame posed
+pub mod cmd; // the command line: one file per verb, the only user of clap
+pub mod comp; // a frame's layer EXRs -> one stacked EXR
+pub mod error; // typed errors naming file, line, frame, agent and field; atomic writes
+pub mod export; // a cast frame -> glTF (.glb)
+pub mod layers; // a cast crowd -> the layer manifest (membership, LOD, visibility) and its map
+pub mod output; // names of rendered files and layers, shared by render and comp
+pub mod render; // a cast crowd + manifest -> path-traced multi-channel EXR layers
+pub mod scene; // the shared vocabulary: meshes, materials, instances, visibility, camera, lights; glTF loading
+pub mod shot; // the shot file (TOML) -> a checked `Shot`: frames, camera, rigs, wardrobes, render and layer settings
+pub mod sim; // a steering scene -> a cache (the reference crowd simulation) // process figures (CPU time, peak RSS) for the benchmark examples

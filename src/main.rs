@@ -5,8 +5,8 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
-    let cli = throng::cli::Cli::parse();
-    match throng::cli::run(cli) {
+    let cli = throng::cmd::Cli::parse();
+    match throng::cmd::run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("throng: error: {e}");

@@ -416,20 +416,26 @@ impl Shot {
             return Err(at(
                 file.version.span(),
                 "version",
-                format!("unsupported shot version {} (this throng reads version {SHOT_VERSION})", file.version.get_ref()),
+                format!(
+                    "unsupported shot version {} (this throng reads version {SHOT_VERSION})",
+                    file.version.get_ref()
+                ),
             ));
         }
         let frames = *file.frames.get_ref();
         if frames.end < frames.start {
-            return Err(at(file.frames.span(), "frames", format!("end {} is before start {}", frames.end, frames.start)));
+            return Err(at(
+                file.frames.span(),
+                "frames",
+                format!("end {} is before start {}", frames.end, frames.start),
+            ));
         }
         if !(frames.fps > 0.0 && frames.fps.is_finite()) {
             return Err(at(file.frames.span(), "frames.fps", format!("fps must be positive, got {}", frames.fps)));
         }
 
         let cache = CacheRef { path: existing(&file.cache.path, "cache.path")?, frame_offset: file.cache.frame_offset };
-        let wardrobes =
-            file.wardrobes.iter().map(|w| existing(w, "wardrobes")).collect::<Result<Vec<_>>>()?;
+        let wardrobes = file.wardrobes.iter().map(|w| existing(w, "wardrobes")).collect::<Result<Vec<_>>>()?;
         let mut rigs = BTreeMap::new();
         for (name, rig) in &file.rigs {
             let jitter = rig.height_jitter.as_ref().map_or(default_jitter(), |j| *j.get_ref());
@@ -480,7 +486,10 @@ impl Shot {
             if !(k.focal_length > 0.0) || Vec3::from(k.position) == Vec3::from(k.aim) {
                 return Err(Error::invalid(
                     path,
-                    format!("camera key at frame {}: focal length must be > 0 and aim must differ from position", k.frame),
+                    format!(
+                        "camera key at frame {}: focal length must be > 0 and aim must differ from position",
+                        k.frame
+                    ),
                 )
                 .field("camera.keys"));
             }
@@ -630,7 +639,9 @@ pub fn parse_frame_list(s: &str) -> std::result::Result<Vec<i32>, String> {
         // A leading '-' is a negative frame, not a range separator.
         let dash = range.char_indices().skip(1).find(|&(_, c)| c == '-').map(|(i, _)| i);
         let (a, b) = match dash {
-            Some(i) => (range[..i].parse::<i32>().map_err(|_| bad())?, range[i + 1..].parse::<i32>().map_err(|_| bad())?),
+            Some(i) => {
+                (range[..i].parse::<i32>().map_err(|_| bad())?, range[i + 1..].parse::<i32>().map_err(|_| bad())?)
+            }
             None => {
                 let f = range.parse::<i32>().map_err(|_| bad())?;
                 (f, f)

@@ -2,13 +2,15 @@
 //! hierarchy) and a hand-made set (tests/fixtures/set_small.gltf, written by
 //! make_set_small.py) with a texture, a camera and a sun.
 
+mod common;
+
 use glam::{Affine3A, Quat, Vec3};
-use throng::assets::{srgb_to_linear, AssetCache};
 use throng::error::Error;
+use throng::scene::gltf::{srgb_to_linear, AssetCache};
 use throng::scene::Material;
 
 fn fixture(name: &str) -> String {
-    format!("{}/tests/fixtures/{name}", env!("CARGO_MANIFEST_DIR"))
+    common::fixture(name).display().to_string()
 }
 
 fn alien() -> String {
@@ -88,8 +90,10 @@ fn alien_materials_are_shared_and_named() {
 
     // Per primitive: armLeft is crystal, metal, metalRed.
     let prims = ok(cache.mesh_primitives(alien(), "Mesh armLeft"));
-    let names: Vec<String> =
-        prims.iter().map(|&(_, m)| cache.library().materials[m as usize].name.rsplit('#').next().unwrap_or("").to_string()).collect();
+    let names: Vec<String> = prims
+        .iter()
+        .map(|&(_, m)| cache.library().materials[m as usize].name.rsplit('#').next().unwrap_or("").to_string())
+        .collect();
     assert_eq!(names, ["crystal", "metal", "metalRed"]);
     assert_eq!(prims[0].1, ids[0], "shared with gltf_material");
     let red = &cache.library().materials[prims[2].1 as usize];
@@ -110,11 +114,13 @@ fn alien_scene_places_every_primitive() {
     // Nodes in file order under tmpParent -> alien (no transforms): armLeft first.
     let lib = cache.library();
     assert!(lib.meshes[placed[0].0 as usize].name.ends_with("#Mesh armLeft/0"));
-    let arm_left = Affine3A::from_scale_rotation_translation(Vec3::splat(0.8584), Quat::IDENTITY, Vec3::new(-0.13, 0.473184, 0.0));
+    let arm_left =
+        Affine3A::from_scale_rotation_translation(Vec3::splat(0.8584), Quat::IDENTITY, Vec3::new(-0.13, 0.473184, 0.0));
     assert!(placed[0].2.abs_diff_eq(arm_left, 1e-5), "{:?}", placed[0].2);
     // The head is the 4th node: primitives 9..12, scaled 0.26.
     let head = placed.iter().find(|p| lib.meshes[p.0 as usize].name.ends_with("#Mesh head/0")).map(|p| p.2);
-    let expect = Affine3A::from_scale_rotation_translation(Vec3::splat(0.26), Quat::IDENTITY, Vec3::new(0.0, 0.483184, 0.0));
+    let expect =
+        Affine3A::from_scale_rotation_translation(Vec3::splat(0.26), Quat::IDENTITY, Vec3::new(0.0, 0.483184, 0.0));
     assert!(head.is_some_and(|h| h.abs_diff_eq(expect, 1e-5)), "{head:?}");
     // Each primitive keeps its own material.
     let body_mats: Vec<&str> = placed
@@ -225,7 +231,8 @@ fn scene_composes_parent_transforms() {
     // Scene roots: group (-> floor, tri), camrig, sun. `dots` is outside the scene.
     let placed = ok(cache.load_scene_instances(set()));
     let lib = cache.library();
-    let names: Vec<&str> = placed.iter().map(|p| lib.meshes[p.0 as usize].name.rsplit('#').next().unwrap_or("")).collect();
+    let names: Vec<&str> =
+        placed.iter().map(|p| lib.meshes[p.0 as usize].name.rsplit('#').next().unwrap_or("")).collect();
     assert_eq!(names, ["floor", "tri"]);
     close3(placed[0].2.translation.into(), Vec3::new(1.0, 0.0, 2.0), "floor: group then node");
     close3(placed[1].2.translation.into(), Vec3::new(1.0, 0.0, 0.0), "tri");
@@ -295,7 +302,9 @@ fn malformed_meshes_are_errors_naming_the_mesh() {
     });
     assert!(err.contains("index 3 is out of range (3 vertices)"), "{err}");
     // Indices pointing at a VEC3 accessor.
-    let err = load(&|j| j["meshes"][0]["primitives"][0]["indices"] = j["meshes"][0]["primitives"][0]["attributes"]["POSITION"].clone());
+    let err = load(&|j| {
+        j["meshes"][0]["primitives"][0]["indices"] = j["meshes"][0]["primitives"][0]["attributes"]["POSITION"].clone()
+    });
     assert!(err.contains("expected Scalar"), "{err}");
     // A zero-count accessor.
     let err = load(&|j| {

@@ -1,20 +1,21 @@
 //! Integration tests for the cache stage: formats, round trips, random
 //! access, bad input (library errors and CLI exit codes), JuPedSim import.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use glam::Vec3;
-use throng::cache::{self, binary, AgentRecord, CacheReader, Crowd, FrameBlock, ImportOptions, HIDDEN, SEATED};
+use throng::cache::{self, binary, AgentSample, CacheReader, CrowdCache, FrameBlock, ImportOptions, HIDDEN, SEATED};
 
-fn rec(id: u32, x: f32, z: f32, rig: u16, cycle: u16, cf: f32, flags: u8) -> AgentRecord {
-    AgentRecord { id, position: Vec3::new(x, 0.0, z), heading: x * 0.1, rig, cycle, cycle_frame: cf, flags }
+fn rec(id: u32, x: f32, z: f32, rig: u16, cycle: u16, cf: f32, flags: u8) -> AgentSample {
+    AgentSample { id, position: Vec3::new(x, 0.0, z), heading: x * 0.1, rig, cycle, cycle_frame: cf, flags }
 }
 
 /// A crowd whose tables are in first-use order (what .crowd stores), with
 /// awkward floats, agents entering and leaving, and an empty frame.
-fn sample() -> Crowd {
-    Crowd {
+fn sample() -> CrowdCache {
+    CrowdCache {
         rigs: vec!["bipedThinA".into(), "bipedTallB".into()],
         cycles: vec!["WalkA".into(), "SitA".into(), "IdleA".into()],
         frames: vec![
@@ -23,22 +24,24 @@ fn sample() -> Crowd {
                 agents: vec![
                     rec(7, 0.1, -3.55, 0, 0, 0.0, 0),
                     rec(3, -0.0, 1e-40, 1, 1, 31.999998, SEATED),
-                    AgentRecord { heading: -std::f32::consts::PI, ..rec(1000000, 1.0e30, -7.25, 0, 2, 12.5, HIDDEN) },
+                    AgentSample { heading: -std::f32::consts::PI, ..rec(1000000, 1.0e30, -7.25, 0, 2, 12.5, HIDDEN) },
                 ],
             },
             FrameBlock { frame: 0, agents: vec![rec(3, 1.0 / 3.0, 2.0 / 3.0, 1, 1, 0.1, SEATED | HIDDEN)] },
             FrameBlock { frame: 5, agents: vec![] },
             FrameBlock {
                 frame: 7,
-                agents: vec![rec(9, 4.5, -2.0, 1, 0, 3.25, 0), rec(7, 0.2, -3.5, 0, 0, 1.0, 0), rec(3, 5.0, 6.0, 1, 2, 2.0, 0)],
+                agents: vec![
+                    rec(9, 4.5, -2.0, 1, 0, 3.25, 0),
+                    rec(7, 0.2, -3.5, 0, 0, 1.0, 0),
+                    rec(3, 5.0, 6.0, 1, 2, 2.0, 0),
+                ],
             },
         ],
     }
 }
 
-fn throng(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_throng")).args(args).output().expect("run throng")
-}
+use common::throng;
 
 fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 temp path")
@@ -450,16 +453,15 @@ fn usage_errors() {
 // --- JuPedSim ----------------------------------------------------------------
 
 fn fixture() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/jupedsim_small.sqlite")
+    common::fixture("jupedsim_small.sqlite")
 }
 
 /// (frame, id) -> (pos_x, pos_y, ori_x, ori_y) straight from SQLite.
 fn raw_rows(p: &Path) -> std::collections::BTreeMap<(i32, u32), [f64; 4]> {
     let conn = rusqlite::Connection::open(p).unwrap();
     let mut st = conn.prepare("SELECT frame, id, pos_x, pos_y, ori_x, ori_y FROM trajectory_data").unwrap();
-    let rows = st
-        .query_map([], |r| Ok(((r.get(0)?, r.get(1)?), [r.get(2)?, r.get(3)?, r.get(4)?, r.get(5)?])))
-        .unwrap();
+    let rows =
+        st.query_map([], |r| Ok(((r.get(0)?, r.get(1)?), [r.get(2)?, r.get(3)?, r.get(4)?, r.get(5)?]))).unwrap();
     rows.map(|r| r.unwrap()).collect()
 }
 
@@ -528,8 +530,17 @@ fn jupedsim_heading_from_motion_and_cycle_advance() {
     assert_eq!((crowd.rigs[0].as_str(), crowd.cycles[0].as_str()), ("bipedTallB", "WalkB"));
 }
 
-fn import_args(rig: &str, cycle: &str, rig_file: Option<&str>) -> throng::cli::ImportArgs {
-    throng::cli::ImportArgs {
+/// The import flags of `throng cache` as the library takes them.
+struct ImportFlags {
+    rig: String,
+    cycle: String,
+    cycle_length: Option<f32>,
+    stride: Option<f32>,
+    rig_file: Option<std::path::PathBuf>,
+}
+
+fn import_args(rig: &str, cycle: &str, rig_file: Option<&str>) -> ImportFlags {
+    ImportFlags {
         rig: rig.into(),
         cycle: cycle.into(),
         cycle_length: None,
@@ -538,8 +549,14 @@ fn import_args(rig: &str, cycle: &str, rig_file: Option<&str>) -> throng::cli::I
     }
 }
 
+fn options(f: &ImportFlags) -> throng::error::Result<ImportOptions> {
+    ImportOptions::new(&f.rig, &f.cycle, f.stride, f.cycle_length, None)?;
+    let clip = f.rig_file.as_deref().map(|p| throng::casting::rig::import_clip(p, &f.rig, &f.cycle)).transpose()?;
+    ImportOptions::new(&f.rig, &f.cycle, f.stride, f.cycle_length, clip)
+}
+
 /// Cycle frame advance per frame == distance / stride * length (mod length).
-fn assert_feet_planted(crowd: &Crowd, stride: f32, length: f32) {
+fn assert_feet_planted(crowd: &CrowdCache, stride: f32, length: f32) {
     let mut checked = 0;
     for w in crowd.frames.windows(2) {
         for (a, b) in w[0].agents.iter().zip(&w[1].agents) {
@@ -559,7 +576,7 @@ fn assert_feet_planted(crowd: &Crowd, stride: f32, length: f32) {
 fn jupedsim_rig_file_gives_stride_and_length() {
     // bipedThinA's WalkA: 1.5 m per cycle, 32 frames at the shot's 24 fps
     // (not JuPedSim's 25: cycle frames are shot frames, driven by distance).
-    let opts = ImportOptions::from_args(&import_args("bipedThinA", "WalkA", Some("demo/rigs/bipedThinA.glb"))).unwrap();
+    let opts = options(&import_args("bipedThinA", "WalkA", Some("demo/rigs/bipedThinA.glb"))).unwrap();
     assert!((opts.stride() - 1.5).abs() < 1e-4 && (opts.cycle_length() - 32.0).abs() < 1e-3, "{}", opts.describe());
     assert_has(&opts.describe(), &["stride 1.5", "bipedThinA.glb"]);
     let crowd = cache::read_with(fixture(), &opts).unwrap();
@@ -567,27 +584,27 @@ fn jupedsim_rig_file_gives_stride_and_length() {
     assert_feet_planted(&crowd, opts.stride(), opts.cycle_length());
 
     // Another clip of the same rig: WalkB, 1.9 m in 40 frames.
-    let opts = ImportOptions::from_args(&import_args("bipedThinA", "WalkB", Some("demo/rigs/bipedThinA.glb"))).unwrap();
+    let opts = options(&import_args("bipedThinA", "WalkB", Some("demo/rigs/bipedThinA.glb"))).unwrap();
     assert!((opts.stride() - 1.9).abs() < 1e-4 && (opts.cycle_length() - 40.0).abs() < 1e-3);
     assert_feet_planted(&cache::read_with(fixture(), &opts).unwrap(), 1.9, 40.0);
 
     // --stride and --cycle-length override the rig, each on its own.
     let mut args = import_args("bipedThinA", "WalkA", Some("demo/rigs/bipedThinA.glb"));
     args.stride = Some(0.7);
-    let opts = ImportOptions::from_args(&args).unwrap();
+    let opts = options(&args).unwrap();
     assert_eq!((opts.stride(), opts.cycle_length()), (0.7, 32.0));
     assert_has(&opts.describe(), &["stride 0.7 m,", "32 frames (rig file"]);
     args.cycle_length = Some(24.0);
-    let opts = ImportOptions::from_args(&args).unwrap();
+    let opts = options(&args).unwrap();
     assert_eq!((opts.stride(), opts.cycle_length()), (0.7, 24.0));
     assert_feet_planted(&cache::read_with(fixture(), &opts).unwrap(), 0.7, 24.0);
 
     // Errors name the rig file and what is wrong.
-    let e = err_text(ImportOptions::from_args(&import_args("bipedThinA", "IdleA", Some("demo/rigs/bipedThinA.glb"))));
+    let e = err_text(options(&import_args("bipedThinA", "IdleA", Some("demo/rigs/bipedThinA.glb"))));
     assert_has(&e, &["bipedThinA.glb", "IdleA", "stride 0", "--stride"]);
-    let e = err_text(ImportOptions::from_args(&import_args("bipedThinA", "RunZ", Some("demo/rigs/bipedThinA.glb"))));
+    let e = err_text(options(&import_args("bipedThinA", "RunZ", Some("demo/rigs/bipedThinA.glb"))));
     assert_has(&e, &["bipedThinA.glb", "RunZ", "WalkA"]);
-    let e = err_text(ImportOptions::from_args(&import_args("bipedTallB", "WalkA", Some("demo/rigs/bipedThinA.glb"))));
+    let e = err_text(options(&import_args("bipedTallB", "WalkA", Some("demo/rigs/bipedThinA.glb"))));
     assert_has(&e, &["bipedThinA.glb", "--rig bipedThinA"]);
 
     // The command line: settings and their source are reported.
@@ -628,7 +645,10 @@ fn bad_jupedsim_files() {
     assert_has(&msg, &["inf.sqlite", "frame 7", "agent 3", "field `x`", "finite"]);
     let msg = sqlite_error("text.sqlite", "UPDATE trajectory_data SET pos_y = 'abc' WHERE id = 4 AND frame = 9;");
     assert_has(&msg, &["text.sqlite", "frame 9", "agent 4", "pos_y"]);
-    let msg = sqlite_error("dup.sqlite", "INSERT INTO trajectory_data SELECT * FROM trajectory_data WHERE id = 2 AND frame = 5;");
+    let msg = sqlite_error(
+        "dup.sqlite",
+        "INSERT INTO trajectory_data SELECT * FROM trajectory_data WHERE id = 2 AND frame = 5;",
+    );
     assert_has(&msg, &["dup.sqlite", "frame 5", "agent 2", "appears twice"]);
     let msg = sqlite_error("ver.sqlite", "UPDATE metadata SET value = '9' WHERE key = 'version';");
     assert_has(&msg, &["ver.sqlite", "version 9"]);
@@ -639,26 +659,18 @@ fn bad_jupedsim_files() {
     assert_has(&err_text(cache::read(&p)), &["junk.sqlite", "JuPedSim SQLite"]);
 }
 
-/// The done criterion, on the real file when ../shared is present.
+/// The done criterion, on the real file from ../shared.
 #[test]
 fn real_jupedsim_file_info() {
-    let real = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/assets/crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
-    let real = if real.exists() {
-        real
-    } else {
-        let alt = PathBuf::from("/work/shared/assets/crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
-        if !alt.exists() {
-            eprintln!("skipped: the shared JuPedSim file is not here");
-            return;
-        }
-        alt
-    };
+    let real = common::shared_asset("crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
     let out = throng(&["cache", "info", s(&real), "--json"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["agents"], 200);
-    assert_eq!((v["frame_first"].as_i64(), v["frame_last"].as_i64(), v["frames"].as_i64()), (Some(0), Some(999), Some(1000)));
+    assert_eq!(
+        (v["frame_first"].as_i64(), v["frame_last"].as_i64(), v["frames"].as_i64()),
+        (Some(0), Some(999), Some(1000))
+    );
     assert_eq!(v["agents_per_frame_max"], 200);
     assert_eq!(v["agent_frames"], 171336);
     assert_eq!(v["bounds"]["min"][1], 0.0);
@@ -669,7 +681,7 @@ fn real_jupedsim_file_info() {
 #[test]
 #[ignore]
 fn timings_on_real_file() {
-    let real = PathBuf::from("/work/shared/assets/crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
+    let real = common::shared_asset("crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("real.crowd");
     let t = std::time::Instant::now();

@@ -1,20 +1,19 @@
 //! Casting on the bundled demo shot: uniform heads, height jitter, stability
 //! under removal and reordering, determinism, exclusions, posing, export.
 
+mod common;
+
 use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
 
 use throng::cache::{self, CacheReader};
+use throng::casting::wardrobe::Wardrobes;
 use throng::casting::{cast_agent, RigCasting};
-use throng::pose::{Lod, ShotCrowd};
+use throng::casting::{Lod, ShotCrowd};
 use throng::shot::Shot;
-use throng::wardrobe::Wardrobes;
 
-fn demo_shot() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/shot.toml")
-}
+use common::demo_shot;
 
-fn load_with(edit: impl FnOnce(&mut Shot, &mut cache::Crowd)) -> ShotCrowd {
+fn load_with(edit: impl FnOnce(&mut Shot, &mut cache::CrowdCache)) -> ShotCrowd {
     let mut shot = Shot::load(&demo_shot()).unwrap();
     let mut crowd = cache::read(&shot.cache.path).unwrap();
     edit(&mut shot, &mut crowd);
@@ -31,7 +30,8 @@ fn heads_are_uniform_and_inside_their_box() {
         let rig = &crowd.rigs[&cast.rig];
         // A part may be several pieces (one per glTF material): check the
         // union of its pieces, as fitted.
-        let mut by_slot: std::collections::BTreeMap<usize, (glam::Vec3, glam::Vec3, glam::Affine3A)> = Default::default();
+        let mut by_slot: std::collections::BTreeMap<usize, (glam::Vec3, glam::Vec3, glam::Affine3A)> =
+            Default::default();
         for p in parts {
             let (lo, hi) = crowd.library().meshes[p.mesh as usize].bounds();
             let (a, b) = (p.slot_from_part.transform_point3(lo), p.slot_from_part.transform_point3(hi));
@@ -43,7 +43,11 @@ fn heads_are_uniform_and_inside_their_box() {
             let slot = &rig.slots()[slot_index];
             let uniform = cast.slots[slot_index].part.as_ref().unwrap().uniform;
             let eps = 1e-4;
-            assert!(a.cmpge(slot.proxy_min - eps).all() && b.cmple(slot.proxy_max + eps).all(), "agent {id} slot {}", slot.name);
+            assert!(
+                a.cmpge(slot.proxy_min - eps).all() && b.cmple(slot.proxy_max + eps).all(),
+                "agent {id} slot {}",
+                slot.name
+            );
             if uniform {
                 heads += 1;
                 let (s, _, _) = fit.to_scale_rotation_translation();
@@ -51,7 +55,9 @@ fn heads_are_uniform_and_inside_their_box() {
                 assert!((a.y - slot.proxy_min.y).abs() < 1e-4, "agent {id}: head rests on the box bottom");
             } else {
                 // Body parts fill their box on every axis.
-                assert!((a - slot.proxy_min).abs().max_element() < 1e-4 && (b - slot.proxy_max).abs().max_element() < 1e-4);
+                assert!(
+                    (a - slot.proxy_min).abs().max_element() < 1e-4 && (b - slot.proxy_max).abs().max_element() < 1e-4
+                );
             }
         }
     }
@@ -66,9 +72,8 @@ fn height_scales_are_uniform_within_range() {
     let slots = vec!["head".to_string()];
     let rc = RigCasting { name, slots: &slots, schemes: &rig.schemes, height_jitter: 0.1 };
     let n = 10_000;
-    let mut h: Vec<f64> = (1..=n)
-        .map(|id| cast_agent(shot.seed, id, &rc, &wardrobes, &[], false).unwrap().height_scale as f64)
-        .collect();
+    let mut h: Vec<f64> =
+        (1..=n).map(|id| cast_agent(shot.seed, id, &rc, &wardrobes, &[], false).unwrap().height_scale as f64).collect();
     assert!(h.iter().all(|&x| (0.9..=1.1).contains(&x)));
     h.sort_by(f64::total_cmp);
     // Kolmogorov-Smirnov against U(0.9, 1.1): D < 1.63 / sqrt(n) is alpha = 0.01.
@@ -194,7 +199,8 @@ fn export_reopens_with_shared_meshes() {
     let (doc, _, _) = gltf::import(&out).unwrap();
     let rendered = crowd.agents_at(frame).unwrap().agents.iter().filter(|a| crowd.renders(a)).count();
     assert_eq!(s.agents, rendered);
-    let agent_nodes = doc.nodes().filter(|n| n.name().is_some_and(|x| x.starts_with("agent_") && !x.contains('/'))).count();
+    let agent_nodes =
+        doc.nodes().filter(|n| n.name().is_some_and(|x| x.starts_with("agent_") && !x.contains('/'))).count();
     assert_eq!(agent_nodes, rendered);
     let mesh_nodes = doc.nodes().filter(|n| n.mesh().is_some()).count();
     assert_eq!(mesh_nodes, s.mesh_nodes);

@@ -8,13 +8,14 @@
 //!
 //! Renders land in `target/tmp/comp/` (PNGs beside the EXRs) for looking at.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use throng::cli::LayersArgs;
+use throng::casting::ShotCrowd;
 use throng::comp;
-use throng::layers::Manifest;
-use throng::pose::ShotCrowd;
+use throng::layers::{LayerOverrides, Manifest};
 use throng::render::exr;
 use throng::render::job::{self, RenderJob};
 use throng::render::Film;
@@ -58,8 +59,8 @@ fn out_dir() -> PathBuf {
     }
 }
 
-fn layers_args() -> LayersArgs {
-    LayersArgs::for_shot(PathBuf::from(SHOT))
+fn layers_args() -> LayerOverrides {
+    LayerOverrides::default()
 }
 
 fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
@@ -78,7 +79,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
 }
 
 fn read(dir: &Path, layer: &str) -> Film {
-    exr::read_layer(&job::layer_path(dir, "stack", layer, FRAME)).unwrap().0
+    exr::read_layer(&throng::output::layer_path(dir, "stack", layer, FRAME)).unwrap().0
 }
 
 fn renders() -> &'static Renders {
@@ -87,7 +88,7 @@ fn renders() -> &'static Renders {
         let dir = out_dir();
         let _ = std::fs::remove_dir_all(&dir);
         let mut crowd = ShotCrowd::load(Path::new(SHOT)).unwrap();
-        let manifest = throng::commands::build_layers(&crowd, &layers_args()).unwrap();
+        let manifest = throng::layers::build_layers(&crowd, &layers_args()).unwrap();
         throng::layers::write_manifest(&dir.join("stack.layers.json"), &manifest).unwrap();
         let a = dir.join("a");
         render(&crowd, &manifest, &["set", "crowd2", "crowd1", "crowd0", "full"], &a);
@@ -179,7 +180,11 @@ fn stack_matches_full_render_within_noise() {
 
     let (m, se) = diff_stats(&stack, &full_a, noise, &all, lum);
     let level = all.iter().map(|&i| lum(&full_a.rgba[i])).sum::<f64>() / all.len() as f64;
-    eprintln!("mean lum: full {level:.4}, stack - full {m:+.5} (se {se:.5}, {:.2} sigma, {:+.3}%)", m / se, 100.0 * m / level);
+    eprintln!(
+        "mean lum: full {level:.4}, stack - full {m:+.5} (se {se:.5}, {:.2} sigma, {:+.3}%)",
+        m / se,
+        100.0 * m / level
+    );
     assert!((m / se).abs() < K_MEAN, "mean differs by {:.2} sigma", m / se);
     assert!((m / level).abs() < 0.005, "mean differs by {:.3}%", 100.0 * m / level);
 
@@ -204,11 +209,22 @@ fn stack_matches_full_render_within_noise() {
         if (m / se).abs() > worst_any.0 {
             worst_any = ((m / se).abs(), b, m);
         }
-        assert!(m.abs() < K_BLOCK * se + 0.02 * block_level, "block {b}: stack - full {m:+.5} (se {se:.5}, level {block_level:.4})");
+        assert!(
+            m.abs() < K_BLOCK * se + 0.02 * block_level,
+            "block {b}: stack - full {m:+.5} (se {se:.5}, level {block_level:.4})"
+        );
     }
     eprintln!("worst 8x8 block, interior pixels (luminance): #{}, {:.2} sigma", worst_interior.1, worst_interior.0);
-    eprintln!("worst 8x8 block, all pixels (luminance): #{}, {:.2} sigma ({:+.5})", worst_any.1, worst_any.0, worst_any.2);
-    assert!(worst_interior.0 < K_BLOCK, "interior of block {} differs by {:.2} sigma", worst_interior.1, worst_interior.0);
+    eprintln!(
+        "worst 8x8 block, all pixels (luminance): #{}, {:.2} sigma ({:+.5})",
+        worst_any.1, worst_any.0, worst_any.2
+    );
+    assert!(
+        worst_interior.0 < K_BLOCK,
+        "interior of block {} differs by {:.2} sigma",
+        worst_interior.1,
+        worst_interior.0
+    );
     let (z, b, d) = worst_block(&stack, &full_a, noise, |p| p[3] as f64);
     eprintln!("worst 8x8 block (alpha): #{b}, {z:.2} sigma ({d:+.5})");
     assert!(z < K_BLOCK, "alpha block {b} differs by {z:.2} sigma");
@@ -266,11 +282,15 @@ fn floor_shadows_and_reflections_are_in_the_set_layer() {
     // Shadows: floor pixels (no agent in front) clearly darker with agents
     // (the sky lights the shadows, and thin limbs cast partial ones at this size).
     for t in [0.6, 0.7, 0.8, 0.9] {
-        let n = (0..set.rgba.len()).filter(|&i| full_a.agent_id[i] == 0 && lum(&set.rgba[i]) < t * lum(&r.set_bare.rgba[i])).count();
+        let n = (0..set.rgba.len())
+            .filter(|&i| full_a.agent_id[i] == 0 && lum(&set.rgba[i]) < t * lum(&r.set_bare.rgba[i]))
+            .count();
         eprintln!("set pixels darker than {t} x bare: {n}");
     }
     let shadow: Vec<usize> = (0..set.rgba.len())
-        .filter(|&i| full_a.agent_id[i] == 0 && stack.rgba[i][3] > 0.99 && lum(&set.rgba[i]) < 0.8 * lum(&r.set_bare.rgba[i]))
+        .filter(|&i| {
+            full_a.agent_id[i] == 0 && stack.rgba[i][3] > 0.99 && lum(&set.rgba[i]) < 0.8 * lum(&r.set_bare.rgba[i])
+        })
         .collect();
     let (m, se) = diff_stats(&stack, &bare_stack, noise, &shadow, lum);
     eprintln!("floor shadow pixels: {}, stack darker by {m:.4} ({:.1} sigma)", shadow.len(), -m / se);
@@ -313,7 +333,8 @@ fn cross_layer_shadow_falls_on_the_agent_behind() {
     let full_a = read(&r.a, "full");
     let crowd1 = read(&r.a, "crowd1");
     let stack = comped(None);
-    let agent2: Vec<usize> = (0..crowd1.rgba.len()).filter(|&i| full_a.agent_id[i] == 3 && crowd1.agent_id[i] == 3).collect();
+    let agent2: Vec<usize> =
+        (0..crowd1.rgba.len()).filter(|&i| full_a.agent_id[i] == 3 && crowd1.agent_id[i] == 3).collect();
     let noise = (&full_a, &r.full_b);
     let (m, se) = diff_stats(&crowd1, &r.crowd1_without_1, noise, &agent2, lum);
     eprintln!("agent 2: {} pixels, darker by {:.4} ({:.1} sigma) with agent 1's shadow", agent2.len(), -m, -m / se);
@@ -343,8 +364,8 @@ fn comp_finds_layers_and_writes_exr() {
     // A missing layer is named.
     let partial = r.dir.join("partial");
     for l in ["set", "crowd2", "crowd0"] {
-        let from = job::layer_path(&r.a, "stack", l, FRAME);
-        let to = job::layer_path(&partial, "stack", l, FRAME);
+        let from = throng::output::layer_path(&r.a, "stack", l, FRAME);
+        let to = throng::output::layer_path(&partial, "stack", l, FRAME);
         std::fs::create_dir_all(to.parent().unwrap()).unwrap();
         std::fs::copy(from, to).unwrap();
     }
@@ -356,9 +377,10 @@ fn comp_finds_layers_and_writes_exr() {
     assert!(e.contains("1002"), "{e}");
 }
 
+/// (success, stdout, stderr) of a `throng` run.
 fn throng(args: &[&str]) -> (bool, String, String) {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_throng")).args(args).output().unwrap();
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    let (code, stdout, stderr) = common::run(args);
+    (code == 0, stdout, stderr)
 }
 
 #[test]

@@ -2,8 +2,10 @@
 //! decoder on Psyop's sample files, and our own agent / part mattes (ranking,
 //! coverage, manifest, determinism, EXR round trip, sidecar manifests).
 
+mod common;
+
 use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use glam::{Affine3A, Vec2, Vec3};
 use throng::render::accel::BlasSet;
@@ -20,17 +22,12 @@ use throng::render::RenderSettings;
 use throng::scene::{vis, Camera, FrameScene, Instance, Library, Material, Mesh, Sky};
 
 fn fixtures() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/cryptomatte")
+    common::fixture("cryptomatte")
 }
 
-/// The larger Psyop samples live in shared/ (not copied into the repo).
-fn shared_sample(name: &str) -> Option<PathBuf> {
-    [
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/assets/exr/cryptomatte_psyop").join(name),
-        PathBuf::from("/work/shared/assets/exr/cryptomatte_psyop").join(name),
-    ]
-    .into_iter()
-    .find(|p| p.exists())
+/// The larger Psyop samples live in ../shared (not copied into the repo).
+fn shared_sample(name: &str) -> PathBuf {
+    common::shared_asset("exr/cryptomatte_psyop").join(name)
 }
 
 // ------------------------------------------------------------ ids
@@ -106,10 +103,7 @@ fn sidecar_manifest_sample() {
 
 #[test]
 fn multichannel_and_cornell_samples() {
-    let Some(path) = shared_sample("multichannel.exr") else {
-        eprintln!("skipped: shared/assets/exr/cryptomatte_psyop not present");
-        return;
-    };
+    let path = shared_sample("multichannel.exr");
     let mattes = cryptomatte::read(&path).unwrap();
     let names: Vec<&str> = mattes.iter().map(|m| m.name.as_str()).collect();
     assert_eq!(names.len(), 3, "{names:?}");
@@ -128,7 +122,7 @@ fn multichannel_and_cornell_samples() {
     assert!(a.iter().sum::<f32>() > 10.0 && b.iter().sum::<f32>() > 10.0);
     assert!(a.iter().zip(&b).all(|(x, y)| x + y <= 1.0 + 1e-3));
 
-    let Some(path) = shared_sample("cornellBox_CryptoWildcard.0001.exr") else { return };
+    let path = shared_sample("cornellBox_CryptoWildcard.0001.exr");
     let mattes = cryptomatte::read(&path).unwrap();
     assert_eq!(mattes.len(), 1);
     let m = &mattes[0];
@@ -141,7 +135,8 @@ fn multichannel_and_cornell_samples() {
 // -------------------------------------------------------- our own mattes
 
 fn floor() -> Mesh {
-    let positions = [(-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (-20.0, 20.0)].map(|(x, z)| Vec3::new(x, 0.0, z)).to_vec();
+    let positions =
+        [(-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (-20.0, 20.0)].map(|(x, z)| Vec3::new(x, 0.0, z)).to_vec();
     Mesh {
         name: "floor".into(),
         normals: vec![Vec3::Y; 4],
@@ -155,7 +150,10 @@ fn camera(eye: Vec3, target: Vec3, yfov_deg: f32) -> Camera {
     let forward = (target - eye).normalize();
     let right = forward.cross(Vec3::Y).normalize();
     let up = right.cross(forward);
-    Camera { world_from_camera: Affine3A::from_cols(right.into(), up.into(), (-forward).into(), eye.into()), yfov: yfov_deg.to_radians() }
+    Camera {
+        world_from_camera: Affine3A::from_cols(right.into(), up.into(), (-forward).into(), eye.into()),
+        yfov: yfov_deg.to_radians(),
+    }
 }
 
 const SLOTS: [&str; 2] = ["torso", "head"];
@@ -165,18 +163,37 @@ const SLOTS: [&str; 2] = ["torso", "head"];
 fn crowd_scene() -> (Library, FrameScene) {
     let lib = Library {
         meshes: vec![floor(), Mesh::cube("cube")],
-        materials: vec![Material { name: "grey".into(), base_color: Vec3::splat(0.5), base_color_texture: None, roughness: 0.5, metallic: 0.0 }],
+        materials: vec![Material {
+            name: "grey".into(),
+            base_color: Vec3::splat(0.5),
+            base_color_texture: None,
+            roughness: 0.5,
+            metallic: 0.0,
+        }],
         textures: vec![],
     };
-    let inst = |mesh, m: Affine3A, agent, part, visibility| Instance { mesh, material: 0, world_from_object: m, agent, part, visibility };
+    let inst = |mesh, m: Affine3A, agent, part, visibility| Instance {
+        mesh,
+        material: 0,
+        world_from_object: m,
+        agent,
+        part,
+        visibility,
+    };
     let mut instances = vec![inst(0, Affine3A::IDENTITY, None, 0, vis::ALL)];
     for (agent, x) in [(3u32, -1.2f32), (78, 0.0), (1000, 1.3), (5, 60.0)] {
-        let torso = Affine3A::from_scale_rotation_translation(Vec3::new(0.8, 1.0, 0.5), Default::default(), Vec3::new(x, 0.5, 0.0));
-        let head = Affine3A::from_scale_rotation_translation(Vec3::splat(0.4), Default::default(), Vec3::new(x, 1.2, 0.0));
+        let torso = Affine3A::from_scale_rotation_translation(
+            Vec3::new(0.8, 1.0, 0.5),
+            Default::default(),
+            Vec3::new(x, 0.5, 0.0),
+        );
+        let head =
+            Affine3A::from_scale_rotation_translation(Vec3::splat(0.4), Default::default(), Vec3::new(x, 1.2, 0.0));
         instances.push(inst(1, torso, Some(agent), 0, vis::ALL));
         instances.push(inst(1, head, Some(agent), 1, vis::ALL));
     }
-    let holdout = Affine3A::from_scale_rotation_translation(Vec3::splat(0.3), Default::default(), Vec3::new(1.5, 0.4, 0.6));
+    let holdout =
+        Affine3A::from_scale_rotation_translation(Vec3::splat(0.3), Default::default(), Vec3::new(1.5, 0.4, 0.6));
     instances.push(inst(1, holdout, None, 0, vis::HOLDOUT | vis::SHADOW));
     let scene = FrameScene {
         instances,
@@ -192,14 +209,27 @@ fn names(scene: &FrameScene) -> CryptoNames {
 }
 
 fn settings(spp: u32, threads: usize) -> RenderSettings {
-    RenderSettings { width: 48, height: 36, spp, max_bounces: 1, seed: 7, frame: 1001, layer: 0, sky_visible: false, threads, indirect_clamp: 10.0, diffuse_only: false }
+    RenderSettings {
+        width: 48,
+        height: 36,
+        spp,
+        max_bounces: 1,
+        seed: 7,
+        frame: 1001,
+        layer: 0,
+        sky_visible: false,
+        threads,
+        indirect_clamp: 10.0,
+        diffuse_only: false,
+    }
 }
 
 fn render(spp: u32, threads: usize) -> (FrameScene, Film) {
     let (lib, scene) = crowd_scene();
     let blas = BlasSet::build(&lib);
     let crypto = names(&scene);
-    let (film, _) = render_frame_with_cryptomatte(&blas, &lib, &scene, &settings(spp, threads), Some(&crypto), None).unwrap();
+    let (film, _) =
+        render_frame_with_cryptomatte(&blas, &lib, &scene, &settings(spp, threads), Some(&crypto), None).unwrap();
     (scene, film)
 }
 
@@ -300,7 +330,8 @@ fn exr_round_trip_and_header() {
         assert_eq!(p.attributes[&format!("cryptomatte/{key}/name")], m.name);
         assert_eq!(p.attributes[&format!("cryptomatte/{key}/hash")], "MurmurHash3_32");
         assert_eq!(p.attributes[&format!("cryptomatte/{key}/conversion")], "uint32_to_float32");
-        let manifest = cryptomatte::parse_manifest(&p.attributes[&format!("cryptomatte/{key}/manifest")], &path).unwrap();
+        let manifest =
+            cryptomatte::parse_manifest(&p.attributes[&format!("cryptomatte/{key}/manifest")], &path).unwrap();
         assert_eq!(manifest, m.manifest);
         for level in ["00", "01", "02"] {
             for c in ["R", "G", "B", "A"] {

@@ -1,8 +1,9 @@
 //! The committed demo assets (made by `cargo run --example make_demo`) open
 //! and agree with SPEC and with each other.
 
+mod common;
+
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
 
 const SLOTS: [&str; 11] = [
     "head",
@@ -20,9 +21,7 @@ const SLOTS: [&str; 11] = [
 const CLIPS: [&str; 4] = ["WalkA", "WalkB", "IdleA", "SitA"];
 const FPS: f32 = 24.0;
 
-fn crate_path(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
-}
+use common::repo_path as crate_path;
 
 fn import(rel: &str) -> (gltf::Document, Vec<gltf::buffer::Data>, Vec<gltf::image::Data>) {
     gltf::import(crate_path(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
@@ -96,7 +95,9 @@ fn rig_clips(rel: &str) -> BTreeMap<String, Clip> {
             let r = ch.reader(|b| Some(&buffers[b.index()]));
             let times: Vec<f32> = r.read_inputs().unwrap().collect();
             end = end.max(*times.last().unwrap());
-            if ch.target().node().index() == root.index() && ch.target().property() == gltf::animation::Property::Translation {
+            if ch.target().node().index() == root.index()
+                && ch.target().property() == gltf::animation::Property::Translation
+            {
                 let v: Vec<[f32; 3]> = match r.read_outputs().unwrap() {
                     gltf::animation::util::ReadOutputs::Translations(t) => t.collect(),
                     _ => unreachable!(),
@@ -138,11 +139,17 @@ fn rigs_follow_spec() {
             let Some(ex) = extras(&node) else { continue };
             let slot = ex["slot"].as_str().unwrap().to_string();
             assert_eq!(node.name(), Some(slot.as_str()));
-            let bmin: Vec<f32> = ex["proxy_box"]["min"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
-            let bmax: Vec<f32> = ex["proxy_box"]["max"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+            let bmin: Vec<f32> =
+                ex["proxy_box"]["min"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+            let bmax: Vec<f32> =
+                ex["proxy_box"]["max"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
             assert!((0..3).all(|k| bmin[k] < bmax[k]), "{rig} {slot} box");
             let bb = node.mesh().expect("slot mesh").primitives().next().unwrap().bounding_box();
-            assert_eq!((bb.min.to_vec(), bb.max.to_vec()), (bmin.clone(), bmax.clone()), "{rig} {slot} mesh matches proxy_box");
+            assert_eq!(
+                (bb.min.to_vec(), bb.max.to_vec()),
+                (bmin.clone(), bmax.clone()),
+                "{rig} {slot} mesh matches proxy_box"
+            );
             for corner in [glam::Vec3::from_slice(&bmin), glam::Vec3::from_slice(&bmax)] {
                 let y = world[node.index()].transform_point3(corner).y;
                 lo = lo.min(y);
@@ -159,8 +166,10 @@ fn rigs_follow_spec() {
         assert!(clips["WalkA"].stride > 1.0 && clips["WalkB"].stride > clips["WalkA"].stride);
         assert_eq!(clips["IdleA"].stride, 0.0);
         assert_eq!(clips["SitA"].stride, 0.0);
-        let modes: BTreeSet<String> =
-            doc.animations().flat_map(|a| a.samplers().map(|s| format!("{:?}", s.interpolation())).collect::<Vec<_>>()).collect();
+        let modes: BTreeSet<String> = doc
+            .animations()
+            .flat_map(|a| a.samplers().map(|s| format!("{:?}", s.interpolation())).collect::<Vec<_>>())
+            .collect();
         for m in ["Step", "Linear", "CubicSpline"] {
             assert!(modes.contains(m), "{rig}: no {m} sampler");
         }
@@ -205,7 +214,12 @@ fn cache_crowd_is_a_plausible_crowd() {
     let ids: BTreeSet<u32> = crowd.frames[0].agents.iter().map(|a| a.id).collect();
     assert!((280..=320).contains(&ids.len()), "{} agents", ids.len());
     for f in &crowd.frames {
-        assert_eq!(f.agents.iter().map(|a| a.id).collect::<BTreeSet<_>>(), ids, "frame {}: every agent in every frame", f.frame);
+        assert_eq!(
+            f.agents.iter().map(|a| a.id).collect::<BTreeSet<_>>(),
+            ids,
+            "frame {}: every agent in every frame",
+            f.frame
+        );
     }
     let mut rigs = crowd.rigs.clone();
     rigs.sort();
@@ -258,7 +272,12 @@ fn cache_crowd_is_a_plausible_crowd() {
             } else {
                 assert!((0.89..=1.0001).contains(&adv), "agent {} frame {}: advance {adv}", b.id, w[1].frame);
                 let expect = clip.stride / clip.frames;
-                assert!((step / adv - expect).abs() < 1e-4, "agent {} ({rig} {cycle}) frame {}: {step} m per {adv} frames, stride says {expect}", b.id, w[1].frame);
+                assert!(
+                    (step / adv - expect).abs() < 1e-4,
+                    "agent {} ({rig} {cycle}) frame {}: {step} m per {adv} frames, stride says {expect}",
+                    b.id,
+                    w[1].frame
+                );
                 *walked.entry((rig.clone(), cycle.clone())).or_default() += 1;
             }
         }

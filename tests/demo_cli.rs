@@ -1,30 +1,21 @@
 //! The verbs on the bundled demo shot, through the library and the binary.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
+
+use std::path::Path;
 
 use throng::cache::CacheReader;
-use throng::cli::LayersArgs;
-use throng::commands::build_layers;
-use throng::pose::ShotCrowd;
+use throng::casting::ShotCrowd;
+use throng::layers::{build_layers, LayerOverrides};
 use throng::shot::Shot;
 
-fn demo_shot() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/shot.toml")
+use common::demo_shot;
+
+fn layer_args(per_frame: bool) -> LayerOverrides {
+    LayerOverrides { per_frame, ..Default::default() }
 }
 
-fn layer_args(per_frame: bool) -> LayersArgs {
-    LayersArgs { per_frame, ..LayersArgs::for_shot(demo_shot()) }
-}
-
-fn throng(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_throng")).args(args).output().unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use common::run as throng;
 
 #[test]
 fn fixed_layers_do_not_pop_and_per_frame_ranking_does() {
@@ -36,7 +27,12 @@ fn fixed_layers_do_not_pop_and_per_frame_ranking_does() {
     assert!(per_frame.pops.agents_changed > 0, "the demo's walkers cross layer boundaries");
     // Layers are ordered by distance, nearest first.
     for w in fixed.layers.windows(2) {
-        assert!(w[0].distance_max_m.unwrap() <= w[1].distance_min_m.unwrap() + 1e-3, "{} then {}", w[0].name, w[1].name);
+        assert!(
+            w[0].distance_max_m.unwrap() <= w[1].distance_min_m.unwrap() + 1e-3,
+            "{} then {}",
+            w[0].name,
+            w[1].name
+        );
     }
 }
 
@@ -45,13 +41,8 @@ fn removing_an_agent_moves_no_other_agent_between_layers() {
     let crowd = ShotCrowd::load(&demo_shot()).unwrap();
     let before = build_layers(&crowd, &layer_args(false)).unwrap();
     // Remove the agent on a layer boundary: the nearest of layer 1.
-    let victim = before
-        .agents
-        .iter()
-        .filter(|a| a.layer == 1)
-        .min_by(|a, b| a.distance_m.total_cmp(&b.distance_m))
-        .unwrap()
-        .id;
+    let victim =
+        before.agents.iter().filter(|a| a.layer == 1).min_by(|a, b| a.distance_m.total_cmp(&b.distance_m)).unwrap().id;
     let mut shot = Shot::load(&demo_shot()).unwrap();
     shot.removed.push(victim);
     let cache = CacheReader::open(&shot.cache.path).unwrap();
@@ -128,10 +119,16 @@ fn botinfo_distance_is_the_manifests_distance_at_the_reference_frame() {
     let crowd = ShotCrowd::load(&demo_shot()).unwrap();
     let manifest = build_layers(&crowd, &layer_args(false)).unwrap();
     let present: Vec<u32> = crowd.agents_at(manifest.ref_frame).unwrap().agents.iter().map(|a| a.id).take(20).collect();
-    let infos = throng::commands::bot_info(&crowd, &present, manifest.ref_frame).unwrap();
+    let infos = throng::botinfo::bot_info(&crowd, &present, manifest.ref_frame).unwrap();
     for b in infos {
         let m = manifest.agent(b.id).unwrap();
-        assert!((b.distance - m.distance_m).abs() < 1e-4, "agent {}: botinfo {} vs manifest {}", b.id, b.distance, m.distance_m);
+        assert!(
+            (b.distance - m.distance_m).abs() < 1e-4,
+            "agent {}: botinfo {} vs manifest {}",
+            b.id,
+            b.distance,
+            m.distance_m
+        );
     }
 }
 
@@ -144,7 +141,10 @@ fn an_unknown_scheme_names_file_agent_and_key_once() {
         Ok(_) => panic!("an unknown scheme was accepted"),
         Err(e) => e.to_string(),
     };
-    assert!(err.contains("shot.toml") && err.contains("rigs.bipedTallB.schemes") && err.contains("NoSuchScheme"), "{err}");
+    assert!(
+        err.contains("shot.toml") && err.contains("rigs.bipedTallB.schemes") && err.contains("NoSuchScheme"),
+        "{err}"
+    );
     assert_eq!(err.matches("agent ").count(), 1, "the agent is named once: {err}");
 }
 
@@ -157,6 +157,6 @@ fn a_wardrobe_type_error_names_file_line_and_key() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("robots.toml");
     std::fs::write(&path, broken).unwrap();
-    let err = throng::wardrobe::Wardrobes::load(&[path]).unwrap_err().to_string();
+    let err = throng::casting::wardrobe::Wardrobes::load(&[path]).unwrap_err().to_string();
     assert!(err.contains(&format!("robots.toml:{line}")) && err.contains("`roughness`"), "{err}");
 }

@@ -11,13 +11,13 @@
 
 use std::path::{Path, PathBuf};
 
-use throng::cli::LayersArgs;
-use throng::commands::build_layers;
+use throng::casting::ShotCrowd;
 use throng::layers::Manifest;
-use throng::pose::ShotCrowd;
+use throng::layers::{build_layers, LayerOverrides};
+use throng::output::FULL_LAYER;
 use throng::render::exr;
 use throng::render::film::Film;
-use throng::render::job::{self, RenderJob, FULL_LAYER};
+use throng::render::job::{self, RenderJob};
 
 const FRAME: i32 = 1024;
 const WIDTH: u32 = 160;
@@ -79,7 +79,7 @@ fn file_name(shot: &str, layer: &str) -> String {
 fn demo() -> (ShotCrowd, Manifest) {
     let shot = repo().join("demo/shot.toml");
     let crowd = ShotCrowd::load(&shot).expect("demo shot loads");
-    let args = LayersArgs::for_shot(shot);
+    let args = LayerOverrides::default();
     let manifest = build_layers(&crowd, &args).expect("demo layers");
     (crowd, manifest)
 }
@@ -146,7 +146,8 @@ fn erfc(x: f64) -> f64 {
             + t * (0.37409196
                 + t * (0.09678418
                     + t * (-0.18628806
-                        + t * (0.27886807 + t * (-1.13520398 + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277))))))));
+                        + t * (0.27886807
+                            + t * (-1.13520398 + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277))))))));
     let r = t * poly.exp();
     if x >= 0.0 {
         r
@@ -302,7 +303,8 @@ fn compare(gold: &Film, new: &Film, tests_in_run: usize, points: PointTolerance)
             }
         }
         let (gz, nz) = (gold.z[i], new.z[i]);
-        let same = if gz.is_finite() && nz.is_finite() { (gz - nz).abs() <= Z_REL * gz.abs().max(1e-3) } else { gz == nz };
+        let same =
+            if gz.is_finite() && nz.is_finite() { (gz - nz).abs() <= Z_REL * gz.abs().max(1e-3) } else { gz == nz };
         if !same {
             let explained = if nz.is_finite() {
                 let (lo, hi) = neighbours(i)
@@ -438,7 +440,14 @@ fn check_against_golden(
         {
             r.problems.push(format!(
                 "header differs: {}/{}/{}/{} spp, golden {}/{}/{}/{} spp",
-                meta.shot, meta.layer, meta.frame, meta.spp, gold_meta.shot, gold_meta.layer, gold_meta.frame, gold_meta.spp
+                meta.shot,
+                meta.layer,
+                meta.frame,
+                meta.spp,
+                gold_meta.shot,
+                gold_meta.layer,
+                gold_meta.frame,
+                gold_meta.spp
             ));
         }
         lines.push(format!("{layer:<7} {}", r.summary()));
@@ -451,7 +460,11 @@ fn check_against_golden(
                 write_diff_image(&diff, &gold, &new, &r);
                 let copy = dir.join(&name);
                 let _ = std::fs::copy(path, &copy);
-                evidence = format!("\n    diff image (golden | new | difference): {}\n    new render: {}", diff.display(), copy.display());
+                evidence = format!(
+                    "\n    diff image (golden | new | difference): {}\n    new render: {}",
+                    diff.display(),
+                    copy.display()
+                );
             }
             failures.push(format!("layer {layer}: {}{evidence}", r.problems.join("; ")));
         }
@@ -470,7 +483,11 @@ fn demo_layers_match_golden() {
     let tmp = tempfile::tempdir().expect("temp dir");
     let started = std::time::Instant::now();
     let rendered = render(&crowd, &manifest, &layers, tmp.path());
-    println!("rendered {} layers at {WIDTH}x{HEIGHT}, {SPP} spp in {:.1} s", layers.len(), started.elapsed().as_secs_f64());
+    println!(
+        "rendered {} layers at {WIDTH}x{HEIGHT}, {SPP} spp in {:.1} s",
+        layers.len(),
+        started.elapsed().as_secs_f64()
+    );
 
     if std::env::var_os("UPDATE_GOLDEN").is_some_and(|v| v != "0") {
         std::fs::create_dir_all(golden_dir()).expect("golden dir");
@@ -515,7 +532,11 @@ fn metric_accepts_another_seed() {
     for l in &lines {
         println!("{l}");
     }
-    assert!(failures.is_empty(), "a noise-only change (another seed) failed the golden metric:\n  {}", failures.join("\n  "));
+    assert!(
+        failures.is_empty(),
+        "a noise-only change (another seed) failed the golden metric:\n  {}",
+        failures.join("\n  ")
+    );
 }
 
 /// Control: a real look change, the sun turned 4 degrees about +Y, must fail.
@@ -539,5 +560,10 @@ fn metric_rejects_a_moved_sun() {
     for l in &lines {
         println!("{l}");
     }
-    assert_eq!(failures.len(), layers.len(), "moving the sun 4 degrees should fail every layer's golden:\n  {}", lines.join("\n  "));
+    assert_eq!(
+        failures.len(),
+        layers.len(),
+        "moving the sun 4 degrees should fail every layer's golden:\n  {}",
+        lines.join("\n  ")
+    );
 }

@@ -381,33 +381,34 @@ fn map_decodes_as_png_of_the_requested_size() {
 #[test]
 fn command_line_flags_override_the_shot() {
     use clap::Parser;
-    use throng::cli::{Cli, Verb};
-    use throng::layers::settings_with_args;
+    use throng::cmd::{Cli, Verb};
+    use throng::layers::settings_with_overrides;
     let parse = |args: &[&str]| match Cli::try_parse_from(args).unwrap().verb {
         Verb::Layers(a) => a,
         _ => unreachable!(),
     };
     let shot = count(3);
     let a = parse(&["throng", "layers", "shot.toml", "--cutoffs", "10,25,60", "--ref-frame", "1010", "--per-frame"]);
-    let (s, o) = settings_with_args(&shot, &a).unwrap();
+    let (s, o) = settings_with_overrides(&shot, &a.overrides()).unwrap();
     assert_eq!(
         (s.split, s.cutoffs.clone(), s.ref_frame, o.per_frame),
         (SplitMode::Cutoffs, vec![10.0, 25.0, 60.0], Some(1010), true)
     );
     let a = parse(&["throng", "layers", "shot.toml", "--budget", "2.8GB", "--lod-px", "25", "--lod-per-frame"]);
-    let (s, o) = settings_with_args(&shot, &a).unwrap();
+    let (s, o) = settings_with_overrides(&shot, &a.overrides()).unwrap();
     assert_eq!(
         (s.split, s.budget.as_deref(), s.lod_full_min_px, o.lod_per_frame),
         (SplitMode::Budget, Some("2.8GB"), 25.0, true)
     );
-    let a = parse(&["throng", "layers", "shot.toml", "--budget", "lots"]);
-    assert!(settings_with_args(&shot, &a).unwrap_err().to_string().contains("--budget"));
+    // A bad budget is refused at parse time, naming the flag.
+    let e = Cli::try_parse_from(["throng", "layers", "shot.toml", "--budget", "lots"]).unwrap_err().to_string();
+    assert!(e.contains("--budget"), "{e}");
     assert!(Cli::try_parse_from(["throng", "layers", "s.toml", "--count", "2", "--budget", "1GB"]).is_err());
 }
 
 #[test]
 fn input_from_a_shot_and_crowd() {
-    use throng::cache::{AgentRecord as Rec, Crowd, FrameBlock};
+    use throng::cache::{AgentSample as Rec, CrowdCache, FrameBlock};
     use throng::layers::shot_input;
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("c.crowd"), b"").unwrap();
@@ -447,7 +448,7 @@ count = 2
             agents: [rec(1, 10.0), rec(2, 0.0)].into_iter().chain((f >= 4).then(|| rec(3, -10.0))).collect(),
         })
         .collect();
-    let crowd = Crowd { rigs: vec!["r".into()], cycles: vec!["c".into()], frames };
+    let crowd = CrowdCache { rigs: vec!["r".into()], cycles: vec!["c".into()], frames };
     let input =
         shot_input(&shot, &crowd, None, shot.layers.clone(), LayerOptions::default(), |_| (1.8, 1_000_000, 1_000))
             .unwrap();

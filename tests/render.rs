@@ -61,7 +61,19 @@ fn camera(eye: Vec3, target: Vec3, yfov_deg: f32) -> Camera {
 }
 
 fn settings(width: u32, height: u32, spp: u32) -> RenderSettings {
-    RenderSettings { width, height, spp, max_bounces: 3, seed: 1234, frame: 1001, layer: 0, sky_visible: false, threads: 2, indirect_clamp: 10.0, diffuse_only: false }
+    RenderSettings {
+        width,
+        height,
+        spp,
+        max_bounces: 3,
+        seed: 1234,
+        frame: 1001,
+        layer: 0,
+        sky_visible: false,
+        threads: 2,
+        indirect_clamp: 10.0,
+        diffuse_only: false,
+    }
 }
 
 fn luminance(p: [f32; 4]) -> f32 {
@@ -109,7 +121,8 @@ fn accel_matches_brute_force() {
         let rot = Quat::from_axis_angle(rng.vec3(-1.0, 1.0).normalize(), rng.range(0.0, 6.0));
         let scale = Vec3::new(rng.range(0.3, 2.0), rng.range(0.3, 2.0), rng.range(0.3, 2.0));
         let m = Affine3A::from_scale_rotation_translation(scale, rot, rng.vec3(-8.0, 8.0));
-        let visibility = [vis::ALL, vis::CAMERA, vis::SHADOW, vis::INDIRECT | vis::SHADOW, vis::HOLDOUT][i as usize % 5];
+        let visibility =
+            [vis::ALL, vis::CAMERA, vis::SHADOW, vis::INDIRECT | vis::SHADOW, vis::HOLDOUT][i as usize % 5];
         instances.push(instance(i % 4, 0, m, Some(i), visibility));
     }
 
@@ -133,7 +146,8 @@ fn accel_matches_brute_force() {
                 }
                 let mesh = &lib.meshes[inst.mesh as usize];
                 for (ti, idx) in mesh.indices.chunks_exact(3).enumerate() {
-                    let [a, b, c] = [0, 1, 2].map(|k| inst.world_from_object.transform_point3(mesh.positions[idx[k] as usize]));
+                    let [a, b, c] =
+                        [0, 1, 2].map(|k| inst.world_from_object.transform_point3(mesh.positions[idx[k] as usize]));
                     if let Some((t, _, _)) = brute_triangle(origin, direction, a, b, c) {
                         if t <= tmax && best.is_none_or(|(bt, _, _)| t < bt) {
                             best = Some((t, ii as u32, ti as u32));
@@ -150,13 +164,19 @@ fn accel_matches_brute_force() {
                     assert!((h.t - t).abs() <= 1e-3 * t.max(1.0), "ray {r}: t {} vs brute {t}", h.t);
                     if (h.instance, h.triangle) != (ii, ti) {
                         // Only acceptable as a near tie (shared edges, coplanar faces).
-                        assert!((h.t - t).abs() <= 1e-4 * t.max(1.0), "ray {r}: hit ({}, {}) vs ({ii}, {ti})", h.instance, h.triangle);
+                        assert!(
+                            (h.t - t).abs() <= 1e-4 * t.max(1.0),
+                            "ray {r}: hit ({}, {}) vs ({ii}, {ti})",
+                            h.instance,
+                            h.triangle
+                        );
                     }
                     // Barycentrics rebuild the hit point.
                     let inst = &instances[h.instance as usize];
                     let mesh = &lib.meshes[inst.mesh as usize];
                     let idx = &mesh.indices[h.triangle as usize * 3..][..3];
-                    let [a, b, c] = [0, 1, 2].map(|k| inst.world_from_object.transform_point3(mesh.positions[idx[k] as usize]));
+                    let [a, b, c] =
+                        [0, 1, 2].map(|k| inst.world_from_object.transform_point3(mesh.positions[idx[k] as usize]));
                     let p = a * (1.0 - h.u - h.v) + b * h.u + c * h.v;
                     let q = origin + direction * h.t;
                     assert!((p - q).length() <= 1e-3 * q.length().max(1.0), "ray {r}: barycentric point {p} vs {q}");
@@ -261,7 +281,11 @@ fn small_set() -> (Library, FrameScene) {
     let scene = FrameScene {
         instances,
         camera: camera(Vec3::new(0.0, 2.0, 6.0), Vec3::new(0.0, 0.5, -1.0), 50.0),
-        sun: Some(Sun { direction: Vec3::new(-0.4, 0.6, 0.5).normalize(), angular_diameter: 0.0093, irradiance: Vec3::splat(3.0) }),
+        sun: Some(Sun {
+            direction: Vec3::new(-0.4, 0.6, 0.5).normalize(),
+            angular_diameter: 0.0093,
+            irradiance: Vec3::splat(3.0),
+        }),
         sky: Sky { radiance: Vec3::new(0.3, 0.38, 0.5) },
     };
     (lib, scene)
@@ -312,7 +336,13 @@ fn holdout_gives_alpha_zero() {
     assert!(holdout > 500 && agent > 10, "{holdout} {agent}");
     // A holdout in front of an agent hides it.
     let mut wall = scene.clone();
-    wall.instances.push(instance(0, 0, Affine3A::from_rotation_translation(Quat::from_rotation_x(PI / 2.0), Vec3::new(0.0, 0.0, 3.0)), None, vis::HOLDOUT));
+    wall.instances.push(instance(
+        0,
+        0,
+        Affine3A::from_rotation_translation(Quat::from_rotation_x(PI / 2.0), Vec3::new(0.0, 0.0, 3.0)),
+        None,
+        vis::HOLDOUT,
+    ));
     let film = render_frame(&blas, &lib, &wall, &settings(40, 30, 2), None).unwrap();
     assert!(film.rgba.iter().all(|p| p[3] == 0.0) && film.agent_id.iter().all(|&id| id == 0));
 }
@@ -326,7 +356,13 @@ fn shadow_only_instance_is_invisible_but_casts_a_shadow() {
     };
     let blas = BlasSet::build(&lib);
     let floor = instance(0, 0, Affine3A::IDENTITY, None, vis::ALL);
-    let blocker = instance(1, 1, Affine3A::from_scale_rotation_translation(Vec3::splat(1.5), Quat::IDENTITY, Vec3::new(0.0, 1.5, 0.0)), Some(5), vis::SHADOW);
+    let blocker = instance(
+        1,
+        1,
+        Affine3A::from_scale_rotation_translation(Vec3::splat(1.5), Quat::IDENTITY, Vec3::new(0.0, 1.5, 0.0)),
+        Some(5),
+        vis::SHADOW,
+    );
     let scene = |instances| FrameScene {
         instances,
         camera: camera(Vec3::new(0.0, 6.0, 6.0), Vec3::ZERO, 50.0),
@@ -341,7 +377,12 @@ fn shadow_only_instance_is_invisible_but_casts_a_shadow() {
     assert_eq!(with.z, without.z);
     // The centre of the image looks at the floor under the box: in shadow.
     let centre = with.index(20, 15);
-    assert!(luminance(with.rgba[centre]) < 0.3 * luminance(without.rgba[centre]), "{:?} vs {:?}", with.rgba[centre], without.rgba[centre]);
+    assert!(
+        luminance(with.rgba[centre]) < 0.3 * luminance(without.rgba[centre]),
+        "{:?} vs {:?}",
+        with.rgba[centre],
+        without.rgba[centre]
+    );
     // Far from the box nothing changes much (sky occlusion only).
     let corner = with.index(2, 28);
     assert!(luminance(with.rgba[corner]) > 0.9 * luminance(without.rgba[corner]));
@@ -351,16 +392,29 @@ fn shadow_only_instance_is_invisible_but_casts_a_shadow() {
 fn glossy_floor_reflects_indirect_only_object() {
     let lib = Library {
         meshes: vec![quad(40.0, Vec3::ZERO), Mesh::cube("cube")],
-        materials: vec![material("mirror", Vec3::splat(0.9), 1.0, 0.05), material("red", Vec3::new(0.9, 0.02, 0.02), 0.0, 0.8)],
+        materials: vec![
+            material("mirror", Vec3::splat(0.9), 1.0, 0.05),
+            material("red", Vec3::new(0.9, 0.02, 0.02), 0.0, 0.8),
+        ],
         textures: vec![],
     };
     let blas = BlasSet::build(&lib);
     let floor = instance(0, 0, Affine3A::IDENTITY, None, vis::ALL);
-    let red = instance(1, 1, Affine3A::from_scale_rotation_translation(Vec3::splat(2.0), Quat::IDENTITY, Vec3::new(0.0, 1.0, -4.0)), Some(3), vis::INDIRECT);
+    let red = instance(
+        1,
+        1,
+        Affine3A::from_scale_rotation_translation(Vec3::splat(2.0), Quat::IDENTITY, Vec3::new(0.0, 1.0, -4.0)),
+        Some(3),
+        vis::INDIRECT,
+    );
     let scene = |instances| FrameScene {
         instances,
         camera: camera(Vec3::new(0.0, 1.0, 6.0), Vec3::new(0.0, -0.5, -4.0), 50.0),
-        sun: Some(Sun { direction: Vec3::new(0.0, 0.7, 0.7).normalize(), angular_diameter: 0.0093, irradiance: Vec3::splat(3.0) }),
+        sun: Some(Sun {
+            direction: Vec3::new(0.0, 0.7, 0.7).normalize(),
+            angular_diameter: 0.0093,
+            irradiance: Vec3::splat(3.0),
+        }),
         sky: Sky { radiance: Vec3::splat(0.2) },
     };
     let s = settings(40, 30, 8);
@@ -393,7 +447,11 @@ fn no_shadow_acne_far_from_origin() {
         let scene = FrameScene {
             instances: vec![inst],
             camera: camera(far + Vec3::new(0.0, 4.0, 8.0), far, 40.0),
-            sun: Some(Sun { direction: Vec3::new(0.3, 0.5, 0.2).normalize(), angular_diameter: 0.0093, irradiance: Vec3::splat(3.0) }),
+            sun: Some(Sun {
+                direction: Vec3::new(0.3, 0.5, 0.2).normalize(),
+                angular_diameter: 0.0093,
+                irradiance: Vec3::splat(3.0),
+            }),
             sky: Sky { radiance: Vec3::ZERO },
         };
         let film = render_frame(&blas, &lib, &scene, &settings(48, 32, 4), None).unwrap();
@@ -473,7 +531,10 @@ fn exr_round_trip() {
             FlatSamples::U32(_) => "uint",
         })
         .collect();
-    assert_eq!(types, ["half", "half", "half", "half", "half", "half", "half", "float", "uint", "half", "half", "half"]);
+    assert_eq!(
+        types,
+        ["half", "half", "half", "half", "half", "half", "half", "float", "uint", "half", "half", "half"]
+    );
     let attrs = &image.layer_data.attributes;
     assert!(attrs.software_name.as_ref().unwrap().to_string().starts_with("throng "));
     assert_eq!(image.layer_data.encoding.compression, Compression::ZIP16);
@@ -498,8 +559,9 @@ fn degenerate_crowd_at_one_point_traces_correctly() {
     // trees must stay within obvhs' fixed traversal stack (validate checks depth).
     let lib = Library { meshes: vec![Mesh::cube("cube")], materials: vec![Material::default()], textures: vec![] };
     let blas = BlasSet::build(&lib);
-    let instances: Vec<Instance> =
-        (0..20_000).map(|i| instance(0, 0, Affine3A::from_translation(Vec3::new(0.0, 0.5, 0.0)), Some(i), vis::ALL)).collect();
+    let instances: Vec<Instance> = (0..20_000)
+        .map(|i| instance(0, 0, Affine3A::from_translation(Vec3::new(0.0, 0.5, 0.0)), Some(i), vis::ALL))
+        .collect();
     for kind in [TlasKind::Bvh2, TlasKind::CwBvh] {
         let tlas = Tlas::build_with(&blas, &instances, kind);
         tlas.validate();
@@ -523,7 +585,9 @@ fn degenerate_mesh_triangles_are_dropped() {
     blas.validate();
     assert_eq!(blas.get(0).unwrap().triangle_count(), 1);
     let tlas = Tlas::build(&blas, &[instance(0, 0, Affine3A::IDENTITY, None, vis::ALL)]);
-    let hit = tlas.intersect(&WorldRay { origin: Vec3::new(0.2, 0.2, 1.0), direction: -Vec3::Z, tmax: f32::INFINITY }, vis::ALL).unwrap();
+    let hit = tlas
+        .intersect(&WorldRay { origin: Vec3::new(0.2, 0.2, 1.0), direction: -Vec3::Z, tmax: f32::INFINITY }, vis::ALL)
+        .unwrap();
     assert_eq!(hit.triangle, 0);
 }
 
@@ -532,7 +596,12 @@ fn axis_aligned_rays_hit_shared_edges_and_signed_zeros() {
     // Regressions: obvhs' triangle test rejects barycentrics of -0.0 (a ray
     // exactly on a face diagonal went through the box), and a -0.0 direction
     // component made traversal miss.
-    let tri = Mesh { name: "t".into(), positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y], indices: vec![0, 1, 2], ..Default::default() };
+    let tri = Mesh {
+        name: "t".into(),
+        positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+        indices: vec![0, 1, 2],
+        ..Default::default()
+    };
     let lib = Library { meshes: vec![tri, Mesh::cube("cube")], materials: vec![Material::default()], textures: vec![] };
     let blas = BlasSet::build(&lib);
     let turned = Affine3A::from_rotation_y(PI); // object-space directions pick up -0.0 too
@@ -564,7 +633,13 @@ fn base_color_texture_reaches_the_albedo_aov() {
     let blas = BlasSet::build(&lib);
     let scene = FrameScene {
         instances: vec![instance(0, 0, Affine3A::IDENTITY, None, vis::ALL)],
-        camera: Camera { world_from_camera: Affine3A::from_rotation_translation(Quat::from_rotation_x(-PI / 2.0), Vec3::new(0.0, 3.0, 0.0)), yfov: 0.5 },
+        camera: Camera {
+            world_from_camera: Affine3A::from_rotation_translation(
+                Quat::from_rotation_x(-PI / 2.0),
+                Vec3::new(0.0, 3.0, 0.0),
+            ),
+            yfov: 0.5,
+        },
         sun: None,
         sky: Sky { radiance: Vec3::ONE },
     };
@@ -633,6 +708,7 @@ fn diffuse_only_is_lambert_furnace() {
     assert!(count > 200, "sphere covers too few pixels: {count}");
     // Without the flag the glossy sphere is not Lambert (Fresnel reflection adds energy).
     let film = render_frame(&blas, &lib, &scene, &RenderSettings { diffuse_only: false, ..s }, None).unwrap();
-    let gloss = film.rgba.iter().zip(&film.albedo).filter(|(_, a)| **a == [albedo; 3]).map(|(p, _)| p[0]).sum::<f32>() / count as f32;
+    let gloss = film.rgba.iter().zip(&film.albedo).filter(|(_, a)| **a == [albedo; 3]).map(|(p, _)| p[0]).sum::<f32>()
+        / count as f32;
     assert!((gloss - albedo).abs() > 0.01, "gloss {gloss}");
 }

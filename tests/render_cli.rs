@@ -3,25 +3,18 @@
 //! (skips whole files, re-renders a truncated one), errors and exit codes,
 //! and byte-identical output for 1 and 2 threads.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use throng::render::exr::{read_layer, ID_MAPPING};
 
 const FRAME: i32 = 1024;
 
-fn demo_shot() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("demo/shot.toml")
-}
+use common::demo_shot;
 
-fn throng(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_throng")).args(args).output().expect("throng runs")
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
+use common::{text, throng};
 
 fn ok(args: &[&str]) -> String {
     let out = throng(args);
@@ -39,7 +32,14 @@ fn ok(args: &[&str]) -> String {
 /// Runs a command that must fail with status 2 and returns its stderr.
 fn usage_error(args: &[&str]) -> String {
     let out = throng(args);
-    assert_eq!(out.status.code(), Some(2), "throng {} should exit 2:\n{}{}", args.join(" "), text(&out.stdout), text(&out.stderr));
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "throng {} should exit 2:\n{}{}",
+        args.join(" "),
+        text(&out.stdout),
+        text(&out.stderr)
+    );
     text(&out.stderr)
 }
 
@@ -65,7 +65,10 @@ fn files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
             if p.is_dir() {
                 walk(root, &p, out);
             } else {
-                out.insert(p.strip_prefix(root).expect("under root").to_path_buf(), std::fs::read(&p).expect("read file"));
+                out.insert(
+                    p.strip_prefix(root).expect("under root").to_path_buf(),
+                    std::fs::read(&p).expect("read file"),
+                );
             }
         }
     }
@@ -182,8 +185,18 @@ fn layers_render_resume_and_errors() {
     let shot = demo_shot();
     let frame = FRAME.to_string();
     let render = |extra: &[&str]| {
-        let mut args =
-            vec!["render", s(&shot), "--manifest", s(&manifest), "--frames", &frame, "--spp", "2", "--resolution", "64x36"];
+        let mut args = vec![
+            "render",
+            s(&shot),
+            "--manifest",
+            s(&manifest),
+            "--frames",
+            &frame,
+            "--spp",
+            "2",
+            "--resolution",
+            "64x36",
+        ];
         args.extend_from_slice(&["--png", "--out", s(&out)]);
         args.extend_from_slice(extra);
         ok(&args)
@@ -321,8 +334,22 @@ fn output_is_byte_identical_including_header_order() {
     for threads in ["1", "2"] {
         let out = tmp.path().join(format!("threads{threads}"));
         ok(&[
-            "render", s(&shot), "--manifest", s(&manifest), "--layer", "crowd0", "--frames", &frame, "--spp", "2",
-            "--resolution", "64x36", "--threads", threads, "--out", s(&out),
+            "render",
+            s(&shot),
+            "--manifest",
+            s(&manifest),
+            "--layer",
+            "crowd0",
+            "--frames",
+            &frame,
+            "--spp",
+            "2",
+            "--resolution",
+            "64x36",
+            "--threads",
+            threads,
+            "--out",
+            s(&out),
         ]);
         outs.push(files(&out));
     }

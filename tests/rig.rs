@@ -2,11 +2,13 @@
 //! computed here by hand from its keyframes) and rigs against a hand-made
 //! fixture (tests/fixtures/rig_small.gltf, written by make_rig_small.py).
 
+mod common;
+
 use glam::{Quat, Vec3, Vec4};
-use throng::rig::{Animated, Channel, Interpolation, Property, Rig};
+use throng::casting::rig::{Animated, Channel, Interpolation, Property, Rig};
 
 fn fixture(name: &str) -> String {
-    format!("{}/tests/fixtures/{name}", env!("CARGO_MANIFEST_DIR"))
+    common::fixture(name).display().to_string()
 }
 
 fn interpolation_test() -> Animated {
@@ -310,7 +312,8 @@ fn hierarchy_composes_rotations() {
     let head = slot_at(&rig, "WalkA", 12.0, "head");
     let (_, rot, pos) = head.to_scale_rotation_translation();
     close3(pos, Vec3::new(0.0, 0.9 + 0.04 + 0.65, 0.0), "head position (Y axis turn keeps it on axis)");
-    let head_local = rig.cycle("WalkA").map(|c| c.sample(12.0, 24.0).local()[4].rotation).unwrap_or_else(|e| panic!("{e}"));
+    let head_local =
+        rig.cycle("WalkA").map(|c| c.sample(12.0, 24.0).local()[4].rotation).unwrap_or_else(|e| panic!("{e}"));
     same_rotation(rot, Quat::from_rotation_y(30f32.to_radians()) * head_local, "head rotation");
     // The tail hangs 0.2 m behind the hips: after a 30 degree turn it swings in X.
     let pose = rig.cycle("WalkA").map(|c| c.sample(12.0, 24.0)).unwrap_or_else(|e| panic!("{e}"));
@@ -349,7 +352,8 @@ fn cycles_loop() {
 
 #[test]
 fn non_rig_files_are_rejected_with_a_reason() {
-    let err = Rig::load(fixture("InterpolationTest/InterpolationTest.gltf")).err().map(|e| e.to_string()).unwrap_or_default();
+    let err =
+        Rig::load(fixture("InterpolationTest/InterpolationTest.gltf")).err().map(|e| e.to_string()).unwrap_or_default();
     assert!(err.contains("root"), "{err}");
     let err = Rig::load(fixture("missing.glb")).err().map(|e| e.to_string()).unwrap_or_default();
     assert!(err.contains("missing.glb"), "{err}");
@@ -376,7 +380,9 @@ fn broken_rig(edit: impl FnOnce(&mut serde_json::Value)) -> String {
 #[test]
 fn malformed_animation_data_is_an_error() {
     // Sampler input pointing at a VEC3 accessor.
-    let err = broken_rig(|j| j["animations"][0]["samplers"][0]["input"] = j["animations"][0]["samplers"][0]["output"].clone());
+    let err = broken_rig(|j| {
+        j["animations"][0]["samplers"][0]["input"] = j["animations"][0]["samplers"][0]["output"].clone()
+    });
     assert!(err.contains("WalkA") && err.contains("root") && err.contains("Scalar"), "{err}");
     // Output count that no longer matches the keys (and runs past its view).
     let err = broken_rig(|j| {

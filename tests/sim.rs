@@ -1,9 +1,11 @@
 //! Behaviour tests of the reference crowd simulation (`throng sim`): each
 //! rule of the Robots steering model, per-agent handles, determinism.
 
+mod common;
+
 use glam::Vec2;
-use throng::cache::Crowd;
-use throng::sim::{run, steer, Scene, Simulation};
+use throng::cache::CrowdCache;
+use throng::sim::{run, steer, SimScene, Simulation};
 
 const CYCLES: &str = r#"
 [cycles.WalkA]
@@ -21,24 +23,24 @@ stride = 0
 "#;
 
 /// A scene from a header (frames etc.) and a body (targets, agents, ...).
-fn scene(frames: (i32, i32), extra: &str) -> Scene {
+fn scene(frames: (i32, i32), extra: &str) -> SimScene {
     let text = format!("version = 1\nseed = 7\n[frames]\nstart = {}\nend = {}\n{CYCLES}\n{extra}", frames.0, frames.1);
-    match Scene::parse(&text, "test.toml") {
+    match SimScene::parse(&text, "test.toml") {
         Ok(s) => s,
         Err(e) => panic!("{e}\n{text}"),
     }
 }
 
-fn pos(c: &Crowd, frame: usize, agent: usize) -> Vec2 {
+fn pos(c: &CrowdCache, frame: usize, agent: usize) -> Vec2 {
     let p = c.frames[frame].agents[agent].position;
     Vec2::new(p.x, p.z)
 }
 
-fn heading(c: &Crowd, frame: usize, agent: usize) -> f32 {
+fn heading(c: &CrowdCache, frame: usize, agent: usize) -> f32 {
     c.frames[frame].agents[agent].heading
 }
 
-fn bits(c: &Crowd) -> Vec<u32> {
+fn bits(c: &CrowdCache) -> Vec<u32> {
     let mut out = Vec::new();
     for f in &c.frames {
         for a in &f.agents {
@@ -59,7 +61,7 @@ fn walker(id: u32, x: f32, z: f32, heading_deg: f32, extra: &str) -> String {
 // Obstacles: turn away, to the correct side.
 // ---------------------------------------------------------------------------
 
-fn obstacle_run(obstacle_x: f32) -> Crowd {
+fn obstacle_run(obstacle_x: f32) -> CrowdCache {
     // Facing +Z the agent's right is -X. The goal lies straight beyond the obstacle.
     let body = format!(
         "[[targets]]\nname = \"t\"\nposition = [0.0, 6.0]\nradius = 0.5\n{}\
@@ -69,7 +71,7 @@ fn obstacle_run(obstacle_x: f32) -> Crowd {
     run(&scene((1, 160), &body))
 }
 
-fn reaches(c: &Crowd, agent: usize, goal: Vec2, radius: f32) -> bool {
+fn reaches(c: &CrowdCache, agent: usize, goal: Vec2, radius: f32) -> bool {
     (0..c.frames.len()).any(|f| pos(c, f, agent).distance(goal) <= radius + 0.05)
 }
 
@@ -157,7 +159,7 @@ fn plane_wall_turns_agent_back() {
 // Agents: head-on agents pass, agents in line stay in line (chase).
 // ---------------------------------------------------------------------------
 
-fn file_of_walkers(chase: bool) -> Crowd {
+fn file_of_walkers(chase: bool) -> CrowdCache {
     let mut body = format!("[model]\nchase = {chase}\n[[targets]]\nname = \"far\"\nposition = [0.0, 200.0]\n");
     for k in 0..6 {
         // Centres 0.7 m apart (0.1 m gap) with a 1 cm sideways wobble.
@@ -331,7 +333,7 @@ fn walk_cycle_advances_with_distance_and_standers_stand() {
 }
 
 /// A scene whose cycle lengths and strides come from the demo rig files.
-fn rig_scene(frames: (i32, i32), cycles: &str, body: &str) -> Result<Scene, String> {
+fn rig_scene(frames: (i32, i32), cycles: &str, body: &str) -> Result<SimScene, String> {
     let rigs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/rigs");
     let text = format!(
         "version = 1\nseed = 7\n[frames]\nstart = {}\nend = {}\n\
@@ -341,7 +343,7 @@ fn rig_scene(frames: (i32, i32), cycles: &str, body: &str) -> Result<Scene, Stri
         rigs.join("bipedThinA.glb").display().to_string(),
         rigs.join("bipedTallB.glb").display().to_string(),
     );
-    Scene::parse(&text, "rigs.toml").map_err(|e| e.to_string())
+    SimScene::parse(&text, "rigs.toml").map_err(|e| e.to_string())
 }
 
 #[test]
@@ -351,7 +353,9 @@ fn cycle_advance_matches_each_rigs_stride() {
     let cycles = "[cycles.WalkA]\n[cycles.WalkB]\n";
     let mut body = String::new();
     for (k, (rig, cycle)) in
-        [("bipedThinA", "WalkA"), ("bipedTallB", "WalkA"), ("bipedThinA", "WalkB"), ("bipedTallB", "WalkB")].iter().enumerate()
+        [("bipedThinA", "WalkA"), ("bipedTallB", "WalkA"), ("bipedThinA", "WalkB"), ("bipedTallB", "WalkB")]
+            .iter()
+            .enumerate()
     {
         // Side by side, a few obstacles ahead so speeds vary below the full stride.
         body += &format!(
@@ -363,12 +367,20 @@ fn cycle_advance_matches_each_rigs_stride() {
     }
     let s = rig_scene((1, 120), cycles, &body).unwrap();
     let c = run(&s);
-    let figures = [("bipedThinA", "WalkA", 32.0, 1.5), ("bipedTallB", "WalkA", 32.0, 1.7), ("bipedThinA", "WalkB", 40.0, 1.9), ("bipedTallB", "WalkB", 40.0, 2.1)];
+    let figures = [
+        ("bipedThinA", "WalkA", 32.0, 1.5),
+        ("bipedTallB", "WalkA", 32.0, 1.7),
+        ("bipedThinA", "WalkB", 40.0, 1.9),
+        ("bipedTallB", "WalkB", 40.0, 2.1),
+    ];
     for (k, &(rig_name, cycle, frames, stride)) in figures.iter().enumerate() {
-        let rig = throng::rig::Rig::load(root.join(format!("demo/rigs/{rig_name}.glb"))).unwrap();
+        let rig = throng::casting::rig::Rig::load(root.join(format!("demo/rigs/{rig_name}.glb"))).unwrap();
         let clip = rig.cycle(cycle).unwrap();
         let (length, stride_rig) = (clip.frames(24.0), clip.stride());
-        assert!((length - frames).abs() < 1e-3 && (stride_rig - stride).abs() < 1e-3, "{rig_name} {cycle}: {length} frames, {stride_rig} m");
+        assert!(
+            (length - frames).abs() < 1e-3 && (stride_rig - stride).abs() < 1e-3,
+            "{rig_name} {cycle}: {length} frames, {stride_rig} m"
+        );
         let r = s.rigs.iter().position(|n| n == rig_name).unwrap() as u16;
         let ci = s.cycles.iter().position(|n| n.name == cycle).unwrap() as u16;
         assert_eq!(s.timing(r, ci), throng::sim::CycleTiming { length, stride: stride_rig });
@@ -382,7 +394,10 @@ fn cycle_advance_matches_each_rigs_stride() {
             }
             let dist = pos(&c, f, k).distance(pos(&c, f - 1, k));
             assert!(adv > 0.0 && adv <= 1.0 + 1e-4, "{rig_name} {cycle} frame {f}: advance {adv}");
-            assert!((dist / adv - stride_rig / length).abs() < 1e-4, "{rig_name} {cycle} frame {f}: {dist} m for {adv} frames");
+            assert!(
+                (dist / adv - stride_rig / length).abs() < 1e-4,
+                "{rig_name} {cycle} frame {f}: {dist} m for {adv} frames"
+            );
             walked += f64::from(dist);
             advanced += f64::from(adv);
         }
@@ -395,12 +410,17 @@ fn cycle_advance_matches_each_rigs_stride() {
 
 #[test]
 fn rig_files_precedence_and_errors() {
-    let walker = |rig: &str, cycle: &str| format!("[[agents]]\nid = 9\nposition = [0.0, 0.0]\nrig = \"{rig}\"\ncycle = \"{cycle}\"\n");
+    let walker = |rig: &str, cycle: &str| {
+        format!("[[agents]]\nid = 9\nposition = [0.0, 0.0]\nrig = \"{rig}\"\ncycle = \"{cycle}\"\n")
+    };
     // A rig without a file takes the explicit values; a rig with one, its clip.
     let s = rig_scene(
         (1, 2),
         "[cycles.WalkA]\n[cycles.RunZ]\nlength = 20\nstride = 3.0\n",
-        &format!("{}[[agents]]\nid = 10\nposition = [3.0, 0.0]\nrig = \"proxyBot\"\ncycle = \"RunZ\"\n", walker("bipedThinA", "WalkA")),
+        &format!(
+            "{}[[agents]]\nid = 10\nposition = [3.0, 0.0]\nrig = \"proxyBot\"\ncycle = \"RunZ\"\n",
+            walker("bipedThinA", "WalkA")
+        ),
     )
     .unwrap();
     let r = |n: &str| s.rigs.iter().position(|x| x == n).unwrap() as u16;
@@ -412,22 +432,27 @@ fn rig_files_precedence_and_errors() {
 
     // A cycle missing from a rig file: the message names the rig file and the key.
     let e = rig_scene((1, 2), "[cycles.RunZ]\n", &walker("bipedTallB", "RunZ")).unwrap_err();
-    assert!(e.contains("rigs.toml") && e.contains("bipedTallB.glb") && e.contains("RunZ") && e.contains("agents[0].cycle"), "{e}");
+    assert!(
+        e.contains("rigs.toml") && e.contains("bipedTallB.glb") && e.contains("RunZ") && e.contains("agents[0].cycle"),
+        "{e}"
+    );
     // Reached through `next`: the key is the `next` entry.
-    let e = rig_scene((1, 2), "[cycles.WalkA]\nnext = { RunZ = 1 }\n[cycles.RunZ]\n", &walker("bipedTallB", "WalkA")).unwrap_err();
+    let e = rig_scene((1, 2), "[cycles.WalkA]\nnext = { RunZ = 1 }\n[cycles.RunZ]\n", &walker("bipedTallB", "WalkA"))
+        .unwrap_err();
     assert!(e.contains("bipedTallB.glb") && e.contains("cycles.WalkA.next.RunZ"), "{e}");
     // ...and through a spawn mix.
     let spawn = "[[spawn]]\ncount = 2\nfirst_id = 1\nmin = [0.0, 0.0]\nmax = [2.0, 2.0]\nrigs = { bipedThinA = 1 }\ncycles = { RunZ = 1 }\n";
     let e = rig_scene((1, 2), "[cycles.RunZ]\n", spawn).unwrap_err();
     assert!(e.contains("bipedThinA.glb") && e.contains("spawn[0].cycles.RunZ"), "{e}");
     // Explicit values every user of which reads a file would be ignored: an error.
-    let e = rig_scene((1, 2), "[cycles.WalkA]\nlength = 28\nstride = 1.2\n", &walker("bipedThinA", "WalkA")).unwrap_err();
+    let e =
+        rig_scene((1, 2), "[cycles.WalkA]\nlength = 28\nstride = 1.2\n", &walker("bipedThinA", "WalkA")).unwrap_err();
     assert!(e.contains("cycles.WalkA.length") && e.contains("remove"), "{e}");
     // A rig without a file and no explicit value.
     let e = rig_scene((1, 2), "[cycles.WalkA]\n", &walker("proxyBot", "WalkA")).unwrap_err();
     assert!(e.contains("cycles.WalkA.length") && e.contains("proxyBot") && e.contains("agents[0].cycle"), "{e}");
     // A rig file that does not load.
-    let e = Scene::parse(
+    let e = SimScene::parse(
         &format!("version = 1\nseed = 1\n[frames]\nstart = 1\nend = 2\n[rigs]\nbipedThinA = \"nope.glb\"\n[cycles.WalkA]\n{}", walker("bipedThinA", "WalkA")),
         "dir/s.toml",
     )
@@ -435,7 +460,8 @@ fn rig_files_precedence_and_errors() {
     .to_string();
     assert!(e.contains("s.toml") && e.contains("rigs.bipedThinA") && e.contains("nope.glb"), "{e}");
     // Seated agents need a cycle that stands on their rig.
-    let e = rig_scene((1, 2), "[cycles.WalkA]\n", &format!("{}seated = true\n", walker("bipedThinA", "WalkA"))).unwrap_err();
+    let e = rig_scene((1, 2), "[cycles.WalkA]\n", &format!("{}seated = true\n", walker("bipedThinA", "WalkA")))
+        .unwrap_err();
     assert!(e.contains("stride 0") && e.contains("bipedThinA"), "{e}");
 }
 
@@ -447,7 +473,7 @@ fn cycles_switch_only_at_cycle_end() {
          [cycles.IdleA]\nlength = 48\nstride = 0\nnext = { IdleA = 1, WalkA = 1 }\n\
          [[spawn]]\ncount = 40\nfirst_id = 100\nmin = [-40.0, -40.0]\nmax = [40.0, 40.0]\nheading_jitter_deg = 180\n\
          rigs = { bipedThinA = 1 }\ncycles = { WalkA = 1, IdleA = 1 }\n";
-    let s = Scene::parse(text, "cycles.toml").unwrap();
+    let s = SimScene::parse(text, "cycles.toml").unwrap();
     let c = run(&s);
     let len = |k: u16| match c.cycles[k as usize].as_str() {
         "WalkA" => 32.0f32,
@@ -484,7 +510,7 @@ fn cycles_switch_only_at_cycle_end() {
 // Per-agent handles.
 // ---------------------------------------------------------------------------
 
-fn wall_pair(blind_weight: f32) -> Crowd {
+fn wall_pair(blind_weight: f32) -> CrowdCache {
     // Two agents far apart, each walking at its own wall.
     let body = format!(
         "{}{}[[walls]]\nfrom = [-2.0, 3.0]\nto = [2.0, 3.0]\n[[walls]]\nfrom = [48.0, 3.0]\nto = [52.0, 3.0]\n",
@@ -520,7 +546,7 @@ fn weights_change_only_that_agent() {
              rigs = {{ bipedThinA = 1 }}\ncycles = {{ WalkA = 1 }}\n\
              [[agents]]\nid = 1\nposition = [0.3, -1.6]\nrig = \"bipedThinA\"\ncycle = \"WalkA\"\n{w}\n"
         );
-        Scene::parse(&text, "w.toml").unwrap()
+        SimScene::parse(&text, "w.toml").unwrap()
     };
     let plain = crowd("");
     let keen = crowd("weights = { targets = 4.0, obstacles = 0.0, walls = 0.0, agents = 0.0 }");
@@ -534,7 +560,8 @@ fn weights_change_only_that_agent() {
     let (ca, cb) = (run(&plain), run(&keen));
     let mut far = 0;
     for i in 1..ca.frames[0].agents.len() {
-        let near = (0..ca.frames.len()).any(|f| pos(&ca, f, i).distance(pos(&ca, f, 0)) < 8.0 || pos(&cb, f, i).distance(pos(&cb, f, 0)) < 8.0);
+        let near = (0..ca.frames.len())
+            .any(|f| pos(&ca, f, i).distance(pos(&ca, f, 0)) < 8.0 || pos(&cb, f, i).distance(pos(&cb, f, 0)) < 8.0);
         if !near {
             far += 1;
             for f in 0..ca.frames.len() {
@@ -549,7 +576,7 @@ fn weights_change_only_that_agent() {
 // Determinism.
 // ---------------------------------------------------------------------------
 
-fn big_scene(seed: u64) -> Scene {
+fn big_scene(seed: u64) -> SimScene {
     let text = format!(
         "version = 1\nseed = {seed}\n[frames]\nstart = 1\nend = 24\nwarmup = 10\n{CYCLES}\n\
          [cycles.WalkA.next]\nWalkA = 3\nWalkB = 1\n\
@@ -557,7 +584,7 @@ fn big_scene(seed: u64) -> Scene {
          [[spawn]]\ncount = 1500\nfirst_id = 0\nmin = [-15.0, -15.0]\nmax = [15.0, 15.0]\nheading_jitter_deg = 180\n\
          rigs = {{ bipedThinA = 1, bipedTallB = 1 }}\ncycles = {{ WalkA = 3, WalkB = 2, IdleA = 1 }}\n"
     );
-    Scene::parse(&text, "det.toml").unwrap()
+    SimScene::parse(&text, "det.toml").unwrap()
 }
 
 #[test]
@@ -574,7 +601,7 @@ fn same_seed_same_crowd_any_thread_count() {
 }
 
 // ---------------------------------------------------------------------------
-// Scene file.
+// SimScene file.
 // ---------------------------------------------------------------------------
 
 #[test]
@@ -596,10 +623,13 @@ fn spawn_regions_fill_their_rectangle() {
 fn errors_name_file_key_and_agent() {
     let bad = |extra: &str| {
         let text = format!("version = 1\nseed = 1\n[frames]\nstart = 1\nend = 2\n{CYCLES}\n{extra}");
-        Scene::parse(&text, "bad.toml").unwrap_err().to_string()
+        SimScene::parse(&text, "bad.toml").unwrap_err().to_string()
     };
     let e = bad("[[agents]]\nid = 4\nposition = [0.0, 0.0]\nrig = \"r\"\ncycle = \"Nope\"\n");
-    assert!(e.contains("bad.toml") && e.contains("agent 4") && e.contains("agents[0].cycle") && e.contains("Nope"), "{e}");
+    assert!(
+        e.contains("bad.toml") && e.contains("agent 4") && e.contains("agents[0].cycle") && e.contains("Nope"),
+        "{e}"
+    );
     let e = bad("[[agents]]\nid = 4\nposition = [0.0, 0.0]\nrig = \"r\"\ncycle = \"WalkA\"\nspeeed = 3\n");
     assert!(e.contains("bad.toml:") && e.contains("speeed"), "{e}");
     let e = bad("[[agents]]\nid = 4\nposition = [0.0, 0.0]\nrig = \"r\"\ncycle = \"WalkA\"\nseated = true\n");
@@ -608,20 +638,21 @@ fn errors_name_file_key_and_agent() {
     assert!(e.contains("unknown target `x`"), "{e}");
     let e = bad("[[walls]]\nfrom = [0.0, 0.0]\n");
     assert!(e.contains("walls[0]"), "{e}");
-    let e = bad(
-        "[[agents]]\nid = 4\nposition = [0.0, 0.0]\nrig = \"r\"\ncycle = \"WalkA\"\n\
-         [[agents]]\nid = 4\nposition = [1.0, 0.0]\nrig = \"r\"\ncycle = \"WalkA\"\n",
-    );
+    let e = bad("[[agents]]\nid = 4\nposition = [0.0, 0.0]\nrig = \"r\"\ncycle = \"WalkA\"\n\
+         [[agents]]\nid = 4\nposition = [1.0, 0.0]\nrig = \"r\"\ncycle = \"WalkA\"\n");
     assert!(e.contains("used twice"), "{e}");
     let e = bad("[[spawn]]\ncount = 4000000000\nfirst_id = 0\nmin = [0.0, 0.0]\nmax = [1.0, 1.0]\nrigs = { r = 1 }\ncycles = { WalkA = 1 }\n");
     assert!(e.contains("spawn[0].count"), "{e}");
-    let e = Scene::parse("version = 1\nseed = 1\n[frames]\nstart = -2147483648\nend = 2147483647\n[cycles.W]\nlength = 1\nstride = 0\n", "f.toml")
-        .unwrap_err()
-        .to_string();
+    let e = SimScene::parse(
+        "version = 1\nseed = 1\n[frames]\nstart = -2147483648\nend = 2147483647\n[cycles.W]\nlength = 1\nstride = 0\n",
+        "f.toml",
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("f.toml") && e.contains("frames"), "{e}");
-    let e = Scene::parse("version = 2\n", "v.toml").unwrap_err().to_string();
+    let e = SimScene::parse("version = 2\n", "v.toml").unwrap_err().to_string();
     assert!(e.contains("v.toml") && e.contains("version"), "{e}");
-    let e = Scene::parse("version = 1\nseed = [\n", "s.toml").unwrap_err().to_string();
+    let e = SimScene::parse("version = 1\nseed = [\n", "s.toml").unwrap_err().to_string();
     assert!(e.contains("s.toml"), "{e}");
 }
 
@@ -649,19 +680,11 @@ fn same_seed_byte_identical_cache_file() {
 fn cli_writes_cache_and_reports() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("s.toml");
-    let text = format!(
-        "version = 1\nseed = 1\n[frames]\nstart = 1\nend = 10\n{CYCLES}\n{}",
-        walker(1, 0.0, 0.0, 0.0, "")
-    );
+    let text =
+        format!("version = 1\nseed = 1\n[frames]\nstart = 1\nend = 10\n{CYCLES}\n{}", walker(1, 0.0, 0.0, 0.0, ""));
     std::fs::write(&scene, text).unwrap();
     let out = dir.path().join("out.crowd");
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_throng"))
-        .arg("sim")
-        .arg(&scene)
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let run = common::throng(&["sim".as_ref(), scene.as_os_str(), "--out".as_ref(), out.as_os_str()]);
     assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(stdout.contains("1 agents") && stdout.contains("frames 1-10"), "{stdout}");
@@ -669,12 +692,13 @@ fn cli_writes_cache_and_reports() {
     assert_eq!(throng::cache::read(&out).unwrap().frames.len(), 10);
 
     // Bad scene: non-zero exit, message names the file and key, no cache.
-    std::fs::write(&scene, "version = 1\nseed = 1\nframes = { start = 1, end = 2 }\n[cycles.W]\nlength = 0\nstride = 1\n").unwrap();
+    std::fs::write(
+        &scene,
+        "version = 1\nseed = 1\nframes = { start = 1, end = 2 }\n[cycles.W]\nlength = 0\nstride = 1\n",
+    )
+    .unwrap();
     let bad_out = dir.path().join("bad.crowd");
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_throng"))
-        .args(["sim".as_ref(), scene.as_os_str(), "--out".as_ref(), bad_out.as_os_str()])
-        .output()
-        .unwrap();
+    let run = common::throng(&["sim".as_ref(), scene.as_os_str(), "--out".as_ref(), bad_out.as_os_str()]);
     assert!(!run.status.success());
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(stderr.contains("s.toml") && stderr.contains("cycles.W.length"), "{stderr}");
@@ -700,7 +724,7 @@ fn faster_walker_does_not_pass_through_slower_one() {
 #[test]
 fn demo_scene_matches_spec_and_committed_cache() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let s = Scene::load(root.join("demo/sim/demo.toml")).unwrap();
+    let s = SimScene::load(root.join("demo/sim/demo.toml")).unwrap();
     assert_eq!((s.start, s.end), (1, 48));
     assert!((290..=310).contains(&s.agents.len()));
     let c = run(&s);
@@ -723,7 +747,7 @@ fn demo_scene_matches_spec_and_committed_cache() {
     assert_eq!(rigs, ["bipedTallB", "bipedThinA"]);
     // Cycle lengths and strides are each rig's own clip's.
     for (r, name) in s.rigs.iter().enumerate() {
-        let rig = throng::rig::Rig::load(root.join(format!("demo/rigs/{name}.glb"))).unwrap();
+        let rig = throng::casting::rig::Rig::load(root.join(format!("demo/rigs/{name}.glb"))).unwrap();
         for (k, cycle) in s.cycles.iter().enumerate() {
             let clip = rig.cycle(&cycle.name).unwrap();
             let t = s.timing(r as u16, k as u16);
@@ -731,9 +755,10 @@ fn demo_scene_matches_spec_and_committed_cache() {
         }
     }
     // Walkers' feet do not slide: distance per cycle frame is their rig's stride / length.
-    let (rig_of, cycle_of) = (|i: u16| s.rigs.iter().position(|n| *n == c.rigs[i as usize]).unwrap() as u16, |i: u16| {
-        s.cycles.iter().position(|n| n.name == c.cycles[i as usize]).unwrap() as u16
-    });
+    let (rig_of, cycle_of) = (
+        |i: u16| s.rigs.iter().position(|n| *n == c.rigs[i as usize]).unwrap() as u16,
+        |i: u16| s.cycles.iter().position(|n| n.name == c.cycles[i as usize]).unwrap() as u16,
+    );
     let mut checked = 0;
     for f in 1..c.frames.len() {
         for (k, (a, b)) in c.frames[f - 1].agents.iter().zip(&c.frames[f].agents).enumerate() {

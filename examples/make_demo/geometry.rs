@@ -4,7 +4,7 @@
 
 use glam::{Quat, Vec3};
 use std::f32::consts::{FRAC_PI_2, PI, TAU};
-use throng::gltf_out::MeshData;
+use throng::export::glb::MeshData;
 
 /// Appends `b` to `a`.
 pub fn append(a: &mut MeshData, b: &MeshData) {

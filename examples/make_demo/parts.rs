@@ -4,8 +4,8 @@
 use crate::geometry::*;
 use glam::Vec3;
 use std::f32::consts::{FRAC_PI_2, PI};
-use throng::gltf_out::{GlbBuilder, MeshData, NodeDesc};
 use throng::error::Result;
+use throng::export::glb::{GlbBuilder, MeshData, NodeDesc};
 
 /// Segments around for round heads.
 const HEAD_SEGS: usize = 20;
@@ -70,11 +70,7 @@ pub fn heads() -> Vec<Part> {
             "head_bulb",
             merge(&[
                 lathe(
-                    &[
-                        cap(0.22, 0.0, false),
-                        line(0.22, 0.0, 0.22, 0.2),
-                        arc(0.6, 0.45, 0.45, -1.1, FRAC_PI_2, 10),
-                    ],
+                    &[cap(0.22, 0.0, false), line(0.22, 0.0, 0.22, 0.2), arc(0.6, 0.45, 0.45, -1.1, FRAC_PI_2, 10)],
                     HEAD_SEGS,
                 ),
                 eyes(0.65, 0.16, 0.4, 0.08),
@@ -120,8 +116,18 @@ pub fn heads() -> Vec<Part> {
                 sphere(0.09, 0.9, 10, 5),
             ])
         }),
-        part("head_can", merge(&[cylinder(0.4, 0.0, 0.9, HEAD_SEGS), cylinder(0.43, 0.82, 0.9, HEAD_SEGS), visor(0.5, 0.58, 0.25, 0.2, 0.42)])),
-        part("head_cone", merge(&[cone(0.45, 0.0, 0.05, 1.0, HEAD_SEGS), sphere(0.07, 1.0, 8, 5), eyes(0.3, 0.13, 0.33, 0.07)])),
+        part(
+            "head_can",
+            merge(&[
+                cylinder(0.4, 0.0, 0.9, HEAD_SEGS),
+                cylinder(0.43, 0.82, 0.9, HEAD_SEGS),
+                visor(0.5, 0.58, 0.25, 0.2, 0.42),
+            ]),
+        ),
+        part(
+            "head_cone",
+            merge(&[cone(0.45, 0.0, 0.05, 1.0, HEAD_SEGS), sphere(0.07, 1.0, 8, 5), eyes(0.3, 0.13, 0.33, 0.07)]),
+        ),
         part(
             "head_bucket",
             merge(&[
@@ -147,11 +153,7 @@ pub fn torsos() -> Vec<Part> {
         ),
         part("torso_barrel", {
             let barrel = lathe(
-                &[
-                    cap(0.38, 0.0, false),
-                    curve(12, |t| (0.38 + 0.1 * (PI * t).sin(), t)),
-                    cap(0.38, 1.0, true),
-                ],
+                &[cap(0.38, 0.0, false), curve(12, |t| (0.38 + 0.1 * (PI * t).sin(), t)), cap(0.38, 1.0, true)],
                 HEAD_SEGS,
             );
             let barrel = transform(&barrel, [1.0, 1.0, 0.75], glam::Quat::IDENTITY, [0.0; 3]);
@@ -172,17 +174,26 @@ pub fn limbs() -> Vec<Part> {
     let mut out = vec![part("upper_arm_box", cuboid([-0.05, -0.3, -0.05], [0.05, 0.0, 0.05]))];
     out.push(part(
         "lower_arm_box",
-        merge(&[cuboid([-0.045, -0.24, -0.045], [0.045, 0.0, 0.045]), cuboid([-0.05, -0.3, -0.06], [0.05, -0.24, 0.06])]),
+        merge(&[
+            cuboid([-0.045, -0.24, -0.045], [0.045, 0.0, 0.045]),
+            cuboid([-0.05, -0.3, -0.06], [0.05, -0.24, 0.06]),
+        ]),
     ));
     out.push(part("upper_leg_box", cuboid([-0.06, -0.3, -0.06], [0.06, 0.0, 0.06])));
     out.push(part(
         "lower_leg_box",
-        merge(&[cuboid([-0.055, -0.27, -0.055], [0.055, 0.0, 0.055]), cuboid([-0.065, -0.3, -0.07], [0.065, -0.27, 0.14])]),
+        merge(&[
+            cuboid([-0.055, -0.27, -0.055], [0.055, 0.0, 0.055]),
+            cuboid([-0.065, -0.3, -0.07], [0.065, -0.27, 0.14]),
+        ]),
     ));
     out.push(part("hips_box", cuboid([-0.5, -0.15, -0.25], [0.5, 0.15, 0.25])));
     // Cylinder style.
     out.push(part("upper_arm_cyl", cylinder(0.05, -0.3, 0.0, LIMB_SEGS)));
-    out.push(part("lower_arm_cyl", merge(&[cylinder(0.04, -0.25, 0.0, LIMB_SEGS), sphere(0.055, -0.25, LIMB_SEGS, 6)])));
+    out.push(part(
+        "lower_arm_cyl",
+        merge(&[cylinder(0.04, -0.25, 0.0, LIMB_SEGS), sphere(0.055, -0.25, LIMB_SEGS, 6)]),
+    ));
     out.push(part("upper_leg_cyl", cylinder(0.06, -0.3, 0.0, LIMB_SEGS)));
     out.push(part(
         "lower_leg_cyl",

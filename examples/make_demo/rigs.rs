@@ -6,7 +6,7 @@ use serde_json::json;
 use std::f32::consts::TAU;
 use std::path::Path;
 use throng::error::Result;
-use throng::gltf_out::{
+use throng::export::glb::{
     AnimationDesc, ChannelDesc, ChannelValues, GlbBuilder, Interpolation, MaterialDesc, NodeDesc, NodeId,
 };
 
@@ -152,7 +152,7 @@ fn slot_node(
     translation: [f32; 3],
     min: [f32; 3],
     max: [f32; 3],
-    material: throng::gltf_out::MaterialId,
+    material: throng::export::glb::MaterialId,
 ) -> Result<NodeId> {
     let mesh = glb.add_mesh(&format!("{rig}_{slot}_proxy"), &cuboid(min, max), Some(material))?;
     glb.add_node(
@@ -373,7 +373,9 @@ fn idle(n: &Nodes, clip: ClipSpec) -> AnimationDesc {
         node: n.torso,
         interpolation: Interpolation::Linear,
         times,
-        values: ChannelValues::Scale(phases.iter().map(|&p| [1.0, 1.0 + 0.012 * sin(p), 1.0 + 0.025 * sin(p)]).collect()),
+        values: ChannelValues::Scale(
+            phases.iter().map(|&p| [1.0, 1.0 + 0.012 * sin(p), 1.0 + 0.025 * sin(p)]).collect(),
+        ),
     });
     channels.push(rotation(n.torso, frames, move |p| q(0.0, 0.0, 0.025 * sin(p))));
     channels.push(rotation(n.hips, frames, move |p| q(0.0, 0.0, -0.015 * sin(p))));
@@ -383,7 +385,13 @@ fn idle(n: &Nodes, clip: ClipSpec) -> AnimationDesc {
         node: n.head,
         interpolation: Interpolation::Step,
         times: vec![t(0.0), t(12.0), t(24.0), t(36.0), t(frames as f32)],
-        values: ChannelValues::Rotation(vec![q(0.0, 0.0, 0.0), q(0.0, 0.35, 0.0), q(0.08, -0.25, 0.0), q(0.0, 0.0, 0.0), q(0.0, 0.0, 0.0)]),
+        values: ChannelValues::Rotation(vec![
+            q(0.0, 0.0, 0.0),
+            q(0.0, 0.35, 0.0),
+            q(0.08, -0.25, 0.0),
+            q(0.0, 0.0, 0.0),
+            q(0.0, 0.0, 0.0),
+        ]),
     });
     for side in 0..2 {
         let sign = if side == 0 { 1.0 } else { -1.0 };
@@ -429,9 +437,27 @@ pub fn build_rig(spec: &RigSpec) -> Result<Vec<u8>> {
     glb.set_generator("throng examples/make_demo.rs");
     let nodes = build_nodes(&mut glb, spec)?;
     // Bob is about leg * (1 - cos thigh): the hips drop when the legs are spread.
-    let walk_a = WalkStyle { thigh: 0.38, knee: 0.9, knee_rest: 0.08, arm: 0.35, elbow: 0.4, bob: 0.05, sway: 0.08, cubic_root: false };
+    let walk_a = WalkStyle {
+        thigh: 0.38,
+        knee: 0.9,
+        knee_rest: 0.08,
+        arm: 0.35,
+        elbow: 0.4,
+        bob: 0.05,
+        sway: 0.08,
+        cubic_root: false,
+    };
     // WalkB: a longer, slower, bouncier stride.
-    let walk_b = WalkStyle { thigh: 0.5, knee: 1.1, knee_rest: 0.1, arm: 0.5, elbow: 0.6, bob: 0.09, sway: 0.12, cubic_root: true };
+    let walk_b = WalkStyle {
+        thigh: 0.5,
+        knee: 1.1,
+        knee_rest: 0.1,
+        arm: 0.5,
+        elbow: 0.6,
+        bob: 0.09,
+        sway: 0.12,
+        cubic_root: true,
+    };
     glb.add_animation(&walk(&nodes, spec.walk_a, &walk_a))?;
     glb.add_animation(&walk(&nodes, spec.walk_b, &walk_b))?;
     glb.add_animation(&idle(&nodes, spec.idle))?;
@@ -448,4 +474,3 @@ pub fn write_rig(path: &Path, spec: &RigSpec) -> Result<()> {
         w.write_all(&bytes).at(path)
     })
 }
-

@@ -4,7 +4,7 @@
 use glam::Vec3;
 use std::path::Path;
 use throng::error::Result;
-use throng::gltf_out::{rotation_looking_along, GlbBuilder, MaterialDesc, MeshData, NodeDesc, Perspective};
+use throng::export::glb::{rotation_looking_along, GlbBuilder, MaterialDesc, MeshData, NodeDesc, Perspective};
 
 use crate::geometry::{cuboid, merge};
 
@@ -54,13 +54,55 @@ struct Building {
 
 /// Behind the agents (z in [-45, -35]) and at the sides (|x| in [25, 35]).
 const BUILDINGS: [Building; 7] = [
-    Building { name: "building_back_left", footprint: [-24.0, -45.0, -10.0, -36.0], height: 14.0, color: [0.45, 0.16, 0.1], windows: true },
-    Building { name: "building_back_mid", footprint: [-8.0, -44.0, 6.0, -37.0], height: 20.0, color: [0.55, 0.55, 0.52], windows: true },
-    Building { name: "building_back_right", footprint: [8.0, -45.0, 22.0, -35.0], height: 10.0, color: [0.1, 0.35, 0.35], windows: false },
-    Building { name: "building_left_far", footprint: [-35.0, -30.0, -26.0, -12.0], height: 16.0, color: [0.6, 0.42, 0.12], windows: true },
-    Building { name: "building_left_near", footprint: [-34.0, -8.0, -25.0, 8.0], height: 8.0, color: [0.25, 0.3, 0.38], windows: false },
-    Building { name: "building_right_far", footprint: [25.0, -32.0, 35.0, -14.0], height: 12.0, color: [0.7, 0.62, 0.45], windows: true },
-    Building { name: "building_right_near", footprint: [26.0, -10.0, 34.0, 6.0], height: 18.0, color: [0.12, 0.25, 0.14], windows: false },
+    Building {
+        name: "building_back_left",
+        footprint: [-24.0, -45.0, -10.0, -36.0],
+        height: 14.0,
+        color: [0.45, 0.16, 0.1],
+        windows: true,
+    },
+    Building {
+        name: "building_back_mid",
+        footprint: [-8.0, -44.0, 6.0, -37.0],
+        height: 20.0,
+        color: [0.55, 0.55, 0.52],
+        windows: true,
+    },
+    Building {
+        name: "building_back_right",
+        footprint: [8.0, -45.0, 22.0, -35.0],
+        height: 10.0,
+        color: [0.1, 0.35, 0.35],
+        windows: false,
+    },
+    Building {
+        name: "building_left_far",
+        footprint: [-35.0, -30.0, -26.0, -12.0],
+        height: 16.0,
+        color: [0.6, 0.42, 0.12],
+        windows: true,
+    },
+    Building {
+        name: "building_left_near",
+        footprint: [-34.0, -8.0, -25.0, 8.0],
+        height: 8.0,
+        color: [0.25, 0.3, 0.38],
+        windows: false,
+    },
+    Building {
+        name: "building_right_far",
+        footprint: [25.0, -32.0, 35.0, -14.0],
+        height: 12.0,
+        color: [0.7, 0.62, 0.45],
+        windows: true,
+    },
+    Building {
+        name: "building_right_near",
+        footprint: [26.0, -10.0, 34.0, 6.0],
+        height: 18.0,
+        color: [0.12, 0.25, 0.14],
+        windows: false,
+    },
 ];
 
 /// Vertical field of view for the shot's lens and aspect ratio.

@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 use throng::error::{write_atomic, Error, IoContext, Result};
-use throng::gltf_out::{GlbBuilder, MaterialDesc, MeshData, NodeDesc};
+use throng::export::glb::{GlbBuilder, MaterialDesc, MeshData, NodeDesc};
 
 use crate::parts::Part;
 
@@ -124,37 +124,120 @@ pub fn robots_toml(heads: &[Part], torsos: &[Part], limbs: &[Part]) -> String {
     let _ = writeln!(s, "[schemes.{scheme}]\nexclude = {}", toml_list(&LOWEND_EXCLUDE));
     let mats: &[&str] = &LOWEND_MATERIALS;
     for (mesh, weight) in LOWEND_HEADS {
-        push_entry(&mut s, scheme, &Entry { slot: "head", file: HEADS_GLB, mesh, weight, materials: mats, material_weights: Some(&[2.0, 2.0, 1.0, 1.0]) });
+        push_entry(
+            &mut s,
+            scheme,
+            &Entry {
+                slot: "head",
+                file: HEADS_GLB,
+                mesh,
+                weight,
+                materials: mats,
+                material_weights: Some(&[2.0, 2.0, 1.0, 1.0]),
+            },
+        );
     }
     for (mesh, weight) in [("torso_boxy", 2.0), ("torso_barrel", 1.0)] {
-        push_entry(&mut s, scheme, &Entry { slot: "torso", file: TORSOS_GLB, mesh, weight, materials: mats, material_weights: None });
+        push_entry(
+            &mut s,
+            scheme,
+            &Entry { slot: "torso", file: TORSOS_GLB, mesh, weight, materials: mats, material_weights: None },
+        );
     }
-    push_entry(&mut s, scheme, &Entry { slot: "hips", file: LIMBS_GLB, mesh: "hips_box", weight: 1.0, materials: &["rust", "paint_blue"], material_weights: None });
+    push_entry(
+        &mut s,
+        scheme,
+        &Entry {
+            slot: "hips",
+            file: LIMBS_GLB,
+            mesh: "hips_box",
+            weight: 1.0,
+            materials: &["rust", "paint_blue"],
+            material_weights: None,
+        },
+    );
     for (slot, prefix) in LIMB_SLOTS {
         let mesh = format!("{prefix}_box");
-        push_entry(&mut s, scheme, &Entry { slot, file: LIMBS_GLB, mesh: &mesh, weight: 1.0, materials: &["rust", "paint_blue", "paint_red"], material_weights: None });
+        push_entry(
+            &mut s,
+            scheme,
+            &Entry {
+                slot,
+                file: LIMBS_GLB,
+                mesh: &mesh,
+                weight: 1.0,
+                materials: &["rust", "paint_blue", "paint_red"],
+                material_weights: None,
+            },
+        );
     }
 
     // HighEnd: every part, every material.
     let scheme = "HighEnd";
     let _ = writeln!(s, "\n# Every head, torso and limb style; metals, paints, plastics and the hazard texture.");
     let _ = writeln!(s, "[schemes.{scheme}]\nexclude = []");
-    let head_mats: &[&str] = &["chrome", "copper", "gunmetal", "paint_red", "paint_teal", "plastic_white", "plastic_yellow", "hazard"];
+    let head_mats: &[&str] =
+        &["chrome", "copper", "gunmetal", "paint_red", "paint_teal", "plastic_white", "plastic_yellow", "hazard"];
     for h in heads {
-        push_entry(&mut s, scheme, &Entry { slot: "head", file: HEADS_GLB, mesh: h.name, weight: 1.0, materials: head_mats, material_weights: None });
+        push_entry(
+            &mut s,
+            scheme,
+            &Entry {
+                slot: "head",
+                file: HEADS_GLB,
+                mesh: h.name,
+                weight: 1.0,
+                materials: head_mats,
+                material_weights: None,
+            },
+        );
     }
-    let body_mats: &[&str] = &["chrome", "gunmetal", "paint_blue", "paint_teal", "plastic_white", "olive_drab", "rust", "hazard"];
+    let body_mats: &[&str] =
+        &["chrome", "gunmetal", "paint_blue", "paint_teal", "plastic_white", "olive_drab", "rust", "hazard"];
     let body_weights: &[f32] = &[2.0, 2.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.5];
     for t in torsos {
-        push_entry(&mut s, scheme, &Entry { slot: "torso", file: TORSOS_GLB, mesh: t.name, weight: 1.0, materials: body_mats, material_weights: Some(body_weights) });
+        push_entry(
+            &mut s,
+            scheme,
+            &Entry {
+                slot: "torso",
+                file: TORSOS_GLB,
+                mesh: t.name,
+                weight: 1.0,
+                materials: body_mats,
+                material_weights: Some(body_weights),
+            },
+        );
     }
     let limb_mats: &[&str] = &["chrome", "gunmetal", "copper", "plastic_white", "paint_red"];
     for l in limbs.iter().filter(|l| l.name.starts_with("hips_")) {
-        push_entry(&mut s, scheme, &Entry { slot: "hips", file: LIMBS_GLB, mesh: l.name, weight: 1.0, materials: limb_mats, material_weights: None });
+        push_entry(
+            &mut s,
+            scheme,
+            &Entry {
+                slot: "hips",
+                file: LIMBS_GLB,
+                mesh: l.name,
+                weight: 1.0,
+                materials: limb_mats,
+                material_weights: None,
+            },
+        );
     }
     for (slot, prefix) in LIMB_SLOTS {
         for l in limbs.iter().filter(|l| l.name.starts_with(prefix)) {
-            push_entry(&mut s, scheme, &Entry { slot, file: LIMBS_GLB, mesh: l.name, weight: 1.0, materials: limb_mats, material_weights: None });
+            push_entry(
+                &mut s,
+                scheme,
+                &Entry {
+                    slot,
+                    file: LIMBS_GLB,
+                    mesh: l.name,
+                    weight: 1.0,
+                    materials: limb_mats,
+                    material_weights: None,
+                },
+            );
         }
     }
     s
@@ -204,7 +287,11 @@ pub fn kenney_toml() -> String {
     s.push_str("\n[schemes.KenneyAlien]\nexclude = []\n");
     let file = format!("../{KENNEY_TURNED}");
     for (slot, mesh) in KENNEY_SLOTS {
-        push_entry(&mut s, "KenneyAlien", &Entry { slot, file: &file, mesh, weight: 1.0, materials: &["gltf"], material_weights: None });
+        push_entry(
+            &mut s,
+            "KenneyAlien",
+            &Entry { slot, file: &file, mesh, weight: 1.0, materials: &["gltf"], material_weights: None },
+        );
     }
     s
 }
@@ -231,8 +318,11 @@ pub fn write_kenney_turned(src: &Path, dst: &Path) -> Result<()> {
         let mut id = None;
         for prim in mesh.primitives() {
             let r = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-            let positions: Vec<[f32; 3]> =
-                r.read_positions().ok_or_else(|| Error::invalid(src, "primitive without POSITION").field(name.clone()))?.map(turn).collect();
+            let positions: Vec<[f32; 3]> = r
+                .read_positions()
+                .ok_or_else(|| Error::invalid(src, "primitive without POSITION").field(name.clone()))?
+                .map(turn)
+                .collect();
             let mut data = MeshData {
                 normals: r.read_normals().map(|n| n.map(turn).collect()).unwrap_or_default(),
                 uvs: r.read_tex_coords(0).map(|t| t.into_f32().collect()).unwrap_or_default(),

@@ -16,7 +16,7 @@ use std::sync::Mutex;
 use glam::Vec3;
 
 use super::{first_use_tables, lock, missing_frame, validate_frame, validate_frame_order, validate_names};
-use super::{AgentRecord, Crowd, FrameBlock};
+use super::{AgentSample, CrowdCache, FrameBlock};
 use crate::error::{write_atomic, Error, IoContext, Result};
 
 /// First 8 bytes of every `.crowd` file.
@@ -120,19 +120,26 @@ fn check_crc<'a>(path: &Path, bytes: &'a [u8], what: &str) -> Result<&'a [u8]> {
 
 fn parse_header(path: &Path, bytes: &[u8], file_len: u64) -> Result<Header> {
     let mut c = Cur::new(bytes);
-    let short = || Error::invalid(path, format!("truncated: {file_len} bytes, shorter than the {HEADER_LEN}-byte header"));
+    let short =
+        || Error::invalid(path, format!("truncated: {file_len} bytes, shorter than the {HEADER_LEN}-byte header"));
     let magic: [u8; 8] = c.arr().ok_or_else(short)?;
     if magic != MAGIC {
         return Err(Error::invalid(
             path,
-            format!("not a throng .crowd cache: bad magic {:?} (expected \"THRCROWD\")", String::from_utf8_lossy(&magic)),
+            format!(
+                "not a throng .crowd cache: bad magic {:?} (expected \"THRCROWD\")",
+                String::from_utf8_lossy(&magic)
+            ),
         ));
     }
     // The version is checked before the CRC so a newer file says so rather
     // than "corrupt": magic and version never move between versions.
     let version = c.u32().ok_or_else(short)?;
     if version != VERSION {
-        return Err(Error::invalid(path, format!("unknown .crowd version {version}; this throng reads version {VERSION}")));
+        return Err(Error::invalid(
+            path,
+            format!("unknown .crowd version {version}; this throng reads version {VERSION}"),
+        ));
     }
     let head = bytes.get(..HEADER_LEN as usize).ok_or_else(short)?;
     check_crc(path, head, "header")?;
@@ -196,12 +203,17 @@ fn parse_meta(path: &Path, bytes: &[u8], h: &Header, file_len: u64) -> Result<Me
         }
         next = e.offset + e.length;
         if next > file_len {
-            return Err(at(format!("truncated: the frame's block ends at byte {next} but the file is {file_len} bytes")));
+            return Err(at(format!(
+                "truncated: the frame's block ends at byte {next} but the file is {file_len} bytes"
+            )));
         }
         index.push(e);
     }
     if c.pos != payload.len() {
-        return Err(Error::invalid(path, format!("{} unexpected bytes at the end of the index", payload.len() - c.pos)));
+        return Err(Error::invalid(
+            path,
+            format!("{} unexpected bytes at the end of the index", payload.len() - c.pos),
+        ));
     }
     if next != file_len {
         return Err(Error::invalid(path, format!("{} trailing bytes after the last frame block", file_len - next)));
@@ -222,7 +234,7 @@ fn parse_block(path: &Path, bytes: &[u8], e: &IndexEntry, rigs: usize, cycles: u
     }
     let mut agents = Vec::with_capacity(count as usize);
     for _ in 0..count {
-        let mut r = || -> Option<(AgentRecord, [u8; 3])> {
+        let mut r = || -> Option<(AgentSample, [u8; 3])> {
             let id = c.u32()?;
             let position = Vec3::new(c.f32()?, c.f32()?, c.f32()?);
             let heading = c.f32()?;
@@ -230,7 +242,7 @@ fn parse_block(path: &Path, bytes: &[u8], e: &IndexEntry, rigs: usize, cycles: u
             let cycle = c.u16()?;
             let cycle_frame = c.f32()?;
             let flags = c.u8()?;
-            Some((AgentRecord { id, position, heading, rig, cycle, cycle_frame, flags }, c.arr()?))
+            Some((AgentSample { id, position, heading, rig, cycle, cycle_frame, flags }, c.arr()?))
         };
         let (a, pad) = r().ok_or_else(short)?;
         if pad != [0; 3] {
@@ -245,7 +257,7 @@ fn parse_block(path: &Path, bytes: &[u8], e: &IndexEntry, rigs: usize, cycles: u
 
 /// Parses a whole `.crowd` file held in memory. `path` only names the data
 /// in errors. Never panics on any input (see fuzz/).
-pub fn parse_bytes_named(path: &Path, bytes: &[u8]) -> Result<Crowd> {
+pub fn parse_bytes_named(path: &Path, bytes: &[u8]) -> Result<CrowdCache> {
     let file_len = bytes.len() as u64;
     let h = parse_header(path, bytes, file_len)?;
     let meta_bytes = bytes.get(HEADER_LEN as usize..(HEADER_LEN + h.meta_len) as usize).unwrap_or_default();
@@ -255,16 +267,16 @@ pub fn parse_bytes_named(path: &Path, bytes: &[u8]) -> Result<Crowd> {
         let block = bytes.get(e.offset as usize..(e.offset + e.length) as usize).unwrap_or_default();
         frames.push(parse_block(path, block, e, meta.rigs.len(), meta.cycles.len())?);
     }
-    Ok(Crowd { rigs: meta.rigs, cycles: meta.cycles, frames })
+    Ok(CrowdCache { rigs: meta.rigs, cycles: meta.cycles, frames })
 }
 
 /// Parses a whole `.crowd` file held in memory (the fuzz target's entry).
-pub fn parse_bytes(bytes: &[u8]) -> Result<Crowd> {
+pub fn parse_bytes(bytes: &[u8]) -> Result<CrowdCache> {
     parse_bytes_named(Path::new("<bytes>"), bytes)
 }
 
 /// Reads a whole `.crowd` file.
-pub fn read(path: &Path) -> Result<Crowd> {
+pub fn read(path: &Path) -> Result<CrowdCache> {
     BinaryReader::open(path)?.read_all()
 }
 
@@ -342,9 +354,9 @@ impl BinaryReader {
     }
 
     /// Reads every frame.
-    pub fn read_all(&self) -> Result<Crowd> {
+    pub fn read_all(&self) -> Result<CrowdCache> {
         let frames = self.index.iter().map(|e| self.read_entry(e)).collect::<Result<Vec<_>>>()?;
-        Ok(Crowd { rigs: self.rigs.clone(), cycles: self.cycles.clone(), frames })
+        Ok(CrowdCache { rigs: self.rigs.clone(), cycles: self.cycles.clone(), frames })
     }
 }
 
@@ -357,7 +369,7 @@ fn push_name(out: &mut Vec<u8>, name: &str) {
 /// Writes `crowd` as a `.crowd` file through [`write_atomic`], after
 /// [`super::validate`]; rig and cycle tables are written in first-use order.
 /// The output depends only on the crowd.
-pub fn write(path: &Path, crowd: &Crowd) -> Result<()> {
+pub fn write(path: &Path, crowd: &CrowdCache) -> Result<()> {
     super::validate(path, crowd)?;
     let too_big = |what: &str| Error::invalid(path, format!("too many {what} for one .crowd file"));
     let (rigs, rig_map, cycles, cycle_map) = first_use_tables(crowd);

@@ -16,7 +16,7 @@ use std::path::Path;
 
 use glam::Vec3;
 
-use super::{check_name, validate, validate_record, AgentRecord, Crowd, FrameBlock, HIDDEN, SEATED};
+use super::{check_name, validate, validate_record, AgentSample, CrowdCache, FrameBlock, HIDDEN, SEATED};
 use crate::error::{write_atomic, Error, IoContext, Result};
 
 /// The header line.
@@ -48,7 +48,7 @@ fn parse_flags(s: &str) -> std::result::Result<u8, String> {
 }
 
 /// Reads a CSV cache.
-pub fn read(path: &Path) -> Result<Crowd> {
+pub fn read(path: &Path) -> Result<CrowdCache> {
     let bytes = std::fs::read(path).at(path)?;
     match std::str::from_utf8(&bytes) {
         Ok(text) => parse_str(path, text),
@@ -72,18 +72,20 @@ fn intern(names: &mut Vec<String>, lookup: &mut HashMap<String, u16>, name: &str
 }
 
 /// Parses CSV text; `path` names it in errors.
-pub fn parse_str(path: &Path, text: &str) -> Result<Crowd> {
+pub fn parse_str(path: &Path, text: &str) -> Result<CrowdCache> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text); // spreadsheets add a BOM
     let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim_end_matches('\r')));
     match lines.next() {
         Some((_, h)) if h.split(',').map(str::trim).eq(COLUMNS) => {}
         Some((n, h)) => {
-            return Err(Error::invalid(path, format!("expected the header `{HEADER}`, found `{}`", h.escape_debug())).line(n))
+            return Err(
+                Error::invalid(path, format!("expected the header `{HEADER}`, found `{}`", h.escape_debug())).line(n)
+            )
         }
         None => return Err(Error::invalid(path, format!("empty file: expected the header `{HEADER}`")).line(1)),
     }
 
-    let mut crowd = Crowd::default();
+    let mut crowd = CrowdCache::default();
     let (mut rig_ids, mut cycle_ids) = (HashMap::new(), HashMap::new());
     let mut seen = HashSet::new(); // agent ids in the current frame
     for (n, line) in lines {
@@ -92,7 +94,9 @@ pub fn parse_str(path: &Path, text: &str) -> Result<Crowd> {
         }
         let cols: Vec<&str> = line.split(',').map(str::trim).collect();
         if cols.len() != COLUMNS.len() {
-            return Err(Error::invalid(path, format!("expected {} columns, found {}", COLUMNS.len(), cols.len())).line(n));
+            return Err(
+                Error::invalid(path, format!("expected {} columns, found {}", COLUMNS.len(), cols.len())).line(n)
+            );
         }
         let col = |i: usize| cols.get(i).copied().unwrap_or_default();
         let field_err = |i: usize, msg: String| {
@@ -102,15 +106,19 @@ pub fn parse_str(path: &Path, text: &str) -> Result<Crowd> {
         let num = |i: usize| -> Result<f32> {
             col(i).parse::<f32>().map_err(|_| field_err(i, format!("cannot read `{}` as a number", col(i))))
         };
-        let frame: i32 = col(0).parse().map_err(|_| field_err(0, format!("cannot read `{}` as a frame number", col(0))))?;
+        let frame: i32 =
+            col(0).parse().map_err(|_| field_err(0, format!("cannot read `{}` as a frame number", col(0))))?;
 
         // Start a new block when the frame changes; frames must increase.
         match crowd.frames.last() {
             Some(b) if b.frame == frame => {}
             Some(b) if b.frame > frame => {
-                return Err(Error::invalid(path, format!("frame {frame} follows frame {}; rows must be grouped by increasing frame", b.frame))
-                    .line(n)
-                    .frame(frame.into()))
+                return Err(Error::invalid(
+                    path,
+                    format!("frame {frame} follows frame {}; rows must be grouped by increasing frame", b.frame),
+                )
+                .line(n)
+                .frame(frame.into()))
             }
             _ => {
                 crowd.frames.push(FrameBlock { frame, agents: Vec::new() });
@@ -126,7 +134,7 @@ pub fn parse_str(path: &Path, text: &str) -> Result<Crowd> {
         let with_agent = |e: Error| e.frame(frame.into()).agent(id);
         let rig = intern(&mut crowd.rigs, &mut rig_ids, col(6)).map_err(|m| with_agent(field_err(6, m)))?;
         let cycle = intern(&mut crowd.cycles, &mut cycle_ids, col(7)).map_err(|m| with_agent(field_err(7, m)))?;
-        let a = AgentRecord {
+        let a = AgentSample {
             id,
             position: Vec3::new(num(2).map_err(with_agent)?, num(3).map_err(with_agent)?, num(4).map_err(with_agent)?),
             heading: num(5).map_err(with_agent)?,
@@ -151,7 +159,7 @@ pub fn parse_str(path: &Path, text: &str) -> Result<Crowd> {
 }
 
 /// Writes `crowd` as CSV through [`write_atomic`], after [`validate`].
-pub fn write(path: &Path, crowd: &Crowd) -> Result<()> {
+pub fn write(path: &Path, crowd: &CrowdCache) -> Result<()> {
     validate(path, crowd)?;
     let name = |names: &[String], i: u16| names.get(usize::from(i)).cloned().unwrap_or_default();
     write_atomic(path, |w| {

@@ -1,13 +1,13 @@
-//! `throng cache info` and `throng cache convert`.
+//! What a cache holds: frame range, agent counts, rigs, cycles and bounds
+//! (`throng cache info` prints it).
 
 use std::collections::{BTreeMap, HashSet};
 use std::fmt::Write as _;
 
 use serde::Serialize;
 
-use super::{read_with, write, CacheReader, Format, ImportOptions};
-use crate::cli::{CacheConvertArgs, CacheInfoArgs};
-use crate::error::{Error, Result};
+use super::{CacheReader, Format};
+use crate::error::Result;
 
 /// Usage of one rig or cycle.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -206,65 +206,4 @@ impl CacheInfo {
         }
         s
     }
-}
-
-/// `throng cache info FILE [--json]`: prints to stdout.
-pub fn cmd_info(args: &CacheInfoArgs) -> Result<()> {
-    let format = Format::of(&args.file)?;
-    let opts = match format {
-        Format::JuPedSim => ImportOptions::from_args(&args.import)?,
-        _ => ImportOptions::default(),
-    };
-    let reader = CacheReader::open_with(&args.file, &opts)?;
-    let mut info = info(&reader)?;
-    if format == Format::JuPedSim {
-        info.import = Some(ImportInfo {
-            rig: opts.rig.clone(),
-            cycle: opts.cycle.clone(),
-            stride: opts.stride(),
-            cycle_length: opts.cycle_length(),
-            rig_file: opts.rig_clip.as_ref().map(|c| c.file.display().to_string()),
-        });
-    }
-    if args.json {
-        let json = serde_json::to_string_pretty(&info).map_err(|e| Error::Usage(format!("cannot print JSON: {e}")))?;
-        println!("{json}");
-    } else {
-        print!("{}", info.to_text());
-        if format == Format::JuPedSim {
-            println!("{:<8} {}", "import", opts.describe());
-        }
-    }
-    Ok(())
-}
-
-/// `throng cache convert IN OUT`: reads IN whole, writes OUT atomically.
-pub fn cmd_convert(args: &CacheConvertArgs) -> Result<()> {
-    let (from, to) = (Format::of(&args.input)?, Format::of(&args.output)?);
-    if to == Format::JuPedSim {
-        return Err(Error::Usage(format!(
-            "{}: JuPedSim files are read only; convert to .crowd or .csv",
-            args.output.display()
-        )));
-    }
-    let opts = match from {
-        Format::JuPedSim => ImportOptions::from_args(&args.import)?,
-        _ => ImportOptions::default(),
-    };
-    let crowd = read_with(&args.input, &opts)?;
-    write(&args.output, &crowd)?;
-    let agents: HashSet<u32> = crowd.frames.iter().flat_map(|b| b.agents.iter().map(|a| a.id)).collect();
-    println!(
-        "wrote {} ({}): {} frames, {} agents, from {} ({})",
-        args.output.display(),
-        to.name(),
-        crowd.frames.len(),
-        agents.len(),
-        args.input.display(),
-        from.name()
-    );
-    if from == Format::JuPedSim {
-        println!("import: {}", opts.describe());
-    }
-    Ok(())
 }

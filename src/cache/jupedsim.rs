@@ -35,8 +35,7 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use rusqlite::{Connection, OpenFlags};
 
-use super::{validate, AgentRecord, Crowd, FrameBlock};
-use crate::cli::ImportArgs;
+use super::{validate, AgentSample, CrowdCache, FrameBlock};
 use crate::error::{Error, IoContext, Result};
 
 /// Stride (metres per walk cycle) when neither --stride nor a rig gives one.
@@ -47,7 +46,8 @@ pub const DEFAULT_CYCLE_LENGTH: f32 = 32.0;
 /// rig clip's length is `duration * SHOT_FPS` frames.
 pub const SHOT_FPS: f32 = 24.0;
 
-/// A walk cycle's length and stride read from a rig glTF (`--rig-file`).
+/// A walk cycle's length and stride read from a rig glTF (`--rig-file`;
+/// casting's `rig::import_clip` reads it, so the cache never loads rigs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct RigClip {
     /// The rig file.
@@ -56,38 +56,6 @@ pub struct RigClip {
     pub stride: f32,
     /// Clip length in frames at [`SHOT_FPS`].
     pub cycle_length: f32,
-}
-
-impl RigClip {
-    /// Reads cycle `cycle` of the rig in `file`. The rig's name (its top
-    /// node, the parent of `root`) must be `rig` when the file gives one, so
-    /// the cache does not name one rig and walk at another's stride.
-    pub fn load(file: &Path, rig: &str, cycle: &str) -> Result<RigClip> {
-        let r = crate::rig::Rig::load(file)?;
-        let h = r.hierarchy();
-        if let Some(top) = h.nodes.get(r.root()).and_then(|n| n.parent).and_then(|p| h.nodes.get(p)) {
-            if top.name != rig {
-                return Err(Error::invalid(
-                    file,
-                    format!("this is rig `{}` but --rig is `{rig}`; pass --rig {}", top.name, top.name),
-                )
-                .field("--rig"));
-            }
-        }
-        let c = r.cycle(cycle).map_err(|e| e.field("--cycle"))?;
-        let (stride, cycle_length) = (c.stride(), c.frames(SHOT_FPS));
-        if !(stride.is_finite() && stride > 0.0) {
-            return Err(Error::invalid(
-                file,
-                format!("cycle `{cycle}` has stride {stride} m (its root does not walk forward); pick a walk cycle with --cycle or pass --stride"),
-            )
-            .field("--cycle"));
-        }
-        if !(cycle_length.is_finite() && cycle_length > 0.0) {
-            return Err(Error::invalid(file, format!("cycle `{cycle}` is {cycle_length} frames long")).field("--cycle"));
-        }
-        Ok(RigClip { file: file.to_path_buf(), stride, cycle_length })
-    }
 }
 
 /// How imported trajectories become agents.
@@ -109,26 +77,27 @@ pub struct ImportOptions {
 
 impl Default for ImportOptions {
     fn default() -> Self {
-        ImportOptions { rig: "bipedThinA".into(), cycle: "WalkA".into(), stride: None, cycle_length: None, rig_clip: None }
+        ImportOptions {
+            rig: "bipedThinA".into(),
+            cycle: "WalkA".into(),
+            stride: None,
+            cycle_length: None,
+            rig_clip: None,
+        }
     }
 }
 
 impl ImportOptions {
-    /// Options from the command line.
-    pub fn from_args(args: &ImportArgs) -> Result<ImportOptions> {
-        let mut opts = ImportOptions {
-            rig: args.rig.clone(),
-            cycle: args.cycle.clone(),
-            stride: args.stride,
-            cycle_length: args.cycle_length,
-            rig_clip: None,
-        };
-        opts.check()?;
-        if let Some(file) = &args.rig_file {
-            // Only what the flags leave open is needed from the rig, but a
-            // bad rig file or cycle is an error either way.
-            opts.rig_clip = Some(RigClip::load(file, &opts.rig, &opts.cycle)?);
-        }
+    /// Checked options: every agent gets `rig` and `cycle`; `stride` and
+    /// `cycle_length` override what `rig_clip` (the rig file's cycle) says.
+    pub fn new(
+        rig: &str,
+        cycle: &str,
+        stride: Option<f32>,
+        cycle_length: Option<f32>,
+        rig_clip: Option<RigClip>,
+    ) -> Result<ImportOptions> {
+        let opts = ImportOptions { rig: rig.to_string(), cycle: cycle.to_string(), stride, cycle_length, rig_clip };
         opts.check()?;
         Ok(opts)
     }
@@ -250,14 +219,15 @@ fn has_table(conn: &Connection, path: &Path, name: &str) -> Result<bool> {
 }
 
 /// Imports a JuPedSim trajectory file.
-pub fn read(path: &Path, opts: &ImportOptions) -> Result<Crowd> {
+pub fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
     opts.check()?;
     std::fs::metadata(path).at(path)?; // a clear "not found" before SQLite's message
     let conn = Connection::open_with_flags(path, OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX)
         .map_err(sql_err(path))?;
     if !has_table(&conn, path, "trajectory_data")? {
-        return Err(Error::invalid(path, "no `trajectory_data` table: not a JuPedSim trajectory file")
-            .field("trajectory_data"));
+        return Err(
+            Error::invalid(path, "no `trajectory_data` table: not a JuPedSim trajectory file").field("trajectory_data")
+        );
     }
     if has_table(&conn, path, "metadata")? {
         let version: Option<String> = conn
@@ -314,12 +284,12 @@ pub fn read(path: &Path, opts: &ImportOptions) -> Result<Crowd> {
     }
 
     let (stride, length) = (f64::from(opts.stride()), f64::from(opts.cycle_length()));
-    let mut frames: BTreeMap<i32, Vec<AgentRecord>> = BTreeMap::new();
+    let mut frames: BTreeMap<i32, Vec<AgentSample>> = BTreeMap::new();
     for (id, s) in &agents {
         let hs = headings(s);
         let cs = cycle_frames(*id, s, stride, length);
         for ((p, heading), cycle_frame) in s.iter().zip(hs).zip(cs) {
-            frames.entry(p.frame).or_default().push(AgentRecord {
+            frames.entry(p.frame).or_default().push(AgentSample {
                 id: *id,
                 position: Vec3::new(p.x as f32, 0.0, -p.y as f32),
                 heading,
@@ -331,7 +301,7 @@ pub fn read(path: &Path, opts: &ImportOptions) -> Result<Crowd> {
         }
     }
     // Agents were visited by increasing id, so each frame is in id order.
-    let crowd = Crowd {
+    let crowd = CrowdCache {
         rigs: vec![opts.rig.clone()],
         cycles: vec![opts.cycle.clone()],
         frames: frames.into_iter().map(|(frame, agents)| FrameBlock { frame, agents }).collect(),

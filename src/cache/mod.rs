@@ -1,9 +1,9 @@
 //! Simulation caches: per-frame agent states, read from our binary format,
-//! CSV, or a real simulator's output, into a [`Crowd`].
+//! CSV, or a real simulator's output, into a [`CrowdCache`].
 //!
 //! INTERFACE (shared by every stage; keep these types stable):
-//! - [`AgentRecord`], [`FrameBlock`], [`Crowd`] are the in-memory model.
-//! - `read(path) -> Result<Crowd>` and `write(path, &Crowd) -> Result<()>`
+//! - [`AgentSample`], [`FrameBlock`], [`CrowdCache`] are the in-memory model.
+//! - `read(path) -> Result<CrowdCache>` and `write(path, &CrowdCache) -> Result<()>`
 //!   choose the format by extension.
 //! - `CacheReader::open(path)` gives random access to single frames.
 
@@ -16,16 +16,16 @@ pub const HIDDEN: u8 = 2;
 
 /// One agent in one frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AgentRecord {
+pub struct AgentSample {
     /// Stable id, never renumbered.
     pub id: u32,
     /// Foot position in metres, Y up.
     pub position: Vec3,
     /// Radians about +Y; 0 faces +Z.
     pub heading: f32,
-    /// Index into [`Crowd::rigs`].
+    /// Index into [`CrowdCache::rigs`].
     pub rig: u16,
-    /// Index into [`Crowd::cycles`].
+    /// Index into [`CrowdCache::cycles`].
     pub cycle: u16,
     /// Frame within the cycle (fractional, in frames at the shot fps).
     pub cycle_frame: f32,
@@ -33,7 +33,7 @@ pub struct AgentRecord {
     pub flags: u8,
 }
 
-impl AgentRecord {
+impl AgentSample {
     /// Whether the agent is seated.
     pub fn seated(&self) -> bool {
         self.flags & SEATED != 0
@@ -50,15 +50,15 @@ pub struct FrameBlock {
     /// Cache frame number.
     pub frame: i32,
     /// Agents in cache order; ids are unique within a frame.
-    pub agents: Vec<AgentRecord>,
+    pub agents: Vec<AgentSample>,
 }
 
 /// A whole simulation cache in memory.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct Crowd {
-    /// Rig names, indexed by [`AgentRecord::rig`].
+pub struct CrowdCache {
+    /// Rig names, indexed by [`AgentSample::rig`].
     pub rigs: Vec<String>,
-    /// Cycle names, indexed by [`AgentRecord::cycle`].
+    /// Cycle names, indexed by [`AgentSample::cycle`].
     pub cycles: Vec<String>,
     /// Frames in strictly increasing order.
     pub frames: Vec<FrameBlock>,
@@ -79,7 +79,7 @@ use std::sync::Mutex;
 
 use crate::error::{Error, Result};
 
-pub use info::{cmd_convert, cmd_info, info, CacheInfo, NameCount};
+pub use info::{info, Bounds, CacheInfo, ImportInfo, NameCount};
 pub use jupedsim::ImportOptions;
 
 /// Longest rig or cycle name, in UTF-8 bytes.
@@ -123,12 +123,12 @@ impl Format {
 
 /// Reads a whole cache; the format comes from the extension. JuPedSim files
 /// are imported with [`ImportOptions::default`].
-pub fn read(path: impl AsRef<Path>) -> Result<Crowd> {
+pub fn read(path: impl AsRef<Path>) -> Result<CrowdCache> {
     read_with(path, &ImportOptions::default())
 }
 
 /// Reads a whole cache, importing simulator files with `opts`.
-pub fn read_with(path: impl AsRef<Path>, opts: &ImportOptions) -> Result<Crowd> {
+pub fn read_with(path: impl AsRef<Path>, opts: &ImportOptions) -> Result<CrowdCache> {
     let path = path.as_ref();
     match Format::of(path)? {
         Format::Binary => binary::read(path),
@@ -142,15 +142,14 @@ pub fn read_with(path: impl AsRef<Path>, opts: &ImportOptions) -> Result<Crowd> 
 /// files store the rig and cycle tables in order of first use (see
 /// [`first_use_tables`]), so `read(write(c)) == c` when `c` is already in
 /// that order.
-pub fn write(path: impl AsRef<Path>, crowd: &Crowd) -> Result<()> {
+pub fn write(path: impl AsRef<Path>, crowd: &CrowdCache) -> Result<()> {
     let path = path.as_ref();
     match Format::of(path)? {
         Format::Binary => binary::write(path, crowd),
         Format::Csv => csv::write(path, crowd),
-        Format::JuPedSim => Err(Error::Usage(format!(
-            "{}: JuPedSim files are read only; write a .crowd or .csv cache",
-            path.display()
-        ))),
+        Format::JuPedSim => {
+            Err(Error::Usage(format!("{}: JuPedSim files are read only; write a .crowd or .csv cache", path.display())))
+        }
     }
 }
 
@@ -166,7 +165,7 @@ pub enum CacheReader {
         /// The file it came from (for error messages).
         path: PathBuf,
         /// The crowd.
-        crowd: Crowd,
+        crowd: CrowdCache,
         /// Its frame numbers, for [`CacheReader::frames`].
         frames: Vec<i32>,
     },
@@ -189,7 +188,7 @@ impl CacheReader {
     }
 
     /// Wraps an in-memory crowd (already validated) that came from `path`.
-    pub fn from_crowd(path: impl Into<PathBuf>, crowd: Crowd) -> CacheReader {
+    pub fn from_crowd(path: impl Into<PathBuf>, crowd: CrowdCache) -> CacheReader {
         let frames = crowd.frames.iter().map(|b| b.frame).collect();
         CacheReader::Memory { path: path.into(), crowd, frames }
     }
@@ -202,7 +201,7 @@ impl CacheReader {
         }
     }
 
-    /// Rig names, indexed by [`AgentRecord::rig`].
+    /// Rig names, indexed by [`AgentSample::rig`].
     pub fn rigs(&self) -> &[String] {
         match self {
             CacheReader::Binary(r) => r.rigs(),
@@ -210,7 +209,7 @@ impl CacheReader {
         }
     }
 
-    /// Cycle names, indexed by [`AgentRecord::cycle`].
+    /// Cycle names, indexed by [`AgentSample::cycle`].
     pub fn cycles(&self) -> &[String] {
         match self {
             CacheReader::Binary(r) => r.cycles(),
@@ -237,8 +236,8 @@ impl CacheReader {
         }
     }
 
-    /// Reads every frame into a [`Crowd`].
-    pub fn read_all(&self) -> Result<Crowd> {
+    /// Reads every frame into a [`CrowdCache`].
+    pub fn read_all(&self) -> Result<CrowdCache> {
         match self {
             CacheReader::Binary(r) => r.read_all(),
             CacheReader::Memory { crowd, .. } => Ok(crowd.clone()),
@@ -290,7 +289,7 @@ pub fn validate_names(path: &Path, kind: &str, names: &[String]) -> Result<()> {
 
 /// Checks one agent record: finite numbers, known rig and cycle, no
 /// reserved flag bits. The error names the frame and agent.
-pub fn validate_record(path: &Path, frame: i32, a: &AgentRecord, rigs: usize, cycles: usize) -> Result<()> {
+pub fn validate_record(path: &Path, frame: i32, a: &AgentSample, rigs: usize, cycles: usize) -> Result<()> {
     let bad = |msg: String, field: &str| Err(Error::invalid(path, msg).frame(frame.into()).agent(a.id).field(field));
     for (v, field) in [(a.position.x, "x"), (a.position.y, "y"), (a.position.z, "z")] {
         if !v.is_finite() {
@@ -335,8 +334,9 @@ pub fn validate_frame_order(path: &Path, frames: impl IntoIterator<Item = i32>) 
     for f in frames {
         if let Some(p) = prev {
             if f <= p {
-                return Err(Error::invalid(path, format!("frame {f} follows frame {p}; frames must increase"))
-                    .frame(f.into()));
+                return Err(
+                    Error::invalid(path, format!("frame {f} follows frame {p}; frames must increase")).frame(f.into())
+                );
             }
         }
         prev = Some(f);
@@ -346,7 +346,7 @@ pub fn validate_frame_order(path: &Path, frames: impl IntoIterator<Item = i32>) 
 
 /// The checks every reader (and [`write`]) applies: names, frame order, and
 /// every frame's records. `path` names the file in errors.
-pub fn validate(path: &Path, crowd: &Crowd) -> Result<()> {
+pub fn validate(path: &Path, crowd: &CrowdCache) -> Result<()> {
     validate_names(path, "rig", &crowd.rigs)?;
     validate_names(path, "cycle", &crowd.cycles)?;
     validate_frame_order(path, crowd.frames.iter().map(|b| b.frame))?;
@@ -360,7 +360,7 @@ pub fn validate(path: &Path, crowd: &Crowd) -> Result<()> {
 /// cache order), dropping unused names, with old-index -> new-index maps.
 /// This is the order CSV can reproduce, so binary -> CSV -> binary is
 /// byte-identical. Assumes a validated crowd (indices in range).
-pub fn first_use_tables(crowd: &Crowd) -> (Vec<String>, Vec<u16>, Vec<String>, Vec<u16>) {
+pub fn first_use_tables(crowd: &CrowdCache) -> (Vec<String>, Vec<u16>, Vec<String>, Vec<u16>) {
     fn table(names: &[String], used: impl Iterator<Item = u16>) -> (Vec<String>, Vec<u16>) {
         let mut map = vec![u16::MAX; names.len()];
         let mut out = Vec::new();
@@ -382,7 +382,7 @@ pub fn first_use_tables(crowd: &Crowd) -> (Vec<String>, Vec<u16>, Vec<String>, V
 
 /// `crowd` with its rig and cycle tables in first-use order (what a `.crowd`
 /// file stores). Assumes a validated crowd.
-pub fn canonical(crowd: &Crowd) -> Crowd {
+pub fn canonical(crowd: &CrowdCache) -> CrowdCache {
     let (rigs, rig_map, cycles, cycle_map) = first_use_tables(crowd);
     let remap = |map: &[u16], i: u16| map.get(usize::from(i)).copied().unwrap_or(i);
     let frames = crowd
@@ -393,11 +393,11 @@ pub fn canonical(crowd: &Crowd) -> Crowd {
             agents: b
                 .agents
                 .iter()
-                .map(|a| AgentRecord { rig: remap(&rig_map, a.rig), cycle: remap(&cycle_map, a.cycle), ..*a })
+                .map(|a| AgentSample { rig: remap(&rig_map, a.rig), cycle: remap(&cycle_map, a.cycle), ..*a })
                 .collect(),
         })
         .collect();
-    Crowd { rigs, cycles, frames }
+    CrowdCache { rigs, cycles, frames }
 }
 
 /// A poisoned lock still holds a usable file handle.

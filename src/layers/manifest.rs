@@ -27,12 +27,12 @@ pub enum Ranking {
 }
 
 /// Level of detail (shared with posing).
-pub use crate::pose::Lod;
+pub use crate::casting::Lod;
 
 /// A ray type an object is visible to; see [`crate::scene::vis`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-pub enum Ray {
+pub enum RayKind {
     /// Camera rays: colour and alpha.
     Camera,
     /// Shadow rays.
@@ -44,13 +44,13 @@ pub enum Ray {
 }
 
 /// [`vis`] bits of a ray list.
-pub fn vis_bits(rays: &[Ray]) -> u8 {
+pub fn vis_bits(rays: &[RayKind]) -> u8 {
     rays.iter().fold(0, |b, r| {
         b | match r {
-            Ray::Camera => vis::CAMERA,
-            Ray::Shadow => vis::SHADOW,
-            Ray::Indirect => vis::INDIRECT,
-            Ray::Holdout => vis::HOLDOUT,
+            RayKind::Camera => vis::CAMERA,
+            RayKind::Shadow => vis::SHADOW,
+            RayKind::Indirect => vis::INDIRECT,
+            RayKind::Holdout => vis::HOLDOUT,
         }
     })
 }
@@ -59,13 +59,13 @@ pub fn vis_bits(rays: &[Ray]) -> u8 {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Visibility {
     /// This layer's own (non-removed) agents.
-    pub own_agents: Vec<Ray>,
+    pub own_agents: Vec<RayKind>,
     /// Every other non-removed agent.
-    pub other_agents: Vec<Ray>,
+    pub other_agents: Vec<RayKind>,
     /// Other agents drawn as proxy boxes (else at their own LOD).
     pub other_agents_as_proxy: bool,
     /// The set.
-    pub set: Vec<Ray>,
+    pub set: Vec<RayKind>,
 }
 
 /// One crowd layer.
@@ -100,7 +100,7 @@ pub struct LayerRecord {
 impl LayerRecord {
     pub(crate) fn empty(index: usize, shared_bytes: u64, proxy_casters: bool) -> Self {
         LayerRecord {
-            name: format!("crowd{index}"),
+            name: crate::output::crowd_layer_name(index),
             index,
             agents: 0,
             rendered: 0,
@@ -112,10 +112,10 @@ impl LayerRecord {
             lod_proxy: 0,
             memory_bytes: shared_bytes,
             visibility: Visibility {
-                own_agents: vec![Ray::Camera, Ray::Shadow, Ray::Indirect],
-                other_agents: vec![Ray::Shadow, Ray::Indirect],
+                own_agents: vec![RayKind::Camera, RayKind::Shadow, RayKind::Indirect],
+                other_agents: vec![RayKind::Shadow, RayKind::Indirect],
                 other_agents_as_proxy: proxy_casters,
-                set: vec![Ray::Holdout, Ray::Shadow, Ray::Indirect],
+                set: vec![RayKind::Holdout, RayKind::Shadow, RayKind::Indirect],
             },
         }
     }
@@ -134,14 +134,14 @@ pub struct SetRecord {
 impl SetRecord {
     pub(crate) fn new(proxy_casters: bool) -> Self {
         SetRecord {
-            name: "set".into(),
+            name: crate::output::SET_LAYER.into(),
             visibility: Visibility {
                 own_agents: Vec::new(),
                 // Agents' shadows and their reflections in the set belong to
                 // the set layer: crowd layers hold the set out.
-                other_agents: vec![Ray::Shadow, Ray::Indirect],
+                other_agents: vec![RayKind::Shadow, RayKind::Indirect],
                 other_agents_as_proxy: proxy_casters,
-                set: vec![Ray::Camera, Ray::Shadow, Ray::Indirect],
+                set: vec![RayKind::Camera, RayKind::Shadow, RayKind::Indirect],
             },
         }
     }
@@ -158,7 +158,7 @@ pub struct LodChange {
 
 /// One agent.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct AgentRecord {
+pub struct LayerAgent {
     /// Cache agent id.
     pub id: u32,
     /// Layer index.
@@ -188,7 +188,7 @@ pub struct AgentRecord {
     pub lod_changes: Vec<LodChange>,
 }
 
-impl AgentRecord {
+impl LayerAgent {
     /// LOD at a shot frame.
     pub fn lod_at(&self, frame: i32) -> Lod {
         match self.lod_changes.iter().rev().find(|c| c.frame <= frame).or(self.lod_changes.first()) {
@@ -306,7 +306,7 @@ pub struct Manifest {
     /// Crowd layers, nearest first.
     pub layers: Vec<LayerRecord>,
     /// Every ranked agent, sorted by id.
-    pub agents: Vec<AgentRecord>,
+    pub agents: Vec<LayerAgent>,
     /// Agents absent from every shot frame (in no layer).
     #[serde(default)]
     pub absent: Vec<u32>,
@@ -314,8 +314,19 @@ pub struct Manifest {
 
 impl Manifest {
     /// An agent by id.
-    pub fn agent(&self, id: u32) -> Option<&AgentRecord> {
+    pub fn agent(&self, id: u32) -> Option<&LayerAgent> {
         self.agents.binary_search_by_key(&id, |a| a.id).ok().map(|i| &self.agents[i])
+    }
+
+    /// The ids of a crowd layer's agents (removed agents left out), or the
+    /// crowd layer names when there is no such layer.
+    pub fn layer_agents(&self, name: &str) -> std::result::Result<std::collections::BTreeSet<u32>, Vec<String>> {
+        let index = self
+            .layers
+            .iter()
+            .position(|l| l.name == name)
+            .ok_or_else(|| self.layers.iter().map(|l| l.name.clone()).collect::<Vec<_>>())?;
+        Ok(self.agents.iter().filter(|a| a.layer == index && !a.removed).map(|a| a.id).collect())
     }
 
     /// A crowd layer by name.

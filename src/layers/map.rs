@@ -12,7 +12,7 @@ use glam::{Vec2, Vec3};
 use tiny_skia::{Color, FillRule, Mask, Paint, PathBuilder, Pixmap, Rect, Stroke, StrokeDash, Transform};
 
 use super::font;
-use super::manifest::{distance_range, format_bytes, AgentRecord, Lod, Manifest, Ranking};
+use super::manifest::{distance_range, format_bytes, LayerAgent, Lod, Manifest, Ranking};
 use crate::error::{write_atomic, Error, Result};
 
 /// What to draw.
@@ -227,8 +227,8 @@ pub fn draw_map(m: &Manifest, opts: &MapOptions, path: &Path) -> Result<()> {
 }
 
 /// Agents far to near, so nearer layers paint over farther ones.
-fn far_to_near(m: &Manifest) -> Vec<&AgentRecord> {
-    let mut v: Vec<&AgentRecord> = m.agents.iter().collect();
+fn far_to_near(m: &Manifest) -> Vec<&LayerAgent> {
+    let mut v: Vec<&LayerAgent> = m.agents.iter().collect();
     v.sort_by(|a, b| b.layer.cmp(&a.layer).then(b.distance_m.total_cmp(&a.distance_m)));
     v
 }

@@ -9,10 +9,12 @@
 //! fixed for the whole shot; `--per-frame` ranks on every frame only to count
 //! the pops for comparison.
 //!
-//! This module is pure: it works from a [`LayerInput`] (positions, heights,
-//! memory estimates, cameras), independent of cache and casting types.
+//! The ranking itself is pure: it works from a [`LayerInput`] (positions,
+//! heights, memory estimates, cameras), independent of cache and casting
+//! types; [`input`] builds that input from a cast shot.
 
 mod font;
+pub mod input;
 pub mod manifest;
 pub mod map;
 
@@ -25,9 +27,10 @@ use crate::error::{Error, Result};
 use crate::scene::Camera;
 use crate::shot::{parse_bytes, LayerSettings, SplitMode};
 
+pub use input::{build_layers, set_bounds, settings_with_overrides, LayerOverrides};
 pub use manifest::{
-    estimate_agent_memory, estimate_proxy_memory, format_bytes, read_manifest, summary, write_manifest, AgentRecord,
-    CameraRecord, LayerRecord, Lod, LodChange, Manifest, PartCost, Pops, Ranking, Ray, SetRecord, SplitRecord,
+    estimate_agent_memory, estimate_proxy_memory, format_bytes, read_manifest, summary, write_manifest, CameraRecord,
+    LayerAgent, LayerRecord, Lod, LodChange, Manifest, PartCost, Pops, Ranking, RayKind, SetRecord, SplitRecord,
     Visibility, MANIFEST_VERSION,
 };
 pub use map::{draw_map, render_map, MapOptions};
@@ -491,7 +494,7 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
             rec.distance_min_m = Some(rec.distance_min_m.map_or(s.distance, |d: f32| d.min(s.distance)));
             rec.distance_max_m = Some(rec.distance_max_m.map_or(s.distance, |d: f32| d.max(s.distance)));
         }
-        agents.push(AgentRecord {
+        agents.push(LayerAgent {
             id: a.id,
             layer: l,
             lod,
@@ -554,7 +557,9 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
         proxy_shadow_casters: input.settings.proxy_shadow_casters,
         camera: CameraRecord::new(cam, input.image_size),
         pops,
-        comp_order: std::iter::once("set".to_string()).chain(layers.iter().rev().map(|l| l.name.clone())).collect(),
+        comp_order: std::iter::once(crate::output::SET_LAYER.to_string())
+            .chain(layers.iter().rev().map(|l| l.name.clone()))
+            .collect(),
         set: SetRecord::new(input.settings.proxy_shadow_casters),
         layers,
         agents,
@@ -621,7 +626,7 @@ fn count_pops(input: &LayerInput, prep: &Prepared, full_lod: &dyn Fn(usize, &Sam
 /// Every agent's foot position at each shot frame (`None` where the cache
 /// has no record for it), sorted by id: the positions half of a
 /// [`LayerInput`]. Hidden agents count as present (they are still simulated).
-pub fn shot_positions(shot: &crate::shot::Shot, crowd: &crate::cache::Crowd) -> Vec<(u32, Vec<Option<Vec3>>)> {
+pub fn shot_positions(shot: &crate::shot::Shot, crowd: &crate::cache::CrowdCache) -> Vec<(u32, Vec<Option<Vec3>>)> {
     let frames: Vec<i32> = shot.frames.iter().collect();
     let mut by_id: std::collections::BTreeMap<u32, Vec<Option<Vec3>>> = Default::default();
     for (fi, &f) in frames.iter().enumerate() {
@@ -639,7 +644,7 @@ pub fn shot_positions(shot: &crate::shot::Shot, crowd: &crate::cache::Crowd) -> 
 /// and `info(id) -> (height_m, memory_full, memory_proxy)` from casting.
 pub fn shot_input(
     shot: &crate::shot::Shot,
-    crowd: &crate::cache::Crowd,
+    crowd: &crate::cache::CrowdCache,
     cameras: Option<Vec<Camera>>,
     settings: LayerSettings,
     options: LayerOptions,
@@ -675,33 +680,4 @@ pub fn shot_input(
 /// `<shot dir>/<shot name>.layers.json`.
 pub fn default_manifest_path(shot_path: &std::path::Path, shot_name: &str) -> PathBuf {
     shot_path.parent().unwrap_or(std::path::Path::new("")).join(format!("{shot_name}.layers.json"))
-}
-
-/// Applies `throng layers` flags over the shot's `[layers]` table.
-pub fn settings_with_args(
-    shot: &LayerSettings,
-    args: &crate::cli::LayersArgs,
-) -> Result<(LayerSettings, LayerOptions)> {
-    let mut s = shot.clone();
-    if let Some(c) = args.count {
-        s.split = SplitMode::Count;
-        s.count = c;
-    }
-    if let Some(c) = &args.cutoffs {
-        s.split = SplitMode::Cutoffs;
-        s.cutoffs = c.clone();
-    }
-    if let Some(b) = &args.budget {
-        parse_bytes(b).map_err(|m| Error::Usage(format!("--budget: {m}")))?;
-        s.split = SplitMode::Budget;
-        s.budget = Some(b.clone());
-    }
-    if args.ref_frame.is_some() {
-        s.ref_frame = args.ref_frame;
-    }
-    if let Some(px) = args.lod_px {
-        s.lod_full_min_px = px;
-    }
-    let options = LayerOptions { per_frame: args.per_frame, lod_per_frame: args.lod_per_frame, ..Default::default() };
-    Ok((s, options))
 }

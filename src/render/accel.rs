@@ -58,11 +58,8 @@ impl Blas {
             return Blas { bvh: CwBvh::default(), tris: Vec::new(), triangle_index: Vec::new() };
         }
         let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut Duration::default());
-        let (rt, triangle_index) = bvh
-            .primitive_indices
-            .iter()
-            .map(|&s| (RtTriangle::from(&tris[s as usize]), original[s as usize]))
-            .unzip();
+        let (rt, triangle_index) =
+            bvh.primitive_indices.iter().map(|&s| (RtTriangle::from(&tris[s as usize]), original[s as usize])).unzip();
         Blas { bvh, tris: rt, triangle_index }
     }
 
@@ -315,10 +312,11 @@ impl<'a> Tlas<'a> {
                 continue;
             }
             let bounds = world_bounds(&b.bounds(), m);
-            let key = [bounds.min.x, bounds.min.y, bounds.min.z, bounds.max.x, bounds.max.y, bounds.max.z].map(f32::to_bits);
+            let key =
+                [bounds.min.x, bounds.min.y, bounds.min.z, bounds.max.x, bounds.max.y, bounds.max.z].map(f32::to_bits);
             keyed.push((key, i as u32, bounds));
         }
-        keyed.sort_unstable_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+        keyed.sort_unstable_by_key(|a| (a.0, a.1));
         // Runs of equal keys are clusters; order them by their first instance.
         let mut runs: Vec<(u32, std::ops::Range<usize>)> = Vec::new();
         let mut at = 0;
@@ -419,13 +417,7 @@ impl<'a> Tlas<'a> {
         let b = self.blas.get(inst.mesh)?;
         let local = object_ray(inst, &world, world.tmax);
         let uv = b.tris[best.1 as usize].compute_barycentric(&local);
-        Some(Hit {
-            instance: inst.index,
-            triangle: b.triangle_index[best.1 as usize],
-            t: hit.t,
-            u: uv.x,
-            v: uv.y,
-        })
+        Some(Hit { instance: inst.index, triangle: b.triangle_index[best.1 as usize], t: hit.t, u: uv.x, v: uv.y })
     }
 
     /// True when any instance whose visibility shares a bit with `mask`

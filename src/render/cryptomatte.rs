@@ -136,8 +136,8 @@ impl RankAccumulator {
     /// `samples`, highest first, ties by id bits; unused ranks are (0, 0).
     pub fn write_ranked(&self, samples: u32, out: &mut [[f32; 2]]) {
         let mut order: [(u32, u32); ACCUMULATOR_CAPACITY] = [(0, 0); ACCUMULATOR_CAPACITY];
-        for i in 0..self.len {
-            order[i] = (self.counts[i], self.ids[i]);
+        for (i, o) in order.iter_mut().enumerate().take(self.len) {
+            *o = (self.counts[i], self.ids[i]);
         }
         let order = &mut order[..self.len];
         order.sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
@@ -288,9 +288,12 @@ pub fn decode_part(part: &RawPart, exr_path: &Path) -> Result<Vec<Cryptomatte>> 
                 .find_map(|suffix| part.channels.get(&format!("{name}{level:02}.{suffix}")))
         };
         let mut levels: Vec<[&Vec<f32>; 4]> = Vec::new();
-        while let (Some(r), Some(g), Some(b), Some(a)) =
-            (channel(levels.len(), 'R'), channel(levels.len(), 'G'), channel(levels.len(), 'B'), channel(levels.len(), 'A'))
-        {
+        while let (Some(r), Some(g), Some(b), Some(a)) = (
+            channel(levels.len(), 'R'),
+            channel(levels.len(), 'G'),
+            channel(levels.len(), 'B'),
+            channel(levels.len(), 'A'),
+        ) {
             levels.push([r, g, b, a]);
         }
         if levels.is_empty() {

@@ -210,7 +210,8 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
         }
     }
 
-    let encoding = Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing };
+    let encoding =
+        Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing };
     let image = Image::from_layer(Layer::new((w, h), attrs, encoding, channels));
     let mut bytes = Vec::new();
     image.write().to_buffered(std::io::Cursor::new(&mut bytes)).map_err(|e| exr_error(path, e))?;
@@ -314,7 +315,9 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
     };
 
     let attrs = &layer.attributes;
-    let other = |k: &str| attrs.other.get(&Text::new_or_none(k)?).or_else(|| image.attributes.other.get(&Text::new_or_none(k)?));
+    let other = |k: &str| {
+        attrs.other.get(&Text::new_or_none(k)?).or_else(|| image.attributes.other.get(&Text::new_or_none(k)?))
+    };
     let get_text = |k: &str| match other(k) {
         Some(AttributeValue::Text(t)) => Ok(t.to_string()),
         _ => Err(Error::invalid(path, format!("header attribute `{k}` is missing or not text")).field(k.to_string())),
@@ -328,9 +331,9 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
         shot: get_text("throng/shot")?,
         layer: get_text("throng/layer")?,
         frame: get_i32("throng/frame")?,
-        seed: seed_text
-            .parse()
-            .map_err(|_| Error::invalid(path, format!("throng/seed `{seed_text}` is not a number")).field("throng/seed"))?,
+        seed: seed_text.parse().map_err(|_| {
+            Error::invalid(path, format!("throng/seed `{seed_text}` is not a number")).field("throng/seed")
+        })?,
         spp: get_i32("throng/spp")?.max(0) as u32,
         id_mapping: get_text("throng/idMapping")?,
         world_to_camera: attrs.world_to_camera.unwrap_or_default(),
@@ -411,7 +414,8 @@ fn srgb_encode(linear: f32) -> u8 {
 
 /// Writes an 8-bit sRGB PNG preview: premultiplied RGB over black, clamped.
 pub fn write_preview_png(path: &Path, film: &Film) -> Result<()> {
-    let pixels: Vec<u8> = film.rgba.iter().flat_map(|p| [srgb_encode(p[0]), srgb_encode(p[1]), srgb_encode(p[2])]).collect();
+    let pixels: Vec<u8> =
+        film.rgba.iter().flat_map(|p| [srgb_encode(p[0]), srgb_encode(p[1]), srgb_encode(p[2])]).collect();
     let img = image::RgbImage::from_raw(film.width, film.height, pixels)
         .ok_or_else(|| Error::invalid(path, "film buffer does not match its size"))?;
     write_atomic(path, |out| {

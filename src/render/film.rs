@@ -261,17 +261,22 @@ fn check(blas: &BlasSet, lib: &Library, scene: &FrameScene, s: &RenderSettings) 
         return Err(Error::Usage("render spp must be at least 1".into()));
     }
     if blas.len() != lib.meshes.len() {
-        return Err(Error::invalid(here, format!(
-            "BLAS set has {} meshes but the library has {} (built from another library?)",
-            blas.len(),
-            lib.meshes.len()
-        )));
+        return Err(Error::invalid(
+            here,
+            format!(
+                "BLAS set has {} meshes but the library has {} (built from another library?)",
+                blas.len(),
+                lib.meshes.len()
+            ),
+        ));
     }
     let camera = &scene.camera;
     let fov_ok = camera.yfov > 0.0 && camera.yfov < std::f32::consts::PI; // false for NaN too
     let det = camera.world_from_camera.matrix3.determinant();
     if !fov_ok || !camera.world_from_camera.is_finite() || det.abs() < 1e-12 {
-        return Err(Error::invalid(here, format!("camera is degenerate (yfov {} rad)", scene.camera.yfov)).field("camera"));
+        return Err(
+            Error::invalid(here, format!("camera is degenerate (yfov {} rad)", scene.camera.yfov)).field("camera")
+        );
     }
     for (i, inst) in scene.instances.iter().enumerate() {
         let err = |msg: String| {

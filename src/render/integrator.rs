@@ -326,7 +326,13 @@ impl<'a> Integrator<'a> {
         self.lib.materials.get(index).unwrap_or(&self.default_material)
     }
 
-    fn trace_path(&self, mut origin: Vec3, mut dir: Vec3, sampler: &mut Sampler, counts: &mut RayCounts) -> SampleResult {
+    fn trace_path(
+        &self,
+        mut origin: Vec3,
+        mut dir: Vec3,
+        sampler: &mut Sampler,
+        counts: &mut RayCounts,
+    ) -> SampleResult {
         let mut out = SampleResult { z: f32::INFINITY, ..Default::default() };
         let mut radiance = Vec3::ZERO;
         let mut throughput = Vec3::ONE;

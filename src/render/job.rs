@@ -6,18 +6,16 @@
 //! layer; only the TLAS is rebuilt per (frame, layer).
 
 use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
+use crate::casting::{Lod, ShotCrowd};
 use crate::error::{Error, Result};
 use crate::layers::Manifest;
-use crate::pose::{Lod, ShotCrowd};
+use crate::output::{layer_path, FULL_LAYER};
 use crate::render::cryptomatte::CryptoNames;
 use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, RenderSettings};
 use crate::scene::{vis, FrameScene, Instance};
-
-/// The render that needs no manifest: the set and every agent, fully visible.
-pub const FULL_LAYER: &str = "full";
 
 /// What to render.
 #[derive(Debug, Clone)]
@@ -40,6 +38,25 @@ pub struct RenderJob {
     pub resolution: Option<[u32; 2]>,
     /// Cryptomatte output (`CryptoAgent`, `CryptoPart`).
     pub cryptomatte: CryptoOutput,
+}
+
+impl RenderJob {
+    /// A job for `layers` x `frames` at `spp` into `out`, with the defaults
+    /// of `throng render`: all cores, the shot's resolution, Cryptomatte in
+    /// the header, no resume, no PNG previews.
+    pub fn new(layers: Vec<String>, frames: Vec<i32>, spp: u32, out: PathBuf) -> RenderJob {
+        RenderJob {
+            layers,
+            frames,
+            spp,
+            threads: 0,
+            out,
+            resume: false,
+            png: false,
+            resolution: None,
+            cryptomatte: CryptoOutput::Header,
+        }
+    }
 }
 
 /// Whether and how a job writes Cryptomatte mattes.
@@ -81,11 +98,6 @@ pub struct RenderedLayer {
     pub instances: usize,
 }
 
-/// `OUT/<layer>/<shot>.<layer>.<frame:04>.exr`.
-pub fn layer_path(out: &Path, shot: &str, layer: &str, frame: i32) -> PathBuf {
-    out.join(layer).join(format!("{shot}.{layer}.{frame:04}.exr"))
-}
-
 /// Every rendered agent of a frame with its posed slots (world_from_slot):
 /// posed once per frame and shared by every layer's scene.
 pub struct PosedFrame {
@@ -110,7 +122,12 @@ impl PosedFrame {
 }
 
 /// The instances of one (frame, layer) render.
-pub fn frame_scene(crowd: &ShotCrowd, manifest: Option<&Manifest>, layer: &str, posed: &PosedFrame) -> Result<FrameScene> {
+pub fn frame_scene(
+    crowd: &ShotCrowd,
+    manifest: Option<&Manifest>,
+    layer: &str,
+    posed: &PosedFrame,
+) -> Result<FrameScene> {
     let frame = posed.frame;
     let mut instances: Vec<Instance> = Vec::new();
     let set_bits = if layer == FULL_LAYER {
@@ -204,7 +221,14 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
         for layer in &job.layers {
             let path = layer_path(&job.out, &crowd.shot.name, layer, frame);
             if job.resume && exr::read_layer(&path).is_ok() {
-                out.push(RenderedLayer { layer: layer.clone(), frame, path, skipped: true, seconds: 0.0, instances: 0 });
+                out.push(RenderedLayer {
+                    layer: layer.clone(),
+                    frame,
+                    path,
+                    skipped: true,
+                    seconds: 0.0,
+                    instances: 0,
+                });
                 continue;
             }
             let started = Instant::now();
@@ -216,9 +240,8 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
             let scene = frame_scene(crowd, manifest, layer, posed)?;
             // The layer index keys the random streams, so layers are
             // independent samples; `full` and `set` get fixed indices.
-            let index = manifest
-                .and_then(|m| m.comp_order.iter().position(|l| l == layer))
-                .unwrap_or(u32::MAX as usize) as u32;
+            let index =
+                manifest.and_then(|m| m.comp_order.iter().position(|l| l == layer)).unwrap_or(u32::MAX as usize) as u32;
             let settings = RenderSettings {
                 width: w,
                 height: h,

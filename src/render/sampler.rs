@@ -84,15 +84,8 @@ pub struct Sampler {
 impl Sampler {
     /// The sampler of sample `sample` of pixel (x, y).
     pub fn new(seed: u64, frame: i64, layer: u32, x: u32, y: u32, sample: u32) -> Sampler {
-        let pixel_key = hash_words(&[
-            seed as u32,
-            (seed >> 32) as u32,
-            frame as u32,
-            (frame >> 32) as u32,
-            layer,
-            x,
-            y,
-        ]);
+        let pixel_key =
+            hash_words(&[seed as u32, (seed >> 32) as u32, frame as u32, (frame >> 32) as u32, layer, x, y]);
         Sampler { pixel_key, sample, dimension: 0 }
     }
 

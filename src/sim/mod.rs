@@ -1,7 +1,7 @@
 //! Reference crowd simulation: the steering model of the Robots crowd system
 //! (Patterson 2005), so a lighter or a test can make a cache without a crowd
 //! department. `throng sim SCENE.toml --out FILE` reads a scene file, runs
-//! [`run`] and writes the [`Crowd`] with `cache::write`.
+//! [`run`] and writes the [`CrowdCache`] with `cache::write`.
 //!
 //! The per-frame algorithm, the scene file and the conventions are in
 //! docs/sim.md. In short: every frame each walking agent sums weighted,
@@ -22,7 +22,7 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use serde::Deserialize;
 
-use crate::cache::{AgentRecord, Crowd, FrameBlock, SEATED};
+use crate::cache::{AgentSample, CrowdCache, FrameBlock, SEATED};
 use crate::error::{Error, IoContext, Result};
 use rng::Purpose;
 use steer::{forward, heading_of, wrap_angle, Steer};
@@ -78,7 +78,7 @@ impl Default for Model {
 }
 
 /// An animation cycle as the simulation sees it: its name and what follows
-/// it. Its length and stride depend on the rig ([`Scene::timing`]).
+/// it. Its length and stride depend on the rig ([`SimScene::timing`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cycle {
     /// Name, as in the rigs' animations.
@@ -219,15 +219,15 @@ pub struct AgentSpec {
     pub position: Vec2,
     /// Start heading, radians.
     pub heading: f32,
-    /// Index into [`Scene::rigs`].
+    /// Index into [`SimScene::rigs`].
     pub rig: u16,
-    /// Start cycle, index into [`Scene::cycles`].
+    /// Start cycle, index into [`SimScene::cycles`].
     pub cycle: u16,
     /// Start cycle frame.
     pub cycle_frame: f32,
     /// Seated: never moves, never switches cycle.
     pub seated: bool,
-    /// Targets this agent visits, as a bit mask over [`Scene::targets`].
+    /// Targets this agent visits, as a bit mask over [`SimScene::targets`].
     pub targets: u64,
     /// Handles.
     pub weights: Weights,
@@ -237,7 +237,7 @@ pub struct AgentSpec {
 
 /// A simulation scene, validated.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Scene {
+pub struct SimScene {
     /// The file it came from (for messages).
     pub path: PathBuf,
     /// Seed of every random choice.
@@ -262,7 +262,7 @@ pub struct Scene {
     /// Cycles (sorted by name).
     pub cycles: Vec<Cycle>,
     /// Length and stride per (rig, cycle): index `rig * cycles.len() + cycle`
-    /// (see [`Scene::timing`]). Pairs no agent can reach hold a stand-in
+    /// (see [`SimScene::timing`]). Pairs no agent can reach hold a stand-in
     /// (1 frame, stride 0).
     pub timings: Vec<CycleTiming>,
     /// Targets in file order.
@@ -276,7 +276,7 @@ pub struct Scene {
 }
 
 // ---------------------------------------------------------------------------
-// Scene file
+// SimScene file
 // ---------------------------------------------------------------------------
 
 #[derive(Deserialize)]
@@ -430,16 +430,16 @@ fn default_jitter() -> f32 {
     0.8
 }
 
-impl Scene {
+impl SimScene {
     /// Reads and validates a scene file.
-    pub fn load(path: impl AsRef<Path>) -> Result<Scene> {
+    pub fn load(path: impl AsRef<Path>) -> Result<SimScene> {
         let path = path.as_ref();
         let text = std::fs::read_to_string(path).at(path)?;
-        Scene::parse(&text, path)
+        SimScene::parse(&text, path)
     }
 
     /// Parses and validates scene text; `path` names it in messages.
-    pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Scene> {
+    pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<SimScene> {
         let path = path.as_ref();
         // Check the version before the strict schema, so a future file says so.
         let table: toml::Table = toml::from_str(text).map_err(|e| Error::toml(path, text, e))?;
@@ -455,8 +455,8 @@ impl Scene {
         resolve(raw, path)
     }
 
-    /// Length and stride of `cycle` on `rig` (indices into [`Scene::rigs`]
-    /// and [`Scene::cycles`]).
+    /// Length and stride of `cycle` on `rig` (indices into [`SimScene::rigs`]
+    /// and [`SimScene::cycles`]).
     pub fn timing(&self, rig: u16, cycle: u16) -> CycleTiming {
         self.timings[rig as usize * self.cycles.len() + cycle as usize]
     }
@@ -494,7 +494,7 @@ fn weights(path: &Path, w: RawWeights, field: &str) -> Result<Weights> {
     })
 }
 
-fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
+fn resolve(raw: RawScene, path: &Path) -> Result<SimScene> {
     let _ = raw.version; // checked in parse
     check(path, raw.frames.end >= raw.frames.start, "frames.end", "must be >= frames.start")?;
     let warmup = i32::try_from(raw.frames.warmup)
@@ -516,7 +516,12 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
         chase: m.chase.unwrap_or(d.chase),
     };
     check(path, model.max_turn.is_finite() && model.max_turn > 0.0, "model.max_turn_deg", "must be > 0")?;
-    check(path, model.relax_distance.is_finite() && model.relax_distance >= 0.0, "model.relax_distance", "must be >= 0")?;
+    check(
+        path,
+        model.relax_distance.is_finite() && model.relax_distance >= 0.0,
+        "model.relax_distance",
+        "must be >= 0",
+    )?;
     check(path, model.falloff.is_finite() && model.falloff > 0.0, "model.falloff", "must be > 0")?;
     check(path, model.power.is_finite() && model.power > 0.0, "model.power", "must be > 0")?;
     check(path, (0.0..=1.0).contains(&model.min_speed), "model.min_speed", "must be in [0, 1]")?;
@@ -529,8 +534,7 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
     // per rig, after the agents (see `timings`).
     check(path, !raw.cycles.is_empty(), "cycles", "declare at least one cycle")?;
     check(path, raw.cycles.len() <= usize::from(u16::MAX), "cycles", "too many cycles")?;
-    let cycle_index: HashMap<&str, u16> =
-        raw.cycles.keys().enumerate().map(|(i, k)| (k.as_str(), i as u16)).collect();
+    let cycle_index: HashMap<&str, u16> = raw.cycles.keys().enumerate().map(|(i, k)| (k.as_str(), i as u16)).collect();
     let mut cycles = Vec::new();
     for (name, c) in &raw.cycles {
         let f = format!("cycles.{name}");
@@ -625,8 +629,9 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
                 WallShape::Plane { point: Vec2::from(p), normal: n.normalize() }
             }
             _ => {
-                return Err(Error::invalid(path, "a wall is a segment (`from`, `to`) or a plane (`point`, `normal`)")
-                    .field(f))
+                return Err(
+                    Error::invalid(path, "a wall is a segment (`from`, `to`) or a plane (`point`, `normal`)").field(f)
+                )
             }
         };
         walls.push(Wall { shape, radius: w.radius });
@@ -704,18 +709,27 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
         if !a.heading_deg.is_finite() {
             return Err(inv("must be finite".into(), "heading_deg"));
         }
-        let cycle = *cycle_index.get(a.cycle.as_str()).ok_or_else(|| inv(format!("unknown cycle `{}`", a.cycle), "cycle"))?;
+        let cycle =
+            *cycle_index.get(a.cycle.as_str()).ok_or_else(|| inv(format!("unknown cycle `{}`", a.cycle), "cycle"))?;
         let rig = rig_index[a.rig.as_str()];
         let c = timing(rig, cycle);
         if a.seated && c.moves() {
             return Err(inv(
-                format!("seated agents need a cycle with stride 0, `{}` walks {} m on rig `{}`", a.cycle, c.stride, a.rig),
+                format!(
+                    "seated agents need a cycle with stride 0, `{}` walks {} m on rig `{}`",
+                    a.cycle, c.stride, a.rig
+                ),
                 "cycle",
             ));
         }
         let cycle_frame = match a.cycle_frame {
             Some(cf) if cf.is_finite() && cf >= 0.0 && cf < c.length => cf,
-            Some(_) => return Err(inv(format!("must be in [0, {}) (`{}` on rig `{}`)", c.length, a.cycle, a.rig), "cycle_frame")),
+            Some(_) => {
+                return Err(inv(
+                    format!("must be in [0, {}) (`{}` on rig `{}`)", c.length, a.cycle, a.rig),
+                    "cycle_frame",
+                ))
+            }
             None => phase(a.id, rig, cycle),
         };
         agents.push(AgentSpec {
@@ -756,7 +770,12 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
             check(path, w.is_finite() && *w >= 0.0, format!("{f}.cycles.{n}"), "weight must be >= 0")?;
             cycle_mix.push((c, *w));
         }
-        check(path, cycle_mix.iter().any(|r| r.1 > 0.0), format!("{f}.cycles"), "give at least one cycle a weight > 0")?;
+        check(
+            path,
+            cycle_mix.iter().any(|r| r.1 > 0.0),
+            format!("{f}.cycles"),
+            "give at least one cycle a weight > 0",
+        )?;
         let mask = target_mask(&s.targets, &format!("{f}.targets"))?;
         let w = weights(path, s.weights, &format!("{f}.weights"))?;
         let r = radius(s.radius, format!("{f}.radius"))?;
@@ -808,7 +827,7 @@ fn resolve(raw: RawScene, path: &Path) -> Result<Scene> {
         }
     }
 
-    Ok(Scene {
+    Ok(SimScene {
         path: path.to_path_buf(),
         seed,
         start: raw.frames.start,
@@ -842,15 +861,15 @@ fn timings(
 ) -> Result<Vec<CycleTiming>> {
     let stand_in = CycleTiming { length: 1.0, stride: 0.0 };
     let mut out = vec![stand_in; rigs.len() * cycles.len()];
-    let mut loaded: Vec<Option<crate::rig::Rig>> = vec![None; rigs.len()];
+    let mut loaded: Vec<Option<crate::casting::rig::Rig>> = vec![None; rigs.len()];
     let mut explicit_used = vec![false; cycles.len()];
     for (&(r, c), key) in reach {
         let (rig_name, cycle) = (&rigs[r as usize], &cycles[c as usize]);
         let timing = match &rig_files[r as usize] {
             Some(file) => {
-                let rig: &crate::rig::Rig = match &mut loaded[r as usize] {
+                let rig: &crate::casting::rig::Rig = match &mut loaded[r as usize] {
                     Some(rig) => rig,
-                    slot @ None => slot.insert(crate::rig::Rig::load(file).map_err(|e| {
+                    slot @ None => slot.insert(crate::casting::rig::Rig::load(file).map_err(|e| {
                         Error::invalid(path, format!("rig `{rig_name}`: {e}")).field(format!("rigs.{rig_name}"))
                     })?),
                 };
@@ -869,8 +888,18 @@ fn timings(
                 };
                 let t = CycleTiming { length: clip.frames(fps), stride: clip.stride() };
                 let what = format!("rig `{rig_name}` ({}) cycle `{}`", file.display(), cycle.name);
-                check(path, t.length.is_finite() && t.length >= 1.0, key.clone(), format!("{what} is {} frames long; needs >= 1", t.length))?;
-                check(path, t.stride.is_finite() && t.stride >= 0.0, key.clone(), format!("{what} has stride {} m; needs >= 0 (root walks along +Z)", t.stride))?;
+                check(
+                    path,
+                    t.length.is_finite() && t.length >= 1.0,
+                    key.clone(),
+                    format!("{what} is {} frames long; needs >= 1", t.length),
+                )?;
+                check(
+                    path,
+                    t.stride.is_finite() && t.stride >= 0.0,
+                    key.clone(),
+                    format!("{what} has stride {} m; needs >= 0 (root walks along +Z)", t.stride),
+                )?;
                 t
             }
             None => {
@@ -878,7 +907,10 @@ fn timings(
                 let missing = |k: &str| {
                     Error::invalid(
                         path,
-                        format!("rig `{rig_name}` has no file in [rigs], so `{}` needs an explicit {k} (used by {key})", cycle.name),
+                        format!(
+                            "rig `{rig_name}` has no file in [rigs], so `{}` needs an explicit {k} (used by {key})",
+                            cycle.name
+                        ),
                     )
                     .field(format!("cycles.{}.{k}", cycle.name))
                 };
@@ -925,11 +957,11 @@ pub struct AgentState {
     pub heading: f32,
     /// Metres walked in the last frame (0 when standing).
     pub speed: f32,
-    /// Index into [`Scene::cycles`].
+    /// Index into [`SimScene::cycles`].
     pub cycle: u16,
     /// Frame within the cycle.
     pub cycle_frame: f32,
-    /// Target being walked to, index into [`Scene::targets`].
+    /// Target being walked to, index into [`SimScene::targets`].
     pub target: Option<u8>,
     /// Targets visited since the agent last ran out of targets (bit mask).
     pub visited: u64,
@@ -937,7 +969,7 @@ pub struct AgentState {
 
 /// A running simulation: the scene and the current frame's states.
 pub struct Simulation<'a> {
-    scene: &'a Scene,
+    scene: &'a SimScene,
     frame: i32,
     states: Vec<AgentState>,
     max_radius: f32,
@@ -945,7 +977,7 @@ pub struct Simulation<'a> {
 
 impl<'a> Simulation<'a> {
     /// Agents at the scene's first simulated frame (`start - warmup`).
-    pub fn new(scene: &'a Scene) -> Simulation<'a> {
+    pub fn new(scene: &'a SimScene) -> Simulation<'a> {
         let states = scene
             .agents
             .iter()
@@ -973,7 +1005,7 @@ impl<'a> Simulation<'a> {
         self.frame
     }
 
-    /// States in [`Scene::agents`] order.
+    /// States in [`SimScene::agents`] order.
     pub fn states(&self) -> &[AgentState] {
         &self.states
     }
@@ -1013,7 +1045,7 @@ impl<'a> Simulation<'a> {
             .agents
             .iter()
             .zip(&self.states)
-            .map(|(a, s)| AgentRecord {
+            .map(|(a, s)| AgentSample {
                 id: a.id,
                 position: Vec3::new(s.position.x, 0.0, s.position.y),
                 heading: s.heading,
@@ -1161,7 +1193,7 @@ struct Near<'g> {
 }
 
 /// The nearest of the agent's targets not in `visited` (ties: file order).
-fn nearest_target(scene: &Scene, spec: &AgentSpec, from: Vec2, visited: u64) -> Option<u8> {
+fn nearest_target(scene: &SimScene, spec: &AgentSpec, from: Vec2, visited: u64) -> Option<u8> {
     let mut best: Option<(f32, u8)> = None;
     for (t, tg) in scene.targets.iter().enumerate() {
         if spec.targets & (1 << t) == 0 || visited & (1 << t) != 0 {
@@ -1178,7 +1210,7 @@ fn nearest_target(scene: &Scene, spec: &AgentSpec, from: Vec2, visited: u64) -> 
 /// Runs the whole scene and returns frames `start..=end` as a cache, its
 /// rig and cycle tables in first-use order ([`crate::cache::canonical`]), so
 /// reading the written file back gives this crowd exactly.
-pub fn run(scene: &Scene) -> Crowd {
+pub fn run(scene: &SimScene) -> CrowdCache {
     let mut sim = Simulation::new(scene);
     let mut frames = Vec::with_capacity((i64::from(scene.end) - i64::from(scene.start) + 1).clamp(0, 100_000) as usize);
     loop {
@@ -1190,7 +1222,7 @@ pub fn run(scene: &Scene) -> Crowd {
         }
         sim.step();
     }
-    crate::cache::canonical(&Crowd {
+    crate::cache::canonical(&CrowdCache {
         rigs: scene.rigs.clone(),
         cycles: scene.cycles.iter().map(|c| c.name.clone()).collect(),
         frames,

@@ -175,11 +175,8 @@ impl Wardrobes {
             }
             for (name, mut scheme) in file.schemes {
                 if let Some(prev) = origin.get(&name) {
-                    return Err(Error::invalid(
-                        path,
-                        format!("scheme `{name}` is also defined in {}", prev.display()),
-                    )
-                    .field(format!("schemes.{name}")));
+                    return Err(Error::invalid(path, format!("scheme `{name}` is also defined in {}", prev.display()))
+                        .field(format!("schemes.{name}")));
                 }
                 for (i, part) in scheme.parts.iter_mut().enumerate() {
                     let key = format!("schemes.{name}.parts[{i}]");
@@ -194,15 +191,14 @@ impl Wardrobes {
                             .field(format!("{key}.weight")));
                     }
                     if part.materials.is_empty() {
-                        return Err(Error::invalid(path, "needs at least one material").field(format!("{key}.materials")));
+                        return Err(
+                            Error::invalid(path, "needs at least one material").field(format!("{key}.materials"))
+                        );
                     }
                     if let Some(w) = &part.material_weights {
                         if w.len() != part.materials.len() || w.iter().any(|x| !(*x >= 0.0)) {
-                            return Err(Error::invalid(
-                                path,
-                                "needs one weight >= 0 per material",
-                            )
-                            .field(format!("{key}.material_weights")));
+                            return Err(Error::invalid(path, "needs one weight >= 0 per material")
+                                .field(format!("{key}.material_weights")));
                         }
                     }
                     for m in &mut part.materials {

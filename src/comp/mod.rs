@@ -25,12 +25,9 @@ use glam::Mat4;
 
 use crate::error::{Error, Result};
 use crate::layers::Manifest;
+use crate::output::{crowd_layer_index, crowd_layer_name, layer_path, COMP_LAYER, FULL_LAYER, SET_LAYER};
 use crate::render::exr::{self, LayerMeta};
-use crate::render::job::{layer_path, FULL_LAYER};
 use crate::render::Film;
-
-/// The layer name written to composited files.
-pub const COMP_LAYER: &str = "comp";
 
 /// One layer file read for compositing.
 #[derive(Debug, Clone)]
@@ -62,8 +59,8 @@ pub fn over(films: &[&Film]) -> Result<Film> {
         for f in films {
             let a = f.rgba[i][3];
             let keep = 1.0 - a;
-            for c in 0..4 {
-                rgba[c] = f.rgba[i][c] + keep * rgba[c];
+            for (c, v) in rgba.iter_mut().enumerate() {
+                *v = f.rgba[i][c] + keep * *v;
             }
             for c in 0..3 {
                 n[c] = f.normal[i][c] + keep * n[c];
@@ -83,11 +80,6 @@ pub fn over(films: &[&Film]) -> Result<Film> {
         out.agent_id[i] = id;
     }
     Ok(out)
-}
-
-/// Crowd layer index of a `crowdN` name.
-fn crowd_index(name: &str) -> Option<usize> {
-    name.strip_prefix("crowd")?.parse().ok()
 }
 
 /// The layers of `frame` under render output `dir`, back to front.
@@ -161,9 +153,9 @@ pub fn layer_files(dir: &Path, frame: i32, manifest: Option<&Manifest>) -> Resul
     let mut set = None;
     let mut crowd: Vec<(usize, String, PathBuf)> = Vec::new();
     for (_, layer, path) in found {
-        if layer == "set" {
+        if layer == SET_LAYER {
             set = Some((layer, path));
-        } else if let Some(i) = crowd_index(&layer) {
+        } else if let Some(i) = crowd_layer_index(&layer) {
             crowd.push((i, layer, path));
         } else {
             return Err(Error::Usage(format!(
@@ -175,13 +167,13 @@ pub fn layer_files(dir: &Path, frame: i32, manifest: Option<&Manifest>) -> Resul
     let Some(set) = set else {
         return Err(Error::Usage(format!(
             "layer `set` of shot {shot} frame {frame} is missing: no {}",
-            layer_path(dir, &shot, "set", frame).display()
+            layer_path(dir, &shot, SET_LAYER, frame).display()
         )));
     };
     crowd.sort_by_key(|c| std::cmp::Reverse(c.0));
     let n = crowd.first().map_or(0, |c| c.0 + 1);
     if let Some(gap) = (0..n).find(|i| !crowd.iter().any(|c| c.0 == *i)) {
-        let name = format!("crowd{gap}");
+        let name = crowd_layer_name(gap);
         return Err(Error::Usage(format!(
             "layer `{name}` of shot {shot} frame {frame} is missing: no {}",
             layer_path(dir, &shot, &name, frame).display()
@@ -208,7 +200,12 @@ pub fn read_inputs(files: &[(String, PathBuf)], frame: i32) -> Result<Vec<CompIn
             if meta.shot != first.meta.shot {
                 return Err(Error::invalid(
                     path,
-                    format!("layer is from shot `{}` but {} is from shot `{}`", meta.shot, first.path.display(), first.meta.shot),
+                    format!(
+                        "layer is from shot `{}` but {} is from shot `{}`",
+                        meta.shot,
+                        first.path.display(),
+                        first.meta.shot
+                    ),
                 )
                 .field("throng/shot"));
             }
@@ -274,27 +271,17 @@ pub fn comp_frame(dir: &Path, frame: i32, manifest: Option<&Manifest>) -> Result
     let inputs = read_inputs(&files, frame)?;
     if let Some(m) = manifest {
         if let Some(i) = inputs.iter().find(|i| i.meta.shot != m.shot) {
-            return Err(Error::invalid(&i.path, format!("layer is from shot `{}`, the manifest is for `{}`", i.meta.shot, m.shot))
-                .field("throng/shot"));
+            return Err(Error::invalid(
+                &i.path,
+                format!("layer is from shot `{}`, the manifest is for `{}`", i.meta.shot, m.shot),
+            )
+            .field("throng/shot"));
         }
     }
     let films: Vec<&Film> = inputs.iter().map(|i| &i.film).collect();
     let film = over(&films)?;
     let meta = comp_meta(&inputs)?;
     Ok(Comped { film, meta, layers: files })
-}
-
-/// `throng comp DIR --frame F --out FILE.exr [--png FILE.png] [--manifest FILE]`.
-pub fn cmd_comp(args: &crate::cli::CompArgs) -> Result<()> {
-    let manifest = args.manifest.as_deref().map(crate::layers::read_manifest).transpose()?;
-    let comped = comp_frame(&args.dir, args.frame, manifest.as_ref())?;
-    exr::write_layer(&args.out, &comped.film, &comped.meta)?;
-    if let Some(png) = &args.png {
-        exr::write_preview_png(png, &comped.film)?;
-    }
-    let names: Vec<&str> = comped.layers.iter().map(|l| l.0.as_str()).collect();
-    println!("comp {} frame {}: {} (back to front) -> {}", comped.meta.shot, args.frame, names.join(", "), args.out.display());
-    Ok(())
 }
 
 #[cfg(test)]

@@ -4,6 +4,8 @@
 //!
 //! INTERFACE (shared by casting, export and the renderer; keep stable).
 
+pub mod gltf;
+
 use glam::{Affine3A, Vec2, Vec3};
 
 /// Index into [`Library::meshes`].
@@ -80,7 +82,13 @@ impl Mesh {
 
 /// The eight corners of the box `lo..hi`.
 pub fn box_corners(lo: Vec3, hi: Vec3) -> [Vec3; 8] {
-    std::array::from_fn(|c| Vec3::new(if c & 1 == 0 { lo.x } else { hi.x }, if c & 2 == 0 { lo.y } else { hi.y }, if c & 4 == 0 { lo.z } else { hi.z }))
+    std::array::from_fn(|c| {
+        Vec3::new(
+            if c & 1 == 0 { lo.x } else { hi.x },
+            if c & 2 == 0 { lo.y } else { hi.y },
+            if c & 4 == 0 { lo.z } else { hi.z },
+        )
+    })
 }
 
 /// An RGBA texture in linear colour (sRGB decoded on load).
@@ -113,7 +121,13 @@ pub struct Material {
 
 impl Default for Material {
     fn default() -> Self {
-        Material { name: "default".into(), base_color: Vec3::splat(0.8), base_color_texture: None, roughness: 0.5, metallic: 0.0 }
+        Material {
+            name: "default".into(),
+            base_color: Vec3::splat(0.8),
+            base_color_texture: None,
+            roughness: 0.5,
+            metallic: 0.0,
+        }
     }
 }
 

@@ -5,7 +5,7 @@
 //! 4-byte-aligned buffer view, so the output is simple to inspect.
 //!
 //! ```no_run
-//! use throng::gltf_out::{GlbBuilder, MeshData, MaterialDesc, NodeDesc};
+//! use throng::export::glb::{GlbBuilder, MeshData, MaterialDesc, NodeDesc};
 //! let mut glb = GlbBuilder::new();
 //! let grey = glb.add_material(&MaterialDesc::new("grey", [0.5, 0.5, 0.5, 1.0]));
 //! let quad = MeshData {
@@ -191,13 +191,7 @@ pub struct NodeDesc {
 impl NodeDesc {
     /// A node with identity transform, no mesh, no children.
     pub fn new(name: impl Into<String>) -> Self {
-        NodeDesc {
-            name: name.into(),
-            transform: Transform::IDENTITY,
-            children: Vec::new(),
-            mesh: None,
-            extras: None,
-        }
+        NodeDesc { name: name.into(), transform: Transform::IDENTITY, children: Vec::new(), mesh: None, extras: None }
     }
     /// Sets the translation (keeping any rotation and scale).
     pub fn translation(mut self, t: [f32; 3]) -> Self {
@@ -406,9 +400,7 @@ impl GlbBuilder {
             buffer_view: Some(view),
             byte_offset: None,
             count: USize64::from(data.len() / comps),
-            component_type: Checked::Valid(json::accessor::GenericComponentType(
-                json::accessor::ComponentType::F32,
-            )),
+            component_type: Checked::Valid(json::accessor::GenericComponentType(json::accessor::ComponentType::F32)),
             extensions: None,
             extras: None,
             type_: Checked::Valid(type_),
@@ -427,9 +419,7 @@ impl GlbBuilder {
             buffer_view: Some(view),
             byte_offset: None,
             count: USize64::from(indices.len()),
-            component_type: Checked::Valid(json::accessor::GenericComponentType(
-                json::accessor::ComponentType::U32,
-            )),
+            component_type: Checked::Valid(json::accessor::GenericComponentType(json::accessor::ComponentType::U32)),
             extensions: None,
             extras: None,
             type_: Checked::Valid(json::accessor::Type::Scalar),
@@ -441,7 +431,12 @@ impl GlbBuilder {
         })
     }
 
-    fn primitive(&mut self, name: &str, data: &MeshData, material: Option<MaterialId>) -> Result<json::mesh::Primitive> {
+    fn primitive(
+        &mut self,
+        name: &str,
+        data: &MeshData,
+        material: Option<MaterialId>,
+    ) -> Result<json::mesh::Primitive> {
         use json::accessor::Type;
         use json::buffer::Target::ArrayBuffer;
         use json::mesh::Semantic;
@@ -670,7 +665,10 @@ impl GlbBuilder {
             if ch.node.index() >= self.root.nodes.len() {
                 return bad("unknown node".into());
             }
-            if ch.times.is_empty() || ch.times.windows(2).any(|w| w[1] <= w[0]) || ch.times.iter().any(|t| !t.is_finite()) {
+            if ch.times.is_empty()
+                || ch.times.windows(2).any(|w| w[1] <= w[0])
+                || ch.times.iter().any(|t| !t.is_finite())
+            {
                 return bad("key times must be finite and strictly increasing".into());
             }
             let per_key = if ch.interpolation == Interpolation::CubicSpline { 3 } else { 1 };
@@ -811,9 +809,18 @@ mod tests {
         let m0 = b.add_mesh("tri_a", &tri(0.0), Some(red)).unwrap();
         let m1 = b.add_mesh("tri_b", &tri(2.0), Some(tex)).unwrap();
         let a = b
-            .add_node(NodeDesc::new("a").mesh(m0).translation([1.0, 0.0, 0.0]).extras(serde_json::json!({"slot": "head", "k": [1, 2]})))
+            .add_node(
+                NodeDesc::new("a")
+                    .mesh(m0)
+                    .translation([1.0, 0.0, 0.0])
+                    .extras(serde_json::json!({"slot": "head", "k": [1, 2]})),
+            )
             .unwrap();
-        let c = b.add_node(NodeDesc::new("c").mesh(m0).matrix([1.0, 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 5., 0., 1.])).unwrap();
+        let c = b
+            .add_node(
+                NodeDesc::new("c").mesh(m0).matrix([1.0, 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 5., 0., 1.]),
+            )
+            .unwrap();
         let d = b.add_node(NodeDesc::new("d").mesh(m1)).unwrap();
         let top = b.add_node(NodeDesc::new("top").children(vec![a, c])).unwrap();
         b.add_child(top, d).unwrap();
@@ -822,8 +829,12 @@ mod tests {
             Perspective { yfov: 0.6, aspect_ratio: Some(1.5), znear: 0.1, zfar: None },
         )
         .unwrap();
-        b.add_sun(NodeDesc::new("sun").rotation(rotation_looking_along([0.0, -1.0, -1.0], [0.0, 1.0, 0.0])), [1.0, 0.9, 0.8], 3.0)
-            .unwrap();
+        b.add_sun(
+            NodeDesc::new("sun").rotation(rotation_looking_along([0.0, -1.0, -1.0], [0.0, 1.0, 0.0])),
+            [1.0, 0.9, 0.8],
+            3.0,
+        )
+        .unwrap();
         b.add_animation(&AnimationDesc {
             name: "Clip".into(),
             channels: vec![

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 use glam::{Affine3A, Quat, Vec3};
 
-use crate::wardrobe::{Scheme, Wardrobes};
+use crate::casting::wardrobe::{Scheme, Wardrobes};
 
 /// A 64-bit mix (splitmix64's finaliser): a bijection with good avalanche.
 pub fn mix64(mut z: u64) -> u64 {
@@ -134,11 +134,12 @@ pub fn cast_agent(
         let w: Vec<f32> = candidates.iter().map(|p| p.weight).collect();
         let part = weighted_pick(&w, uniform(seed, id, &format!("part/{slot}"))).map(|i| {
             let p = candidates[i];
-            let m = weighted_pick(&p.material_weight_list(), uniform(seed, id, &format!("material/{slot}"))).unwrap_or(0);
+            let m =
+                weighted_pick(&p.material_weight_list(), uniform(seed, id, &format!("material/{slot}"))).unwrap_or(0);
             CastPart {
                 file: p.file.clone(),
                 mesh: p.mesh.clone(),
-                material: p.materials.get(m).cloned().unwrap_or_else(|| crate::wardrobe::GLTF_MATERIAL.into()),
+                material: p.materials.get(m).cloned().unwrap_or_else(|| crate::casting::wardrobe::GLTF_MATERIAL.into()),
                 uniform: scheme.is_uniform(slot),
             }
         });
@@ -187,7 +188,13 @@ mod tests {
 
     #[test]
     fn body_parts_fill_the_box() {
-        let m = fit_part(Vec3::new(-1.0, 0.0, -2.0), Vec3::new(1.0, 4.0, 2.0), Vec3::new(0.0, -0.5, 0.0), Vec3::new(0.2, 0.0, 0.1), false);
+        let m = fit_part(
+            Vec3::new(-1.0, 0.0, -2.0),
+            Vec3::new(1.0, 4.0, 2.0),
+            Vec3::new(0.0, -0.5, 0.0),
+            Vec3::new(0.2, 0.0, 0.1),
+            false,
+        );
         assert!((m.transform_point3(Vec3::new(-1.0, 0.0, -2.0)) - Vec3::new(0.0, -0.5, 0.0)).length() < 1e-6);
         assert!((m.transform_point3(Vec3::new(1.0, 4.0, 2.0)) - Vec3::new(0.2, 0.0, 0.1)).length() < 1e-6);
     }

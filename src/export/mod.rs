@@ -2,15 +2,17 @@
 //! binary glTF, meshes shared between nodes, so it opens in Blender or any
 //! viewer and can be rendered by other renderers for comparison.
 
+pub mod glb;
+
 use std::collections::{BTreeSet, HashMap};
 use std::path::Path;
 
 use glam::{Affine3A, Mat4};
 
+use crate::casting::{Lod, ShotCrowd};
 use crate::error::Result;
-use crate::gltf_out::{self, GlbBuilder, MaterialDesc, MeshData, NodeDesc, Perspective, Transform};
-use crate::pose::{Lod, ShotCrowd};
 use crate::scene::{vis, Instance, Library, MaterialId, MeshId};
+use glb::{GlbBuilder, MaterialDesc, MeshData, NodeDesc, Perspective, Transform};
 
 /// What an export wrote.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -36,14 +38,14 @@ fn matrix(m: &Affine3A) -> Transform {
 struct Writer<'a> {
     glb: GlbBuilder,
     lib: &'a Library,
-    meshes: HashMap<(MeshId, MaterialId), gltf_out::MeshId>,
-    materials: HashMap<MaterialId, gltf_out::MaterialId>,
+    meshes: HashMap<(MeshId, MaterialId), glb::MeshId>,
+    materials: HashMap<MaterialId, glb::MaterialId>,
     triangles: usize,
     mesh_nodes: usize,
 }
 
 impl Writer<'_> {
-    fn mesh(&mut self, mesh: MeshId, material: MaterialId) -> Result<gltf_out::MeshId> {
+    fn mesh(&mut self, mesh: MeshId, material: MaterialId) -> Result<glb::MeshId> {
         if let Some(&m) = self.meshes.get(&(mesh, material)) {
             return Ok(m);
         }
@@ -71,7 +73,7 @@ impl Writer<'_> {
         Ok(m)
     }
 
-    fn instance_node(&mut self, name: String, inst: &Instance, parent_from_object: &Affine3A) -> Result<gltf_out::NodeId> {
+    fn instance_node(&mut self, name: String, inst: &Instance, parent_from_object: &Affine3A) -> Result<glb::NodeId> {
         let mesh = self.mesh(inst.mesh, inst.material)?;
         self.triangles += self.lib.meshes[inst.mesh as usize].triangle_count();
         self.mesh_nodes += 1;
@@ -106,7 +108,11 @@ pub fn export_frame(crowd: &ShotCrowd, frame: i32, only: Option<&BTreeSet<u32>>,
         let mut children = Vec::new();
         for inst in &insts {
             let slot = slots.get(inst.part as usize).map_or("part", |s| s.name.as_str());
-            children.push(w.instance_node(format!("agent_{}/{slot}", a.id), inst, &(agent_from_world * inst.world_from_object))?);
+            children.push(w.instance_node(
+                format!("agent_{}/{slot}", a.id),
+                inst,
+                &(agent_from_world * inst.world_from_object),
+            )?);
         }
         let cast = &crowd.casting[&a.id];
         let mut node = NodeDesc::new(format!("agent_{}", a.id)).children(children).extras(serde_json::json!({
@@ -146,7 +152,7 @@ pub fn export_frame(crowd: &ShotCrowd, frame: i32, only: Option<&BTreeSet<u32>>,
         let mut node = NodeDesc::new("sun");
         node.transform = Transform::Trs {
             translation: [0.0, 50.0, 0.0],
-            rotation: gltf_out::rotation_looking_along((-sun.direction).to_array(), [0.0, 1.0, 0.0]),
+            rotation: glb::rotation_looking_along((-sun.direction).to_array(), [0.0, 1.0, 0.0]),
             scale: [1.0; 3],
         };
         w.glb.add_sun(node, colour, peak * LUX_PER_WATT)?;

@@ -31,8 +31,9 @@ use std::sync::Arc;
 use glam::{Affine3A, Quat, Vec3, Vec4};
 use gltf::accessor::{DataType, Dimensions};
 
-use crate::assets::{check_accessor, node_label, out_of_range, quat_from_gltf, read_mesh, GltfFile};
+use crate::cache::jupedsim::{RigClip, SHOT_FPS};
 use crate::error::{Error, Result};
+use crate::scene::gltf::{check_accessor, node_label, out_of_range, quat_from_gltf, read_mesh, GltfFile};
 
 /// A translation, rotation and scale (glTF node transform order T * R * S).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -321,7 +322,9 @@ impl Clip {
                     let types = [DataType::F32, DataType::I8, DataType::U8, DataType::I16, DataType::U16];
                     check_accessor(&output, Dimensions::Vec4, &types).map_err(ctx)?;
                     match reader.read_outputs() {
-                        Some(gltf::animation::util::ReadOutputs::Rotations(r)) => r.into_f32().map(Vec4::from).collect(),
+                        Some(gltf::animation::util::ReadOutputs::Rotations(r)) => {
+                            r.into_f32().map(Vec4::from).collect()
+                        }
                         _ => return Err(ctx(out_of_range(&output))),
                     }
                 }
@@ -515,7 +518,10 @@ fn read_slot(file: &GltfFile, node: &gltf::Node) -> Result<Option<Slot>> {
     let (proxy_min, proxy_max) = match extras.get("proxy_box") {
         Some(b) => {
             let corner = |k: &str| -> Result<Vec3> {
-                let v = b.get(k).and_then(|v| v.as_array()).ok_or_else(|| ctx(format!("proxy_box needs `{k}`: [x, y, z]")))?;
+                let v = b
+                    .get(k)
+                    .and_then(|v| v.as_array())
+                    .ok_or_else(|| ctx(format!("proxy_box needs `{k}`: [x, y, z]")))?;
                 let xyz: Vec<f32> = v.iter().filter_map(|x| x.as_f64()).map(|x| x as f32).collect();
                 if xyz.len() != 3 || v.len() != 3 || xyz.iter().any(|x| !x.is_finite()) {
                     return Err(ctx(format!("proxy_box `{k}` must be three numbers")));
@@ -619,4 +625,35 @@ impl Pose {
         let world = self.node_transforms();
         self.shape.slots.iter().enumerate().map(|(i, s)| (i, world[s.node])).collect()
     }
+}
+
+/// The walk cycle a trajectory import takes its stride and cycle length from.
+/// Reads cycle `cycle` of the rig in `file`. The rig's name (its top
+/// node, the parent of `root`) must be `rig` when the file gives one, so
+/// the cache does not name one rig and walk at another's stride.
+pub fn import_clip(file: &Path, rig: &str, cycle: &str) -> Result<RigClip> {
+    let r = Rig::load(file)?;
+    let h = r.hierarchy();
+    if let Some(top) = h.nodes.get(r.root()).and_then(|n| n.parent).and_then(|p| h.nodes.get(p)) {
+        if top.name != rig {
+            return Err(Error::invalid(
+                file,
+                format!("this is rig `{}` but --rig is `{rig}`; pass --rig {}", top.name, top.name),
+            )
+            .field("--rig"));
+        }
+    }
+    let c = r.cycle(cycle).map_err(|e| e.field("--cycle"))?;
+    let (stride, cycle_length) = (c.stride(), c.frames(SHOT_FPS));
+    if !(stride.is_finite() && stride > 0.0) {
+        return Err(Error::invalid(
+            file,
+            format!("cycle `{cycle}` has stride {stride} m (its root does not walk forward); pick a walk cycle with --cycle or pass --stride"),
+        )
+        .field("--cycle"));
+    }
+    if !(cycle_length.is_finite() && cycle_length > 0.0) {
+        return Err(Error::invalid(file, format!("cycle `{cycle}` is {cycle_length} frames long")).field("--cycle"));
+    }
+    Ok(RigClip { file: file.to_path_buf(), stride, cycle_length })
 }

@@ -44,13 +44,15 @@ impl GltfFile {
     pub fn open(path: impl AsRef<Path>) -> Result<GltfFile> {
         let path = path.as_ref();
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        let gltf::Gltf { document, mut blob } = gltf::Gltf::from_slice(&bytes)
-            .map_err(|e| Error::invalid(path, format!("not a valid glTF file: {e}")))?;
+        let gltf::Gltf { document, mut blob } =
+            gltf::Gltf::from_slice(&bytes).map_err(|e| Error::invalid(path, format!("not a valid glTF file: {e}")))?;
         let base = path.parent().unwrap_or(Path::new("."));
         let mut buffers = Vec::new();
         for buffer in document.buffers() {
             let what = match buffer.source() {
-                gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => format!("buffer {} (embedded)", buffer.index()),
+                gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+                    format!("buffer {} (embedded)", buffer.index())
+                }
                 gltf::buffer::Source::Uri(uri) => format!("buffer {} (`{uri}`)", buffer.index()),
                 gltf::buffer::Source::Bin => format!("buffer {} (GLB chunk)", buffer.index()),
             };
@@ -201,7 +203,14 @@ pub fn check_accessor(acc: &Accessor, dims: Dimensions, types: &[DataType]) -> s
 
 /// Checks that `count` elements of `size` bytes from `offset` lie inside
 /// `view` (checked arithmetic: a huge count must not overflow).
-fn fits(id: usize, what: &str, view: &gltf::buffer::View, offset: usize, count: usize, size: usize) -> std::result::Result<(), String> {
+fn fits(
+    id: usize,
+    what: &str,
+    view: &gltf::buffer::View,
+    offset: usize,
+    count: usize,
+    size: usize,
+) -> std::result::Result<(), String> {
     if view.offset().checked_add(view.length()).is_none_or(|end| end > view.buffer().length()) {
         return Err(format!("accessor {id}: {what}buffer view {} reaches outside its buffer", view.index()));
     }
@@ -227,7 +236,10 @@ fn uri_decodes(uri: &str) -> bool {
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;
     while i < bytes.len() {
-        let hex = bytes.get(i + 1..i + 3).and_then(|h| std::str::from_utf8(h).ok()).and_then(|h| u8::from_str_radix(h, 16).ok());
+        let hex = bytes
+            .get(i + 1..i + 3)
+            .and_then(|h| std::str::from_utf8(h).ok())
+            .and_then(|h| u8::from_str_radix(h, 16).ok());
         match (bytes[i], hex) {
             (b'%', Some(b)) => {
                 out.push(b);
@@ -566,7 +578,8 @@ impl AssetCache {
         let data = gltf::image::Data::from_source(image.source(), Some(base), &file.buffers)
             .map_err(|e| ctx(format!("cannot decode: {e}")))?;
         let texels = decode_texels(&data).ok_or_else(|| ctx(format!("unsupported pixel format {:?}", data.format)))?;
-        let texture = Texture { name: format!("{}#{label}", src.shown), width: data.width, height: data.height, texels };
+        let texture =
+            Texture { name: format!("{}#{label}", src.shown), width: data.width, height: data.height, texels };
         self.library.textures.push(texture);
         let id = (self.library.textures.len() - 1) as u32;
         self.textures.insert((src.key.clone(), index), id);
@@ -604,11 +617,10 @@ impl AssetCache {
         if let Some(&id) = self.textures.get(&key) {
             return Ok(id);
         }
-        let img = image::open(path).map_err(|e| Error::invalid(path, format!("cannot decode texture: {e}")))?.to_rgba32f();
-        let texels = img
-            .pixels()
-            .map(|p| [srgb_to_linear(p[0]), srgb_to_linear(p[1]), srgb_to_linear(p[2]), p[3]])
-            .collect();
+        let img =
+            image::open(path).map_err(|e| Error::invalid(path, format!("cannot decode texture: {e}")))?.to_rgba32f();
+        let texels =
+            img.pixels().map(|p| [srgb_to_linear(p[0]), srgb_to_linear(p[1]), srgb_to_linear(p[2]), p[3]]).collect();
         let texture = Texture { name: path.display().to_string(), width: img.width(), height: img.height(), texels };
         self.library.textures.push(texture);
         let id = (self.library.textures.len() - 1) as u32;
@@ -623,7 +635,8 @@ impl AssetCache {
         let src = self.source(path.as_ref())?;
         let file = src.file.clone();
         file.parents()?; // a forest, so the walk below ends
-        let scene = file.doc.default_scene().or_else(|| file.doc.scenes().next()).ok_or_else(|| file.err("has no scene"))?;
+        let scene =
+            file.doc.default_scene().or_else(|| file.doc.scenes().next()).ok_or_else(|| file.err("has no scene"))?;
         let mut stack: Vec<(gltf::Node, Affine3A)> = scene.nodes().map(|n| (n.clone(), node_affine(&n))).collect();
         stack.reverse();
         let mut out = Vec::new();
@@ -652,7 +665,9 @@ impl AssetCache {
         let yfov = match camera.projection() {
             gltf::camera::Projection::Perspective(p) => p.yfov(),
             gltf::camera::Projection::Orthographic(_) => {
-                return Err(file.err(format!("camera on node `{node_name}` is orthographic; only perspective is supported")))
+                return Err(
+                    file.err(format!("camera on node `{node_name}` is orthographic; only perspective is supported"))
+                )
             }
         };
         if !(yfov.is_finite() && yfov > 0.0 && yfov < std::f32::consts::PI) {

@@ -12,14 +12,14 @@ use std::path::Path;
 
 use glam::{Affine3A, Quat, Vec3};
 
-use crate::assets::AssetCache;
-use crate::cache::{AgentRecord, CacheReader, FrameBlock};
+use crate::cache::{AgentSample, CacheReader, FrameBlock};
+use crate::casting::rig::Rig;
+use crate::casting::wardrobe::{Wardrobes, GLTF_MATERIAL};
 use crate::casting::{cast_agent, fit_part, AgentCast, RigCasting};
 use crate::error::{Error, Result};
-use crate::rig::Rig;
+use crate::scene::gltf::AssetCache;
 use crate::scene::{vis, Camera, Instance, Library, Material, MaterialId, Mesh, MeshId};
 use crate::shot::Shot;
-use crate::wardrobe::{Wardrobes, GLTF_MATERIAL};
 
 /// Level of detail an agent renders at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -243,7 +243,11 @@ impl ShotCrowd {
                         mesh,
                         material,
                         slot_from_part: fit,
-                        slot_from_proxy: Affine3A::from_scale_rotation_translation(size, Quat::IDENTITY, slot.proxy_min),
+                        slot_from_proxy: Affine3A::from_scale_rotation_translation(
+                            size,
+                            Quat::IDENTITY,
+                            slot.proxy_min,
+                        ),
                         proxy: i == 0,
                     });
                 }
@@ -271,7 +275,19 @@ impl ShotCrowd {
             None => None,
         };
         let rig_heights = rigs.iter().map(|(name, rig)| (name.clone(), rig.height())).collect();
-        Ok(ShotCrowd { shot, wardrobes, rigs, cache, casting, assets, dressed, proxy_mesh, set, gltf_camera, rig_heights })
+        Ok(ShotCrowd {
+            shot,
+            wardrobes,
+            rigs,
+            cache,
+            casting,
+            assets,
+            dressed,
+            proxy_mesh,
+            set,
+            gltf_camera,
+            rig_heights,
+        })
     }
 
     /// The shared meshes, materials and textures.
@@ -290,7 +306,7 @@ impl ShotCrowd {
 
     /// Only the cache frames the shot reads (they keep their cache numbers),
     /// without reading the rest of a long simulation.
-    pub fn shot_crowd(&self) -> Result<crate::cache::Crowd> {
+    pub fn shot_crowd(&self) -> Result<crate::cache::CrowdCache> {
         let mut frames = Vec::new();
         for f in self.shot.frames.iter() {
             let cf = self.shot.cache.cache_frame(f);
@@ -298,16 +314,16 @@ impl ShotCrowd {
                 frames.push(self.cache.read_frame(cf)?);
             }
         }
-        Ok(crate::cache::Crowd { rigs: self.cache.rigs().to_vec(), cycles: self.cache.cycles().to_vec(), frames })
+        Ok(crate::cache::CrowdCache { rigs: self.cache.rigs().to_vec(), cycles: self.cache.cycles().to_vec(), frames })
     }
 
     /// Name of a cycle index.
-    pub fn cycle_name(&self, a: &AgentRecord) -> &str {
+    pub fn cycle_name(&self, a: &AgentSample) -> &str {
         self.cache.cycles().get(a.cycle as usize).map(String::as_str).unwrap_or("?")
     }
 
     /// Agent to world: foot position, heading about +Y, height scale about the foot pivot.
-    pub fn world_from_agent(&self, a: &AgentRecord) -> Affine3A {
+    pub fn world_from_agent(&self, a: &AgentSample) -> Affine3A {
         let h = self.casting.get(&a.id).map_or(1.0, |c| c.height_scale);
         Affine3A::from_scale_rotation_translation(Vec3::splat(h), Quat::from_rotation_y(a.heading), a.position)
     }
@@ -320,12 +336,14 @@ impl ShotCrowd {
     }
 
     /// Whether an agent record is rendered at all (not removed, hidden or on a culled cycle).
-    pub fn renders(&self, a: &AgentRecord) -> bool {
-        !a.hidden() && !self.shot.removed.contains(&a.id) && !self.shot.culled_cycles.iter().any(|c| c == self.cycle_name(a))
+    pub fn renders(&self, a: &AgentSample) -> bool {
+        !a.hidden()
+            && !self.shot.removed.contains(&a.id)
+            && !self.shot.culled_cycles.iter().any(|c| c == self.cycle_name(a))
     }
 
     /// World transforms of every slot of an agent at its cycle frame, in rig slot order.
-    pub fn slot_transforms(&self, a: &AgentRecord) -> Result<Vec<Affine3A>> {
+    pub fn slot_transforms(&self, a: &AgentSample) -> Result<Vec<Affine3A>> {
         let cast = self.casting.get(&a.id).ok_or_else(|| {
             Error::invalid(&self.shot.cache.path, "agent was not cast (not in the shot's frames)").agent(a.id)
         })?;
@@ -340,7 +358,7 @@ impl ShotCrowd {
 
     /// The instances of one agent at a frame: its parts, or its proxy boxes
     /// wearing the same materials.
-    pub fn agent_instances(&self, a: &AgentRecord, lod: Lod, visibility: u8, out: &mut Vec<Instance>) -> Result<()> {
+    pub fn agent_instances(&self, a: &AgentSample, lod: Lod, visibility: u8, out: &mut Vec<Instance>) -> Result<()> {
         let slots = self.slot_transforms(a)?;
         self.posed_instances(a.id, &slots, lod, visibility, out);
         Ok(())

@@ -1,0 +1,141 @@
+//! botInfo: everything known about one agent at a frame (rig, cycle, scheme,
+//! parts, distance, layer), as the Robots lighters' botInfo tool printed it.
+
+use std::fmt::Write as _;
+
+use serde::Serialize;
+
+use crate::cache::AgentSample;
+use crate::casting::table::{cast_row, PartRow};
+use crate::casting::ShotCrowd;
+use crate::error::{Error, Result};
+use crate::layers::Manifest;
+
+/// Everything botinfo says about one agent.
+#[derive(Debug, Serialize)]
+pub struct BotInfo {
+    /// Cache id ("Robot ID").
+    pub id: u32,
+    /// Rig.
+    pub rig: String,
+    /// Cycle at the frame.
+    pub cycle: String,
+    /// Cycle frame at the frame.
+    pub cycle_frame: f32,
+    /// Shot frame asked about.
+    pub shot_frame: i32,
+    /// Wardrobe scheme.
+    pub scheme: String,
+    /// Height scale.
+    pub height_scale: f32,
+    /// Foot position.
+    pub position: [f32; 3],
+    /// Heading in degrees.
+    pub heading_deg: f32,
+    /// Distance from the camera to the agent, metres.
+    pub distance: f32,
+    /// Seated at this frame.
+    pub seated: bool,
+    /// Removed in the shot.
+    pub removed: bool,
+    /// Layer, once the shot has a layer manifest.
+    pub layer: Option<String>,
+    /// LOD, once the shot has a layer manifest.
+    pub lod: Option<String>,
+    /// Parts per slot.
+    pub parts: Vec<PartRow>,
+}
+
+/// Ids closest to `id` among those that exist, for "did you mean".
+pub fn nearest_ids(existing: impl Iterator<Item = u32>, id: u32, n: usize) -> Vec<u32> {
+    let mut all: Vec<u32> = existing.collect();
+    all.sort_by_key(|&e| ((e as i64 - id as i64).abs(), e));
+    all.truncate(n);
+    all
+}
+
+/// The botInfo block of agents at a frame.
+pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInfo>> {
+    let block = crowd.agents_at(frame)?;
+    let camera = crowd.camera(frame)?;
+    let mut out = Vec::new();
+    for &id in ids {
+        let Some(cast) = crowd.casting.get(&id) else {
+            let near = nearest_ids(crowd.casting.keys().copied(), id, 5);
+            return Err(Error::Usage(format!(
+                "agent {id} is not in shot {} (frames {}-{}); nearest ids: {}",
+                crowd.shot.name,
+                crowd.shot.frames.start,
+                crowd.shot.frames.end,
+                near.iter().map(u32::to_string).collect::<Vec<_>>().join(", ")
+            )));
+        };
+        let rec: Option<&AgentSample> = block.agents.iter().find(|a| a.id == id);
+        let Some(a) = rec else {
+            return Err(Error::Usage(format!(
+                "agent {id} is in shot {} but not at frame {frame}; try another --frame",
+                crowd.shot.name
+            )));
+        };
+        let height = crowd.agent_height(id).unwrap_or(1.8);
+        let (distance, _, _) = crate::layers::measure(&camera, crowd.shot.render.resolution[1], a.position, height);
+        out.push(BotInfo {
+            id,
+            rig: cast.rig.clone(),
+            cycle: crowd.cycle_name(a).to_string(),
+            cycle_frame: a.cycle_frame,
+            shot_frame: frame,
+            scheme: cast.scheme.clone(),
+            height_scale: cast.height_scale,
+            position: a.position.to_array(),
+            heading_deg: a.heading.to_degrees(),
+            distance,
+            seated: a.seated(),
+            removed: crowd.shot.removed.contains(&id),
+            layer: None,
+            lod: None,
+            parts: cast_row(crowd, cast).parts,
+        });
+    }
+    Ok(out)
+}
+
+/// Fills in each agent's layer and LOD from a layer manifest.
+pub fn add_layers(infos: &mut [BotInfo], manifest: &Manifest) {
+    for b in infos {
+        if let Some(a) = manifest.agent(b.id) {
+            b.layer = manifest.layers.get(a.layer).map(|l| l.name.clone());
+            b.lod = Some(format!("{:?}", a.lod_at(b.shot_frame)).to_lowercase());
+        }
+    }
+}
+
+/// The aligned, botInfo-style block.
+pub fn format_bot_info(b: &BotInfo) -> String {
+    let mut o = String::new();
+    let _ = writeln!(o, "Robot ID  {}", b.id);
+    let _ = writeln!(o, "Rig       {}", b.rig);
+    let _ = writeln!(o, "Cycle     {}", b.cycle);
+    let _ = writeln!(o, "Frame     {:.2}  (cycle frame at shot frame {})", b.cycle_frame, b.shot_frame);
+    let _ = writeln!(o, "Scheme    {}", b.scheme);
+    let _ = writeln!(o, "Height    {:.3}{}", b.height_scale, if b.seated { "  (seated)" } else { "" });
+    let _ = writeln!(o, "Position  {:.2} {:.2} {:.2}", b.position[0], b.position[1], b.position[2]);
+    let _ = writeln!(o, "Heading   {:.1} deg", b.heading_deg);
+    let _ = writeln!(o, "Distance  {:.2} m", b.distance);
+    if let (Some(l), Some(lod)) = (&b.layer, &b.lod) {
+        let _ = writeln!(o, "Layer     {l}  (LOD {lod}){}", if b.removed { "  REMOVED" } else { "" });
+    } else if b.removed {
+        let _ = writeln!(o, "Layer     -  REMOVED");
+    }
+    let _ = writeln!(o, "Parts");
+    for p in &b.parts {
+        let _ = writeln!(
+            o,
+            "  {:<12} {:<22} {}",
+            p.slot,
+            p.mesh.as_deref().unwrap_or("-"),
+            p.material.as_deref().unwrap_or("-")
+        );
+    }
+    o
+}

@@ -1,0 +1,12 @@
+//! Casting: the shot loaded and every agent dressed. Takes the shot file,
+//! the cache, rigs and wardrobes; gives a [`ShotCrowd`]: each agent's scheme,
+//! parts, materials and height, and any frame's posed instances.
+
+pub mod cast;
+pub mod crowd;
+pub mod rig;
+pub mod table;
+pub mod wardrobe;
+
+pub use cast::{cast_agent, fit_part, mix64, uniform, AgentCast, RigCasting};
+pub use crowd::{DressedPart, Lod, ShotCrowd};

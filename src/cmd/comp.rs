@@ -1,0 +1,47 @@
+//! `throng comp`: stack a frame's layers into one EXR.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use crate::error::Result;
+use crate::render::exr;
+
+/// `throng comp`.
+#[derive(Debug, Args)]
+pub struct CompArgs {
+    /// Render output directory.
+    pub dir: PathBuf,
+    /// Shot frame.
+    #[arg(long)]
+    pub frame: i32,
+    /// Composited EXR.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also write a PNG preview.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+    /// Layer manifest giving the comp order and the layers that must be there
+    /// (default: scan DIR: `set`, then `crowdN` from the highest N down).
+    #[arg(long)]
+    pub manifest: Option<PathBuf>,
+}
+
+/// `throng comp DIR --frame F --out FILE.exr [--png FILE.png] [--manifest FILE]`.
+pub fn run(args: &CompArgs) -> Result<()> {
+    let manifest = args.manifest.as_deref().map(crate::layers::read_manifest).transpose()?;
+    let comped = crate::comp::comp_frame(&args.dir, args.frame, manifest.as_ref())?;
+    exr::write_layer(&args.out, &comped.film, &comped.meta)?;
+    if let Some(png) = &args.png {
+        exr::write_preview_png(png, &comped.film)?;
+    }
+    let names: Vec<&str> = comped.layers.iter().map(|l| l.0.as_str()).collect();
+    println!(
+        "comp {} frame {}: {} (back to front) -> {}",
+        comped.meta.shot,
+        args.frame,
+        names.join(", "),
+        args.out.display()
+    );
+    Ok(())
+}

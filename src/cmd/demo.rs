@@ -1,0 +1,133 @@
+//! `throng demo`: every stage on the bundled demo shot, with a summary of
+//! what each wrote.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::Args;
+
+use crate::casting::table::{cast_stats, mib};
+use crate::casting::ShotCrowd;
+use crate::error::{Error, Result};
+use crate::layers::{build_layers, set_bounds, LayerOverrides, MapOptions};
+use crate::output::FULL_LAYER;
+use crate::render::job::{self, RenderJob};
+
+/// `throng demo`.
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Where to write the demo's outputs.
+    #[arg(long, default_value = "out/demo")]
+    pub out: PathBuf,
+    /// The shot (default: the bundled demo/shot.toml).
+    #[arg(long)]
+    pub shot: Option<PathBuf>,
+    /// Samples per pixel for the demo renders.
+    #[arg(long, default_value_t = 16)]
+    pub spp: u32,
+}
+
+/// `throng demo`: every stage on the bundled demo shot.
+pub fn run(args: &DemoArgs) -> Result<()> {
+    let started = Instant::now();
+    let shot_path = match &args.shot {
+        Some(p) => p.clone(),
+        None => {
+            // From the repository, or wherever the binary was built from.
+            let here = PathBuf::from("demo/shot.toml");
+            if here.exists() {
+                here
+            } else {
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/shot.toml")
+            }
+        }
+    };
+    let out = &args.out;
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    println!("throng demo: {}", shot_path.display());
+
+    let t = Instant::now();
+    let crowd = ShotCrowd::load(&shot_path)?;
+    let info = crate::cache::info(&crowd.cache)?;
+    println!(
+        "  cache    {} agents over cache frames {}-{}, {} rigs, {} cycles",
+        info.agents,
+        info.frame_first.unwrap_or(0),
+        info.frame_last.unwrap_or(0),
+        info.rigs.len(),
+        info.cycles.len()
+    );
+    let stats = cast_stats(&crowd);
+    println!(
+        "  cast     {} agents, {} part instances of {} unique parts and {} materials ({} shared vs {} copied)  [{:.2} s]",
+        stats.agents,
+        stats.part_instances,
+        stats.unique_parts,
+        stats.unique_materials,
+        mib(stats.unique_geometry_bytes),
+        mib(stats.copied_geometry_bytes),
+        t.elapsed().as_secs_f64()
+    );
+
+    let t = Instant::now();
+    let manifest = build_layers(&crowd, &LayerOverrides { per_frame: true, ..Default::default() })?;
+    let manifest_path = out.join(format!("{}.layers.json", crowd.shot.name));
+    crate::layers::write_manifest(&manifest_path, &manifest)?;
+    let map = out.join("layers_map.png");
+    crate::layers::draw_map(&manifest, &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, &map)?;
+    println!(
+        "  layers   {} crowd layers + set, ranked at frame {}: 0 pops fixed (per-frame ranking would pop {} agents)  [{:.2} s]",
+        manifest.layers.len(),
+        manifest.ref_frame,
+        manifest.pops.agents_changed,
+        t.elapsed().as_secs_f64()
+    );
+
+    let t = Instant::now();
+    let glb = out.join(format!("{}.{}.glb", crowd.shot.name, manifest.ref_frame));
+    let s = crate::export::export_frame(&crowd, manifest.ref_frame, None, &glb)?;
+    println!(
+        "  export   {} agents, {} mesh nodes sharing {} meshes  [{:.2} s]",
+        s.agents,
+        s.mesh_nodes,
+        s.meshes,
+        t.elapsed().as_secs_f64()
+    );
+
+    let t = Instant::now();
+    let f = crowd.shot.frames;
+    let mut layers = job::all_layers(&manifest);
+    layers.push(FULL_LAYER.to_string());
+    let render = RenderJob {
+        png: true,
+        ..RenderJob::new(layers, vec![f.start, manifest.ref_frame, f.end], args.spp, out.join("render"))
+    };
+    let done = job::run(&crowd, Some(&manifest), &render)?;
+    let [w, h] = crowd.shot.render.resolution;
+    println!(
+        "  render   {} layer-frames at {w}x{h}, {} spp  [{:.1} s]",
+        done.len(),
+        render.spp,
+        t.elapsed().as_secs_f64()
+    );
+
+    println!("done in {:.1} s. Wrote under {}:", started.elapsed().as_secs_f64(), out.display());
+    let rows = [
+        (manifest_path.display().to_string(), "the layer manifest (docs/layers.md)".to_string()),
+        (map.display().to_string(), "the layer map: who is in which layer".to_string()),
+        (glb.display().to_string(), format!("frame {} as glTF (open in Blender)", manifest.ref_frame)),
+        (
+            format!("{}/<layer>/{}.<layer>.<frame>.exr", render.out.display(), crowd.shot.name),
+            "EXR layers (docs/render.md), PNG previews beside them".to_string(),
+        ),
+    ];
+    let width = rows.iter().map(|(p, _)| p.len()).max().unwrap_or(0);
+    for (path, what) in &rows {
+        println!("  {path:<width$}  {what}");
+    }
+    println!("Look at the PNGs, or the EXRs with `exrheader FILE` (Debian: openexr) or any compositor.");
+    if let Some(a) = manifest.agents.iter().find(|a| a.layer == 0 && !a.removed) {
+        println!("Ask about an agent: throng botinfo {} {} --frame {}", shot_path.display(), a.id, manifest.ref_frame);
+    }
+    Ok(())
+}

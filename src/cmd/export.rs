@@ -1,0 +1,63 @@
+//! `throng export`: one frame of the shot as glTF.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use crate::casting::ShotCrowd;
+use crate::error::{Error, Result};
+
+/// `throng export`.
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    /// Shot file.
+    pub shot: PathBuf,
+    /// Shot frame.
+    #[arg(long)]
+    pub frame: i32,
+    /// Only this layer's agents.
+    #[arg(long)]
+    pub layer: Option<String>,
+    /// Output .glb.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// `throng export SHOT --frame F [--layer L] --out scene.glb`.
+pub fn run(args: &ExportArgs) -> Result<()> {
+    let crowd = ShotCrowd::load(&args.shot)?;
+    if !crowd.shot.frames.contains(args.frame) {
+        return Err(Error::Usage(format!(
+            "frame {} is outside shot {} ({}-{})",
+            args.frame, crowd.shot.name, crowd.shot.frames.start, crowd.shot.frames.end
+        )));
+    }
+    // --layer: only that crowd layer's agents, from the manifest beside the shot.
+    let only = match &args.layer {
+        None => None,
+        Some(layer) => {
+            let path = crate::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name);
+            if !path.exists() {
+                return Err(Error::Usage(format!(
+                    "--layer needs the layer manifest {}: run `throng layers {}` first",
+                    path.display(),
+                    args.shot.display()
+                )));
+            }
+            let m = crate::layers::read_manifest(&path)?;
+            Some(m.layer_agents(layer).map_err(|names| {
+                Error::Usage(format!("no crowd layer `{layer}` in {} (layers: {})", path.display(), names.join(", ")))
+            })?)
+        }
+    };
+    let s = crate::export::export_frame(&crowd, args.frame, only.as_ref(), &args.out)?;
+    println!(
+        "wrote {}: {} agents, {} mesh nodes sharing {} meshes, {} instanced triangles",
+        args.out.display(),
+        s.agents,
+        s.mesh_nodes,
+        s.meshes,
+        s.instanced_triangles
+    );
+    Ok(())
+}

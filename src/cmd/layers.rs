@@ -1,0 +1,84 @@
+//! `throng layers`: the layer split, its manifest and map.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::values::budget;
+use crate::casting::ShotCrowd;
+use crate::error::Result;
+use crate::layers::{self, build_layers, set_bounds, LayerOverrides, MapOptions};
+
+/// `throng layers`.
+#[derive(Debug, Args)]
+pub struct LayersArgs {
+    /// Shot file.
+    pub shot: PathBuf,
+    /// Split into N layers of equal agent count, nearest first.
+    #[arg(long, conflicts_with_all = ["cutoffs", "budget"])]
+    pub count: Option<usize>,
+    /// Split at these distances in metres, e.g. 10,25,60.
+    #[arg(long, value_delimiter = ',', conflicts_with = "budget")]
+    pub cutoffs: Option<Vec<f32>>,
+    /// Split so each layer's estimated render memory stays under this, e.g. 2.8GB.
+    #[arg(long, value_parser = budget)]
+    pub budget: Option<String>,
+    /// Shot frame to rank at (default: the middle of the shot).
+    #[arg(long)]
+    pub ref_frame: Option<i32>,
+    /// Rank on every frame instead, and report agents that change layer.
+    #[arg(long)]
+    pub per_frame: bool,
+    /// Projected height in pixels below which an agent renders as proxy boxes
+    /// (default: the shot's `lod_full_min_px`).
+    #[arg(long)]
+    pub lod_px: Option<f32>,
+    /// Choose LOD on every frame, with hysteresis, instead of once at the reference frame.
+    #[arg(long)]
+    pub lod_per_frame: bool,
+    /// Draw the layer map to this PNG.
+    #[arg(long)]
+    pub map: Option<PathBuf>,
+    /// Where to write the layer manifest (default: beside the shot).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Machine-readable output.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl LayersArgs {
+    /// What these flags override of the shot's `[layers]` table.
+    pub fn overrides(&self) -> LayerOverrides {
+        LayerOverrides {
+            count: self.count,
+            cutoffs: self.cutoffs.clone(),
+            budget: self.budget.clone(),
+            ref_frame: self.ref_frame,
+            per_frame: self.per_frame,
+            lod_px: self.lod_px,
+            lod_per_frame: self.lod_per_frame,
+        }
+    }
+}
+
+/// `throng layers SHOT ...`: writes the manifest (and map) and prints the split.
+pub fn run(args: &LayersArgs) -> Result<()> {
+    let crowd = ShotCrowd::load(&args.shot)?;
+    let manifest = build_layers(&crowd, &args.overrides())?;
+    let out = args.out.clone().unwrap_or_else(|| layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
+    layers::write_manifest(&out, &manifest)?;
+    if let Some(map) = &args.map {
+        layers::draw_map(&manifest, &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, map)?;
+    }
+    if args.json {
+        println!("{}", super::to_json(&manifest.summary_json())?);
+    } else {
+        print!("{}", layers::summary(&manifest));
+        println!("manifest  {}", out.display());
+        if let Some(map) = &args.map {
+            println!("map       {}", map.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,123 @@
+//! `throng render`: path-traced EXR layers.
+
+use std::path::PathBuf;
+
+use clap::{Args, ValueEnum};
+
+use super::values::{frame_list, resolution, FrameList, Resolution};
+use crate::casting::ShotCrowd;
+use crate::error::{Error, Result};
+use crate::output::FULL_LAYER;
+use crate::render::job::{self, CryptoOutput, RenderJob};
+
+/// `--cryptomatte`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CryptoFlag {
+    /// Manifest in the EXR header.
+    Header,
+    /// Manifest in a JSON beside the EXR.
+    Sidecar,
+    /// No Cryptomatte channels.
+    Off,
+}
+
+impl From<CryptoFlag> for CryptoOutput {
+    fn from(f: CryptoFlag) -> CryptoOutput {
+        match f {
+            CryptoFlag::Header => CryptoOutput::Header,
+            CryptoFlag::Sidecar => CryptoOutput::Sidecar,
+            CryptoFlag::Off => CryptoOutput::Off,
+        }
+    }
+}
+
+/// `throng render`.
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// Shot file.
+    pub shot: PathBuf,
+    /// Layer name, `all`, or `full` (every agent in one pass).
+    #[arg(long, default_value = "all")]
+    pub layer: String,
+    /// Shot frames, e.g. 1001-1010 or 1001,1005.
+    #[arg(long, value_parser = frame_list)]
+    pub frames: Option<FrameList>,
+    /// Samples per pixel (default: the shot's).
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Render threads (default: all cores). Output does not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Skip frames whose EXR already exists and reads back whole.
+    #[arg(long)]
+    pub resume: bool,
+    /// Layer manifest (default: `<shot dir>/<shot name>.layers.json`, from `throng layers`).
+    #[arg(long)]
+    pub manifest: Option<PathBuf>,
+    /// Also write a tone-mapped PNG preview beside each EXR.
+    #[arg(long)]
+    pub png: bool,
+    /// Image size override, e.g. 480x270 (default: the shot's).
+    #[arg(long, value_parser = resolution)]
+    pub resolution: Option<Resolution>,
+    /// Cryptomatte mattes (CryptoAgent, CryptoPart).
+    #[arg(long, value_enum, default_value_t = CryptoFlag::Header)]
+    pub cryptomatte: CryptoFlag,
+}
+
+/// `throng render SHOT ...`: renders the asked layers and frames.
+pub fn run(args: &RenderArgs) -> Result<()> {
+    let crowd = ShotCrowd::load(&args.shot)?;
+    let manifest_path = args
+        .manifest
+        .clone()
+        .unwrap_or_else(|| crate::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
+    let manifest = if manifest_path.exists() {
+        Some(crate::layers::read_manifest(&manifest_path)?)
+    } else if args.layer == FULL_LAYER {
+        None
+    } else {
+        return Err(Error::Usage(format!(
+            "no layer manifest at {}: run `throng layers {}` first (or render --layer full)",
+            manifest_path.display(),
+            args.shot.display()
+        )));
+    };
+    if let Some(m) = &manifest {
+        if m.shot != crowd.shot.name {
+            return Err(Error::invalid(
+                &manifest_path,
+                format!("manifest is for shot `{}`, not `{}`", m.shot, crowd.shot.name),
+            ));
+        }
+    }
+    let layers = match (args.layer.as_str(), &manifest) {
+        ("all", Some(m)) => job::all_layers(m),
+        (l, _) => vec![l.to_string()],
+    };
+    let frames = match &args.frames {
+        Some(FrameList(f)) => f.clone(),
+        None => crowd.shot.frames.iter().collect(),
+    };
+    let spp = args.spp.unwrap_or(crowd.shot.render.spp).max(1);
+    let job = RenderJob {
+        threads: args.threads.unwrap_or(0),
+        resume: args.resume,
+        png: args.png,
+        resolution: args.resolution.map(|Resolution(r)| r),
+        cryptomatte: args.cryptomatte.into(),
+        ..RenderJob::new(layers, frames, spp, args.out.clone())
+    };
+    let done = job::run(&crowd, manifest.as_ref(), &job)?;
+    let rendered = done.iter().filter(|d| !d.skipped).count();
+    let secs: f64 = done.iter().map(|d| d.seconds).sum();
+    println!(
+        "rendered {rendered} layer-frames ({} skipped as complete) in {secs:.1} s into {}",
+        done.len() - rendered,
+        args.out.display()
+    );
+    Ok(())
+}

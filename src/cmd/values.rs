@@ -1,0 +1,50 @@
+//! Typed flag values, parsed by clap so a bad value is refused at parse time.
+
+/// `--frames`: a frame list such as `1001-1010`, `1001-1100x2` or `1001,1005`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FrameList(pub Vec<i32>);
+
+/// Parses a frame list.
+pub fn frame_list(s: &str) -> Result<FrameList, String> {
+    crate::shot::parse_frame_list(s).map(FrameList)
+}
+
+/// `--pixel X,Y`: 0,0 is the top-left pixel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Pixel {
+    /// Column.
+    pub x: u32,
+    /// Row from the top.
+    pub y: u32,
+}
+
+/// Parses `X,Y` pixel coordinates.
+pub fn pixel(s: &str) -> Result<Pixel, String> {
+    let bad = || format!("bad --pixel `{s}` (use X,Y, e.g. 480,270; 0,0 is the top-left pixel)");
+    let (x, y) = s.split_once(',').ok_or_else(bad)?;
+    Ok(Pixel { x: x.trim().parse().map_err(|_| bad())?, y: y.trim().parse().map_err(|_| bad())? })
+}
+
+/// `--resolution WIDTHxHEIGHT`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Resolution(pub [u32; 2]);
+
+/// Largest width or height a render accepts.
+pub const MAX_RESOLUTION: u32 = 16384;
+
+/// Parses `WIDTHxHEIGHT`.
+pub fn resolution(s: &str) -> Result<Resolution, String> {
+    let bad = || format!("bad resolution `{s}` (use e.g. 480x270; at most {MAX_RESOLUTION} a side)");
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h): (u32, u32) = (w.trim().parse().map_err(|_| bad())?, h.trim().parse().map_err(|_| bad())?);
+    if w == 0 || h == 0 || w > MAX_RESOLUTION || h > MAX_RESOLUTION {
+        return Err(bad());
+    }
+    Ok(Resolution([w, h]))
+}
+
+/// `--budget`: a byte size such as `2.8GB` (checked here, kept as written for the manifest).
+pub fn budget(s: &str) -> Result<String, String> {
+    crate::shot::parse_bytes(s)?;
+    Ok(s.to_string())
+}
