@@ -44,6 +44,10 @@ pub struct BotInfo {
     pub lod: Option<String>,
     /// Parts per slot.
     pub parts: Vec<PartRow>,
+    /// The shared pose a skinned agent plays (`rig/cycle/<step>of<steps>`);
+    /// absent for slot rigs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose: Option<String>,
 }
 
 /// Ids closest to `id` among those that exist, for "did you mean".
@@ -95,6 +99,7 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
             layer: None,
             lod: None,
             parts: cast_row(crowd, cast).parts,
+            pose: crowd.pose_key(a),
         });
     }
     Ok(out)
@@ -126,6 +131,9 @@ pub fn format_bot_info(b: &BotInfo) -> String {
         let _ = writeln!(o, "Layer     {l}  (LOD {lod}){}", if b.removed { "  REMOVED" } else { "" });
     } else if b.removed {
         let _ = writeln!(o, "Layer     -  REMOVED");
+    }
+    if let Some(pose) = &b.pose {
+        let _ = writeln!(o, "Pose      {pose}  (shared by every agent on it)");
     }
     let _ = writeln!(o, "Parts");
     for p in &b.parts {

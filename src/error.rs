@@ -124,6 +124,14 @@ impl Error {
         let field = field.into();
         self.with(|l| l.field = Some(field))
     }
+    /// Qualifies the field, if any, with the key path it sits under (`rigs.walker`).
+    pub fn field_prefix(self, prefix: &str) -> Self {
+        self.with(|l| {
+            if let Some(f) = &l.field {
+                l.field = Some(format!("{prefix}.{f}"));
+            }
+        })
+    }
 }
 
 /// The 1-based line of a byte offset in `text`.

@@ -110,6 +110,79 @@ pub struct RigRef {
     pub schemes: BTreeMap<String, f32>,
     /// Height jitter: scale drawn uniformly from 1 +/- this.
     pub height_jitter: f32,
+    /// `kind`: `None` detects it from the file (a skin and no slots: skinned).
+    pub kind: Option<RigKind>,
+    /// Options of a skinned character (defaults for slot rigs, which ignore them).
+    pub skin: SkinOptions,
+}
+
+/// What kind of character a rig file is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RigKind {
+    /// Rigid nodes with part slots (the frankenbot).
+    Slots,
+    /// A skinned mesh on a skeleton.
+    Skinned,
+}
+
+/// A coordinate axis of a source file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+pub enum Axis {
+    /// +X.
+    #[serde(rename = "+x")]
+    PosX,
+    /// -X.
+    #[serde(rename = "-x")]
+    NegX,
+    /// +Y.
+    #[serde(rename = "+y")]
+    PosY,
+    /// -Y.
+    #[serde(rename = "-y")]
+    NegY,
+    /// +Z.
+    #[serde(rename = "+z")]
+    PosZ,
+    /// -Z.
+    #[serde(rename = "-z")]
+    NegZ,
+}
+
+/// How a skinned character file maps onto throng's agents.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SkinOptions {
+    /// Cache cycle name -> clip name (or `#index` for unnamed clips).
+    pub cycles: BTreeMap<String, String>,
+    /// The file's up axis (default +y; a Z-up parent node in the file is respected anyway).
+    pub up: Axis,
+    /// The direction the character faces in the file (default +z).
+    pub forward: Axis,
+    /// Metres per file unit (0.01 for a file in centimetres).
+    pub scale: f32,
+    /// Joint whose horizontal travel is root motion (stripped; its Z travel is the stride).
+    pub root: Option<String>,
+    /// Metres per cycle by cache cycle name, overriding the root joint's travel.
+    pub strides: BTreeMap<String, f32>,
+    /// Pose instancing step in cycle frames (default `skin::DEFAULT_POSE_STEP`).
+    pub pose_step: Option<f32>,
+    /// Slot names for wardrobes (default: one per skinned mesh node of the file).
+    pub slots: Option<Vec<String>>,
+}
+
+impl Default for SkinOptions {
+    fn default() -> Self {
+        SkinOptions {
+            cycles: BTreeMap::new(),
+            up: Axis::PosY,
+            forward: Axis::PosZ,
+            scale: 1.0,
+            root: None,
+            strides: BTreeMap::new(),
+            pose_step: None,
+            slots: None,
+        }
+    }
 }
 
 /// `[set]`.
@@ -361,6 +434,31 @@ struct RigFile {
     #[serde(default)]
     schemes: BTreeMap<String, f32>,
     height_jitter: Option<Spanned<f32>>,
+    kind: Option<RigKind>,
+    #[serde(default)]
+    cycles: BTreeMap<String, String>,
+    up: Option<Axis>,
+    forward: Option<Axis>,
+    scale: Option<Spanned<f32>>,
+    root: Option<String>,
+    #[serde(default)]
+    strides: BTreeMap<String, f32>,
+    pose_step: Option<Spanned<f32>>,
+    slots: Option<Vec<String>>,
+}
+
+impl RigFile {
+    /// Whether any skinned-character key is set.
+    fn has_skin_keys(&self) -> bool {
+        !self.cycles.is_empty()
+            || self.up.is_some()
+            || self.forward.is_some()
+            || self.scale.is_some()
+            || self.root.is_some()
+            || !self.strides.is_empty()
+            || self.pose_step.is_some()
+            || self.slots.is_some()
+    }
 }
 
 #[derive(Deserialize)]
@@ -455,12 +553,59 @@ impl Shot {
                     ));
                 }
             }
+            if rig.kind == Some(RigKind::Slots) && rig.has_skin_keys() {
+                return Err(at(
+                    rig.file.span(),
+                    &format!("rigs.{name}.kind"),
+                    "cycles, up, forward, scale, root, strides, pose_step and slots are for `kind = \"skinned\"` rigs"
+                        .into(),
+                ));
+            }
+            let defaults = SkinOptions::default();
+            let scale = rig.scale.as_ref().map_or(defaults.scale, |s| *s.get_ref());
+            if !(scale > 0.0 && scale.is_finite()) {
+                let span = rig.scale.as_ref().map_or(rig.file.span(), |s| s.span());
+                return Err(at(span, &format!("rigs.{name}.scale"), format!("must be a positive number, got {scale}")));
+            }
+            let pose_step = rig.pose_step.as_ref().map(|s| *s.get_ref());
+            if let (Some(s), Some(spanned)) = (pose_step, &rig.pose_step) {
+                if !(s > 0.0 && s.is_finite()) {
+                    return Err(at(
+                        spanned.span(),
+                        &format!("rigs.{name}.pose_step"),
+                        format!("must be a positive number of frames, got {s}"),
+                    ));
+                }
+            }
+            for (cycle, s) in &rig.strides {
+                if !(*s >= 0.0 && s.is_finite()) {
+                    return Err(at(
+                        rig.file.span(),
+                        &format!("rigs.{name}.strides.{cycle}"),
+                        format!("stride must be >= 0 metres, got {s}"),
+                    ));
+                }
+            }
+            if rig.slots.as_ref().is_some_and(|s| s.is_empty()) {
+                return Err(at(rig.file.span(), &format!("rigs.{name}.slots"), "give at least one slot".into()));
+            }
             rigs.insert(
                 name.clone(),
                 RigRef {
                     file: existing(&rig.file, &format!("rigs.{name}.file"))?,
                     schemes: rig.schemes.clone(),
                     height_jitter: jitter,
+                    kind: rig.kind,
+                    skin: SkinOptions {
+                        cycles: rig.cycles.clone(),
+                        up: rig.up.unwrap_or(defaults.up),
+                        forward: rig.forward.unwrap_or(defaults.forward),
+                        scale,
+                        root: rig.root.clone(),
+                        strides: rig.strides.clone(),
+                        pose_step,
+                        slots: rig.slots.clone(),
+                    },
                 },
             );
         }

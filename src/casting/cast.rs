@@ -146,18 +146,43 @@ pub fn cast_agent(
         slots.push(SlotCast { slot: slot.clone(), part });
     }
 
-    // h' = h * (1 + U(-j, j)); drawn even for unscaled agents so that the
-    // draw never depends on anything but (seed, id, purpose).
-    let u = uniform(seed, id, "height") as f32;
-    let jittered = 1.0 + rig.height_jitter * (2.0 * u - 1.0);
     Ok(AgentCast {
         id,
         rig: rig.name.to_string(),
         scheme: scheme_name,
-        height_scale: if never_scale { 1.0 } else { jittered },
+        height_scale: height_scale(seed, id, rig.height_jitter, never_scale),
         scaled: !never_scale,
         slots,
     })
+}
+
+/// The scheme name of agents that wear their character as delivered.
+pub const DELIVERED_SCHEME: &str = "delivered";
+
+/// Casts an agent of a skinned rig whose shot names no schemes: it wears
+/// the file's own meshes and materials (`parts`, one per slot); only the
+/// height is drawn.
+pub fn cast_delivered(seed: u64, id: u32, rig: &RigCasting, parts: Vec<SlotCast>, never_scale: bool) -> AgentCast {
+    AgentCast {
+        id,
+        rig: rig.name.to_string(),
+        scheme: DELIVERED_SCHEME.to_string(),
+        height_scale: height_scale(seed, id, rig.height_jitter, never_scale),
+        scaled: !never_scale,
+        slots: parts,
+    }
+}
+
+/// `h' = h * (1 + U(-j, j))`; drawn even for unscaled agents so that the
+/// draw never depends on anything but (seed, id, purpose).
+fn height_scale(seed: u64, id: u32, jitter: f32, never_scale: bool) -> f32 {
+    let u = uniform(seed, id, "height") as f32;
+    let jittered = 1.0 + jitter * (2.0 * u - 1.0);
+    if never_scale {
+        1.0
+    } else {
+        jittered
+    }
 }
 
 /// The transform that fits a part mesh (bounds `mesh_lo..mesh_hi`) to its

@@ -1,25 +1,30 @@
 //! Posing: the shot loaded and cast, ready to give any frame's instances.
 //!
-//! An agent's part transform at a frame is
+//! A slot-rig agent's part transform at a frame is
 //! `world_from_agent (position, heading, height scale about the foot pivot)
 //!  x rig_from_slot (the rig node at that cycle frame)
 //!  x slot_from_part (the part's fit to its proxy box)`.
+//! A skinned agent is `world_from_agent x` its meshes posed at the pose step
+//! nearest its cycle frame (`casting::skin`); every pose any agent takes in
+//! the shot's frames is posed once, at load, and shared by every agent,
+//! frame and layer on it.
 //! Meshes and materials are loaded once into the shared [`AssetCache`]; every
 //! instance references them by id.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::Path;
 
 use glam::{Affine3A, Quat, Vec3};
 
 use crate::cache::{AgentSample, CacheReader, FrameBlock};
 use crate::casting::rig::Rig;
+use crate::casting::skin::{is_skinned, SkinnedRig};
 use crate::casting::wardrobe::{Wardrobes, GLTF_MATERIAL};
-use crate::casting::{cast_agent, fit_part, AgentCast, RigCasting};
+use crate::casting::{cast_agent, cast_delivered, fit_part, AgentCast, CastPart, RigCasting, SlotCast};
 use crate::error::{Error, Result};
-use crate::scene::gltf::AssetCache;
+use crate::scene::gltf::{AssetCache, GltfFile};
 use crate::scene::{vis, Camera, Instance, Library, Material, MaterialId, Mesh, MeshId};
-use crate::shot::Shot;
+use crate::shot::{RigKind, Shot};
 
 /// Level of detail an agent renders at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -50,26 +55,73 @@ pub struct DressedPart {
     pub proxy: bool,
 }
 
+/// One skinned piece a skinned agent wears.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SkinDress {
+    /// Index into the agent's cast slots.
+    pub slot: usize,
+    /// Index into the rig's pieces ([`SkinnedRig::piece`]).
+    pub piece: usize,
+    /// The piece's material.
+    pub material: MaterialId,
+}
+
+/// A pose every agent on it shares: (rig, cycle index, pose step).
+pub type PoseKey = (String, usize, u32);
+
+/// Posed geometry of skinned agents, one entry per pose used in the shot.
+#[derive(Debug, Default)]
+pub struct PosedSkins {
+    /// (rig, piece, cycle, step) -> the posed mesh.
+    pub meshes: BTreeMap<(String, usize, usize, u32), MeshId>,
+    /// `rig_from_node` of every rig node at each pose (for proxy boxes).
+    pub joints: BTreeMap<PoseKey, Vec<Affine3A>>,
+}
+
+/// An agent posed at one frame.
+#[derive(Debug, Clone)]
+pub enum AgentPose {
+    /// A slot rig: `world_from_slot` for every rig slot.
+    Slots(Vec<Affine3A>),
+    /// A skinned character: where it stands and the pose step it plays.
+    Skinned {
+        /// World from rig space (position, heading, height scale).
+        world_from_rig: Affine3A,
+        /// Cycle index in the skinned rig.
+        cycle: usize,
+        /// Pose step of that cycle.
+        step: u32,
+    },
+}
+
 /// The shot, its wardrobes, rigs, cache and casting, loaded once.
 pub struct ShotCrowd {
     /// The shot.
     pub shot: Shot,
     /// Its wardrobes.
     pub wardrobes: Wardrobes,
-    /// Rigs by name.
+    /// Slot rigs by name.
     pub rigs: BTreeMap<String, Rig>,
+    /// Skinned characters by rig name.
+    pub skinned: BTreeMap<String, SkinnedRig>,
     /// The simulation cache.
     pub cache: CacheReader,
     /// Every agent that appears in the shot's frames, by id.
     pub casting: BTreeMap<u32, AgentCast>,
     /// Shared meshes and materials.
     pub assets: AssetCache,
-    /// Resolved parts per agent.
+    /// Resolved parts per slot-rig agent.
     pub dressed: BTreeMap<u32, Vec<DressedPart>>,
+    /// Skinned pieces per skinned agent.
+    pub skin_dressed: BTreeMap<u32, Vec<SkinDress>>,
+    /// Every pose skinned agents take in the shot's frames.
+    pub posed: PosedSkins,
     /// The unit cube used for proxy boxes.
     pub proxy_mesh: MeshId,
     /// The set's instances (agent `None`), fully visible.
     pub set: Vec<Instance>,
+    /// What loading noticed but accepted (weights renormalised, morph targets ignored).
+    pub warnings: Vec<String>,
     /// The camera from a glTF node, when the shot names one instead of keys.
     gltf_camera: Option<Camera>,
     /// Standing height of each rig, metres.
@@ -100,6 +152,32 @@ fn unit_cube() -> Mesh {
     m
 }
 
+/// The library material for a wardrobe material, made once per name.
+fn wardrobe_material(
+    assets: &mut AssetCache,
+    made: &mut HashMap<String, MaterialId>,
+    wardrobes: &Wardrobes,
+    name: &str,
+) -> Result<MaterialId> {
+    if let Some(&m) = made.get(name) {
+        return Ok(m);
+    }
+    let spec = &wardrobes.materials[name];
+    let texture = match &spec.base_color_texture {
+        Some(t) => Some(assets.texture_png(t)?),
+        None => None,
+    };
+    let m = assets.add_material(Material {
+        name: name.to_string(),
+        base_color: Vec3::from(spec.base_color),
+        base_color_texture: texture,
+        roughness: spec.roughness,
+        metallic: spec.metallic,
+    });
+    made.insert(name.to_string(), m);
+    Ok(m)
+}
+
 impl ShotCrowd {
     /// Loads the shot and everything it names, and casts every agent that
     /// appears in the shot's frame range.
@@ -114,17 +192,43 @@ impl ShotCrowd {
     pub fn new(shot: Shot, cache: CacheReader) -> Result<ShotCrowd> {
         let wardrobes = Wardrobes::load(&shot.wardrobes)?;
         let mut rigs = BTreeMap::new();
+        let mut skinned = BTreeMap::new();
         for (name, r) in &shot.rigs {
-            rigs.insert(name.clone(), Rig::load(&r.file)?);
+            let kind = match r.kind {
+                Some(k) => k,
+                // A skin and no slot extras: a skinned character.
+                None => {
+                    let file = GltfFile::open(&r.file)?;
+                    let slots =
+                        file.doc.nodes().any(|n| n.extras().as_ref().is_some_and(|e| e.get().contains("\"slot\"")));
+                    if is_skinned(&file) && !slots {
+                        RigKind::Skinned
+                    } else {
+                        RigKind::Slots
+                    }
+                }
+            };
+            match kind {
+                RigKind::Slots => {
+                    rigs.insert(name.clone(), Rig::load(&r.file)?);
+                }
+                RigKind::Skinned => {
+                    let rig = SkinnedRig::load(&r.file, &r.skin, shot.frames.fps)
+                        .map_err(|e| e.field_prefix(&format!("rigs.{name}")))?;
+                    skinned.insert(name.clone(), rig);
+                }
+            }
         }
 
         // First pass over the shot's frames: each agent's rig (at its first
-        // appearance) and whether it is ever seated or on a no-scale cycle.
+        // appearance), whether it is ever seated or on a no-scale cycle, and
+        // the poses skinned agents take.
         struct Seen {
             rig: u16,
             never_scale: bool,
         }
         let mut seen: BTreeMap<u32, Seen> = BTreeMap::new();
+        let mut skin_poses: BTreeMap<u32, BTreeSet<(usize, u32)>> = BTreeMap::new();
         for f in shot.frames.iter() {
             let cf = shot.cache.cache_frame(f);
             if cache.frames().binary_search(&cf).is_err() {
@@ -135,13 +239,24 @@ impl ShotCrowd {
                 let cycle = cache.cycles().get(a.cycle as usize).map(String::as_str).unwrap_or("");
                 let rig_name = cache.rigs().get(a.rig as usize).map(String::as_str).unwrap_or("");
                 // A cycle the agent's rig lacks would only fail when posed; say so now.
-                if let Some(rig) = rigs.get(rig_name) {
-                    if let Err(e) = rig.cycle(cycle) {
-                        return Err(Error::invalid(cache.path(), format!("rig `{rig_name}`: {e}"))
-                            .frame(f as i64)
-                            .agent(a.id)
-                            .field("cycle"));
-                    }
+                let missing = match (rigs.get(rig_name), skinned.get(rig_name)) {
+                    (Some(rig), _) => rig.cycle(cycle).err(),
+                    (None, Some(rig)) => match rig.cycle_index(cycle) {
+                        Ok(c) => {
+                            if !a.hidden() {
+                                skin_poses.entry(a.id).or_default().insert((c, rig.step_of(c, a.cycle_frame)));
+                            }
+                            None
+                        }
+                        Err(e) => Some(e),
+                    },
+                    (None, None) => None,
+                };
+                if let Some(e) = missing {
+                    return Err(Error::invalid(cache.path(), format!("rig `{rig_name}`: {e}"))
+                        .frame(f as i64)
+                        .agent(a.id)
+                        .field("cycle"));
                 }
                 let no_scale = a.seated() || shot.is_no_scale_cycle(cycle);
                 let e = seen.entry(a.id).or_insert(Seen { rig: a.rig, never_scale: false });
@@ -166,25 +281,75 @@ impl ShotCrowd {
         let proxy_mesh = assets.add_mesh(unit_cube());
         let mut casting = BTreeMap::new();
         let mut dressed = BTreeMap::new();
+        let mut skin_dressed = BTreeMap::new();
         // Fits depend only on (rig, slot, mesh): compute each once.
         let mut fits: HashMap<(String, usize, MeshId), Affine3A> = HashMap::new();
         let mut materials: HashMap<String, MaterialId> = HashMap::new();
         for (&id, s) in &seen {
             let rig_name = cache.rigs().get(s.rig as usize).cloned().unwrap_or_default();
-            let (rig, rig_ref) = match (rigs.get(&rig_name), shot.rigs.get(&rig_name)) {
-                (Some(r), Some(rr)) => (r, rr),
-                _ => {
-                    return Err(Error::invalid(
-                        &shot.path,
-                        format!(
-                            "agent {id} uses rig `{rig_name}`, which the shot's [rigs] does not define (defined: {})",
-                            shot.rigs.keys().cloned().collect::<Vec<_>>().join(", ")
-                        ),
-                    )
-                    .agent(id)
-                    .field("rigs"))
-                }
+            let Some(rig_ref) = shot.rigs.get(&rig_name) else {
+                return Err(Error::invalid(
+                    &shot.path,
+                    format!(
+                        "agent {id} uses rig `{rig_name}`, which the shot's [rigs] does not define (defined: {})",
+                        shot.rigs.keys().cloned().collect::<Vec<_>>().join(", ")
+                    ),
+                )
+                .agent(id)
+                .field("rigs"));
             };
+            let scheme_err =
+                |msg: String| Error::invalid(&shot.path, msg).agent(id).field(format!("rigs.{rig_name}.schemes"));
+
+            if let Some(rig) = skinned.get_mut(&rig_name) {
+                let slot_names = rig.slots().to_vec();
+                let rc = RigCasting {
+                    name: &rig_name,
+                    slots: &slot_names,
+                    schemes: &rig_ref.schemes,
+                    height_jitter: rig_ref.height_jitter,
+                };
+                let cast = if rig_ref.schemes.is_empty() {
+                    // No schemes: the character as delivered, in its own materials.
+                    let rig_file = rig.path().to_path_buf();
+                    let parts = rig
+                        .delivered()
+                        .iter()
+                        .map(|(slot, mesh, _)| SlotCast {
+                            slot: slot.clone(),
+                            part: Some(CastPart {
+                                file: rig_file.clone(),
+                                mesh: mesh.clone(),
+                                material: GLTF_MATERIAL.into(),
+                                uniform: false,
+                            }),
+                        })
+                        .collect();
+                    cast_delivered(shot.seed, id, &rc, parts, s.never_scale)
+                } else {
+                    cast_agent(shot.seed, id, &rc, &wardrobes, &shot.exclude_parts, s.never_scale)
+                        .map_err(scheme_err)?
+                };
+                let mut pieces = Vec::new();
+                for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
+                    let Some(part) = &slot_cast.part else { continue };
+                    let part_index = rig.part(&part.file, &part.mesh).map_err(|e| e.agent(id))?;
+                    for &piece in &rig.part_at(part_index).pieces.clone() {
+                        let material = if part.material == GLTF_MATERIAL {
+                            let p = rig.piece(piece);
+                            assets.gltf_material_at(&p.file, p.material)?
+                        } else {
+                            wardrobe_material(&mut assets, &mut materials, &wardrobes, &part.material)?
+                        };
+                        pieces.push(SkinDress { slot: slot_index, piece, material });
+                    }
+                }
+                skin_dressed.insert(id, pieces);
+                casting.insert(id, cast);
+                continue;
+            }
+
+            let Some(rig) = rigs.get(&rig_name) else { continue };
             let slot_names: Vec<String> = rig.slots().iter().map(|s| s.name.clone()).collect();
             let rc = RigCasting {
                 name: &rig_name,
@@ -192,8 +357,8 @@ impl ShotCrowd {
                 schemes: &rig_ref.schemes,
                 height_jitter: rig_ref.height_jitter,
             };
-            let cast = cast_agent(shot.seed, id, &rc, &wardrobes, &shot.exclude_parts, s.never_scale)
-                .map_err(|msg| Error::invalid(&shot.path, msg).agent(id).field(format!("rigs.{rig_name}.schemes")))?;
+            let cast =
+                cast_agent(shot.seed, id, &rc, &wardrobes, &shot.exclude_parts, s.never_scale).map_err(scheme_err)?;
             let mut parts = Vec::new();
             for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
                 let Some(part) = &slot_cast.part else { continue };
@@ -203,26 +368,7 @@ impl ShotCrowd {
                     assets.mesh_primitives(&part.file, &part.mesh)?
                 } else {
                     let mesh = assets.mesh(&part.file, &part.mesh)?;
-                    let material = match materials.get(&part.material) {
-                        Some(&m) => m,
-                        None => {
-                            let spec = &wardrobes.materials[&part.material];
-                            let texture = match &spec.base_color_texture {
-                                Some(t) => Some(assets.texture_png(t)?),
-                                None => None,
-                            };
-                            let m = assets.add_material(Material {
-                                name: part.material.clone(),
-                                base_color: Vec3::from(spec.base_color),
-                                base_color_texture: texture,
-                                roughness: spec.roughness,
-                                metallic: spec.metallic,
-                            });
-                            materials.insert(part.material.clone(), m);
-                            m
-                        }
-                    };
-                    vec![(mesh, material)]
+                    vec![(mesh, wardrobe_material(&mut assets, &mut materials, &wardrobes, &part.material)?)]
                 };
                 let Some(&(first_mesh, _)) = pieces.first() else { continue };
                 let slot = &rig.slots()[slot_index];
@@ -255,6 +401,29 @@ impl ShotCrowd {
             dressed.insert(id, parts);
             casting.insert(id, cast);
         }
+
+        // Pose every (piece, cycle, step) a skinned agent takes, once, in a
+        // fixed order so mesh ids never depend on anything but the inputs.
+        let mut posed = PosedSkins::default();
+        for (id, poses) in &skin_poses {
+            let (Some(cast), Some(pieces)) = (casting.get(id), skin_dressed.get(id)) else { continue };
+            let rig = &skinned[&cast.rig];
+            for &(cycle, step) in poses {
+                let key = (cast.rig.clone(), cycle, step);
+                if !posed.joints.contains_key(&key) {
+                    posed.joints.insert(key.clone(), rig.step_joints(cycle, step));
+                }
+                for d in pieces {
+                    let mesh_key = (cast.rig.clone(), d.piece, cycle, step);
+                    if posed.meshes.contains_key(&mesh_key) {
+                        continue;
+                    }
+                    let mesh = rig.pose_piece(d.piece, &posed.joints[&key], &rig.pose_name(cycle, step));
+                    posed.meshes.insert(mesh_key, assets.add_mesh(mesh));
+                }
+            }
+        }
+
         let set = match &shot.set {
             Some(s) => assets
                 .load_scene_instances(&s.file)?
@@ -274,17 +443,26 @@ impl ShotCrowd {
             Some((file, node)) => Some(assets.find_camera(file, node)?),
             None => None,
         };
-        let rig_heights = rigs.iter().map(|(name, rig)| (name.clone(), rig.height())).collect();
+        let rig_heights = rigs
+            .iter()
+            .map(|(name, rig)| (name.clone(), rig.height()))
+            .chain(skinned.iter().map(|(name, rig)| (name.clone(), rig.height())))
+            .collect();
+        let warnings = skinned.values().flat_map(|r| r.warnings().iter().cloned()).collect();
         Ok(ShotCrowd {
             shot,
             wardrobes,
             rigs,
+            skinned,
             cache,
             casting,
             assets,
             dressed,
+            skin_dressed,
+            posed,
             proxy_mesh,
             set,
+            warnings,
             gltf_camera,
             rig_heights,
         })
@@ -342,47 +520,103 @@ impl ShotCrowd {
             && !self.shot.culled_cycles.iter().any(|c| c == self.cycle_name(a))
     }
 
-    /// World transforms of every slot of an agent at its cycle frame, in rig slot order.
-    pub fn slot_transforms(&self, a: &AgentSample) -> Result<Vec<Affine3A>> {
+    /// An agent posed at its cycle frame: its slots' world transforms (slot
+    /// rigs) or its placement and pose step (skinned characters).
+    pub fn agent_pose(&self, a: &AgentSample) -> Result<AgentPose> {
         let cast = self.casting.get(&a.id).ok_or_else(|| {
             Error::invalid(&self.shot.cache.path, "agent was not cast (not in the shot's frames)").agent(a.id)
         })?;
-        let rig = &self.rigs[&cast.rig];
-        let cycle = rig
-            .cycle(self.cycle_name(a))
-            .map_err(|e| Error::invalid(&self.shot.cache.path, format!("rig `{}`: {e}", cast.rig)).agent(a.id))?;
-        let pose = cycle.sample(a.cycle_frame, self.shot.frames.fps);
         let world_from_agent = self.world_from_agent(a);
-        Ok(pose.slot_transforms().into_iter().map(|(_, m)| world_from_agent * m).collect())
+        let rig_err = |e: Error| Error::invalid(&self.shot.cache.path, format!("rig `{}`: {e}", cast.rig)).agent(a.id);
+        if let Some(rig) = self.skinned.get(&cast.rig) {
+            let cycle = rig.cycle_index(self.cycle_name(a)).map_err(rig_err)?;
+            return Ok(AgentPose::Skinned {
+                world_from_rig: world_from_agent,
+                cycle,
+                step: rig.step_of(cycle, a.cycle_frame),
+            });
+        }
+        let rig = &self.rigs[&cast.rig];
+        let cycle = rig.cycle(self.cycle_name(a)).map_err(rig_err)?;
+        let pose = cycle.sample(a.cycle_frame, self.shot.frames.fps);
+        Ok(AgentPose::Slots(pose.slot_transforms().into_iter().map(|(_, m)| world_from_agent * m).collect()))
     }
 
     /// The instances of one agent at a frame: its parts, or its proxy boxes
     /// wearing the same materials.
     pub fn agent_instances(&self, a: &AgentSample, lod: Lod, visibility: u8, out: &mut Vec<Instance>) -> Result<()> {
-        let slots = self.slot_transforms(a)?;
-        self.posed_instances(a.id, &slots, lod, visibility, out);
+        let pose = self.agent_pose(a)?;
+        self.posed_instances(a.id, &pose, lod, visibility, out);
         Ok(())
     }
 
-    /// As [`ShotCrowd::agent_instances`], from slot transforms already
-    /// posed (a render poses each agent once per frame, not once per layer).
-    pub fn posed_instances(&self, id: u32, slots: &[Affine3A], lod: Lod, visibility: u8, out: &mut Vec<Instance>) {
-        for p in self.dressed.get(&id).into_iter().flatten() {
-            let world_from_slot = slots[p.slot];
-            let (mesh, world_from_object) = match lod {
-                Lod::Full => (p.mesh, world_from_slot * p.slot_from_part),
-                Lod::Proxy if p.proxy => (self.proxy_mesh, world_from_slot * p.slot_from_proxy),
-                Lod::Proxy => continue,
-            };
-            out.push(Instance {
-                mesh,
-                material: p.material,
-                world_from_object,
-                agent: Some(id),
-                part: p.slot as u16,
-                visibility,
-            });
+    /// As [`ShotCrowd::agent_instances`], from a pose already computed (a
+    /// render poses each agent once per frame, not once per layer).
+    pub fn posed_instances(&self, id: u32, pose: &AgentPose, lod: Lod, visibility: u8, out: &mut Vec<Instance>) {
+        let instance = |mesh, material, world_from_object, part: usize| Instance {
+            mesh,
+            material,
+            world_from_object,
+            agent: Some(id),
+            part: part as u16,
+            visibility,
+        };
+        match pose {
+            AgentPose::Slots(slots) => {
+                for p in self.dressed.get(&id).into_iter().flatten() {
+                    let world_from_slot = slots[p.slot];
+                    match lod {
+                        Lod::Full => out.push(instance(p.mesh, p.material, world_from_slot * p.slot_from_part, p.slot)),
+                        Lod::Proxy if p.proxy => {
+                            out.push(instance(self.proxy_mesh, p.material, world_from_slot * p.slot_from_proxy, p.slot))
+                        }
+                        Lod::Proxy => {}
+                    }
+                }
+            }
+            &AgentPose::Skinned { world_from_rig, cycle, step } => {
+                let Some(cast) = self.casting.get(&id) else { return };
+                let Some(rig) = self.skinned.get(&cast.rig) else { return };
+                for d in self.skin_dressed.get(&id).into_iter().flatten() {
+                    match lod {
+                        Lod::Full => {
+                            // Every pose in the shot's frames was posed at load.
+                            let key = (cast.rig.clone(), d.piece, cycle, step);
+                            if let Some(&mesh) = self.posed.meshes.get(&key) {
+                                out.push(instance(mesh, d.material, world_from_rig, d.slot));
+                            }
+                        }
+                        Lod::Proxy => {
+                            let Some(joints) = self.posed.joints.get(&(cast.rig.clone(), cycle, step)) else {
+                                continue;
+                            };
+                            let piece = rig.piece(d.piece);
+                            for (j, b) in piece.joint_boxes.iter().enumerate() {
+                                let Some((lo, hi)) = *b else { continue };
+                                let size = (hi - lo).max(Vec3::splat(1e-4));
+                                let box_from_cube = Affine3A::from_scale_rotation_translation(size, Quat::IDENTITY, lo);
+                                let world = world_from_rig * joints[piece.joint_nodes[j]] * box_from_cube;
+                                out.push(instance(self.proxy_mesh, d.material, world, d.slot));
+                            }
+                        }
+                    }
+                }
+            }
         }
+    }
+
+    /// The name of part `part` (a cast slot) of an agent, for Cryptomatte
+    /// and export node names.
+    pub fn slot_name(&self, id: u32, part: u16) -> Option<&str> {
+        self.casting.get(&id)?.slots.get(part as usize).map(|s| s.slot.as_str())
+    }
+
+    /// The pose key a skinned agent plays at a frame: `<rig>/<cycle>/<step>of<steps>`.
+    pub fn pose_key(&self, a: &AgentSample) -> Option<String> {
+        let cast = self.casting.get(&a.id)?;
+        let rig = self.skinned.get(&cast.rig)?;
+        let cycle = rig.cycle_index(self.cycle_name(a)).ok()?;
+        Some(format!("{}/{}", cast.rig, rig.pose_name(cycle, rig.step_of(cycle, a.cycle_frame))))
     }
 
     /// Every rendered agent at a shot frame, fully visible, at `lod(agent id)`.

@@ -5,8 +5,9 @@
 pub mod cast;
 pub mod crowd;
 pub mod rig;
+pub mod skin;
 pub mod table;
 pub mod wardrobe;
 
-pub use cast::{cast_agent, fit_part, mix64, uniform, AgentCast, RigCasting};
-pub use crowd::{DressedPart, Lod, ShotCrowd};
+pub use cast::{cast_agent, cast_delivered, fit_part, mix64, uniform, AgentCast, CastPart, RigCasting, SlotCast};
+pub use crowd::{AgentPose, DressedPart, Lod, PosedSkins, ShotCrowd, SkinDress};

@@ -378,7 +378,8 @@ impl Animated {
         Self::from_file(&file)
     }
 
-    fn from_file(file: &GltfFile) -> Result<Animated> {
+    /// The nodes and animations of an already opened file.
+    pub fn from_file(file: &GltfFile) -> Result<Animated> {
         let hierarchy = Hierarchy::load(file)?;
         let clips = file.doc.animations().map(|a| Clip::load(file, &a)).collect::<Result<Vec<_>>>()?;
         Ok(Animated { path: file.path.clone(), hierarchy, clips })
@@ -429,6 +430,10 @@ impl Rig {
         let file = GltfFile::open(path)?;
         let animated = Animated::from_file(&file)?;
         let hierarchy = animated.hierarchy;
+        let has_slots = file.doc.nodes().any(|n| n.extras().as_ref().is_some_and(|e| e.get().contains("\"slot\"")));
+        if crate::casting::skin::is_skinned(&file) && !has_slots {
+            return Err(crate::casting::skin::skinned_refusal(&file.path, "this rig"));
+        }
         let root = hierarchy.find("root").ok_or_else(|| file.err("rig has no node named `root`"))?;
         let mut slots: Vec<Slot> = Vec::new();
         for node in file.doc.nodes() {

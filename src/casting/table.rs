@@ -53,6 +53,29 @@ pub struct CastStats {
     pub unique_geometry_bytes: usize,
     /// Bytes if every agent had its own copy of its parts.
     pub copied_geometry_bytes: usize,
+    /// Skinned agents and their pose instancing, when the shot has any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skinned: Option<SkinStats>,
+}
+
+/// Pose instancing figures of a shot's skinned agents.
+#[derive(Debug, Serialize)]
+pub struct SkinStats {
+    /// Agents on skinned rigs.
+    pub agents: usize,
+    /// Unique poses taken in the shot's frames: (rig, cycle, pose step).
+    pub unique_poses: usize,
+    /// Posed meshes built (one per piece per pose), each with one BLAS.
+    pub posed_meshes: usize,
+    /// Bytes of all posed geometry, held once for every frame and layer.
+    pub posed_geometry_bytes: usize,
+    /// Bytes of one posed copy per skinned agent: what one frame costs
+    /// without pose sharing.
+    pub posed_per_agent_bytes: usize,
+    /// Largest vertex displacement, metres (before height jitter), between a
+    /// pose step and the exact pose halfway to the next step, over the
+    /// pieces and cycles the shot uses.
+    pub worst_quantisation_error_m: f32,
 }
 
 /// Every agent's row, by id.
@@ -68,12 +91,15 @@ pub fn cast_row(crowd: &ShotCrowd, c: &AgentCast) -> CastRow {
         .iter()
         .enumerate()
         .map(|(i, s)| {
-            let dressed = crowd.dressed.get(&c.id).and_then(|d| d.iter().find(|p| p.slot == i));
+            let material = match crowd.dressed.get(&c.id) {
+                Some(d) => d.iter().find(|p| p.slot == i).map(|d| d.material),
+                None => crowd.skin_dressed.get(&c.id).and_then(|d| d.iter().find(|p| p.slot == i)).map(|d| d.material),
+            };
             PartRow {
                 slot: s.slot.clone(),
                 mesh: s.part.as_ref().map(|p| p.mesh.clone()),
                 file: s.part.as_ref().map(|p| p.file.display().to_string()),
-                material: dressed.map(|d| lib.materials[d.material as usize].name.clone()),
+                material: material.map(|m| lib.materials[m as usize].name.clone()),
             }
         })
         .collect();
@@ -102,7 +128,14 @@ pub fn cast_stats(crowd: &ShotCrowd) -> CastStats {
             instances += 1;
         }
     }
+    for parts in crowd.skin_dressed.values() {
+        for p in parts {
+            materials.insert(p.material);
+            instances += 1;
+        }
+    }
     CastStats {
+        skinned: skin_stats(crowd),
         agents: crowd.casting.len(),
         part_instances: instances,
         unique_parts: meshes.len(),
@@ -110,6 +143,43 @@ pub fn cast_stats(crowd: &ShotCrowd) -> CastStats {
         unique_geometry_bytes: meshes.iter().map(|&m| lib.meshes[m as usize].bytes()).sum(),
         copied_geometry_bytes: copied,
     }
+}
+
+/// Pose instancing figures, `None` without skinned agents.
+fn skin_stats(crowd: &ShotCrowd) -> Option<SkinStats> {
+    if crowd.skin_dressed.is_empty() {
+        return None;
+    }
+    let lib = crowd.library();
+    let posed_bytes = |rig: &str, piece: usize| {
+        crowd
+            .posed
+            .meshes
+            .range((rig.to_string(), piece, 0, 0)..)
+            .find(|(k, _)| k.0 == rig && k.1 == piece)
+            .map_or(0, |(_, &m)| lib.meshes[m as usize].bytes())
+    };
+    let mut per_agent = 0;
+    let mut used: BTreeSet<(String, usize, usize)> = BTreeSet::new();
+    for (rig, piece, cycle, _) in crowd.posed.meshes.keys() {
+        used.insert((rig.clone(), *piece, *cycle));
+    }
+    for (id, parts) in &crowd.skin_dressed {
+        let rig = &crowd.casting[id].rig;
+        per_agent += parts.iter().map(|p| posed_bytes(rig, p.piece)).sum::<usize>();
+    }
+    let worst = used
+        .iter()
+        .map(|(rig, piece, cycle)| crowd.skinned[rig].quantisation_error(*piece, *cycle))
+        .fold(0.0f32, f32::max);
+    Some(SkinStats {
+        agents: crowd.skin_dressed.len(),
+        unique_poses: crowd.posed.joints.len(),
+        posed_meshes: crowd.posed.meshes.len(),
+        posed_geometry_bytes: crowd.posed.meshes.values().map(|&m| lib.meshes[m as usize].bytes()).sum(),
+        posed_per_agent_bytes: per_agent,
+        worst_quantisation_error_m: worst,
+    })
 }
 
 /// Bytes as MiB with two decimals.
@@ -131,5 +201,13 @@ pub fn format_stats(s: &CastStats) -> String {
         mib(s.copied_geometry_bytes),
         s.copied_geometry_bytes as f64 / s.unique_geometry_bytes.max(1) as f64
     );
+    if let Some(k) = &s.skinned {
+        let _ = writeln!(o, "skinned agents       {}", k.agents);
+        let _ =
+            writeln!(o, "unique poses         {}  ({} posed meshes, one BLAS each)", k.unique_poses, k.posed_meshes);
+        let _ = writeln!(o, "posed geometry       {}", mib(k.posed_geometry_bytes));
+        let _ = writeln!(o, "one copy per agent   {}  per frame, without pose sharing", mib(k.posed_per_agent_bytes));
+        let _ = writeln!(o, "worst pose error     {:.2} mm", k.worst_quantisation_error_m * 1000.0);
+    }
     o
 }

@@ -6,7 +6,6 @@ use clap::Args;
 
 use super::values::{pixel, Pixel};
 use crate::botinfo::{add_layers, bot_info, format_bot_info};
-use crate::casting::ShotCrowd;
 use crate::error::{Error, Result};
 
 /// `throng botinfo`.
@@ -80,7 +79,7 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
     if picked.is_none() && args.ids.is_empty() {
         return Err(Error::Usage("name at least one agent id (or --exr FILE --pixel X,Y)".into()));
     }
-    let crowd = ShotCrowd::load(shot)?;
+    let crowd = super::load_crowd(shot)?;
     let (ids, frame) = match &picked {
         Some((_, id, meta, exr_path, _)) => {
             if meta.shot != crowd.shot.name {

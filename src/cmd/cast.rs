@@ -6,7 +6,6 @@ use clap::Args;
 use serde::Serialize;
 
 use crate::casting::table::{cast_rows, cast_stats, format_stats, CastRow, CastStats};
-use crate::casting::ShotCrowd;
 use crate::error::Result;
 
 /// `throng cast`.
@@ -24,7 +23,7 @@ pub struct CastArgs {
 
 /// `throng cast SHOT [--json] [--stats]`.
 pub fn run(args: &CastArgs) -> Result<()> {
-    let crowd = ShotCrowd::load(&args.shot)?;
+    let crowd = super::load_crowd(&args.shot)?;
     let rows = cast_rows(&crowd);
     if args.json {
         #[derive(Serialize)]

@@ -7,7 +7,6 @@ use std::time::Instant;
 use clap::Args;
 
 use crate::casting::table::{cast_stats, mib};
-use crate::casting::ShotCrowd;
 use crate::error::{Error, Result};
 use crate::layers::{build_layers, set_bounds, LayerOverrides, MapOptions};
 use crate::output::FULL_LAYER;
@@ -47,7 +46,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     println!("throng demo: {}", shot_path.display());
 
     let t = Instant::now();
-    let crowd = ShotCrowd::load(&shot_path)?;
+    let crowd = super::load_crowd(&shot_path)?;
     let info = crate::cache::info(&crowd.cache)?;
     println!(
         "  cache    {} agents over cache frames {}-{}, {} rigs, {} cycles",

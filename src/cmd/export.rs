@@ -4,7 +4,6 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use crate::casting::ShotCrowd;
 use crate::error::{Error, Result};
 
 /// `throng export`.
@@ -25,7 +24,7 @@ pub struct ExportArgs {
 
 /// `throng export SHOT --frame F [--layer L] --out scene.glb`.
 pub fn run(args: &ExportArgs) -> Result<()> {
-    let crowd = ShotCrowd::load(&args.shot)?;
+    let crowd = super::load_crowd(&args.shot)?;
     if !crowd.shot.frames.contains(args.frame) {
         return Err(Error::Usage(format!(
             "frame {} is outside shot {} ({}-{})",

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::values::budget;
-use crate::casting::ShotCrowd;
 use crate::error::Result;
 use crate::layers::{self, build_layers, set_bounds, LayerOverrides, MapOptions};
 
@@ -64,7 +63,7 @@ impl LayersArgs {
 
 /// `throng layers SHOT ...`: writes the manifest (and map) and prints the split.
 pub fn run(args: &LayersArgs) -> Result<()> {
-    let crowd = ShotCrowd::load(&args.shot)?;
+    let crowd = super::load_crowd(&args.shot)?;
     let manifest = build_layers(&crowd, &args.overrides())?;
     let out = args.out.clone().unwrap_or_else(|| layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
     layers::write_manifest(&out, &manifest)?;

@@ -67,6 +67,16 @@ pub fn run(cli: Cli) -> Result<()> {
     }
 }
 
+/// Loads and casts a shot, printing what loading noticed but accepted
+/// (renormalised weights, ignored morph targets) to stderr, once.
+fn load_crowd(shot: &std::path::Path) -> Result<crate::casting::ShotCrowd> {
+    let crowd = crate::casting::ShotCrowd::load(shot)?;
+    for w in &crowd.warnings {
+        eprintln!("throng: warning: {w}");
+    }
+    Ok(crowd)
+}
+
 /// Pretty JSON of a summary, for `--json` outputs.
 fn to_json(value: &impl serde::Serialize) -> Result<String> {
     serde_json::to_string_pretty(value).map_err(|e| crate::error::Error::Usage(format!("cannot print JSON: {e}")))

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use clap::{Args, ValueEnum};
 
 use super::values::{frame_list, resolution, FrameList, Resolution};
-use crate::casting::ShotCrowd;
 use crate::error::{Error, Result};
 use crate::output::FULL_LAYER;
 use crate::render::job::{self, CryptoOutput, RenderJob};
@@ -70,7 +69,7 @@ pub struct RenderArgs {
 
 /// `throng render SHOT ...`: renders the asked layers and frames.
 pub fn run(args: &RenderArgs) -> Result<()> {
-    let crowd = ShotCrowd::load(&args.shot)?;
+    let crowd = super::load_crowd(&args.shot)?;
     let manifest_path = args
         .manifest
         .clone()

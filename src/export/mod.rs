@@ -104,10 +104,9 @@ pub fn export_frame(crowd: &ShotCrowd, frame: i32, only: Option<&BTreeSet<u32>>,
         crowd.agent_instances(a, Lod::Full, vis::ALL, &mut insts)?;
         let world_from_agent = crowd.world_from_agent(a);
         let agent_from_world = world_from_agent.inverse();
-        let slots = crowd.rigs[&crowd.casting[&a.id].rig].slots();
         let mut children = Vec::new();
         for inst in &insts {
-            let slot = slots.get(inst.part as usize).map_or("part", |s| s.name.as_str());
+            let slot = crowd.slot_name(a.id, inst.part).unwrap_or("part");
             children.push(w.instance_node(
                 format!("agent_{}/{slot}", a.id),
                 inst,

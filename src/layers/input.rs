@@ -74,6 +74,20 @@ pub fn build_layers(crowd: &ShotCrowd, overrides: &LayerOverrides) -> Result<Man
             *users.entry(p.mesh).or_default() += 1;
         }
     }
+    // Skinned pieces: every pose of a piece is its own mesh and BLAS, shared
+    // by the agents that wear it.
+    let mut posed: HashMap<(&str, usize), (u64, u64)> = HashMap::new();
+    for (&(ref rig, piece, _, _), &m) in &crowd.posed.meshes {
+        let e = posed.entry((rig.as_str(), piece)).or_default();
+        e.0 += lib.meshes[m as usize].bytes() as u64;
+        e.1 += lib.meshes[m as usize].triangle_count() as u64;
+    }
+    let mut piece_users: HashMap<(&str, usize), u64> = HashMap::new();
+    for (id, pieces) in &crowd.skin_dressed {
+        for p in pieces {
+            *piece_users.entry((crowd.casting[id].rig.as_str(), p.piece)).or_default() += 1;
+        }
+    }
     let all = crowd.shot_crowd()?;
     let cameras = match crowd.shot.keyed_camera(crowd.shot.frames.start as f32) {
         Some(_) => None,
@@ -82,6 +96,25 @@ pub fn build_layers(crowd: &ShotCrowd, overrides: &LayerOverrides) -> Result<Man
     let input = shot_input(&crowd.shot, &all, cameras, settings, options, |id| {
         // Every agent of the shot's frames was cast; others never reach here.
         let Some(height) = crowd.agent_height(id) else { return (1.8, 0, 0) };
+        if let (Some(pieces), Some(cast)) = (crowd.skin_dressed.get(&id), crowd.casting.get(&id)) {
+            let rig = cast.rig.as_str();
+            let costs: Vec<PartCost> = pieces
+                .iter()
+                .map(|p| {
+                    let (bytes, triangles) = posed.get(&(rig, p.piece)).copied().unwrap_or((0, 0));
+                    PartCost {
+                        mesh_bytes: bytes,
+                        triangles,
+                        users: piece_users.get(&(rig, p.piece)).copied().unwrap_or(1),
+                    }
+                })
+                .collect();
+            let boxes: usize = pieces
+                .iter()
+                .map(|p| crowd.skinned[rig].piece(p.piece).joint_boxes.iter().filter(|b| b.is_some()).count())
+                .sum();
+            return (height, estimate_agent_memory(&costs), estimate_proxy_memory(boxes));
+        }
         let parts = crowd.dressed.get(&id).map(Vec::as_slice).unwrap_or(&[]);
         let costs: Vec<PartCost> = parts
             .iter()

@@ -9,7 +9,7 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use crate::casting::{Lod, ShotCrowd};
+use crate::casting::{AgentPose, Lod, ShotCrowd};
 use crate::error::{Error, Result};
 use crate::layers::Manifest;
 use crate::output::{layer_path, FULL_LAYER};
@@ -74,11 +74,7 @@ pub enum CryptoOutput {
 /// The Cryptomatte names of a frame scene's instances: slot names from each
 /// agent's rig.
 pub fn crypto_names(crowd: &ShotCrowd, scene: &FrameScene) -> CryptoNames {
-    CryptoNames::new(&scene.instances, |agent, part| {
-        let cast = crowd.casting.get(&agent)?;
-        let rig = crowd.rigs.get(&cast.rig)?;
-        rig.slots().get(part as usize).map(|s| s.name.as_str())
-    })
+    CryptoNames::new(&scene.instances, |agent, part| crowd.slot_name(agent, part))
 }
 
 /// One file the job wrote or skipped.
@@ -103,8 +99,8 @@ pub struct RenderedLayer {
 pub struct PosedFrame {
     /// Shot frame.
     pub frame: i32,
-    /// (agent id, world_from_slot per rig slot).
-    pub agents: Vec<(u32, Vec<glam::Affine3A>)>,
+    /// (agent id, its pose).
+    pub agents: Vec<(u32, AgentPose)>,
 }
 
 impl PosedFrame {
@@ -115,7 +111,7 @@ impl PosedFrame {
             .agents
             .iter()
             .filter(|a| crowd.renders(a))
-            .map(|a| Ok((a.id, crowd.slot_transforms(a)?)))
+            .map(|a| Ok((a.id, crowd.agent_pose(a)?)))
             .collect::<Result<_>>()?;
         Ok(PosedFrame { frame, agents })
     }
@@ -136,7 +132,7 @@ pub fn frame_scene(
         let m = manifest.ok_or_else(|| Error::Usage(format!("layer `{layer}` needs a layer manifest")))?;
         m.set_visibility(layer)
     };
-    for (id, slots) in &posed.agents {
+    for (id, pose) in &posed.agents {
         let how = match manifest {
             _ if layer == FULL_LAYER => {
                 Some((vis::ALL, manifest.and_then(|m| m.agent(*id)).map_or(Lod::Full, |r| r.lod_at(frame))))
@@ -145,7 +141,7 @@ pub fn frame_scene(
             None => None,
         };
         if let Some((bits, lod)) = how.filter(|&(bits, _)| bits != 0) {
-            crowd.posed_instances(*id, slots, lod, bits, &mut instances);
+            crowd.posed_instances(*id, pose, lod, bits, &mut instances);
         }
     }
     if let Some(bits) = set_bits.filter(|&b| b != 0) {

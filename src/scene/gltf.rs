@@ -260,7 +260,7 @@ pub fn out_of_range(acc: &Accessor) -> String {
 }
 
 /// Reads one glTF mesh primitive (triangles only) into a [`Mesh`] named `name`.
-fn read_primitive(file: &GltfFile, mesh: &gltf::Mesh, prim: &gltf::Primitive, name: String) -> Result<Mesh> {
+pub fn read_primitive(file: &GltfFile, mesh: &gltf::Mesh, prim: &gltf::Primitive, name: String) -> Result<Mesh> {
     let ctx = |msg: String| file.err(format!("mesh {} primitive {}: {msg}", mesh_label(mesh), prim.index()));
     if prim.mode() != gltf::mesh::Mode::Triangles {
         return Err(ctx(format!("mode {:?} is not supported (triangles only)", prim.mode())));
@@ -515,6 +515,13 @@ impl AssetCache {
             return Err(src.file.err(format!("mesh `{mesh_name}` has no primitives")));
         };
         self.material_of(&src, material)
+    }
+
+    /// glTF material `index` of the file at `path` (`None`: the default
+    /// material), loaded once.
+    pub fn gltf_material_at(&mut self, path: impl AsRef<Path>, index: Option<usize>) -> Result<MaterialId> {
+        let src = self.source(path.as_ref())?;
+        self.material_of(&src, index)
     }
 
     /// Material `index` of a file. Primitives without a material get

@@ -1,0 +1,704 @@
+//! Skinned characters: ordinary animated glTF characters as crowd agents.
+//!
+//! A [`SkinnedRig`] is a glTF file with one or more skins and clips. Posing
+//! follows the glTF 2.0 skinning rules:
+//! - a joint's transform is its global transform, every parent included (a
+//!   Z-up parent node above the skeleton is respected);
+//! - a skinned mesh ignores its own node's transform;
+//! - `posed = sum_i w_i * (global(joint_i) * inverseBind(joint_i)) * bind`,
+//!   with JOINTS_0/WEIGHTS_0 and JOINTS_1/WEIGHTS_1 (up to 8 influences);
+//! - normals use the inverse transpose of the blended matrix.
+//!
+//! Rig space is throng's agent space: Y up, facing +Z, metres, feet on y = 0.
+//! `rig_from_file` rotates the file's up and forward axes onto +Y and +Z,
+//! scales by the shot's `scale` and lifts the rest pose's lowest vertex to
+//! the ground. When the shot names a `root` joint, its horizontal travel is
+//! removed from every pose (the cache places the agent) and its Z travel over
+//! a clip is that cycle's stride, as the `root` node is for slot rigs.
+//!
+//! Pose instancing: a cycle of `length` frames is cut into `steps` equal
+//! steps of about `pose_step` frames (`steps + 1` poses: a clip that does
+//! not loop seamlessly ends on its own pose); an agent is posed at the step nearest
+//! its cycle frame, so every agent on the same (mesh, cycle, step) shares one
+//! posed mesh. The error this costs is at most the vertex displacement over
+//! half a step, which [`SkinnedRig::quantisation_error`] measures.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use glam::{Affine3A, Mat3, Mat4, Quat, Vec3};
+use gltf::accessor::{DataType, Dimensions};
+
+use crate::casting::rig::{Animated, Trs};
+use crate::error::{Error, Result};
+use crate::scene::gltf::{check_accessor, out_of_range, read_primitive, GltfFile};
+use crate::scene::Mesh;
+use crate::shot::{Axis, SkinOptions};
+
+/// Most influences per vertex (JOINTS_0/WEIGHTS_0 and JOINTS_1/WEIGHTS_1).
+pub const MAX_INFLUENCES: usize = 8;
+/// Pose step in cycle frames when the shot gives none (see docs/wardrobes.md
+/// for the displacement it costs on the demo character).
+pub const DEFAULT_POSE_STEP: f32 = 1.0;
+/// Most pose steps one cycle may be cut into (bounds posed geometry).
+pub const MAX_STEPS_PER_CYCLE: u32 = 1024;
+/// Weight sums further than this from 1 are renormalised with a warning.
+const WEIGHT_SUM_TOLERANCE: f32 = 1e-3;
+
+/// One skinned primitive: bind-pose geometry and per-vertex influences.
+#[derive(Clone, Debug)]
+pub struct SkinPiece {
+    /// Bind geometry in mesh space, named `<file>#<mesh>[/<primitive>]`.
+    pub mesh: Mesh,
+    /// Per vertex: (joint, weight), joints indexing [`SkinPiece::joint_nodes`];
+    /// unused influences have weight 0. Weights sum to 1.
+    pub influences: Vec<[(u16, f32); MAX_INFLUENCES]>,
+    /// Skin joint -> node index in the rig's hierarchy.
+    pub joint_nodes: Vec<usize>,
+    /// Skin joint -> inverse bind matrix.
+    pub inverse_bind: Vec<Affine3A>,
+    /// The file the mesh came from (its own materials are looked up there).
+    pub file: PathBuf,
+    /// The primitive's glTF material index in `file`.
+    pub material: Option<usize>,
+    /// Per skin joint: bounds, in joint space, of the vertices weighted
+    /// mostly to that joint (`None` for joints that dominate no vertex).
+    pub joint_boxes: Vec<Option<(Vec3, Vec3)>>,
+}
+
+/// A skinned mesh a wardrobe can choose: every primitive of one glTF mesh.
+#[derive(Clone, Debug)]
+pub struct SkinPart {
+    /// `<file>#<mesh>` as shown to users.
+    pub label: String,
+    /// Indices into [`SkinnedRig::pieces`].
+    pub pieces: Vec<usize>,
+}
+
+/// One cycle of a skinned rig: a cache cycle name mapped to a clip.
+#[derive(Clone, Debug)]
+pub struct SkinCycle {
+    /// The cache's cycle name.
+    pub name: String,
+    /// Index into the rig file's clips.
+    pub clip: usize,
+    /// The clip's name (`#index` when unnamed).
+    pub clip_name: String,
+    /// Metres per cycle: given in the shot, else the root joint's travel, else 0.
+    pub stride: f32,
+    /// Steps the cycle is cut into for pose instancing.
+    pub steps: u32,
+}
+
+/// A skinned character loaded from glTF.
+#[derive(Clone, Debug)]
+pub struct SkinnedRig {
+    path: PathBuf,
+    /// `path` canonicalised: parts are keyed by it, so two spellings of one file are one file.
+    canonical: PathBuf,
+    animated: Animated,
+    rig_from_file: Affine3A,
+    root: Option<usize>,
+    cycles: Vec<SkinCycle>,
+    pieces: Vec<SkinPiece>,
+    parts: BTreeMap<(PathBuf, String), usize>,
+    part_list: Vec<SkinPart>,
+    slots: Vec<String>,
+    delivered: Vec<(String, String, usize)>,
+    height: f32,
+    fps: f32,
+    pose_step: f32,
+    warnings: Vec<String>,
+}
+
+/// Whether a glTF file holds a skin (a skinned character, not a slot rig).
+pub fn is_skinned(file: &GltfFile) -> bool {
+    file.doc.skins().len() > 0
+}
+
+/// The error for a skinned file used where rigid geometry is expected.
+pub fn skinned_refusal(path: &Path, what: &str) -> Error {
+    Error::invalid(
+        path,
+        format!(
+            "{what} is a skinned character (the file has a skin): slot rigs and wardrobe parts for them are rigid. \
+             Declare it as a skinned rig in the shot, `[rigs.NAME] file = \"...\"` with `kind = \"skinned\"` \
+             (docs/wardrobes.md, \"Bringing an animated character\")"
+        ),
+    )
+}
+
+fn axis_vector(a: Axis) -> Vec3 {
+    match a {
+        Axis::PosX => Vec3::X,
+        Axis::NegX => Vec3::NEG_X,
+        Axis::PosY => Vec3::Y,
+        Axis::NegY => Vec3::NEG_Y,
+        Axis::PosZ => Vec3::Z,
+        Axis::NegZ => Vec3::NEG_Z,
+    }
+}
+
+/// The rotation taking the file's `up` to +Y and `forward` to +Z.
+fn orientation(path: &Path, up: Axis, forward: Axis) -> Result<Quat> {
+    let (u, f) = (axis_vector(up), axis_vector(forward));
+    if u.dot(f).abs() > 0.5 {
+        return Err(
+            Error::invalid(path, format!("forward {forward:?} is along up {up:?}; they must differ")).field("forward")
+        );
+    }
+    // Columns (right, up, forward) of the file's frame; its transpose maps them onto X, Y, Z.
+    let frame = Mat3::from_cols(u.cross(f), u, f);
+    Ok(Quat::from_mat3(&frame.transpose()))
+}
+
+impl SkinnedRig {
+    /// Loads a skinned character with the shot's options. Cycle names come
+    /// from `options.cycles` (cache name -> clip name or `#index`); every
+    /// clip is also available under its own name.
+    pub fn load(path: &Path, options: &SkinOptions, fps: f32) -> Result<SkinnedRig> {
+        let file = GltfFile::open(path)?;
+        if !is_skinned(&file) {
+            return Err(
+                file.err("declared `kind = \"skinned\"` but the file has no skin; a rigid slot rig needs no kind")
+            );
+        }
+        let animated = Animated::from_file(&file)?;
+        let root = match &options.root {
+            Some(name) => Some(animated.hierarchy.find(name).ok_or_else(|| {
+                let joints: Vec<&str> = file
+                    .doc
+                    .skins()
+                    .flat_map(|s| s.joints().map(|j| j.index()))
+                    .filter_map(|i| animated.hierarchy.nodes.get(i).map(|n| n.name.as_str()))
+                    .collect();
+                file.err(format!("no joint named `{name}` for root motion; joints: {}", joints.join(", ")))
+                    .field("root")
+            })?),
+            None => None,
+        };
+        let orient = orientation(path, options.up, options.forward)?;
+        let canonical = std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?;
+        let mut rig = SkinnedRig {
+            path: path.to_path_buf(),
+            canonical,
+            animated,
+            rig_from_file: Affine3A::from_scale_rotation_translation(Vec3::splat(options.scale), orient, Vec3::ZERO),
+            root,
+            cycles: Vec::new(),
+            pieces: Vec::new(),
+            parts: BTreeMap::new(),
+            part_list: Vec::new(),
+            slots: Vec::new(),
+            delivered: Vec::new(),
+            height: 0.0,
+            fps,
+            pose_step: options.pose_step.unwrap_or(DEFAULT_POSE_STEP),
+            warnings: Vec::new(),
+        };
+
+        // The character as delivered: every skinned mesh node is a slot
+        // wearing its own mesh, unless the shot names the slots.
+        let mut delivered = Vec::new();
+        for node in file.doc.nodes() {
+            let (Some(mesh), Some(_)) = (node.mesh(), node.skin()) else { continue };
+            let slot = node
+                .name()
+                .map(str::to_string)
+                .or_else(|| mesh.name().map(str::to_string))
+                .unwrap_or_else(|| format!("#{}", mesh.index()));
+            let mesh_ref = mesh.name().map(str::to_string).unwrap_or_else(|| format!("#{}", mesh.index()));
+            let canonical = rig.canonical.clone();
+            let part = rig.load_part(&file, &canonical, &mesh_ref)?;
+            delivered.push((slot, mesh_ref, part));
+        }
+        if delivered.is_empty() {
+            return Err(file.err("the file has a skin but no node that uses it with a mesh"));
+        }
+        rig.slots = match &options.slots {
+            Some(s) => s.clone(),
+            None => delivered.iter().map(|(s, _, _)| s.clone()).collect(),
+        };
+        rig.delivered = delivered;
+
+        // Ground and height from the rest pose of the delivered meshes.
+        let rest = rig.joints_at(&rig.animated.hierarchy.rest_pose());
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for (_, _, part) in &rig.delivered {
+            for &p in &rig.part_list[*part].pieces {
+                for v in rig.skin_positions(p, &rest) {
+                    lo = lo.min(v.y);
+                    hi = hi.max(v.y);
+                }
+            }
+        }
+        if !(lo.is_finite() && hi > lo) {
+            return Err(file.err("the skinned meshes have no height in the rest pose"));
+        }
+        rig.rig_from_file = Affine3A::from_translation(Vec3::new(0.0, -lo, 0.0)) * rig.rig_from_file;
+        rig.height = hi - lo;
+
+        // Cycles: the shot's mapping first, then every clip under its own name.
+        let clip_index = |name: &str| -> Option<usize> {
+            rig.animated.clips.iter().position(|c| c.name == name).or_else(|| {
+                name.strip_prefix('#').and_then(|i| i.parse::<usize>().ok()).filter(|&i| i < rig.animated.clips.len())
+            })
+        };
+        let mut cycles: Vec<(String, usize)> = Vec::new();
+        for (cycle, clip) in &options.cycles {
+            let i = clip_index(clip).ok_or_else(|| {
+                let names: Vec<String> =
+                    rig.animated.clips.iter().enumerate().map(|(i, c)| format!("{} (#{i})", c.name)).collect();
+                file.err(format!(
+                    "cycle `{cycle}` maps to clip `{clip}`, which the file lacks; clips: {}",
+                    if names.is_empty() { "(none)".to_string() } else { names.join(", ") }
+                ))
+                .field(format!("cycles.{cycle}"))
+            })?;
+            cycles.push((cycle.clone(), i));
+        }
+        for (i, c) in rig.animated.clips.iter().enumerate() {
+            if !cycles.iter().any(|(n, _)| *n == c.name) {
+                cycles.push((c.name.clone(), i));
+            }
+        }
+        for (name, clip) in cycles {
+            let clip_name = rig.animated.clips[clip].name.clone();
+            let stride = match options.strides.get(&name) {
+                Some(&s) => s,
+                None => rig.root_travel(clip),
+            };
+            let length = rig.animated.clips[clip].duration() * fps;
+            let steps = if length > 0.0 {
+                let s = (length / rig.pose_step).round();
+                if !(s.is_finite() && s <= MAX_STEPS_PER_CYCLE as f32) {
+                    return Err(file
+                        .err(format!(
+                            "pose_step {} cuts cycle `{name}` ({length:.1} frames) into more than {MAX_STEPS_PER_CYCLE} poses",
+                            rig.pose_step
+                        ))
+                        .field("pose_step"));
+                }
+                (s as u32).max(1)
+            } else {
+                1
+            };
+            rig.cycles.push(SkinCycle { name, clip, clip_name, stride, steps });
+        }
+        Ok(rig)
+    }
+
+    /// Reads glTF mesh `mesh_ref` (a name, or `#index`) of `file` as a part,
+    /// binding its skin's joints to this rig's nodes by name.
+    fn load_part(&mut self, file: &GltfFile, canonical: &Path, mesh_ref: &str) -> Result<usize> {
+        let key = (canonical.to_path_buf(), mesh_ref.to_string());
+        if let Some(&i) = self.parts.get(&key) {
+            return Ok(i);
+        }
+        let gmesh = match mesh_ref.strip_prefix('#').and_then(|i| i.parse::<usize>().ok()) {
+            Some(i) => file.doc.meshes().nth(i).ok_or_else(|| {
+                file.err(format!("no mesh #{i}; the file has {} meshes", file.doc.meshes().len())).field("mesh")
+            })?,
+            None => file.mesh_by_name(mesh_ref)?,
+        };
+        // Known under its other spelling (name or `#index`)?
+        for other in [format!("#{}", gmesh.index())].into_iter().chain(gmesh.name().map(str::to_string)) {
+            if let Some(&i) = self.parts.get(&(canonical.to_path_buf(), other)) {
+                self.parts.insert(key, i);
+                return Ok(i);
+            }
+        }
+        let label = format!(
+            "{}#{}",
+            file.path.display(),
+            gmesh.name().map(str::to_string).unwrap_or_else(|| format!("#{}", gmesh.index()))
+        );
+        // The skin of the node that uses this mesh (a skinned mesh is drawn
+        // by a node with both `mesh` and `skin`).
+        let skin = file
+            .doc
+            .nodes()
+            .find(|n| n.mesh().is_some_and(|m| m.index() == gmesh.index()) && n.skin().is_some())
+            .and_then(|n| n.skin())
+            .ok_or_else(|| {
+                file.err(format!(
+                    "mesh {label} is not skinned (no node draws it with a skin); a skinned rig wears skinned meshes"
+                ))
+            })?;
+        let (joint_nodes, inverse_bind) = self.read_skin(file, canonical == self.canonical, &skin, &label)?;
+        let mut pieces = Vec::new();
+        let single = gmesh.primitives().len() == 1;
+        for prim in gmesh.primitives() {
+            let name = if single { label.clone() } else { format!("{label}/{}", prim.index()) };
+            let piece = self.read_piece(file, &gmesh, &prim, name, &joint_nodes, &inverse_bind)?;
+            self.pieces.push(piece);
+            pieces.push(self.pieces.len() - 1);
+        }
+        if gmesh.weights().is_some() || gmesh.primitives().any(|p| p.morph_targets().len() > 0) {
+            self.warnings.push(format!("{label}: morph targets are ignored (skinning only)"));
+        }
+        self.part_list.push(SkinPart { label, pieces });
+        let i = self.part_list.len() - 1;
+        self.parts.insert(key, i);
+        Ok(i)
+    }
+
+    /// A skin's joints as this rig's node indices, and its inverse bind
+    /// matrices. Joints of another file are matched to this rig by name.
+    fn read_skin(
+        &self,
+        file: &GltfFile,
+        same_file: bool,
+        skin: &gltf::Skin,
+        label: &str,
+    ) -> Result<(Vec<usize>, Vec<Affine3A>)> {
+        let ctx = |msg: String| file.err(format!("skin {} of mesh {label}: {msg}", skin.index()));
+        let joints: Vec<gltf::Node> = skin.joints().collect();
+        if joints.is_empty() || joints.len() > u16::MAX as usize {
+            return Err(ctx(format!("{} joints (1 to {} allowed)", joints.len(), u16::MAX)));
+        }
+        let mut joint_nodes = Vec::with_capacity(joints.len());
+        for j in &joints {
+            let node = if same_file {
+                j.index()
+            } else {
+                let name = j.name().unwrap_or("");
+                self.animated.hierarchy.find(name).ok_or_else(|| {
+                    ctx(format!(
+                        "joint `{name}` is not in the rig's skeleton {}: a part must be bound to the same skeleton",
+                        self.path.display()
+                    ))
+                })?
+            };
+            joint_nodes.push(node);
+        }
+        let acc = skin.inverse_bind_matrices().ok_or_else(|| {
+            ctx("has no inverseBindMatrices accessor; throng needs them (exporters write them; the glTF identity default means joints bound at the origin, almost always a broken export)".into())
+        })?;
+        check_accessor(&acc, Dimensions::Mat4, &[DataType::F32])
+            .map_err(|m| ctx(format!("inverseBindMatrices: {m}")))?;
+        let reader = skin.reader(|b| file.buffer_data(b));
+        let ibm: Vec<Affine3A> = reader
+            .read_inverse_bind_matrices()
+            .ok_or_else(|| ctx(out_of_range(&acc)))?
+            .map(|m| Affine3A::from_mat4(Mat4::from_cols_array_2d(&m)))
+            .collect();
+        if ibm.len() != joints.len() {
+            return Err(ctx(format!(
+                "accessor {}: {} inverse bind matrices for {} joints",
+                acc.index(),
+                ibm.len(),
+                joints.len()
+            )));
+        }
+        if ibm.iter().any(|m| !m.is_finite()) {
+            return Err(ctx(format!("accessor {}: an inverse bind matrix is not finite", acc.index())));
+        }
+        Ok((joint_nodes, ibm))
+    }
+
+    fn read_piece(
+        &mut self,
+        file: &GltfFile,
+        gmesh: &gltf::Mesh,
+        prim: &gltf::Primitive,
+        name: String,
+        joint_nodes: &[usize],
+        inverse_bind: &[Affine3A],
+    ) -> Result<SkinPiece> {
+        let mesh = read_primitive(file, gmesh, prim, name.clone())?;
+        let n = mesh.positions.len();
+        let ctx = |msg: String| file.err(format!("mesh {name}: {msg}"));
+        if prim.get(&gltf::Semantic::Joints(2)).is_some() || prim.get(&gltf::Semantic::Weights(2)).is_some() {
+            return Err(ctx(format!(
+                "JOINTS_2/WEIGHTS_2: more than {MAX_INFLUENCES} influences per vertex are not supported"
+            )));
+        }
+        let reader = prim.reader(|b| file.buffer_data(b));
+        let mut influences = vec![[(0u16, 0.0f32); MAX_INFLUENCES]; n];
+        let mut sets = 0;
+        for set in 0..2u32 {
+            let (ja, wa) = (prim.get(&gltf::Semantic::Joints(set)), prim.get(&gltf::Semantic::Weights(set)));
+            let (ja, wa) = match (ja, wa) {
+                (None, None) => continue,
+                (Some(j), Some(w)) => (j, w),
+                _ => return Err(ctx(format!("JOINTS_{set} and WEIGHTS_{set} must come together"))),
+            };
+            check_accessor(&ja, Dimensions::Vec4, &[DataType::U8, DataType::U16])
+                .map_err(|m| ctx(format!("JOINTS_{set}: {m}")))?;
+            check_accessor(&wa, Dimensions::Vec4, &[DataType::F32, DataType::U8, DataType::U16])
+                .map_err(|m| ctx(format!("WEIGHTS_{set}: {m}")))?;
+            let joints: Vec<[u16; 4]> =
+                reader.read_joints(set).ok_or_else(|| ctx(out_of_range(&ja)))?.into_u16().collect();
+            let weights: Vec<[f32; 4]> =
+                reader.read_weights(set).ok_or_else(|| ctx(out_of_range(&wa)))?.into_f32().collect();
+            if joints.len() != n || weights.len() != n {
+                return Err(ctx(format!(
+                    "JOINTS_{set} (accessor {}) has {} and WEIGHTS_{set} (accessor {}) {} entries for {n} vertices",
+                    ja.index(),
+                    joints.len(),
+                    wa.index(),
+                    weights.len()
+                )));
+            }
+            for (v, (j, w)) in joints.iter().zip(&weights).enumerate() {
+                for k in 0..4 {
+                    if !(w[k] >= 0.0 && w[k].is_finite()) {
+                        return Err(ctx(format!(
+                            "WEIGHTS_{set} (accessor {}) vertex {v}: weight {} is not a finite number >= 0",
+                            wa.index(),
+                            w[k]
+                        )));
+                    }
+                    if w[k] > 0.0 && j[k] as usize >= joint_nodes.len() {
+                        return Err(ctx(format!(
+                            "JOINTS_{set} (accessor {}) vertex {v}: joint {} is out of range (the skin has {} joints)",
+                            ja.index(),
+                            j[k],
+                            joint_nodes.len()
+                        )));
+                    }
+                    influences[v][set as usize * 4 + k] = (j[k], w[k]);
+                }
+            }
+            sets += 1;
+        }
+        if sets == 0 {
+            return Err(ctx("has no JOINTS_0/WEIGHTS_0 but its node has a skin".into()));
+        }
+        let mut renormalised = 0;
+        for (v, inf) in influences.iter_mut().enumerate() {
+            let sum: f32 = inf.iter().map(|i| i.1).sum();
+            if sum <= 0.0 {
+                return Err(ctx(format!("vertex {v} has no joint weight (its weights sum to 0)")));
+            }
+            if (sum - 1.0).abs() > WEIGHT_SUM_TOLERANCE {
+                renormalised += 1;
+            }
+            for i in inf.iter_mut() {
+                i.1 /= sum;
+            }
+        }
+        if renormalised > 0 {
+            self.warnings.push(format!(
+                "{}: mesh {name}: {renormalised} of {n} vertices have joint weights that do not sum to 1; renormalised",
+                file.path.display()
+            ));
+        }
+        // Per-joint proxy boxes: vertices weighted mostly to a joint, in its bind space.
+        let mut joint_boxes: Vec<Option<(Vec3, Vec3)>> = vec![None; joint_nodes.len()];
+        for (p, inf) in mesh.positions.iter().zip(&influences) {
+            let Some(&(j, _)) = inf.iter().max_by(|a, b| a.1.total_cmp(&b.1)) else { continue };
+            let q = inverse_bind[j as usize].transform_point3(*p);
+            let b = &mut joint_boxes[j as usize];
+            *b = Some(b.map_or((q, q), |(lo, hi)| (lo.min(q), hi.max(q))));
+        }
+        Ok(SkinPiece {
+            mesh,
+            influences,
+            joint_nodes: joint_nodes.to_vec(),
+            inverse_bind: inverse_bind.to_vec(),
+            file: file.path.clone(),
+            material: prim.material().index(),
+            joint_boxes,
+        })
+    }
+
+    /// The part for a wardrobe's `file` + `mesh` (a name or `#index`),
+    /// loading it on first use.
+    pub fn part(&mut self, file: &Path, mesh_ref: &str) -> Result<usize> {
+        let canonical = std::fs::canonicalize(file).map_err(|e| Error::io(file, e))?;
+        if let Some(&i) = self.parts.get(&(canonical.clone(), mesh_ref.to_string())) {
+            return Ok(i);
+        }
+        let gltf = GltfFile::open(file)?;
+        self.load_part(&gltf, &canonical, mesh_ref)
+    }
+
+    /// `rig_from_node` of every node for local transforms `local` (before root-motion removal).
+    fn joints_at(&self, local: &[Trs]) -> Vec<Affine3A> {
+        self.animated.hierarchy.compose(local).into_iter().map(|m| self.rig_from_file * m).collect()
+    }
+
+    /// The root joint's rig-space Z travel over clip `clip`.
+    fn root_travel(&self, clip: usize) -> f32 {
+        let Some(root) = self.root else { return 0.0 };
+        let c = &self.animated.clips[clip];
+        let at = |t: f32| {
+            let mut local = self.animated.hierarchy.rest_pose();
+            c.apply(t, &mut local);
+            self.joints_at(&local)[root].translation.z
+        };
+        at(c.end) - at(c.start)
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+    /// Slot names casting fills (one skinned mesh each).
+    pub fn slots(&self) -> &[String] {
+        &self.slots
+    }
+    /// The file's own skinned meshes: (slot, mesh name or `#index`, part),
+    /// what an agent wears when the shot gives the rig no schemes.
+    pub fn delivered(&self) -> &[(String, String, usize)] {
+        &self.delivered
+    }
+    /// Standing height in metres (rest pose, before height jitter).
+    pub fn height(&self) -> f32 {
+        self.height
+    }
+    /// Cycles, mapped names first.
+    pub fn cycles(&self) -> &[SkinCycle] {
+        &self.cycles
+    }
+    /// A part by index.
+    pub fn part_at(&self, i: usize) -> &SkinPart {
+        &self.part_list[i]
+    }
+    /// A piece by index.
+    pub fn piece(&self, i: usize) -> &SkinPiece {
+        &self.pieces[i]
+    }
+    /// Warnings from loading (weights renormalised, morph targets ignored).
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// Index of the cycle a cache cycle name plays; the error lists the cycles.
+    pub fn cycle_index(&self, name: &str) -> Result<usize> {
+        self.cycles.iter().position(|c| c.name == name).ok_or_else(|| {
+            let names: Vec<String> = self.cycles.iter().map(|c| format!("{} (clip {})", c.name, c.clip_name)).collect();
+            Error::invalid(
+                &self.path,
+                format!(
+                    "skinned rig has no cycle `{name}`; cycles: {} (map cache cycles to clips with `cycles = {{ {name} = \"CLIP\" }}`)",
+                    names.join(", ")
+                ),
+            )
+        })
+    }
+
+    /// Length of a cycle in frames.
+    pub fn cycle_frames(&self, cycle: usize) -> f32 {
+        self.animated.clips[self.cycles[cycle].clip].duration() * self.fps
+    }
+
+    /// The pose step nearest cycle frame `frame` (wrapped into the cycle):
+    /// 0 to `steps` inclusive, since a clip that does not loop seamlessly
+    /// ends on a pose other than its first.
+    pub fn step_of(&self, cycle: usize, frame: f32) -> u32 {
+        let c = &self.cycles[cycle];
+        let length = self.cycle_frames(cycle);
+        if !(length > 0.0 && frame.is_finite()) {
+            return 0;
+        }
+        let step = length / c.steps as f32;
+        ((frame.rem_euclid(length) / step).round() as u32).min(c.steps)
+    }
+
+    /// Clip time in seconds of a fractional step of a cycle.
+    fn step_time(&self, cycle: usize, step: f32) -> f32 {
+        let c = &self.cycles[cycle];
+        let clip = &self.animated.clips[c.clip];
+        clip.start + step * (self.cycle_frames(cycle) / c.steps as f32) / self.fps
+    }
+
+    /// `rig_from_node` for every node at clip time `t` of a cycle, root
+    /// motion removed.
+    fn joints_at_time(&self, cycle: usize, t: f32) -> Vec<Affine3A> {
+        let mut local = self.animated.hierarchy.rest_pose();
+        self.animated.clips[self.cycles[cycle].clip].apply(t, &mut local);
+        let mut joints = self.joints_at(&local);
+        if let Some(root) = self.root {
+            let o = joints[root].translation;
+            let strip = Affine3A::from_translation(Vec3::new(-o.x, 0.0, -o.z));
+            for j in &mut joints {
+                *j = strip * *j;
+            }
+        }
+        joints
+    }
+
+    /// `rig_from_node` for every node at a pose step.
+    pub fn step_joints(&self, cycle: usize, step: u32) -> Vec<Affine3A> {
+        self.joints_at_time(cycle, self.step_time(cycle, step as f32))
+    }
+
+    /// Skin matrices of a piece for node transforms `joints`.
+    fn skin_matrices(&self, piece: usize, joints: &[Affine3A]) -> Vec<Affine3A> {
+        let p = &self.pieces[piece];
+        p.joint_nodes.iter().zip(&p.inverse_bind).map(|(&n, ibm)| joints[n] * *ibm).collect()
+    }
+
+    /// Blended matrix of one vertex.
+    fn blend(skin: &[Affine3A], inf: &[(u16, f32); MAX_INFLUENCES]) -> Affine3A {
+        let mut m = Mat4::ZERO;
+        for &(j, w) in inf {
+            if w > 0.0 {
+                m += Mat4::from(skin[j as usize]) * w;
+            }
+        }
+        Affine3A::from_mat4(m)
+    }
+
+    fn skin_positions(&self, piece: usize, joints: &[Affine3A]) -> Vec<Vec3> {
+        let skin = self.skin_matrices(piece, joints);
+        let p = &self.pieces[piece];
+        p.mesh
+            .positions
+            .iter()
+            .zip(&p.influences)
+            .map(|(v, inf)| Self::blend(&skin, inf).transform_point3(*v))
+            .collect()
+    }
+
+    /// A piece posed by node transforms `joints`: positions blended,
+    /// normals by the inverse transpose. Named `<piece>@<pose>`.
+    pub fn pose_piece(&self, piece: usize, joints: &[Affine3A], pose: &str) -> Mesh {
+        let skin = self.skin_matrices(piece, joints);
+        let p = &self.pieces[piece];
+        let mut out = Mesh {
+            name: format!("{}@{pose}", p.mesh.name),
+            positions: Vec::with_capacity(p.mesh.positions.len()),
+            normals: Vec::with_capacity(p.mesh.normals.len()),
+            uvs: p.mesh.uvs.clone(),
+            indices: p.mesh.indices.clone(),
+        };
+        for (i, inf) in p.influences.iter().enumerate() {
+            let m = Self::blend(&skin, inf);
+            out.positions.push(m.transform_point3(p.mesh.positions[i]));
+            if let Some(&n) = p.mesh.normals.get(i) {
+                let normal_matrix = Mat3::from(m.matrix3).inverse().transpose();
+                out.normals.push((normal_matrix * n).try_normalize().unwrap_or(n));
+            }
+        }
+        out
+    }
+
+    /// Pose name of a step, for mesh names and botinfo: `<cycle>/<step>of<steps>`.
+    pub fn pose_name(&self, cycle: usize, step: u32) -> String {
+        let c = &self.cycles[cycle];
+        format!("{}/{}of{}", c.name, step, c.steps)
+    }
+
+    /// The largest vertex displacement, metres (rig space, before height
+    /// jitter), between a piece posed at a step and posed half a step away:
+    /// the worst error pose quantisation makes on this cycle.
+    pub fn quantisation_error(&self, piece: usize, cycle: usize) -> f32 {
+        let steps = self.cycles[cycle].steps;
+        let at: Vec<Vec<Vec3>> = (0..=steps).map(|q| self.skin_positions(piece, &self.step_joints(cycle, q))).collect();
+        let mut worst = 0.0f32;
+        for q in 0..steps as usize {
+            // Halfway between steps q and q + 1: farthest from both.
+            let half = self.skin_positions(piece, &self.joints_at_time(cycle, self.step_time(cycle, q as f32 + 0.5)));
+            for near in [&at[q], &at[q + 1]] {
+                for (a, b) in near.iter().zip(&half) {
+                    worst = worst.max(a.distance(*b));
+                }
+            }
+        }
+        worst
+    }
+}
