@@ -9,6 +9,8 @@
 //!
 //! `UPDATE_GOLDEN=1 cargo test --test golden` rewrites the goldens.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use throng::casting::ShotCrowd;
@@ -472,7 +474,49 @@ fn check_against_golden(
     (lines, failures)
 }
 
+/// With `UPDATE_GOLDEN=1`, copies the renders (EXR and PNG) into golden/
+/// and says so; otherwise does nothing and returns false.
+fn update_goldens(rendered: &[(String, PathBuf)]) -> bool {
+    if !std::env::var_os("UPDATE_GOLDEN").is_some_and(|v| v != "0") {
+        return false;
+    }
+    std::fs::create_dir_all(golden_dir()).expect("golden dir");
+    for (_, path) in rendered {
+        for p in [path.clone(), path.with_extension("png")] {
+            let to = golden_dir().join(p.file_name().expect("file name"));
+            std::fs::copy(&p, &to).expect("copy golden");
+            println!("updated {}", to.display());
+        }
+    }
+    true
+}
+
 // ---------------------------------------------------------------- tests
+
+/// A skinned character: Khronos' RiggedFigure (a skeleton under a Z-up
+/// node, one unnamed clip) walking, five agents at different phases, full
+/// render and its nearest crowd layer.
+#[test]
+fn rigged_figure_matches_golden() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
+    let crowd = ShotCrowd::load(&shot).expect("figure shot loads");
+    let manifest = build_layers(&crowd, &LayerOverrides::default()).expect("figure layers");
+    let layers = vec!["crowd0".to_string(), FULL_LAYER.to_string()];
+    let rendered = render(&crowd, &manifest, &layers, &dir.path().join("out"));
+    if update_goldens(&rendered) {
+        return;
+    }
+    let (lines, failures) = check_against_golden(&rendered, &crowd.shot.name, GOLDEN_POINTS, true);
+    for l in &lines {
+        println!("{l}");
+    }
+    assert!(
+        failures.is_empty(),
+        "RiggedFigure differs from its golden (regenerate with `UPDATE_GOLDEN=1 cargo test --test golden` if intended):\n  {}",
+        failures.join("\n  ")
+    );
+}
 
 /// The goldens: every layer of the demo at frame 1024 matches, or with
 /// `UPDATE_GOLDEN=1` is rewritten.
@@ -489,15 +533,7 @@ fn demo_layers_match_golden() {
         started.elapsed().as_secs_f64()
     );
 
-    if std::env::var_os("UPDATE_GOLDEN").is_some_and(|v| v != "0") {
-        std::fs::create_dir_all(golden_dir()).expect("golden dir");
-        for (_, path) in &rendered {
-            for p in [path.clone(), path.with_extension("png")] {
-                let to = golden_dir().join(p.file_name().expect("file name"));
-                std::fs::copy(&p, &to).expect("copy golden");
-                println!("updated {}", to.display());
-            }
-        }
+    if update_goldens(&rendered) {
         return;
     }
 

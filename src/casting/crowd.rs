@@ -18,7 +18,7 @@ use glam::{Affine3A, Quat, Vec3};
 
 use crate::cache::{AgentSample, CacheReader, FrameBlock};
 use crate::casting::rig::Rig;
-use crate::casting::skin::{is_skinned, SkinnedRig};
+use crate::casting::skin::{is_skinned, skinned_refusal, SkinnedRig};
 use crate::casting::wardrobe::{Wardrobes, GLTF_MATERIAL};
 use crate::casting::{cast_agent, cast_delivered, fit_part, AgentCast, CastPart, RigCasting, SlotCast};
 use crate::error::{Error, Result};
@@ -285,6 +285,8 @@ impl ShotCrowd {
         // Fits depend only on (rig, slot, mesh): compute each once.
         let mut fits: HashMap<(String, usize, MeshId), Affine3A> = HashMap::new();
         let mut materials: HashMap<String, MaterialId> = HashMap::new();
+        // Whether each (file, mesh) part is skinned, asked once per part.
+        let mut checked: HashMap<(std::path::PathBuf, String), bool> = HashMap::new();
         for (&id, s) in &seen {
             let rig_name = cache.rigs().get(s.rig as usize).cloned().unwrap_or_default();
             let Some(rig_ref) = shot.rigs.get(&rig_name) else {
@@ -362,6 +364,22 @@ impl ShotCrowd {
             let mut parts = Vec::new();
             for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
                 let Some(part) = &slot_cast.part else { continue };
+                let skinned_part = match checked.get(&(part.file.clone(), part.mesh.clone())) {
+                    Some(&s) => s,
+                    None => {
+                        let s = assets.is_skinned_mesh(&part.file, &part.mesh)?;
+                        checked.insert((part.file.clone(), part.mesh.clone()), s);
+                        s
+                    }
+                };
+                if skinned_part {
+                    return Err(skinned_refusal(
+                        &part.file,
+                        &format!("wardrobe part `{}` (slot `{}`)", part.mesh, slot_cast.slot),
+                    )
+                    .agent(id)
+                    .field(format!("schemes.{}.parts", cast.scheme)));
+                }
                 // A part wearing its own glTF materials keeps one piece per
                 // primitive (a multi-material mesh); otherwise one mesh, one material.
                 let pieces: Vec<(MeshId, MaterialId)> = if part.material == GLTF_MATERIAL {

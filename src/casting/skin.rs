@@ -308,11 +308,10 @@ impl SkinnedRig {
                 return Ok(i);
             }
         }
-        let label = format!(
-            "{}#{}",
-            file.path.display(),
-            gmesh.name().map(str::to_string).unwrap_or_else(|| format!("#{}", gmesh.index()))
-        );
+        let label = match gmesh.name() {
+            Some(name) => format!("{}#{name}", file.path.display()),
+            None => format!("{} mesh #{}", file.path.display(), gmesh.index()),
+        };
         // The skin of the node that uses this mesh (a skinned mesh is drawn
         // by a node with both `mesh` and `skin`).
         let skin = file

@@ -486,6 +486,15 @@ impl AssetCache {
         Ok(out)
     }
 
+    /// Whether glTF mesh `mesh_name` of `path` is skinned (a primitive has
+    /// JOINTS_0): such a mesh follows a skeleton, not a rigid slot.
+    pub fn is_skinned_mesh(&mut self, path: impl AsRef<Path>, mesh_name: &str) -> Result<bool> {
+        let src = self.source(path.as_ref())?;
+        let gmesh = src.file.mesh_by_name(mesh_name)?;
+        let skinned = gmesh.primitives().any(|p| p.get(&gltf::Semantic::Joints(0)).is_some());
+        Ok(skinned)
+    }
+
     /// The mesh `mesh_name` split by primitive: one (mesh, its own glTF
     /// material) pair per primitive, for parts with several materials.
     pub fn mesh_primitives(&mut self, path: impl AsRef<Path>, mesh_name: &str) -> Result<Vec<(MeshId, MaterialId)>> {

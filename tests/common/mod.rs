@@ -51,3 +51,72 @@ pub fn shared_asset(rel: &str) -> PathBuf {
     assert!(path.exists(), "shared asset {} is missing", path.display());
     path
 }
+
+/// A shot of Khronos RiggedFigure agents (shared assets) written into `dir`:
+/// `rows` of (frame, id, x, z, heading, cycle frame) on frames 1020-1026,
+/// `extra_rig` added to its `[rigs.figure]` table. Used by the skinning and
+/// golden tests.
+pub fn figure_shot(dir: &Path, rows: &[(i32, u32, f32, f32, f32, f32)], extra_rig: &str) -> PathBuf {
+    let figure = shared_asset("gltf/RiggedFigure/RiggedFigure.gltf");
+    let mut csv = String::from("frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags\n");
+    for &(f, id, x, z, h, cf) in rows {
+        csv.push_str(&format!("{f},{id},{x:?},0,{z:?},{h:?},figure,Walk,{cf:?},\n"));
+    }
+    std::fs::write(dir.join("c.csv"), csv).unwrap();
+    let shot = format!(
+        r##"version = 1
+name = "figure"
+seed = 11
+wardrobes = []
+[frames]
+start = 1020
+end = 1026
+fps = 24.0
+[cache]
+path = "c.csv"
+[rigs.figure]
+file = "{}"
+cycles = {{ Walk = "#0" }}
+{extra_rig}
+[camera]
+sensor_width = 36.0
+[[camera.keys]]
+frame = 1020
+position = [0.0, 1.1, 5.5]
+aim = [0.0, 0.75, 0.0]
+focal_length = 35.0
+[lights.sun]
+direction = [-0.6, 0.5, 0.6]
+angular_diameter = 0.53
+intensity = 3.0
+color = [1.0, 0.95, 0.88]
+[lights.sky]
+color = [0.3, 0.38, 0.5]
+intensity = 1.0
+[layers]
+split = "count"
+count = 2
+[render]
+resolution = [160, 90]
+spp = 8
+max_bounces = 3
+"##,
+        figure.display()
+    );
+    let path = dir.join("figure.toml");
+    std::fs::write(&path, shot).unwrap();
+    path
+}
+
+/// Five agents on every frame 1020-1026, spread across the frame, at
+/// different phases of the walk.
+pub fn five_walkers() -> Vec<(i32, u32, f32, f32, f32, f32)> {
+    let mut rows = Vec::new();
+    for f in 1020..=1026 {
+        for i in 0..5u32 {
+            let phase = (f - 1020) as f32 + i as f32 * 5.0;
+            rows.push((f, i + 1, (i as f32 - 2.0) * 0.9, -(i as f32) * 0.7, 0.4 * i as f32 - 0.8, phase));
+        }
+    }
+    rows
+}

@@ -1,0 +1,407 @@
+//! Skinned characters: exact skinning against hand-worked values on Khronos'
+//! SimpleSkin, RiggedFigure (a skeleton under a Z-up parent node) standing
+//! upright, pose instancing, invariants, determinism, and bad input.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use glam::{Quat, Vec3};
+use throng::casting::skin::SkinnedRig;
+use throng::casting::{AgentPose, Lod, ShotCrowd};
+use throng::scene::vis;
+use throng::shot::SkinOptions;
+
+const FPS: f32 = 24.0;
+
+fn simple_skin(name: &str) -> PathBuf {
+    common::shared_asset("gltf/SimpleSkin").join(name)
+}
+
+fn load(path: &Path, options: SkinOptions) -> SkinnedRig {
+    SkinnedRig::load(path, &options, FPS).unwrap_or_else(|e| panic!("{} loads: {e}", path.display()))
+}
+
+/// SimpleSkin's posed vertices worked out by hand. Joint 0 sits at (0, 1, 0)
+/// and does not move; joint 1 (its child, at the same place) rotates about Z.
+/// Both inverse bind matrices are a translation by (0, -1, 0), so joint 1's
+/// skin matrix is a rotation about the pivot (0, 1, 0), and a vertex with
+/// weights (w0, w1) lands at `w0 * v + w1 * (p + R(v - p))`.
+fn hand_posed(v: Vec3, w1: f32, angle: f32) -> Vec3 {
+    let p = Vec3::new(0.0, 1.0, 0.0);
+    let r = Quat::from_rotation_z(angle);
+    (1.0 - w1) * v + w1 * (p + r * (v - p))
+}
+
+/// The file's ten vertices (x = +-0.5 at y = 0, 0.5, .., 2) and the weight of
+/// joint 1 at each height (0, 0.25, 0.5, 0.75, 1).
+fn simple_skin_vertices() -> Vec<(Vec3, f32)> {
+    (0..10)
+        .map(|i| (Vec3::new(if i % 2 == 0 { -0.5 } else { 0.5 }, (i / 2) as f32 * 0.5, 0.0), (i / 2) as f32 * 0.25))
+        .collect()
+}
+
+fn assert_close(got: Vec3, want: Vec3, what: &str) {
+    assert!(got.distance(want) < 2e-4, "{what}: got {got}, want {want}");
+}
+
+#[test]
+fn simple_skin_matches_positions_worked_by_hand() {
+    // Pose step 6 frames = 0.25 s at 24 fps: steps land on the keys (every
+    // 0.5 s) and halfway between them.
+    let rig = load(&simple_skin("SimpleSkin.gltf"), SkinOptions { pose_step: Some(6.0), ..Default::default() });
+    assert!((rig.height() - 2.0).abs() < 1e-5, "rest height {}", rig.height());
+    let cycle = rig.cycle_index("#0").expect("the unnamed clip is cycle #0");
+    assert_eq!(rig.cycles()[cycle].steps, 22, "5.5 s clip in 0.25 s steps");
+    // Key 1 (t = 0.5 s) is the quaternion (0, 0, 0.383, 0.924): 45.03 degrees.
+    let key1 = 2.0 * 0.383f32.atan2(0.924);
+    // (step, angle): t = 0 rest; 0.25 s halfway to key 1 (slerp: half the
+    // angle); 0.5 s key 1; 1.0 s key 2 (0, 0, .707, .707) = 90 degrees;
+    // 4.0 s key 8 = -90 degrees.
+    for (step, angle) in
+        [(0, 0.0), (1, key1 / 2.0), (2, key1), (4, std::f32::consts::FRAC_PI_2), (16, -std::f32::consts::FRAC_PI_2)]
+    {
+        let joints = rig.step_joints(cycle, step);
+        let posed = rig.pose_piece(0, &joints, "test");
+        assert_eq!(posed.positions.len(), 10);
+        for (i, (v, w1)) in simple_skin_vertices().into_iter().enumerate() {
+            assert_close(posed.positions[i], hand_posed(v, w1, angle), &format!("step {step} vertex {i}"));
+        }
+    }
+    // Spot values written out: at 90 degrees the tip (-0.5, 2) swings to (-1, 0.5).
+    let tip = rig.pose_piece(0, &rig.step_joints(cycle, 4), "t").positions[8];
+    assert_close(tip, Vec3::new(-1.0, 0.5, 0.0), "tip at 90 degrees");
+    // The middle vertex (-0.5, 1), half on each joint: (-0.25, 0.75).
+    let mid = rig.pose_piece(0, &rig.step_joints(cycle, 4), "t").positions[4];
+    assert_close(mid, Vec3::new(-0.25, 0.75, 0.0), "middle at 90 degrees");
+}
+
+#[test]
+fn second_joint_set_counts_and_unnormalised_weights_warn_once() {
+    // The multi-joint-set file repeats JOINTS_0/WEIGHTS_0 as JOINTS_1/WEIGHTS_1:
+    // every vertex's weights sum to 2, so all ten are renormalised, and the
+    // result is SimpleSkin's.
+    let path = simple_skin("SimpleSkin-multi-joint-set.gltf");
+    let rig = load(&path, SkinOptions { pose_step: Some(6.0), ..Default::default() });
+    assert_eq!(rig.warnings().len(), 1, "{:?}", rig.warnings());
+    let w = &rig.warnings()[0];
+    assert!(
+        w.contains("SimpleSkin-multi-joint-set.gltf") && w.contains("#0") && w.contains("10 of 10 vertices"),
+        "{w}"
+    );
+    let single = load(&simple_skin("SimpleSkin.gltf"), SkinOptions { pose_step: Some(6.0), ..Default::default() });
+    let (a, b) = (rig.cycle_index("#0").unwrap(), single.cycle_index("#0").unwrap());
+    let pa = rig.pose_piece(0, &rig.step_joints(a, 4), "t");
+    let pb = single.pose_piece(0, &single.step_joints(b, 4), "t");
+    for (x, y) in pa.positions.iter().zip(&pb.positions) {
+        assert_close(*x, *y, "two joint sets vs one");
+    }
+    assert!(rig.piece(0).influences.iter().all(|inf| (inf.iter().map(|i| i.1).sum::<f32>() - 1.0).abs() < 1e-6));
+}
+
+#[test]
+fn rigged_figure_under_a_z_up_node_stands_upright_on_the_ground() {
+    let path = common::shared_asset("gltf/RiggedFigure/RiggedFigure.gltf");
+    let rig = load(&path, SkinOptions::default());
+    // The file's mesh is 1.45 units tall along its Z axis; its Z_UP parent
+    // node turns that into Y.
+    assert!((1.3..1.6).contains(&rig.height()), "height {}", rig.height());
+    let cycle = rig.cycle_index("#0").unwrap();
+    for step in [0, 7, 15] {
+        let posed = rig.pose_piece(0, &rig.step_joints(cycle, step), "t");
+        let (lo, hi) = posed.bounds();
+        let size = hi - lo;
+        assert!(size.y > 2.0 * size.x.max(size.z) * 0.6 && size.y > 1.2, "step {step}: not upright: {size}");
+        assert!(lo.y.abs() < 0.08, "step {step}: feet at y {}", lo.y);
+    }
+    // The skinned mesh ignores its own node's transform: the posed rest mesh
+    // sits where the joints are, centred on the agent.
+    let rest = rig.pose_piece(0, &rig.step_joints(cycle, 0), "t");
+    let (lo, hi) = rest.bounds();
+    assert!(((lo.x + hi.x) / 2.0).abs() < 0.2 && ((lo.z + hi.z) / 2.0).abs() < 0.3, "{lo} {hi}");
+}
+
+// ------------------------------------------------------------ through a shot
+
+fn mesh_of(crowd: &ShotCrowd, frame: i32, id: u32) -> u32 {
+    let block = crowd.agents_at(frame).unwrap();
+    let a = block.agents.iter().find(|a| a.id == id).unwrap();
+    let mut out = Vec::new();
+    crowd.agent_instances(a, Lod::Full, vis::ALL, &mut out).unwrap();
+    assert_eq!(out.len(), 1, "one skinned mesh");
+    out[0].mesh
+}
+
+#[test]
+fn agents_on_one_quantised_pose_share_one_mesh_and_others_do_not() {
+    let dir = tempfile::tempdir().unwrap();
+    // Agents 1 and 2 play the same cycle frame (up to less than half a step);
+    // agent 3 is 6 frames further on.
+    let rows = [
+        (1020, 1, 0.0, 0.0, 0.0, 4.0),
+        (1020, 2, 1.0, 0.0, 1.0, 4.2),
+        (1020, 3, -1.0, 0.0, 0.0, 10.0),
+        (1021, 1, 0.0, 0.1, 0.0, 5.0),
+    ];
+    let crowd = ShotCrowd::load(&common::figure_shot(dir.path(), &rows, "")).unwrap();
+    assert_eq!(mesh_of(&crowd, 1020, 1), mesh_of(&crowd, 1020, 2), "same pose, same mesh (and BLAS)");
+    assert_ne!(mesh_of(&crowd, 1020, 1), mesh_of(&crowd, 1020, 3), "another pose");
+    assert_ne!(mesh_of(&crowd, 1020, 1), mesh_of(&crowd, 1021, 1), "the next frame is another pose");
+    // Three poses in all (frames 4, 5, 10 of the walk): posed once each.
+    assert_eq!(crowd.posed.meshes.len(), 3);
+    let stats = throng::casting::table::cast_stats(&crowd);
+    let skin = stats.skinned.expect("skinned figures");
+    assert_eq!((skin.agents, skin.unique_poses, skin.posed_meshes), (3, 3, 3));
+    assert!(skin.worst_quantisation_error_m > 0.0 && skin.worst_quantisation_error_m < 0.02, "{skin:?}");
+}
+
+#[test]
+fn removing_an_agent_changes_no_other_agents_cast_or_pose() {
+    let dir = tempfile::tempdir().unwrap();
+    let all = common::five_walkers();
+    let without: Vec<_> = all.iter().copied().filter(|r| r.1 != 3).collect();
+    let a = ShotCrowd::load(&common::figure_shot(dir.path(), &all, "")).unwrap();
+    let dir2 = tempfile::tempdir().unwrap();
+    let b = ShotCrowd::load(&common::figure_shot(dir2.path(), &without, "")).unwrap();
+    for id in [1u32, 2, 4, 5] {
+        assert_eq!(a.casting[&id], b.casting[&id], "agent {id}'s casting");
+        for f in [1020, 1023, 1026] {
+            let pose = |c: &ShotCrowd| {
+                let block = c.agents_at(f).unwrap();
+                let s = *block.agents.iter().find(|s| s.id == id).unwrap();
+                match c.agent_pose(&s).unwrap() {
+                    AgentPose::Skinned { world_from_rig, cycle, step } => (world_from_rig, cycle, step),
+                    AgentPose::Slots(_) => panic!("a skinned agent"),
+                }
+            };
+            assert_eq!(pose(&a), pose(&b), "agent {id} frame {f}");
+            let pos = |c: &ShotCrowd| {
+                let m = mesh_of(c, f, id);
+                c.library().meshes[m as usize].positions.clone()
+            };
+            assert_eq!(pos(&a), pos(&b), "agent {id} frame {f}: posed vertices");
+        }
+    }
+}
+
+fn render_layers(shot: &Path, out: &Path, threads: usize, layers: &[&str]) -> Vec<PathBuf> {
+    let crowd = ShotCrowd::load(shot).unwrap();
+    let manifest = throng::layers::build_layers(&crowd, &Default::default()).unwrap();
+    let job = throng::render::job::RenderJob {
+        threads,
+        ..throng::render::job::RenderJob::new(
+            layers.iter().map(|l| l.to_string()).collect(),
+            vec![1023],
+            8,
+            out.to_path_buf(),
+        )
+    };
+    throng::render::job::run(&crowd, Some(&manifest), &job).unwrap().into_iter().map(|r| r.path).collect()
+}
+
+#[test]
+fn skinned_renders_are_bit_identical_for_one_and_two_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
+    let one = render_layers(&shot, &dir.path().join("t1"), 1, &["crowd0", "full"]);
+    let two = render_layers(&shot, &dir.path().join("t2"), 2, &["crowd0", "full"]);
+    for (a, b) in one.iter().zip(&two) {
+        assert_eq!(std::fs::read(a).unwrap(), std::fs::read(b).unwrap(), "{} differs by thread count", a.display());
+    }
+}
+
+#[test]
+fn the_layer_stack_matches_the_full_render_with_skinned_agents() {
+    let dir = tempfile::tempdir().unwrap();
+    let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
+    let out = dir.path().join("r");
+    let files = render_layers(&shot, &out, 0, &["set", "crowd1", "crowd0", "full"]);
+    let comped = throng::comp::comp_frame(&out, 1023, None).unwrap();
+    let (full, _) = throng::render::exr::read_layer(&files[3]).unwrap();
+    let n = full.rgba.len() as f64;
+    let mut diff = [0.0f64; 4];
+    let mut coverage = 0.0f64;
+    for (a, b) in comped.film.rgba.iter().zip(&full.rgba) {
+        for c in 0..4 {
+            diff[c] += (a[c] - b[c]) as f64 / n;
+        }
+        coverage += b[3] as f64 / n;
+    }
+    // The figures cover part of the frame (no set: the rest is empty).
+    assert!(coverage > 0.05, "figures cover {coverage:.3} of the frame");
+    for (c, d) in diff.iter().enumerate() {
+        assert!(d.abs() < 0.01, "channel {c}: comp - full mean {d:.4} (more than noise)");
+    }
+}
+
+// ------------------------------------------------------------ bad input
+
+/// Runs `throng cast` on a figure shot with `extra` in its rig table; the
+/// error text on failure.
+fn cast_error(extra_rig: &str, rows: &[(i32, u32, f32, f32, f32, f32)]) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let shot = common::figure_shot(dir.path(), rows, extra_rig);
+    let (code, _, err) = common::run(&["cast".as_ref(), shot.as_os_str()]);
+    assert_eq!(code, 2, "should be refused: {err}");
+    err
+}
+
+#[test]
+fn a_skinned_file_as_a_slot_rig_is_refused_naming_skinning() {
+    let dir = tempfile::tempdir().unwrap();
+    let shot = common::figure_shot(dir.path(), &common::five_walkers(), "kind = \"slots\"");
+    let text = std::fs::read_to_string(&shot).unwrap().replace("cycles = { Walk = \"#0\" }\n", "");
+    std::fs::write(&shot, text).unwrap();
+    let (code, _, err) = common::run(&["cast".as_ref(), shot.as_os_str()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("skinned") && err.contains("kind = \"skinned\"") && err.contains("RiggedFigure"), "{err}");
+}
+
+#[test]
+fn a_skinned_mesh_as_a_rigid_part_is_refused_naming_skinning() {
+    let dir = tempfile::tempdir().unwrap();
+    let figure = common::shared_asset("gltf/RiggedFigure/RiggedFigure.gltf");
+    let wardrobe = dir.path().join("w.toml");
+    std::fs::write(
+        &wardrobe,
+        format!(
+            "version = 1\nname = \"w\"\n[schemes.Figures]\n[[schemes.Figures.parts]]\nslot = \"torso\"\nfile = \"{}\"\nmesh = \"Proxy\"\n",
+            figure.display()
+        ),
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(common::demo_shot()).unwrap();
+    let demo = common::repo_path("demo");
+    // The demo shot with one rig whose torsos come from the skinned file.
+    let text = text
+        .replace(
+            "wardrobes = [\"../wardrobes/robots.toml\", \"../wardrobes/kenney_alien.toml\"]",
+            &format!("wardrobes = [\"{}\"]", wardrobe.display()),
+        )
+        .replace("\"cache/", &format!("\"{}/cache/", demo.display()))
+        .replace("\"rigs/", &format!("\"{}/rigs/", demo.display()))
+        .replace("\"set/", &format!("\"{}/set/", demo.display()))
+        .replace(
+            "schemes = { LowEnd_good_heads = 3.0, HighEnd = 1.0, KenneyAlien = 0.5 }",
+            "schemes = { Figures = 1.0 }",
+        )
+        .replace("schemes = { HighEnd = 2.0, KenneyAlien = 1.0 }", "schemes = { Figures = 1.0 }");
+    let shot = dir.path().join("shot.toml");
+    std::fs::write(&shot, text).unwrap();
+    let (code, _, err) = common::run(&["cast".as_ref(), shot.as_os_str()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("skinned") && err.contains("kind = \"skinned\"") && err.contains("Proxy"), "{err}");
+}
+
+#[test]
+fn a_clip_mapping_to_a_missing_clip_lists_the_clips() {
+    let dir = tempfile::tempdir().unwrap();
+    let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
+    let text =
+        std::fs::read_to_string(&shot).unwrap().replace("cycles = { Walk = \"#0\" }", "cycles = { Walk = \"Run\" }");
+    std::fs::write(&shot, text).unwrap();
+    let (code, _, err) = common::run(&["cast".as_ref(), shot.as_os_str()]);
+    assert_eq!(code, 2);
+    assert!(err.contains("Run") && err.contains("clips: #0 (#0)") && err.contains("rigs.figure.cycles.Walk"), "{err}");
+}
+
+/// SimpleSkin's JSON with `edit` applied, written beside a shot that uses it;
+/// the `throng cast` error.
+fn broken_simple_skin(edit: impl Fn(&mut serde_json::Value)) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(simple_skin("SimpleSkin.gltf")).unwrap()).unwrap();
+    edit(&mut doc);
+    let file = dir.path().join("broken.gltf");
+    std::fs::write(&file, serde_json::to_string(&doc).unwrap()).unwrap();
+    let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
+    let text = std::fs::read_to_string(&shot).unwrap();
+    let figure = common::shared_asset("gltf/RiggedFigure/RiggedFigure.gltf");
+    let text = text.replace(&figure.display().to_string(), &file.display().to_string());
+    std::fs::write(&shot, text).unwrap();
+    let (code, _, err) = common::run(&["cast".as_ref(), shot.as_os_str()]);
+    assert_eq!(code, 2, "should be refused: {err}");
+    err
+}
+
+#[test]
+fn malformed_skins_are_errors_naming_file_mesh_and_accessor() {
+    // No inverse bind matrices.
+    let err = broken_simple_skin(|d| {
+        d["skins"][0].as_object_mut().unwrap().remove("inverseBindMatrices");
+    });
+    assert!(err.contains("broken.gltf") && err.contains("mesh") && err.contains("inverseBindMatrices"), "{err}");
+    // A skin of one joint: the vertices weighted to joint 1 point past it.
+    let err = broken_simple_skin(|d| {
+        d["skins"][0]["joints"] = serde_json::json!([1]);
+        d["accessors"][4]["count"] = serde_json::json!(1);
+    });
+    assert!(
+        err.contains("broken.gltf") && err.contains("joint 1 is out of range") && err.contains("accessor 2"),
+        "{err}"
+    );
+    // A third joint set: more than 8 influences.
+    let err = broken_simple_skin(|d| {
+        let attrs = &mut d["meshes"][0]["primitives"][0]["attributes"];
+        attrs["JOINTS_2"] = serde_json::json!(2);
+        attrs["WEIGHTS_2"] = serde_json::json!(3);
+    });
+    assert!(err.contains("broken.gltf") && err.contains("more than 8 influences"), "{err}");
+    // Weights pointed at the inverse bind matrices: a MAT4 accessor.
+    let err = broken_simple_skin(|d| d["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"] = serde_json::json!(4));
+    assert!(err.contains("broken.gltf") && err.contains("WEIGHTS_0"), "{err}");
+}
+
+#[test]
+fn nan_weights_are_an_error_naming_the_accessor() {
+    // A weights accessor of 10 VEC4 floats, all NaN, in a buffer of its own.
+    let err = broken_simple_skin(|d| {
+        let nan = f32::NAN.to_le_bytes();
+        let bytes: Vec<u8> = (0..40).flat_map(|_| nan).collect();
+        let uri = format!("data:application/octet-stream;base64,{}", base64(&bytes));
+        d["buffers"].as_array_mut().unwrap().push(serde_json::json!({ "uri": uri, "byteLength": bytes.len() }));
+        let buffer = d["buffers"].as_array().unwrap().len() - 1;
+        d["bufferViews"]
+            .as_array_mut()
+            .unwrap()
+            .push(serde_json::json!({ "buffer": buffer, "byteLength": bytes.len() }));
+        let view = d["bufferViews"].as_array().unwrap().len() - 1;
+        d["accessors"]
+            .as_array_mut()
+            .unwrap()
+            .push(serde_json::json!({ "bufferView": view, "componentType": 5126, "count": 10, "type": "VEC4" }));
+        let acc = d["accessors"].as_array().unwrap().len() - 1;
+        d["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"] = serde_json::json!(acc);
+    });
+    assert!(err.contains("broken.gltf") && err.contains("WEIGHTS_0 (accessor 7)") && err.contains("NaN"), "{err}");
+}
+
+/// Standard base64 with padding (for data URIs in the broken files above).
+fn base64(bytes: &[u8]) -> String {
+    const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::new();
+    for chunk in bytes.chunks(3) {
+        let b = [chunk[0], *chunk.get(1).unwrap_or(&0), *chunk.get(2).unwrap_or(&0)];
+        let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
+        for i in 0..4 {
+            if i <= chunk.len() {
+                out.push(T[(n >> (18 - 6 * i) & 63) as usize] as char);
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn cycles_and_strides_options_are_checked_in_the_shot() {
+    let err = cast_error("scale = -1.0", &common::five_walkers());
+    assert!(err.contains("rigs.figure.scale"), "{err}");
+    let err = cast_error("pose_step = 0.0", &common::five_walkers());
+    assert!(err.contains("rigs.figure.pose_step"), "{err}");
+    let err = cast_error("root = \"tail\"", &common::five_walkers());
+    assert!(err.contains("tail") && err.contains("torso_joint_1"), "{err}");
+    let err = cast_error("forward = \"+y\"\nup = \"+y\"", &common::five_walkers());
+    assert!(err.contains("forward") && err.contains("up"), "{err}");
+}
