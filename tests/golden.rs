@@ -477,7 +477,7 @@ fn check_against_golden(
 /// With `UPDATE_GOLDEN=1`, copies the renders (EXR and PNG) into golden/
 /// and says so; otherwise does nothing and returns false.
 fn update_goldens(rendered: &[(String, PathBuf)]) -> bool {
-    if !std::env::var_os("UPDATE_GOLDEN").is_some_and(|v| v != "0") {
+    if std::env::var_os("UPDATE_GOLDEN").is_none_or(|v| v == "0") {
         return false;
     }
     std::fs::create_dir_all(golden_dir()).expect("golden dir");
