@@ -235,6 +235,15 @@ fn check_graph(path: &Path, plan: &Plan) -> Result<()> {
         return Err(Error::invalid(path, "two tasks share an id").field("tasks"));
     }
     for t in &plan.tasks {
+        // Ids name log and marker files and go into Slurm's --wrap line.
+        let safe = |w: &str| !w.starts_with('.') && w.bytes().all(|b| b.is_ascii_alphanumeric() || b"._-".contains(&b));
+        if !safe(&t.id) || !t.layer.as_deref().is_none_or(safe) {
+            return Err(Error::invalid(
+                path,
+                format!("task id or layer `{}` is not letters, digits, `.`, `_`, `-`", t.id),
+            )
+            .field("id"));
+        }
         if t.argv.first().map(String::as_str) != Some("throng") {
             return Err(Error::invalid(path, format!("task `{}` does not run `throng`", t.id)).field("argv"));
         }
