@@ -159,6 +159,9 @@ while :; do
 done
 [ "$rc" -ne 0 ] || fail "farm status exits 0 with a failed task"
 grep "^$victim" "$tmp/status2.txt"
+vlog="$work/kill/logs/$victim.log"
+! grep -q "task $victim done" "$vlog" || fail "$victim finished before the cancel: not a mid-render kill"
+echo "slurm: $victim log at the kill: $(grep -c '^render: frame' "$vlog") of 2 frames done"
 grep -q "^$victim .*log .*$victim.log" "$tmp/status2.txt" || fail "status does not name the failed task's log"
 "$bin" farm submit "$kplan" --engine slurm | tee "$tmp/resubmit.txt"
 grep -q "render.crowd0 array 0" "$tmp/resubmit.txt" || fail "re-submit did not run $victim again"
