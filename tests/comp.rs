@@ -74,6 +74,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
         png: true,
         resolution: None,
         cryptomatte: job::CryptoOutput::Header,
+        progress: job::ProgressStyle::Off,
     };
     job::run(crowd, Some(manifest), &job).unwrap();
 }

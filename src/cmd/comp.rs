@@ -25,15 +25,23 @@ pub struct CompArgs {
     /// (default: scan DIR: `set`, then `crowdN` from the highest N down).
     #[arg(long)]
     pub manifest: Option<PathBuf>,
+    /// Print a machine-readable summary instead of the line.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// `throng comp DIR --frame F --out FILE.exr [--png FILE.png] [--manifest FILE]`.
 pub fn run(args: &CompArgs) -> Result<()> {
+    let clock = std::time::Instant::now();
     let manifest = args.manifest.as_deref().map(crate::layers::read_manifest).transpose()?;
     let comped = crate::comp::comp_frame(&args.dir, args.frame, manifest.as_ref())?;
     exr::write_layer(&args.out, &comped.film, &comped.meta)?;
     if let Some(png) = &args.png {
         exr::write_preview_png(png, &comped.film)?;
+    }
+    if args.json {
+        let files = std::iter::once(args.out.clone()).chain(args.png.clone()).collect();
+        return super::Summary::new("comp", clock, comped.layers.len() as u64, files).print();
     }
     let names: Vec<&str> = comped.layers.iter().map(|l| l.0.as_str()).collect();
     println!(

@@ -20,10 +20,14 @@ pub struct ExportArgs {
     /// Output .glb.
     #[arg(long)]
     pub out: PathBuf,
+    /// Print a machine-readable summary instead of the line.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// `throng export SHOT --frame F [--layer L] --out scene.glb`.
 pub fn run(args: &ExportArgs) -> Result<()> {
+    let clock = std::time::Instant::now();
     let crowd = super::load_crowd(&args.shot)?;
     if !crowd.shot.frames.contains(args.frame) {
         return Err(Error::Usage(format!(
@@ -50,6 +54,9 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         }
     };
     let s = crate::export::export_frame(&crowd, args.frame, only.as_ref(), &args.out)?;
+    if args.json {
+        return super::Summary::new("export", clock, s.mesh_nodes as u64, vec![args.out.clone()]).print();
+    }
     println!(
         "wrote {}: {} agents, {} mesh nodes sharing {} meshes, {} instanced triangles",
         args.out.display(),

@@ -14,6 +14,7 @@ pub mod cast;
 pub mod comp;
 pub mod demo;
 pub mod export;
+pub mod farm;
 pub mod layers;
 pub mod render;
 pub mod sim;
@@ -50,6 +51,9 @@ pub enum Verb {
     Comp(comp::CompArgs),
     /// Write one frame of the shot as glTF (.glb).
     Export(export::ExportArgs),
+    /// Plan, submit and follow a shot on a render farm (Slurm) or local workers.
+    #[command(subcommand)]
+    Farm(farm::FarmVerb),
 }
 
 /// Runs one parsed command line.
@@ -64,6 +68,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Verb::Render(args) => render::run(&args),
         Verb::Comp(args) => comp::run(&args),
         Verb::Export(args) => export::run(&args),
+        Verb::Farm(verb) => farm::run(&verb),
     }
 }
 
@@ -80,4 +85,45 @@ fn load_crowd(shot: &std::path::Path) -> Result<crate::casting::ShotCrowd> {
 /// Pretty JSON of a summary, for `--json` outputs.
 fn to_json(value: &impl serde::Serialize) -> Result<String> {
     serde_json::to_string_pretty(value).map_err(|e| crate::error::Error::Usage(format!("cannot print JSON: {e}")))
+}
+
+/// The `--json` summary of `render`, `comp`, `export` and `sim`
+/// (docs/farm.md, "Machine-readable summaries").
+#[derive(Debug, serde::Serialize)]
+struct Summary {
+    /// The verb.
+    verb: &'static str,
+    /// Files written, in the order written.
+    files_written: Vec<std::path::PathBuf>,
+    /// Files found complete and skipped (`render --resume`).
+    files_skipped: Vec<std::path::PathBuf>,
+    /// Wall-clock seconds of the verb.
+    seconds: f64,
+    /// Instances traced (render), mesh nodes written (export), agents simulated (sim), layers stacked (comp).
+    instances: u64,
+    /// Peak resident memory of the process, bytes (null where /proc is missing).
+    peak_rss_bytes: Option<u64>,
+}
+
+impl Summary {
+    fn new(
+        verb: &'static str,
+        clock: std::time::Instant,
+        instances: u64,
+        files_written: Vec<std::path::PathBuf>,
+    ) -> Self {
+        let mib = crate::bench::peak_rss_mib();
+        Summary {
+            verb,
+            files_written,
+            files_skipped: Vec::new(),
+            seconds: clock.elapsed().as_secs_f64(),
+            instances,
+            peak_rss_bytes: mib.is_finite().then_some((mib * 1048576.0) as u64),
+        }
+    }
+    fn print(&self) -> Result<()> {
+        println!("{}", to_json(self)?);
+        Ok(())
+    }
 }

@@ -7,7 +7,7 @@ use clap::{Args, ValueEnum};
 use super::values::{frame_list, resolution, FrameList, Resolution};
 use crate::error::{Error, Result};
 use crate::output::FULL_LAYER;
-use crate::render::job::{self, CryptoOutput, RenderJob};
+use crate::render::job::{self, CryptoOutput, ProgressStyle, RenderJob};
 
 /// `--cryptomatte`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -26,6 +26,30 @@ impl From<CryptoFlag> for CryptoOutput {
             CryptoFlag::Header => CryptoOutput::Header,
             CryptoFlag::Sidecar => CryptoOutput::Sidecar,
             CryptoFlag::Off => CryptoOutput::Off,
+        }
+    }
+}
+
+/// `--progress`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ProgressFlag {
+    /// A bar on a terminal, plain lines otherwise.
+    Auto,
+    /// One line redrawn in place.
+    Bar,
+    /// One flushed line per finished frame or block of tiles, with percent and ETA (farm logs).
+    Plain,
+    /// No progress.
+    Off,
+}
+
+impl From<ProgressFlag> for ProgressStyle {
+    fn from(f: ProgressFlag) -> ProgressStyle {
+        match f {
+            ProgressFlag::Auto => ProgressStyle::Auto,
+            ProgressFlag::Bar => ProgressStyle::Bar,
+            ProgressFlag::Plain => ProgressStyle::Plain,
+            ProgressFlag::Off => ProgressStyle::Off,
         }
     }
 }
@@ -65,10 +89,17 @@ pub struct RenderArgs {
     /// Cryptomatte mattes (CryptoAgent, CryptoPart).
     #[arg(long, value_enum, default_value_t = CryptoFlag::Header)]
     pub cryptomatte: CryptoFlag,
+    /// Progress on stderr.
+    #[arg(long, value_enum, default_value_t = ProgressFlag::Auto)]
+    pub progress: ProgressFlag,
+    /// Print a machine-readable summary (files, seconds, instances, peak memory) instead of the line.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// `throng render SHOT ...`: renders the asked layers and frames.
 pub fn run(args: &RenderArgs) -> Result<()> {
+    let clock = std::time::Instant::now();
     let crowd = super::load_crowd(&args.shot)?;
     let manifest_path = args
         .manifest
@@ -108,9 +139,17 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         png: args.png,
         resolution: args.resolution.map(|Resolution(r)| r),
         cryptomatte: args.cryptomatte.into(),
+        progress: args.progress.into(),
         ..RenderJob::new(layers, frames, spp, args.out.clone())
     };
     let done = job::run(&crowd, manifest.as_ref(), &job)?;
+    if args.json {
+        let written = done.iter().filter(|d| !d.skipped).map(|d| d.path.clone()).collect();
+        let instances = done.iter().map(|d| d.instances as u64).sum();
+        let mut summary = super::Summary::new("render", clock, instances, written);
+        summary.files_skipped = done.iter().filter(|d| d.skipped).map(|d| d.path.clone()).collect();
+        return summary.print();
+    }
     let rendered = done.iter().filter(|d| !d.skipped).count();
     let secs: f64 = done.iter().map(|d| d.seconds).sum();
     println!(

@@ -16,6 +16,9 @@ pub struct SimArgs {
     /// Cache to write (.crowd or .csv).
     #[arg(long)]
     pub out: PathBuf,
+    /// Print a machine-readable summary instead of the line.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Simulates the scene and writes its cache.
@@ -24,6 +27,9 @@ pub fn run(args: &SimArgs) -> Result<()> {
     let scene = SimScene::load(&args.scene)?;
     let crowd = crate::sim::run(&scene);
     crate::cache::write(&args.out, &crowd)?;
+    if args.json {
+        return super::Summary::new("sim", clock, scene.agents.len() as u64, vec![args.out.clone()]).print();
+    }
     println!(
         "throng sim: {} agents, frames {}-{} (simulated from {}), {:.2} s -> {}",
         scene.agents.len(),

@@ -38,6 +38,8 @@ pub struct RenderJob {
     pub resolution: Option<[u32; 2]>,
     /// Cryptomatte output (`CryptoAgent`, `CryptoPart`).
     pub cryptomatte: CryptoOutput,
+    /// How progress is reported on stderr.
+    pub progress: ProgressStyle,
 }
 
 impl RenderJob {
@@ -55,8 +57,24 @@ impl RenderJob {
             png: false,
             resolution: None,
             cryptomatte: CryptoOutput::Header,
+            progress: ProgressStyle::Auto,
         }
     }
+}
+
+/// How a job reports progress on stderr.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum ProgressStyle {
+    /// `Bar` on a terminal, `Plain` otherwise (a farm log).
+    #[default]
+    Auto,
+    /// One line redrawn in place.
+    Bar,
+    /// One line per finished layer-frame, and per block of tiles on long
+    /// frames, each with percent done and ETA: for logs.
+    Plain,
+    /// Nothing.
+    Off,
 }
 
 /// Whether and how a job writes Cryptomatte mattes.
@@ -155,32 +173,80 @@ pub fn all_layers(manifest: &Manifest) -> Vec<String> {
     manifest.comp_order.clone()
 }
 
-/// A one-line progress display on a terminal; silent otherwise.
+/// Progress on stderr: a line redrawn on a terminal, or plain lines for a log.
 struct Progress {
-    on: bool,
+    style: ProgressStyle,
     start: Instant,
     total: usize,
+    /// When the last plain line mid-frame was printed.
+    last_line: std::sync::Mutex<Instant>,
 }
 
+/// Seconds between plain lines within one layer-frame.
+const PLAIN_EVERY_S: f64 = 10.0;
+
 impl Progress {
-    fn show(&self, done: usize, frame: i32, layer: &str, frac: f64) {
-        if !self.on {
-            return;
-        }
+    fn new(style: ProgressStyle, total: usize) -> Progress {
+        let style = match style {
+            ProgressStyle::Auto if std::io::stderr().is_terminal() => ProgressStyle::Bar,
+            ProgressStyle::Auto => ProgressStyle::Plain,
+            s => s,
+        };
+        Progress { style, start: Instant::now(), total, last_line: std::sync::Mutex::new(Instant::now()) }
+    }
+    fn on(&self) -> bool {
+        self.style != ProgressStyle::Off
+    }
+    fn figures(&self, done: usize, frac: f64) -> (f64, f64, f64) {
         let progress = (done as f64 + frac) / self.total.max(1) as f64;
         let elapsed = self.start.elapsed().as_secs_f64();
         let eta = if progress > 0.0 { elapsed / progress - elapsed } else { 0.0 };
-        eprint!(
-            "\r\x1b[2Kframe {frame} layer {layer:<8} [{}/{}] {:>5.1}%  elapsed {:.0}s  ETA {:.0}s",
-            done + 1,
+        (progress, elapsed, eta)
+    }
+    fn show(&self, done: usize, frame: i32, layer: &str, frac: f64) {
+        let (progress, elapsed, eta) = self.figures(done, frac);
+        match self.style {
+            ProgressStyle::Bar => eprint!(
+                "\r\x1b[2Kframe {frame} layer {layer:<8} [{}/{}] {:>5.1}%  elapsed {:.0}s  ETA {:.0}s",
+                done + 1,
+                self.total,
+                progress * 100.0,
+                elapsed,
+                eta
+            ),
+            ProgressStyle::Plain if frac > 0.0 => {
+                // A block of tiles: at most one line per PLAIN_EVERY_S, so long frames show life in a log.
+                let Ok(mut last) = self.last_line.lock() else { return };
+                if last.elapsed().as_secs_f64() >= PLAIN_EVERY_S {
+                    *last = Instant::now();
+                    eprintln!(
+                        "render: frame {frame} layer {layer} {:.0}% of frame; {:.1}% done, elapsed {elapsed:.0}s, ETA {eta:.0}s",
+                        frac * 100.0,
+                        progress * 100.0
+                    );
+                }
+            }
+            _ => {}
+        }
+    }
+    /// A layer-frame finished (`done` counts it).
+    fn finished(&self, done: usize, frame: i32, layer: &str, skipped: bool) {
+        if self.style != ProgressStyle::Plain {
+            return;
+        }
+        let (progress, elapsed, eta) = self.figures(done, 0.0);
+        let what = if skipped { "complete, skipped" } else { "done" };
+        eprintln!(
+            "render: frame {frame} layer {layer} {what} [{done}/{}] {:.1}%, elapsed {elapsed:.0}s, ETA {eta:.0}s",
             self.total,
-            progress * 100.0,
-            elapsed,
-            eta
+            progress * 100.0
         );
+        if let Ok(mut last) = self.last_line.lock() {
+            *last = Instant::now();
+        }
     }
     fn finish(&self) {
-        if self.on {
+        if self.style == ProgressStyle::Bar {
             eprintln!();
         }
     }
@@ -205,11 +271,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
         }
     }
     let blas = BlasSet::build(crowd.library());
-    let progress = Progress {
-        on: std::io::stderr().is_terminal(),
-        start: Instant::now(),
-        total: job.frames.len() * job.layers.len(),
-    };
+    let progress = Progress::new(job.progress, job.frames.len() * job.layers.len());
     let mut out = Vec::new();
     for &frame in &job.frames {
         // Read and pose lazily: a fully resumed frame needs neither.
@@ -225,10 +287,13 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                     seconds: 0.0,
                     instances: 0,
                 });
+                progress.finished(out.len(), frame, layer, true);
                 continue;
             }
             let started = Instant::now();
-            progress.show(out.len(), frame, layer, 0.0);
+            if progress.style == ProgressStyle::Bar {
+                progress.show(out.len(), frame, layer, 0.0);
+            }
             if posed.is_none() {
                 posed = Some(PosedFrame::new(crowd, frame)?);
             }
@@ -260,7 +325,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                 &scene,
                 &settings,
                 names.as_ref(),
-                if progress.on { Some(&report) } else { None },
+                if progress.on() { Some(&report) } else { None },
             )?;
             let (near, far) = film.depth_range().unwrap_or((0.1, 1000.0));
             let (world_to_camera, world_to_ndc) = exr::camera_matrices(&scene.camera, w, h, near, far);
@@ -292,6 +357,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                 seconds: started.elapsed().as_secs_f64(),
                 instances: scene.instances.len(),
             });
+            progress.finished(out.len(), frame, layer, false);
         }
     }
     progress.finish();

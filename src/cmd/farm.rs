@@ -1,0 +1,263 @@
+//! `throng farm`: plan a shot as a task graph, submit it to an engine
+//! (Slurm, or local workers), and follow it (docs/farm.md).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use clap::{Args, Subcommand, ValueEnum};
+
+use super::values::{frame_list, resolution, FrameList, Resolution};
+use crate::error::{Error, Result};
+use crate::farm::{self, PlanOptions, TaskState};
+
+/// `throng farm ...`.
+#[derive(Debug, Subcommand)]
+pub enum FarmVerb {
+    /// Write the shot's task graph (and its layer manifest) into DIR/plan.json.
+    Plan(PlanArgs),
+    /// Submit what is not done of a plan to an engine.
+    Submit(SubmitArgs),
+    /// Each task done, running, failed or waiting; exit 0 only when all are done.
+    Status(StatusArgs),
+    /// Run one task of a plan (what engines run; retries and leaves state markers).
+    #[command(hide = true)]
+    RunTask(RunTaskArgs),
+}
+
+/// `throng farm plan`.
+#[derive(Debug, Args)]
+pub struct PlanArgs {
+    /// Shot file.
+    pub shot: PathBuf,
+    /// Shot frames, e.g. 1001-1010 (default: the whole shot).
+    #[arg(long, value_parser = frame_list)]
+    pub frames: Option<FrameList>,
+    /// Layers, e.g. set,crowd0 (default: every layer; comps only when every layer is planned).
+    #[arg(long, value_delimiter = ',')]
+    pub layers: Option<Vec<String>>,
+    /// Frames per render task.
+    #[arg(long, default_value_t = 1)]
+    pub chunk: usize,
+    /// Samples per pixel (default: the shot's).
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Image size override, e.g. 480x270 (default: the shot's).
+    #[arg(long, value_parser = resolution)]
+    pub resolution: Option<Resolution>,
+    /// Cores per render task (its `--threads`; output does not depend on it).
+    #[arg(long, default_value_t = 1)]
+    pub cores: u32,
+    /// Extra attempts of a failed task.
+    #[arg(long, default_value_t = 1)]
+    pub retries: u32,
+    /// Plan directory: plan.json, the manifest, render/, logs/, farm/.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Machine-readable output: the plan itself.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `--engine`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Engine {
+    /// sbatch job arrays with afterok dependencies.
+    Slurm,
+    /// Worker processes on this machine.
+    Local,
+}
+
+/// `throng farm submit`.
+#[derive(Debug, Args)]
+pub struct SubmitArgs {
+    /// The plan (DIR/plan.json).
+    pub plan: PathBuf,
+    /// Where to run it.
+    #[arg(long, value_enum)]
+    pub engine: Engine,
+    /// Worker processes (local engine).
+    #[arg(long, default_value_t = 1)]
+    pub workers: usize,
+    /// Refuse the plan unless it is for this shot file.
+    #[arg(long)]
+    pub shot: Option<PathBuf>,
+    /// Machine-readable output.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `throng farm status`.
+#[derive(Debug, Args)]
+pub struct StatusArgs {
+    /// The plan (DIR/plan.json).
+    pub plan: PathBuf,
+    /// Refuse the plan unless it is for this shot file.
+    #[arg(long)]
+    pub shot: Option<PathBuf>,
+    /// Machine-readable output.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `throng farm run-task`.
+#[derive(Debug, Args)]
+pub struct RunTaskArgs {
+    /// The plan.
+    pub plan: PathBuf,
+    /// Task id.
+    pub task: String,
+}
+
+/// Runs a farm verb.
+pub fn run(verb: &FarmVerb) -> Result<()> {
+    match verb {
+        FarmVerb::Plan(a) => plan(a),
+        FarmVerb::Submit(a) => submit(a),
+        FarmVerb::Status(a) => status(a),
+        FarmVerb::RunTask(a) => {
+            let plan = farm::open_plan(&a.plan, None)?;
+            farm::run_task(&plan, &a.task, &exe()?)
+        }
+    }
+}
+
+/// This binary: what engines run for `throng`.
+fn exe() -> Result<PathBuf> {
+    std::env::current_exe().map_err(|e| Error::Usage(format!("cannot find the throng binary to run tasks: {e}")))
+}
+
+/// The plan path made absolute, as engines hand it to other processes.
+fn absolute(p: &Path) -> Result<PathBuf> {
+    std::fs::canonicalize(p).map_err(|e| Error::io(p, e))
+}
+
+fn plan(a: &PlanArgs) -> Result<()> {
+    let opts = PlanOptions {
+        frames: a.frames.as_ref().map(|FrameList(f)| f.clone()),
+        layers: a.layers.clone(),
+        chunk: a.chunk,
+        spp: a.spp,
+        resolution: a.resolution.map(|Resolution(r)| r),
+        cores: a.cores,
+        retries: a.retries,
+        ..PlanOptions::new(a.shot.clone(), a.out.clone())
+    };
+    let (path, plan) = farm::write_new_plan(&opts)?;
+    if a.json {
+        println!("{}", super::to_json(&plan)?);
+        return Ok(());
+    }
+    let renders = plan.tasks.iter().filter(|t| t.kind == farm::TaskKind::Render).count();
+    println!(
+        "plan {}: shot {}, {} frames x {} layers -> {renders} render tasks ({} frames each) and {} comps",
+        path.display(),
+        plan.shot,
+        plan.frames.len(),
+        plan.layers.len(),
+        plan.chunk,
+        plan.tasks.len() - renders
+    );
+    println!(
+        "fingerprint {} over {} inputs; manifest {}",
+        plan.fingerprint.value,
+        plan.fingerprint.inputs.len(),
+        plan.manifest.display()
+    );
+    Ok(())
+}
+
+fn submit(a: &SubmitArgs) -> Result<()> {
+    let plan_path = absolute(&a.plan)?;
+    let plan = farm::open_plan(&plan_path, a.shot.as_deref())?;
+    let exe = exe()?;
+    match a.engine {
+        Engine::Slurm => {
+            let report = farm::slurm::submit(&plan, &plan_path, &exe)?;
+            if a.json {
+                println!("{}", super::to_json(&report)?);
+                return Ok(());
+            }
+            for (what, id) in &report.submitted {
+                println!("submitted {what}: slurm job {id}");
+            }
+            for t in &report.queued {
+                println!("still queued from an earlier submission: {t}");
+            }
+            println!(
+                "{} jobs submitted, {} tasks already done; follow with `throng farm status {}`",
+                report.submitted.len(),
+                report.done,
+                a.plan.display()
+            );
+            Ok(())
+        }
+        Engine::Local => {
+            let say = |line: &str| {
+                if !a.json {
+                    println!("{line}");
+                    let _ = std::io::stdout().flush();
+                }
+            };
+            let report = farm::local::run_local(&plan, &plan_path, &exe, a.workers, &say)?;
+            if a.json {
+                println!("{}", super::to_json(&report)?);
+            } else {
+                println!(
+                    "local: {} tasks ran, {} already done, {} failed, {} blocked in {:.1} s",
+                    report.ran.len(),
+                    report.skipped,
+                    report.failed.len(),
+                    report.blocked.len(),
+                    report.seconds
+                );
+            }
+            if let Some((id, log)) = report.failed.first() {
+                return Err(Error::Usage(format!(
+                    "{} task(s) failed, first {id}: see its log {log}",
+                    report.failed.len()
+                )));
+            }
+            Ok(())
+        }
+    }
+}
+
+fn status(a: &StatusArgs) -> Result<()> {
+    let plan = farm::open_plan(&a.plan, a.shot.as_deref())?;
+    let (tasks, note) = farm::plan_status(&plan);
+    let count = |s: TaskState| tasks.iter().filter(|t| t.state == s).count();
+    let all_done = count(TaskState::Done) == tasks.len();
+    if a.json {
+        let v = serde_json::json!({
+            "shot": plan.shot,
+            "done": all_done,
+            "scheduler": note,
+            "tasks": tasks,
+        });
+        println!("{}", super::to_json(&v)?);
+    } else {
+        let w = tasks.iter().map(|t| t.id.len()).max().unwrap_or(4);
+        for t in &tasks {
+            let log = if t.state == TaskState::Failed { format!("  log {}", t.log.display()) } else { String::new() };
+            println!("{:<w$}  {:<7}  {}{log}", t.id, t.state.word(), t.detail);
+        }
+        if let Some(n) = &note {
+            println!("{n}");
+        }
+        println!(
+            "{}: {} done, {} running, {} failed, {} waiting of {} tasks",
+            plan.shot,
+            count(TaskState::Done),
+            count(TaskState::Running),
+            count(TaskState::Failed),
+            count(TaskState::Waiting),
+            tasks.len()
+        );
+    }
+    if !all_done {
+        // Exit 1: not done (2 is kept for errors, like every verb).
+        let _ = std::io::stdout().flush();
+        std::process::exit(1);
+    }
+    Ok(())
+}

@@ -1,0 +1,317 @@
+//! `farm plan`: the task graph of a shot. The layer manifest is computed
+//! here, once, and every render task reads it; render tasks are (layer,
+//! frame chunk) pairs; each frame's comp depends on the render tasks that
+//! write that frame's layers.
+
+use std::path::{Path, PathBuf};
+
+use super::{fingerprint, Plan, Task, TaskKind, PLAN_FILE, PLAN_FORMAT, PLAN_VERSION};
+use crate::casting::ShotCrowd;
+use crate::error::{Error, IoContext, Result};
+use crate::layers::{build_layers, LayerOverrides, Manifest};
+use crate::output::{layer_path, COMP_LAYER};
+
+/// What to plan; `Default`-like values come from [`PlanOptions::new`].
+#[derive(Debug, Clone)]
+pub struct PlanOptions {
+    /// The shot file.
+    pub shot: PathBuf,
+    /// Shot frames (default: every frame of the shot).
+    pub frames: Option<Vec<i32>>,
+    /// Layers (default: every layer of the manifest, back to front).
+    pub layers: Option<Vec<String>>,
+    /// Frames per render task.
+    pub chunk: usize,
+    /// The plan's directory.
+    pub out: PathBuf,
+    /// Samples per pixel (default: the shot's).
+    pub spp: Option<u32>,
+    /// Image size (default: the shot's).
+    pub resolution: Option<[u32; 2]>,
+    /// Cores per render task.
+    pub cores: u32,
+    /// Extra attempts of a failed task.
+    pub retries: u32,
+}
+
+impl PlanOptions {
+    /// Every frame and layer of `shot` into `out`: 1 frame per task, 1 core, 1 retry.
+    pub fn new(shot: PathBuf, out: PathBuf) -> PlanOptions {
+        PlanOptions {
+            shot,
+            frames: None,
+            layers: None,
+            chunk: 1,
+            out,
+            spp: None,
+            resolution: None,
+            cores: 1,
+            retries: 1,
+        }
+    }
+}
+
+/// Most tasks one plan may hold; bounds the plan before it is built.
+pub const MAX_TASKS: usize = 1_000_000;
+/// Most cores a task may ask for.
+pub const MAX_CORES: u32 = 4096;
+
+/// Memory a throng process needs besides the scene: binary, allocator, buffers.
+const PROCESS_BYTES: u64 = 256 << 20;
+/// Film bytes per pixel while rendering: accumulated channels, ids and
+/// Cryptomatte ranks, with slack (measured peak is below this).
+const FILM_BYTES_PER_PIXEL: u64 = 512;
+/// Bytes per pixel per layer held by a comp (every layer's film at once).
+const COMP_BYTES_PER_PIXEL: u64 = 256;
+
+/// Builds the plan and writes it, with its manifest, into `opts.out`.
+/// Refuses a directory that already holds a plan of other inputs, whose
+/// outputs would otherwise be taken as done.
+pub fn write_new_plan(opts: &PlanOptions) -> Result<(PathBuf, Plan)> {
+    std::fs::create_dir_all(&opts.out).at(&opts.out)?;
+    let out = std::fs::canonicalize(&opts.out).at(&opts.out)?;
+    let plan_path = out.join(PLAN_FILE);
+    let crowd = ShotCrowd::load(&opts.shot)?;
+    let manifest = build_layers(&crowd, &LayerOverrides::default())?;
+    let manifest_path = out.join(format!("{}.layers.json", crowd.shot.name));
+    let plan = build_plan(&crowd, &manifest, &manifest_path, &out, opts, &|inputs| {
+        // The manifest is fingerprinted as written, so write it first; a
+        // directory of another plan must not be overwritten, so check first.
+        if plan_path.exists() {
+            if let Ok(old) = super::read_plan(&plan_path) {
+                if old.shot != crowd.shot.name {
+                    return Err(Error::invalid(
+                        &plan_path,
+                        format!(
+                            "{} holds the plan of shot `{}`, not `{}`: plan into another --out",
+                            out.display(),
+                            old.shot,
+                            crowd.shot.name
+                        ),
+                    )
+                    .field("shot"));
+                }
+                let now = fingerprint(&inputs[..inputs.len() - 1])?;
+                let old_inputs = &old.fingerprint.inputs[..old.fingerprint.inputs.len().saturating_sub(1)];
+                if now.inputs != old_inputs {
+                    return Err(Error::invalid(
+                        &plan_path,
+                        format!(
+                            "{} holds a plan of shot `{}` made from other inputs; its rendered frames would count as done: plan the edited shot into another --out (or remove it)",
+                            out.display(),
+                            old.shot
+                        ),
+                    )
+                    .field("fingerprint"));
+                }
+            }
+        }
+        crate::layers::write_manifest(&manifest_path, &manifest)?;
+        fingerprint(inputs)
+    })?;
+    super::write_plan(&plan_path, &plan)?;
+    Ok((plan_path, plan))
+}
+
+/// The shot's input files, in a fixed order, with the manifest last.
+fn inputs(crowd: &ShotCrowd, manifest_path: &Path) -> Result<Vec<(String, PathBuf)>> {
+    let shot = &crowd.shot;
+    let abs = |p: &Path| std::fs::canonicalize(p).at(p);
+    let mut v = vec![("shot".to_string(), abs(&shot.path)?), ("cache".to_string(), abs(&shot.cache.path)?)];
+    for rig in shot.rigs.values() {
+        v.push(("rig".into(), abs(&rig.file)?));
+    }
+    for w in &shot.wardrobes {
+        v.push(("wardrobe".into(), abs(w)?));
+    }
+    if let Some(set) = &shot.set {
+        v.push(("set".into(), abs(&set.file)?));
+    }
+    v.push(("manifest".into(), manifest_path.to_path_buf()));
+    Ok(v)
+}
+
+/// Estimated render memory of `layer`: the manifest's estimate (the set
+/// layer traces every agent as a caster, so it takes the largest crowd
+/// layer's), plus the film and the process.
+fn render_memory(manifest: &Manifest, layer: &str, [w, h]: [u32; 2]) -> u64 {
+    let largest = manifest.layers.iter().map(|l| l.memory_bytes).max().unwrap_or(manifest.split.shared_bytes);
+    let scene = manifest.layer(layer).map_or(largest, |l| l.memory_bytes);
+    round_mib(scene + w as u64 * h as u64 * FILM_BYTES_PER_PIXEL + PROCESS_BYTES)
+}
+
+/// Rounds up to whole MiB (schedulers ask in MB).
+fn round_mib(b: u64) -> u64 {
+    b.div_ceil(1 << 20) << 20
+}
+
+fn s(p: &Path) -> String {
+    p.display().to_string()
+}
+
+/// Writes the manifest and fingerprints the (role, file) inputs it is given.
+pub type FingerprintInputs<'a> = dyn Fn(&[(String, PathBuf)]) -> Result<super::Fingerprint> + 'a;
+
+/// Builds the plan of `crowd` with its `manifest` (to be at
+/// `manifest_path`) in `out`; `fingerprint_inputs` writes the manifest and
+/// fingerprints the inputs it is given.
+pub fn build_plan(
+    crowd: &ShotCrowd,
+    manifest: &Manifest,
+    manifest_path: &Path,
+    out: &Path,
+    opts: &PlanOptions,
+    fingerprint_inputs: &FingerprintInputs<'_>,
+) -> Result<Plan> {
+    let shot = &crowd.shot;
+    if opts.chunk == 0 {
+        return Err(Error::Usage("--chunk must be at least 1 frame".into()));
+    }
+    if opts.cores == 0 || opts.cores > MAX_CORES {
+        return Err(Error::Usage(format!("--cores must be 1 to {MAX_CORES}")));
+    }
+    let frames = match &opts.frames {
+        Some(f) => f.clone(),
+        None => shot.frames.iter().collect(),
+    };
+    if frames.is_empty() {
+        return Err(Error::Usage("no frames to plan".into()));
+    }
+    if let Some(f) = frames.iter().find(|&&f| !shot.frames.contains(f)) {
+        return Err(Error::Usage(format!(
+            "frame {f} is outside shot {} ({}-{})",
+            shot.name, shot.frames.start, shot.frames.end
+        )));
+    }
+    let mut seen = std::collections::BTreeSet::new();
+    if let Some(f) = frames.iter().find(|&&f| !seen.insert(f)) {
+        return Err(Error::Usage(format!("frame {f} is listed twice")));
+    }
+    let all = manifest.comp_order.clone();
+    let layers = match &opts.layers {
+        None => all.clone(),
+        Some(asked) => {
+            if let Some(l) = asked.iter().find(|l| !all.contains(l)) {
+                return Err(Error::Usage(format!("no layer `{l}` in the manifest (layers: {})", all.join(", "))));
+            }
+            // Back to front, whatever order they were asked in.
+            all.iter().filter(|l| asked.contains(l)).cloned().collect()
+        }
+    };
+    let chunks = frames.len().div_ceil(opts.chunk);
+    let comps = if layers == all { frames.len() } else { 0 };
+    let total = chunks.saturating_mul(layers.len()).saturating_add(comps);
+    if total > MAX_TASKS {
+        return Err(Error::Usage(format!("{total} tasks is more than a plan holds ({MAX_TASKS}): raise --chunk")));
+    }
+    let spp = opts.spp.unwrap_or(shot.render.spp).max(1);
+    let resolution = opts.resolution.unwrap_or(shot.render.resolution);
+    let shot_file = std::fs::canonicalize(&shot.path).at(&shot.path)?;
+    let render_dir = out.join("render");
+    let log_dir = out.join("logs");
+    let mut tasks = Vec::with_capacity(total);
+    // Which render task writes (layer, frame): the comps' dependencies.
+    let mut writer: std::collections::BTreeMap<(&str, i32), String> = std::collections::BTreeMap::new();
+    for layer in &layers {
+        for (chunk, frames) in frames.chunks(opts.chunk).enumerate() {
+            let id = format!("render.{layer}.{chunk}");
+            let list = frames.iter().map(|f| f.to_string()).collect::<Vec<_>>().join(",");
+            let argv = [
+                "throng",
+                "render",
+                &s(&shot_file),
+                "--manifest",
+                &s(manifest_path),
+                "--layer",
+                layer,
+                "--frames",
+                &list,
+                "--spp",
+                &spp.to_string(),
+                "--resolution",
+                &format!("{}x{}", resolution[0], resolution[1]),
+                "--threads",
+                &opts.cores.to_string(),
+                "--resume",
+                "--progress",
+                "plain",
+                "--out",
+                &s(&render_dir),
+            ]
+            .map(String::from)
+            .to_vec();
+            for &f in frames {
+                writer.insert((layer.as_str(), f), id.clone());
+            }
+            tasks.push(Task {
+                log: log_dir.join(format!("{id}.log")),
+                id,
+                kind: TaskKind::Render,
+                layer: Some(layer.clone()),
+                chunk: Some(chunk),
+                frames: frames.to_vec(),
+                argv,
+                outputs: frames.iter().map(|&f| layer_path(&render_dir, &shot.name, layer, f)).collect(),
+                cores: opts.cores,
+                memory_bytes: render_memory(manifest, layer, resolution),
+                depends_on: Vec::new(),
+            });
+        }
+    }
+    if comps > 0 {
+        for &f in &frames {
+            let id = format!("comp.{f}");
+            let out_path = layer_path(&render_dir, &shot.name, COMP_LAYER, f);
+            let argv = [
+                "throng",
+                "comp",
+                &s(&render_dir),
+                "--frame",
+                &f.to_string(),
+                "--manifest",
+                &s(manifest_path),
+                "--out",
+                &s(&out_path),
+            ]
+            .map(String::from)
+            .to_vec();
+            let mut deps: Vec<String> = layers.iter().filter_map(|l| writer.get(&(l.as_str(), f)).cloned()).collect();
+            deps.dedup();
+            tasks.push(Task {
+                log: log_dir.join(format!("{id}.log")),
+                id,
+                kind: TaskKind::Comp,
+                layer: None,
+                chunk: None,
+                frames: vec![f],
+                argv,
+                outputs: vec![out_path],
+                cores: 1,
+                memory_bytes: round_mib(
+                    resolution[0] as u64 * resolution[1] as u64 * COMP_BYTES_PER_PIXEL * (layers.len() as u64 + 1)
+                        + PROCESS_BYTES,
+                ),
+                depends_on: deps,
+            });
+        }
+    }
+    let fingerprint = fingerprint_inputs(&inputs(crowd, manifest_path)?)?;
+    Ok(Plan {
+        format: PLAN_FORMAT.into(),
+        version: PLAN_VERSION,
+        shot: shot.name.clone(),
+        shot_file,
+        fingerprint,
+        manifest: manifest_path.to_path_buf(),
+        out: out.to_path_buf(),
+        render_dir,
+        log_dir,
+        frames,
+        layers,
+        chunk: opts.chunk,
+        spp,
+        resolution,
+        retries: opts.retries,
+        tasks,
+    })
+}
