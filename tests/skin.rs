@@ -405,3 +405,45 @@ fn cycles_and_strides_options_are_checked_in_the_shot() {
     let err = cast_error("forward = \"+y\"\nup = \"+y\"", &common::five_walkers());
     assert!(err.contains("forward") && err.contains("up"), "{err}");
 }
+
+#[test]
+fn mattes_name_skinned_agents_and_their_meshes() {
+    let dir = tempfile::tempdir().unwrap();
+    let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
+    let files = render_layers(&shot, &dir.path().join("r"), 0, &["full"]);
+    let mattes = throng::render::cryptomatte::read(&files[0]).unwrap();
+    let names: Vec<&str> = mattes.iter().map(|m| m.name.as_str()).collect();
+    let agent = mattes.iter().find(|m| m.name == "CryptoAgent").unwrap_or_else(|| panic!("{names:?}"));
+    let part = mattes.iter().find(|m| m.name == "CryptoPart").unwrap_or_else(|| panic!("{names:?}"));
+    for id in 1..=5 {
+        assert!(agent.manifest.contains_key(&format!("agent_{id}")), "{:?}", agent.manifest.keys());
+        // The figure's one skinned mesh sits on its node `Proxy`: the slot.
+        assert!(part.manifest.contains_key(&format!("agent_{id}/Proxy")), "{:?}", part.manifest.keys());
+    }
+}
+
+#[test]
+fn export_shares_posed_meshes_between_agents_on_one_pose() {
+    let dir = tempfile::tempdir().unwrap();
+    // Agents 1 and 2 on one pose, 3 on another.
+    let rows = [(1020, 1, 0.0, 0.0, 0.0, 4.0), (1020, 2, 1.0, 0.0, 1.0, 4.1), (1020, 3, -1.0, 0.0, 0.0, 12.0)];
+    let shot = common::figure_shot(dir.path(), &rows, "");
+    let glb = dir.path().join("f.glb");
+    let (code, out, err) = common::run(&[
+        "export".as_ref(),
+        shot.as_os_str(),
+        "--frame".as_ref(),
+        "1020".as_ref(),
+        "--out".as_ref(),
+        glb.as_os_str(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let doc = gltf::Gltf::open(&glb).unwrap();
+    let mesh_of = |agent: &str| {
+        let parent = doc.nodes().find(|n| n.name() == Some(agent)).unwrap();
+        parent.children().find_map(|c| c.mesh()).unwrap().index()
+    };
+    assert_eq!(mesh_of("agent_1"), mesh_of("agent_2"), "one posed mesh for one pose");
+    assert_ne!(mesh_of("agent_1"), mesh_of("agent_3"));
+    assert_eq!(doc.meshes().len(), 2, "two poses, two meshes");
+}
