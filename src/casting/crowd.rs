@@ -228,7 +228,8 @@ impl ShotCrowd {
             never_scale: bool,
         }
         let mut seen: BTreeMap<u32, Seen> = BTreeMap::new();
-        let mut skin_poses: BTreeMap<u32, BTreeSet<(usize, u32)>> = BTreeMap::new();
+        // Poses by (rig, cycle, step): bounded by the rigs' cycles and steps, whatever the agent count.
+        let mut skin_poses: BTreeSet<(String, usize, u32)> = BTreeSet::new();
         for f in shot.frames.iter() {
             let cf = shot.cache.cache_frame(f);
             if cache.frames().binary_search(&cf).is_err() {
@@ -244,7 +245,10 @@ impl ShotCrowd {
                     (None, Some(rig)) => match rig.cycle_index(cycle) {
                         Ok(c) => {
                             if !a.hidden() {
-                                skin_poses.entry(a.id).or_default().insert((c, rig.step_of(c, a.cycle_frame)));
+                                let key = (c, rig.step_of(c, a.cycle_frame));
+                                if !skin_poses.contains(&(rig_name.to_string(), key.0, key.1)) {
+                                    skin_poses.insert((rig_name.to_string(), key.0, key.1));
+                                }
                             }
                             None
                         }
@@ -420,26 +424,25 @@ impl ShotCrowd {
             casting.insert(id, cast);
         }
 
-        // Pose every (piece, cycle, step) a skinned agent takes, once, in a
-        // fixed order so mesh ids never depend on anything but the inputs.
+        // Pose every piece worn on a rig at every (cycle, step) an agent of
+        // that rig takes, once, in a fixed order so mesh ids depend only on
+        // the inputs. (A piece is posed at a rig's every used step even if
+        // none of its wearers plays that step: bounded, and far cheaper to
+        // track than poses per agent.)
+        let mut worn: BTreeMap<&str, BTreeSet<usize>> = BTreeMap::new();
+        for (id, pieces) in &skin_dressed {
+            worn.entry(casting[id].rig.as_str()).or_default().extend(pieces.iter().map(|d: &SkinDress| d.piece));
+        }
         let mut posed = PosedSkins::default();
-        for (id, poses) in &skin_poses {
-            let (Some(cast), Some(pieces)) = (casting.get(id), skin_dressed.get(id)) else { continue };
-            let rig = &skinned[&cast.rig];
-            for &(cycle, step) in poses {
-                let key = (cast.rig.clone(), cycle, step);
-                if !posed.joints.contains_key(&key) {
-                    posed.joints.insert(key.clone(), rig.step_joints(cycle, step));
-                }
-                for d in pieces {
-                    let mesh_key = (cast.rig.clone(), d.piece, cycle, step);
-                    if posed.meshes.contains_key(&mesh_key) {
-                        continue;
-                    }
-                    let mesh = rig.pose_piece(d.piece, &posed.joints[&key], &rig.pose_name(cycle, step));
-                    posed.meshes.insert(mesh_key, assets.add_mesh(mesh));
-                }
+        for (rig_name, cycle, step) in &skin_poses {
+            let Some(pieces) = worn.get(rig_name.as_str()) else { continue };
+            let rig = &skinned[rig_name];
+            let joints = rig.step_joints(*cycle, *step);
+            for &piece in pieces {
+                let mesh = rig.pose_piece(piece, &joints, &rig.pose_name(*cycle, *step));
+                posed.meshes.insert((rig_name.clone(), piece, *cycle, *step), assets.add_mesh(mesh));
             }
+            posed.joints.insert((rig_name.clone(), *cycle, *step), joints);
         }
 
         let set = match &shot.set {
