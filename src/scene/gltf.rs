@@ -392,6 +392,9 @@ pub struct AssetCache {
     library: Library,
     /// Parsed files by canonical path.
     files: HashMap<PathBuf, Arc<GltfFile>>,
+    /// Canonical path of each path as given: casting asks per agent and part,
+    /// and a `canonicalize` per ask was most of startup's system calls.
+    canonical: HashMap<PathBuf, PathBuf>,
     meshes: HashMap<MeshKey, MeshId>,
     /// glTF materials by (file, material index; `None` for primitives without one).
     gltf_materials: HashMap<(PathBuf, Option<usize>), MaterialId>,
@@ -418,7 +421,14 @@ impl AssetCache {
     /// The parsed file, read on first use. Keyed by canonical path so
     /// `a/../b.glb` and `b.glb` are one file.
     fn source(&mut self, path: &Path) -> Result<Source> {
-        let key = std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?;
+        let key = match self.canonical.get(path) {
+            Some(k) => k.clone(),
+            None => {
+                let k = std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?;
+                self.canonical.insert(path.to_path_buf(), k.clone());
+                k
+            }
+        };
         let file = match self.files.get(&key) {
             Some(file) => file.clone(),
             None => {
