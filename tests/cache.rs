@@ -433,7 +433,9 @@ fn usage_errors() {
     assert_eq!(out.status.code(), Some(2));
     assert_has(&String::from_utf8(out.stderr).unwrap(), &["read only"]);
     let out = throng(&["cache", "info", s(&dir.path().join("a.txt"))]);
-    assert_has(&String::from_utf8(out.stderr).unwrap(), &["a.txt", "unknown cache format"]);
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["a.txt", "needs its layout", "preset"]);
+    let out = throng(&["cache", "info", s(&dir.path().join("a.xyz"))]);
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["a.xyz", "unknown cache format"]);
     let out = throng(&["cache", "info", s(&dir.path().join("missing.crowd"))]);
     assert_eq!(out.status.code(), Some(2));
     assert_has(&String::from_utf8(out.stderr).unwrap(), &["missing.crowd"]);

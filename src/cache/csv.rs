@@ -47,16 +47,9 @@ fn parse_flags(s: &str) -> std::result::Result<u8, String> {
     Ok(flags)
 }
 
-/// Reads a CSV cache.
+/// Reads a CSV cache (gzip is recognised by its magic bytes).
 pub fn read(path: &Path) -> Result<CrowdCache> {
-    let bytes = std::fs::read(path).at(path)?;
-    match std::str::from_utf8(&bytes) {
-        Ok(text) => parse_str(path, text),
-        Err(e) => {
-            let line = bytes.get(..e.valid_up_to()).unwrap_or_default().iter().filter(|&&b| b == b'\n').count() + 1;
-            Err(Error::invalid(path, "not UTF-8 text").line(line))
-        }
-    }
+    parse_str(path, &super::tabular::read_text(path)?)
 }
 
 /// Interns a rig or cycle name, in order of first appearance.
