@@ -86,7 +86,7 @@ pub struct CacheInfo {
 
 /// Widest plausible crowd, metres: wider looks like centimetres (or feet)
 /// read as metres.
-pub const MAX_PLAUSIBLE_WIDTH: f32 = 5000.0;
+pub const MAX_PLAUSIBLE_WIDTH: f32 = 2000.0;
 /// Narrowest plausible spread of [`MIN_AGENTS_FOR_SPREAD`] or more agents, metres.
 pub const MIN_PLAUSIBLE_SPREAD: f32 = 0.5;
 /// Agents needed before a small spread is suspicious.

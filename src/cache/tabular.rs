@@ -1118,37 +1118,47 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
         for run in &runs {
             let n = run.len();
             let mut state = false;
+            // Ground-plane travel direction over the window (length ~ speed),
+            // kept only where the agent moves at full hold speed.
+            let mut travel: Vec<Option<DVec3>> = Vec::with_capacity(n);
             for i in 0..n {
                 let (j0, j1) = (i.saturating_sub(window_half), (i + window_half).min(n - 1));
                 let span = (j1 - j0) as f64 / fps;
-                let mut d = run[j1].p - run[j0].p;
-                d.y = 0.0;
-                let motion_speed = if span > 0.0 { d.length() / span } else { 0.0 };
-                let avg_v = || {
-                    let mut v: DVec3 = run[j0..=j1].iter().filter_map(|q| q.velocity).sum();
-                    v.y = 0.0;
-                    v / (j1 - j0 + 1) as f64
-                };
-                let (speed, dir) = match heading_from {
+                let (speed, mut dir) = match heading_from {
                     HeadingFrom::Velocity => {
-                        let v = avg_v();
-                        (v.length(), v)
+                        let v: DVec3 =
+                            run[j0..=j1].iter().filter_map(|q| q.velocity).sum::<DVec3>() / (j1 - j0 + 1) as f64;
+                        (v.x.hypot(v.z), v)
                     }
-                    _ => (motion_speed, d),
+                    _ => {
+                        let d = run[j1].p - run[j0].p;
+                        (if span > 0.0 { d.x.hypot(d.z) / span } else { 0.0 }, d / span.max(1e-9))
+                    }
                 };
+                dir.y = 0.0;
                 // Hysteresis: start moving at hold_speed, stop below half of it,
                 // so a dawdler does not flicker between walk and idle.
                 state = if state { speed >= hold * 0.5 } else { speed >= hold && speed > 0.0 };
+                moving.push(state);
+                travel.push((speed >= hold && speed > 1e-9).then_some(dir));
+            }
+            for i in 0..n {
+                let (j0, j1) = (i.saturating_sub(window_half), (i + window_half).min(n - 1));
                 let h = match heading_from {
                     HeadingFrom::Column => {
                         let v: DVec3 =
                             run[j0..=j1].iter().filter_map(|q| q.heading.map(|h| h.normalize_or_zero())).sum();
                         (v.x.hypot(v.z) > 1e-9).then(|| v.x.atan2(v.z))
                     }
-                    _ => (state && dir.length() > 1e-12).then(|| dir.x.atan2(dir.z)),
+                    // Turn only at full hold speed, and average the window's travel
+                    // weighted by speed, so the slow frames of a stop (where
+                    // tracking noise is a large share of the motion) barely count.
+                    _ => travel[i].map(|_| {
+                        let v: DVec3 = travel[j0..=j1].iter().flatten().sum();
+                        v.x.atan2(v.z)
+                    }),
                 };
                 headings.push(h);
-                moving.push(state);
             }
         }
         // Held headings: the last known one, else the first one ahead, else 0.
