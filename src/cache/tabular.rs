@@ -847,28 +847,42 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
             (None, _) => None,
         };
 
-    // Whitespace tables become tab-separated line by line (line numbers stay).
-    let normalised;
-    let (data, delimiter) = match o.delimiter {
-        Delimiter::Byte(b) => (text, b),
-        Delimiter::Whitespace => {
-            normalised = text
-                .lines()
-                .map(|l| l.split_whitespace().collect::<Vec<_>>().join("\t"))
-                .collect::<Vec<_>>()
-                .join("\n");
-            (normalised.as_str(), b'\t')
-        }
+    // Comment lines are blanked and whitespace tables become tab-separated,
+    // line by line, so line numbers stay (the csv crate's own comment
+    // handling loses count of the lines it skips).
+    let comment = o.comment.map(char::from);
+    let data = text
+        .lines()
+        .map(|l| match (comment, o.delimiter) {
+            (Some(c), _) if l.trim_start().starts_with(c) => String::new(),
+            (_, Delimiter::Whitespace) => l.split_whitespace().collect::<Vec<_>>().join("\t"),
+            _ => l.to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let delimiter = match o.delimiter {
+        Delimiter::Byte(b) => b,
+        Delimiter::Whitespace => b'\t',
     };
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
         .delimiter(delimiter)
-        .comment(o.comment)
         .trim(csv::Trim::All)
         .from_reader(data.as_bytes());
+    // Lines from byte offsets: the csv crate's own line count skips comment lines.
+    let starts: Vec<usize> = std::iter::once(0).chain(data.match_indices('\n').map(|(i, _)| i + 1)).collect();
+    // A record's position is where reading began, before any blank lines it skipped.
+    let line_at = |byte: u64| {
+        let bytes = data.as_bytes();
+        let mut i = usize::try_from(byte).unwrap_or(usize::MAX).min(bytes.len());
+        while bytes.get(i).is_some_and(|c| *c == b'\n' || *c == b'\r') {
+            i += 1;
+        }
+        starts.partition_point(|&s| s <= i)
+    };
     let csv_err = |e: csv::Error| {
-        let line = e.position().map(|p| p.line() as usize);
+        let line = e.position().map(|p| line_at(p.byte()));
         let err = Error::invalid(path, format!("cannot read the table: {e}"));
         match line {
             Some(l) => err.line(l),
@@ -947,7 +961,7 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
         if record.iter().all(str::is_empty) {
             continue;
         }
-        let line = record.position().map_or(0, |p| p.line() as usize);
+        let line = record.position().map_or(0, |p| line_at(p.byte()));
         rows += 1;
         if rows > MAX_ROWS {
             return Err(Error::invalid(path, format!("more than {MAX_ROWS} rows; split the file")).line(line));
@@ -1271,14 +1285,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn csv_lines_count_comments() {
-        let mut r = csv::ReaderBuilder::new()
-            .has_headers(false)
-            .comment(Some(b'#'))
-            .flexible(true)
-            .from_reader("# a\n# b\n1,2\n\n3,4\n".as_bytes());
-        let lines: Vec<u64> = r.records().map(|x| x.unwrap().position().unwrap().line()).collect();
-        assert_eq!(lines, vec![3, 5]);
+    fn errors_name_the_right_line_after_comments_and_blank_lines() {
+        let o = TabularOptions {
+            columns: Columns { frame: pos(1), id: pos(2), x: pos(3), y: pos(4), ..Default::default() },
+            header: false,
+            source_fps: Some(25.0),
+            ..Default::default()
+        };
+        let text = "# a\n# b\n1,2,0,0\n\n# c\n2,2,zz,0\n";
+        let e = parse_str(Path::new("t.csv"), text, &o).unwrap_err().to_string();
+        assert!(e.starts_with("t.csv:6:"), "{e}");
     }
 
     #[test]
