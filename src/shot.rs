@@ -10,6 +10,8 @@ use glam::{Affine3A, Vec3};
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::cache::tabular::{AngleUnits, Column, Delimiter, Handedness, HeadingFrom, Preset, Units, UpAxis};
+use crate::cache::{Placement, TabularOptions, TabularSpec};
 use crate::error::{line_of, Error, IoContext, Result};
 use crate::scene::{Camera, Sky, Sun};
 
@@ -88,6 +90,9 @@ pub struct CacheRef {
     pub path: PathBuf,
     /// cache frame = shot frame + frame_offset.
     pub frame_offset: i32,
+    /// How raw data is imported and where the crowd stands (every other
+    /// `[cache]` key; docs/shot.md).
+    pub import: TabularSpec,
 }
 
 impl CacheRef {
@@ -425,6 +430,56 @@ struct CacheFile {
     path: Spanned<PathBuf>,
     #[serde(default)]
     frame_offset: i32,
+    preset: Option<Preset>,
+    delimiter: Option<Delimiter>,
+    comment: Option<String>,
+    header: Option<bool>,
+    #[serde(default)]
+    columns: BTreeMap<String, Column>,
+    units: Option<Units>,
+    up: Option<UpAxis>,
+    handedness: Option<Handedness>,
+    heading_units: Option<AngleUnits>,
+    source_fps: Option<f32>,
+    max_gap: Option<f32>,
+    heading: Option<HeadingFrom>,
+    heading_window: Option<f32>,
+    hold_speed: Option<f32>,
+    rig: Option<String>,
+    cycle: Option<String>,
+    idle_cycle: Option<String>,
+    #[serde(default)]
+    translate: [f32; 3],
+    #[serde(default)]
+    rotate: f32,
+    #[serde(default = "one")]
+    scale: f32,
+}
+
+impl CacheFile {
+    /// The import keys as a [`TabularSpec`] (checked when the cache is opened).
+    fn spec(&self) -> TabularSpec {
+        TabularSpec {
+            preset: self.preset,
+            delimiter: self.delimiter,
+            comment: self.comment.clone(),
+            header: self.header,
+            columns: self.columns.iter().map(|(k, v)| (k.clone(), Some(v.clone()))).collect(),
+            units: self.units,
+            up: self.up,
+            handedness: self.handedness,
+            heading_units: self.heading_units,
+            source_fps: self.source_fps,
+            max_gap: self.max_gap,
+            heading: self.heading,
+            heading_window: self.heading_window,
+            hold_speed: self.hold_speed,
+            rig: self.rig.clone(),
+            cycle: self.cycle.clone(),
+            idle_cycle: self.idle_cycle.clone(),
+            placement: Placement { translate: Vec3::from(self.translate), rotate: self.rotate, scale: self.scale },
+        }
+    }
 }
 
 #[derive(Deserialize)]
@@ -532,7 +587,16 @@ impl Shot {
             return Err(at(file.frames.span(), "frames.fps", format!("fps must be positive, got {}", frames.fps)));
         }
 
-        let cache = CacheRef { path: existing(&file.cache.path, "cache.path")?, frame_offset: file.cache.frame_offset };
+        let import = file.cache.spec();
+        // Layout and numbers are checked here, so a bad key names its line
+        // in the shot; gaits come when the cache is opened (casting).
+        if import.describes_layout() {
+            TabularOptions::resolve(&import, frames.fps)
+                .map_err(|(k, m)| Error::invalid(path, m).field(format!("cache.{k}")))?;
+        }
+        import.placement.check_key().map_err(|(k, m)| Error::invalid(path, m).field(format!("cache.{k}")))?;
+        let cache =
+            CacheRef { path: existing(&file.cache.path, "cache.path")?, frame_offset: file.cache.frame_offset, import };
         let wardrobes = file.wardrobes.iter().map(|w| existing(w, "wardrobes")).collect::<Result<Vec<_>>>()?;
         let mut rigs = BTreeMap::new();
         for (name, rig) in &file.rigs {

@@ -417,6 +417,19 @@ fn bad_csv_lines() {
     assert_has(&err_text(cache::read(&p)), &["head.csv:1", "expected the header"]);
     std::fs::write(&p, b"frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags\n1,2,\xff").unwrap();
     assert_has(&err_text(cache::read(&p)), &["head.csv:2", "not UTF-8"]);
+    // Reordered columns and quoted fields are read; errors name the file's column.
+    std::fs::write(&p, "id,frame,\"x\",y,z,heading,rig,cycle,cycle_frame,flags\n4,1,\"0.5\",0,0,0,\"R\",C,0,\n")
+        .unwrap();
+    let c = cache::read(&p).unwrap();
+    assert_eq!((c.frames[0].frame, c.frames[0].agents[0].id, c.frames[0].agents[0].position.x), (1, 4, 0.5));
+    assert_eq!(c.rigs, vec!["R".to_string()]);
+    std::fs::write(&p, "id,frame,x,y,z,heading,rig,cycle,cycle_frame,flags\n4,1,0,q,0,0,R,C,0,\n").unwrap();
+    assert_has(&err_text(cache::read(&p)), &["head.csv:2", "column 4 (y)", "`q`"]);
+    std::fs::write(&p, "frame,agent_id,x,y,z,heading_radians,speed\n0,1,0,0,0,0,1\n").unwrap();
+    assert_has(
+        &err_text(cache::read(&p)),
+        &["head.csv:1", "found `frame,agent_id,x,y,z,heading_radians,speed`", "preset or columns"],
+    );
     // CRLF and a BOM are accepted.
     std::fs::write(&p, format!("\u{feff}{HEADER}\r\n{ok}").replace('\n', "\r\n")).unwrap();
     assert_eq!(cache::read(&p).unwrap().frames[0].agents[0].id, 4);
@@ -433,7 +446,9 @@ fn usage_errors() {
     assert_eq!(out.status.code(), Some(2));
     assert_has(&String::from_utf8(out.stderr).unwrap(), &["read only"]);
     let out = throng(&["cache", "info", s(&dir.path().join("a.txt"))]);
-    assert_has(&String::from_utf8(out.stderr).unwrap(), &["a.txt", "unknown cache format"]);
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["a.txt", "needs its layout", "preset"]);
+    let out = throng(&["cache", "info", s(&dir.path().join("a.xyz"))]);
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["a.xyz", "unknown cache format"]);
     let out = throng(&["cache", "info", s(&dir.path().join("missing.crowd"))]);
     assert_eq!(out.status.code(), Some(2));
     assert_has(&String::from_utf8(out.stderr).unwrap(), &["missing.crowd"]);

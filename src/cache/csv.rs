@@ -1,8 +1,10 @@
 //! CSV caches: one row per agent per frame, rigs and cycles by name.
 //!
-//! Dialect (docs/cache-format.md): UTF-8, comma-separated, no quoting (names
-//! may not hold commas or quotes), LF line endings written (CRLF read), the
-//! header `frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags`, rows grouped
+//! Dialect (docs/cache-format.md): UTF-8, comma-separated, written without
+//! quoting (names may not hold commas or quotes; quoted fields are read, via
+//! the `csv` crate), LF line endings written (CRLF read), the header
+//! `frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags` (read in any column
+//! order), rows grouped
 //! by frame in increasing order. Floats use Rust's shortest round-trip
 //! form, so values survive exactly. `flags` is empty, `seated`, `hidden` or
 //! `seated|hidden`. A frame with no agents is a row holding only the frame
@@ -47,16 +49,9 @@ fn parse_flags(s: &str) -> std::result::Result<u8, String> {
     Ok(flags)
 }
 
-/// Reads a CSV cache.
+/// Reads a CSV cache (gzip is recognised by its magic bytes).
 pub fn read(path: &Path) -> Result<CrowdCache> {
-    let bytes = std::fs::read(path).at(path)?;
-    match std::str::from_utf8(&bytes) {
-        Ok(text) => parse_str(path, text),
-        Err(e) => {
-            let line = bytes.get(..e.valid_up_to()).unwrap_or_default().iter().filter(|&&b| b == b'\n').count() + 1;
-            Err(Error::invalid(path, "not UTF-8 text").line(line))
-        }
-    }
+    parse_str(path, &super::tabular::read_text(path)?)
 }
 
 /// Interns a rig or cycle name, in order of first appearance.
@@ -74,34 +69,70 @@ fn intern(names: &mut Vec<String>, lookup: &mut HashMap<String, u16>, name: &str
 /// Parses CSV text; `path` names it in errors.
 pub fn parse_str(path: &Path, text: &str) -> Result<CrowdCache> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text); // spreadsheets add a BOM
-    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim_end_matches('\r')));
-    match lines.next() {
-        Some((_, h)) if h.split(',').map(str::trim).eq(COLUMNS) => {}
-        Some((n, h)) => {
-            return Err(
-                Error::invalid(path, format!("expected the header `{HEADER}`, found `{}`", h.escape_debug())).line(n)
-            )
+                                                              // The csv crate splits fields, so quoted fields are fine; columns are
+                                                              // found by header name, so any order is.
+    let mut reader =
+        csv::ReaderBuilder::new().has_headers(false).flexible(true).trim(csv::Trim::All).from_reader(text.as_bytes());
+    let starts: Vec<usize> = std::iter::once(0).chain(text.match_indices('\n').map(|(i, _)| i + 1)).collect();
+    // A record's position is where reading began, before any blank lines it skipped.
+    let line_at = |byte: u64| {
+        let bytes = text.as_bytes();
+        let mut i = usize::try_from(byte).unwrap_or(usize::MAX).min(bytes.len());
+        while bytes.get(i).is_some_and(|c| *c == b'\n' || *c == b'\r') {
+            i += 1;
         }
+        starts.partition_point(|&s| s <= i)
+    };
+    let csv_err = |e: csv::Error| {
+        let err = Error::invalid(path, format!("cannot read CSV: {e}"));
+        match e.position() {
+            Some(p) => err.line(line_at(p.byte())),
+            None => err,
+        }
+    };
+    let mut records = reader.records();
+    let header = match records.next() {
+        Some(h) => h.map_err(csv_err)?,
         None => return Err(Error::invalid(path, format!("empty file: expected the header `{HEADER}`")).line(1)),
-    }
+    };
+    // File column of each of COLUMNS.
+    let order: Option<Vec<usize>> = COLUMNS
+        .iter()
+        .map(|name| header.iter().position(|h| h == *name))
+        .collect::<Option<Vec<_>>>()
+        .filter(|o| header.len() == COLUMNS.len() && o.iter().collect::<HashSet<_>>().len() == COLUMNS.len());
+    let Some(order) = order else {
+        let found: Vec<&str> = header.iter().collect();
+        return Err(Error::invalid(
+            path,
+            format!(
+                "expected the header `{HEADER}` (in any order), found `{}`; for another layout give a preset or columns (docs/cache-format.md)",
+                found.join(",").escape_debug()
+            ),
+        )
+        .line(1));
+    };
 
     let mut crowd = CrowdCache::default();
     let (mut rig_ids, mut cycle_ids) = (HashMap::new(), HashMap::new());
     let mut seen = HashSet::new(); // agent ids in the current frame
-    for (n, line) in lines {
-        if line.trim().is_empty() {
+    for record in records {
+        let record = record.map_err(csv_err)?;
+        let n = record.position().map_or(0, |p| line_at(p.byte()));
+        if record.iter().all(str::is_empty) && record.len() <= 1 {
             continue;
         }
-        let cols: Vec<&str> = line.split(',').map(str::trim).collect();
-        if cols.len() != COLUMNS.len() {
+        if record.len() != COLUMNS.len() {
             return Err(
-                Error::invalid(path, format!("expected {} columns, found {}", COLUMNS.len(), cols.len())).line(n)
+                Error::invalid(path, format!("expected {} columns, found {}", COLUMNS.len(), record.len())).line(n)
             );
         }
+        let cols: Vec<&str> = order.iter().map(|&i| record.get(i).unwrap_or_default()).collect();
         let col = |i: usize| cols.get(i).copied().unwrap_or_default();
         let field_err = |i: usize, msg: String| {
             let name = COLUMNS.get(i).copied().unwrap_or_default();
-            Error::invalid(path, format!("column {} ({name}): {msg}", i + 1)).line(n).field(name)
+            let column = order.get(i).copied().unwrap_or(i) + 1;
+            Error::invalid(path, format!("column {column} ({name}): {msg}")).line(n).field(name)
         };
         let num = |i: usize| -> Result<f32> {
             col(i).parse::<f32>().map_err(|_| field_err(i, format!("cannot read `{}` as a number", col(i))))

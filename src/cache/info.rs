@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
-use super::{CacheReader, Format};
+use super::{CacheReader, CrowdCache, Format};
 use crate::error::Result;
 
 /// Usage of one rig or cycle.
@@ -80,6 +80,52 @@ pub struct CacheInfo {
     pub bounds: Option<Bounds>,
     /// Import settings for simulator files, else null.
     pub import: Option<ImportInfo>,
+    /// Doubts about the data, e.g. bounds that look like the wrong units.
+    pub warnings: Vec<String>,
+}
+
+/// Widest plausible crowd, metres: wider looks like centimetres (or feet)
+/// read as metres.
+pub const MAX_PLAUSIBLE_WIDTH: f32 = 2000.0;
+/// Narrowest plausible spread of [`MIN_AGENTS_FOR_SPREAD`] or more agents, metres.
+pub const MIN_PLAUSIBLE_SPREAD: f32 = 0.5;
+/// Agents needed before a small spread is suspicious.
+pub const MIN_AGENTS_FOR_SPREAD: usize = 10;
+
+/// A warning when bounds look like the wrong units: a crowd wider than
+/// [`MAX_PLAUSIBLE_WIDTH`] or many agents packed in less than
+/// [`MIN_PLAUSIBLE_SPREAD`].
+pub fn bounds_warning(b: &Bounds, agents: usize) -> Option<String> {
+    let (w, d) = (b.max[0] - b.min[0], b.max[2] - b.min[2]);
+    let wide = w.max(d);
+    let at = format!("x {:.1}..{:.1}, z {:.1}..{:.1}", b.min[0], b.max[0], b.min[2], b.max[2]);
+    if !wide.is_finite() || wide > MAX_PLAUSIBLE_WIDTH {
+        return Some(format!(
+            "the crowd is {wide:.0} m wide ({at}): wider than {:.0} km, so the units look wrong \
+             (centimetres read as metres? set the cache's units, e.g. units = \"cm\")",
+            MAX_PLAUSIBLE_WIDTH / 1000.0
+        ));
+    }
+    if agents >= MIN_AGENTS_FOR_SPREAD && wide < MIN_PLAUSIBLE_SPREAD {
+        return Some(format!(
+            "{agents} agents stand within {wide:.3} m ({at}): the units look wrong (metres read as millimetres?)"
+        ));
+    }
+    None
+}
+
+/// [`bounds_warning`] for a crowd in memory.
+pub fn bounds_warnings(crowd: &CrowdCache) -> Vec<String> {
+    let mut ids = HashSet::new();
+    let mut bounds: Option<Bounds> = None;
+    for a in crowd.frames.iter().flat_map(|f| f.agents.iter()) {
+        ids.insert(a.id);
+        let p = a.position.to_array();
+        let b = bounds.get_or_insert(Bounds { min: p, max: p });
+        b.min = glam::Vec3::from(b.min).min(a.position).to_array();
+        b.max = glam::Vec3::from(b.max).max(a.position).to_array();
+    }
+    bounds.and_then(|b| bounds_warning(&b, ids.len())).into_iter().collect()
 }
 
 /// Summarises a cache, reading one frame at a time.
@@ -151,6 +197,7 @@ pub fn info(reader: &CacheReader) -> Result<CacheInfo> {
         hidden_agent_frames: hidden_frames,
         rigs: counts(reader.rigs(), &rig_frames, &rig_agents),
         cycles: counts(reader.cycles(), &cycle_frames, &cycle_agents),
+        warnings: bounds.as_ref().and_then(|b| bounds_warning(b, ids.len())).into_iter().collect(),
         bounds,
         import: None,
     })

@@ -72,6 +72,7 @@ pub mod binary;
 pub mod csv;
 mod info;
 pub mod jupedsim;
+pub mod tabular;
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
@@ -79,33 +80,49 @@ use std::sync::Mutex;
 
 use crate::error::{Error, Result};
 
-pub use info::{info, Bounds, CacheInfo, ImportInfo, NameCount};
+pub use info::{bounds_warning, bounds_warnings, info, Bounds, CacheInfo, ImportInfo, NameCount};
 pub use jupedsim::ImportOptions;
+pub use tabular::{place, Placement, TabularOptions, TabularReport, TabularSpec};
 
 /// Longest rig or cycle name, in UTF-8 bytes.
 pub const MAX_NAME_LEN: usize = 255;
 
-/// A cache file format, chosen by file extension.
+/// A cache file format, chosen by file extension (a `.gz` suffix is looked
+/// through: `a.csv.gz` is CSV, `a.txt.gz` a table).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
     /// `.crowd`: our binary format (docs/cache-format.md).
     Binary,
-    /// `.csv`: one row per agent per frame.
+    /// `.csv`: one row per agent per frame (or, with a layout, a table).
     Csv,
     /// `.sqlite` (also `.sqlite3`, `.db`): JuPedSim trajectories, read only.
     JuPedSim,
+    /// `.txt`, `.tsv`, `.dat`: a trajectory table, read with a preset or
+    /// columns ([`TabularOptions`]), read only.
+    Tabular,
 }
 
 impl Format {
     /// The format of `path`, from its extension (case-insensitive).
     pub fn of(path: &Path) -> Result<Format> {
-        let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+        let lower = |p: &Path| p.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+        let mut ext = lower(path);
+        let gz = ext.as_deref() == Some("gz");
+        if gz {
+            ext = path.file_stem().and_then(|s| lower(Path::new(s)));
+        }
         match ext.as_deref() {
-            Some("crowd") => Ok(Format::Binary),
+            Some("crowd") if !gz => Ok(Format::Binary),
             Some("csv") => Ok(Format::Csv),
-            Some("sqlite" | "sqlite3" | "db") => Ok(Format::JuPedSim),
+            Some("sqlite" | "sqlite3" | "db") if !gz => Ok(Format::JuPedSim),
+            Some("txt" | "tsv" | "dat" | "ssv") => Ok(Format::Tabular),
+            Some("crowd" | "sqlite" | "sqlite3" | "db") => Err(Error::Usage(format!(
+                "{}: a gzipped .crowd or SQLite file cannot be read in place; gunzip it first",
+                path.display()
+            ))),
             _ => Err(Error::Usage(format!(
-                "{}: unknown cache format; expected a .crowd, .csv or .sqlite (JuPedSim) file",
+                "{}: unknown cache format; expected a .crowd, .csv or .sqlite (JuPedSim) file, \
+                 or a trajectory table (.txt, .tsv, .dat, optionally .gz) with a preset or columns",
                 path.display()
             ))),
         }
@@ -117,8 +134,32 @@ impl Format {
             Format::Binary => "crowd",
             Format::Csv => "csv",
             Format::JuPedSim => "jupedsim",
+            Format::Tabular => "table",
         }
     }
+}
+
+/// How any cache file becomes a crowd: JuPedSim options, the table layout
+/// (when the file is a foreign table) and where the crowd stands.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Import {
+    /// JuPedSim import options (rig, cycle, stride).
+    pub jupedsim: ImportOptions,
+    /// Read the file as a table with these options (any extension but
+    /// `.crowd` and `.sqlite`); `None`: by extension.
+    pub tabular: Option<TabularOptions>,
+    /// Placement for caches that are not tables (tables place themselves
+    /// through [`TabularOptions::placement`]).
+    pub placement: Placement,
+}
+
+/// The error for a table read without a preset or columns.
+pub fn needs_layout(path: &Path) -> Error {
+    Error::Usage(format!(
+        "{}: a trajectory table needs its layout: a preset (petrack, eth, eth-ucy) or columns \
+         (see docs/cache-format.md, \"Tabular import\")",
+        path.display()
+    ))
 }
 
 /// Reads a whole cache; the format comes from the extension. JuPedSim files
@@ -129,12 +170,25 @@ pub fn read(path: impl AsRef<Path>) -> Result<CrowdCache> {
 
 /// Reads a whole cache, importing simulator files with `opts`.
 pub fn read_with(path: impl AsRef<Path>, opts: &ImportOptions) -> Result<CrowdCache> {
+    Ok(import(path, &Import { jupedsim: opts.clone(), ..Default::default() })?.0)
+}
+
+/// Reads a whole cache as `how` says, with the table import's report.
+pub fn import(path: impl AsRef<Path>, how: &Import) -> Result<(CrowdCache, Option<TabularReport>)> {
     let path = path.as_ref();
-    match Format::of(path)? {
-        Format::Binary => binary::read(path),
-        Format::Csv => csv::read(path),
-        Format::JuPedSim => jupedsim::read(path, opts),
+    let format = Format::of(path)?;
+    if let (Some(t), Format::Csv | Format::Tabular) = (&how.tabular, format) {
+        let (crowd, report) = tabular::read(path, t)?;
+        return Ok((crowd, Some(report)));
     }
+    let mut crowd = match format {
+        Format::Binary => binary::read(path)?,
+        Format::Csv => csv::read(path)?,
+        Format::JuPedSim => jupedsim::read(path, &how.jupedsim)?,
+        Format::Tabular => return Err(needs_layout(path)),
+    };
+    place(&mut crowd, &how.placement);
+    Ok((crowd, None))
 }
 
 /// Writes a whole cache atomically (never a partial file under `path`); the
@@ -147,9 +201,11 @@ pub fn write(path: impl AsRef<Path>, crowd: &CrowdCache) -> Result<()> {
     match Format::of(path)? {
         Format::Binary => binary::write(path, crowd),
         Format::Csv => csv::write(path, crowd),
-        Format::JuPedSim => {
-            Err(Error::Usage(format!("{}: JuPedSim files are read only; write a .crowd or .csv cache", path.display())))
-        }
+        Format::JuPedSim | Format::Tabular => Err(Error::Usage(format!(
+            "{}: {} files are read only; write a .crowd or .csv cache",
+            path.display(),
+            Format::of(path).map(Format::name).unwrap_or_default()
+        ))),
     }
 }
 
@@ -179,12 +235,17 @@ impl CacheReader {
 
     /// Opens a cache, importing simulator files with `opts`.
     pub fn open_with(path: impl AsRef<Path>, opts: &ImportOptions) -> Result<CacheReader> {
+        Self::open_import(path, &Import { jupedsim: opts.clone(), ..Default::default() })
+    }
+
+    /// Opens a cache as `how` says. A `.crowd` file placed nowhere keeps
+    /// frame-by-frame reading; anything else is read whole.
+    pub fn open_import(path: impl AsRef<Path>, how: &Import) -> Result<CacheReader> {
         let path = path.as_ref();
-        match Format::of(path)? {
-            Format::Binary => Ok(CacheReader::Binary(binary::BinaryReader::open(path)?)),
-            Format::Csv => Ok(Self::from_crowd(path, csv::read(path)?)),
-            Format::JuPedSim => Ok(Self::from_crowd(path, jupedsim::read(path, opts)?)),
+        if Format::of(path)? == Format::Binary && how.placement.is_identity() {
+            return Ok(CacheReader::Binary(binary::BinaryReader::open(path)?));
         }
+        Ok(Self::from_crowd(path, import(path, how)?.0))
     }
 
     /// Wraps an in-memory crowd (already validated) that came from `path`.

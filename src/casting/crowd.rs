@@ -183,7 +183,7 @@ impl ShotCrowd {
     /// appears in the shot's frame range.
     pub fn load(shot_path: &Path) -> Result<ShotCrowd> {
         let shot = Shot::load(shot_path)?;
-        let cache = CacheReader::open(&shot.cache.path)?;
+        let cache = crate::casting::shot_cache::open(&shot)?;
         ShotCrowd::new(shot, cache)
     }
 

@@ -5,6 +5,7 @@
 pub mod cast;
 pub mod crowd;
 pub mod rig;
+pub mod shot_cache;
 pub mod skin;
 pub mod table;
 pub mod wardrobe;

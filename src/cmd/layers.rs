@@ -64,6 +64,9 @@ impl LayersArgs {
 /// `throng layers SHOT ...`: writes the manifest (and map) and prints the split.
 pub fn run(args: &LayersArgs) -> Result<()> {
     let crowd = super::load_crowd(&args.shot)?;
+    for w in layers::checks::check_placement(&crowd)?.warnings() {
+        eprintln!("throng: warning: {w}");
+    }
     let manifest = build_layers(&crowd, &args.overrides())?;
     let out = args.out.clone().unwrap_or_else(|| layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
     layers::write_manifest(&out, &manifest)?;

@@ -13,6 +13,7 @@
 //! heights, memory estimates, cameras), independent of cache and casting
 //! types; [`input`] builds that input from a cast shot.
 
+pub mod checks;
 mod font;
 pub mod input;
 pub mod manifest;

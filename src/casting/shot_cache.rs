@@ -1,0 +1,88 @@
+//! Opening a shot's cache as its `[cache]` table says: raw trajectory tables
+//! are imported at the shot's frame rate, and every import (tables and
+//! JuPedSim files alike) walks at the stride of the shot's own rigs, so feet
+//! do not slide. This is the only place the cache stage meets rig files for
+//! a shot; `cache` itself never loads rigs.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use crate::cache::jupedsim::{RigClip, SHOT_FPS};
+use crate::cache::tabular::Gait;
+use crate::cache::{CacheReader, Format, Import, ImportOptions, TabularOptions};
+use crate::casting::rig::Rig;
+use crate::error::{Error, Result};
+use crate::shot::Shot;
+
+/// A rig's gait from its glTF: the walk cycle's stride and length, and the
+/// idle cycle's length (frames at 24 fps, the unit of cycle frames). A walk
+/// cycle whose root does not travel is refused (it would never advance).
+pub fn gait(file: &Path, walk: &str, idle: Option<&str>) -> Result<Gait> {
+    let rig = Rig::load(file)?;
+    let c = rig.cycle(walk).map_err(|e| e.field("cycle"))?;
+    let (stride, cycle_length) = (c.stride(), c.frames(SHOT_FPS));
+    if !(stride.is_finite() && stride > 0.0 && cycle_length.is_finite() && cycle_length > 0.0) {
+        return Err(Error::invalid(
+            file,
+            format!("cycle `{walk}` walks {stride} m in {cycle_length} frames; name a walk cycle"),
+        )
+        .field("cycle"));
+    }
+    let idle_length = match idle {
+        Some(name) => {
+            let len = rig.cycle(name).map_err(|e| e.field("idle_cycle"))?.frames(SHOT_FPS);
+            if !(len.is_finite() && len > 0.0) {
+                return Err(
+                    Error::invalid(file, format!("idle cycle `{name}` is {len} frames long")).field("idle_cycle")
+                );
+            }
+            len
+        }
+        None => Gait::default().idle_length,
+    };
+    Ok(Gait { stride, cycle_length, idle_length })
+}
+
+/// How the shot's cache becomes a crowd: the `[cache]` keys over their
+/// preset, at the shot's fps, with the gaits of the shot's rigs.
+pub fn shot_import(shot: &Shot) -> Result<Import> {
+    let spec = &shot.cache.import;
+    let path = &shot.cache.path;
+    let key_err = |(k, m): (String, String)| Error::invalid(&shot.path, m).field(format!("cache.{k}"));
+    let format = Format::of(path)?;
+    let walk = spec.cycle.clone().unwrap_or_else(|| ImportOptions::default().cycle);
+    let rig = spec.rig.clone().unwrap_or_else(|| ImportOptions::default().rig);
+    let gaits = |walk: &str| -> Result<BTreeMap<String, Gait>> {
+        let mut out = BTreeMap::new();
+        for (name, r) in &shot.rigs {
+            // A rig without the walk cycle is only an error if an agent uses it.
+            if Rig::load(&r.file)?.cycle(walk).is_ok() {
+                out.insert(name.clone(), gait(&r.file, walk, spec.idle_cycle.as_deref())?);
+            }
+        }
+        Ok(out)
+    };
+    let tabular = matches!(format, Format::Tabular) || (format == Format::Csv && spec.describes_layout());
+    if tabular {
+        if !spec.describes_layout() {
+            return Err(crate::cache::needs_layout(path));
+        }
+        let mut o = TabularOptions::resolve(spec, shot.frames.fps).map_err(key_err)?;
+        o.gaits = gaits(&o.cycle)?;
+        return Ok(Import { tabular: Some(o), ..Default::default() });
+    }
+    let mut jupedsim = ImportOptions { rig: rig.clone(), cycle: walk.clone(), ..Default::default() };
+    if format == Format::JuPedSim {
+        if let Some(r) = shot.rigs.get(&rig) {
+            let g = gaits(&walk)?.get(&rig).copied();
+            jupedsim.rig_clip =
+                g.map(|g| RigClip { file: r.file.clone(), stride: g.stride, cycle_length: g.cycle_length });
+        }
+    }
+    Ok(Import { jupedsim, tabular: None, placement: spec.placement })
+}
+
+/// Opens the shot's cache (see [`shot_import`]).
+pub fn open(shot: &Shot) -> Result<CacheReader> {
+    CacheReader::open_import(&shot.cache.path, &shot_import(shot)?)
+}
