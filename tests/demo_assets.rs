@@ -18,6 +18,8 @@ const SLOTS: [&str; 11] = [
     "upper_leg_r",
     "lower_leg_r",
 ];
+/// Slots of the skinned walker (demo/shot.toml `[rigs.walker] slots`).
+const WALKER_SLOTS: [&str; 2] = ["body", "head"];
 const CLIPS: [&str; 4] = ["WalkA", "WalkB", "IdleA", "SitA"];
 const FPS: f32 = 24.0;
 
@@ -78,6 +80,7 @@ fn parts_are_named_meshes_with_normals_and_uvs() {
     }
 }
 
+#[derive(Debug)]
 struct Clip {
     frames: f32,
     stride: f32,
@@ -111,6 +114,76 @@ fn rig_clips(rel: &str) -> BTreeMap<String, Clip> {
         out.insert(anim.name().unwrap().to_string(), Clip { frames: (end * FPS).round(), stride });
     }
     out
+}
+
+/// The skinned walker's cycles as the shot plays them (cache cycle ->
+/// length in frames and stride), read by throng's own skinning code.
+fn walker_cycles() -> (throng::casting::skin::SkinnedRig, BTreeMap<String, Clip>) {
+    let shot = throng::shot::Shot::load(&common::demo_shot()).unwrap();
+    let r = &shot.rigs["walker"];
+    let rig = throng::casting::skin::SkinnedRig::load(&r.file, &r.skin, shot.frames.fps).unwrap();
+    let clips = (0..rig.cycles().len())
+        .map(|i| (rig.cycles()[i].name.clone(), Clip { frames: rig.cycle_frames(i), stride: rig.cycles()[i].stride }))
+        .collect();
+    (rig, clips)
+}
+
+#[test]
+fn walker_is_a_skinned_humanoid() {
+    let (doc, buffers, _) = import("demo/rigs/walker.glb");
+    let skin = doc.skins().next().expect("a skin");
+    let joints: Vec<String> = skin.joints().map(|j| j.name().unwrap().to_string()).collect();
+    assert!(joints.len() >= 20, "{joints:?}");
+    for name in ["root", "hips", "spine", "chest", "neck", "head"].into_iter().map(str::to_string).chain(
+        ["shoulder", "upper_arm", "forearm", "hand", "thigh", "shin", "foot", "toe"]
+            .iter()
+            .flat_map(|j| [format!("{j}_l"), format!("{j}_r")]),
+    ) {
+        assert!(joints.contains(&name), "no joint {name}: {joints:?}");
+    }
+    let ibm = skin.reader(|b| Some(&buffers[b.index()])).read_inverse_bind_matrices().unwrap().count();
+    assert_eq!(ibm, joints.len());
+    // Each mesh skinned on its own node, weights summing to 1, with normals and a material.
+    let mut tris = 0;
+    for name in ["body_slim", "body_broad", "head"] {
+        let node = doc
+            .nodes()
+            .find(|n| n.mesh().is_some_and(|m| m.name() == Some(name)))
+            .unwrap_or_else(|| panic!("no node draws mesh {name}"));
+        assert!(node.skin().is_some(), "{name}");
+        let mesh = node.mesh().unwrap();
+        assert_eq!(mesh.name(), Some(name));
+        for prim in mesh.primitives() {
+            assert!(prim.get(&gltf::Semantic::Normals).is_some() && prim.material().index().is_some(), "{name}");
+            let r = prim.reader(|b| Some(&buffers[b.index()]));
+            for w in r.read_weights(0).unwrap().into_f32() {
+                assert!((w.iter().sum::<f32>() - 1.0).abs() < 1e-4, "{name}: weights {w:?}");
+            }
+        }
+        tris += mesh_tris(&mesh);
+    }
+    assert!(tris >= 5000, "{tris} triangles");
+
+    // As throng plays it: 1.75 m tall, Walk 32 frames over 1.4 m (WalkA and
+    // WalkB both play it), Idle 48 frames standing still.
+    let (rig, cycles) = walker_cycles();
+    assert!((rig.height() - 1.75).abs() < 0.02, "height {}", rig.height());
+    assert!(rig.warnings().is_empty(), "{:?}", rig.warnings());
+    for (cycle, frames, stride) in [("WalkA", 32.0, 1.4), ("WalkB", 32.0, 1.4), ("IdleA", 48.0, 0.0)] {
+        let c = &cycles[cycle];
+        assert!((c.frames - frames).abs() < 1e-3 && (c.stride - stride).abs() < 1e-4, "{cycle}: {c:?}");
+    }
+
+    // The sim walks the walker at its Walk clip's speed, so feet do not slide.
+    let scene = throng::sim::SimScene::load(crate_path("demo/sim/demo.toml")).unwrap();
+    let r = scene.rigs.iter().position(|n| n == "walker").unwrap() as u16;
+    assert!(scene.rig_files[r as usize].is_none(), "the sim has no file for the skinned walker");
+    for (c, cycle) in scene.cycles.iter().enumerate() {
+        if let Some(clip) = cycles.get(&cycle.name).filter(|_| cycle.name != "SitA") {
+            let t = scene.timing(r, c as u16);
+            assert_eq!((t.length, t.stride), (clip.frames, clip.stride), "{}", cycle.name);
+        }
+    }
 }
 
 #[test]
@@ -223,7 +296,7 @@ fn cache_crowd_is_a_plausible_crowd() {
     }
     let mut rigs = crowd.rigs.clone();
     rigs.sort();
-    assert_eq!(rigs, ["bipedTallB", "bipedThinA"]);
+    assert_eq!(rigs, ["bipedTallB", "bipedThinA", "walker"]);
     let mut cycles = crowd.cycles.clone();
     cycles.sort();
     assert_eq!(cycles, ["IdleA", "SitA", "WalkA", "WalkB"]);
@@ -245,10 +318,11 @@ fn cache_crowd_is_a_plausible_crowd() {
 
     // Feet do not slide: a walker's distance per cycle frame is its own rig's
     // stride / cycle length; standers stand and play their cycle at 1 frame per frame.
-    let clips: BTreeMap<String, BTreeMap<String, Clip>> = ["bipedThinA", "bipedTallB"]
+    let mut clips: BTreeMap<String, BTreeMap<String, Clip>> = ["bipedThinA", "bipedTallB"]
         .iter()
         .map(|r| (r.to_string(), rig_clips(&format!("demo/rigs/{r}.glb"))))
         .collect();
+    clips.insert("walker".into(), walker_cycles().1);
     let (mut walked, mut stood) = (BTreeMap::<(String, String), usize>::new(), 0);
     let mut idle = BTreeSet::new();
     for w in crowd.frames.windows(2) {
@@ -282,8 +356,12 @@ fn cache_crowd_is_a_plausible_crowd() {
             }
         }
     }
-    assert_eq!(walked.len(), 4, "both rigs walk both walks: {walked:?}");
+    assert_eq!(walked.len(), 6, "all three rigs walk both walks: {walked:?}");
     assert!(walked.values().all(|&n| n > 200), "{walked:?}");
+    // A quarter of the spawned agents are skinned walkers.
+    let walker = crowd.rigs.iter().position(|r| r == "walker").unwrap() as u16;
+    let walkers = crowd.frames[0].agents.iter().filter(|a| a.rig == walker).count();
+    assert!((50..=100).contains(&walkers), "{walkers} walkers");
     assert!(stood > 1000 && idle.len() >= 10, "{stood} standing agent-frames, {} idlers", idle.len());
 
     // Nobody overlaps badly (agent radius 0.3: centres 0.6 m apart touch).
@@ -303,7 +381,7 @@ fn toml_file(rel: &str) -> toml::Value {
 }
 
 /// scheme name -> wardrobe; checks every part's file, mesh, slot and materials.
-fn check_wardrobe(rel: &str, schemes: &mut BTreeMap<String, String>) {
+fn check_wardrobe(rel: &str, slots: &[&str], schemes: &mut BTreeMap<String, String>) {
     let w = toml_file(rel);
     assert_eq!(w["version"].as_integer(), Some(1));
     let dir = crate_path(rel).parent().unwrap().to_path_buf();
@@ -318,7 +396,7 @@ fn check_wardrobe(rel: &str, schemes: &mut BTreeMap<String, String>) {
         schemes.insert(name.clone(), rel.to_string());
         for part in scheme["parts"].as_array().unwrap() {
             let slot = part["slot"].as_str().unwrap();
-            assert!(SLOTS.contains(&slot), "{rel} {name}: slot {slot}");
+            assert!(slots.contains(&slot), "{rel} {name}: slot {slot}");
             let file = dir.join(part["file"].as_str().unwrap());
             let (doc, _, _) = gltf::import(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
             let mesh = part["mesh"].as_str().unwrap();
@@ -338,8 +416,9 @@ fn check_wardrobe(rel: &str, schemes: &mut BTreeMap<String, String>) {
 #[test]
 fn wardrobes_and_shot_agree() {
     let mut schemes = BTreeMap::new();
-    check_wardrobe("wardrobes/robots.toml", &mut schemes);
-    check_wardrobe("wardrobes/kenney_alien.toml", &mut schemes);
+    check_wardrobe("wardrobes/robots.toml", &SLOTS, &mut schemes);
+    check_wardrobe("wardrobes/kenney_alien.toml", &SLOTS, &mut schemes);
+    check_wardrobe("wardrobes/walkers.toml", &WALKER_SLOTS, &mut schemes);
     let robots = toml_file("wardrobes/robots.toml");
     assert!(robots["materials"].as_table().unwrap().len() >= 8);
     let heads_in = |scheme: &str| -> BTreeSet<String> {
@@ -370,6 +449,11 @@ fn wardrobes_and_shot_agree() {
     }
     for (rig, spec) in shot["rigs"].as_table().unwrap() {
         assert!(crate_path("demo").join(spec["file"].as_str().unwrap()).is_file(), "{rig}");
+        if rig == "walker" {
+            assert_eq!(spec["kind"].as_str(), Some("skinned"));
+            let slots: Vec<&str> = spec["slots"].as_array().unwrap().iter().filter_map(|s| s.as_str()).collect();
+            assert_eq!(slots, WALKER_SLOTS);
+        }
         for scheme in spec["schemes"].as_table().unwrap().keys() {
             assert!(schemes.contains_key(scheme), "{rig}: unknown scheme {scheme}");
         }

@@ -12,6 +12,8 @@ pub fn append(a: &mut MeshData, b: &MeshData) {
     a.positions.extend_from_slice(&b.positions);
     a.normals.extend_from_slice(&b.normals);
     a.uvs.extend_from_slice(&b.uvs);
+    a.joints.extend_from_slice(&b.joints);
+    a.weights.extend_from_slice(&b.weights);
     a.indices.extend(b.indices.iter().map(|i| i + base));
 }
 

@@ -8,10 +8,11 @@
 //! ```
 //!
 //! Writes under the crate root: demo/parts/{heads,torsos,limbs,kenney_alien_facing_z}.glb,
-//! demo/rigs/{bipedThinA,bipedTallB}.glb, demo/set/set.glb, demo/shot.toml,
-//! wardrobes/{robots,kenney_alien}.toml, wardrobes/textures/hazard.png.
+//! demo/rigs/{bipedThinA,bipedTallB,walker}.glb, demo/set/set.glb, demo/shot.toml,
+//! wardrobes/{robots,kenney_alien,walkers}.toml, wardrobes/textures/hazard.png.
 //! demo/parts/kenney_alien.glb (the CC0 original) is an input, not an output.
 
+mod character;
 mod geometry;
 mod parts;
 mod rigs;
@@ -44,7 +45,7 @@ fn shot_toml() -> String {
     );
     s.push_str(
         "version = 1\nname = \"demo\"\nseed = 1234\n\
-         wardrobes = [\"../wardrobes/robots.toml\", \"../wardrobes/kenney_alien.toml\"]\n\
+         wardrobes = [\"../wardrobes/robots.toml\", \"../wardrobes/kenney_alien.toml\", \"../wardrobes/walkers.toml\"]\n\
          removed = []\nculled_cycles = []\nno_scale_cycles = [\"SitA\"]\nexclude_parts = []\n",
     );
     let _ = write!(s, "\n[frames]\nstart = {FRAME_START}\nend = {FRAME_END}\nfps = {FPS:?}\n");
@@ -55,6 +56,14 @@ fn shot_toml() -> String {
          schemes = { LowEnd_good_heads = 3.0, HighEnd = 1.0, KenneyAlien = 0.5 }\nheight_jitter = 0.1\n\
          \n[rigs.bipedTallB]\nfile = \"rigs/bipedTallB.glb\"\n\
          schemes = { HighEnd = 2.0, KenneyAlien = 1.0 }\nheight_jitter = 0.1\n",
+    );
+    // The skinned walker: every cycle the sim gives it plays one of its two
+    // clips (demo/sim/demo.toml gives it the Walk clip's length and stride).
+    s.push_str(
+        "\n[rigs.walker]\nfile = \"rigs/walker.glb\"\nkind = \"skinned\"\n\
+         cycles = { WalkA = \"Walk\", WalkB = \"Walk\", IdleA = \"Idle\" }\n\
+         root = \"hips\"\npose_step = 1.0\nschemes = { Walkers = 1.0 }\nslots = [\"body\", \"head\"]\n\
+         height_jitter = 0.1\n",
     );
     s.push_str("\n[set]\nfile = \"set/set.glb\"\n");
     let _ = write!(s, "\n[camera]\nsensor_width = {SENSOR_WIDTH:?}\n");
@@ -114,6 +123,16 @@ fn run() -> Result<()> {
         println!("rigs/{}.glb: height {:.2} m, hips {:.2} m", r.name, r.dims.height(), r.dims.hip_height());
     }
 
+    let walker = character::write_walker(&demo.join("rigs/walker.glb"))?;
+    let tris: Vec<String> = walker.triangles.iter().map(|(m, n)| format!("{m} {n}")).collect();
+    println!(
+        "rigs/walker.glb: skinned, {} joints, triangles {} (total {}), walk foot slide {:.1e} m",
+        walker.joints,
+        tris.join(", "),
+        walker.triangles.iter().map(|t| t.1).sum::<usize>(),
+        walker.foot_slide
+    );
+
     set::write_set(&demo.join("set/set.glb"))?;
     println!("set/set.glb");
 
@@ -130,6 +149,7 @@ fn run() -> Result<()> {
     for (file, text) in [
         ("robots.toml", wardrobe::robots_toml(&heads, &torsos, &limbs)),
         ("kenney_alien.toml", wardrobe::kenney_toml()),
+        ("walkers.toml", wardrobe::walkers_toml()),
     ] {
         let path = wardrobes.join(file);
         check_wardrobe(&path, &text)?;

@@ -118,6 +118,7 @@ fn floor() -> MeshData {
         normals: vec![[0.0, 1.0, 0.0]; 4],
         uvs: vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]],
         indices: vec![0, 1, 2, 0, 2, 3],
+        ..Default::default()
     }
 }
 

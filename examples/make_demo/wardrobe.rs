@@ -243,6 +243,55 @@ pub fn robots_toml(heads: &[Part], torsos: &[Part], limbs: &[Part]) -> String {
     s
 }
 
+/// The walker's skinned meshes (examples/make_demo/character.rs).
+const WALKER_GLB: &str = "../demo/rigs/walker.glb";
+
+/// Clothing for the walkers' bodies: a few muted everyday colours.
+const CLOTHES: [Mat; 6] = [
+    mat("cloth_denim", [0.08, 0.13, 0.25], 0.0, 0.8),
+    mat("cloth_khaki", [0.42, 0.36, 0.22], 0.0, 0.85),
+    mat("cloth_charcoal", [0.09, 0.09, 0.1], 0.0, 0.75),
+    mat("cloth_brick", [0.45, 0.09, 0.06], 0.0, 0.8),
+    mat("cloth_forest", [0.06, 0.2, 0.1], 0.0, 0.8),
+    mat("cloth_cream", [0.7, 0.65, 0.55], 0.0, 0.85),
+];
+/// Skin tones for the walkers' heads.
+const SKIN_TONES: [Mat; 3] = [
+    mat("skin_light", [0.7, 0.5, 0.4], 0.0, 0.55),
+    mat("skin_medium", [0.45, 0.28, 0.18], 0.0, 0.55),
+    mat("skin_dark", [0.18, 0.1, 0.07], 0.0, 0.5),
+];
+
+/// walkers.toml text: scheme `Walkers` for the skinned walker rig, whose
+/// slots are `body` (either build, in any clothing) and `head`.
+pub fn walkers_toml() -> String {
+    let mut s = String::from(HEADER);
+    s.push_str(
+        "# Parts: the skinned meshes of ../demo/rigs/walker.glb, bound to its skeleton;\n\
+         # the shot's [rigs.walker] wears them in slots `body` and `head`.\n",
+    );
+    s.push_str("version = 1\nname = \"walkers\"\nuniform_slots = [\"head\"]\n");
+    for m in CLOTHES.iter().chain(&SKIN_TONES) {
+        let _ = writeln!(s, "\n[materials.{}]", m.name);
+        let _ = writeln!(s, "base_color = {}", floats(&m.base_color));
+        let _ = writeln!(s, "metallic = {:?}", m.metallic);
+        let _ = writeln!(s, "roughness = {:?}", m.roughness);
+    }
+    let _ = writeln!(s, "\n[schemes.Walkers]\nexclude = []");
+    let clothes: Vec<&str> = CLOTHES.iter().map(|m| m.name).collect();
+    let tones: Vec<&str> = SKIN_TONES.iter().map(|m| m.name).collect();
+    for (slot, mesh, weight, materials) in
+        [("body", "body_slim", 3.0, &clothes), ("body", "body_broad", 2.0, &clothes), ("head", "head", 1.0, &tones)]
+    {
+        push_entry(
+            &mut s,
+            "Walkers",
+            &Entry { slot, file: WALKER_GLB, mesh, weight, materials, material_weights: None },
+        );
+    }
+    s
+}
+
 /// The hazard-stripe texture (yellow and black diagonals), sRGB PNG.
 pub fn hazard_png() -> Result<Vec<u8>> {
     const SIZE: u32 = 64;
@@ -331,6 +380,7 @@ pub fn write_kenney_turned(src: &Path, dst: &Path) -> Result<()> {
                     None => (0..positions.len() as u32).collect(),
                 },
                 positions,
+                ..Default::default()
             };
             nudge_decal(&mut data);
             let mat = prim.material().index().and_then(|i| materials.get(i).copied());

@@ -13,6 +13,7 @@
 //!     normals: vec![[0.0, 0.0, 1.0]; 3],
 //!     uvs: vec![[0.0, 0.0]; 3],
 //!     indices: vec![0, 1, 2],
+//!     ..Default::default()
 //! };
 //! let mesh = glb.add_mesh("tri", &quad, Some(grey)).unwrap();
 //! glb.add_node(NodeDesc::new("tri").mesh(mesh));
@@ -37,6 +38,9 @@ pub struct MeshId(u32);
 /// Handle of a material added to a [`GlbBuilder`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MaterialId(u32);
+/// Handle of a skin added to a [`GlbBuilder`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SkinId(u32);
 /// Handle of a node added to a [`GlbBuilder`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct NodeId(u32);
@@ -48,8 +52,10 @@ impl NodeId {
     }
 }
 
-/// Triangle geometry of one primitive. `normals` and `uvs` are either empty or
-/// as long as `positions`; `indices` holds three per triangle.
+/// Triangle geometry of one primitive. `normals`, `uvs`, `joints` and
+/// `weights` are either empty or as long as `positions`; `indices` holds three
+/// per triangle. `joints` and `weights` (JOINTS_0/WEIGHTS_0) come together and
+/// make the primitive skinned: draw it from a node with [`NodeDesc::skin`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct MeshData {
     /// Vertex positions.
@@ -60,6 +66,10 @@ pub struct MeshData {
     pub uvs: Vec<[f32; 2]>,
     /// Triangle list.
     pub indices: Vec<u32>,
+    /// Up to four skin joints per vertex, indexing the skin's joint list (or empty).
+    pub joints: Vec<[u16; 4]>,
+    /// The weights of `joints`, each vertex's summing to 1 (or empty).
+    pub weights: Vec<[f32; 4]>,
 }
 
 impl MeshData {
@@ -95,6 +105,25 @@ impl MeshData {
         }
         if !self.uvs.is_empty() && self.uvs.len() != n {
             return bad(format!("mesh `{name}`: {} uvs for {n} positions", self.uvs.len()));
+        }
+        if self.joints.len() != self.weights.len() {
+            return bad(format!(
+                "mesh `{name}`: {} joints and {} weights; skinning needs both per vertex",
+                self.joints.len(),
+                self.weights.len()
+            ));
+        }
+        if !self.joints.is_empty() && self.joints.len() != n {
+            return bad(format!("mesh `{name}`: {} joints for {n} positions", self.joints.len()));
+        }
+        if let Some(v) = self.weights.iter().position(|w| {
+            let sum: f32 = w.iter().sum();
+            w.iter().any(|x| !(x.is_finite() && *x >= 0.0)) || (sum - 1.0).abs() > 1e-3
+        }) {
+            return bad(format!(
+                "mesh `{name}`: vertex {v}: weights {:?} are not finite, >= 0 and summing to 1",
+                self.weights[v]
+            ));
         }
         if !self.indices.len().is_multiple_of(3) {
             return bad(format!("mesh `{name}`: {} indices is not a triangle list", self.indices.len()));
@@ -186,12 +215,21 @@ pub struct NodeDesc {
     pub mesh: Option<MeshId>,
     /// Application data written as the node's `extras`.
     pub extras: Option<serde_json::Value>,
+    /// Skin deforming this node's mesh (the mesh must carry joints and weights).
+    pub skin: Option<SkinId>,
 }
 
 impl NodeDesc {
     /// A node with identity transform, no mesh, no children.
     pub fn new(name: impl Into<String>) -> Self {
-        NodeDesc { name: name.into(), transform: Transform::IDENTITY, children: Vec::new(), mesh: None, extras: None }
+        NodeDesc {
+            name: name.into(),
+            transform: Transform::IDENTITY,
+            children: Vec::new(),
+            mesh: None,
+            extras: None,
+            skin: None,
+        }
     }
     /// Sets the translation (keeping any rotation and scale).
     pub fn translation(mut self, t: [f32; 3]) -> Self {
@@ -225,6 +263,12 @@ impl NodeDesc {
     /// Sets the mesh.
     pub fn mesh(mut self, mesh: MeshId) -> Self {
         self.mesh = Some(mesh);
+        self
+    }
+    /// Sets the skin that deforms this node's mesh. glTF ignores a skinned
+    /// mesh node's own transform, so leave it at identity.
+    pub fn skin(mut self, skin: SkinId) -> Self {
+        self.skin = Some(skin);
         self
     }
     /// Sets the children.
@@ -331,6 +375,8 @@ pub struct GlbBuilder {
     root: json::Root,
     bin: Vec<u8>,
     generator: String,
+    /// Per mesh: the highest joint index its primitives use (`None`: unskinned).
+    mesh_max_joint: Vec<Option<u16>>,
 }
 
 impl Default for GlbBuilder {
@@ -345,7 +391,7 @@ impl GlbBuilder {
         let mut root = json::Root::default();
         root.asset.generator = Some(format!("throng {}", env!("CARGO_PKG_VERSION")));
         let generator = root.asset.generator.clone().unwrap_or_default();
-        GlbBuilder { root, bin: Vec::new(), generator }
+        GlbBuilder { root, bin: Vec::new(), generator, mesh_max_joint: Vec::new() }
     }
 
     /// Sets `asset.generator` (default `throng <version>`).
@@ -412,6 +458,26 @@ impl GlbBuilder {
         })
     }
 
+    /// Adds a u16 VEC4 vertex attribute accessor (JOINTS_0).
+    fn push_joints_accessor(&mut self, joints: &[[u16; 4]]) -> json::Index<json::Accessor> {
+        let bytes: Vec<u8> = joints.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+        let view = self.push_view(&bytes, Some(json::buffer::Target::ArrayBuffer));
+        self.root.push(json::Accessor {
+            buffer_view: Some(view),
+            byte_offset: None,
+            count: USize64::from(joints.len()),
+            component_type: Checked::Valid(json::accessor::GenericComponentType(json::accessor::ComponentType::U16)),
+            extensions: None,
+            extras: None,
+            type_: Checked::Valid(json::accessor::Type::Vec4),
+            min: None,
+            max: None,
+            name: None,
+            normalized: false,
+            sparse: None,
+        })
+    }
+
     fn push_index_accessor(&mut self, indices: &[u32]) -> json::Index<json::Accessor> {
         let bytes: Vec<u8> = indices.iter().flat_map(|v| v.to_le_bytes()).collect();
         let view = self.push_view(&bytes, Some(json::buffer::Target::ElementArrayBuffer));
@@ -460,6 +526,13 @@ impl GlbBuilder {
             let uv = self.push_f32_accessor(&uv, Type::Vec2, Some(ArrayBuffer), false);
             attributes.insert(Checked::Valid(Semantic::TexCoords(0)), uv);
         }
+        if !data.joints.is_empty() {
+            let joints = self.push_joints_accessor(&data.joints);
+            attributes.insert(Checked::Valid(Semantic::Joints(0)), joints);
+            let w: Vec<f32> = data.weights.iter().flatten().copied().collect();
+            let weights = self.push_f32_accessor(&w, Type::Vec4, Some(ArrayBuffer), false);
+            attributes.insert(Checked::Valid(Semantic::Weights(0)), weights);
+        }
         let indices = self.push_index_accessor(&data.indices);
         Ok(json::mesh::Primitive {
             attributes,
@@ -482,6 +555,7 @@ impl GlbBuilder {
             primitives: vec![prim],
             weights: None,
         });
+        self.mesh_max_joint.push(max_joint(data));
         Ok(MeshId(index.value() as u32))
     }
 
@@ -495,6 +569,8 @@ impl GlbBuilder {
             .ok_or_else(|| Error::invalid(WRITER, "unknown mesh").field("mesh"))?;
         let prim = self.primitive(&name, data, material)?;
         self.root.meshes[mesh.0 as usize].primitives.push(prim);
+        let m = &mut self.mesh_max_joint[mesh.0 as usize];
+        *m = (*m).max(max_joint(data));
         Ok(())
     }
 
@@ -561,6 +637,19 @@ impl GlbBuilder {
             }
             node.mesh = Some(json::Index::new(mesh.0));
         }
+        if let Some(skin) = desc.skin {
+            let bad = |msg: String| Err(Error::invalid(WRITER, format!("node `{}`: {msg}", desc.name)).field("skin"));
+            let Some(s) = self.root.skins.get(skin.0 as usize) else { return bad("unknown skin".into()) };
+            let Some(mesh) = desc.mesh else { return bad("a skin needs a mesh to deform".into()) };
+            match self.mesh_max_joint[mesh.0 as usize] {
+                None => return bad("its mesh has no joints and weights to skin".into()),
+                Some(j) if j as usize >= s.joints.len() => {
+                    return bad(format!("its mesh uses joint {j}; the skin has {} joints", s.joints.len()))
+                }
+                Some(_) => {}
+            }
+            node.skin = Some(json::Index::new(skin.0));
+        }
         if !desc.children.is_empty() {
             node.children = Some(desc.children.iter().map(|c| json::Index::new(c.0)).collect());
         }
@@ -589,6 +678,33 @@ impl GlbBuilder {
         let p = &mut self.root.nodes[parent.index()];
         p.children.get_or_insert_with(Vec::new).push(json::Index::new(child.0));
         Ok(())
+    }
+
+    /// Adds a skin: its joint nodes (added already) and one inverse bind
+    /// matrix (column-major) per joint, the inverse of the joint's global
+    /// transform in the bind pose.
+    pub fn add_skin(&mut self, joints: &[NodeId], inverse_bind: &[[f32; 16]]) -> Result<SkinId> {
+        let bad = |msg: String| Err(Error::invalid(WRITER, format!("skin: {msg}")).field("skins"));
+        if joints.is_empty() || joints.len() != inverse_bind.len() {
+            return bad(format!("{} joints and {} inverse bind matrices", joints.len(), inverse_bind.len()));
+        }
+        if let Some(j) = joints.iter().find(|j| j.index() >= self.root.nodes.len()) {
+            return bad(format!("unknown joint node {}", j.index()));
+        }
+        if inverse_bind.iter().flatten().any(|v| !v.is_finite()) {
+            return bad("an inverse bind matrix is not finite".into());
+        }
+        let flat: Vec<f32> = inverse_bind.iter().flatten().copied().collect();
+        let ibm = self.push_f32_accessor(&flat, json::accessor::Type::Mat4, None, false);
+        let index = self.root.push(json::Skin {
+            extensions: None,
+            extras: None,
+            inverse_bind_matrices: Some(ibm),
+            joints: joints.iter().map(|j| json::Index::new(j.0)).collect(),
+            name: None,
+            skeleton: None,
+        });
+        Ok(SkinId(index.value() as u32))
     }
 
     /// Adds a perspective camera on a new node (the camera looks down the
@@ -782,6 +898,15 @@ impl GlbBuilder {
     }
 }
 
+/// The highest joint a primitive's vertices use with a weight above 0.
+fn max_joint(data: &MeshData) -> Option<u16> {
+    if data.joints.is_empty() {
+        return None;
+    }
+    let used = data.joints.iter().zip(&data.weights).flat_map(|(j, w)| (0..4).filter(|&k| w[k] > 0.0).map(|k| j[k]));
+    Some(used.max().unwrap_or(0))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -792,6 +917,7 @@ mod tests {
             normals: vec![[0.0, 0.0, 1.0]; 3],
             uvs: vec![[0.0, 0.0], [1.0, 0.0], [0.5, 1.0]],
             indices: vec![0, 1, 2],
+            ..Default::default()
         }
     }
 
@@ -949,6 +1075,80 @@ mod tests {
             }],
         };
         assert!(b.add_animation(&bad_cubic).is_err());
+    }
+
+    /// Two joints along +Y; the triangle's top vertex blends between them.
+    fn skinned_scene() -> Vec<u8> {
+        let mut b = GlbBuilder::new();
+        let mut data = tri(0.0);
+        data.joints = vec![[0, 0, 0, 0], [0, 1, 0, 0], [1, 0, 0, 0]];
+        data.weights = vec![[1.0, 0.0, 0.0, 0.0], [0.25, 0.75, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]];
+        let mesh = b.add_mesh("skinned", &data, None).unwrap();
+        let hips = b.add_node(NodeDesc::new("hips").translation([0.0, 1.0, 0.0])).unwrap();
+        let chest = b.add_node(NodeDesc::new("chest").translation([0.0, 0.5, 0.0])).unwrap();
+        b.add_child(hips, chest).unwrap();
+        let translate_y = |y: f32| [1.0, 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., y, 0., 1.];
+        let skin = b.add_skin(&[hips, chest], &[translate_y(-1.0), translate_y(-1.5)]).unwrap();
+        b.add_node(NodeDesc::new("body").mesh(mesh).skin(skin)).unwrap();
+        b.finish().unwrap()
+    }
+
+    #[test]
+    fn skinned_round_trip() {
+        let bytes = skinned_scene();
+        let (doc, buffers, _) = gltf::import_slice(&bytes).unwrap();
+        let skin = doc.skins().next().unwrap();
+        let joints: Vec<_> = skin.joints().map(|j| j.name().unwrap_or("").to_string()).collect();
+        assert_eq!(joints, ["hips", "chest"]);
+        let r = skin.reader(|b| Some(&buffers[b.index()]));
+        let ibm: Vec<[[f32; 4]; 4]> = r.read_inverse_bind_matrices().unwrap().collect();
+        assert_eq!(ibm.len(), 2);
+        assert_eq!(ibm[1][3][1], -1.5);
+        let body = doc.nodes().find(|n| n.name() == Some("body")).unwrap();
+        assert_eq!(body.skin().map(|s| s.index()), Some(0));
+        let prim = body.mesh().unwrap().primitives().next().unwrap();
+        let acc = prim.get(&gltf::Semantic::Joints(0)).unwrap();
+        assert_eq!(
+            (acc.data_type(), acc.dimensions()),
+            (gltf::accessor::DataType::U16, gltf::accessor::Dimensions::Vec4)
+        );
+        let reader = prim.reader(|b| Some(&buffers[b.index()]));
+        let joints: Vec<[u16; 4]> = reader.read_joints(0).unwrap().into_u16().collect();
+        assert_eq!(joints, [[0, 0, 0, 0], [0, 1, 0, 0], [1, 0, 0, 0]]);
+        let weights: Vec<[f32; 4]> = reader.read_weights(0).unwrap().into_f32().collect();
+        assert_eq!(weights[1], [0.25, 0.75, 0.0, 0.0]);
+        // The skinning code reads the file as a skinned character.
+        assert!(doc.skins().len() == 1 && doc.nodes().any(|n| n.skin().is_some() && n.mesh().is_some()));
+    }
+
+    #[test]
+    fn unskinned_output_is_unchanged_by_skin_support() {
+        // No JOINTS_0/WEIGHTS_0 and no `skins` on a mesh without joints.
+        let bytes = scene();
+        let (doc, _, _) = gltf::import_slice(&bytes).unwrap();
+        assert_eq!(doc.skins().len(), 0);
+        let json = String::from_utf8_lossy(&bytes[20..]).to_string();
+        assert!(!json.contains("JOINTS_0") && !json.contains("\"skins\"") && !json.contains("\"skin\""));
+    }
+
+    #[test]
+    fn rejects_bad_skins() {
+        let mut b = GlbBuilder::new();
+        let mut m = tri(0.0);
+        m.joints = vec![[0; 4]; 3];
+        assert!(b.add_mesh("no_weights", &m, None).is_err(), "joints without weights");
+        m.weights = vec![[0.5, 0.0, 0.0, 0.0]; 3];
+        assert!(b.add_mesh("half", &m, None).is_err(), "weights summing to 0.5");
+        m.joints = vec![[3, 0, 0, 0]; 3];
+        m.weights = vec![[1.0, 0.0, 0.0, 0.0]; 3];
+        let mesh = b.add_mesh("j3", &m, None).unwrap();
+        let plain = b.add_mesh("plain", &tri(0.0), None).unwrap();
+        let j = b.add_node(NodeDesc::new("j")).unwrap();
+        assert!(b.add_skin(&[j], &[]).is_err(), "one joint, no matrix");
+        let skin = b.add_skin(&[j], &[[0.0; 16]]).unwrap();
+        assert!(b.add_node(NodeDesc::new("n").mesh(mesh).skin(skin)).is_err(), "joint 3 of a 1-joint skin");
+        assert!(b.add_node(NodeDesc::new("n").mesh(plain).skin(skin)).is_err(), "skin on an unskinned mesh");
+        assert!(b.add_node(NodeDesc::new("n").skin(skin)).is_err(), "skin without a mesh");
     }
 
     #[test]

@@ -66,6 +66,7 @@ impl Writer<'_> {
             normals: src.normals.iter().map(|n| n.to_array()).collect(),
             uvs: src.uvs.iter().map(|u| u.to_array()).collect(),
             indices: src.indices.clone(),
+            ..Default::default()
         };
         let name = format!("{}|{}", src.name, self.lib.materials[material as usize].name);
         let m = self.glb.add_mesh(&name, &data, Some(mat))?;
