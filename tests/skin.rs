@@ -270,22 +270,19 @@ fn a_skinned_mesh_as_a_rigid_part_is_refused_naming_skinning() {
         ),
     )
     .unwrap();
-    let text = std::fs::read_to_string(common::demo_shot()).unwrap();
-    let demo = common::repo_path("demo");
-    // The demo shot with one rig whose torsos come from the skinned file.
-    let text = text
-        .replace(
-            "wardrobes = [\"../wardrobes/robots.toml\", \"../wardrobes/kenney_alien.toml\"]",
-            &format!("wardrobes = [\"{}\"]", wardrobe.display()),
-        )
-        .replace("\"cache/", &format!("\"{}/cache/", demo.display()))
-        .replace("\"rigs/", &format!("\"{}/rigs/", demo.display()))
-        .replace("\"set/", &format!("\"{}/set/", demo.display()))
-        .replace(
-            "schemes = { LowEnd_good_heads = 3.0, HighEnd = 1.0, KenneyAlien = 0.5 }",
-            "schemes = { Figures = 1.0 }",
-        )
-        .replace("schemes = { HighEnd = 2.0, KenneyAlien = 1.0 }", "schemes = { Figures = 1.0 }");
+    // One slot-rig robot whose torso would be the skinned figure.
+    std::fs::write(
+        dir.path().join("c.csv"),
+        "frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags\n1,1,0,0,0,0,bipedThinA,WalkA,0,\n",
+    )
+    .unwrap();
+    let text = format!(
+        "version = 1\nname = \"r\"\nseed = 1\nwardrobes = [\"{}\"]\n[frames]\nstart = 1\nend = 1\n[cache]\npath = \"c.csv\"\n\
+         [rigs.bipedThinA]\nfile = \"{}\"\nschemes = {{ Figures = 1.0 }}\n[camera]\n[[camera.keys]]\nframe = 1\n\
+         position = [0.0, 1.0, 5.0]\naim = [0.0, 1.0, 0.0]\nfocal_length = 35.0\n",
+        wardrobe.display(),
+        common::repo_path("demo/rigs/bipedThinA.glb").display()
+    );
     let shot = dir.path().join("shot.toml");
     std::fs::write(&shot, text).unwrap();
     let (code, _, err) = common::run(&["cast".as_ref(), shot.as_os_str()]);

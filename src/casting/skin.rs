@@ -565,9 +565,16 @@ impl SkinnedRig {
         &self.warnings
     }
 
-    /// Index of the cycle a cache cycle name plays; the error lists the cycles.
+    /// Index of the cycle a cache cycle name plays; the error lists the
+    /// cycles. Cache cycles mapped to one clip give the same index (the
+    /// first cycle playing that clip), so their agents share poses.
     pub fn cycle_index(&self, name: &str) -> Result<usize> {
-        self.cycles.iter().position(|c| c.name == name).ok_or_else(|| {
+        let found = self.cycles.iter().position(|c| c.name == name);
+        if let Some(i) = found {
+            let clip = self.cycles[i].clip;
+            return Ok(self.cycles.iter().position(|c| c.clip == clip).unwrap_or(i));
+        }
+        found.ok_or_else(|| {
             let names: Vec<String> = self.cycles.iter().map(|c| format!("{} (clip {})", c.name, c.clip_name)).collect();
             Error::invalid(
                 &self.path,
@@ -676,10 +683,10 @@ impl SkinnedRig {
         out
     }
 
-    /// Pose name of a step, for mesh names and botinfo: `<cycle>/<step>of<steps>`.
+    /// Pose name of a step, for mesh names and botinfo: `<clip>/<step>of<steps>`.
     pub fn pose_name(&self, cycle: usize, step: u32) -> String {
         let c = &self.cycles[cycle];
-        format!("{}/{}of{}", c.name, step, c.steps)
+        format!("{}/{}of{}", c.clip_name, step, c.steps)
     }
 
     /// The largest vertex displacement, metres (rig space, before height
