@@ -408,3 +408,48 @@ focal_length = 35.0
     let e = throng::shot::Shot::load(&shot_path).unwrap_err().to_string();
     assert!(e.contains("petrak") && e.contains("shot.toml"), "{e}");
 }
+
+#[test]
+fn shot_reading_raw_data_walks_at_a_skinned_rigs_stride() {
+    // The demo walker: a skinned character whose Walk clip moves its `hips`
+    // joint 1.4 m in 32 frames.
+    let dir = tempfile::tempdir().unwrap();
+    let shot_path = dir.path().join("shot.toml");
+    std::fs::write(
+        &shot_path,
+        format!(
+            r#"version = 1
+name = "raw"
+[frames]
+start = 1
+end = 48
+fps = 24.0
+[cache]
+path = "{}"
+preset = "petrack"
+rig = "walker"
+cycle = "WalkA"
+[rigs.walker]
+file = "{}"
+cycles = {{ WalkA = "Walk", IdleA = "Idle" }}
+root = "hips"
+[camera]
+[[camera.keys]]
+frame = 1
+position = [0.0, 1.7, 20.0]
+aim = [0.0, 1.0, 0.0]
+focal_length = 35.0
+"#,
+            table("petrack_cm.txt").display(),
+            common::repo_path("demo/rigs/walker.glb").display()
+        ),
+    )
+    .unwrap();
+    let shot = throng::shot::Shot::load(&shot_path).unwrap();
+    let crowd = throng::casting::shot_cache::open(&shot).unwrap().read_all().unwrap();
+    let (a, b) = (at(&crowd, 10, 1).unwrap(), at(&crowd, 20, 1).unwrap());
+    let walked = (b.position - a.position).length();
+    let advance = (b.cycle_frame - a.cycle_frame).rem_euclid(32.0);
+    assert!(walked > 0.1, "agent 1 walks ({walked} m)");
+    assert!((advance - walked / 1.4 * 32.0).abs() < 0.05, "advance {advance} frames for {walked} m");
+}

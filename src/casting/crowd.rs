@@ -18,11 +18,11 @@ use glam::{Affine3A, Quat, Vec3};
 
 use crate::cache::{AgentSample, CacheReader, FrameBlock};
 use crate::casting::rig::Rig;
-use crate::casting::skin::{is_skinned, skinned_refusal, SkinnedRig};
+use crate::casting::skin::{is_skinned_rig, skinned_refusal, SkinnedRig};
 use crate::casting::wardrobe::{Wardrobes, GLTF_MATERIAL};
 use crate::casting::{cast_agent, cast_delivered, fit_part, AgentCast, CastPart, RigCasting, SlotCast};
 use crate::error::{Error, Result};
-use crate::scene::gltf::{AssetCache, GltfFile};
+use crate::scene::gltf::AssetCache;
 use crate::scene::{vis, Camera, Instance, Library, Material, MaterialId, Mesh, MeshId};
 use crate::shot::{RigKind, Shot};
 
@@ -194,20 +194,7 @@ impl ShotCrowd {
         let mut rigs = BTreeMap::new();
         let mut skinned = BTreeMap::new();
         for (name, r) in &shot.rigs {
-            let kind = match r.kind {
-                Some(k) => k,
-                // A skin and no slot extras: a skinned character.
-                None => {
-                    let file = GltfFile::open(&r.file)?;
-                    let slots =
-                        file.doc.nodes().any(|n| n.extras().as_ref().is_some_and(|e| e.get().contains("\"slot\"")));
-                    if is_skinned(&file) && !slots {
-                        RigKind::Skinned
-                    } else {
-                        RigKind::Slots
-                    }
-                }
-            };
+            let kind = if is_skinned_rig(r)? { RigKind::Skinned } else { RigKind::Slots };
             match kind {
                 RigKind::Slots => {
                     rigs.insert(name.clone(), Rig::load(&r.file)?);

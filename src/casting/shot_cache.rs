@@ -11,6 +11,7 @@ use crate::cache::jupedsim::{RigClip, SHOT_FPS};
 use crate::cache::tabular::Gait;
 use crate::cache::{CacheReader, Format, Import, ImportOptions, TabularOptions};
 use crate::casting::rig::Rig;
+use crate::casting::skin::{is_skinned_rig, SkinnedRig};
 use crate::error::{Error, Result};
 use crate::shot::Shot;
 
@@ -43,6 +44,28 @@ pub fn gait(file: &Path, walk: &str, idle: Option<&str>) -> Result<Gait> {
     Ok(Gait { stride, cycle_length, idle_length })
 }
 
+/// A skinned character's gait: its walk cycle's stride (the root joint's
+/// travel, or the shot's `strides`) and length; `None` when it has no such
+/// cycle. A walk whose stride is 0 (no root, no given stride) is refused.
+fn skinned_gait(rig: &SkinnedRig, walk: &str, idle: Option<&str>) -> Result<Option<Gait>> {
+    let Ok(c) = rig.cycle_index(walk) else { return Ok(None) };
+    let (stride, cycle_length) = (rig.cycles()[c].stride, rig.cycle_frames(c));
+    if !(stride.is_finite() && stride > 0.0 && cycle_length.is_finite() && cycle_length > 0.0) {
+        return Err(Error::invalid(
+            rig.path(),
+            format!(
+                "cycle `{walk}` walks {stride} m in {cycle_length} frames: name its root joint (`root`) or give `strides`"
+            ),
+        )
+        .field("cycle"));
+    }
+    let idle_length = match idle {
+        Some(name) => rig.cycle_frames(rig.cycle_index(name).map_err(|e| e.field("idle_cycle"))?),
+        None => Gait::default().idle_length,
+    };
+    Ok(Some(Gait { stride, cycle_length, idle_length }))
+}
+
 /// How the shot's cache becomes a crowd: the `[cache]` keys over their
 /// preset, at the shot's fps, with the gaits of the shot's rigs.
 pub fn shot_import(shot: &Shot) -> Result<Import> {
@@ -55,6 +78,13 @@ pub fn shot_import(shot: &Shot) -> Result<Import> {
     let gaits = |walk: &str| -> Result<BTreeMap<String, Gait>> {
         let mut out = BTreeMap::new();
         for (name, r) in &shot.rigs {
+            if is_skinned_rig(r)? {
+                let rig = SkinnedRig::load(&r.file, &r.skin, SHOT_FPS)?;
+                if let Some(g) = skinned_gait(&rig, walk, spec.idle_cycle.as_deref())? {
+                    out.insert(name.clone(), g);
+                }
+                continue;
+            }
             // A rig without the walk cycle is only an error if an agent uses it.
             if Rig::load(&r.file)?.cycle(walk).is_ok() {
                 out.insert(name.clone(), gait(&r.file, walk, spec.idle_cycle.as_deref())?);

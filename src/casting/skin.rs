@@ -116,6 +116,19 @@ pub fn is_skinned(file: &GltfFile) -> bool {
     file.doc.skins().len() > 0
 }
 
+/// Whether a shot's rig is a skinned character: its `kind`, else detected
+/// from the file (a skin and no slot extras).
+pub fn is_skinned_rig(rig: &crate::shot::RigRef) -> Result<bool> {
+    match rig.kind {
+        Some(k) => Ok(k == crate::shot::RigKind::Skinned),
+        None => {
+            let file = GltfFile::open(&rig.file)?;
+            let slots = file.doc.nodes().any(|n| n.extras().as_ref().is_some_and(|e| e.get().contains("\"slot\"")));
+            Ok(is_skinned(&file) && !slots)
+        }
+    }
+}
+
 /// The error for a skinned file used where rigid geometry is expected.
 pub fn skinned_refusal(path: &Path, what: &str) -> Error {
     Error::invalid(
