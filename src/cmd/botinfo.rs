@@ -11,8 +11,8 @@ use crate::error::{Error, Result};
 /// `throng botinfo`.
 #[derive(Debug, Args)]
 pub struct BotinfoArgs {
-    /// Shot file (optional with --exr, which names its shot in the header).
-    pub shot: Option<PathBuf>,
+    /// Shot file (required, with --exr too: the EXR names its shot and frame, and botinfo checks they match).
+    pub shot: PathBuf,
     /// Agent ids.
     pub ids: Vec<u32>,
     /// Shot frame (default: the shot's first frame).
@@ -41,13 +41,7 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
                 return Err(Error::Usage("give agent ids or --pixel, not both".into()));
             }
             let (film, meta) = crate::render::exr::read_layer(exr_path)?;
-            let Some(shot) = &args.shot else {
-                return Err(Error::Usage(format!(
-                    "botinfo --exr needs the shot file too: {} is from shot `{}` (throng botinfo SHOT --exr FILE --pixel X,Y)",
-                    exr_path.display(),
-                    meta.shot
-                )));
-            };
+            let shot = &args.shot;
             if x >= film.width || y >= film.height {
                 return Err(Error::Usage(format!(
                     "pixel {x},{y} is outside {} ({}x{}; 0,0 is the top-left pixel)",
@@ -66,16 +60,14 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
             }
             let id = film.agent_id[film.index(x, y)];
             if id == 0 {
-                println!("no agent at pixel {x},{y} (set or sky) in {} frame {}", exr_path.display(), meta.frame);
+                outln!("no agent at pixel {x},{y} (set or sky) in {} frame {}", exr_path.display(), meta.frame);
                 return Ok(());
             }
             Some((shot.clone(), id - 1, meta, exr_path.clone(), (x, y)))
         }
         _ => None,
     };
-    let Some(shot) = &args.shot else {
-        return Err(Error::Usage("botinfo needs a shot file".into()));
-    };
+    let shot = &args.shot;
     if picked.is_none() && args.ids.is_empty() {
         return Err(Error::Usage("name at least one agent id (or --exr FILE --pixel X,Y)".into()));
     }
@@ -108,13 +100,13 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
         }
     }
     if args.json {
-        println!("{}", super::to_json(&infos)?);
+        outln!("{}", super::to_json(&infos)?);
     } else {
         if let Some((_, _, meta, exr_path, (x, y))) = &picked {
-            println!("pixel {x},{y} of {} (layer {}, frame {})", exr_path.display(), meta.layer, meta.frame);
+            outln!("pixel {x},{y} of {} (layer {}, frame {})", exr_path.display(), meta.layer, meta.frame);
         }
         let blocks: Vec<String> = infos.iter().map(format_bot_info).collect();
-        print!("{}", blocks.join("\n"));
+        out!("{}", blocks.join("\n"));
     }
     Ok(())
 }

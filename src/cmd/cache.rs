@@ -101,11 +101,11 @@ fn run_info(args: &CacheInfoArgs) -> Result<()> {
         });
     }
     if args.json {
-        println!("{}", super::to_json(&info)?);
+        outln!("{}", super::to_json(&info)?);
     } else {
-        print!("{}", info.to_text());
+        out!("{}", info.to_text());
         if format == Format::JuPedSim {
-            println!("{:<8} {}", "import", opts.describe());
+            outln!("{:<8} {}", "import", opts.describe());
         }
     }
     Ok(())
@@ -127,7 +127,7 @@ fn run_convert(args: &CacheConvertArgs) -> Result<()> {
     let crowd = read_with(&args.input, &opts)?;
     write(&args.output, &crowd)?;
     let agents: HashSet<u32> = crowd.frames.iter().flat_map(|b| b.agents.iter().map(|a| a.id)).collect();
-    println!(
+    outln!(
         "wrote {} ({}): {} frames, {} agents, from {} ({})",
         args.output.display(),
         to.name(),
@@ -137,7 +137,7 @@ fn run_convert(args: &CacheConvertArgs) -> Result<()> {
         from.name()
     );
     if from == Format::JuPedSim {
-        println!("import: {}", opts.describe());
+        outln!("import: {}", opts.describe());
     }
     Ok(())
 }

@@ -57,7 +57,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     if args.json {
         return super::Summary::new("export", clock, s.mesh_nodes as u64, vec![args.out.clone()]).print();
     }
-    println!(
+    outln!(
         "wrote {}: {} agents, {} mesh nodes sharing {} meshes, {} instanced triangles",
         args.out.display(),
         s.agents,

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 
-use super::values::{frame_list, resolution, FrameList, Resolution};
+use super::values::{frame_list, resolution, spp, threads, FrameList, Resolution};
 use crate::error::{Error, Result};
 use crate::output::FULL_LAYER;
 use crate::render::job::{self, CryptoOutput, ProgressStyle, RenderJob};
@@ -65,11 +65,11 @@ pub struct RenderArgs {
     /// Shot frames, e.g. 1001-1010 or 1001,1005.
     #[arg(long, value_parser = frame_list)]
     pub frames: Option<FrameList>,
-    /// Samples per pixel (default: the shot's).
-    #[arg(long)]
+    /// Samples per pixel, 1-65536 (default: the shot's).
+    #[arg(long, value_parser = spp)]
     pub spp: Option<u32>,
-    /// Render threads (default: all cores). Output does not depend on it.
-    #[arg(long)]
+    /// Render threads, 1-4096 (default: all cores). Output does not depend on it.
+    #[arg(long, value_parser = threads)]
     pub threads: Option<usize>,
     /// Output directory.
     #[arg(long)]
@@ -80,7 +80,7 @@ pub struct RenderArgs {
     /// Layer manifest (default: `<shot dir>/<shot name>.layers.json`, from `throng layers`).
     #[arg(long)]
     pub manifest: Option<PathBuf>,
-    /// Also write a tone-mapped PNG preview beside each EXR.
+    /// Also write an 8-bit sRGB PNG preview beside each EXR (premultiplied RGB over black, clamped to 0-1; no tone mapping).
     #[arg(long)]
     pub png: bool,
     /// Image size override, e.g. 480x270 (default: the shot's).
@@ -132,7 +132,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         Some(FrameList(f)) => f.clone(),
         None => crowd.shot.frames.iter().collect(),
     };
-    let spp = args.spp.unwrap_or(crowd.shot.render.spp).max(1);
+    let spp = args.spp.unwrap_or(crowd.shot.render.spp);
     let job = RenderJob {
         threads: args.threads.unwrap_or(0),
         resume: args.resume,
@@ -152,7 +152,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     let rendered = done.iter().filter(|d| !d.skipped).count();
     let secs: f64 = done.iter().map(|d| d.seconds).sum();
-    println!(
+    outln!(
         "rendered {rendered} layer-frames ({} skipped as complete) in {secs:.1} s into {}",
         done.len() - rendered,
         args.out.display()
