@@ -29,6 +29,7 @@ pub mod export;
 pub mod farm;
 pub mod layers;
 pub mod render;
+pub mod shell;
 pub mod sim;
 mod values;
 
@@ -66,6 +67,10 @@ pub enum Verb {
     /// Plan, submit and follow a shot on a render farm (Slurm) or local workers.
     #[command(subcommand)]
     Farm(farm::FarmVerb),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions(shell::CompletionsArgs),
+    /// Print the man page, or write one per verb with --out DIR.
+    Man(shell::ManArgs),
 }
 
 /// Runs one parsed command line.
@@ -81,6 +86,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Verb::Comp(args) => comp::run(&args),
         Verb::Export(args) => export::run(&args),
         Verb::Farm(verb) => farm::run(&verb),
+        Verb::Completions(args) => shell::completions(&args),
+        Verb::Man(args) => shell::man(&args),
     }
 }
 

@@ -7,6 +7,7 @@ use clap::{Args, ValueEnum};
 use super::values::{frame_list, resolution, spp, threads, FrameList, Resolution};
 use crate::error::{Error, Result};
 use crate::output::FULL_LAYER;
+use crate::render::exr;
 use crate::render::job::{self, CryptoOutput, ProgressStyle, RenderJob};
 
 /// `--cryptomatte`.
@@ -26,6 +27,33 @@ impl From<CryptoFlag> for CryptoOutput {
             CryptoFlag::Header => CryptoOutput::Header,
             CryptoFlag::Sidecar => CryptoOutput::Sidecar,
             CryptoFlag::Off => CryptoOutput::Off,
+        }
+    }
+}
+
+/// `--compression`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CompressionFlag {
+    /// ZIP, 16-line blocks: lossless (the default).
+    Zip,
+    /// ZIP per scanline: lossless.
+    Zips,
+    /// PIZ wavelet: lossless, often smaller on noisy renders.
+    Piz,
+    /// B44: lossy on half channels (beauty, N, albedo), for previews; Z, agent.id and Cryptomatte stay exact.
+    B44,
+    /// Uncompressed.
+    None,
+}
+
+impl From<CompressionFlag> for exr::LayerCompression {
+    fn from(f: CompressionFlag) -> exr::LayerCompression {
+        match f {
+            CompressionFlag::Zip => exr::LayerCompression::Zip,
+            CompressionFlag::Zips => exr::LayerCompression::Zips,
+            CompressionFlag::Piz => exr::LayerCompression::Piz,
+            CompressionFlag::B44 => exr::LayerCompression::B44,
+            CompressionFlag::None => exr::LayerCompression::None,
         }
     }
 }
@@ -74,7 +102,8 @@ pub struct RenderArgs {
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
-    /// Skip frames whose EXR already exists and reads back whole.
+    /// Skip frames whose EXR already exists, reads back whole and records the same render settings
+    /// (`throng/renderFingerprint`: spp, resolution, seed, camera, lights, manifest); re-render the rest.
     #[arg(long)]
     pub resume: bool,
     /// Layer manifest (default: `<shot dir>/<shot name>.layers.json`, from `throng layers`).
@@ -89,6 +118,9 @@ pub struct RenderArgs {
     /// Cryptomatte mattes (CryptoAgent, CryptoPart).
     #[arg(long, value_enum, default_value_t = CryptoFlag::Header)]
     pub cryptomatte: CryptoFlag,
+    /// EXR compression.
+    #[arg(long, value_enum, default_value_t = CompressionFlag::Zip)]
+    pub compression: CompressionFlag,
     /// Progress on stderr.
     #[arg(long, value_enum, default_value_t = ProgressFlag::Auto)]
     pub progress: ProgressFlag,
@@ -123,6 +155,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 format!("manifest is for shot `{}`, not `{}`", m.shot, crowd.shot.name),
             ));
         }
+        if let Some(warning) = crate::layers::check_current(&manifest_path, m, &crowd.shot)? {
+            eprintln!("throng: warning: {warning}");
+        }
     }
     let layers = match (args.layer.as_str(), &manifest) {
         ("all", Some(m)) => job::all_layers(m),
@@ -140,6 +175,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         resolution: args.resolution.map(|Resolution(r)| r),
         cryptomatte: args.cryptomatte.into(),
         progress: args.progress.into(),
+        compression: args.compression.into(),
         ..RenderJob::new(layers, frames, spp, args.out.clone())
     };
     let done = job::run(&crowd, manifest.as_ref(), &job)?;

@@ -13,6 +13,7 @@
 //! heights, memory estimates, cameras), independent of cache and casting
 //! types; [`input`] builds that input from a cast shot.
 
+pub mod fingerprint;
 mod font;
 pub mod input;
 pub mod manifest;
@@ -27,6 +28,7 @@ use crate::error::{Error, Result};
 use crate::scene::Camera;
 use crate::shot::{parse_bytes, LayerSettings, SplitMode};
 
+pub use fingerprint::{check_current, MadeFrom};
 pub use input::{build_layers, set_bounds, settings_with_overrides, LayerOverrides};
 pub use manifest::{
     estimate_agent_memory, estimate_proxy_memory, format_bytes, read_manifest, summary, write_manifest, CameraRecord,
@@ -592,6 +594,7 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
         layers,
         agents,
         absent,
+        made_from: None,
     })
 }
 
