@@ -11,8 +11,8 @@ use crate::error::{Error, Result};
 /// `throng botinfo`.
 #[derive(Debug, Args)]
 pub struct BotinfoArgs {
-    /// Shot file (required, with --exr too: the EXR names its shot and frame, and botinfo checks they match).
-    pub shot: PathBuf,
+    /// Shot file (required; without it, --exr says which shot the EXR's header names).
+    pub shot: Option<PathBuf>,
     /// Agent ids.
     pub ids: Vec<u32>,
     /// Shot frame (default: the shot's first frame).
@@ -41,7 +41,13 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
                 return Err(Error::Usage("give agent ids or --pixel, not both".into()));
             }
             let (film, meta) = crate::render::exr::read_layer(exr_path)?;
-            let shot = &args.shot;
+            let Some(shot) = &args.shot else {
+                return Err(Error::Usage(format!(
+                    "botinfo --exr needs the shot file too: {} is from shot `{}` (throng botinfo SHOT --exr FILE --pixel X,Y)",
+                    exr_path.display(),
+                    meta.shot
+                )));
+            };
             if x >= film.width || y >= film.height {
                 return Err(Error::Usage(format!(
                     "pixel {x},{y} is outside {} ({}x{}; 0,0 is the top-left pixel)",
@@ -67,7 +73,9 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
         }
         _ => None,
     };
-    let shot = &args.shot;
+    let Some(shot) = &args.shot else {
+        return Err(Error::Usage("botinfo needs a shot file".into()));
+    };
     if picked.is_none() && args.ids.is_empty() {
         return Err(Error::Usage("name at least one agent id (or --exr FILE --pixel X,Y)".into()));
     }
