@@ -510,6 +510,8 @@ fn main() {
                 world_to_ndc,
                 near,
                 far,
+                fps: 24.0,
+                render_fingerprint: String::new(),
             };
             let exr = prefix.with_extension("exr");
             let png = prefix.with_extension("png");

@@ -66,12 +66,62 @@ pub struct Frames {
     /// Frames per second.
     #[serde(default = "default_fps")]
     pub fps: f32,
+    /// What a shot frame with no cache frame (a gap, or past the cache's
+    /// ends) renders: an error (the default) or an empty crowd, with a warning.
+    #[serde(default)]
+    pub outside_cache: OutsideCache,
+}
+
+/// `frames.outside_cache`: shot frames the cache does not hold.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OutsideCache {
+    /// Loading the shot fails, naming the first such frame.
+    #[default]
+    Error,
+    /// Those frames have no agents; loading warns once, listing them.
+    Empty,
+}
+
+/// Most frames a shot or a `--frames` list may hold (about 70 minutes at 24 fps).
+pub const MAX_FRAMES: u64 = 100_000;
+/// Largest width or height of a render.
+pub const MAX_RESOLUTION: u32 = 16384;
+/// Most pixels of a render (8192 x 8192): the film holds about 60 bytes a pixel.
+pub const MAX_PIXELS: u64 = 8192 * 8192;
+/// Most samples per pixel.
+pub const MAX_SPP: u32 = 65536;
+
+/// Checks a render size: each side 1..=[`MAX_RESOLUTION`], at most [`MAX_PIXELS`].
+pub fn check_resolution(w: u32, h: u32) -> std::result::Result<(), String> {
+    if w == 0 || h == 0 || w > MAX_RESOLUTION || h > MAX_RESOLUTION || u64::from(w) * u64::from(h) > MAX_PIXELS {
+        return Err(format!(
+            "resolution {w}x{h} is out of range (1 to {MAX_RESOLUTION} a side, at most {MAX_PIXELS} pixels)"
+        ));
+    }
+    Ok(())
+}
+
+/// Checks samples per pixel: 1..=[`MAX_SPP`].
+pub fn check_spp(spp: u32) -> std::result::Result<(), String> {
+    if spp == 0 || spp > MAX_SPP {
+        return Err(format!("spp {spp} is out of range (1 to {MAX_SPP})"));
+    }
+    Ok(())
 }
 
 impl Frames {
     /// The middle frame, the default reference frame for layering.
     pub fn middle(&self) -> i32 {
-        self.start + (self.end - self.start) / 2
+        ((i64::from(self.start) + i64::from(self.end)) / 2) as i32
+    }
+    /// How many frames the shot has.
+    pub fn len(&self) -> u64 {
+        (i64::from(self.end) - i64::from(self.start) + 1).max(0) as u64
+    }
+    /// Whether the shot has no frames (never true for a loaded shot).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
     /// Whether `f` is in the shot.
     pub fn contains(&self, f: i32) -> bool {
@@ -97,12 +147,13 @@ pub struct CacheRef {
 
 impl CacheRef {
     /// The cache frame that a shot frame reads.
+    /// Loading checks this fits an i32 for every shot frame; other frames saturate.
     pub fn cache_frame(&self, shot_frame: i32) -> i32 {
-        shot_frame + self.frame_offset
+        shot_frame.saturating_add(self.frame_offset)
     }
-    /// The shot frame a cache frame lands on.
+    /// The shot frame a cache frame lands on (saturating).
     pub fn shot_frame(&self, cache_frame: i32) -> i32 {
-        cache_frame - self.frame_offset
+        cache_frame.saturating_sub(self.frame_offset)
     }
 }
 
@@ -586,6 +637,23 @@ impl Shot {
         if !(frames.fps > 0.0 && frames.fps.is_finite()) {
             return Err(at(file.frames.span(), "frames.fps", format!("fps must be positive, got {}", frames.fps)));
         }
+        if frames.len() > MAX_FRAMES {
+            return Err(at(
+                file.frames.span(),
+                "frames",
+                format!("{} frames is more than a shot may hold ({MAX_FRAMES})", frames.len()),
+            ));
+        }
+        let offset = file.cache.frame_offset;
+        for f in [frames.start, frames.end] {
+            if f.checked_add(offset).is_none() {
+                return Err(Error::invalid(
+                    path,
+                    format!("shot frame {f} + frame_offset {offset} is not a representable frame number (32-bit)"),
+                )
+                .field("cache.frame_offset"));
+            }
+        }
 
         let import = file.cache.spec();
         // Layout and numbers are checked here, so a bad key names its line
@@ -595,8 +663,7 @@ impl Shot {
                 .map_err(|(k, m)| Error::invalid(path, m).field(format!("cache.{k}")))?;
         }
         import.placement.check_key().map_err(|(k, m)| Error::invalid(path, m).field(format!("cache.{k}")))?;
-        let cache =
-            CacheRef { path: existing(&file.cache.path, "cache.path")?, frame_offset: file.cache.frame_offset, import };
+        let cache = CacheRef { path: existing(&file.cache.path, "cache.path")?, frame_offset: offset, import };
         let wardrobes = file.wardrobes.iter().map(|w| existing(w, "wardrobes")).collect::<Result<Vec<_>>>()?;
         let mut rigs = BTreeMap::new();
         for (name, rig) in &file.rigs {
@@ -723,9 +790,9 @@ impl Shot {
             parse_bytes(b).map_err(|m| Error::invalid(path, m).field("layers.budget"))?;
         }
         let render = file.render;
-        if render.resolution[0] == 0 || render.resolution[1] == 0 || render.spp == 0 {
-            return Err(Error::invalid(path, "resolution and spp must be > 0").field("render"));
-        }
+        check_resolution(render.resolution[0], render.resolution[1])
+            .map_err(|m| Error::invalid(path, m).field("render.resolution"))?;
+        check_spp(render.spp).map_err(|m| Error::invalid(path, m).field("render.spp"))?;
 
         Ok(Shot {
             path: path.to_path_buf(),
@@ -859,6 +926,11 @@ pub fn parse_frame_list(s: &str) -> std::result::Result<Vec<i32>, String> {
         if b < a {
             return Err(bad());
         }
+        // Counted before any allocation: a list may hold at most MAX_FRAMES frames.
+        let count = (i64::from(b) - i64::from(a)) as u64 / step as u64 + 1;
+        if frames.len() as u64 + count > MAX_FRAMES {
+            return Err(format!("frame list `{s}` holds more than {MAX_FRAMES} frames"));
+        }
         frames.extend((a..=b).step_by(step as usize));
     }
     if frames.is_empty() {
@@ -880,6 +952,10 @@ mod tests {
         assert_eq!(parse_frame_list("-2-1").unwrap(), vec![-2, -1, 0, 1]);
         assert!(parse_frame_list("10-5").is_err());
         assert!(parse_frame_list("abc").is_err());
+        // Runaway lists are refused before allocating.
+        assert!(parse_frame_list("-2147483648-2147483647").is_err());
+        assert!(parse_frame_list("1-100000").is_ok());
+        assert!(parse_frame_list("1-100000,200000").is_err());
     }
 
     #[test]

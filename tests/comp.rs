@@ -75,6 +75,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
         resolution: None,
         cryptomatte: job::CryptoOutput::Header,
         progress: job::ProgressStyle::Off,
+        compression: Default::default(),
     };
     job::run(crowd, Some(manifest), &job).unwrap();
 }

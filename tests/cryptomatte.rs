@@ -246,6 +246,8 @@ fn meta(film: &Film, scene: &FrameScene) -> LayerMeta {
         world_to_ndc,
         near: 0.1,
         far: 100.0,
+        fps: 24.0,
+        render_fingerprint: String::new(),
     }
 }
 
@@ -352,7 +354,13 @@ fn sidecar_manifest_option() {
     let (scene, film) = render(4, 2);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("demo.crowd_0.1001.exr");
-    write_layer_with(&path, &film, &meta(&film, &scene), &WriteOptions { manifest: ManifestMode::Sidecar }).unwrap();
+    write_layer_with(
+        &path,
+        &film,
+        &meta(&film, &scene),
+        &WriteOptions { manifest: ManifestMode::Sidecar, ..Default::default() },
+    )
+    .unwrap();
     let side = dir.path().join("demo.crowd_0.1001.CryptoAgent.json");
     assert!(side.exists() && dir.path().join("demo.crowd_0.1001.CryptoPart.json").exists());
     let p = &read_parts(&path, |_| false).unwrap()[0];

@@ -107,6 +107,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[String], out: &Path)
         resolution: Some([WIDTH, HEIGHT]),
         cryptomatte: job::CryptoOutput::Header,
         progress: job::ProgressStyle::Off,
+        compression: Default::default(),
     };
     let done = job::run(crowd, Some(manifest), &job).expect("demo renders");
     done.into_iter().map(|r| (r.layer, r.path)).collect()

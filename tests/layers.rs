@@ -220,13 +220,13 @@ fn pins_move_only_the_pinned_agent() {
     let base = build_manifest(&input(grid(10, 8), count(3))).unwrap();
     let far = base.agents.iter().max_by(|a, b| a.distance_m.total_cmp(&b.distance_m)).unwrap().id;
     let mut settings = count(3);
-    settings.pins = vec![Pin { agent: far, layer: 0 }, Pin { agent: 5, layer: 4 }];
+    settings.pins = vec![Pin { agent: far, layer: 0 }, Pin { agent: 5, layer: 3 }];
     let m = build_manifest(&input(grid(10, 8), settings)).unwrap();
     assert_eq!(m.agent(far).unwrap().layer, 0);
     assert!(m.agent(far).unwrap().pinned);
-    assert_eq!(m.agent(5).unwrap().layer, 4);
-    assert_eq!(m.layers.len(), 5, "pinning to layer 4 creates crowd3 and crowd4");
-    assert_eq!(m.layers[3].agents, 0);
+    assert_eq!(m.agent(5).unwrap().layer, 3);
+    assert_eq!(m.layers.len(), 4, "pinning to layer 3 of 3 creates crowd3");
+    assert_eq!(m.layers[3].agents, 1);
     for (a, b) in m.agents.iter().zip(&base.agents) {
         if a.id != far && a.id != 5 {
             assert_eq!(a.layer, b.layer, "agent {}", a.id);
@@ -237,6 +237,15 @@ fn pins_move_only_the_pinned_agent() {
     settings.pins = vec![Pin { agent: 9999, layer: 0 }];
     let err = build_manifest(&input(grid(3, 3), settings)).unwrap_err().to_string();
     assert!(err.contains("agent 9999") && err.contains("layers.pins"), "{err}");
+}
+
+#[test]
+fn a_pin_that_would_leave_empty_layers_is_refused() {
+    // Regression (issue 15): a pin to layer 7 of 3 made crowd3-crowd6 empty, silently.
+    let mut settings = count(3);
+    settings.pins = vec![Pin { agent: 5, layer: 7 }];
+    let err = build_manifest(&input(grid(10, 8), settings)).unwrap_err().to_string();
+    assert!(err.contains("agent 5") && err.contains("layers.pins") && err.contains("layer 3 empty"), "{err}");
 }
 
 #[test]

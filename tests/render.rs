@@ -493,6 +493,8 @@ fn exr_round_trip() {
         world_to_ndc,
         near: 0.1,
         far: 1000.0,
+        fps: 24.0,
+        render_fingerprint: String::new(),
     };
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("demo.crowd_0.1001.exr");
@@ -544,9 +546,9 @@ fn exr_round_trip() {
     let m = glam::Mat4::from_cols_array(&world_to_camera);
     let pc = m.transform_point3(target);
     assert!(pc.z > 0.0 && pc.x.abs() < 1e-4, "{pc}");
-    // And worldToNDC maps the image centre's point to (0, 0).
+    // And worldToNDC (OpenEXR's NDC: 0..1 from the top-left) maps the image centre's point to (0.5, 0.5).
     let ndc = glam::Mat4::from_cols_array(&world_to_ndc).project_point3(target);
-    assert!(ndc.x.abs() < 1e-4 && ndc.y.abs() < 1e-4 && ndc.z > -1.0 && ndc.z < 1.0, "{ndc}");
+    assert!((ndc.x - 0.5).abs() < 1e-4 && (ndc.y - 0.5).abs() < 1e-4 && ndc.z > 0.0 && ndc.z < 1.0, "{ndc}");
 
     let png = dir.path().join("preview.png");
     write_preview_png(&png, &film).unwrap();

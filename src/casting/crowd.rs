@@ -205,6 +205,12 @@ impl ShotCrowd {
                     skinned.insert(name.clone(), rig);
                 }
             }
+            let slots: Vec<&str> = match (rigs.get(name), skinned.get(name)) {
+                (Some(rig), _) => rig.slots().iter().map(|s| s.name.as_str()).collect(),
+                (None, Some(rig)) => rig.slots().iter().map(String::as_str).collect(),
+                (None, None) => Vec::new(),
+            };
+            wardrobes.check_slots(name, &r.schemes, &slots)?;
         }
 
         // First pass over the shot's frames: each agent's rig (at its first
@@ -217,13 +223,16 @@ impl ShotCrowd {
         let mut seen: BTreeMap<u32, Seen> = BTreeMap::new();
         // Poses by (rig, cycle, step): bounded by the rigs' cycles and steps, whatever the agent count.
         let mut skin_poses: BTreeSet<(String, usize, u32)> = BTreeSet::new();
+        let mut outside: Vec<i32> = Vec::new();
         for f in shot.frames.iter() {
             let cf = shot.cache.cache_frame(f);
             if cache.frames().binary_search(&cf).is_err() {
+                outside.push(f);
                 continue;
             }
             let block = cache.read_frame(cf)?;
             for a in &block.agents {
+                crate::casting::check_agent_id(cache.path(), cf, a.id)?;
                 let cycle = cache.cycles().get(a.cycle as usize).map(String::as_str).unwrap_or("");
                 let rig_name = cache.rigs().get(a.rig as usize).map(String::as_str).unwrap_or("");
                 // A cycle the agent's rig lacks would only fail when posed; say so now.
@@ -254,6 +263,7 @@ impl ShotCrowd {
                 e.never_scale |= no_scale;
             }
         }
+        let mut warnings = crate::casting::check_outside_cache(&shot, cache.frames(), cache.path(), &outside)?;
         if seen.is_empty() {
             return Err(Error::invalid(
                 &shot.cache.path,
@@ -456,7 +466,7 @@ impl ShotCrowd {
             .map(|(name, rig)| (name.clone(), rig.height()))
             .chain(skinned.iter().map(|(name, rig)| (name.clone(), rig.height())))
             .collect();
-        let warnings = skinned.values().flat_map(|r| r.warnings().iter().cloned()).collect();
+        warnings.extend(skinned.values().flat_map(|r| r.warnings().iter().cloned()));
         Ok(ShotCrowd {
             shot,
             wardrobes,

@@ -12,3 +12,62 @@ pub mod wardrobe;
 
 pub use cast::{cast_agent, cast_delivered, fit_part, mix64, uniform, AgentCast, CastPart, RigCasting, SlotCast};
 pub use crowd::{AgentPose, DressedPart, Lod, PosedSkins, ShotCrowd, SkinDress};
+
+/// Refuses an agent id that cannot be represented downstream: `agent.id` in
+/// the EXRs is id + 1 (0 = no agent), so `u32::MAX` would write as "no agent".
+pub fn check_agent_id(cache: &std::path::Path, cache_frame: i32, id: u32) -> crate::error::Result<()> {
+    if id == u32::MAX {
+        return Err(crate::error::Error::invalid(
+            cache,
+            format!("agent id {id} cannot be rendered (agent.id is id + 1 in 32 bits; ids go up to {})", u32::MAX - 1),
+        )
+        .frame(cache_frame.into())
+        .agent(id)
+        .field("id"));
+    }
+    Ok(())
+}
+
+/// Shot frames with no cache frame (`outside`, in order): an error naming the
+/// first one, unless the shot sets `frames.outside_cache = "empty"`, when they
+/// render no agents and this returns the warning to print.
+pub fn check_outside_cache(
+    shot: &crate::shot::Shot,
+    cache_frames: &[i32],
+    cache: &std::path::Path,
+    outside: &[i32],
+) -> crate::error::Result<Vec<String>> {
+    let Some(&first) = outside.first() else { return Ok(Vec::new()) };
+    let held = match (cache_frames.first(), cache_frames.last()) {
+        (Some(a), Some(b)) => format!("the cache holds frames {a}-{b}"),
+        _ => "the cache holds no frames".into(),
+    };
+    let list = |n: usize| {
+        let mut s = outside.iter().take(n).map(i32::to_string).collect::<Vec<_>>().join(", ");
+        if outside.len() > n {
+            s += &format!(" and {} more", outside.len() - n);
+        }
+        s
+    };
+    match shot.frames.outside_cache {
+        crate::shot::OutsideCache::Error => Err(crate::error::Error::invalid(
+            &shot.path,
+            format!(
+                "{} shot frame(s) have no cache frame in {} ({held}; frame_offset {}): {}; set `frames.outside_cache = \"empty\"` to render them with no agents",
+                outside.len(),
+                cache.display(),
+                shot.cache.frame_offset,
+                list(8)
+            ),
+        )
+        .frame(first.into())
+        .field("frames")),
+        crate::shot::OutsideCache::Empty => Ok(vec![format!(
+            "{}: {} shot frame(s) have no cache frame in {} ({held}) and render no agents (frames.outside_cache = \"empty\"): {}",
+            shot.path.display(),
+            outside.len(),
+            cache.display(),
+            list(8)
+        )]),
+    }
+}

@@ -109,6 +109,9 @@ pub struct Scheme {
     /// Slots scaled uniformly, from the wardrobe (set on load).
     #[serde(skip)]
     pub uniform_slots: Vec<String>,
+    /// The wardrobe file it came from (set on load).
+    #[serde(skip)]
+    pub source: PathBuf,
 }
 
 impl Scheme {
@@ -196,9 +199,16 @@ impl Wardrobes {
                         );
                     }
                     if let Some(w) = &part.material_weights {
-                        if w.len() != part.materials.len() || w.iter().any(|x| !(*x >= 0.0)) {
+                        if w.len() != part.materials.len() || w.iter().any(|x| !(*x >= 0.0 && x.is_finite())) {
                             return Err(Error::invalid(path, "needs one weight >= 0 per material")
                                 .field(format!("{key}.material_weights")));
+                        }
+                        if w.iter().all(|x| *x == 0.0) {
+                            return Err(Error::invalid(
+                                path,
+                                "every material weight is 0, so no material could be drawn (give one a weight > 0)",
+                            )
+                            .field(format!("{key}.material_weights")));
                         }
                     }
                     for m in &mut part.materials {
@@ -213,12 +223,36 @@ impl Wardrobes {
                     }
                 }
                 scheme.wardrobe = file.name.clone();
+                scheme.source = path.clone();
                 scheme.uniform_slots = file.uniform_slots.clone();
                 origin.insert(name.clone(), path.clone());
                 all.schemes.insert(name, scheme);
             }
         }
         Ok(all)
+    }
+
+    /// Refuses a part for a slot that rig `rig` (with `slots`) lacks, in any
+    /// scheme the rig draws with a weight > 0: such a part could never be worn.
+    pub fn check_slots(&self, rig: &str, schemes: &BTreeMap<String, f32>, slots: &[&str]) -> Result<()> {
+        for (name, _) in schemes.iter().filter(|(_, w)| **w > 0.0) {
+            let Some(scheme) = self.schemes.get(name) else { continue };
+            for (i, part) in scheme.parts.iter().enumerate() {
+                if !slots.contains(&part.slot.as_str()) {
+                    return Err(Error::invalid(
+                        &scheme.source,
+                        format!(
+                            "part `{}` is for slot `{}`, which rig `{rig}` (used with scheme `{name}`) lacks; its slots: {}",
+                            part.mesh,
+                            part.slot,
+                            slots.join(", ")
+                        ),
+                    )
+                    .field(format!("schemes.{name}.parts[{i}].slot")));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Every slot any scheme dresses.

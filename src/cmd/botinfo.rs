@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 /// `throng botinfo`.
 #[derive(Debug, Args)]
 pub struct BotinfoArgs {
-    /// Shot file (optional with --exr, which names its shot in the header).
+    /// Shot file (required; without it, --exr says which shot the EXR's header names).
     pub shot: Option<PathBuf>,
     /// Agent ids.
     pub ids: Vec<u32>,
@@ -66,7 +66,7 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
             }
             let id = film.agent_id[film.index(x, y)];
             if id == 0 {
-                println!("no agent at pixel {x},{y} (set or sky) in {} frame {}", exr_path.display(), meta.frame);
+                outln!("no agent at pixel {x},{y} (set or sky) in {} frame {}", exr_path.display(), meta.frame);
                 return Ok(());
             }
             Some((shot.clone(), id - 1, meta, exr_path.clone(), (x, y)))
@@ -108,13 +108,13 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
         }
     }
     if args.json {
-        println!("{}", super::to_json(&infos)?);
+        outln!("{}", super::to_json(&infos)?);
     } else {
         if let Some((_, _, meta, exr_path, (x, y))) = &picked {
-            println!("pixel {x},{y} of {} (layer {}, frame {})", exr_path.display(), meta.layer, meta.frame);
+            outln!("pixel {x},{y} of {} (layer {}, frame {})", exr_path.display(), meta.layer, meta.frame);
         }
         let blocks: Vec<String> = infos.iter().map(format_bot_info).collect();
-        print!("{}", blocks.join("\n"));
+        out!("{}", blocks.join("\n"));
     }
     Ok(())
 }

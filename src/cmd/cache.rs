@@ -287,14 +287,14 @@ fn run_info(args: &CacheInfoArgs) -> Result<()> {
         eprintln!("throng: warning: {w}");
     }
     if args.json {
-        println!("{}", super::to_json(&info)?);
+        outln!("{}", super::to_json(&info)?);
     } else {
-        print!("{}", info.to_text());
+        out!("{}", info.to_text());
         if format == Format::JuPedSim {
-            println!("{:<8} {}", "import", opts.describe());
+            outln!("{:<8} {}", "import", opts.describe());
         }
         if let (Some(o), Some(r)) = (&how.tabular, &report) {
-            println!("{:<8} {}", "import", describe_table(o, r));
+            outln!("{:<8} {}", "import", describe_table(o, r));
         }
     }
     Ok(())
@@ -315,7 +315,7 @@ fn run_convert(args: &CacheConvertArgs) -> Result<()> {
     write(&args.output, &crowd)?;
     let agents: HashSet<u32> = crowd.frames.iter().flat_map(|b| b.agents.iter().map(|a| a.id)).collect();
     let from_name = if how.tabular.is_some() { Format::Tabular.name() } else { from.name() };
-    println!(
+    outln!(
         "wrote {} ({}): {} frames, {} agents, from {} ({})",
         args.output.display(),
         to.name(),
@@ -325,10 +325,10 @@ fn run_convert(args: &CacheConvertArgs) -> Result<()> {
         from_name
     );
     if from == Format::JuPedSim {
-        println!("import: {}", how.jupedsim.describe());
+        outln!("import: {}", how.jupedsim.describe());
     }
     if let (Some(o), Some(r)) = (&how.tabular, &report) {
-        println!("import: {}", describe_table(o, r));
+        outln!("import: {}", describe_table(o, r));
     }
     for w in crate::cache::bounds_warnings(&crowd) {
         eprintln!("throng: warning: {w}");

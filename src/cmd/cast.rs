@@ -42,14 +42,14 @@ pub fn run(args: &CastArgs) -> Result<()> {
             agents: &rows,
             stats: args.stats.then(|| cast_stats(&crowd)),
         };
-        println!("{}", super::to_json(&out)?);
+        outln!("{}", super::to_json(&out)?);
         return Ok(());
     }
     if args.stats {
-        print!("{}", format_stats(&cast_stats(&crowd)));
+        out!("{}", format_stats(&cast_stats(&crowd)));
         return Ok(());
     }
-    println!("{:>6}  {:<12} {:<20} {:>6}  {:<16} parts", "id", "rig", "scheme", "height", "head");
+    outln!("{:>6}  {:<12} {:<20} {:>6}  {:<16} parts", "id", "rig", "scheme", "height", "head");
     for r in &rows {
         let head = crowd.casting[&r.id]
             .slots
@@ -58,7 +58,7 @@ pub fn run(args: &CastArgs) -> Result<()> {
             .and_then(|s| s.part.as_ref())
             .map_or("-", |p| p.mesh.as_str());
         let filled = r.parts.iter().filter(|p| p.mesh.is_some()).count();
-        println!(
+        outln!(
             "{:>6}  {:<12} {:<20} {:>6.3}  {:<16} {}/{}",
             r.id,
             r.rig,

@@ -44,7 +44,7 @@ pub fn run(args: &CompArgs) -> Result<()> {
         return super::Summary::new("comp", clock, comped.layers.len() as u64, files).print();
     }
     let names: Vec<&str> = comped.layers.iter().map(|l| l.0.as_str()).collect();
-    println!(
+    outln!(
         "comp {} frame {}: {} (back to front) -> {}",
         comped.meta.shot,
         args.frame,

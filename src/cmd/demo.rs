@@ -22,7 +22,7 @@ pub struct DemoArgs {
     #[arg(long)]
     pub shot: Option<PathBuf>,
     /// Samples per pixel for the demo renders.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = 16, value_parser = super::values::spp)]
     pub spp: u32,
 }
 
@@ -43,12 +43,12 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     };
     let out = &args.out;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    println!("throng demo: {}", shot_path.display());
+    outln!("throng demo: {}", shot_path.display());
 
     let t = Instant::now();
     let crowd = super::load_crowd(&shot_path)?;
     let info = crate::cache::info(&crowd.cache)?;
-    println!(
+    outln!(
         "  cache    {} agents over cache frames {}-{}, {} rigs, {} cycles",
         info.agents,
         info.frame_first.unwrap_or(0),
@@ -57,7 +57,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         info.cycles.len()
     );
     let stats = cast_stats(&crowd);
-    println!(
+    outln!(
         "  cast     {} agents, {} part instances of {} unique parts and {} materials ({} shared vs {} copied)  [{:.2} s]",
         stats.agents,
         stats.part_instances,
@@ -74,7 +74,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     crate::layers::write_manifest(&manifest_path, &manifest)?;
     let map = out.join("layers_map.png");
     crate::layers::draw_map(&manifest, &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, &map)?;
-    println!(
+    outln!(
         "  layers   {} crowd layers + set, ranked at frame {}: 0 pops fixed (per-frame ranking would pop {} agents)  [{:.2} s]",
         manifest.layers.len(),
         manifest.ref_frame,
@@ -85,7 +85,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let t = Instant::now();
     let glb = out.join(format!("{}.{}.glb", crowd.shot.name, manifest.ref_frame));
     let s = crate::export::export_frame(&crowd, manifest.ref_frame, None, &glb)?;
-    println!(
+    outln!(
         "  export   {} agents, {} mesh nodes sharing {} meshes  [{:.2} s]",
         s.agents,
         s.mesh_nodes,
@@ -103,14 +103,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     };
     let done = job::run(&crowd, Some(&manifest), &render)?;
     let [w, h] = crowd.shot.render.resolution;
-    println!(
+    outln!(
         "  render   {} layer-frames at {w}x{h}, {} spp  [{:.1} s]",
         done.len(),
         render.spp,
         t.elapsed().as_secs_f64()
     );
 
-    println!("done in {:.1} s. Wrote under {}:", started.elapsed().as_secs_f64(), out.display());
+    outln!("done in {:.1} s. Wrote under {}:", started.elapsed().as_secs_f64(), out.display());
     let rows = [
         (manifest_path.display().to_string(), "the layer manifest (docs/layers.md)".to_string()),
         (map.display().to_string(), "the layer map: who is in which layer".to_string()),
@@ -122,11 +122,11 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     ];
     let width = rows.iter().map(|(p, _)| p.len()).max().unwrap_or(0);
     for (path, what) in &rows {
-        println!("  {path:<width$}  {what}");
+        outln!("  {path:<width$}  {what}");
     }
-    println!("Look at the PNGs, or the EXRs with `exrheader FILE` (Debian: openexr) or any compositor.");
+    outln!("Look at the PNGs, or the EXRs with `exrheader FILE` (Debian: openexr) or any compositor.");
     if let Some(a) = manifest.agents.iter().find(|a| a.layer == 0 && !a.removed) {
-        println!("Ask about an agent: throng botinfo {} {} --frame {}", shot_path.display(), a.id, manifest.ref_frame);
+        outln!("Ask about an agent: throng botinfo {} {} --frame {}", shot_path.display(), a.id, manifest.ref_frame);
     }
     Ok(())
 }

@@ -28,6 +28,15 @@ pub struct ExportArgs {
 /// `throng export SHOT --frame F [--layer L] --out scene.glb`.
 pub fn run(args: &ExportArgs) -> Result<()> {
     let clock = std::time::Instant::now();
+    // Like a shell redirect, export writes into an existing folder only: a
+    // typo in --out must not create a tree somewhere unexpected.
+    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty() && !d.is_dir()) {
+        return Err(Error::Usage(format!(
+            "--out {}: the folder {} does not exist (create it first)",
+            args.out.display(),
+            dir.display()
+        )));
+    }
     let crowd = super::load_crowd(&args.shot)?;
     if !crowd.shot.frames.contains(args.frame) {
         return Err(Error::Usage(format!(
@@ -57,7 +66,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     if args.json {
         return super::Summary::new("export", clock, s.mesh_nodes as u64, vec![args.out.clone()]).print();
     }
-    println!(
+    outln!(
         "wrote {}: {} agents, {} mesh nodes sharing {} meshes, {} instanced triangles",
         args.out.display(),
         s.agents,

@@ -38,14 +38,14 @@ pub struct PlanArgs {
     /// Frames per render task.
     #[arg(long, default_value_t = 1)]
     pub chunk: usize,
-    /// Samples per pixel (default: the shot's).
-    #[arg(long)]
+    /// Samples per pixel, 1-65536 (default: the shot's).
+    #[arg(long, value_parser = super::values::spp)]
     pub spp: Option<u32>,
     /// Image size override, e.g. 480x270 (default: the shot's).
     #[arg(long, value_parser = resolution)]
     pub resolution: Option<Resolution>,
     /// Cores per render task (its `--threads`; output does not depend on it).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub cores: u32,
     /// Extra attempts of a failed task.
     #[arg(long, default_value_t = 1)]
@@ -144,11 +144,11 @@ fn plan(a: &PlanArgs) -> Result<()> {
     };
     let (path, plan) = farm::write_new_plan(&opts)?;
     if a.json {
-        println!("{}", super::to_json(&plan)?);
+        outln!("{}", super::to_json(&plan)?);
         return Ok(());
     }
     let renders = plan.tasks.iter().filter(|t| t.kind == farm::TaskKind::Render).count();
-    println!(
+    outln!(
         "plan {}: shot {}, {} frames x {} layers -> {renders} render tasks ({} frames each) and {} comps",
         path.display(),
         plan.shot,
@@ -157,7 +157,7 @@ fn plan(a: &PlanArgs) -> Result<()> {
         plan.chunk,
         plan.tasks.len() - renders
     );
-    println!(
+    outln!(
         "fingerprint {} over {} inputs; manifest {}",
         plan.fingerprint.value,
         plan.fingerprint.inputs.len(),
@@ -174,16 +174,16 @@ fn submit(a: &SubmitArgs) -> Result<()> {
         Engine::Slurm => {
             let report = farm::slurm::submit(&plan, &plan_path, &exe)?;
             if a.json {
-                println!("{}", super::to_json(&report)?);
+                outln!("{}", super::to_json(&report)?);
                 return Ok(());
             }
             for (what, id) in &report.submitted {
-                println!("submitted {what}: slurm job {id}");
+                outln!("submitted {what}: slurm job {id}");
             }
             for t in &report.queued {
-                println!("still queued from an earlier submission: {t}");
+                outln!("still queued from an earlier submission: {t}");
             }
-            println!(
+            outln!(
                 "{} jobs submitted, {} tasks already done; follow with `throng farm status {}`",
                 report.submitted.len(),
                 report.done,
@@ -194,15 +194,15 @@ fn submit(a: &SubmitArgs) -> Result<()> {
         Engine::Local => {
             let say = |line: &str| {
                 if !a.json {
-                    println!("{line}");
+                    outln!("{line}");
                     let _ = std::io::stdout().flush();
                 }
             };
             let report = farm::local::run_local(&plan, &plan_path, &exe, a.workers, &say)?;
             if a.json {
-                println!("{}", super::to_json(&report)?);
+                outln!("{}", super::to_json(&report)?);
             } else {
-                println!(
+                outln!(
                     "local: {} tasks ran, {} already done, {} failed, {} blocked in {:.1} s",
                     report.ran.len(),
                     report.skipped,
@@ -234,17 +234,17 @@ fn status(a: &StatusArgs) -> Result<()> {
             "scheduler": note,
             "tasks": tasks,
         });
-        println!("{}", super::to_json(&v)?);
+        outln!("{}", super::to_json(&v)?);
     } else {
         let w = tasks.iter().map(|t| t.id.len()).max().unwrap_or(4);
         for t in &tasks {
             let log = if t.state == TaskState::Failed { format!("  log {}", t.log.display()) } else { String::new() };
-            println!("{:<w$}  {:<7}  {}{log}", t.id, t.state.word(), t.detail);
+            outln!("{:<w$}  {:<7}  {}{log}", t.id, t.state.word(), t.detail);
         }
         if let Some(n) = &note {
-            println!("{n}");
+            outln!("{n}");
         }
-        println!(
+        outln!(
             "{}: {} done, {} running, {} failed, {} waiting of {} tasks",
             plan.shot,
             count(TaskState::Done),

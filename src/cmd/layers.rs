@@ -25,7 +25,8 @@ pub struct LayersArgs {
     /// Shot frame to rank at (default: the middle of the shot).
     #[arg(long)]
     pub ref_frame: Option<i32>,
-    /// Rank on every frame instead, and report agents that change layer.
+    /// Also rank on every frame and report how many agents would change layer
+    /// (membership stays the reference frame's; the count is for comparison only).
     #[arg(long)]
     pub per_frame: bool,
     /// Projected height in pixels below which an agent renders as proxy boxes
@@ -74,12 +75,12 @@ pub fn run(args: &LayersArgs) -> Result<()> {
         layers::draw_map(&manifest, &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, map)?;
     }
     if args.json {
-        println!("{}", super::to_json(&manifest.summary_json())?);
+        outln!("{}", super::to_json(&manifest.summary_json())?);
     } else {
-        print!("{}", layers::summary(&manifest));
-        println!("manifest  {}", out.display());
+        out!("{}", layers::summary(&manifest));
+        outln!("manifest  {}", out.display());
         if let Some(map) = &args.map {
-            println!("map       {}", map.display());
+            outln!("map       {}", map.display());
         }
     }
     Ok(())

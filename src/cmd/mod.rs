@@ -8,6 +8,18 @@ use clap::{Parser, Subcommand};
 
 use crate::error::Result;
 
+/// `print!` to stdout that ends the process quietly with status 0 when
+/// stdout is closed (`throng botinfo ... --json | head`), like ripgrep.
+macro_rules! out {
+    ($($t:tt)*) => { $crate::cmd::emit(&format!($($t)*)) };
+}
+
+/// `println!` with [`out!`]'s closed-stdout rule.
+macro_rules! outln {
+    () => { $crate::cmd::emit("\n") };
+    ($($t:tt)*) => { $crate::cmd::emit(&format!("{}\n", format_args!($($t)*))) };
+}
+
 pub mod botinfo;
 pub mod cache;
 pub mod cast;
@@ -17,12 +29,13 @@ pub mod export;
 pub mod farm;
 pub mod layers;
 pub mod render;
+pub mod shell;
 pub mod sim;
 mod values;
 
 /// throng: crowd renderer and level-of-detail layering tool for lighters.
 #[derive(Debug, Parser)]
-#[command(name = "throng", version, about, long_about = None)]
+#[command(name = "throng", version, propagate_version = true, about, long_about = None)]
 pub struct Cli {
     /// The verb.
     #[command(subcommand)]
@@ -54,6 +67,10 @@ pub enum Verb {
     /// Plan, submit and follow a shot on a render farm (Slurm) or local workers.
     #[command(subcommand)]
     Farm(farm::FarmVerb),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions(shell::CompletionsArgs),
+    /// Print the man page, or write one per verb with --out DIR.
+    Man(shell::ManArgs),
 }
 
 /// Runs one parsed command line.
@@ -69,6 +86,23 @@ pub fn run(cli: Cli) -> Result<()> {
         Verb::Comp(args) => comp::run(&args),
         Verb::Export(args) => export::run(&args),
         Verb::Farm(verb) => farm::run(&verb),
+        Verb::Completions(args) => shell::completions(&args),
+        Verb::Man(args) => shell::man(&args),
+    }
+}
+
+/// Writes `text` to stdout and flushes. A closed pipe (EPIPE) ends the
+/// process with status 0 and no message: the reader has what it wanted.
+/// Any other write error ends it with status 2 and the reason.
+pub(crate) fn emit(text: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("throng: error: cannot write to stdout: {e}");
+        std::process::exit(2);
     }
 }
 
@@ -123,7 +157,7 @@ impl Summary {
         }
     }
     fn print(&self) -> Result<()> {
-        println!("{}", to_json(self)?);
+        outln!("{}", to_json(self)?);
         Ok(())
     }
 }

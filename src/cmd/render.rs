@@ -4,9 +4,10 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 
-use super::values::{frame_list, resolution, FrameList, Resolution};
+use super::values::{frame_list, resolution, spp, threads, FrameList, Resolution};
 use crate::error::{Error, Result};
 use crate::output::FULL_LAYER;
+use crate::render::exr;
 use crate::render::job::{self, CryptoOutput, ProgressStyle, RenderJob};
 
 /// `--cryptomatte`.
@@ -26,6 +27,33 @@ impl From<CryptoFlag> for CryptoOutput {
             CryptoFlag::Header => CryptoOutput::Header,
             CryptoFlag::Sidecar => CryptoOutput::Sidecar,
             CryptoFlag::Off => CryptoOutput::Off,
+        }
+    }
+}
+
+/// `--compression`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CompressionFlag {
+    /// ZIP, 16-line blocks: lossless (the default).
+    Zip,
+    /// ZIP per scanline: lossless.
+    Zips,
+    /// PIZ wavelet: lossless, often smaller on noisy renders.
+    Piz,
+    /// B44: lossy on half channels (beauty, N, albedo), for previews; Z, agent.id and Cryptomatte stay exact.
+    B44,
+    /// Uncompressed.
+    None,
+}
+
+impl From<CompressionFlag> for exr::LayerCompression {
+    fn from(f: CompressionFlag) -> exr::LayerCompression {
+        match f {
+            CompressionFlag::Zip => exr::LayerCompression::Zip,
+            CompressionFlag::Zips => exr::LayerCompression::Zips,
+            CompressionFlag::Piz => exr::LayerCompression::Piz,
+            CompressionFlag::B44 => exr::LayerCompression::B44,
+            CompressionFlag::None => exr::LayerCompression::None,
         }
     }
 }
@@ -65,22 +93,23 @@ pub struct RenderArgs {
     /// Shot frames, e.g. 1001-1010 or 1001,1005.
     #[arg(long, value_parser = frame_list)]
     pub frames: Option<FrameList>,
-    /// Samples per pixel (default: the shot's).
-    #[arg(long)]
+    /// Samples per pixel, 1-65536 (default: the shot's).
+    #[arg(long, value_parser = spp)]
     pub spp: Option<u32>,
-    /// Render threads (default: all cores). Output does not depend on it.
-    #[arg(long)]
+    /// Render threads, 1-4096 (default: all cores). Output does not depend on it.
+    #[arg(long, value_parser = threads)]
     pub threads: Option<usize>,
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
-    /// Skip frames whose EXR already exists and reads back whole.
+    /// Skip frames whose EXR already exists, reads back whole and records the same render settings
+    /// (`throng/renderFingerprint`: spp, resolution, seed, camera, lights, manifest); re-render the rest.
     #[arg(long)]
     pub resume: bool,
     /// Layer manifest (default: `<shot dir>/<shot name>.layers.json`, from `throng layers`).
     #[arg(long)]
     pub manifest: Option<PathBuf>,
-    /// Also write a tone-mapped PNG preview beside each EXR.
+    /// Also write an 8-bit sRGB PNG preview beside each EXR (premultiplied RGB over black, clamped to 0-1; no tone mapping).
     #[arg(long)]
     pub png: bool,
     /// Image size override, e.g. 480x270 (default: the shot's).
@@ -89,6 +118,9 @@ pub struct RenderArgs {
     /// Cryptomatte mattes (CryptoAgent, CryptoPart).
     #[arg(long, value_enum, default_value_t = CryptoFlag::Header)]
     pub cryptomatte: CryptoFlag,
+    /// EXR compression.
+    #[arg(long, value_enum, default_value_t = CompressionFlag::Zip)]
+    pub compression: CompressionFlag,
     /// Progress on stderr.
     #[arg(long, value_enum, default_value_t = ProgressFlag::Auto)]
     pub progress: ProgressFlag,
@@ -123,6 +155,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 format!("manifest is for shot `{}`, not `{}`", m.shot, crowd.shot.name),
             ));
         }
+        if let Some(warning) = crate::layers::check_current(&manifest_path, m, &crowd.shot)? {
+            eprintln!("throng: warning: {warning}");
+        }
     }
     let layers = match (args.layer.as_str(), &manifest) {
         ("all", Some(m)) => job::all_layers(m),
@@ -132,7 +167,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         Some(FrameList(f)) => f.clone(),
         None => crowd.shot.frames.iter().collect(),
     };
-    let spp = args.spp.unwrap_or(crowd.shot.render.spp).max(1);
+    let spp = args.spp.unwrap_or(crowd.shot.render.spp);
     let job = RenderJob {
         threads: args.threads.unwrap_or(0),
         resume: args.resume,
@@ -140,6 +175,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         resolution: args.resolution.map(|Resolution(r)| r),
         cryptomatte: args.cryptomatte.into(),
         progress: args.progress.into(),
+        compression: args.compression.into(),
         ..RenderJob::new(layers, frames, spp, args.out.clone())
     };
     let done = job::run(&crowd, manifest.as_ref(), &job)?;
@@ -152,7 +188,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     let rendered = done.iter().filter(|d| !d.skipped).count();
     let secs: f64 = done.iter().map(|d| d.seconds).sum();
-    println!(
+    outln!(
         "rendered {rendered} layer-frames ({} skipped as complete) in {secs:.1} s into {}",
         done.len() - rendered,
         args.out.display()

@@ -30,7 +30,7 @@ pub fn run(args: &SimArgs) -> Result<()> {
     if args.json {
         return super::Summary::new("sim", clock, scene.agents.len() as u64, vec![args.out.clone()]).print();
     }
-    println!(
+    outln!(
         "throng sim: {} agents, frames {}-{} (simulated from {}), {:.2} s -> {}",
         scene.agents.len(),
         scene.start,

@@ -29,18 +29,37 @@ pub fn pixel(s: &str) -> Result<Pixel, String> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Resolution(pub [u32; 2]);
 
-/// Largest width or height a render accepts.
-pub const MAX_RESOLUTION: u32 = 16384;
+use crate::shot::{MAX_PIXELS, MAX_RESOLUTION, MAX_SPP};
 
 /// Parses `WIDTHxHEIGHT`.
 pub fn resolution(s: &str) -> Result<Resolution, String> {
-    let bad = || format!("bad resolution `{s}` (use e.g. 480x270; at most {MAX_RESOLUTION} a side)");
+    let bad =
+        || format!("bad resolution `{s}` (use e.g. 480x270; at most {MAX_RESOLUTION} a side and {MAX_PIXELS} pixels)");
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
     let (w, h): (u32, u32) = (w.trim().parse().map_err(|_| bad())?, h.trim().parse().map_err(|_| bad())?);
-    if w == 0 || h == 0 || w > MAX_RESOLUTION || h > MAX_RESOLUTION {
+    crate::shot::check_resolution(w, h).map_err(|_| bad())?;
+    Ok(Resolution([w, h]))
+}
+
+/// `--spp`: 1 to [`MAX_SPP`] samples per pixel (0 is refused, never replaced).
+pub fn spp(s: &str) -> Result<u32, String> {
+    let bad = || format!("bad --spp `{s}` (a whole number from 1 to {MAX_SPP})");
+    let n: u32 = s.trim().parse().map_err(|_| bad())?;
+    crate::shot::check_spp(n).map_err(|_| bad())?;
+    Ok(n)
+}
+
+/// Most render threads `--threads` accepts.
+pub const MAX_THREADS: usize = 4096;
+
+/// `--threads`: 1 to [`MAX_THREADS`] (0 is refused; leave the flag out for all cores).
+pub fn threads(s: &str) -> Result<usize, String> {
+    let bad = || format!("bad --threads `{s}` (1 to {MAX_THREADS}; leave it out to use every core)");
+    let n: usize = s.trim().parse().map_err(|_| bad())?;
+    if n == 0 || n > MAX_THREADS {
         return Err(bad());
     }
-    Ok(Resolution([w, h]))
+    Ok(n)
 }
 
 /// `--budget`: a byte size such as `2.8GB` (checked here, kept as written for the manifest).

@@ -244,8 +244,7 @@ pub fn comp_meta(inputs: &[CompInput]) -> Result<LayerMeta> {
         let cam = Mat4::from_cols_array(&back.meta.world_to_camera);
         if cam.determinant().abs() > 1e-12 {
             let mut p = Mat4::from_cols_array(&back.meta.world_to_ndc) * cam.inverse();
-            p.z_axis.z = (far + near) / (far - near);
-            p.w_axis.z = -2.0 * far * near / (far - near);
+            (p.z_axis.z, p.w_axis.z) = exr::ndc_depth_terms(near, far);
             meta.world_to_ndc = (p * cam).to_cols_array();
             meta.near = near;
             meta.far = far;

@@ -130,7 +130,9 @@ pub fn build_layers(crowd: &ShotCrowd, overrides: &LayerOverrides) -> Result<Man
         let proxies = parts.iter().filter(|p| p.proxy).count();
         (height, estimate_agent_memory(&costs), estimate_proxy_memory(proxies))
     })?;
-    build_manifest(&input)
+    let mut manifest = build_manifest(&input)?;
+    manifest.made_from = Some(super::MadeFrom::of(&crowd.shot)?);
+    Ok(manifest)
 }
 
 /// World bounds of the set's instances, for the layer map.

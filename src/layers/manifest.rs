@@ -310,6 +310,10 @@ pub struct Manifest {
     /// Agents absent from every shot frame (in no layer).
     #[serde(default)]
     pub absent: Vec<u32>,
+    /// What the manifest was made from; `render` refuses it when stale
+    /// ([`super::fingerprint`]). Absent in manifests of older throngs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub made_from: Option<super::fingerprint::MadeFrom>,
 }
 
 impl Manifest {

@@ -14,6 +14,7 @@
 //! types; [`input`] builds that input from a cast shot.
 
 pub mod checks;
+pub mod fingerprint;
 mod font;
 pub mod input;
 pub mod manifest;
@@ -28,6 +29,7 @@ use crate::error::{Error, Result};
 use crate::scene::Camera;
 use crate::shot::{parse_bytes, LayerSettings, SplitMode};
 
+pub use fingerprint::{check_current, MadeFrom};
 pub use input::{build_layers, set_bounds, settings_with_overrides, LayerOverrides};
 pub use manifest::{
     estimate_agent_memory, estimate_proxy_memory, format_bytes, read_manifest, summary, write_manifest, CameraRecord,
@@ -394,11 +396,39 @@ fn assign(
     if let Plan::Cutoffs(cuts) = &prep.plan {
         boundaries = cuts.iter().map(|&c| Some(c)).collect();
     }
-    // Pins override the split for the pinned agent only.
+    // Pins override the split for the pinned agent only. A pin may add
+    // layers after the split's, but never leave one of them empty.
+    let split_layers = n_layers;
     for (&i, &l) in &prep.pins {
         if layer[i] != u32::MAX {
             layer[i] = l as u32;
             n_layers = n_layers.max(l + 1);
+        }
+    }
+    if n_layers > split_layers {
+        let mut used = vec![false; n_layers - split_layers];
+        for &l in &layer {
+            if l != u32::MAX && l as usize >= split_layers {
+                used[l as usize - split_layers] = true;
+            }
+        }
+        if let Some(empty) = used.iter().position(|u| !u).map(|e| e + split_layers) {
+            let (&i, &l) = prep
+                .pins
+                .iter()
+                .filter(|(&i, &l)| l > empty && layer[i] != u32::MAX)
+                .min_by_key(|(&i, _)| input.agents[i].id)
+                .unwrap_or((&0, &empty));
+            return Err(Error::invalid(
+                &input.source,
+                format!(
+                    "pin to layer {l} leaves layer {empty} empty: the split makes {split_layers} layer(s) (0-{}), \
+                     so pin to at most layer {split_layers}, or raise the layer count",
+                    split_layers - 1
+                ),
+            )
+            .agent(input.agents.get(i).map_or(0, |a| a.id))
+            .field("layers.pins"));
         }
     }
     Ok(Assigned { samples, layer, n_layers, boundaries })
@@ -565,6 +595,7 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
         layers,
         agents,
         absent,
+        made_from: None,
     })
 }
 

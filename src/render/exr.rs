@@ -1,6 +1,7 @@
 //! OpenEXR output (the only file that names the exr crate) and PNG previews.
 //!
-//! One single-part scanline file per (layer, frame), ZIP16, increasing lines,
+//! One single-part scanline file per (layer, frame), ZIP16 unless asked
+//! otherwise ([`LayerCompression`]), increasing lines, Rec.709 `chromaticities`,
 //! channels (sorted): `A B G R` (half, premultiplied), `N.X N.Y N.Z` (half),
 //! `Z` (float, camera-space depth, +inf = no hit), `agent.id` (uint, 0 = no
 //! agent, else cache id + 1), `albedo.B albedo.G albedo.R` (half), and when
@@ -48,6 +49,87 @@ pub struct LayerMeta {
     pub near: f32,
     /// Far clip distance (metres).
     pub far: f32,
+    /// Frames per second (`framesPerSecond`; not written when 0).
+    pub fps: f32,
+    /// `throng/renderFingerprint`: what `--resume` compares (empty: not written).
+    pub render_fingerprint: String,
+}
+
+/// The working colourspace of every beauty and albedo channel: linear light
+/// with Rec.709 / sRGB primaries and a D65 white (`chromaticities`).
+pub const COLORSPACE: &str = "lin_rec709";
+
+/// Rec.709 primaries and D65 white, as OpenEXR's `chromaticities` attribute.
+pub fn rec709_chromaticities() -> exr::meta::attribute::Chromaticities {
+    use exr::math::Vec2;
+    exr::meta::attribute::Chromaticities {
+        red: Vec2(0.64, 0.33),
+        green: Vec2(0.30, 0.60),
+        blue: Vec2(0.15, 0.06),
+        white: Vec2(0.3127, 0.3290),
+    }
+}
+
+/// `fps` as the rational OpenEXR's `framesPerSecond` wants: 24 -> 24/1,
+/// 23.976 -> 24000/1001, 29.97 -> 30000/1001, else thousandths.
+pub fn fps_rational(fps: f32) -> (i32, u32) {
+    let f = fps as f64;
+    if (f - f.round()).abs() < 1e-4 {
+        (f.round() as i32, 1)
+    } else if ((f * 1.001) - (f * 1.001).round()).abs() < 1e-3 {
+        ((f * 1.001).round() as i32 * 1000, 1001)
+    } else {
+        ((f * 1000.0).round() as i32, 1000)
+    }
+}
+
+/// Layer file compression (`--compression`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LayerCompression {
+    /// ZIP in blocks of 16 lines: lossless, the default.
+    #[default]
+    Zip,
+    /// ZIP per line: lossless, faster to read a line at a time.
+    Zips,
+    /// PIZ (wavelet): lossless, smaller on noisy renders.
+    Piz,
+    /// B44: lossy on the half channels (beauty, normals, albedo) for previews;
+    /// `Z`, `agent.id` and Cryptomatte (float/uint) stay exact.
+    B44,
+    /// No compression.
+    None,
+}
+
+impl LayerCompression {
+    fn exr(self) -> Compression {
+        match self {
+            LayerCompression::Zip => Compression::ZIP16,
+            LayerCompression::Zips => Compression::ZIP1,
+            LayerCompression::Piz => Compression::PIZ,
+            LayerCompression::B44 => Compression::B44,
+            LayerCompression::None => Compression::Uncompressed,
+        }
+    }
+    /// The name `--compression` takes and the docs use.
+    pub fn name(self) -> &'static str {
+        match self {
+            LayerCompression::Zip => "zip",
+            LayerCompression::Zips => "zips",
+            LayerCompression::Piz => "piz",
+            LayerCompression::B44 => "b44",
+            LayerCompression::None => "none",
+        }
+    }
+}
+
+/// The depth terms of a `worldToNDC` for clip planes `near`, `far`: NDC z =
+/// `a + b / depth`, 0 at near and 1 at far.
+pub fn ndc_depth_terms(near: f32, far: f32) -> (f32, f32) {
+    if far > near {
+        (far / (far - near), -far * near / (far - near))
+    } else {
+        (1.0, 0.0)
+    }
 }
 
 /// The `worldToCamera` and `worldToNDC` header matrices of `camera` for a
@@ -60,19 +142,22 @@ pub struct LayerMeta {
 /// row-vector form of a column-vector matrix is its transpose, and the
 /// row-major storage of a transpose is the column-major storage of the
 /// original: so the attribute is `to_cols_array()` of our matrix, no
-/// transposing by hand. NDC: after the divide by w (= camera depth), x and y
-/// run -1..1 across the image (x right, y up) and z -1..1 from near to far
-/// (OpenGL-style depth on a +z-forward camera).
+/// transposing by hand. NDC (OpenEXR's and RenderMan's definition): after
+/// the divide by w (= camera depth), (0, 0) is the top-left corner of the
+/// image and (1, 1) the bottom-right (x right, y down), so pixel
+/// coordinates are `(x * width, y * height)` with pixel centres at `i + 0.5`;
+/// z runs 0..1 from near to far ([`ndc_depth_terms`]).
 pub fn camera_matrices(camera: &Camera, width: u32, height: u32, near: f32, far: f32) -> ([f32; 16], [f32; 16]) {
     let camera_from_world = Mat4::from(camera.world_from_camera.inverse());
     let exr_camera_from_world = Mat4::from_scale(Vec3::new(1.0, 1.0, -1.0)) * camera_from_world;
     let tan_half_y = (0.5 * camera.yfov).tan();
     let aspect = width as f32 / height.max(1) as f32;
-    let (a, b) = if far > near { ((far + near) / (far - near), -2.0 * far * near / (far - near)) } else { (1.0, 0.0) };
+    let (a, b) = ndc_depth_terms(near, far);
+    // x' = 0.5 x / (aspect tan) + 0.5 w, y' = -0.5 y / tan + 0.5 w, w = depth.
     let ndc_from_camera = Mat4::from_cols(
-        Vec4::new(1.0 / (aspect * tan_half_y), 0.0, 0.0, 0.0),
-        Vec4::new(0.0, 1.0 / tan_half_y, 0.0, 0.0),
-        Vec4::new(0.0, 0.0, a, 1.0),
+        Vec4::new(0.5 / (aspect * tan_half_y), 0.0, 0.0, 0.0),
+        Vec4::new(0.0, -0.5 / tan_half_y, 0.0, 0.0),
+        Vec4::new(0.5, 0.5, a, 1.0),
         Vec4::new(0.0, 0.0, b, 0.0),
     );
     (exr_camera_from_world.to_cols_array(), (ndc_from_camera * exr_camera_from_world).to_cols_array())
@@ -111,6 +196,8 @@ pub enum ManifestMode {
 pub struct WriteOptions {
     /// Where Cryptomatte manifests go.
     pub manifest: ManifestMode,
+    /// Compression (lossless ZIP by default).
+    pub compression: LayerCompression,
 }
 
 /// The sidecar manifest file name of Cryptomatte type `type_name` for the EXR `exr_path`.
@@ -187,6 +274,13 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
     put("throng/spp", AttributeValue::I32(meta.spp.min(i32::MAX as u32) as i32))?;
     put("throng/zConvention", AttributeValue::Text(text("cameraDepth")?))?;
     put("throng/idMapping", AttributeValue::Text(text(&meta.id_mapping)?))?;
+    put("throng/colorspace", AttributeValue::Text(text(COLORSPACE)?))?;
+    if !meta.render_fingerprint.is_empty() {
+        put("throng/renderFingerprint", AttributeValue::Text(text(&meta.render_fingerprint)?))?;
+    }
+    if meta.fps > 0.0 && meta.fps.is_finite() {
+        attrs.frames_per_second = Some(fps_rational(meta.fps));
+    }
     for m in &film.cryptomatte {
         let key = m.key();
         let mut put_utf8 = |field: &str, v: &str| {
@@ -210,9 +304,13 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
         }
     }
 
-    let encoding =
-        Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing };
-    let image = Image::from_layer(Layer::new((w, h), attrs, encoding, channels));
+    let encoding = Encoding {
+        compression: options.compression.exr(),
+        blocks: Blocks::ScanLines,
+        line_order: LineOrder::Increasing,
+    };
+    let mut image = Image::from_layer(Layer::new((w, h), attrs, encoding, channels));
+    image.attributes.chromaticities = Some(rec709_chromaticities());
     let mut bytes = Vec::new();
     image.write().to_buffered(std::io::Cursor::new(&mut bytes)).map_err(|e| exr_error(path, e))?;
     sort_header_attributes(&mut bytes);
@@ -340,6 +438,8 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
         world_to_ndc: attrs.world_to_normalized_device.unwrap_or_default(),
         near: attrs.near_clip_plane.unwrap_or(0.0),
         far: attrs.far_clip_plane.unwrap_or(0.0),
+        fps: attrs.frames_per_second.map_or(0.0, |(n, d)| n as f32 / d.max(1) as f32),
+        render_fingerprint: get_text("throng/renderFingerprint").unwrap_or_default(),
     };
     Ok((film, meta))
 }

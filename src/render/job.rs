@@ -40,6 +40,8 @@ pub struct RenderJob {
     pub cryptomatte: CryptoOutput,
     /// How progress is reported on stderr.
     pub progress: ProgressStyle,
+    /// EXR compression (lossless ZIP by default).
+    pub compression: exr::LayerCompression,
 }
 
 impl RenderJob {
@@ -58,6 +60,7 @@ impl RenderJob {
             resolution: None,
             cryptomatte: CryptoOutput::Header,
             progress: ProgressStyle::Auto,
+            compression: exr::LayerCompression::Zip,
         }
     }
 }
@@ -252,6 +255,62 @@ impl Progress {
     }
 }
 
+/// The render fingerprint of one layer (`throng/renderFingerprint`, 8 hex
+/// digits): CRC-32 over everything that changes the pixels or channels of a
+/// layer file: samples per pixel, resolution, seed, bounces, the camera and
+/// lights of the shot, Cryptomatte and compression choices, the layer name
+/// and the manifest (whose `made_from` covers the cache and casting). There
+/// is no shutter (no motion blur) to record. `--resume` skips a file only
+/// when its fingerprint matches.
+pub fn render_fingerprint(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob, layer: &str) -> String {
+    let shot = &crowd.shot;
+    let [w, h] = job.resolution.unwrap_or(shot.render.resolution);
+    let manifest_hash = manifest.map_or(0, |m| crc32fast::hash(&serde_json::to_vec(m).unwrap_or_default()));
+    let text = format!(
+        "v1 spp {} res {w}x{h} seed {} bounces {} camera {:?} {:?} {:?} lights {:?} crypto {:?} compression {:?} layer {layer} manifest {manifest_hash:08x} throng {}",
+        job.spp,
+        shot.seed,
+        shot.render.max_bounces,
+        shot.camera.sensor_width,
+        shot.camera.keys,
+        shot.camera.gltf.as_ref().map(|(_, node)| node),
+        shot.lights,
+        job.cryptomatte,
+        job.compression,
+        env!("CARGO_PKG_VERSION"),
+    );
+    format!("{:08x}", crc32fast::hash(text.as_bytes()))
+}
+
+/// Removes the temporaries that a killed run left beside this job's targets
+/// (`.<file>.<pid>.tmp`, as `write_atomic` names them, for a frame of the
+/// job in a layer of the job) whose pid is not this process. Returns them.
+pub fn remove_stale_temporaries(shot: &str, job: &RenderJob) -> Result<Vec<PathBuf>> {
+    let frames: std::collections::HashSet<i32> = job.frames.iter().copied().collect();
+    let own = std::process::id();
+    let mut removed = Vec::new();
+    for layer in &job.layers {
+        let dir = job.out.join(layer);
+        let Ok(entries) = std::fs::read_dir(&dir) else { continue };
+        let prefix = format!("{shot}.{layer}.");
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let Some(inner) = name.strip_prefix('.').and_then(|n| n.strip_suffix(".tmp")) else { continue };
+            let Some((target, pid)) = inner.rsplit_once('.') else { continue };
+            if pid.parse::<u32>().map_or(true, |p| p == own) {
+                continue;
+            }
+            let frame = target.strip_prefix(&prefix).and_then(|r| r.split('.').next()).and_then(|f| f.parse().ok());
+            if frame.is_some_and(|f| frames.contains(&f)) {
+                let path = e.path();
+                std::fs::remove_file(&path).map_err(|err| Error::io(&path, err))?;
+                removed.push(path);
+            }
+        }
+    }
+    Ok(removed)
+}
+
 /// Renders every (frame, layer) of the job.
 pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> Result<Vec<RenderedLayer>> {
     let [w, h] = job.resolution.unwrap_or(crowd.shot.render.resolution);
@@ -270,6 +329,16 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
             )));
         }
     }
+    let stale = remove_stale_temporaries(&crowd.shot.name, job)?;
+    if !stale.is_empty() {
+        eprintln!(
+            "throng: warning: removed {} stale temporary file(s) a killed render left behind (first: {})",
+            stale.len(),
+            stale[0].display()
+        );
+    }
+    let fingerprints: std::collections::HashMap<&str, String> =
+        job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
     let blas = BlasSet::build(crowd.library());
     let progress = Progress::new(job.progress, job.frames.len() * job.layers.len());
     let mut out = Vec::new();
@@ -278,7 +347,22 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
         let mut posed: Option<PosedFrame> = None;
         for layer in &job.layers {
             let path = layer_path(&job.out, &crowd.shot.name, layer, frame);
-            if job.resume && exr::read_layer(&path).is_ok() {
+            let fingerprint = fingerprints.get(layer.as_str()).cloned().unwrap_or_default();
+            let complete = job.resume
+                && match exr::read_layer(&path) {
+                    Ok((_, meta)) if meta.render_fingerprint == fingerprint => true,
+                    Ok((_, meta)) => {
+                        eprintln!(
+                            "throng: warning: --resume: re-rendering {}: it was rendered with other settings \
+                             (renderFingerprint {}, now {fingerprint}: spp, resolution, seed, camera, lights or manifest differ)",
+                            path.display(),
+                            if meta.render_fingerprint.is_empty() { "none" } else { &meta.render_fingerprint },
+                        );
+                        false
+                    }
+                    Err(_) => false,
+                };
+            if complete {
                 out.push(RenderedLayer {
                     layer: layer.clone(),
                     frame,
@@ -340,12 +424,14 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                 world_to_ndc,
                 near,
                 far,
+                fps: crowd.shot.frames.fps,
+                render_fingerprint: fingerprint,
             };
             let manifest = match job.cryptomatte {
                 CryptoOutput::Sidecar => exr::ManifestMode::Sidecar,
                 _ => exr::ManifestMode::Header,
             };
-            exr::write_layer_with(&path, &film, &meta, &exr::WriteOptions { manifest })?;
+            exr::write_layer_with(&path, &film, &meta, &exr::WriteOptions { manifest, compression: job.compression })?;
             if job.png {
                 exr::write_preview_png(&path.with_extension("png"), &film)?;
             }

@@ -72,6 +72,8 @@ wardrobes = []
 start = 1020
 end = 1026
 fps = 24.0
+# Callers' rows may cover only some of the frames: those render no agents.
+outside_cache = "empty"
 [cache]
 path = "c.csv"
 [rigs.figure]
