@@ -428,3 +428,48 @@ fn comp_and_botinfo_on_the_command_line() {
     let (ok, _, stderr) = throng(&["botinfo", SHOT, "--exr", out.to_str().unwrap(), "--pixel", "1;1"]);
     assert!(!ok && stderr.contains("--pixel"), "{stderr}");
 }
+
+/// The comp carries the stacked Cryptomatte: every agent's matte in the comp
+/// covers what it covers in the full render (within noise), the set's too,
+/// and mattes written to the comp EXR read back with their merged manifests.
+#[test]
+fn comp_mattes_match_the_full_render() {
+    let r = renders();
+    let comp = comp::comp_frame(&r.a, FRAME, Some(&r.manifest)).unwrap().film;
+    let full = read(&r.a, "full");
+    let names: Vec<&str> = comp.cryptomatte.iter().map(|m| m.name.as_str()).collect();
+    assert!(names.contains(&"CryptoAgent") && names.contains(&"CryptoPart"), "{names:?}");
+    for m in &comp.cryptomatte {
+        let f = full.cryptomatte.iter().find(|f| f.name == m.name).expect("full render has the same matte type");
+        // Every name the full render shows is in the comp's manifest.
+        for (name, _) in f.manifest.iter().filter(|(n, _)| f.matte(n).iter().sum::<f32>() > 0.0) {
+            assert!(m.manifest.contains_key(name), "{}: comp manifest lacks {name}", m.name);
+        }
+        let mut checked = 0;
+        for name in f.manifest.keys() {
+            let (a, b): (f32, f32) = (m.matte(name).iter().sum(), f.matte(name).iter().sum());
+            if b < 4.0 {
+                continue; // a few pixels: too noisy to compare
+            }
+            assert!(
+                (a - b).abs() / b < 0.2,
+                "{} `{name}`: {a:.1} pixels in the comp, {b:.1} in the full render",
+                m.name
+            );
+            checked += 1;
+        }
+        assert!(checked >= 3, "{}: compared {checked} objects", m.name);
+        // Ranks are sorted by coverage, highest first.
+        for px in m.pairs.chunks_exact(m.ranks) {
+            assert!(px.windows(2).all(|w| w[0][1] >= w[1][1]), "{px:?}");
+        }
+    }
+    let out = r.dir.join("comp.mattes.exr");
+    let comped = comp::comp_frame(&r.a, FRAME, Some(&r.manifest)).unwrap();
+    exr::write_layer(&out, &comped.film, &comped.meta).unwrap();
+    let back = throng::render::cryptomatte::read(&out).unwrap();
+    assert_eq!(back.len(), comped.film.cryptomatte.len());
+    for (a, b) in back.iter().zip(&comped.film.cryptomatte) {
+        assert_eq!((&a.name, &a.manifest), (&b.name, &b.manifest));
+    }
+}

@@ -15,6 +15,12 @@
 //!   minimum over the layers that hit something there and the id names the
 //!   surface that Z measures (0 when that surface is the set or sky).
 //!
+//! - Cryptomatte (`CryptoAgent`, `CryptoPart`): an object's coverage in a
+//!   layer is multiplied by `1 - A` of every layer in front of it (the
+//!   colour over, per pixel), coverages of one id add, each pixel keeps its
+//!   highest ranks (ties by id bits) and the manifests are merged, so mattes
+//!   picked in the comp select what the stacked image shows.
+//!
 //! The header repeats the layers' shot, frame, seed and camera; the layer
 //! name is `comp`, `spp` the smallest of the layers', and near/far span the
 //! layers' (with `worldToNDC` rebuilt for them).
@@ -26,6 +32,7 @@ use glam::Mat4;
 use crate::error::{Error, Result};
 use crate::layers::Manifest;
 use crate::output::{crowd_layer_index, crowd_layer_name, layer_path, COMP_LAYER, FULL_LAYER, SET_LAYER};
+use crate::render::cryptomatte::Cryptomatte;
 use crate::render::exr::{self, LayerMeta};
 use crate::render::Film;
 
@@ -79,7 +86,67 @@ pub fn over(films: &[&Film]) -> Result<Film> {
         out.z[i] = z;
         out.agent_id[i] = id;
     }
+    out.cryptomatte = over_cryptomatte(films);
     Ok(out)
+}
+
+/// Stacks the layers' Cryptomatte types (matched by name): an object's
+/// coverage in a layer counts through the layers in front of it, times
+/// `1 - A` of each (the same over as colour), coverages of one id from
+/// several layers add, and each pixel keeps its highest-coverage ranks
+/// (ties by id bits, as the renderer ranks). Manifests are merged.
+fn over_cryptomatte(films: &[&Film]) -> Vec<Cryptomatte> {
+    let mut names: Vec<&str> = Vec::new();
+    for f in films {
+        for m in &f.cryptomatte {
+            if !names.contains(&m.name.as_str()) {
+                names.push(&m.name);
+            }
+        }
+    }
+    let Some(first) = films.first() else { return Vec::new() };
+    let (w, h) = (first.width, first.height);
+    let mut out = Vec::new();
+    for name in names {
+        let layers: Vec<(usize, &Cryptomatte)> = films
+            .iter()
+            .enumerate()
+            .filter_map(|(k, f)| f.cryptomatte.iter().find(|m| m.name == name).map(|m| (k, m)))
+            .filter(|(_, m)| m.width == w && m.height == h && m.ranks > 0)
+            .collect();
+        let ranks = layers.iter().map(|(_, m)| m.ranks).max().unwrap_or(0);
+        let mut stacked = Cryptomatte::new(name, w, h, ranks);
+        for (_, m) in &layers {
+            stacked.manifest.extend(m.manifest.iter().map(|(k, &v)| (k.clone(), v)));
+        }
+        let mut acc: Vec<(u32, f32)> = Vec::new();
+        for i in 0..(w as usize * h as usize) {
+            acc.clear();
+            // Front to back: what is in front hides what is behind.
+            let mut through = 1.0f32;
+            for k in (0..films.len()).rev() {
+                if let Some((_, m)) = layers.iter().find(|(l, _)| *l == k) {
+                    for p in m.pixel(i) {
+                        let (id, cov) = (p[0].to_bits(), p[1] * through);
+                        if id == 0 || cov <= 0.0 {
+                            continue;
+                        }
+                        match acc.iter_mut().find(|a| a.0 == id) {
+                            Some(a) => a.1 += cov,
+                            None => acc.push((id, cov)),
+                        }
+                    }
+                }
+                through *= (1.0 - films[k].rgba[i][3]).clamp(0.0, 1.0);
+            }
+            acc.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+            for (r, &(id, cov)) in acc.iter().take(ranks).enumerate() {
+                stacked.pairs[i * ranks + r] = [f32::from_bits(id), cov];
+            }
+        }
+        out.push(stacked);
+    }
+    out
 }
 
 /// The layers of `frame` under render output `dir`, back to front.
