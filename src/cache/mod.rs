@@ -72,6 +72,7 @@ pub mod binary;
 pub mod csv;
 mod info;
 pub mod jupedsim;
+pub mod usd;
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
@@ -94,6 +95,8 @@ pub enum Format {
     Csv,
     /// `.sqlite` (also `.sqlite3`, `.db`): JuPedSim trajectories, read only.
     JuPedSim,
+    /// `.usd`, `.usda`, `.usdc`, `.usdz`: a USD crowd, read only (docs/usd.md).
+    Usd,
 }
 
 impl Format {
@@ -104,8 +107,9 @@ impl Format {
             Some("crowd") => Ok(Format::Binary),
             Some("csv") => Ok(Format::Csv),
             Some("sqlite" | "sqlite3" | "db") => Ok(Format::JuPedSim),
+            Some("usd" | "usda" | "usdc" | "usdz") => Ok(Format::Usd),
             _ => Err(Error::Usage(format!(
-                "{}: unknown cache format; expected a .crowd, .csv or .sqlite (JuPedSim) file",
+                "{}: unknown cache format; expected a .crowd, .csv, .sqlite (JuPedSim) or .usd/.usda/.usdc file",
                 path.display()
             ))),
         }
@@ -117,6 +121,7 @@ impl Format {
             Format::Binary => "crowd",
             Format::Csv => "csv",
             Format::JuPedSim => "jupedsim",
+            Format::Usd => "usd",
         }
     }
 }
@@ -134,6 +139,7 @@ pub fn read_with(path: impl AsRef<Path>, opts: &ImportOptions) -> Result<CrowdCa
         Format::Binary => binary::read(path),
         Format::Csv => csv::read(path),
         Format::JuPedSim => jupedsim::read(path, opts),
+        Format::Usd => usd::read(path, opts),
     }
 }
 
@@ -147,9 +153,10 @@ pub fn write(path: impl AsRef<Path>, crowd: &CrowdCache) -> Result<()> {
     match Format::of(path)? {
         Format::Binary => binary::write(path, crowd),
         Format::Csv => csv::write(path, crowd),
-        Format::JuPedSim => {
-            Err(Error::Usage(format!("{}: JuPedSim files are read only; write a .crowd or .csv cache", path.display())))
-        }
+        Format::JuPedSim | Format::Usd => Err(Error::Usage(format!(
+            "{}: JuPedSim and USD crowds are read only here; write a .crowd or .csv cache (or `throng export --format usd`)",
+            path.display()
+        ))),
     }
 }
 
@@ -184,6 +191,7 @@ impl CacheReader {
             Format::Binary => Ok(CacheReader::Binary(binary::BinaryReader::open(path)?)),
             Format::Csv => Ok(Self::from_crowd(path, csv::read(path)?)),
             Format::JuPedSim => Ok(Self::from_crowd(path, jupedsim::read(path, opts)?)),
+            Format::Usd => Ok(Self::from_crowd(path, usd::read(path, opts)?)),
         }
     }
 

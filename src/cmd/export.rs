@@ -39,6 +39,9 @@ pub struct ExportArgs {
     /// Shot frame range A-B (USD; default: the shot's).
     #[arg(long, value_parser = frame_list)]
     pub frames: Option<FrameList>,
+    /// USD: the layer manifest (default: `<shot dir>/<shot>.layers.json` when it exists).
+    #[arg(long)]
+    pub manifest: Option<PathBuf>,
     /// USD: one file per render layer beside --out, sublayered by it.
     #[arg(long)]
     pub split_layers: bool,
@@ -117,7 +120,10 @@ fn run_usd(args: &ExportArgs, clock: std::time::Instant) -> Result<()> {
         }
     };
     let only = layer_agents(args, &crowd)?;
-    let manifest = beside_manifest(&crowd)?;
+    let manifest = match &args.manifest {
+        Some(p) => Some(crate::layers::read_manifest(p)?),
+        None => beside_manifest(&crowd)?,
+    };
     let opts = UsdExportOptions {
         only: only.as_ref(),
         manifest: manifest.as_ref(),
@@ -155,7 +161,8 @@ fn layer_agents(
     Ok(match &args.layer {
         None => None,
         Some(layer) => {
-            let path = crate::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name);
+            let path = (args.manifest.clone())
+                .unwrap_or_else(|| crate::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
             if !path.exists() {
                 return Err(Error::Usage(format!(
                     "--layer needs the layer manifest {}: run `throng layers {}` first",

@@ -106,8 +106,8 @@ struct PartTrack {
 }
 
 struct AgentTrack {
-    /// (frame, world_from_agent, cycle, cycle frame).
-    frames: Vec<(i32, Affine3A, String, f32)>,
+    /// (frame, world_from_agent, cycle, cycle frame, seated).
+    frames: Vec<(i32, Affine3A, String, f32, bool)>,
     parts: BTreeMap<(u16, usize), PartTrack>,
 }
 
@@ -203,7 +203,7 @@ fn gather(crowd: &ShotCrowd, opts: &UsdExportOptions) -> Result<Gathered> {
             let world_from_agent = crowd.world_from_agent(s);
             let agent_from_world = world_from_agent.inverse();
             let t = agents.entry(s.id).or_insert_with(|| AgentTrack { frames: Vec::new(), parts: BTreeMap::new() });
-            t.frames.push((f, world_from_agent, crowd.cycle_name(s).to_string(), s.cycle_frame));
+            t.frames.push((f, world_from_agent, crowd.cycle_name(s).to_string(), s.cycle_frame, s.seated()));
             let mut seen: HashMap<u16, usize> = HashMap::new();
             for inst in &insts {
                 let k = seen.entry(inst.part).or_insert(0);
@@ -460,7 +460,7 @@ fn write_agent(
 ) -> Result<usize> {
     let path = format!("/World/Crowd/{}", agent_name(id));
     let p = l.def(&path, "Xform");
-    xform(l, p, t.frames.iter().map(|(f, m, _, _)| (f64::from(*f), matrix(m))).collect());
+    xform(l, p, t.frames.iter().map(|(f, m, ..)| (f64::from(*f), matrix(m))).collect());
     let present: BTreeSet<i32> = t.frames.iter().map(|x| x.0).collect();
     if present.len() < times.len() {
         let vis = |f: &i32| {
@@ -481,9 +481,9 @@ fn write_agent(
         p,
         "throng:cycle",
         "string",
-        t.frames.iter().map(|(f, _, c, _)| (f64::from(*f), string(c))).collect(),
+        t.frames.iter().map(|(f, _, c, ..)| (f64::from(*f), string(c))).collect(),
     );
-    let cf = t.frames.iter().map(|(f, _, _, cf)| (f64::from(*f), Value::Float(*cf))).collect();
+    let cf = t.frames.iter().map(|(f, _, _, cf, _)| (f64::from(*f), Value::Float(*cf))).collect();
     put_primvar(l, p, "throng:cycleFrame", "float", cf);
     if let Some(layer) = layer {
         l.primvar(p, "throng:layer", "string", string(layer));
