@@ -485,6 +485,8 @@ fn write_agent(
     );
     let cf = t.frames.iter().map(|(f, _, _, cf, _)| (f64::from(*f), Value::Float(*cf))).collect();
     put_primvar(l, p, "throng:cycleFrame", "float", cf);
+    let seated = t.frames.iter().map(|(f, .., s)| (f64::from(*f), Value::Bool(*s))).collect();
+    put_primvar(l, p, "throng:seated", "bool", seated);
     if let Some(layer) = layer {
         l.primvar(p, "throng:layer", "string", string(layer));
     }
