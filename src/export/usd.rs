@@ -6,7 +6,7 @@
 //!
 //! ```text
 //! /World                         Xform (defaultPrim)
-//!   /Prototypes                  class: one Mesh per library mesh used
+//!   /Prototypes                  invisible Scope: per library mesh used, an Xform holding a Mesh
 //!   /Looks                       Scope: one Material (UsdPreviewSurface) per cast material
 //!   /Set/set_<i>                 instanceable, references a prototype, binds its material
 //!   /Crowd                       Scope (one collection per render layer)
@@ -274,11 +274,18 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
 
     // Prototypes: one Mesh per library mesh, named from the mesh name.
     let proto_names = unique_names(g.meshes.iter().map(|&m| (m, prototype_name(&lib.meshes[m as usize].name))));
-    let protos = root.prim("/World/Prototypes", Specifier::Class, "");
-    let _ = protos;
+    // A defined but invisible Scope: importers that skip abstract (`class`)
+    // prims, Blender's among them, still find the prototypes, and a reference
+    // to one brings only its own opinions, not the Scope's invisibility.
+    let protos = root.def("/World/Prototypes", "Scope");
+    root.attr(protos, "visibility", "token", Value::Token("invisible".into()));
     for (&m, name) in &proto_names {
         let mesh = &lib.meshes[m as usize];
-        let p = root.def(&format!("/World/Prototypes/{name}"), "Mesh");
+        // An Xform holding the Mesh: an instance's prototype root is the
+        // instance prim itself, so the geometry sits one level down (DCCs
+        // such as Blender build their shared prototype from the root's children).
+        root.def(&format!("/World/Prototypes/{name}"), "Xform");
+        let p = root.def(&format!("/World/Prototypes/{name}/mesh"), "Mesh");
         let (lo, hi) = mesh.bounds();
         root.attr(p, "extent", "float3[]", Value::Vec3fVec(vec![vec3(lo), vec3(hi)]));
         root.attr(p, "points", "point3f[]", Value::Vec3fVec(mesh.positions.iter().map(|&v| vec3(v)).collect()));
