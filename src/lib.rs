@@ -15,7 +15,7 @@ pub mod casting; // shot + cache + rigs + wardrobes -> `ShotCrowd`: every agent 
 pub mod cmd; // the command line: one file per verb, the only user of clap
 pub mod comp; // a frame's layer EXRs -> one stacked EXR
 pub mod error; // typed errors naming file, line, frame, agent and field; atomic writes
-pub mod export; // a cast frame -> glTF (.glb)
+pub mod export; // a cast frame -> glTF (.glb); a frame range -> USD (.usda/.usd/.usdz)
 pub mod farm; // a shot -> a render-farm task graph (the plan); engines (local, slurm) and status
 pub mod layers; // a cast crowd -> the layer manifest (membership, LOD, visibility) and its map
 pub mod output; // names of rendered files and layers, shared by render and comp

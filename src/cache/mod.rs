@@ -73,6 +73,7 @@ pub mod csv;
 mod info;
 pub mod jupedsim;
 pub mod tabular;
+pub mod usd;
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
@@ -100,6 +101,8 @@ pub enum Format {
     /// `.txt`, `.tsv`, `.dat`: a trajectory table, read with a preset or
     /// columns ([`TabularOptions`]), read only.
     Tabular,
+    /// `.usd`, `.usda`, `.usdc`, `.usdz`: a USD crowd, read only (docs/usd.md).
+    Usd,
 }
 
 impl Format {
@@ -116,12 +119,13 @@ impl Format {
             Some("csv") => Ok(Format::Csv),
             Some("sqlite" | "sqlite3" | "db") if !gz => Ok(Format::JuPedSim),
             Some("txt" | "tsv" | "dat" | "ssv") => Ok(Format::Tabular),
+            Some("usd" | "usda" | "usdc" | "usdz") if !gz => Ok(Format::Usd),
             Some("crowd" | "sqlite" | "sqlite3" | "db") => Err(Error::Usage(format!(
                 "{}: a gzipped .crowd or SQLite file cannot be read in place; gunzip it first",
                 path.display()
             ))),
             _ => Err(Error::Usage(format!(
-                "{}: unknown cache format; expected a .crowd, .csv or .sqlite (JuPedSim) file, \
+                "{}: unknown cache format; expected a .crowd, .csv, .sqlite (JuPedSim) or .usd/.usda/.usdc/.usdz file, \
                  or a trajectory table (.txt, .tsv, .dat, optionally .gz) with a preset or columns",
                 path.display()
             ))),
@@ -135,6 +139,7 @@ impl Format {
             Format::Csv => "csv",
             Format::JuPedSim => "jupedsim",
             Format::Tabular => "table",
+            Format::Usd => "usd",
         }
     }
 }
@@ -185,6 +190,7 @@ pub fn import(path: impl AsRef<Path>, how: &Import) -> Result<(CrowdCache, Optio
         Format::Binary => binary::read(path)?,
         Format::Csv => csv::read(path)?,
         Format::JuPedSim => jupedsim::read(path, &how.jupedsim)?,
+        Format::Usd => usd::read(path, &how.jupedsim)?,
         Format::Tabular => return Err(needs_layout(path)),
     };
     place(&mut crowd, &how.placement);
@@ -201,7 +207,7 @@ pub fn write(path: impl AsRef<Path>, crowd: &CrowdCache) -> Result<()> {
     match Format::of(path)? {
         Format::Binary => binary::write(path, crowd),
         Format::Csv => csv::write(path, crowd),
-        Format::JuPedSim | Format::Tabular => Err(Error::Usage(format!(
+        Format::JuPedSim | Format::Tabular | Format::Usd => Err(Error::Usage(format!(
             "{}: {} files are read only; write a .crowd or .csv cache",
             path.display(),
             Format::of(path).map(Format::name).unwrap_or_default()

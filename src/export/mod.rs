@@ -3,6 +3,8 @@
 //! viewer and can be rendered by other renderers for comparison.
 
 pub mod glb;
+pub mod usd;
+pub mod usd_layer;
 
 use std::collections::{BTreeSet, HashMap};
 use std::path::Path;

@@ -1,0 +1,112 @@
+#!/usr/bin/env python3
+"""Reads a `throng export --format usd` stage with Pixar's USD (usd-core) and
+compares it with throng itself: agent ids and transforms at several frames
+against `throng botinfo --json`, the camera against the shot file, the stage
+metadata, and instancing (prototypes shared, not copied).
+
+usage: usd_check.py THRONG SHOT STAGE FRAME...
+"""
+import json
+import math
+import subprocess
+import sys
+import tomllib
+
+from pxr import Gf, Usd, UsdGeom
+
+failures = []
+
+
+def check(ok, what):
+    if not ok:
+        failures.append(what)
+        print("FAIL:", what)
+
+
+def close(a, b, tol=1e-4):
+    return all(abs(x - y) <= tol * max(1.0, abs(y)) for x, y in zip(a, b))
+
+
+def main(throng, shot_path, stage_path, frames):
+    stage = Usd.Stage.Open(stage_path)
+    check(UsdGeom.GetStageUpAxis(stage) == "Y", "upAxis is Y")
+    check(UsdGeom.GetStageMetersPerUnit(stage) == 1.0, "metersPerUnit is 1")
+    shot = tomllib.load(open(shot_path, "rb"))
+    fps = shot["frames"]["fps"]
+    check(stage.GetTimeCodesPerSecond() == fps, f"timeCodesPerSecond {stage.GetTimeCodesPerSecond()} == {fps}")
+
+    crowd = stage.GetPrimAtPath("/World/Crowd")
+    agents = [p for p in crowd.GetChildren() if p.GetName().startswith("agent_")]
+    check(len(agents) > 0, "the stage holds agents")
+    # Instancing: every part an instance of a shared prototype.
+    instances = [p for p in Usd.PrimRange(crowd) if p.IsInstance()]
+    protos = {p.GetPrototype().GetPath() for p in instances}
+    print(f"{len(agents)} agents, {len(instances)} instanceable parts sharing {len(protos)} prototypes")
+    check(len(instances) > len(protos) > 0, "parts share prototypes")
+    for p in agents:
+        pv = UsdGeom.PrimvarsAPI(p)
+        aid = pv.GetPrimvar("throng:agentId").Get()
+        check(p.GetName() == f"agent_{aid}", f"{p.GetPath()}: primvar throng:agentId {aid} matches the prim name")
+        check(pv.GetPrimvar("throng:name").Get() == p.GetName(), f"{p.GetPath()}: throng:name is the Cryptomatte name")
+        for part in p.GetChildren():
+            name = UsdGeom.PrimvarsAPI(part).GetPrimvar("throng:name").Get()
+            check(name is not None and name.startswith(p.GetName() + "/"), f"{part.GetPath()}: part Cryptomatte name {name}")
+
+    cache = UsdGeom.XformCache()
+    for frame in frames:
+        cache.SetTime(frame)
+        shown = [p for p in agents if UsdGeom.Imageable(p).ComputeVisibility(frame) != "invisible"]
+        ids = [UsdGeom.PrimvarsAPI(p).GetPrimvar("throng:agentId").Get() for p in shown]
+        out = subprocess.run([throng, "botinfo", shot_path, *map(str, ids), "--frame", str(frame), "--json"],
+                             check=True, capture_output=True, text=True).stdout
+        infos = {b["id"]: b for b in json.loads(out)}
+        check(set(infos) == set(ids), f"frame {frame}: botinfo knows the same {len(ids)} agents")
+        worst = 0.0
+        for p, aid in zip(shown, ids):
+            b = infos[aid]
+            m = cache.GetLocalToWorldTransform(p)
+            t = m.ExtractTranslation()
+            h = math.radians(b["heading_deg"])
+            s = b["height_scale"]
+            # Agent +Z (heading 0) turned by heading about +Y, scaled by the height scale.
+            z = m.TransformDir(Gf.Vec3d(0, 0, 1))
+            want_z = (s * math.sin(h), 0.0, s * math.cos(h))
+            err = max(max(abs(a - b) for a, b in zip(t, b["position"])), max(abs(a - b) for a, b in zip(z, want_z)))
+            worst = max(worst, err)
+            check(err < 1e-3, f"frame {frame}: agent {aid} transform {tuple(t)} vs botinfo {b['position']} (err {err:.2e})")
+            rig = UsdGeom.PrimvarsAPI(p).GetPrimvar("throng:rig").Get()
+            cyc = UsdGeom.PrimvarsAPI(p).GetPrimvar("throng:cycle").Get(frame)
+            check(rig == b["rig"] and cyc == b["cycle"], f"frame {frame}: agent {aid} rig/cycle {rig}/{cyc} vs {b['rig']}/{b['cycle']}")
+        print(f"frame {frame}: {len(ids)} agents match botinfo (worst transform error {worst:.1e})")
+
+    # The camera, as the shot defines it.
+    cam = UsdGeom.Camera(stage.GetPrimAtPath("/World/shotcam"))
+    res = shot.get("render", {}).get("resolution", [1920, 1080])
+    width = shot["camera"]["sensor_width"]
+    check(abs(cam.GetHorizontalApertureAttr().Get() - width) < 1e-4, "horizontal aperture is the sensor width")
+    check(abs(cam.GetVerticalApertureAttr().Get() - width * res[1] / res[0]) < 1e-3, "vertical aperture from the aspect")
+    near, far = cam.GetClippingRangeAttr().Get()
+    check(0 < near < far, f"clipping range {near}-{far}")
+    keys = shot["camera"].get("keys", [])
+    for k in keys:
+        f = k["frame"]
+        if not (stage.GetStartTimeCode() <= f <= stage.GetEndTimeCode()):
+            continue
+        cache.SetTime(f)
+        m = cache.GetLocalToWorldTransform(cam.GetPrim())
+        check(close(m.ExtractTranslation(), k["position"]), f"camera position at key frame {f}")
+        fwd = m.TransformDir(Gf.Vec3d(0, 0, -1)).GetNormalized()
+        aim = Gf.Vec3d(*k["aim"]) - Gf.Vec3d(*k["position"])
+        check(close(fwd, aim.GetNormalized()), f"camera looks at the aim at key frame {f}")
+        check(abs(cam.GetFocalLengthAttr().Get(f) - k["focal_length"]) < 1e-4, f"focal length at key frame {f}")
+    print(f"camera: aperture {width} x {cam.GetVerticalApertureAttr().Get():.3f} mm, "
+          f"focal {cam.GetFocalLengthAttr().Get(stage.GetStartTimeCode())} mm, clipping {near}-{far}")
+    if failures:
+        print(f"{len(failures)} failures")
+        return 1
+    print("usd-core reads back the same agents, transforms and camera as throng")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1], sys.argv[2], sys.argv[3], [int(f) for f in sys.argv[4:]]))

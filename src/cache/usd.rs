@@ -1,0 +1,516 @@
+//! USD crowds in (`.usd`, `.usda`, `.usdc`, `.usdz`), read through `openusd`
+//! (docs/usd.md, "USD in").
+//!
+//! Two shapes are read, over every integer time code of the stage's
+//! `startTimeCode`-`endTimeCode` (or of the authored samples when the stage
+//! has no range):
+//!
+//! - a `PointInstancer` with `ids` (the agent ids, required), `positions` and
+//!   `orientations` (or `orientationsf`), time-sampled;
+//! - agent prims carrying `primvars:throng:agentId` with time-sampled xform
+//!   ops (`transform`, `translate`, `rotateY`, `orient`, `scale`), as
+//!   `throng export --format usd` writes them; an agent `invisible` at a
+//!   frame is absent from it, and `primvars:throng:seated` sets the seated flag.
+//!
+//! Rig, cycle and cycle frame come from the primvars `throng:rig`,
+//! `throng:cycle` and `throng:cycleFrame` (constant, or one per instance on
+//! a PointInstancer); without them the [`ImportOptions`] rig and cycle, and
+//! the frames since the agent's first frame.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::path::Path;
+
+use glam::{Mat4, Quat, Vec3};
+use openusd::sdf::{self, Value};
+use openusd::usd::{PrimPredicate, Stage, TimeCode};
+
+use super::{validate, AgentSample, CrowdCache, FrameBlock, ImportOptions, SEATED};
+use crate::error::{Error, Result};
+
+/// Most frames a USD crowd may span.
+pub const MAX_FRAMES: i64 = 1_000_000;
+/// Most agent samples (agents x frames) one USD crowd may hold.
+pub const MAX_SAMPLES: usize = 50_000_000;
+
+struct Ctx<'a> {
+    path: &'a Path,
+    stage: Stage,
+}
+
+impl Ctx<'_> {
+    fn err(&self, prim: &str, msg: impl Into<String>) -> Error {
+        Error::invalid(self.path, msg).field(prim.to_string())
+    }
+
+    fn sdf_path(&self, p: &str) -> Result<sdf::Path> {
+        sdf::Path::new(p).map_err(|e| self.err(p, format!("invalid USD path: {e}")))
+    }
+
+    /// The composed value of `prim.attr` at `t` (`None` when not authored).
+    fn value(&self, prim: &str, attr: &str, t: f64) -> Result<Option<Value>> {
+        let p = self.sdf_path(&format!("{prim}.{attr}"))?;
+        self.stage
+            .attribute(p)
+            .get_at::<Value>(TimeCode::new(t))
+            .map_err(|e| self.err(&format!("{prim}.{attr}"), format!("cannot read at time {t}: {e}")))
+    }
+
+    /// Sample times of `prim.attr` (empty when it holds only a default).
+    fn times(&self, prim: &str, attr: &str) -> Result<Vec<f64>> {
+        let p = self.sdf_path(&format!("{prim}.{attr}"))?;
+        self.stage
+            .attribute(p)
+            .time_sample_times()
+            .map_err(|e| self.err(&format!("{prim}.{attr}"), format!("cannot read time samples: {e}")))
+    }
+
+    fn has(&self, props: &BTreeSet<String>, name: &str) -> bool {
+        props.contains(name)
+    }
+
+    /// Errors when the samples of `prim.attr` do not cover `frames`.
+    fn covers(&self, prim: &str, attr: &str, frames: (i64, i64)) -> Result<()> {
+        let times = self.times(prim, attr)?;
+        let (Some(&first), Some(&last)) = (times.first(), times.last()) else { return Ok(()) };
+        let missing = if first > frames.0 as f64 {
+            Some(frames.0)
+        } else if last < frames.1 as f64 {
+            Some(frames.1)
+        } else {
+            None
+        };
+        if let Some(f) = missing {
+            return Err(self
+                .err(
+                    &format!("{prim}.{attr}"),
+                    format!(
+                        "time samples of <{prim}.{attr}> cover {first}-{last}, not frame {f} \
+                         (the crowd spans frames {}-{})",
+                        frames.0, frames.1
+                    ),
+                )
+                .frame(f));
+        }
+        Ok(())
+    }
+}
+
+fn props(stage: &Stage, path: &sdf::Path) -> BTreeSet<String> {
+    stage.prim(path.clone()).property_names().unwrap_or_default().iter().map(|t| t.as_str().to_string()).collect()
+}
+
+fn f32_of(v: &Value) -> Option<f32> {
+    match v {
+        Value::Float(x) => Some(*x),
+        Value::Double(x) => Some(*x as f32),
+        Value::Half(x) => Some(x.to_f32()),
+        Value::Int(x) => Some(*x as f32),
+        _ => None,
+    }
+}
+
+fn vec3_of(v: &Value) -> Option<Vec3> {
+    match v {
+        Value::Vec3f(p) => Some(Vec3::new(p.x, p.y, p.z)),
+        Value::Vec3d(p) => Some(Vec3::new(p.x as f32, p.y as f32, p.z as f32)),
+        Value::Vec3h(p) => Some(Vec3::new(p.x.to_f32(), p.y.to_f32(), p.z.to_f32())),
+        _ => None,
+    }
+}
+
+fn quat_of(v: &Value) -> Option<Quat> {
+    match v {
+        Value::Quatf(q) => Some(Quat::from_xyzw(q.x, q.y, q.z, q.w)),
+        Value::Quatd(q) => Some(Quat::from_xyzw(q.x as f32, q.y as f32, q.z as f32, q.w as f32)),
+        Value::Quath(q) => Some(Quat::from_xyzw(q.x.to_f32(), q.y.to_f32(), q.z.to_f32(), q.w.to_f32())),
+        _ => None,
+    }
+}
+
+fn quats_of(v: &Value) -> Option<Vec<Quat>> {
+    match v {
+        Value::QuatfVec(q) => Some(q.iter().map(|q| Quat::from_xyzw(q.x, q.y, q.z, q.w)).collect()),
+        Value::QuathVec(q) => {
+            Some(q.iter().map(|q| Quat::from_xyzw(q.x.to_f32(), q.y.to_f32(), q.z.to_f32(), q.w.to_f32())).collect())
+        }
+        Value::QuatdVec(q) => {
+            Some(q.iter().map(|q| Quat::from_xyzw(q.x as f32, q.y as f32, q.z as f32, q.w as f32)).collect())
+        }
+        _ => None,
+    }
+}
+
+fn vec3s_of(v: &Value) -> Option<Vec<Vec3>> {
+    match v {
+        Value::Vec3fVec(p) => Some(p.iter().map(|p| Vec3::new(p.x, p.y, p.z)).collect()),
+        Value::Vec3dVec(p) => Some(p.iter().map(|p| Vec3::new(p.x as f32, p.y as f32, p.z as f32)).collect()),
+        _ => None,
+    }
+}
+
+fn ids_of(v: &Value) -> Option<Vec<i64>> {
+    match v {
+        Value::Int64Vec(x) => Some(x.clone()),
+        Value::IntVec(x) => Some(x.iter().map(|&i| i64::from(i)).collect()),
+        Value::UintVec(x) => Some(x.iter().map(|&i| i64::from(i)).collect()),
+        _ => None,
+    }
+}
+
+/// A string primvar: one value, or one per instance.
+enum Names {
+    One(String),
+    Each(Vec<String>),
+}
+
+fn names_of(v: &Value) -> Option<Names> {
+    match v {
+        Value::String(s) => Some(Names::One(s.clone())),
+        Value::Token(t) => Some(Names::One(t.as_str().to_string())),
+        Value::StringVec(s) => Some(Names::Each(s.clone())),
+        Value::TokenVec(t) => Some(Names::Each(t.iter().map(|t| t.as_str().to_string()).collect())),
+        _ => None,
+    }
+}
+
+fn heading_of(m: &Mat4) -> f32 {
+    let f = m.transform_vector3(Vec3::Z);
+    f.x.atan2(f.z)
+}
+
+/// Rig and cycle tables in first-use order.
+#[derive(Default)]
+struct Names2 {
+    rigs: Vec<String>,
+    cycles: Vec<String>,
+    rig_index: HashMap<String, u16>,
+    cycle_index: HashMap<String, u16>,
+}
+
+impl Names2 {
+    fn index(names: &mut Vec<String>, index: &mut HashMap<String, u16>, name: &str) -> Option<u16> {
+        if let Some(&i) = index.get(name) {
+            return Some(i);
+        }
+        let i = u16::try_from(names.len()).ok()?;
+        names.push(name.to_string());
+        index.insert(name.to_string(), i);
+        Some(i)
+    }
+    fn rig(&mut self, name: &str) -> Option<u16> {
+        Self::index(&mut self.rigs, &mut self.rig_index, name)
+    }
+    fn cycle(&mut self, name: &str) -> Option<u16> {
+        Self::index(&mut self.cycles, &mut self.cycle_index, name)
+    }
+}
+
+/// Reads a USD crowd into a [`CrowdCache`].
+pub fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
+    let text = path.to_str().ok_or_else(|| Error::invalid(path, "the USD file's path is not UTF-8"))?;
+    if !path.exists() {
+        return Err(Error::invalid(path, "no such USD file"));
+    }
+    let stage = Stage::open(text).map_err(|e| Error::invalid(path, format!("cannot open the USD stage: {e:#}")))?;
+    let ctx = Ctx { path, stage };
+    if let Some(e) = ctx.stage.composition_errors().first() {
+        return Err(Error::invalid(path, format!("USD composition error: {e}")));
+    }
+
+    // Find the crowd: PointInstancers and agent prims.
+    let mut instancers = Vec::new();
+    let mut agent_prims = Vec::new();
+    let mut visited = 0usize;
+    let mut paths = Vec::new();
+    ctx.stage
+        .traverse(PrimPredicate::DEFAULT, |p| paths.push(p.clone()))
+        .map_err(|e| Error::invalid(path, format!("cannot traverse the USD stage: {e:#}")))?;
+    for p in &paths {
+        visited += 1;
+        let prim = ctx.stage.prim(p.clone());
+        let ty = prim.type_name().ok().flatten().map(|t| t.as_str().to_string()).unwrap_or_default();
+        if ty == "PointInstancer" {
+            instancers.push(p.as_str().to_string());
+        } else if props(&ctx.stage, p).contains("primvars:throng:agentId") {
+            agent_prims.push(p.as_str().to_string());
+        }
+    }
+    if instancers.is_empty() && agent_prims.is_empty() {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "no crowd in this USD file: no PointInstancer and no prim with primvars:throng:agentId \
+                 among its {visited} prims"
+            ),
+        ));
+    }
+
+    // The frames.
+    let frames: (i64, i64) = if ctx.stage.has_authored_time_code_range() {
+        (ctx.stage.start_time_code().ceil() as i64, ctx.stage.end_time_code().floor() as i64)
+    } else {
+        let mut all = Vec::new();
+        for p in &instancers {
+            all.extend(ctx.times(p, "positions")?);
+        }
+        for p in &agent_prims {
+            for op in xform_ops(&ctx, p)? {
+                all.extend(ctx.times(p, &op)?);
+            }
+        }
+        let lo = all.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = all.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if lo.is_finite() {
+            (lo.ceil() as i64, hi.floor() as i64)
+        } else {
+            (0, 0)
+        }
+    };
+    if frames.1 < frames.0 || frames.1 - frames.0 >= MAX_FRAMES {
+        return Err(Error::invalid(
+            path,
+            format!("the crowd's frame range {}-{} is empty or longer than {MAX_FRAMES} frames", frames.0, frames.1),
+        ));
+    }
+    if i32::try_from(frames.0).is_err() || i32::try_from(frames.1).is_err() {
+        return Err(Error::invalid(path, format!("frames {}-{} do not fit a cache frame", frames.0, frames.1)));
+    }
+
+    let mut names = Names2::default();
+    let mut blocks: BTreeMap<i32, Vec<AgentSample>> = (frames.0..=frames.1).map(|f| (f as i32, Vec::new())).collect();
+    let mut samples = 0usize;
+    let mut first_seen: HashMap<u32, i32> = HashMap::new();
+    let mut push = |blocks: &mut BTreeMap<i32, Vec<AgentSample>>, prim: &str, f: i32, a: AgentSample| -> Result<()> {
+        samples += 1;
+        if samples > MAX_SAMPLES {
+            return Err(Error::invalid(path, format!("more than {MAX_SAMPLES} agent samples")).field(prim.to_string()));
+        }
+        blocks.entry(f).or_default().push(a);
+        Ok(())
+    };
+
+    for pi in &instancers {
+        let p = props(&ctx.stage, &ctx.sdf_path(pi)?);
+        if !ctx.has(&p, "ids") {
+            return Err(ctx.err(pi, format!("PointInstancer <{pi}> has no `ids`: throng needs the agent ids")));
+        }
+        if !ctx.has(&p, "positions") {
+            return Err(ctx.err(pi, format!("PointInstancer <{pi}> has no `positions`")));
+        }
+        // Prototypes must exist.
+        let rel = ctx.stage.relationship(ctx.sdf_path(&format!("{pi}.prototypes"))?);
+        let protos = rel.targets().unwrap_or_default();
+        for t in &protos {
+            if !ctx.stage.prim(t.clone()).is_valid().unwrap_or(false) {
+                return Err(ctx.err(
+                    &format!("{pi}.prototypes"),
+                    format!("PointInstancer <{pi}>: prototype <{}> does not exist (a missing reference?)", t.as_str()),
+                ));
+            }
+        }
+        let orient = if ctx.has(&p, "orientations") {
+            Some("orientations")
+        } else if ctx.has(&p, "orientationsf") {
+            Some("orientationsf")
+        } else {
+            None
+        };
+        for a in ["ids", "positions"].into_iter().chain(orient) {
+            ctx.covers(pi, a, frames)?;
+        }
+        for f in frames.0..=frames.1 {
+            let t = f as f64;
+            let frame_err = |attr: &str, msg: String| ctx.err(&format!("{pi}.{attr}"), msg).frame(f);
+            let ids = ctx
+                .value(pi, "ids", t)?
+                .and_then(|v| ids_of(&v))
+                .ok_or_else(|| frame_err("ids", format!("<{pi}.ids> has no int64[] value at frame {f}")))?;
+            let pos = ctx.value(pi, "positions", t)?.and_then(|v| vec3s_of(&v)).ok_or_else(|| {
+                frame_err("positions", format!("<{pi}.positions> has no point3f[] value at frame {f}"))
+            })?;
+            let rot = match orient {
+                Some(o) => ctx
+                    .value(pi, o, t)?
+                    .and_then(|v| quats_of(&v))
+                    .ok_or_else(|| frame_err(o, format!("<{pi}.{o}> has no quaternion array at frame {f}")))?,
+                None => vec![Quat::IDENTITY; ids.len()],
+            };
+            if pos.len() != ids.len() || rot.len() != ids.len() {
+                return Err(frame_err(
+                    "positions",
+                    format!(
+                        "{} ids, {} positions and {} orientations at frame {f}; they must be equally long",
+                        ids.len(),
+                        pos.len(),
+                        rot.len()
+                    ),
+                ));
+            }
+            if !protos.is_empty() && ctx.has(&p, "protoIndices") {
+                if let Some(Value::IntVec(idx)) = ctx.value(pi, "protoIndices", t)? {
+                    if let Some(bad) = idx.iter().find(|&&i| i < 0 || i as usize >= protos.len()) {
+                        return Err(frame_err(
+                            "protoIndices",
+                            format!("protoIndex {bad} at frame {f}: there are {} prototypes", protos.len()),
+                        ));
+                    }
+                }
+            }
+            let rig = ctx.value(pi, "primvars:throng:rig", t)?.and_then(|v| names_of(&v));
+            let cycle = ctx.value(pi, "primvars:throng:cycle", t)?.and_then(|v| names_of(&v));
+            let cycle_frame = ctx.value(pi, "primvars:throng:cycleFrame", t)?;
+            for (i, &id) in ids.iter().enumerate() {
+                let id =
+                    u32::try_from(id).map_err(|_| frame_err("ids", format!("id {id} at frame {f} is not a u32")))?;
+                let pick = |n: &Option<Names>, default: &str| match n {
+                    Some(Names::One(s)) => s.clone(),
+                    Some(Names::Each(v)) => v.get(i).cloned().unwrap_or_else(|| default.to_string()),
+                    None => default.to_string(),
+                };
+                let rig_name = pick(&rig, &opts.rig);
+                let cycle_name = pick(&cycle, &opts.cycle);
+                let first = *first_seen.entry(id).or_insert(f as i32);
+                let cf = match &cycle_frame {
+                    Some(Value::FloatVec(v)) => v.get(i).copied(),
+                    Some(v) => f32_of(v),
+                    None => None,
+                }
+                .unwrap_or((f as i32 - first) as f32);
+                let too_many = || frame_err("primvars:throng:rig", "more than 65536 rig or cycle names".into());
+                let a = AgentSample {
+                    id,
+                    position: pos[i],
+                    heading: heading_of(&Mat4::from_quat(rot[i])),
+                    rig: names.rig(&rig_name).ok_or_else(too_many)?,
+                    cycle: names.cycle(&cycle_name).ok_or_else(too_many)?,
+                    cycle_frame: cf,
+                    flags: 0,
+                };
+                push(&mut blocks, pi, f as i32, a)?;
+            }
+        }
+    }
+
+    for ap in &agent_prims {
+        let id = match ctx.value(ap, "primvars:throng:agentId", 0.0)? {
+            Some(Value::Int(i)) => u32::try_from(i).ok(),
+            Some(Value::Int64(i)) => u32::try_from(i).ok(),
+            Some(Value::Uint(i)) => Some(i),
+            _ => None,
+        }
+        .ok_or_else(|| ctx.err(ap, format!("<{ap}> primvars:throng:agentId is not a non-negative int")))?;
+        let ops = xform_ops(&ctx, ap)?;
+        if ops.is_empty() {
+            return Err(ctx.err(ap, format!("agent prim <{ap}> has no xformOpOrder: throng needs its transform")));
+        }
+        for op in &ops {
+            ctx.covers(ap, op, frames)?;
+        }
+        let p = props(&ctx.stage, &ctx.sdf_path(ap)?);
+        for f in frames.0..=frames.1 {
+            let t = f as f64;
+            if ctx.has(&p, "visibility") {
+                if let Some(Value::Token(v)) = ctx.value(ap, "visibility", t)? {
+                    if v.as_str() == "invisible" {
+                        continue;
+                    }
+                }
+            }
+            let m = world_matrix(&ctx, ap, t)?;
+            let name_at = |attr: &str, default: &str| -> Result<String> {
+                Ok(match ctx.value(ap, attr, t)?.and_then(|v| names_of(&v)) {
+                    Some(Names::One(s)) => s,
+                    _ => default.to_string(),
+                })
+            };
+            let rig_name = name_at("primvars:throng:rig", &opts.rig)?;
+            let cycle_name = name_at("primvars:throng:cycle", &opts.cycle)?;
+            let first = *first_seen.entry(id).or_insert(f as i32);
+            let cf = ctx
+                .value(ap, "primvars:throng:cycleFrame", t)?
+                .and_then(|v| f32_of(&v))
+                .unwrap_or((f as i32 - first) as f32);
+            let too_many = || ctx.err(ap, "more than 65536 rig or cycle names").frame(f);
+            let seated = matches!(ctx.value(ap, "primvars:throng:seated", t)?, Some(Value::Bool(true)));
+            let a = AgentSample {
+                id,
+                position: m.w_axis.truncate(),
+                heading: heading_of(&m),
+                rig: names.rig(&rig_name).ok_or_else(too_many)?,
+                cycle: names.cycle(&cycle_name).ok_or_else(too_many)?,
+                cycle_frame: cf,
+                flags: if seated { SEATED } else { 0 },
+            };
+            push(&mut blocks, ap, f as i32, a)?;
+        }
+    }
+
+    let frames = blocks
+        .into_iter()
+        .filter(|(_, agents)| !agents.is_empty())
+        .map(|(frame, mut agents)| {
+            agents.sort_by_key(|a| a.id);
+            FrameBlock { frame, agents }
+        })
+        .collect();
+    let crowd = CrowdCache { rigs: names.rigs, cycles: names.cycles, frames };
+    validate(path, &crowd)?;
+    Ok(crowd)
+}
+
+/// The prim's `xformOpOrder`.
+fn xform_ops(ctx: &Ctx, prim: &str) -> Result<Vec<String>> {
+    Ok(match ctx.value(prim, "xformOpOrder", 0.0)? {
+        Some(Value::TokenVec(v)) => v.iter().map(|t| t.as_str().to_string()).collect(),
+        _ => Vec::new(),
+    })
+}
+
+/// The prim's local matrix at `t` from its xform ops (column vectors).
+fn local_matrix(ctx: &Ctx, prim: &str, t: f64) -> Result<Mat4> {
+    let mut m = Mat4::IDENTITY;
+    for op in xform_ops(ctx, prim)? {
+        if op == "!resetXformStack!" {
+            continue;
+        }
+        let bad = || ctx.err(&format!("{prim}.{op}"), format!("<{prim}.{op}> has no usable value at time {t}"));
+        let v = ctx.value(prim, &op, t)?.ok_or_else(bad)?;
+        let kind = op.strip_prefix("xformOp:").unwrap_or(&op).split(':').next().unwrap_or("");
+        let step = match kind {
+            "transform" => match &v {
+                // USD matrices are row-major for row vectors: the same 16 numbers
+                // as a column-major matrix for column vectors.
+                Value::Matrix4d(x) => Mat4::from_cols_array(&x.0.map(|e| e as f32)),
+                _ => return Err(bad()),
+            },
+            "translate" => Mat4::from_translation(vec3_of(&v).ok_or_else(bad)?),
+            "scale" => Mat4::from_scale(vec3_of(&v).ok_or_else(bad)?),
+            "orient" => Mat4::from_quat(quat_of(&v).ok_or_else(bad)?),
+            "rotateY" => Mat4::from_rotation_y(f32_of(&v).ok_or_else(bad)?.to_radians()),
+            "rotateX" => Mat4::from_rotation_x(f32_of(&v).ok_or_else(bad)?.to_radians()),
+            "rotateZ" => Mat4::from_rotation_z(f32_of(&v).ok_or_else(bad)?.to_radians()),
+            _ => {
+                return Err(ctx.err(
+                    &format!("{prim}.{op}"),
+                    format!("<{prim}>: xform op `{op}` is not read by throng (transform, translate, orient, rotateX/Y/Z, scale are)"),
+                ))
+            }
+        };
+        m *= step;
+    }
+    Ok(m)
+}
+
+/// World matrix: the prim's and its ancestors' ops.
+fn world_matrix(ctx: &Ctx, prim: &str, t: f64) -> Result<Mat4> {
+    let mut m = local_matrix(ctx, prim, t)?;
+    let mut p = prim;
+    while let Some(i) = p.rfind('/') {
+        p = &p[..i];
+        if p.is_empty() {
+            break;
+        }
+        m = local_matrix(ctx, p, t)? * m;
+    }
+    Ok(m)
+}

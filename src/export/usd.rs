@@ -1,0 +1,670 @@
+//! `throng export --format usd`: the cast crowd over a frame range as a USD
+//! stage (docs/usd.md).
+//!
+//! Layout (every name derived from mesh, material and agent names, sorted,
+//! so two runs write the same bytes):
+//!
+//! ```text
+//! /World                         Xform (defaultPrim)
+//!   /Prototypes                  invisible Scope: per library mesh used, an Xform holding a Mesh
+//!   /Looks                       Scope: one Material (UsdPreviewSurface) per cast material
+//!   /Set/set_<i>                 instanceable, references a prototype, binds its material
+//!   /Crowd                       Scope (one collection per render layer)
+//!     /agent_<id>                Xform, time-sampled world_from_agent, throng primvars
+//!       /<slot>                  instanceable, references a prototype, time-sampled
+//!                                agent_from_part (skinned: one child per pose, visibility-sampled)
+//!   /shotcam                     Camera: focal length, apertures, clipping, time-sampled transform
+//!   /Lights/sun, /Lights/sky     DistantLight, DomeLight
+//! ```
+//!
+//! With [`Instancing::PointInstancer`] the crowd is one PointInstancer per
+//! part slot instead (ids = agent ids); kept for the measurement in docs/usd.md.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::path::{Path, PathBuf};
+
+use glam::{Affine3A, Mat4, Quat, Vec3};
+use openusd::gf;
+use openusd::sdf::{Specifier, Value};
+
+use super::usd_layer::{identifier, LayerBuilder, PrimId, UsdEncoding};
+use crate::casting::{Lod, ShotCrowd};
+use crate::error::{write_atomic, Error, IoContext, Result};
+use crate::layers::Manifest;
+use crate::render::cryptomatte::{agent_name, part_name};
+use crate::scene::{vis, MaterialId, MeshId};
+
+/// Most transform samples one export holds in memory (agents x frames x parts).
+pub const MAX_SAMPLES: usize = 40_000_000;
+/// Near and far clipping planes written on the camera: the shot has no
+/// clipping keys, and throng's renderer clips at neither.
+pub const CLIPPING_RANGE: [f32; 2] = [0.05, 100_000.0];
+
+/// How agents are instanced in the stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Instancing {
+    /// Every agent a prim, every part an instanceable prim referencing a
+    /// shared prototype (the default; docs/usd.md says why).
+    #[default]
+    Prims,
+    /// One PointInstancer per part slot, `ids` = agent ids.
+    PointInstancer,
+}
+
+/// What to export.
+#[derive(Clone, Debug)]
+pub struct UsdExportOptions<'a> {
+    /// First and last shot frame (time codes are shot frames).
+    pub frames: (i32, i32),
+    /// Only these agents (a layer's).
+    pub only: Option<&'a BTreeSet<u32>>,
+    /// The layer manifest: the `throng:layer` primvar and per-layer collections.
+    pub manifest: Option<&'a Manifest>,
+    /// One file per render layer, sublayered by the root file.
+    pub split_layers: bool,
+    /// Prims or a PointInstancer.
+    pub instancing: Instancing,
+}
+
+impl UsdExportOptions<'_> {
+    /// The whole crowd over `frames`.
+    pub fn new(frames: (i32, i32)) -> Self {
+        UsdExportOptions { frames, only: None, manifest: None, split_layers: false, instancing: Instancing::Prims }
+    }
+}
+
+/// What an export wrote.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct UsdExportSummary {
+    /// Agents written.
+    pub agents: usize,
+    /// Frames sampled.
+    pub frames: usize,
+    /// Shared prototype meshes.
+    pub prototypes: usize,
+    /// Materials.
+    pub materials: usize,
+    /// Instanceable prims (agent parts and set pieces) or point instances per frame.
+    pub instances: usize,
+    /// Prims in all layers.
+    pub prims: usize,
+    /// Files written, root last.
+    pub files: Vec<PathBuf>,
+    /// Bytes written.
+    pub bytes: u64,
+}
+
+/// One part of one agent over the frames it is present.
+struct PartTrack {
+    /// Prim name (`<slot>`, `<slot>_1` for a slot's second piece).
+    name: String,
+    /// Cryptomatte part name `agent_<id>/<slot>`.
+    crypto: String,
+    material: MaterialId,
+    /// (frame, mesh, agent_from_object).
+    samples: Vec<(i32, MeshId, Affine3A)>,
+}
+
+struct AgentTrack {
+    /// (frame, world_from_agent, cycle, cycle frame, seated).
+    frames: Vec<(i32, Affine3A, String, f32, bool)>,
+    parts: BTreeMap<(u16, usize), PartTrack>,
+}
+
+fn matrix(m: &Affine3A) -> Value {
+    let cols = Mat4::from(*m).to_cols_array();
+    Value::Matrix4d(gf::Matrix4d(cols.map(f64::from)))
+}
+
+fn vec3(v: Vec3) -> gf::Vec3f {
+    gf::vec3f(v.x, v.y, v.z)
+}
+
+fn string(s: &str) -> Value {
+    Value::String(s.to_string())
+}
+
+/// Samples, or one default when every sample is equal.
+enum Track {
+    Constant(Value),
+    Samples(Vec<(f64, Value)>),
+}
+
+fn track(samples: Vec<(f64, Value)>) -> Track {
+    match samples.first() {
+        Some((_, first)) if samples.iter().all(|(_, v)| v == first) => Track::Constant(first.clone()),
+        _ => Track::Samples(samples),
+    }
+}
+
+fn put(l: &mut LayerBuilder, prim: PrimId, name: &str, ty: &str, samples: Vec<(f64, Value)>) {
+    match track(samples) {
+        Track::Constant(v) => l.attr(prim, name, ty, v),
+        Track::Samples(s) => l.samples(prim, name, ty, s),
+    }
+}
+
+fn put_primvar(l: &mut LayerBuilder, prim: PrimId, name: &str, ty: &str, samples: Vec<(f64, Value)>) {
+    match track(samples) {
+        Track::Constant(v) => l.primvar(prim, name, ty, v),
+        Track::Samples(s) => l.primvar_samples(prim, name, ty, s),
+    }
+}
+
+fn xform(l: &mut LayerBuilder, prim: PrimId, samples: Vec<(f64, Value)>) {
+    put(l, prim, "xformOp:transform", "matrix4d", samples);
+    l.uniform(prim, "xformOpOrder", "token[]", Value::TokenVec(vec!["xformOp:transform".into()]));
+}
+
+/// Unique identifiers for sorted keys: `identifier(name)`, then `_1`, `_2` on clashes.
+fn unique_names<K: Ord + Copy>(items: impl IntoIterator<Item = (K, String)>) -> BTreeMap<K, String> {
+    let mut sorted: Vec<(String, K)> = items.into_iter().map(|(k, n)| (identifier(&n), k)).collect();
+    sorted.sort();
+    let mut used = BTreeSet::new();
+    let mut out = BTreeMap::new();
+    for (base, k) in sorted {
+        let mut name = base.clone();
+        let mut n = 1;
+        while !used.insert(name.clone()) {
+            name = format!("{base}_{n}");
+            n += 1;
+        }
+        out.insert(k, name);
+    }
+    out
+}
+
+/// Everything the crowd holds over the frame range, gathered once.
+struct Gathered {
+    agents: BTreeMap<u32, AgentTrack>,
+    meshes: BTreeSet<MeshId>,
+    materials: BTreeSet<MaterialId>,
+}
+
+fn gather(crowd: &ShotCrowd, opts: &UsdExportOptions) -> Result<Gathered> {
+    let (a, b) = opts.frames;
+    let mut agents: BTreeMap<u32, AgentTrack> = BTreeMap::new();
+    let mut meshes = BTreeSet::new();
+    let mut materials = BTreeSet::new();
+    let mut samples = 0usize;
+    let mut insts = Vec::new();
+    for f in a..=b {
+        let block = crowd.agents_at(f)?;
+        for s in block.agents.iter().filter(|s| crowd.renders(s) && opts.only.is_none_or(|o| o.contains(&s.id))) {
+            insts.clear();
+            crowd.agent_instances(s, Lod::Full, vis::ALL, &mut insts).map_err(|e| e.frame(f.into()))?;
+            samples += insts.len() + 1;
+            if samples > MAX_SAMPLES {
+                return Err(Error::Usage(format!(
+                    "the USD export of frames {a}-{b} holds more than {MAX_SAMPLES} transform samples \
+                     (agents x frames x parts); export a shorter --frames range or one --layer"
+                )));
+            }
+            let world_from_agent = crowd.world_from_agent(s);
+            let agent_from_world = world_from_agent.inverse();
+            let t = agents.entry(s.id).or_insert_with(|| AgentTrack { frames: Vec::new(), parts: BTreeMap::new() });
+            t.frames.push((f, world_from_agent, crowd.cycle_name(s).to_string(), s.cycle_frame, s.seated()));
+            let mut seen: HashMap<u16, usize> = HashMap::new();
+            for inst in &insts {
+                let k = seen.entry(inst.part).or_insert(0);
+                let key = (inst.part, *k);
+                *k += 1;
+                let slot = crowd.slot_name(s.id, inst.part).unwrap_or("part");
+                let part = t.parts.entry(key).or_insert_with(|| PartTrack {
+                    name: if key.1 == 0 { identifier(slot) } else { format!("{}_{}", identifier(slot), key.1) },
+                    crypto: part_name(s.id, slot),
+                    material: inst.material,
+                    samples: Vec::new(),
+                });
+                part.samples.push((f, inst.mesh, agent_from_world * inst.world_from_object));
+                meshes.insert(inst.mesh);
+                materials.insert(inst.material);
+            }
+        }
+    }
+    for inst in &crowd.set {
+        meshes.insert(inst.mesh);
+        materials.insert(inst.material);
+    }
+    Ok(Gathered { agents, meshes, materials })
+}
+
+/// Writes the crowd as USD to `out` (the encoding from its extension:
+/// `.usda` or `.usd` text, or a `.usdz` package of a text layer).
+pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Result<UsdExportSummary> {
+    let encoding = UsdEncoding::of(out).ok_or_else(|| {
+        Error::Usage(format!("{}: a USD export needs a .usda, .usdc, .usd or .usdz file name", out.display()))
+    })?;
+    if encoding == UsdEncoding::Usdc {
+        return Err(Error::Usage(format!(
+            "{}: throng cannot write .usdc yet: the binary crate openusd 0.6 writes does not open in Pixar's USD \
+             (docs/usd.md); write .usda, .usd (text) or .usdz",
+            out.display()
+        )));
+    }
+    let (a, b) = opts.frames;
+    let shot = &crowd.shot;
+    if a > b || !shot.frames.contains(a) || !shot.frames.contains(b) {
+        return Err(Error::Usage(format!(
+            "frames {a}-{b} are not within shot {} ({}-{})",
+            shot.name, shot.frames.start, shot.frames.end
+        )));
+    }
+    if opts.split_layers {
+        if encoding == UsdEncoding::Usdz {
+            return Err(Error::Usage("--split-layers writes several files; use .usda or .usdc, not .usdz".into()));
+        }
+        if opts.manifest.is_none() {
+            return Err(Error::Usage("--split-layers needs the layer manifest (run `throng layers` first)".into()));
+        }
+    }
+    let g = gather(crowd, opts)?;
+    let lib = crowd.library();
+
+    let mut root = LayerBuilder::new();
+    root.layer_meta("defaultPrim", Value::Token("World".into()));
+    root.layer_meta("doc", string(&format!("throng {}: shot {}", env!("CARGO_PKG_VERSION"), shot.name)));
+    root.layer_meta("metersPerUnit", Value::Double(1.0));
+    root.layer_meta("upAxis", Value::Token("Y".into()));
+    root.layer_meta("startTimeCode", Value::Double(a.into()));
+    root.layer_meta("endTimeCode", Value::Double(b.into()));
+    root.layer_meta("timeCodesPerSecond", Value::Double(shot.frames.fps.into()));
+    root.layer_meta("framesPerSecond", Value::Double(shot.frames.fps.into()));
+    root.def("/World", "Xform");
+
+    // Prototypes: one Mesh per library mesh, named from the mesh name.
+    let proto_names = unique_names(g.meshes.iter().map(|&m| (m, prototype_name(&lib.meshes[m as usize].name))));
+    // A defined but invisible Scope: importers that skip abstract (`class`)
+    // prims, Blender's among them, still find the prototypes, and a reference
+    // to one brings only its own opinions, not the Scope's invisibility.
+    let protos = root.def("/World/Prototypes", "Scope");
+    root.attr(protos, "visibility", "token", Value::Token("invisible".into()));
+    for (&m, name) in &proto_names {
+        let mesh = &lib.meshes[m as usize];
+        // An Xform holding the Mesh: an instance's prototype root is the
+        // instance prim itself, so the geometry sits one level down (DCCs
+        // such as Blender build their shared prototype from the root's children).
+        root.def(&format!("/World/Prototypes/{name}"), "Xform");
+        let p = root.def(&format!("/World/Prototypes/{name}/mesh"), "Mesh");
+        let (lo, hi) = mesh.bounds();
+        root.attr(p, "extent", "float3[]", Value::Vec3fVec(vec![vec3(lo), vec3(hi)]));
+        root.attr(p, "points", "point3f[]", Value::Vec3fVec(mesh.positions.iter().map(|&v| vec3(v)).collect()));
+        root.attr(p, "faceVertexCounts", "int[]", Value::IntVec(vec![3; mesh.indices.len() / 3]));
+        let indices = mesh.indices.iter().map(|&i| i32::try_from(i).unwrap_or(i32::MAX)).collect();
+        root.attr(p, "faceVertexIndices", "int[]", Value::IntVec(indices));
+        if mesh.normals.len() == mesh.positions.len() {
+            root.attr(p, "normals", "normal3f[]", Value::Vec3fVec(mesh.normals.iter().map(|&v| vec3(v)).collect()));
+            root.attr_meta(p, "normals", "interpolation", Value::Token("vertex".into()));
+        }
+        if mesh.uvs.len() == mesh.positions.len() {
+            let st = mesh.uvs.iter().map(|u| gf::Vec2f { x: u.x, y: 1.0 - u.y }).collect();
+            root.attr(p, "primvars:st", "texCoord2f[]", Value::Vec2fVec(st));
+            root.attr_meta(p, "primvars:st", "interpolation", Value::Token("vertex".into()));
+        }
+        root.uniform(p, "subdivisionScheme", "token", Value::Token("none".into()));
+    }
+
+    // Materials.
+    let mat_names = unique_names(g.materials.iter().map(|&m| (m, lib.materials[m as usize].name.clone())));
+    root.def("/World/Looks", "Scope");
+    for (&m, name) in &mat_names {
+        let src = &lib.materials[m as usize];
+        let path = format!("/World/Looks/{name}");
+        let mat = root.def(&path, "Material");
+        root.connect(mat, "outputs:surface", "token", &format!("{path}/PreviewSurface.outputs:surface"));
+        let sh = root.def(&format!("{path}/PreviewSurface"), "Shader");
+        root.uniform(sh, "info:id", "token", Value::Token("UsdPreviewSurface".into()));
+        root.attr(sh, "inputs:diffuseColor", "color3f", Value::Vec3f(vec3(src.base_color)));
+        root.attr(sh, "inputs:roughness", "float", Value::Float(src.roughness));
+        root.attr(sh, "inputs:metallic", "float", Value::Float(src.metallic));
+        root.attr(sh, "outputs:surface", "token", Value::Token("".into()));
+        let _ = mat;
+    }
+    let bind = |l: &mut LayerBuilder, prim: PrimId, m: MaterialId| {
+        l.api_schemas(prim, &["MaterialBindingAPI"]);
+        l.rel(prim, "material:binding", vec![format!("/World/Looks/{}", mat_names[&m])]);
+    };
+
+    // The set.
+    let mut instances = 0;
+    if !crowd.set.is_empty() {
+        let set = root.def("/World/Set", "Xform");
+        root.primvar(set, "throng:name", "string", string("set"));
+        for (i, inst) in crowd.set.iter().enumerate() {
+            let p = root.def(&format!("/World/Set/set_{i}"), "Xform");
+            root.meta(p, "instanceable", Value::Bool(true));
+            root.reference(p, &format!("/World/Prototypes/{}", proto_names[&inst.mesh]))?;
+            bind(&mut root, p, inst.material);
+            xform(&mut root, p, vec![(0.0, matrix(&inst.world_from_object))]);
+            instances += 1;
+        }
+    }
+
+    // Layer of each agent, from the manifest.
+    let layer_of = |id: u32| -> Option<&str> {
+        let m = opts.manifest?;
+        let a = m.agent(id)?;
+        m.layers.get(a.layer).map(|l| l.name.as_str())
+    };
+
+    // The crowd.
+    let crowd_prim = root.def("/World/Crowd", "Scope");
+    let mut layer_files: BTreeMap<String, LayerBuilder> = BTreeMap::new();
+    let times: Vec<i32> = (a..=b).collect();
+    match opts.instancing {
+        Instancing::Prims => {
+            for (&id, t) in &g.agents {
+                let layer = layer_of(id);
+                let l = match (opts.split_layers, layer) {
+                    (true, Some(name)) => layer_files.entry(name.to_string()).or_insert_with(|| {
+                        let mut l = LayerBuilder::new();
+                        l.prim("/World", Specifier::Over, "");
+                        l.prim("/World/Crowd", Specifier::Over, "");
+                        l
+                    }),
+                    _ => &mut root,
+                };
+                instances += write_agent(l, crowd, id, t, layer, &times, &proto_names, &mat_names)?;
+            }
+        }
+        Instancing::PointInstancer => {
+            instances += write_point_instancers(&mut root, crowd, &g, &times, &proto_names, &mat_names)?;
+        }
+    }
+    // One collection per render layer on /World/Crowd.
+    if let Some(m) = opts.manifest {
+        let mut names = Vec::new();
+        let mut members: BTreeMap<&str, Vec<String>> = BTreeMap::new();
+        for &id in g.agents.keys() {
+            if let Some(layer) = layer_of(id) {
+                members.entry(layer).or_default().push(format!("/World/Crowd/{}", agent_name(id)));
+            }
+        }
+        for l in &m.layers {
+            let Some(targets) = members.remove(l.name.as_str()) else { continue };
+            if opts.instancing == Instancing::PointInstancer {
+                continue;
+            }
+            names.push(format!("CollectionAPI:{}", l.name));
+            root.uniform(
+                crowd_prim,
+                &format!("collection:{}:expansionRule", l.name),
+                "token",
+                Value::Token("expandPrims".into()),
+            );
+            root.rel(crowd_prim, &format!("collection:{}:includes", l.name), targets);
+        }
+        let names: Vec<&str> = names.iter().map(String::as_str).collect();
+        if !names.is_empty() {
+            root.api_schemas(crowd_prim, &names);
+        }
+    }
+
+    write_camera(&mut root, crowd, &times)?;
+    write_lights(&mut root, crowd);
+
+    // Files: per-layer files first, the root last.
+    let ext = out.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default();
+    let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let mut files = Vec::new();
+    let mut bytes = 0u64;
+    let mut prims = root.prim_count();
+    for (layer, l) in &layer_files {
+        let name = format!("{stem}.{layer}.{ext}");
+        let path = out.with_file_name(&name);
+        let data = l.encode(encoding, &name)?;
+        write_bytes(&path, &data)?;
+        bytes += data.len() as u64;
+        prims += l.prim_count();
+        root.sublayer(format!("./{name}"));
+        files.push(path);
+    }
+    let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let data = root.encode(encoding, &name)?;
+    write_bytes(out, &data)?;
+    bytes += data.len() as u64;
+    files.push(out.to_path_buf());
+    Ok(UsdExportSummary {
+        agents: g.agents.len(),
+        frames: times.len(),
+        prototypes: proto_names.len(),
+        materials: mat_names.len(),
+        instances,
+        prims,
+        files,
+        bytes,
+    })
+}
+
+/// A prototype's name from its mesh's library name `<file>#<mesh>`: the
+/// file stem and mesh name, never the directory (which depends on how the
+/// shot's path was given).
+pub fn prototype_name(mesh: &str) -> String {
+    match mesh.rsplit_once('#') {
+        Some((file, name)) => {
+            let stem = Path::new(file).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            format!("{stem}_{name}")
+        }
+        None => mesh.rsplit('/').next().unwrap_or(mesh).to_string(),
+    }
+}
+
+fn write_bytes(path: &Path, data: &[u8]) -> Result<()> {
+    use std::io::Write;
+    write_atomic(path, |w| w.write_all(data).at(path))
+}
+
+#[allow(clippy::too_many_arguments, reason = "one call site; the pieces of one export")]
+fn write_agent(
+    l: &mut LayerBuilder,
+    crowd: &ShotCrowd,
+    id: u32,
+    t: &AgentTrack,
+    layer: Option<&str>,
+    times: &[i32],
+    proto_names: &BTreeMap<MeshId, String>,
+    mat_names: &BTreeMap<MaterialId, String>,
+) -> Result<usize> {
+    let path = format!("/World/Crowd/{}", agent_name(id));
+    let p = l.def(&path, "Xform");
+    xform(l, p, t.frames.iter().map(|(f, m, ..)| (f64::from(*f), matrix(m))).collect());
+    let present: BTreeSet<i32> = t.frames.iter().map(|x| x.0).collect();
+    if present.len() < times.len() {
+        let vis = |f: &i32| {
+            let v = if present.contains(f) { "inherited" } else { "invisible" };
+            (f64::from(*f), Value::Token(v.into()))
+        };
+        l.samples(p, "visibility", "token", times.iter().map(vis).collect());
+    }
+    let cast = crowd.casting.get(&id).ok_or_else(|| {
+        Error::invalid(&crowd.shot.cache.path, "agent was not cast (not in the shot's frames)").agent(id)
+    })?;
+    l.primvar(p, "throng:agentId", "int", Value::Int(i32::try_from(id).unwrap_or(i32::MAX)));
+    l.primvar(p, "throng:name", "string", string(&agent_name(id)));
+    l.primvar(p, "throng:rig", "string", string(&cast.rig));
+    l.primvar(p, "throng:scheme", "string", string(&cast.scheme));
+    put_primvar(
+        l,
+        p,
+        "throng:cycle",
+        "string",
+        t.frames.iter().map(|(f, _, c, ..)| (f64::from(*f), string(c))).collect(),
+    );
+    let cf = t.frames.iter().map(|(f, _, _, cf, _)| (f64::from(*f), Value::Float(*cf))).collect();
+    put_primvar(l, p, "throng:cycleFrame", "float", cf);
+    let seated = t.frames.iter().map(|(f, .., s)| (f64::from(*f), Value::Bool(*s))).collect();
+    put_primvar(l, p, "throng:seated", "bool", seated);
+    if let Some(layer) = layer {
+        l.primvar(p, "throng:layer", "string", string(layer));
+    }
+    let mut count = 0;
+    for part in t.parts.values() {
+        let ppath = format!("{path}/{}", part.name);
+        let pp = l.def(&ppath, "Xform");
+        l.primvar(pp, "throng:name", "string", string(&part.crypto));
+        xform(l, pp, part.samples.iter().map(|(f, _, m)| (f64::from(*f), matrix(m))).collect());
+        let used: BTreeSet<MeshId> = part.samples.iter().map(|s| s.1).collect();
+        let binding = format!("/World/Looks/{}", mat_names[&part.material]);
+        if used.len() == 1 {
+            let mesh = part.samples[0].1;
+            l.meta(pp, "instanceable", Value::Bool(true));
+            l.reference(pp, &format!("/World/Prototypes/{}", proto_names[&mesh]))?;
+            l.api_schemas(pp, &["MaterialBindingAPI"]);
+            l.rel(pp, "material:binding", vec![binding]);
+            count += 1;
+            continue;
+        }
+        // A skinned part: one child per pose it takes, shown on its frames.
+        for &mesh in &used {
+            let c = l.def(&format!("{ppath}/{}", proto_names[&mesh]), "");
+            l.meta(c, "instanceable", Value::Bool(true));
+            l.reference(c, &format!("/World/Prototypes/{}", proto_names[&mesh]))?;
+            l.api_schemas(c, &["MaterialBindingAPI"]);
+            l.rel(c, "material:binding", vec![binding.clone()]);
+            let on: BTreeSet<i32> = part.samples.iter().filter(|s| s.1 == mesh).map(|s| s.0).collect();
+            let vis = part
+                .samples
+                .iter()
+                .map(|s| {
+                    let v = if on.contains(&s.0) { "inherited" } else { "invisible" };
+                    (f64::from(s.0), Value::Token(v.into()))
+                })
+                .collect();
+            l.samples(c, "visibility", "token", vis);
+            count += 1;
+        }
+    }
+    Ok(count)
+}
+
+/// The PointInstancer layout: one instancer per part prim name; each
+/// (mesh, material) a prototype under it; per frame `ids` (agent ids),
+/// `protoIndices`, `positions`, `orientations`, `scales`.
+fn write_point_instancers(
+    l: &mut LayerBuilder,
+    crowd: &ShotCrowd,
+    g: &Gathered,
+    times: &[i32],
+    proto_names: &BTreeMap<MeshId, String>,
+    mat_names: &BTreeMap<MaterialId, String>,
+) -> Result<usize> {
+    // part name -> frame -> (id, (mesh, material), world_from_object)
+    type Frames = BTreeMap<i32, Vec<(u32, (MeshId, MaterialId), Affine3A)>>;
+    let mut groups: BTreeMap<String, Frames> = BTreeMap::new();
+    for (&id, t) in &g.agents {
+        let world: BTreeMap<i32, Affine3A> = t.frames.iter().map(|x| (x.0, x.1)).collect();
+        for part in t.parts.values() {
+            let frames = groups.entry(part.name.clone()).or_default();
+            for &(f, mesh, m) in &part.samples {
+                frames.entry(f).or_default().push((id, (mesh, part.material), world[&f] * m));
+            }
+        }
+    }
+    let _ = crowd;
+    let mut total = 0;
+    for (name, frames) in &groups {
+        let mut most = 0;
+        let path = format!("/World/Crowd/{name}");
+        let pi = l.def(&path, "PointInstancer");
+        let protos: BTreeSet<(MeshId, MaterialId)> = frames.values().flatten().map(|x| x.1).collect();
+        let index: BTreeMap<(MeshId, MaterialId), i32> =
+            protos.iter().enumerate().map(|(i, &k)| (k, i as i32)).collect();
+        l.def(&format!("{path}/Prototypes"), "Scope");
+        let mut targets = Vec::new();
+        for &(mesh, mat) in &protos {
+            let pp = format!("{path}/Prototypes/{}__{}", proto_names[&mesh], mat_names[&mat]);
+            let c = l.def(&pp, "");
+            l.reference(c, &format!("/World/Prototypes/{}", proto_names[&mesh]))?;
+            l.api_schemas(c, &["MaterialBindingAPI"]);
+            l.rel(c, "material:binding", vec![format!("/World/Looks/{}", mat_names[&mat])]);
+            targets.push(pp);
+        }
+        l.rel(pi, "prototypes", targets);
+        let (mut ids, mut idx, mut pos, mut ori, mut scl) = (vec![], vec![], vec![], vec![], vec![]);
+        for &f in times {
+            let rows = frames.get(&f).map(Vec::as_slice).unwrap_or(&[]);
+            most = most.max(rows.len());
+            let t = f64::from(f);
+            ids.push((t, Value::Int64Vec(rows.iter().map(|r| i64::from(r.0)).collect())));
+            idx.push((t, Value::IntVec(rows.iter().map(|r| index[&r.1]).collect())));
+            let trs: Vec<(Vec3, Quat, Vec3)> = rows.iter().map(|r| r.2.to_scale_rotation_translation()).collect();
+            pos.push((t, Value::Vec3fVec(trs.iter().map(|x| vec3(x.2)).collect())));
+            let q = |q: &Quat| gf::Quath {
+                w: gf::f16::from_f32(q.w),
+                x: gf::f16::from_f32(q.x),
+                y: gf::f16::from_f32(q.y),
+                z: gf::f16::from_f32(q.z),
+            };
+            ori.push((t, Value::QuathVec(trs.iter().map(|x| q(&x.1)).collect())));
+            scl.push((t, Value::Vec3fVec(trs.iter().map(|x| vec3(x.0)).collect())));
+        }
+        l.samples(pi, "ids", "int64[]", ids);
+        l.samples(pi, "protoIndices", "int[]", idx);
+        l.samples(pi, "positions", "point3f[]", pos);
+        l.samples(pi, "orientations", "quath[]", ori);
+        l.samples(pi, "scales", "float3[]", scl);
+        total += most;
+    }
+    Ok(total)
+}
+
+fn write_camera(l: &mut LayerBuilder, crowd: &ShotCrowd, times: &[i32]) -> Result<()> {
+    let shot = &crowd.shot;
+    let width = shot.camera.sensor_width;
+    let height = width / shot.aspect();
+    let cam = l.def("/World/shotcam", "Camera");
+    let mut xf = Vec::new();
+    let mut focal = Vec::new();
+    for &f in times {
+        let c = crowd.camera(f)?;
+        xf.push((f64::from(f), matrix(&c.world_from_camera)));
+        // Focal length from the vertical field of view and film back: exact for keyed cameras.
+        let mm = match shot.camera.keys.is_empty() {
+            true => height * 0.5 / (c.yfov * 0.5).tan(),
+            false => keyed_focal(shot, f as f32),
+        };
+        focal.push((f64::from(f), Value::Float(mm)));
+    }
+    xform(l, cam, xf);
+    put(l, cam, "focalLength", "float", focal);
+    l.attr(cam, "horizontalAperture", "float", Value::Float(width));
+    l.attr(cam, "verticalAperture", "float", Value::Float(height));
+    l.attr(cam, "clippingRange", "float2", Value::Vec2f(gf::Vec2f { x: CLIPPING_RANGE[0], y: CLIPPING_RANGE[1] }));
+    l.uniform(cam, "projection", "token", Value::Token("perspective".into()));
+    Ok(())
+}
+
+/// The keyed focal length at a frame, interpolated as `Shot::keyed_camera` does.
+fn keyed_focal(shot: &crate::shot::Shot, frame: f32) -> f32 {
+    let keys = &shot.camera.keys;
+    let (Some(first), Some(last)) = (keys.first(), keys.last()) else { return 35.0 };
+    if frame <= first.frame {
+        return first.focal_length;
+    }
+    if frame >= last.frame {
+        return last.focal_length;
+    }
+    let i = keys.windows(2).position(|w| frame >= w[0].frame && frame <= w[1].frame).unwrap_or(0);
+    let (a, b) = (&keys[i], &keys[i + 1]);
+    let t = if b.frame > a.frame { (frame - a.frame) / (b.frame - a.frame) } else { 0.0 };
+    a.focal_length + (b.focal_length - a.focal_length) * t
+}
+
+fn write_lights(l: &mut LayerBuilder, crowd: &ShotCrowd) {
+    l.def("/World/Lights", "Scope");
+    if let Some(sun) = crowd.shot.sun() {
+        let peak = sun.irradiance.max_element().max(1e-6);
+        let p = l.def("/World/Lights/sun", "DistantLight");
+        // A DistantLight shines down its local -Z: from the sun towards the scene.
+        let rot = Quat::from_rotation_arc(Vec3::NEG_Z, -sun.direction);
+        xform(l, p, vec![(0.0, matrix(&Affine3A::from_quat(rot)))]);
+        l.attr(p, "inputs:intensity", "float", Value::Float(peak));
+        l.attr(p, "inputs:color", "color3f", Value::Vec3f(vec3(sun.irradiance / peak)));
+        l.attr(p, "inputs:angle", "float", Value::Float(sun.angular_diameter.to_degrees()));
+    }
+    let sky = crowd.shot.sky();
+    let peak = sky.radiance.max_element().max(1e-6);
+    let p = l.def("/World/Lights/sky", "DomeLight");
+    l.attr(p, "inputs:intensity", "float", Value::Float(peak));
+    l.attr(p, "inputs:color", "color3f", Value::Vec3f(vec3(sky.radiance / peak)));
+}

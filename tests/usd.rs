@@ -1,0 +1,269 @@
+//! USD interchange (docs/usd.md): the demo exported over a frame range and
+//! read back through openusd; the export deterministic; the layered export;
+//! a USD crowd written by Pixar's usd-core (tests/fixtures/usd, made by
+//! .ci/make_usd_crowd.py) read as a cache and rendered; bad USD input
+//! refused with the file, prim path and frame, exit 2.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{demo_shot, fixture, repo_path, run};
+use openusd::sdf;
+use openusd::usd::{Stage, TimeCode};
+
+fn export(out: &Path, frames: &str, extra: &[&str]) -> String {
+    let shot = demo_shot();
+    let mut args =
+        vec!["export", shot.to_str().unwrap(), "--format", "usd", "--frames", frames, "--out", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let (code, stdout, stderr) = run(&args);
+    assert_eq!(code, 0, "export failed: {stderr}");
+    stdout
+}
+
+fn path(p: &str) -> sdf::Path {
+    sdf::Path::new(p).unwrap()
+}
+
+#[test]
+fn demo_exports_and_reads_back_through_openusd() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo.usda");
+    let line = export(&out, "1001-1003", &[]);
+    assert!(line.contains("over 3 frames"), "{line}");
+    let stage = Stage::open(out.to_str().unwrap()).unwrap();
+    assert!(stage.composition_errors().is_empty(), "{:?}", stage.composition_errors());
+    assert_eq!(stage.start_time_code(), 1001.0);
+    assert_eq!(stage.end_time_code(), 1003.0);
+    assert_eq!(stage.default_prim().map(|t| t.as_str().to_string()).as_deref(), Some("World"));
+    assert_eq!(stage.stage_metadata("upAxis").unwrap(), Some(sdf::Value::Token("Y".into())));
+    assert_eq!(stage.stage_metadata("metersPerUnit").unwrap(), Some(sdf::Value::Double(1.0)));
+
+    // Every agent a prim named by its Cryptomatte name, with its id primvar.
+    let crowd = stage.prim(path("/World/Crowd"));
+    let agents = crowd.child_names().unwrap();
+    assert!(agents.len() > 100, "{} agents", agents.len());
+    let first = agents[0].as_str().to_string();
+    let id: i32 =
+        stage.attribute(path(&format!("/World/Crowd/{first}.primvars:throng:agentId"))).get().unwrap().unwrap();
+    assert_eq!(first, format!("agent_{id}"));
+    let name: String =
+        stage.attribute(path(&format!("/World/Crowd/{first}.primvars:throng:name"))).get().unwrap().unwrap();
+    assert_eq!(name, first);
+    // Its transform is sampled at every frame; its parts are instances of shared prototypes.
+    let sampled = agents.iter().filter(|a| {
+        let xf = stage.attribute(path(&format!("/World/Crowd/{}.xformOp:transform", a.as_str())));
+        xf.time_sample_times().unwrap() == vec![1001.0, 1002.0, 1003.0]
+    });
+    assert!(sampled.count() > agents.len() / 2, "walking agents have a transform sample per frame");
+    let part = stage.prim(path(&format!("/World/Crowd/{first}"))).child_names().unwrap()[0].as_str().to_string();
+    let part_prim = stage.prim(path(&format!("/World/Crowd/{first}/{part}")));
+    assert!(part_prim.is_instanceable().unwrap());
+    let crypto: String =
+        stage.attribute(path(&format!("/World/Crowd/{first}/{part}.primvars:throng:name"))).get().unwrap().unwrap();
+    assert_eq!(crypto, format!("{first}/{part}"));
+    // (Pixar USD checks that the instances share prototypes: .ci/usd_check.py.)
+
+    // Camera with film back and focal length, lights.
+    let focal: f32 =
+        stage.attribute(path("/World/shotcam.focalLength")).get_at(TimeCode::new(1002.0)).unwrap().unwrap();
+    assert!((focal - 35.0).abs() < 1e-4);
+    let ha: f32 = stage.attribute(path("/World/shotcam.horizontalAperture")).get().unwrap().unwrap();
+    assert_eq!(ha, 36.0);
+    assert_eq!(stage.prim(path("/World/Lights/sun")).type_name().unwrap().unwrap().as_str(), "DistantLight");
+    assert_eq!(stage.prim(path("/World/Lights/sky")).type_name().unwrap().unwrap().as_str(), "DomeLight");
+}
+
+#[test]
+fn export_is_deterministic_and_round_trips_as_a_cache() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = dir.path().join("a.usda");
+    let b = dir.path().join("b.usda");
+    export(&a, "1010-1011", &[]);
+    export(&b, "1010-1011", &[]);
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "two exports differ");
+
+    // The export read back as a cache: same agents and positions as the demo cache.
+    let usd = throng::cache::read(&a).unwrap();
+    let demo = throng::cache::read(repo_path("demo/cache/demo.crowd")).unwrap();
+    let usd_frame = usd.frames.iter().find(|b| b.frame == 1010).unwrap();
+    let demo_frame = demo.frames.iter().find(|b| b.frame == 10).unwrap();
+    let rendered: Vec<_> = demo_frame.agents.iter().filter(|a| !a.hidden()).collect();
+    assert_eq!(usd_frame.agents.len(), rendered.len());
+    for (u, d) in usd_frame.agents.iter().zip(&rendered) {
+        assert_eq!(u.id, d.id);
+        assert!((u.position - d.position).length() < 1e-4, "agent {}: {} vs {}", u.id, u.position, d.position);
+        let dh = (u.heading - d.heading).rem_euclid(std::f32::consts::TAU);
+        assert!(!(1e-3..=std::f32::consts::TAU - 1e-3).contains(&dh), "agent {} heading", u.id);
+        assert_eq!(usd.rigs[u.rig as usize], demo.rigs[d.rig as usize]);
+        assert_eq!(usd.cycles[u.cycle as usize], demo.cycles[d.cycle as usize]);
+        assert_eq!(u.seated(), d.seated(), "agent {} seated", u.id);
+    }
+}
+
+#[test]
+fn layers_split_into_sublayers_and_collections() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = dir.path().join("m.json");
+    let shot = demo_shot();
+    let (code, _, err) = run(&["layers", shot.to_str().unwrap(), "--out", manifest.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let out = dir.path().join("demo.usda");
+    export(&out, "1001-1002", &["--manifest", manifest.to_str().unwrap(), "--split-layers"]);
+    for layer in ["crowd0", "crowd1", "crowd2"] {
+        assert!(dir.path().join(format!("demo.{layer}.usda")).exists(), "no {layer} file");
+    }
+    let stage = Stage::open(out.to_str().unwrap()).unwrap();
+    assert_eq!(stage.layer_count(), 4, "{:?}", stage.layer_identifiers());
+    let m: serde_json::Value = serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
+    let agent = &m["agents"][0];
+    let id = agent["id"].as_u64().unwrap();
+    let layer = m["layers"][agent["layer"].as_u64().unwrap() as usize]["name"].as_str().unwrap().to_string();
+    let got: String =
+        stage.attribute(path(&format!("/World/Crowd/agent_{id}.primvars:throng:layer"))).get().unwrap().unwrap();
+    assert_eq!(got, layer);
+    let targets = stage.relationship(path(&format!("/World/Crowd.collection:{layer}:includes"))).targets().unwrap();
+    assert!(targets.iter().any(|t| t.as_str() == format!("/World/Crowd/agent_{id}")));
+    // The agent's prim spec lives in its layer's file.
+    let text = std::fs::read_to_string(dir.path().join(format!("demo.{layer}.usda"))).unwrap();
+    assert!(text.contains(&format!("\"agent_{id}\"")));
+}
+
+/// A shot like the demo's, reading `cache` with frame_offset -1000 over shot frames 1001-1005.
+fn shot_on(dir: &Path, cache: &Path) -> PathBuf {
+    let demo = repo_path("demo");
+    let text = std::fs::read_to_string(demo_shot()).unwrap();
+    let text = text
+        .replace("\"../wardrobes/", &format!("\"{}/", repo_path("wardrobes").display()))
+        .replace("\"rigs/", &format!("\"{}/rigs/", demo.display()))
+        .replace("\"set/", &format!("\"{}/set/", demo.display()))
+        .replace("path = \"cache/demo.crowd\"", &format!("path = \"{}\"", cache.display()))
+        .replace("end = 1048", "end = 1005");
+    let p = dir.join("usd_shot.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn a_usd_core_crowd_renders_through_throng() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = fixture("usd/pointinstancer_crowd.usda");
+    let c = throng::cache::read(&cache).unwrap();
+    assert_eq!(c.frames.len(), 5);
+    let ids: Vec<u32> = c.frames[0].agents.iter().map(|a| a.id).collect();
+    assert_eq!(ids, [7, 11, 12, 40, 41, 99]);
+    assert_eq!(c.rigs, ["bipedThinA", "bipedTallB"]);
+    let a7 = c.frames[0].agents[0];
+    assert!((a7.heading - -0.8).abs() < 2e-3, "heading {}", a7.heading);
+    assert!((a7.position - glam::Vec3::new(-3.0, 0.0, -2.0)).length() < 1e-5);
+    assert_eq!(c.frames[2].agents[0].cycle_frame, 2.0);
+
+    let shot = shot_on(dir.path(), &cache);
+    let out = dir.path().join("r");
+    let (code, _, err) = run(&[
+        "render",
+        shot.to_str().unwrap(),
+        "--layer",
+        "full",
+        "--frames",
+        "1002",
+        "--spp",
+        "1",
+        "--resolution",
+        "32x18",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "render of the usd-core crowd failed: {err}");
+    let exr = out.join("full/demo.full.1002.exr");
+    assert!(exr.exists(), "no {}", exr.display());
+    // botinfo knows the imported agents.
+    let (code, stdout, err) = run(&["botinfo", shot.to_str().unwrap(), "40", "--frame", "1002", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(stdout.contains("\"cycle\": \"IdleA\""), "{stdout}");
+}
+
+fn bad(dir: &Path, name: &str, text: &str) -> (i32, String) {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    let (code, _, err) = run(&["cache", "info", p.to_str().unwrap()]);
+    (code, err)
+}
+
+const HEAD: &str = "#usda 1.0\n(\n    startTimeCode = 1\n    endTimeCode = 4\n)\n";
+
+#[test]
+fn bad_usd_crowds_name_file_prim_and_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    // No crowd.
+    let (code, err) = bad(
+        dir.path(),
+        "empty.usda",
+        &format!("{HEAD}def Xform \"World\"\n{{\n    def Cube \"c\"\n    {{\n    }}\n}}\n"),
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("empty.usda") && err.contains("no crowd"), "{err}");
+
+    // Time samples that stop before the crowd's last frame.
+    let short = format!(
+        "{HEAD}def PointInstancer \"crowd\"\n{{\n    int64[] ids.timeSamples = {{ 1: [1, 2], 2: [1, 2] }}\n    \
+         point3f[] positions.timeSamples = {{ 1: [(0, 0, 0), (1, 0, 0)], 2: [(0, 0, 0), (1, 0, 0)] }}\n}}\n"
+    );
+    let (code, err) = bad(dir.path(), "short.usda", &short);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("short.usda") && err.contains("/crowd.ids") && err.contains("frame 4"), "{err}");
+
+    // A missing prototype.
+    let missing = format!(
+        "{HEAD}def PointInstancer \"crowd\"\n{{\n    int64[] ids = [1]\n    point3f[] positions = [(0, 0, 0)]\n    \
+         rel prototypes = </nowhere>\n}}\n"
+    );
+    let (code, err) = bad(dir.path(), "missing.usda", &missing);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("missing.usda") && err.contains("/nowhere") && err.contains("/crowd"), "{err}");
+
+    // No ids on the point instancer.
+    let no_ids = format!("{HEAD}def PointInstancer \"crowd\"\n{{\n    point3f[] positions = [(0, 0, 0)]\n}}\n");
+    let (code, err) = bad(dir.path(), "noids.usda", &no_ids);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("ids"), "{err}");
+
+    // Lengths that disagree at one frame.
+    let uneven = format!(
+        "{HEAD}def PointInstancer \"crowd\"\n{{\n    int64[] ids = [1, 2]\n    \
+         point3f[] positions.timeSamples = {{ 1: [(0, 0, 0), (1, 0, 0)], 3: [(0, 0, 0)], 4: [(0, 0, 0)] }}\n}}\n"
+    );
+    let (code, err) = bad(dir.path(), "uneven.usda", &uneven);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("uneven.usda") && err.contains("frame 3"), "{err}");
+
+    // Not USD at all, and a missing file: errors, not panics.
+    let (code, err) = bad(dir.path(), "junk.usda", "#usda 1.0\ndef def def {{{{\n");
+    assert_eq!(code, 2, "{err}");
+    let (code, _, err) = run(&["cache", "info", dir.path().join("nope.usd").to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+}
+
+#[test]
+fn usd_export_refuses_bad_requests() {
+    let dir = tempfile::tempdir().unwrap();
+    let shot = demo_shot();
+    let s = shot.to_str().unwrap();
+    for (args, want) in [
+        (vec!["--frames", "900-1002", "--out", "x.usda"], "not within shot"),
+        (vec!["--frames", "1001-1002", "--out", "x.usdc"], ".usdc"),
+        (vec!["--frames", "1001,1003", "--out", "x.usda"], "contiguous"),
+        (vec!["--frames", "1001-1002", "--split-layers", "--out", "x.usdz"], "usdz"),
+    ] {
+        let mut full = vec!["export", s, "--format", "usd"];
+        let out = dir.path().join(args.last().unwrap());
+        let mut args = args.clone();
+        *args.last_mut().unwrap() = out.to_str().unwrap();
+        full.extend(args);
+        let (code, _, err) = run(&full);
+        assert_eq!(code, 2, "{full:?}: {err}");
+        assert!(err.contains(want), "{full:?}: {err}");
+        assert!(!out.exists());
+    }
+}
