@@ -54,7 +54,7 @@ for path in files:
     crypto = [n for n in channels if n.startswith("Crypto")]
     check(len(crypto) >= 12, f"{path}: {len(crypto)} Cryptomatte channels")
 
-    if "/full/" in path or "/comp/" in path:
+    if "/full/" in path:
         ids = channels["agent.id"]
         values, counts = np.unique(ids[ids > 0], return_counts=True)
         check(len(values) > 0, f"{path}: no agent pixels")
