@@ -430,8 +430,7 @@ impl Rig {
         let file = GltfFile::open(path)?;
         let animated = Animated::from_file(&file)?;
         let hierarchy = animated.hierarchy;
-        let has_slots = file.doc.nodes().any(|n| n.extras().as_ref().is_some_and(|e| e.get().contains("\"slot\"")));
-        if crate::casting::skin::is_skinned(&file) && !has_slots {
+        if crate::casting::skin::is_skinned(&file) && !has_slots(&file) {
             return Err(crate::casting::skin::skinned_refusal(&file.path, "this rig"));
         }
         let root = hierarchy.find("root").ok_or_else(|| file.err("rig has no node named `root`"))?;
@@ -510,6 +509,16 @@ impl Rig {
             })
             .fold(0.0f32, f32::max)
     }
+}
+
+/// Whether any node of the file is a slot (extras with a `"slot"` key):
+/// what tells a slot rig from a skinned character when both have a skin.
+pub fn has_slots(file: &GltfFile) -> bool {
+    file.doc.nodes().any(|n| {
+        n.extras()
+            .as_ref()
+            .is_some_and(|e| serde_json::from_str::<serde_json::Value>(e.get()).is_ok_and(|v| v.get("slot").is_some()))
+    })
 }
 
 /// Reads a node's slot extras; `None` when the node is not a slot.

@@ -123,8 +123,7 @@ pub fn is_skinned_rig(rig: &crate::shot::RigRef) -> Result<bool> {
         Some(k) => Ok(k == crate::shot::RigKind::Skinned),
         None => {
             let file = GltfFile::open(&rig.file)?;
-            let slots = file.doc.nodes().any(|n| n.extras().as_ref().is_some_and(|e| e.get().contains("\"slot\"")));
-            Ok(is_skinned(&file) && !slots)
+            Ok(is_skinned(&file) && !crate::casting::rig::has_slots(&file))
         }
     }
 }
