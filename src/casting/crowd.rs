@@ -241,10 +241,7 @@ impl ShotCrowd {
                     (None, Some(rig)) => match rig.cycle_index(cycle) {
                         Ok(c) => {
                             if !a.hidden() {
-                                let key = (c, rig.step_of(c, a.cycle_frame));
-                                if !skin_poses.contains(&(rig_name.to_string(), key.0, key.1)) {
-                                    skin_poses.insert((rig_name.to_string(), key.0, key.1));
-                                }
+                                skin_poses.insert((rig_name.to_string(), c, rig.step_of(c, a.cycle_frame)));
                             }
                             None
                         }
