@@ -170,10 +170,11 @@ impl BlasSet {
     }
 }
 
-/// Which obvhs tree the TLAS uses. Measured with `examples/render_bench.rs`
-/// (single-thread incoherent rays): Bvh2 builds 2-3x faster and traces as
-/// fast or faster up to ~10k instances; at ~100k instances CwBvh traces
-/// 1.5x faster, which outweighs its slower build.
+/// Which obvhs tree the TLAS uses. Measured with `examples/peer_bench.rs`
+/// (single-thread bounce rays, 2026-12-01, Xeon with AVX-512): CwBvh traces
+/// 1.35x faster than Bvh2 at 11,000 instances and faster at every count we
+/// tried; its slower build (a few ms per 10,000 instances) never pays that
+/// back, so it is the only kind `Tlas::build` uses. Bvh2 stays for benchmarks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TlasKind {
     /// Binary BVH, `fastest_build`.
@@ -183,13 +184,9 @@ pub enum TlasKind {
 }
 
 impl TlasKind {
-    /// The faster tree for `instances` instances.
-    pub fn for_count(instances: usize) -> TlasKind {
-        if instances < 16_384 {
-            TlasKind::Bvh2
-        } else {
-            TlasKind::CwBvh
-        }
+    /// The tree `Tlas::build` uses for `instances` instances.
+    pub fn for_count(_instances: usize) -> TlasKind {
+        TlasKind::CwBvh
     }
 }
 

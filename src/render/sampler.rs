@@ -49,21 +49,54 @@ fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
     laine_karras(x.reverse_bits(), seed).reverse_bits()
 }
 
+/// Direction numbers of Sobol dimension 1 (primitive polynomial x + 1):
+/// v_0 = 1 << 31, v_k = v_{k-1} ^ (v_{k-1} >> 1).
+const SOBOL1_DIRECTIONS: [u32; 32] = {
+    let mut v = [0u32; 32];
+    v[0] = 1 << 31;
+    let mut k = 1;
+    while k < 32 {
+        v[k] = v[k - 1] ^ (v[k - 1] >> 1);
+        k += 1;
+    }
+    v
+};
+
+/// Sobol dimension 1 as four byte tables: entry `b` of table `j` is the XOR
+/// of the direction numbers of the set bits of byte `b` at bit offset 8j.
+/// Four lookups replace a loop over all 32 index bits (the shuffled index
+/// uses every bit); the points are the same.
+const SOBOL1_BYTES: [[u32; 256]; 4] = {
+    let mut t = [[0u32; 256]; 4];
+    let mut j = 0;
+    while j < 4 {
+        let mut b = 0;
+        while b < 256 {
+            let mut y = 0u32;
+            let mut bit = 0;
+            while bit < 8 {
+                if b & (1 << bit) != 0 {
+                    y ^= SOBOL1_DIRECTIONS[8 * j + bit];
+                }
+                bit += 1;
+            }
+            t[j][b] = y;
+            b += 1;
+        }
+        j += 1;
+    }
+    t
+};
+
 /// Sobol dimensions 0 and 1 of point `index`, as 32-bit fixed point.
 #[inline]
 fn sobol_2d(index: u32) -> (u32, u32) {
     let x = index.reverse_bits();
-    // Dimension 1: primitive polynomial x + 1, direction numbers v_k = v_{k-1} ^ (v_{k-1} >> 1).
-    let mut y = 0u32;
-    let mut v = 1u32 << 31;
-    let mut i = index;
-    while i != 0 {
-        if i & 1 != 0 {
-            y ^= v;
-        }
-        v ^= v >> 1;
-        i >>= 1;
-    }
+    let b = index.to_le_bytes();
+    let y = SOBOL1_BYTES[0][b[0] as usize]
+        ^ SOBOL1_BYTES[1][b[1] as usize]
+        ^ SOBOL1_BYTES[2][b[2] as usize]
+        ^ SOBOL1_BYTES[3][b[3] as usize];
     (x, y)
 }
 
@@ -146,6 +179,28 @@ mod tests {
                 cells[(p.x * 4.0) as usize + 4 * (p.y * 4.0) as usize] += 1;
             }
             assert!(cells.iter().all(|&c| c == 1), "{cells:?}");
+        }
+    }
+
+    /// The byte tables give the points of the bit-by-bit recurrence.
+    #[test]
+    fn sobol_tables_match_the_recurrence() {
+        let reference = |mut i: u32| {
+            let (mut y, mut v) = (0u32, 1u32 << 31);
+            while i != 0 {
+                if i & 1 != 0 {
+                    y ^= v;
+                }
+                v ^= v >> 1;
+                i >>= 1;
+            }
+            y
+        };
+        let mut x = 12345u32;
+        for i in (0..4096).chain([u32::MAX, 1 << 31, 0xdead_beef]) {
+            assert_eq!(sobol_2d(i).1, reference(i), "index {i}");
+            x = mix32(x);
+            assert_eq!(sobol_2d(x).1, reference(x), "index {x}");
         }
     }
 
