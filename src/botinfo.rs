@@ -85,11 +85,11 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
         let (distance, _, _) = crate::layers::measure(&camera, crowd.shot.render.resolution[1], a.position, height);
         out.push(BotInfo {
             id,
-            rig: cast.rig.clone(),
+            rig: cast.rig.to_string(),
             cycle: crowd.cycle_name(a).to_string(),
             cycle_frame: a.cycle_frame,
             shot_frame: frame,
-            scheme: cast.scheme.clone(),
+            scheme: cast.scheme.to_string(),
             height_scale: cast.height_scale,
             position: a.position.to_array(),
             heading_deg: a.heading.to_degrees(),

@@ -27,15 +27,16 @@ fn heads_are_uniform_and_inside_their_box() {
     let mut heads = 0;
     for (id, parts) in &crowd.dressed {
         let cast = &crowd.casting[id];
-        let rig = &crowd.rigs[&cast.rig];
+        let rig = &crowd.rigs[&*cast.rig];
         // A part may be several pieces (one per glTF material): check the
         // union of its pieces, as fitted.
         let mut by_slot: std::collections::BTreeMap<usize, (glam::Vec3, glam::Vec3, glam::Affine3A)> =
             Default::default();
         for p in parts {
             let (lo, hi) = crowd.library().meshes[p.mesh as usize].bounds();
-            let (a, b) = (p.slot_from_part.transform_point3(lo), p.slot_from_part.transform_point3(hi));
-            let e = by_slot.entry(p.slot).or_insert((a, b, p.slot_from_part));
+            let fit = crowd.fits[p.fit as usize].slot_from_part;
+            let (a, b) = (fit.transform_point3(lo), fit.transform_point3(hi));
+            let e = by_slot.entry(p.slot as usize).or_insert((a, b, fit));
             e.0 = e.0.min(a);
             e.1 = e.1.max(b);
         }
@@ -69,8 +70,8 @@ fn height_scales_are_uniform_within_range() {
     let shot = Shot::load(&demo_shot()).unwrap();
     let wardrobes = Wardrobes::load(&shot.wardrobes).unwrap();
     let (name, rig) = shot.rigs.iter().next().unwrap();
-    let slots = vec!["head".to_string()];
-    let rc = RigCasting { name, slots: &slots, schemes: &rig.schemes, height_jitter: 0.1 };
+    let slots: Vec<std::sync::Arc<str>> = vec!["head".into()];
+    let rc = RigCasting { name: name.as_str().into(), slots: &slots, schemes: &rig.schemes, height_jitter: 0.1 };
     let n = 10_000;
     let mut h: Vec<f64> =
         (1..=n).map(|id| cast_agent(shot.seed, id, &rc, &wardrobes, &[], false).unwrap().height_scale as f64).collect();
@@ -150,7 +151,7 @@ fn excluded_parts_and_culled_cycles_never_appear() {
     let top = top.clone();
     let culled = "IdleA".to_string();
     let edited = load_with(|s, _| {
-        s.exclude_parts.push(top.clone());
+        s.exclude_parts.push(top.to_string());
         s.culled_cycles.push(culled.clone());
     });
     for c in edited.casting.values() {

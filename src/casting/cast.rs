@@ -6,7 +6,8 @@
 //! hash(seed, agent id, purpose), never from a shared sequence, so adding,
 //! removing or reordering agents changes no other agent.
 
-use std::path::PathBuf;
+use std::path::Path;
+use std::sync::Arc;
 
 use glam::{Affine3A, Quat, Vec3};
 
@@ -19,14 +20,27 @@ pub fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+const FNV_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
+
+/// FNV-1a continued over `s` from state `h`: `fnv1a_from(fnv1a("part/"), slot)`
+/// is `fnv1a("part/" + slot)` without building the string.
+fn fnv1a_from(h: u64, s: &str) -> u64 {
+    s.bytes().fold(h, |h, b| (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3))
+}
+
 /// FNV-1a of a purpose string, so purposes are named, not numbered.
 fn fnv1a(s: &str) -> u64 {
-    s.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3))
+    fnv1a_from(FNV_BASIS, s)
 }
 
 /// A uniform number in [0, 1) keyed by (seed, agent id, purpose).
 pub fn uniform(seed: u64, agent: u32, purpose: &str) -> f64 {
-    let h = mix64(mix64(mix64(seed) ^ (agent as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)) ^ fnv1a(purpose));
+    uniform_hashed(seed, agent, fnv1a(purpose))
+}
+
+/// [`uniform`] with the purpose already hashed by [`fnv1a`].
+fn uniform_hashed(seed: u64, agent: u32, purpose: u64) -> f64 {
+    let h = mix64(mix64(mix64(seed) ^ (agent as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)) ^ purpose);
     (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
@@ -55,11 +69,11 @@ pub fn weighted_pick(weights: &[f32], u: f64) -> Option<usize> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct CastPart {
     /// glTF file.
-    pub file: PathBuf,
+    pub file: Arc<Path>,
     /// Mesh name in the file.
-    pub mesh: String,
+    pub mesh: Arc<str>,
     /// Qualified wardrobe material (`wardrobe/name`) or `gltf` for the mesh's own.
-    pub material: String,
+    pub material: Arc<str>,
     /// Scaled uniformly (heads) rather than per axis.
     pub uniform: bool,
 }
@@ -68,7 +82,7 @@ pub struct CastPart {
 #[derive(Debug, Clone, PartialEq)]
 pub struct SlotCast {
     /// Rig slot name.
-    pub slot: String,
+    pub slot: Arc<str>,
     /// The part, or `None` when the scheme has no candidate for this slot.
     pub part: Option<CastPart>,
 }
@@ -79,9 +93,9 @@ pub struct AgentCast {
     /// Cache id.
     pub id: u32,
     /// Rig name.
-    pub rig: String,
+    pub rig: Arc<str>,
     /// Wardrobe scheme.
-    pub scheme: String,
+    pub scheme: Arc<str>,
     /// Height scale (1.0 for agents that are never scaled).
     pub height_scale: f32,
     /// Whether the height jitter applies (false for seated and no-scale agents).
@@ -93,10 +107,10 @@ pub struct AgentCast {
 /// What casting needs to know about one rig.
 #[derive(Debug, Clone)]
 pub struct RigCasting<'a> {
-    /// Rig name.
-    pub name: &'a str,
-    /// Slot names in rig order.
-    pub slots: &'a [String],
+    /// Rig name (shared with every agent cast on the rig).
+    pub name: Arc<str>,
+    /// Slot names in rig order (shared with every agent cast on the rig).
+    pub slots: &'a [Arc<str>],
     /// Scheme name -> weight, from the shot.
     pub schemes: &'a std::collections::BTreeMap<String, f32>,
     /// Height jitter fraction.
@@ -119,8 +133,8 @@ pub fn cast_agent(
     let weights: Vec<f32> = rig.schemes.values().copied().collect();
     let pick = weighted_pick(&weights, uniform(seed, id, "scheme"))
         .ok_or_else(|| format!("rig `{}` has no scheme with a weight above 0 in the shot", rig.name))?;
-    let scheme_name = names[pick].clone();
-    let scheme: &Scheme = wardrobes.schemes.get(&scheme_name).ok_or_else(|| {
+    let scheme_name = names[pick];
+    let scheme: &Scheme = wardrobes.schemes.get(scheme_name).ok_or_else(|| {
         format!(
             "rig `{}` asks for scheme `{scheme_name}`, which no wardrobe defines (known: {})",
             rig.name,
@@ -132,10 +146,13 @@ pub fn cast_agent(
     for slot in rig.slots {
         let candidates: Vec<_> = scheme.candidates(slot, shot_excludes).collect();
         let w: Vec<f32> = candidates.iter().map(|p| p.weight).collect();
-        let part = weighted_pick(&w, uniform(seed, id, &format!("part/{slot}"))).map(|i| {
+        let part = weighted_pick(&w, uniform_hashed(seed, id, fnv1a_from(fnv1a("part/"), slot))).map(|i| {
             let p = candidates[i];
-            let m =
-                weighted_pick(&p.material_weight_list(), uniform(seed, id, &format!("material/{slot}"))).unwrap_or(0);
+            let m = weighted_pick(
+                &p.material_weight_list(),
+                uniform_hashed(seed, id, fnv1a_from(fnv1a("material/"), slot)),
+            )
+            .unwrap_or(0);
             CastPart {
                 file: p.file.clone(),
                 mesh: p.mesh.clone(),
@@ -148,8 +165,8 @@ pub fn cast_agent(
 
     Ok(AgentCast {
         id,
-        rig: rig.name.to_string(),
-        scheme: scheme_name,
+        rig: rig.name.clone(),
+        scheme: scheme.name.clone(),
         height_scale: height_scale(seed, id, rig.height_jitter, never_scale),
         scaled: !never_scale,
         slots,
@@ -165,8 +182,8 @@ pub const DELIVERED_SCHEME: &str = "delivered";
 pub fn cast_delivered(seed: u64, id: u32, rig: &RigCasting, parts: Vec<SlotCast>, never_scale: bool) -> AgentCast {
     AgentCast {
         id,
-        rig: rig.name.to_string(),
-        scheme: DELIVERED_SCHEME.to_string(),
+        rig: rig.name.clone(),
+        scheme: DELIVERED_SCHEME.into(),
         height_scale: height_scale(seed, id, rig.height_jitter, never_scale),
         scaled: !never_scale,
         slots: parts,
@@ -249,6 +266,12 @@ mod tests {
             let u = uniform(3, id, "x");
             assert!((0.0..1.0).contains(&u));
         }
+    }
+
+    #[test]
+    fn continued_purpose_hash_is_the_whole_string() {
+        assert_eq!(fnv1a_from(fnv1a("part/"), "head"), fnv1a("part/head"));
+        assert_eq!(uniform_hashed(5, 9, fnv1a_from(fnv1a("material/"), "torso")), uniform(5, 9, "material/torso"));
     }
 
     #[test]

@@ -13,6 +13,7 @@
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::Path;
+use std::sync::Arc;
 
 use glam::{Affine3A, Quat, Vec3};
 
@@ -36,23 +37,30 @@ pub enum Lod {
     Proxy,
 }
 
-/// One resolved part of a cast agent: geometry and material ids plus the
-/// transforms that place it in its slot.
+/// One resolved part of a cast agent: geometry and material ids plus which
+/// shared fit places it in its slot. 20 bytes: a million agents keep eleven each.
 #[derive(Debug, Clone, Copy)]
 pub struct DressedPart {
     /// Index into the rig's slots.
-    pub slot: usize,
+    pub slot: u32,
     /// The part mesh.
     pub mesh: MeshId,
     /// The part's material.
     pub material: MaterialId,
+    /// Index into [`ShotCrowd::fits`]: fits depend only on (rig, slot, mesh).
+    pub fit: u32,
+    /// Whether this piece stands for its slot at proxy LOD (one per slot,
+    /// wearing the part's first material).
+    pub proxy: bool,
+}
+
+/// How a part mesh and the proxy cube sit in a slot.
+#[derive(Debug, Clone, Copy)]
+pub struct PartFit {
     /// Fit of the part mesh to the slot's proxy box.
     pub slot_from_part: Affine3A,
     /// The unit proxy cube mapped onto the slot's proxy box.
     pub slot_from_proxy: Affine3A,
-    /// Whether this piece stands for its slot at proxy LOD (one per slot,
-    /// wearing the part's first material).
-    pub proxy: bool,
 }
 
 /// One skinned piece a skinned agent wears.
@@ -67,13 +75,13 @@ pub struct SkinDress {
 }
 
 /// A pose every agent on it shares: (rig, cycle index, pose step).
-pub type PoseKey = (String, usize, u32);
+pub type PoseKey = (Arc<str>, usize, u32);
 
 /// Posed geometry of skinned agents, one entry per pose used in the shot.
 #[derive(Debug, Default)]
 pub struct PosedSkins {
     /// (rig, piece, cycle, step) -> the posed mesh.
-    pub meshes: BTreeMap<(String, usize, usize, u32), MeshId>,
+    pub meshes: BTreeMap<(Arc<str>, usize, usize, u32), MeshId>,
     /// `rig_from_node` of every rig node at each pose (for proxy boxes).
     pub joints: BTreeMap<PoseKey, Vec<Affine3A>>,
 }
@@ -112,6 +120,8 @@ pub struct ShotCrowd {
     pub assets: AssetCache,
     /// Resolved parts per slot-rig agent.
     pub dressed: BTreeMap<u32, Vec<DressedPart>>,
+    /// The part fits that [`DressedPart::fit`] indexes.
+    pub fits: Vec<PartFit>,
     /// Skinned pieces per skinned agent.
     pub skin_dressed: BTreeMap<u32, Vec<SkinDress>>,
     /// Every pose skinned agents take in the shot's frames.
@@ -281,10 +291,13 @@ impl ShotCrowd {
         let mut dressed = BTreeMap::new();
         let mut skin_dressed = BTreeMap::new();
         // Fits depend only on (rig, slot, mesh): compute each once.
-        let mut fits: HashMap<(String, usize, MeshId), Affine3A> = HashMap::new();
+        let mut fits: HashMap<(Arc<str>, usize, MeshId), u32> = HashMap::new();
+        let mut fit_list: Vec<PartFit> = Vec::new();
         let mut materials: HashMap<String, MaterialId> = HashMap::new();
-        // Whether each (file, mesh) part is skinned, asked once per part.
-        let mut checked: HashMap<(std::path::PathBuf, String), bool> = HashMap::new();
+        // Each wardrobe part (and material) resolved to its (mesh, material) pieces once.
+        let mut resolved: HashMap<(usize, usize, usize), Vec<(MeshId, MaterialId)>> = HashMap::new();
+        // Rig and slot names shared (Arc) by every agent cast on the rig.
+        let mut rig_names: HashMap<String, (Arc<str>, Vec<Arc<str>>)> = HashMap::new();
         for (&id, s) in &seen {
             let rig_name = cache.rigs().get(s.rig as usize).cloned().unwrap_or_default();
             let Some(rig_ref) = shot.rigs.get(&rig_name) else {
@@ -302,24 +315,26 @@ impl ShotCrowd {
                 |msg: String| Error::invalid(&shot.path, msg).agent(id).field(format!("rigs.{rig_name}.schemes"));
 
             if let Some(rig) = skinned.get_mut(&rig_name) {
-                let slot_names = rig.slots().to_vec();
+                let (shared_name, slot_names) = rig_names.entry(rig_name.clone()).or_insert_with(|| {
+                    (rig_name.as_str().into(), rig.slots().iter().map(|s| s.as_str().into()).collect())
+                });
                 let rc = RigCasting {
-                    name: &rig_name,
-                    slots: &slot_names,
+                    name: shared_name.clone(),
+                    slots: slot_names,
                     schemes: &rig_ref.schemes,
                     height_jitter: rig_ref.height_jitter,
                 };
                 let cast = if rig_ref.schemes.is_empty() {
                     // No schemes: the character as delivered, in its own materials.
-                    let rig_file = rig.path().to_path_buf();
+                    let rig_file: Arc<std::path::Path> = rig.path().into();
                     let parts = rig
                         .delivered()
                         .iter()
                         .map(|(slot, mesh, _)| SlotCast {
-                            slot: slot.clone(),
+                            slot: slot.as_str().into(),
                             part: Some(CastPart {
                                 file: rig_file.clone(),
-                                mesh: mesh.clone(),
+                                mesh: mesh.as_str().into(),
                                 material: GLTF_MATERIAL.into(),
                                 uniform: false,
                             }),
@@ -335,7 +350,7 @@ impl ShotCrowd {
                     let Some(part) = &slot_cast.part else { continue };
                     let part_index = rig.part(&part.file, &part.mesh).map_err(|e| e.agent(id))?;
                     for &piece in &rig.part_at(part_index).pieces.clone() {
-                        let material = if part.material == GLTF_MATERIAL {
+                        let material = if *part.material == *GLTF_MATERIAL {
                             let p = rig.piece(piece);
                             assets.gltf_material_at(&p.file, p.material)?
                         } else {
@@ -350,10 +365,12 @@ impl ShotCrowd {
             }
 
             let Some(rig) = rigs.get(&rig_name) else { continue };
-            let slot_names: Vec<String> = rig.slots().iter().map(|s| s.name.clone()).collect();
+            let (shared_name, slot_names) = rig_names.entry(rig_name.clone()).or_insert_with(|| {
+                (rig_name.as_str().into(), rig.slots().iter().map(|s| s.name.as_str().into()).collect())
+            });
             let rc = RigCasting {
-                name: &rig_name,
-                slots: &slot_names,
+                name: shared_name.clone(),
+                slots: slot_names,
                 schemes: &rig_ref.schemes,
                 height_jitter: rig_ref.height_jitter,
             };
@@ -362,33 +379,39 @@ impl ShotCrowd {
             let mut parts = Vec::new();
             for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
                 let Some(part) = &slot_cast.part else { continue };
-                let skinned_part = match checked.get(&(part.file.clone(), part.mesh.clone())) {
-                    Some(&s) => s,
+                // Resolved once per wardrobe part and material (keyed by the
+                // wardrobe's shared strings, so a lookup hashes three words,
+                // not a path): whether it is skinned, and its (mesh, material) pieces.
+                let key = (
+                    Arc::as_ptr(&part.file) as *const u8 as usize,
+                    Arc::as_ptr(&part.mesh) as *const u8 as usize,
+                    Arc::as_ptr(&part.material) as *const u8 as usize,
+                );
+                let pieces = match resolved.get(&key) {
+                    Some(p) => p,
                     None => {
-                        let s = assets.is_skinned_mesh(&part.file, &part.mesh)?;
-                        checked.insert((part.file.clone(), part.mesh.clone()), s);
-                        s
+                        if assets.is_skinned_mesh(&part.file, &part.mesh)? {
+                            return Err(skinned_refusal(
+                                &part.file,
+                                &format!("wardrobe part `{}` (slot `{}`)", part.mesh, slot_cast.slot),
+                            )
+                            .agent(id)
+                            .field(format!("schemes.{}.parts", cast.scheme)));
+                        }
+                        // A part wearing its own glTF materials keeps one piece per
+                        // primitive (a multi-material mesh); otherwise one mesh, one material.
+                        let pieces: Vec<(MeshId, MaterialId)> = if *part.material == *GLTF_MATERIAL {
+                            assets.mesh_primitives(&part.file, &part.mesh)?
+                        } else {
+                            let mesh = assets.mesh(&part.file, &part.mesh)?;
+                            vec![(mesh, wardrobe_material(&mut assets, &mut materials, &wardrobes, &part.material)?)]
+                        };
+                        resolved.entry(key).or_insert(pieces)
                     }
-                };
-                if skinned_part {
-                    return Err(skinned_refusal(
-                        &part.file,
-                        &format!("wardrobe part `{}` (slot `{}`)", part.mesh, slot_cast.slot),
-                    )
-                    .agent(id)
-                    .field(format!("schemes.{}.parts", cast.scheme)));
-                }
-                // A part wearing its own glTF materials keeps one piece per
-                // primitive (a multi-material mesh); otherwise one mesh, one material.
-                let pieces: Vec<(MeshId, MaterialId)> = if part.material == GLTF_MATERIAL {
-                    assets.mesh_primitives(&part.file, &part.mesh)?
-                } else {
-                    let mesh = assets.mesh(&part.file, &part.mesh)?;
-                    vec![(mesh, wardrobe_material(&mut assets, &mut materials, &wardrobes, &part.material)?)]
                 };
                 let Some(&(first_mesh, _)) = pieces.first() else { continue };
                 let slot = &rig.slots()[slot_index];
-                let fit = *fits.entry((rig_name.clone(), slot_index, first_mesh)).or_insert_with(|| {
+                let fit = *fits.entry((shared_name.clone(), slot_index, first_mesh)).or_insert_with(|| {
                     // Fit the whole part (all its pieces) to the box.
                     let lib = assets.library();
                     let (lo, hi) = pieces
@@ -396,24 +419,22 @@ impl ShotCrowd {
                         .map(|&(m, _)| lib.meshes[m as usize].bounds())
                         .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
                         .unwrap_or((Vec3::ZERO, Vec3::ZERO));
-                    fit_part(lo, hi, slot.proxy_min, slot.proxy_max, part.uniform)
-                });
-                let size = (slot.proxy_max - slot.proxy_min).max(Vec3::splat(1e-4));
-                for (i, &(mesh, material)) in pieces.iter().enumerate() {
-                    parts.push(DressedPart {
-                        slot: slot_index,
-                        mesh,
-                        material,
-                        slot_from_part: fit,
+                    let size = (slot.proxy_max - slot.proxy_min).max(Vec3::splat(1e-4));
+                    fit_list.push(PartFit {
+                        slot_from_part: fit_part(lo, hi, slot.proxy_min, slot.proxy_max, part.uniform),
                         slot_from_proxy: Affine3A::from_scale_rotation_translation(
                             size,
                             Quat::IDENTITY,
                             slot.proxy_min,
                         ),
-                        proxy: i == 0,
                     });
+                    fit_list.len() as u32 - 1
+                });
+                for (i, &(mesh, material)) in pieces.iter().enumerate() {
+                    parts.push(DressedPart { slot: slot_index as u32, mesh, material, fit, proxy: i == 0 });
                 }
             }
+            parts.shrink_to_fit();
             dressed.insert(id, parts);
             casting.insert(id, cast);
         }
@@ -425,18 +446,19 @@ impl ShotCrowd {
         // track than poses per agent.)
         let mut worn: BTreeMap<&str, BTreeSet<usize>> = BTreeMap::new();
         for (id, pieces) in &skin_dressed {
-            worn.entry(casting[id].rig.as_str()).or_default().extend(pieces.iter().map(|d: &SkinDress| d.piece));
+            worn.entry(&*casting[id].rig).or_default().extend(pieces.iter().map(|d: &SkinDress| d.piece));
         }
         let mut posed = PosedSkins::default();
         for (rig_name, cycle, step) in &skin_poses {
             let Some(pieces) = worn.get(rig_name.as_str()) else { continue };
             let rig = &skinned[rig_name];
             let joints = rig.step_joints(*cycle, *step);
+            let key: Arc<str> = rig_names.get(rig_name).map_or_else(|| rig_name.as_str().into(), |(n, _)| n.clone());
             for &piece in pieces {
                 let mesh = rig.pose_piece(piece, &joints, &rig.pose_name(*cycle, *step));
-                posed.meshes.insert((rig_name.clone(), piece, *cycle, *step), assets.add_mesh(mesh));
+                posed.meshes.insert((key.clone(), piece, *cycle, *step), assets.add_mesh(mesh));
             }
-            posed.joints.insert((rig_name.clone(), *cycle, *step), joints);
+            posed.joints.insert((key, *cycle, *step), joints);
         }
 
         let set = match &shot.set {
@@ -473,6 +495,7 @@ impl ShotCrowd {
             casting,
             assets,
             dressed,
+            fits: fit_list,
             skin_dressed,
             posed,
             proxy_mesh,
@@ -525,7 +548,7 @@ impl ShotCrowd {
     /// height scale (`None` for an agent that was not cast).
     pub fn agent_height(&self, id: u32) -> Option<f32> {
         let cast = self.casting.get(&id)?;
-        Some(self.rig_heights.get(&cast.rig)? * cast.height_scale)
+        Some(self.rig_heights.get(&*cast.rig)? * cast.height_scale)
     }
 
     /// Whether an agent record is rendered at all (not removed, hidden or on a culled cycle).
@@ -543,7 +566,7 @@ impl ShotCrowd {
         })?;
         let world_from_agent = self.world_from_agent(a);
         let rig_err = |e: Error| Error::invalid(&self.shot.cache.path, format!("rig `{}`: {e}", cast.rig)).agent(a.id);
-        if let Some(rig) = self.skinned.get(&cast.rig) {
+        if let Some(rig) = self.skinned.get(&*cast.rig) {
             let cycle = rig.cycle_index(self.cycle_name(a)).map_err(rig_err)?;
             return Ok(AgentPose::Skinned {
                 world_from_rig: world_from_agent,
@@ -551,7 +574,7 @@ impl ShotCrowd {
                 step: rig.step_of(cycle, a.cycle_frame),
             });
         }
-        let rig = &self.rigs[&cast.rig];
+        let rig = &self.rigs[&*cast.rig];
         let cycle = rig.cycle(self.cycle_name(a)).map_err(rig_err)?;
         let pose = cycle.sample(a.cycle_frame, self.shot.frames.fps);
         Ok(AgentPose::Slots(pose.slot_transforms().into_iter().map(|(_, m)| world_from_agent * m).collect()))
@@ -579,11 +602,12 @@ impl ShotCrowd {
         match pose {
             AgentPose::Slots(slots) => {
                 for p in self.dressed.get(&id).into_iter().flatten() {
-                    let world_from_slot = slots[p.slot];
+                    let (slot, fit) = (p.slot as usize, &self.fits[p.fit as usize]);
+                    let world_from_slot = slots[slot];
                     match lod {
-                        Lod::Full => out.push(instance(p.mesh, p.material, world_from_slot * p.slot_from_part, p.slot)),
+                        Lod::Full => out.push(instance(p.mesh, p.material, world_from_slot * fit.slot_from_part, slot)),
                         Lod::Proxy if p.proxy => {
-                            out.push(instance(self.proxy_mesh, p.material, world_from_slot * p.slot_from_proxy, p.slot))
+                            out.push(instance(self.proxy_mesh, p.material, world_from_slot * fit.slot_from_proxy, slot))
                         }
                         Lod::Proxy => {}
                     }
@@ -591,7 +615,7 @@ impl ShotCrowd {
             }
             &AgentPose::Skinned { world_from_rig, cycle, step } => {
                 let Some(cast) = self.casting.get(&id) else { return };
-                let Some(rig) = self.skinned.get(&cast.rig) else { return };
+                let Some(rig) = self.skinned.get(&*cast.rig) else { return };
                 for d in self.skin_dressed.get(&id).into_iter().flatten() {
                     match lod {
                         Lod::Full => {
@@ -623,13 +647,13 @@ impl ShotCrowd {
     /// The name of part `part` (a cast slot) of an agent, for Cryptomatte
     /// and export node names.
     pub fn slot_name(&self, id: u32, part: u16) -> Option<&str> {
-        self.casting.get(&id)?.slots.get(part as usize).map(|s| s.slot.as_str())
+        self.casting.get(&id)?.slots.get(part as usize).map(|s| &*s.slot)
     }
 
     /// The pose key a skinned agent plays at a frame: `<rig>/<cycle>/<step>of<steps>`.
     pub fn pose_key(&self, a: &AgentSample) -> Option<String> {
         let cast = self.casting.get(&a.id)?;
-        let rig = self.skinned.get(&cast.rig)?;
+        let rig = self.skinned.get(&*cast.rig)?;
         let cycle = rig.cycle_index(self.cycle_name(a)).ok()?;
         Some(format!("{}/{}", cast.rig, rig.pose_name(cycle, rig.step_of(cycle, a.cycle_frame))))
     }

@@ -3,6 +3,7 @@
 
 use std::collections::BTreeSet;
 use std::fmt::Write as _;
+use std::sync::Arc;
 
 use serde::Serialize;
 
@@ -92,12 +93,12 @@ pub fn cast_row(crowd: &ShotCrowd, c: &AgentCast) -> CastRow {
         .enumerate()
         .map(|(i, s)| {
             let material = match crowd.dressed.get(&c.id) {
-                Some(d) => d.iter().find(|p| p.slot == i).map(|d| d.material),
+                Some(d) => d.iter().find(|p| p.slot as usize == i).map(|d| d.material),
                 None => crowd.skin_dressed.get(&c.id).and_then(|d| d.iter().find(|p| p.slot == i)).map(|d| d.material),
             };
             PartRow {
-                slot: s.slot.clone(),
-                mesh: s.part.as_ref().map(|p| p.mesh.clone()),
+                slot: s.slot.to_string(),
+                mesh: s.part.as_ref().map(|p| p.mesh.to_string()),
                 file: s.part.as_ref().map(|p| p.file.display().to_string()),
                 material: material.map(|m| lib.materials[m as usize].name.clone()),
             }
@@ -105,8 +106,8 @@ pub fn cast_row(crowd: &ShotCrowd, c: &AgentCast) -> CastRow {
         .collect();
     CastRow {
         id: c.id,
-        rig: c.rig.clone(),
-        scheme: c.scheme.clone(),
+        rig: c.rig.to_string(),
+        scheme: c.scheme.to_string(),
         height_scale: c.height_scale,
         scaled: c.scaled,
         parts,
@@ -155,14 +156,14 @@ fn skin_stats(crowd: &ShotCrowd) -> Option<SkinStats> {
         crowd
             .posed
             .meshes
-            .range((rig.to_string(), piece, 0, 0)..)
-            .find(|(k, _)| k.0 == rig && k.1 == piece)
+            .range((Arc::<str>::from(rig), piece, 0, 0)..)
+            .find(|(k, _)| *k.0 == *rig && k.1 == piece)
             .map_or(0, |(_, &m)| lib.meshes[m as usize].bytes())
     };
     let mut per_agent = 0;
     let mut used: BTreeSet<(String, usize, usize)> = BTreeSet::new();
     for (rig, piece, cycle, _) in crowd.posed.meshes.keys() {
-        used.insert((rig.clone(), *piece, *cycle));
+        used.insert((rig.to_string(), *piece, *cycle));
     }
     for (id, parts) in &crowd.skin_dressed {
         let rig = &crowd.casting[id].rig;

@@ -22,6 +22,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use serde::Deserialize;
 
@@ -67,23 +68,24 @@ fn one() -> f32 {
 pub struct PartSpec {
     /// Rig slot it dresses.
     pub slot: String,
-    /// glTF file (resolved to absolute on load).
-    pub file: PathBuf,
+    /// glTF file (resolved to absolute on load). Shared (`Arc`) with every
+    /// agent cast in this part, so casting a million agents copies no paths.
+    pub file: Arc<Path>,
     /// Mesh name inside the file.
-    pub mesh: String,
+    pub mesh: Arc<str>,
     /// Relative weight among the slot's candidates.
     #[serde(default = "one")]
     pub weight: f32,
     /// Material variants (wardrobe material names, or "gltf").
     #[serde(default = "gltf_only")]
-    pub materials: Vec<String>,
+    pub materials: Vec<Arc<str>>,
     /// Optional weights for `materials` (default uniform).
     #[serde(default)]
     pub material_weights: Option<Vec<f32>>,
 }
 
-fn gltf_only() -> Vec<String> {
-    vec![GLTF_MATERIAL.to_string()]
+fn gltf_only() -> Vec<Arc<str>> {
+    vec![GLTF_MATERIAL.into()]
 }
 
 impl PartSpec {
@@ -103,6 +105,9 @@ pub struct Scheme {
     /// Candidate parts.
     #[serde(default)]
     pub parts: Vec<PartSpec>,
+    /// The scheme's name (set on load), shared by every agent cast in it.
+    #[serde(skip)]
+    pub name: Arc<str>,
     /// Which wardrobe the scheme came from (set on load).
     #[serde(skip)]
     pub wardrobe: String,
@@ -118,7 +123,10 @@ impl Scheme {
     /// Candidates for `slot`, without excluded meshes (scheme- or shot-level).
     pub fn candidates<'a>(&'a self, slot: &'a str, shot_excludes: &'a [String]) -> impl Iterator<Item = &'a PartSpec> {
         self.parts.iter().filter(move |p| {
-            p.slot == slot && p.weight > 0.0 && !self.exclude.contains(&p.mesh) && !shot_excludes.contains(&p.mesh)
+            p.slot == slot
+                && p.weight > 0.0
+                && !self.exclude.iter().any(|e| **e == *p.mesh)
+                && !shot_excludes.iter().any(|e| **e == *p.mesh)
         })
     }
     /// Whether parts in `slot` scale uniformly.
@@ -188,7 +196,7 @@ impl Wardrobes {
                         return Err(Error::invalid(path, format!("part file not found: {}", full.display()))
                             .field(format!("{key}.file")));
                     }
-                    part.file = full;
+                    part.file = full.into();
                     if !(part.weight >= 0.0 && part.weight.is_finite()) {
                         return Err(Error::invalid(path, format!("weight must be >= 0, got {}", part.weight))
                             .field(format!("{key}.weight")));
@@ -212,16 +220,17 @@ impl Wardrobes {
                         }
                     }
                     for m in &mut part.materials {
-                        if m != GLTF_MATERIAL {
+                        if **m != *GLTF_MATERIAL {
                             let q = format!("{}/{m}", file.name);
                             if !all.materials.contains_key(&q) {
                                 return Err(Error::invalid(path, format!("unknown material `{m}`"))
                                     .field(format!("{key}.materials")));
                             }
-                            *m = q;
+                            *m = q.into();
                         }
                     }
                 }
+                scheme.name = name.as_str().into();
                 scheme.wardrobe = file.name.clone();
                 scheme.source = path.clone();
                 scheme.uniform_slots = file.uniform_slots.clone();

@@ -5,7 +5,8 @@ use std::path::PathBuf;
 use clap::Args;
 use serde::Serialize;
 
-use crate::casting::table::{cast_rows, cast_stats, format_stats, CastRow, CastStats};
+use crate::casting::table::{cast_row, cast_stats, format_stats, CastStats};
+use crate::casting::ShotCrowd;
 use crate::error::Result;
 
 /// `throng cast`.
@@ -24,14 +25,20 @@ pub struct CastArgs {
 /// `throng cast SHOT [--json] [--stats]`.
 pub fn run(args: &CastArgs) -> Result<()> {
     let crowd = super::load_crowd(&args.shot)?;
-    let rows = cast_rows(&crowd);
     if args.json {
+        // Rows are made as they are written, not held for the whole crowd.
+        struct Rows<'a>(&'a ShotCrowd);
+        impl Serialize for Rows<'_> {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+                s.collect_seq(self.0.casting.values().map(|c| cast_row(self.0, c)))
+            }
+        }
         #[derive(Serialize)]
         struct Out<'a> {
             version: u32,
             shot: &'a str,
             seed: u64,
-            agents: &'a [CastRow],
+            agents: Rows<'a>,
             #[serde(skip_serializing_if = "Option::is_none")]
             stats: Option<CastStats>,
         }
@@ -39,7 +46,7 @@ pub fn run(args: &CastArgs) -> Result<()> {
             version: 1,
             shot: &crowd.shot.name,
             seed: crowd.shot.seed,
-            agents: &rows,
+            agents: Rows(&crowd),
             stats: args.stats.then(|| cast_stats(&crowd)),
         };
         outln!("{}", super::to_json(&out)?);
@@ -50,13 +57,14 @@ pub fn run(args: &CastArgs) -> Result<()> {
         return Ok(());
     }
     outln!("{:>6}  {:<12} {:<20} {:>6}  {:<16} parts", "id", "rig", "scheme", "height", "head");
-    for r in &rows {
-        let head = crowd.casting[&r.id]
+    for cast in crowd.casting.values() {
+        let r = cast_row(&crowd, cast);
+        let head = cast
             .slots
             .iter()
             .find(|s| s.part.as_ref().is_some_and(|p| p.uniform))
             .and_then(|s| s.part.as_ref())
-            .map_or("-", |p| p.mesh.as_str());
+            .map_or("-", |p| &*p.mesh);
         let filled = r.parts.iter().filter(|p| p.mesh.is_some()).count();
         outln!(
             "{:>6}  {:<12} {:<20} {:>6.3}  {:<16} {}/{}",

@@ -78,14 +78,14 @@ pub fn build_layers(crowd: &ShotCrowd, overrides: &LayerOverrides) -> Result<Man
     // by the agents that wear it.
     let mut posed: HashMap<(&str, usize), (u64, u64)> = HashMap::new();
     for (&(ref rig, piece, _, _), &m) in &crowd.posed.meshes {
-        let e = posed.entry((rig.as_str(), piece)).or_default();
+        let e = posed.entry((&**rig, piece)).or_default();
         e.0 += lib.meshes[m as usize].bytes() as u64;
         e.1 += lib.meshes[m as usize].triangle_count() as u64;
     }
     let mut piece_users: HashMap<(&str, usize), u64> = HashMap::new();
     for (id, pieces) in &crowd.skin_dressed {
         for p in pieces {
-            *piece_users.entry((crowd.casting[id].rig.as_str(), p.piece)).or_default() += 1;
+            *piece_users.entry((&*crowd.casting[id].rig, p.piece)).or_default() += 1;
         }
     }
     let all = crowd.shot_crowd()?;
@@ -97,7 +97,7 @@ pub fn build_layers(crowd: &ShotCrowd, overrides: &LayerOverrides) -> Result<Man
         // Every agent of the shot's frames was cast; others never reach here.
         let Some(height) = crowd.agent_height(id) else { return (1.8, 0, 0) };
         if let (Some(pieces), Some(cast)) = (crowd.skin_dressed.get(&id), crowd.casting.get(&id)) {
-            let rig = cast.rig.as_str();
+            let rig = &*cast.rig;
             let costs: Vec<PartCost> = pieces
                 .iter()
                 .map(|p| {
