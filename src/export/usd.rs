@@ -481,7 +481,7 @@ fn write_agent(
     })?;
     l.primvar(p, "throng:agentId", "int", Value::Int(i32::try_from(id).unwrap_or(i32::MAX)));
     l.primvar(p, "throng:name", "string", string(&agent_name(id)));
-    l.primvar(p, "throng:rig", "string", string(&*cast.rig));
+    l.primvar(p, "throng:rig", "string", string(&cast.rig));
     l.primvar(p, "throng:scheme", "string", string(&cast.scheme));
     put_primvar(
         l,
