@@ -1,5 +1,5 @@
-//! Process figures for benchmarks (`examples/*_bench.rs`): peak memory and
-//! CPU time, read from /proc so they stay meaningful when other jobs share
+//! Process figures for benchmarks (`examples/*_bench.rs`) and the render
+//! summary's per-layer peak memory: peak memory and CPU time, read from /proc so they stay meaningful when other jobs share
 //! the cores. NaN where /proc is not available.
 
 /// Peak resident set size of this process in MiB (VmHWM).
@@ -10,6 +10,20 @@ pub fn peak_rss_mib() -> f64 {
         .find(|l| l.starts_with("VmHWM:"))
         .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
         .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// Peak resident set size of this process in bytes (`None` without /proc).
+pub fn peak_rss_bytes() -> Option<u64> {
+    let mib = peak_rss_mib();
+    mib.is_finite().then_some((mib * 1048576.0) as u64)
+}
+
+/// Resets the process's peak RSS (VmHWM) to its current RSS, so the next
+/// [`peak_rss_mib`] measures one stretch of work (one layer's render).
+/// Returns false where the kernel does not allow it (no /proc, not Linux).
+pub fn reset_peak_rss() -> bool {
+    // "5" in clear_refs resets the peak resident set size (Linux >= 4.0).
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
 }
 
 /// CPU seconds of the calling thread.

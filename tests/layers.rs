@@ -80,8 +80,11 @@ fn cutoffs(c: &[f32]) -> LayerSettings {
     LayerSettings { split: SplitMode::Cutoffs, cutoffs: c.to_vec(), ..Default::default() }
 }
 
+/// A budget split whose other layers' agents cast as proxy boxes: with
+/// full casters every layer would carry the whole crowd (see
+/// `budget_counts_every_other_agent_as_a_caster`).
 fn budget(b: &str) -> LayerSettings {
-    LayerSettings { split: SplitMode::Budget, budget: Some(b.into()), ..Default::default() }
+    LayerSettings { split: SplitMode::Budget, budget: Some(b.into()), proxy_shadow_casters: true, ..Default::default() }
 }
 
 fn layers_by_id(m: &throng::layers::Manifest) -> Vec<(u32, usize)> {
@@ -183,6 +186,33 @@ fn budget_split_keeps_every_layer_under_budget() {
     assert_eq!(m.split.budget_bytes, Some(b));
     // Near agents are full LOD (expensive), far ones proxies: near layers hold fewer agents.
     assert!(m.layers[0].agents < m.layers[m.layers.len() - 1].agents);
+}
+
+#[test]
+fn budget_counts_every_other_agent_as_a_caster() {
+    // Full casters: every layer render traces the whole crowd, so no split
+    // can fit 120 agents of ~40 MB into 300 MB, and the error says why.
+    let settings = LayerSettings { proxy_shadow_casters: false, ..budget("300MB") };
+    let err = build_manifest(&input(grid(12, 10), settings)).unwrap_err().to_string();
+    assert!(err.contains("shadow and reflection casters"), "{err}");
+    assert!(err.contains("proxy_shadow_casters = true"), "{err}");
+    assert!(err.contains("layers.budget"), "{err}");
+    // Proxy casters: each layer is the shared part (floor + every agent as a
+    // proxy caster) plus what its own agents cost beyond their proxies.
+    let mut inp = input(grid(12, 10), budget("300MB"));
+    inp.options.shared_bytes = 20_000_000;
+    let m = build_manifest(&inp).unwrap();
+    let casters: u64 = inp.agents.iter().map(|a| a.memory_proxy).sum();
+    assert_eq!(m.split.shared_bytes, 20_000_000 + casters);
+    for l in &m.layers {
+        let own: u64 = m
+            .agents
+            .iter()
+            .filter(|a| a.layer == l.index && !a.removed)
+            .map(|a| a.memory_bytes - inp.agents.iter().find(|x| x.id == a.id).unwrap().memory_proxy)
+            .sum();
+        assert_eq!(l.memory_bytes, m.split.shared_bytes + own, "{}", l.name);
+    }
 }
 
 #[test]

@@ -137,6 +137,20 @@ struct Summary {
     instances: u64,
     /// Peak resident memory of the process, bytes (null where /proc is missing).
     peak_rss_bytes: Option<u64>,
+    /// `render`: each layer-frame rendered, with its own measured peak memory.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    layer_frames: Vec<LayerFrameSummary>,
+}
+
+/// One rendered layer-frame in the `render --json` summary.
+#[derive(Debug, serde::Serialize)]
+struct LayerFrameSummary {
+    layer: String,
+    frame: i32,
+    seconds: f64,
+    instances: u64,
+    /// Peak resident memory while this layer-frame rendered, bytes.
+    peak_rss_bytes: Option<u64>,
 }
 
 impl Summary {
@@ -146,14 +160,14 @@ impl Summary {
         instances: u64,
         files_written: Vec<std::path::PathBuf>,
     ) -> Self {
-        let mib = crate::bench::peak_rss_mib();
         Summary {
             verb,
             files_written,
             files_skipped: Vec::new(),
             seconds: clock.elapsed().as_secs_f64(),
             instances,
-            peak_rss_bytes: mib.is_finite().then_some((mib * 1048576.0) as u64),
+            peak_rss_bytes: crate::bench::peak_rss_bytes(),
+            layer_frames: Vec::new(),
         }
     }
     fn print(&self) -> Result<()> {

@@ -184,6 +184,19 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         let instances = done.iter().map(|d| d.instances as u64).sum();
         let mut summary = super::Summary::new("render", clock, instances, written);
         summary.files_skipped = done.iter().filter(|d| d.skipped).map(|d| d.path.clone()).collect();
+        summary.layer_frames = done
+            .iter()
+            .filter(|d| !d.skipped)
+            .map(|d| super::LayerFrameSummary {
+                layer: d.layer.clone(),
+                frame: d.frame,
+                seconds: d.seconds,
+                instances: d.instances as u64,
+                peak_rss_bytes: d.peak_rss_bytes,
+            })
+            .collect();
+        // The per-layer resets lower VmHWM: the process peak is the largest of them.
+        summary.peak_rss_bytes = done.iter().filter_map(|d| d.peak_rss_bytes).chain(summary.peak_rss_bytes).max();
         return summary.print();
     }
     let rendered = done.iter().filter(|d| !d.skipped).count();
@@ -193,5 +206,18 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         done.len() - rendered,
         args.out.display()
     );
+    // Each layer's measured peak memory (the largest over its frames): what a budget must hold.
+    let mut peaks: Vec<(&str, u64)> = Vec::new();
+    for d in done.iter().filter(|d| !d.skipped) {
+        let Some(b) = d.peak_rss_bytes else { continue };
+        match peaks.iter_mut().find(|(l, _)| *l == d.layer) {
+            Some(p) => p.1 = p.1.max(b),
+            None => peaks.push((&d.layer, b)),
+        }
+    }
+    if !peaks.is_empty() {
+        let list: Vec<String> = peaks.iter().map(|(l, b)| format!("{l} {:.1} MiB", *b as f64 / 1048576.0)).collect();
+        outln!("peak memory per layer: {}", list.join(", "));
+    }
     Ok(())
 }

@@ -3,12 +3,11 @@
 //! caller puts over the shot's `[layers]` table, and the set bounds the layer
 //! map draws.
 
-use std::collections::HashMap;
-
 use glam::Vec3;
 
 use super::{
-    build_manifest, estimate_agent_memory, estimate_proxy_memory, shot_input, LayerOptions, Manifest, PartCost,
+    build_manifest, estimate_agent_memory, estimate_proxy_memory, estimate_render_floor, shot_input, LayerOptions,
+    Manifest, RenderFloor,
 };
 use crate::casting::ShotCrowd;
 use crate::error::{Error, Result};
@@ -65,30 +64,18 @@ pub fn settings_with_overrides(
 
 /// Builds the layer manifest of a cast shot with `overrides` over the shot's `[layers]`.
 pub fn build_layers(crowd: &ShotCrowd, overrides: &LayerOverrides) -> Result<Manifest> {
-    let (settings, options) = settings_with_overrides(&crowd.shot.layers, overrides)?;
+    let (settings, mut options) = settings_with_overrides(&crowd.shot.layers, overrides)?;
     let lib = crowd.library();
-    // How many part instances share each mesh: shared geometry is split between its users.
-    let mut users: HashMap<u32, u64> = HashMap::new();
-    for parts in crowd.dressed.values() {
-        for p in parts {
-            *users.entry(p.mesh).or_default() += 1;
-        }
-    }
-    // Skinned pieces: every pose of a piece is its own mesh and BLAS, shared
-    // by the agents that wear it.
-    let mut posed: HashMap<(&str, usize), (u64, u64)> = HashMap::new();
-    for (&(ref rig, piece, _, _), &m) in &crowd.posed.meshes {
-        let e = posed.entry((&**rig, piece)).or_default();
-        e.0 += lib.meshes[m as usize].bytes() as u64;
-        e.1 += lib.meshes[m as usize].triangle_count() as u64;
-    }
-    let mut piece_users: HashMap<(&str, usize), u64> = HashMap::new();
-    for (id, pieces) in &crowd.skin_dressed {
-        for p in pieces {
-            *piece_users.entry((&*crowd.casting[id].rig, p.piece)).or_default() += 1;
-        }
-    }
     let all = crowd.shot_crowd()?;
+    let [w, h] = crowd.shot.render.resolution;
+    options.shared_bytes = estimate_render_floor(&RenderFloor {
+        agents: crowd.casting.len() as u64,
+        mesh_bytes: lib.meshes.iter().map(|m| m.bytes() as u64).sum(),
+        triangles: lib.meshes.iter().map(|m| m.triangle_count() as u64).sum(),
+        texture_bytes: lib.textures.iter().map(|t| t.texels.len() as u64 * 16).sum(),
+        set_instances: crowd.set.len() as u64,
+        pixels: w as u64 * h as u64,
+    });
     let cameras = match crowd.shot.keyed_camera(crowd.shot.frames.start as f32) {
         Some(_) => None,
         None => Some(crowd.shot.frames.iter().map(|f| crowd.camera(f)).collect::<Result<Vec<_>>>()?),
@@ -97,38 +84,16 @@ pub fn build_layers(crowd: &ShotCrowd, overrides: &LayerOverrides) -> Result<Man
         // Every agent of the shot's frames was cast; others never reach here.
         let Some(height) = crowd.agent_height(id) else { return (1.8, 0, 0) };
         if let (Some(pieces), Some(cast)) = (crowd.skin_dressed.get(&id), crowd.casting.get(&id)) {
-            let rig = &*cast.rig;
-            let costs: Vec<PartCost> = pieces
-                .iter()
-                .map(|p| {
-                    let (bytes, triangles) = posed.get(&(rig, p.piece)).copied().unwrap_or((0, 0));
-                    PartCost {
-                        mesh_bytes: bytes,
-                        triangles,
-                        users: piece_users.get(&(rig, p.piece)).copied().unwrap_or(1),
-                    }
-                })
-                .collect();
+            // One instance per posed piece; as proxies, one per joint box.
             let boxes: usize = pieces
                 .iter()
-                .map(|p| crowd.skinned[rig].piece(p.piece).joint_boxes.iter().filter(|b| b.is_some()).count())
+                .map(|p| crowd.skinned[&*cast.rig].piece(p.piece).joint_boxes.iter().filter(|b| b.is_some()).count())
                 .sum();
-            return (height, estimate_agent_memory(&costs), estimate_proxy_memory(boxes));
+            return (height, estimate_agent_memory(pieces.len()), estimate_proxy_memory(boxes));
         }
         let parts = crowd.dressed.get(&id).map(Vec::as_slice).unwrap_or(&[]);
-        let costs: Vec<PartCost> = parts
-            .iter()
-            .map(|p| {
-                let m = &lib.meshes[p.mesh as usize];
-                PartCost {
-                    mesh_bytes: m.bytes() as u64,
-                    triangles: m.triangle_count() as u64,
-                    users: users.get(&p.mesh).copied().unwrap_or(1),
-                }
-            })
-            .collect();
         let proxies = parts.iter().filter(|p| p.proxy).count();
-        (height, estimate_agent_memory(&costs), estimate_proxy_memory(proxies))
+        (height, estimate_agent_memory(parts.len()), estimate_proxy_memory(proxies))
     })?;
     let mut manifest = build_manifest(&input)?;
     manifest.made_from = Some(super::MadeFrom::of(&crowd.shot)?);

@@ -404,39 +404,69 @@ pub fn read_manifest(path: &Path) -> Result<Manifest> {
 }
 
 // ---- memory estimates ----
+//
+// A layer render's peak memory, modelled from what `throng render` holds and
+// calibrated against measured peaks (docs/benchmarks.md, "Layer budget";
+// `examples/budget_bench.rs` prints estimate against measurement per layer).
+// Every constant is an upper bound of what was measured, so an estimate errs
+// high.
 
-/// Bytes per instance: its record (transform, mesh, material, flags) plus
-/// its share of the per-frame TLAS (about two BVH nodes per instance).
-pub const INSTANCE_BYTES: u64 = 64 + 2 * 32;
-/// BLAS bytes per triangle (about two 32-byte BVH nodes per triangle plus
-/// the reordered triangle indices).
-pub const BLAS_BYTES_PER_TRIANGLE: u64 = 2 * 32 + 4;
+/// Bytes per traced instance: its scene record (96), TLAS record (80),
+/// normal matrix (48), and the TLAS build's scratch (keys, bounds, the
+/// binary tree PLOC builds before the 8-wide one).
+pub const INSTANCE_BYTES: u64 = 560;
+/// BLAS bytes per triangle: the 8-wide nodes, the 48-byte precomputed
+/// triangle, two index arrays, and the build's scratch.
+pub const BLAS_BYTES_PER_TRIANGLE: u64 = 240;
+/// Bytes per agent of the shot that every render holds, in its layer or
+/// not: casting, dressing, the cache's frame index and the frame's pose.
+pub const AGENT_LOADED_BYTES: u64 = 2_400;
+/// Bytes of a render process before it loads a shot: the binary, allocator
+/// arenas and the worker threads' stacks.
+pub const PROCESS_BYTES: u64 = 24_000_000;
+/// Bytes per pixel of the shot's resolution: the film and its AOVs, the
+/// Cryptomatte ranks, tile results and the EXR channels being encoded.
+pub const PIXEL_BYTES: u64 = 420;
 
-/// One part an agent wears, for [`estimate_agent_memory`].
-#[derive(Debug, Clone, Copy)]
-pub struct PartCost {
-    /// Geometry bytes of the part's mesh ([`crate::scene::Mesh::bytes`]).
+/// An agent's render memory as `instances` traced instances (its parts, or
+/// its proxy boxes); its meshes' BLASes are in [`estimate_render_floor`].
+pub fn estimate_agent_memory(instances: usize) -> u64 {
+    instances as u64 * INSTANCE_BYTES
+}
+
+/// An agent's estimated render memory as proxies: one instance per box.
+pub fn estimate_proxy_memory(boxes: usize) -> u64 {
+    estimate_agent_memory(boxes)
+}
+
+/// What every layer render of a shot holds whatever its agents.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RenderFloor {
+    /// Agents in the shot (every one is loaded and posed in every render).
+    pub agents: u64,
+    /// Geometry bytes of every mesh loaded (wardrobe parts, posed skins, set).
     pub mesh_bytes: u64,
-    /// Triangles in the mesh.
+    /// Triangles of every mesh loaded (each may get a BLAS).
     pub triangles: u64,
-    /// How many agent parts in the shot use this mesh (>= 1).
-    pub users: u64,
+    /// Texel bytes of every texture loaded.
+    pub texture_bytes: u64,
+    /// The set's instances.
+    pub set_instances: u64,
+    /// Pixels of the shot's resolution.
+    pub pixels: u64,
 }
 
-/// An agent's estimated render memory with full parts: per part, one
-/// instance plus its share of the mesh geometry and BLAS (shared meshes are
-/// split between their users).
-pub fn estimate_agent_memory(parts: &[PartCost]) -> u64 {
-    parts
-        .iter()
-        .map(|p| INSTANCE_BYTES + (p.mesh_bytes + p.triangles * BLAS_BYTES_PER_TRIANGLE).div_ceil(p.users.max(1)))
-        .sum()
-}
-
-/// An agent's estimated render memory as proxies: one instance per part (the
-/// unit box mesh is shared by the whole crowd and negligible).
-pub fn estimate_proxy_memory(parts: usize) -> u64 {
-    parts as u64 * INSTANCE_BYTES
+/// The floor of every layer render's memory: process, loaded shot, the
+/// whole library with a BLAS per mesh (an upper bound: a layer builds only
+/// the BLASes it uses), the set, and the film.
+pub fn estimate_render_floor(f: &RenderFloor) -> u64 {
+    PROCESS_BYTES
+        .saturating_add(f.agents.saturating_mul(AGENT_LOADED_BYTES))
+        .saturating_add(f.mesh_bytes)
+        .saturating_add(f.triangles.saturating_mul(BLAS_BYTES_PER_TRIANGLE))
+        .saturating_add(f.texture_bytes)
+        .saturating_add(f.set_instances.saturating_mul(INSTANCE_BYTES))
+        .saturating_add(f.pixels.saturating_mul(PIXEL_BYTES))
 }
 
 /// Bytes in decimal units, as `--budget` takes them: `1.21 GB`, `512 MB`.

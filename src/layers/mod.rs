@@ -32,9 +32,9 @@ use crate::shot::{parse_bytes, LayerSettings, SplitMode};
 pub use fingerprint::{check_current, MadeFrom};
 pub use input::{build_layers, set_bounds, settings_with_overrides, LayerOverrides};
 pub use manifest::{
-    estimate_agent_memory, estimate_proxy_memory, format_bytes, read_manifest, summary, write_manifest, CameraRecord,
-    LayerAgent, LayerRecord, Lod, LodChange, Manifest, PartCost, Pops, Ranking, RayKind, SetRecord, SplitRecord,
-    Visibility, MANIFEST_VERSION,
+    estimate_agent_memory, estimate_proxy_memory, estimate_render_floor, format_bytes, read_manifest, summary,
+    write_manifest, CameraRecord, LayerAgent, LayerRecord, Lod, LodChange, Manifest, Pops, Ranking, RayKind,
+    RenderFloor, SetRecord, SplitRecord, Visibility, MANIFEST_VERSION,
 };
 pub use map::{draw_map, render_map, MapOptions};
 
@@ -334,24 +334,27 @@ fn assign(
         Plan::Budget(budget) => {
             // Greedy nearest-first fill. Removed agents are charged too, so
             // removing one never moves another.
-            let shared = input.options.shared_bytes;
-            // Charges in input order first: the fill then reads 8 bytes per
-            // agent in rank order instead of whole agents.
-            let charge: Vec<u64> = input
-                .agents
-                .iter()
-                .zip(&samples)
-                .enumerate()
-                .map(
-                    |(i, (a, s))| {
-                        if s.as_ref().is_some_and(|s| full_lod(i, s)) {
-                            a.memory_full
+            let (shared, charge) = budget_charges(input, &samples, full_lod);
+            if shared > *budget {
+                return Err(Error::invalid(
+                    &input.source,
+                    format!(
+                        "every layer render carries {} whatever its agents ({} for the loaded shot, library, BVHs, \
+                         set and film, plus {} for the other agents as shadow and reflection casters), over the \
+                         layer budget of {}; raise the budget{}",
+                        format_bytes(shared),
+                        format_bytes(input.options.shared_bytes),
+                        format_bytes(shared - input.options.shared_bytes),
+                        format_bytes(*budget),
+                        if input.settings.proxy_shadow_casters {
+                            ""
                         } else {
-                            a.memory_proxy
+                            ", or set [layers] proxy_shadow_casters = true so other layers' agents cast as proxy boxes"
                         }
-                    },
+                    ),
                 )
-                .collect();
+                .field("layers.budget"));
+            }
             let mut current = 0u32;
             let mut used = shared;
             let mut count = 0usize;
@@ -473,6 +476,36 @@ fn charged_full(spans: &Option<Vec<Vec<LodChange>>>, min_px: f32, i: usize, s: &
     }
 }
 
+/// What a layer render carries whatever its agents, and what each agent adds
+/// to the layer it is in. Every layer render traces every other agent as a
+/// shadow and reflection caster (as proxy boxes with `proxy_shadow_casters`,
+/// else at its own LOD), so the shared part is the floor
+/// (`LayerOptions::shared_bytes`: the loaded shot, library, BVHs, set and
+/// film) plus every agent as a caster, and an agent in the layer adds only
+/// what its own LOD costs beyond its caster form.
+fn budget_charges(
+    input: &LayerInput,
+    samples: &[Option<Sample>],
+    full_lod: impl Fn(usize, &Sample) -> bool,
+) -> (u64, Vec<u64>) {
+    let proxy_casters = input.settings.proxy_shadow_casters;
+    let mut casters = 0u64;
+    // Charges in input order: the fill then reads 8 bytes per agent in rank order.
+    let charge = input
+        .agents
+        .iter()
+        .zip(samples)
+        .enumerate()
+        .map(|(i, (a, s))| {
+            let own = if s.as_ref().is_some_and(|s| full_lod(i, s)) { a.memory_full } else { a.memory_proxy };
+            let caster = if proxy_casters { a.memory_proxy } else { own };
+            casters = casters.saturating_add(caster);
+            own.saturating_sub(caster)
+        })
+        .collect();
+    (input.options.shared_bytes.saturating_add(casters), charge)
+}
+
 /// Ranks, splits and chooses LOD: the layer manifest for this input.
 pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
     let prep = prepare(input)?;
@@ -482,9 +515,9 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
     let asg = assign(input, &prep, prep.ref_idx, &full_lod)?;
     let ref_frame = input.frames[prep.ref_idx];
 
-    let mut layers: Vec<LayerRecord> = (0..asg.n_layers)
-        .map(|l| LayerRecord::empty(l, input.options.shared_bytes, input.settings.proxy_shadow_casters))
-        .collect();
+    let (shared, charge) = budget_charges(input, &asg.samples, full_lod);
+    let mut layers: Vec<LayerRecord> =
+        (0..asg.n_layers).map(|l| LayerRecord::empty(l, shared, input.settings.proxy_shadow_casters)).collect();
     let mut agents = Vec::with_capacity(input.agents.len());
     let mut absent = Vec::new();
     for &i in &prep.by_id {
@@ -511,7 +544,7 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
             rec.removed += 1;
         } else {
             rec.rendered += 1;
-            rec.memory_bytes += memory;
+            rec.memory_bytes += charge[i];
             match lod {
                 Lod::Full => rec.lod_full += 1,
                 Lod::Proxy => rec.lod_proxy += 1,
@@ -579,7 +612,7 @@ pub fn build_manifest(input: &LayerInput) -> Result<Manifest> {
             count: if let Plan::Count(c) = prep.plan { Some(c) } else { None },
             cutoffs_m: if let Plan::Cutoffs(c) = &prep.plan { c.clone() } else { Vec::new() },
             budget_bytes: if let Plan::Budget(b) = prep.plan { Some(b) } else { None },
-            shared_bytes: input.options.shared_bytes,
+            shared_bytes: shared,
             boundaries_m: asg.boundaries,
         },
         lod_full_min_px: min_px,

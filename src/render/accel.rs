@@ -128,27 +128,53 @@ fn intersect_triangle(tri: &RtTriangle, ray: &Ray) -> f32 {
     f32::INFINITY
 }
 
-/// One BLAS per [`Library::meshes`] entry, indexed by `MeshId`.
+/// One BLAS per [`Library::meshes`] entry, indexed by `MeshId`, each built
+/// the first time a render needs it: a layer render builds only the meshes
+/// its instances use (its agents, the set, the other layers' casters), not
+/// the whole library.
 pub struct BlasSet {
-    blas: Vec<Blas>,
-    /// Wall time of the whole build.
+    blas: Vec<std::sync::OnceLock<Blas>>,
+    /// Wall time of all builds so far.
     pub build_time: Duration,
 }
 
 impl BlasSet {
+    /// An empty set for `lib`: nothing built yet.
+    pub fn lazy(lib: &Library) -> BlasSet {
+        BlasSet {
+            blas: (0..lib.meshes.len()).map(|_| std::sync::OnceLock::new()).collect(),
+            build_time: Duration::ZERO,
+        }
+    }
+
     /// Builds every mesh's BLAS in parallel (on the current rayon pool).
     pub fn build(lib: &Library) -> BlasSet {
+        let mut set = BlasSet::lazy(lib);
+        set.prepare(lib, 0..lib.meshes.len() as u32);
+        set
+    }
+
+    /// Builds, in parallel, the BLAS of every mesh in `meshes` not built yet
+    /// (unknown ids are ignored). Deterministic: a BLAS depends only on its mesh.
+    pub fn prepare(&mut self, lib: &Library, meshes: impl IntoIterator<Item = u32>) {
         let start = Instant::now();
-        let blas = lib.meshes.par_iter().map(Blas::build).collect();
-        BlasSet { blas, build_time: start.elapsed() }
+        let mut todo: Vec<u32> =
+            meshes.into_iter().filter(|&m| self.blas.get(m as usize).is_some_and(|b| b.get().is_none())).collect();
+        todo.sort_unstable();
+        todo.dedup();
+        let built: Vec<(u32, Blas)> = todo.par_iter().map(|&m| (m, Blas::build(&lib.meshes[m as usize]))).collect();
+        for (m, b) in built {
+            let _ = self.blas[m as usize].set(b);
+        }
+        self.build_time += start.elapsed();
     }
 
-    /// The BLAS of mesh `id`, if it exists.
+    /// The BLAS of mesh `id`, if it exists and has been built.
     pub fn get(&self, id: u32) -> Option<&Blas> {
-        self.blas.get(id as usize)
+        self.blas.get(id as usize)?.get()
     }
 
-    /// Number of BLASes (= meshes).
+    /// Number of meshes the set covers (built or not).
     pub fn len(&self) -> usize {
         self.blas.len()
     }
@@ -158,15 +184,20 @@ impl BlasSet {
         self.blas.is_empty()
     }
 
-    /// Approximate heap bytes of all BLASes.
-    pub fn bytes(&self) -> usize {
-        self.blas.iter().map(Blas::bytes).sum()
+    /// Number of BLASes built so far.
+    pub fn built(&self) -> usize {
+        self.blas.iter().filter(|b| b.get().is_some()).count()
     }
 
-    /// Validates every BLAS (tests only).
+    /// Approximate heap bytes of the BLASes built so far.
+    pub fn bytes(&self) -> usize {
+        self.blas.iter().filter_map(|b| b.get()).map(Blas::bytes).sum()
+    }
+
+    /// Validates every built BLAS (tests only).
     #[doc(hidden)]
     pub fn validate(&self) {
-        self.blas.iter().for_each(Blas::validate);
+        self.blas.iter().filter_map(|b| b.get()).for_each(Blas::validate);
     }
 }
 

@@ -113,6 +113,10 @@ pub struct RenderedLayer {
     pub seconds: f64,
     /// Instances traced.
     pub instances: usize,
+    /// Peak resident memory of the process while this layer-frame rendered,
+    /// bytes (from its posing to its file written; `None` when skipped or
+    /// where /proc cannot say). The figure a layer budget must hold.
+    pub peak_rss_bytes: Option<u64>,
 }
 
 /// Every rendered agent of a frame with its posed slots (world_from_slot):
@@ -339,7 +343,8 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
     }
     let fingerprints: std::collections::HashMap<&str, String> =
         job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
-    let blas = BlasSet::build(crowd.library());
+    // BLASes are built as layer-frames need them (and kept for later frames).
+    let mut blas = BlasSet::lazy(crowd.library());
     let progress = Progress::new(job.progress, job.frames.len() * job.layers.len());
     let mut out = Vec::new();
     for &frame in &job.frames {
@@ -370,11 +375,14 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                     skipped: true,
                     seconds: 0.0,
                     instances: 0,
+                    peak_rss_bytes: None,
                 });
                 progress.finished(out.len(), frame, layer, true);
                 continue;
             }
             let started = Instant::now();
+            // Measure this layer-frame's own peak, not the run's so far.
+            let measured = crate::bench::reset_peak_rss();
             if progress.style == ProgressStyle::Bar {
                 progress.show(out.len(), frame, layer, 0.0);
             }
@@ -402,6 +410,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
             let pixels = (w as usize * h as usize).max(1);
             let done = out.len();
             let report = |p: usize| progress.show(done, frame, layer, p as f64 / pixels as f64);
+            blas.prepare(crowd.library(), scene.instances.iter().map(|i| i.mesh));
             let names = (job.cryptomatte != CryptoOutput::Off).then(|| crypto_names(crowd, &scene));
             let (film, _stats) = render_frame_with_cryptomatte(
                 &blas,
@@ -442,6 +451,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                 skipped: false,
                 seconds: started.elapsed().as_secs_f64(),
                 instances: scene.instances.len(),
+                peak_rss_bytes: measured.then(crate::bench::peak_rss_bytes).flatten(),
             });
             progress.finished(out.len(), frame, layer, false);
         }
