@@ -298,6 +298,10 @@ impl ShotCrowd {
         let mut resolved: HashMap<(usize, usize, usize), Vec<(MeshId, MaterialId)>> = HashMap::new();
         // Rig and slot names shared (Arc) by every agent cast on the rig.
         let mut rig_names: HashMap<String, (Arc<str>, Vec<Arc<str>>)> = HashMap::new();
+        // Skinned rigs: the delivered slot list per rig, and each (rig, part,
+        // material) resolved to its (piece, material) list once.
+        let mut delivered: HashMap<String, Vec<SlotCast>> = HashMap::new();
+        let mut skin_resolved: HashMap<(usize, usize, usize, usize), Vec<(usize, MaterialId)>> = HashMap::new();
         for (&id, s) in &seen {
             let rig_name = cache.rigs().get(s.rig as usize).cloned().unwrap_or_default();
             let Some(rig_ref) = shot.rigs.get(&rig_name) else {
@@ -325,21 +329,26 @@ impl ShotCrowd {
                     height_jitter: rig_ref.height_jitter,
                 };
                 let cast = if rig_ref.schemes.is_empty() {
-                    // No schemes: the character as delivered, in its own materials.
-                    let rig_file: Arc<std::path::Path> = rig.path().into();
-                    let parts = rig
-                        .delivered()
-                        .iter()
-                        .map(|(slot, mesh, _)| SlotCast {
-                            slot: slot.as_str().into(),
-                            part: Some(CastPart {
-                                file: rig_file.clone(),
-                                mesh: mesh.as_str().into(),
-                                material: GLTF_MATERIAL.into(),
-                                uniform: false,
-                            }),
+                    // No schemes: the character as delivered, in its own
+                    // materials; the slot list is made once per rig and shared.
+                    let parts = delivered
+                        .entry(rig_name.clone())
+                        .or_insert_with(|| {
+                            let rig_file: Arc<std::path::Path> = rig.path().into();
+                            rig.delivered()
+                                .iter()
+                                .map(|(slot, mesh, _)| SlotCast {
+                                    slot: slot.as_str().into(),
+                                    part: Some(CastPart {
+                                        file: rig_file.clone(),
+                                        mesh: mesh.as_str().into(),
+                                        material: GLTF_MATERIAL.into(),
+                                        uniform: false,
+                                    }),
+                                })
+                                .collect()
                         })
-                        .collect();
+                        .clone();
                     cast_delivered(shot.seed, id, &rc, parts, s.never_scale)
                 } else {
                     cast_agent(shot.seed, id, &rc, &wardrobes, &shot.exclude_parts, s.never_scale)
@@ -348,17 +357,33 @@ impl ShotCrowd {
                 let mut pieces = Vec::new();
                 for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
                     let Some(part) = &slot_cast.part else { continue };
-                    let part_index = rig.part(&part.file, &part.mesh).map_err(|e| e.agent(id))?;
-                    for &piece in &rig.part_at(part_index).pieces.clone() {
-                        let material = if *part.material == *GLTF_MATERIAL {
-                            let p = rig.piece(piece);
-                            assets.gltf_material_at(&p.file, p.material)?
-                        } else {
-                            wardrobe_material(&mut assets, &mut materials, &wardrobes, &part.material)?
-                        };
+                    // Resolved once per (rig, part, material): rig part lookups
+                    // and glTF materials touch the file system.
+                    let key = (
+                        Arc::as_ptr(shared_name) as *const u8 as usize,
+                        Arc::as_ptr(&part.file) as *const u8 as usize,
+                        Arc::as_ptr(&part.mesh) as *const u8 as usize,
+                        Arc::as_ptr(&part.material) as *const u8 as usize,
+                    );
+                    if !skin_resolved.contains_key(&key) {
+                        let part_index = rig.part(&part.file, &part.mesh).map_err(|e| e.agent(id))?;
+                        let mut list = Vec::new();
+                        for &piece in &rig.part_at(part_index).pieces.clone() {
+                            let material = if *part.material == *GLTF_MATERIAL {
+                                let p = rig.piece(piece);
+                                assets.gltf_material_at(&p.file, p.material)?
+                            } else {
+                                wardrobe_material(&mut assets, &mut materials, &wardrobes, &part.material)?
+                            };
+                            list.push((piece, material));
+                        }
+                        skin_resolved.insert(key, list);
+                    }
+                    for &(piece, material) in &skin_resolved[&key] {
                         pieces.push(SkinDress { slot: slot_index, piece, material });
                     }
                 }
+                pieces.shrink_to_fit();
                 skin_dressed.insert(id, pieces);
                 casting.insert(id, cast);
                 continue;
