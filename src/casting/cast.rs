@@ -84,7 +84,8 @@ pub struct SlotCast {
     /// Rig slot name.
     pub slot: Arc<str>,
     /// The part, or `None` when the scheme has no candidate for this slot.
-    pub part: Option<CastPart>,
+    /// Shared (`Arc`) by every agent cast in the same part and material.
+    pub part: Option<Arc<CastPart>>,
 }
 
 /// A cast agent.
@@ -153,12 +154,19 @@ pub fn cast_agent(
                 uniform_hashed(seed, id, fnv1a_from(fnv1a("material/"), slot)),
             )
             .unwrap_or(0);
-            CastPart {
-                file: p.file.clone(),
-                mesh: p.mesh.clone(),
-                material: p.materials.get(m).cloned().unwrap_or_else(|| crate::casting::wardrobe::GLTF_MATERIAL.into()),
-                uniform: scheme.is_uniform(slot),
-            }
+            // Loaded wardrobes hold one shared CastPart per material.
+            p.cast.get(m).cloned().unwrap_or_else(|| {
+                Arc::new(CastPart {
+                    file: p.file.clone(),
+                    mesh: p.mesh.clone(),
+                    material: p
+                        .materials
+                        .get(m)
+                        .cloned()
+                        .unwrap_or_else(|| crate::casting::wardrobe::GLTF_MATERIAL.into()),
+                    uniform: scheme.is_uniform(slot),
+                })
+            })
         });
         slots.push(SlotCast { slot: slot.clone(), part });
     }

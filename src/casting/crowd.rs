@@ -339,12 +339,12 @@ impl ShotCrowd {
                                 .iter()
                                 .map(|(slot, mesh, _)| SlotCast {
                                     slot: slot.as_str().into(),
-                                    part: Some(CastPart {
+                                    part: Some(Arc::new(CastPart {
                                         file: rig_file.clone(),
                                         mesh: mesh.as_str().into(),
                                         material: GLTF_MATERIAL.into(),
                                         uniform: false,
-                                    }),
+                                    })),
                                 })
                                 .collect()
                         })

@@ -82,6 +82,10 @@ pub struct PartSpec {
     /// Optional weights for `materials` (default uniform).
     #[serde(default)]
     pub material_weights: Option<Vec<f32>>,
+    /// The cast part for each material, made once on load and shared by
+    /// every agent that draws it.
+    #[serde(skip)]
+    pub cast: Vec<Arc<crate::casting::cast::CastPart>>,
 }
 
 fn gltf_only() -> Vec<Arc<str>> {
@@ -229,6 +233,21 @@ impl Wardrobes {
                             *m = q.into();
                         }
                     }
+                }
+                for part in &mut scheme.parts {
+                    let uniform = file.uniform_slots.iter().any(|s| *s == part.slot);
+                    part.cast = part
+                        .materials
+                        .iter()
+                        .map(|m| {
+                            Arc::new(crate::casting::cast::CastPart {
+                                file: part.file.clone(),
+                                mesh: part.mesh.clone(),
+                                material: m.clone(),
+                                uniform,
+                            })
+                        })
+                        .collect();
                 }
                 scheme.name = name.as_str().into();
                 scheme.wardrobe = file.name.clone();
