@@ -102,6 +102,11 @@ pub enum AgentPose {
     },
 }
 
+/// A memo key made of the addresses of shared (`Arc`) names: (rig, file,
+/// mesh, material). The wardrobes and rigs keep them alive for the whole
+/// load, so equal addresses are the same part.
+type SharedKey = (usize, usize, usize, usize);
+
 /// The shot, its wardrobes, rigs, cache and casting, loaded once.
 pub struct ShotCrowd {
     /// The shot.
@@ -295,13 +300,13 @@ impl ShotCrowd {
         let mut fit_list: Vec<PartFit> = Vec::new();
         let mut materials: HashMap<String, MaterialId> = HashMap::new();
         // Each wardrobe part (and material) resolved to its (mesh, material) pieces once.
-        let mut resolved: HashMap<(usize, usize, usize), Vec<(MeshId, MaterialId)>> = HashMap::new();
+        let mut resolved: HashMap<SharedKey, Vec<(MeshId, MaterialId)>> = HashMap::new();
         // Rig and slot names shared (Arc) by every agent cast on the rig.
         let mut rig_names: HashMap<String, (Arc<str>, Vec<Arc<str>>)> = HashMap::new();
         // Skinned rigs: the delivered slot list per rig, and each (rig, part,
         // material) resolved to its (piece, material) list once.
         let mut delivered: HashMap<String, Vec<SlotCast>> = HashMap::new();
-        let mut skin_resolved: HashMap<(usize, usize, usize, usize), Vec<(usize, MaterialId)>> = HashMap::new();
+        let mut skin_resolved: HashMap<SharedKey, Vec<(usize, MaterialId)>> = HashMap::new();
         for (&id, s) in &seen {
             let rig_name = cache.rigs().get(s.rig as usize).cloned().unwrap_or_default();
             let Some(rig_ref) = shot.rigs.get(&rig_name) else {
@@ -365,7 +370,7 @@ impl ShotCrowd {
                         Arc::as_ptr(&part.mesh) as *const u8 as usize,
                         Arc::as_ptr(&part.material) as *const u8 as usize,
                     );
-                    if !skin_resolved.contains_key(&key) {
+                    if let std::collections::hash_map::Entry::Vacant(slot) = skin_resolved.entry(key) {
                         let part_index = rig.part(&part.file, &part.mesh).map_err(|e| e.agent(id))?;
                         let mut list = Vec::new();
                         for &piece in &rig.part_at(part_index).pieces.clone() {
@@ -377,7 +382,7 @@ impl ShotCrowd {
                             };
                             list.push((piece, material));
                         }
-                        skin_resolved.insert(key, list);
+                        slot.insert(list);
                     }
                     for &(piece, material) in &skin_resolved[&key] {
                         pieces.push(SkinDress { slot: slot_index, piece, material });
@@ -408,6 +413,7 @@ impl ShotCrowd {
                 // wardrobe's shared strings, so a lookup hashes three words,
                 // not a path): whether it is skinned, and its (mesh, material) pieces.
                 let key = (
+                    0,
                     Arc::as_ptr(&part.file) as *const u8 as usize,
                     Arc::as_ptr(&part.mesh) as *const u8 as usize,
                     Arc::as_ptr(&part.material) as *const u8 as usize,

@@ -235,7 +235,7 @@ impl Wardrobes {
                     }
                 }
                 for part in &mut scheme.parts {
-                    let uniform = file.uniform_slots.iter().any(|s| *s == part.slot);
+                    let uniform = file.uniform_slots.contains(&part.slot);
                     part.cast = part
                         .materials
                         .iter()
