@@ -331,7 +331,7 @@ fn check(blas: &BlasSet, lib: &Library, scene: &FrameScene, s: &RenderSettings) 
             }
         }
         for c in &m.camera {
-            if !c.world_from_camera.is_finite() || !(c.yfov > 0.0 && c.yfov < std::f32::consts::PI) {
+            if !(c.world_from_camera.is_finite() && c.yfov > 0.0 && c.yfov < std::f32::consts::PI) {
                 return Err(Error::invalid(here, "camera over the shutter is degenerate").field("motion.camera"));
             }
         }
