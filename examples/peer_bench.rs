@@ -175,7 +175,7 @@ fn load_glb(path: &PathBuf, args: &Args) -> Result<Loaded, String> {
     });
     Ok(Loaded {
         lib,
-        scene: FrameScene { instances, camera, sun, sky: Sky { radiance: args.sky } },
+        scene: FrameScene { instances, camera, sun, sky: Sky { radiance: args.sky }, motion: None },
         started: start,
         load_s,
     })
@@ -319,7 +319,7 @@ fn synthetic(n: usize, args: &Args) -> Loaded {
     let load_s = start.elapsed().as_secs_f64();
     Loaded {
         lib,
-        scene: FrameScene { instances, camera, sun, sky: Sky { radiance: args.sky } },
+        scene: FrameScene { instances, camera, sun, sky: Sky { radiance: args.sky }, motion: None },
         started: start,
         load_s,
     }
@@ -359,7 +359,7 @@ fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u3
         .flat_map(|y| (0..w).map(move |x| (x, y)))
         .map(|(x, y)| {
             let (origin, direction) = cam.ray(x as f32 + 0.5, y as f32 + 0.5);
-            WorldRay { origin, direction, tmax: f32::INFINITY }
+            WorldRay { origin, direction, tmax: f32::INFINITY, time: 0.0 }
         })
         .collect();
     let mut rng = Lcg(7);
@@ -374,7 +374,7 @@ fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u3
             }
             let p = r.origin + r.direction * hit.t;
             let d = ShadingFrame::from_normal(n).to_world(sample_cosine_hemisphere(Vec2::new(rng.next(), rng.next())));
-            Some(WorldRay { origin: offset_ray_origin(p, n), direction: d, tmax: f32::INFINITY })
+            Some(WorldRay { origin: offset_ray_origin(p, n), direction: d, tmax: f32::INFINITY, time: 0.0 })
         })
         .collect();
     let (pw, pc, ph) = rate(&tlas, &primary, vis::CAMERA);
@@ -512,6 +512,7 @@ fn main() {
                 far,
                 fps: 24.0,
                 render_fingerprint: String::new(),
+                shutter: None,
             };
             let exr = prefix.with_extension("exr");
             let png = prefix.with_extension("png");

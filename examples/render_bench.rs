@@ -116,7 +116,7 @@ fn ray_rates(tlas: &Tlas, n_rays: usize) -> (f64, f64, f64) {
             let z = rng.next() * 2.0 - 1.0;
             let phi = 2.0 * PI * rng.next();
             let r = (1.0 - z * z).sqrt();
-            WorldRay { origin, direction: Vec3::new(r * phi.cos(), z, r * phi.sin()), tmax: f32::INFINITY }
+            WorldRay { origin, direction: Vec3::new(r * phi.cos(), z, r * phi.sin()), tmax: f32::INFINITY, time: 0.0 }
         })
         .collect();
     let start = throng::bench::thread_cpu_s();
@@ -198,6 +198,7 @@ fn main() {
                 irradiance: Vec3::new(3.0, 2.85, 2.64),
             }),
             sky: Sky { radiance: Vec3::new(0.3, 0.38, 0.5) },
+            motion: None,
         };
         let settings = RenderSettings {
             width: 320,

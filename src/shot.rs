@@ -397,12 +397,42 @@ pub struct RenderSettings {
     /// Maximum path depth after the camera ray.
     #[serde(default = "default_bounces")]
     pub max_bounces: u32,
+    /// Shutter `[open, close]` in frames relative to the rendered frame
+    /// (`[-0.25, 0.25]`: a 180-degree shutter centred on the frame). `None`
+    /// (the default): no motion blur, every frame an instant.
+    #[serde(default)]
+    pub shutter: Option<[f32; 2]>,
 }
 
 impl Default for RenderSettings {
     fn default() -> Self {
-        RenderSettings { resolution: default_resolution(), spp: default_spp(), max_bounces: default_bounces() }
+        RenderSettings {
+            resolution: default_resolution(),
+            spp: default_spp(),
+            max_bounces: default_bounces(),
+            shutter: None,
+        }
     }
+}
+
+/// Checks a shutter `[open, close]` (frames relative to the frame): both
+/// finite, within one frame of it (`-1..=1`), open before close, and at most
+/// one frame long (a 360-degree shutter).
+pub fn check_shutter(shutter: [f32; 2]) -> std::result::Result<(), String> {
+    let [open, close] = shutter;
+    if !(open.is_finite() && close.is_finite()) {
+        return Err(format!("shutter [{open}, {close}] is not finite"));
+    }
+    if !(-1.0..=1.0).contains(&open) || !(-1.0..=1.0).contains(&close) {
+        return Err(format!("shutter [{open}, {close}] must lie within one frame of the frame (-1 to 1)"));
+    }
+    if open >= close {
+        return Err(format!("shutter open {open} must be before close {close} (frames relative to the frame)"));
+    }
+    if close - open > 1.0 {
+        return Err(format!("shutter [{open}, {close}] is longer than one frame (360 degrees)"));
+    }
+    Ok(())
 }
 
 fn default_fps() -> f32 {
@@ -793,6 +823,9 @@ impl Shot {
         check_resolution(render.resolution[0], render.resolution[1])
             .map_err(|m| Error::invalid(path, m).field("render.resolution"))?;
         check_spp(render.spp).map_err(|m| Error::invalid(path, m).field("render.spp"))?;
+        if let Some(shutter) = render.shutter {
+            check_shutter(shutter).map_err(|m| Error::invalid(path, m).field("render.shutter"))?;
+        }
 
         Ok(Shot {
             path: path.to_path_buf(),

@@ -76,6 +76,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
         cryptomatte: job::CryptoOutput::Header,
         progress: job::ProgressStyle::Off,
         compression: Default::default(),
+        shutter: None,
     };
     job::run(crowd, Some(manifest), &job).unwrap();
 }

@@ -200,6 +200,7 @@ fn crowd_scene() -> (Library, FrameScene) {
         camera: camera(Vec3::new(0.0, 1.0, 4.5), Vec3::new(0.0, 0.7, 0.0), 40.0),
         sun: None,
         sky: Sky { radiance: Vec3::splat(0.5) },
+        motion: None,
     };
     (lib, scene)
 }
@@ -248,6 +249,7 @@ fn meta(film: &Film, scene: &FrameScene) -> LayerMeta {
         far: 100.0,
         fps: 24.0,
         render_fingerprint: String::new(),
+        shutter: None,
     }
 }
 

@@ -96,6 +96,18 @@ fn golden_layers(manifest: &Manifest) -> Vec<String> {
 /// Renders `layers` at frame 1024 through the real render job into `out`
 /// (EXR and PNG preview); returns each layer's EXR.
 fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[String], out: &Path) -> Vec<(String, PathBuf)> {
+    render_with_shutter(crowd, manifest, layers, out, None)
+}
+
+/// As [`render`], with motion blur over `shutter` (the crowd must have been
+/// prepared for it).
+fn render_with_shutter(
+    crowd: &ShotCrowd,
+    manifest: &Manifest,
+    layers: &[String],
+    out: &Path,
+    shutter: Option<[f32; 2]>,
+) -> Vec<(String, PathBuf)> {
     let job = RenderJob {
         layers: layers.to_vec(),
         frames: vec![FRAME],
@@ -108,6 +120,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[String], out: &Path)
         cryptomatte: job::CryptoOutput::Header,
         progress: job::ProgressStyle::Off,
         compression: Default::default(),
+        shutter,
     };
     let done = job::run(crowd, Some(manifest), &job).expect("demo renders");
     done.into_iter().map(|r| (r.layer, r.path)).collect()
@@ -549,6 +562,42 @@ fn demo_layers_match_golden() {
         failures.is_empty(),
         "golden images differ (if the change is intended, regenerate with `UPDATE_GOLDEN=1 cargo test --test golden` \
          and review the PNGs in golden/):\n  {}",
+        failures.join("\n  ")
+    );
+}
+
+/// The blurred golden: the demo's `full` layer at frame 1024 with a
+/// 180-degree shutter centred on the frame (`golden/demo_blur.full.1024.exr`),
+/// the same size, samples and metric as the still goldens.
+#[test]
+fn blurred_demo_matches_golden() {
+    let (mut crowd, manifest) = demo();
+    let shutter = [-0.25, 0.25];
+    throng::casting::motion::prepare_shutter(&mut crowd, shutter).expect("shutter poses");
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let rendered = render_with_shutter(&crowd, &manifest, &[FULL_LAYER.to_string()], tmp.path(), Some(shutter));
+    // Golden names carry `demo_blur` so they sit beside the still goldens.
+    let renamed: Vec<(String, PathBuf)> = rendered
+        .into_iter()
+        .map(|(layer, path)| {
+            let to = tmp.path().join(file_name("demo_blur", &layer));
+            std::fs::rename(&path, &to).expect("rename");
+            std::fs::rename(path.with_extension("png"), to.with_extension("png")).expect("rename png");
+            (layer, to)
+        })
+        .collect();
+    let (_, meta) = exr::read_layer(&renamed[0].1).expect("reads back");
+    assert_eq!(meta.shutter, Some(shutter), "the shutter is in the header");
+    if update_goldens(&renamed) {
+        return;
+    }
+    let (lines, failures) = check_against_golden(&renamed, "demo_blur", GOLDEN_POINTS, true);
+    for l in &lines {
+        println!("{l}");
+    }
+    assert!(
+        failures.is_empty(),
+        "the blurred demo differs from its golden (regenerate with `UPDATE_GOLDEN=1 cargo test --test golden` if intended):\n  {}",
         failures.join("\n  ")
     );
 }

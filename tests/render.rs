@@ -155,7 +155,7 @@ fn accel_matches_brute_force() {
                     }
                 }
             }
-            let ray = WorldRay { origin, direction, tmax };
+            let ray = WorldRay { origin, direction, tmax, time: 0.0 };
             let got = tlas.intersect(&ray, mask);
             match (best, got) {
                 (None, None) => {}
@@ -230,6 +230,7 @@ fn furnace_convex_sphere_under_uniform_sky() {
         camera: camera(eye, Vec3::ZERO, 40.0),
         sun: None,
         sky: Sky { radiance: Vec3::ONE },
+        motion: None,
     };
     let s = RenderSettings { sky_visible: true, ..settings(48, 36, 64) };
     let film = render_frame(&blas, &lib, &scene, &s, None).unwrap();
@@ -287,6 +288,7 @@ fn small_set() -> (Library, FrameScene) {
             irradiance: Vec3::splat(3.0),
         }),
         sky: Sky { radiance: Vec3::new(0.3, 0.38, 0.5) },
+        motion: None,
     };
     (lib, scene)
 }
@@ -368,6 +370,7 @@ fn shadow_only_instance_is_invisible_but_casts_a_shadow() {
         camera: camera(Vec3::new(0.0, 6.0, 6.0), Vec3::ZERO, 50.0),
         sun: Some(Sun { direction: Vec3::Y, angular_diameter: 0.0093, irradiance: Vec3::splat(3.0) }),
         sky: Sky { radiance: Vec3::splat(0.1) },
+        motion: None,
     };
     let s = settings(40, 30, 4);
     let with = render_frame(&blas, &lib, &scene(vec![floor, blocker]), &s, None).unwrap();
@@ -416,6 +419,7 @@ fn glossy_floor_reflects_indirect_only_object() {
             irradiance: Vec3::splat(3.0),
         }),
         sky: Sky { radiance: Vec3::splat(0.2) },
+        motion: None,
     };
     let s = settings(40, 30, 8);
     let with = render_frame(&blas, &lib, &scene(vec![floor, red]), &s, None).unwrap();
@@ -453,6 +457,7 @@ fn no_shadow_acne_far_from_origin() {
                 irradiance: Vec3::splat(3.0),
             }),
             sky: Sky { radiance: Vec3::ZERO },
+            motion: None,
         };
         let film = render_frame(&blas, &lib, &scene, &settings(48, 32, 4), None).unwrap();
         let lum: Vec<f32> = film.rgba.iter().filter(|p| p[3] == 1.0).map(|&p| luminance(p)).collect();
@@ -495,6 +500,7 @@ fn exr_round_trip() {
         far: 1000.0,
         fps: 24.0,
         render_fingerprint: String::new(),
+        shutter: None,
     };
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("demo.crowd_0.1001.exr");
@@ -567,7 +573,7 @@ fn degenerate_crowd_at_one_point_traces_correctly() {
     for kind in [TlasKind::Bvh2, TlasKind::CwBvh] {
         let tlas = Tlas::build_with(&blas, &instances, kind);
         tlas.validate();
-        let ray = WorldRay { origin: Vec3::new(0.0, 0.5, 5.0), direction: -Vec3::Z, tmax: f32::INFINITY };
+        let ray = WorldRay { origin: Vec3::new(0.0, 0.5, 5.0), direction: -Vec3::Z, tmax: f32::INFINITY, time: 0.0 };
         let hit = tlas.intersect(&ray, vis::CAMERA).expect("hits the stack of cubes");
         assert!((hit.t - 4.5).abs() < 1e-4);
         assert!(tlas.occluded(&ray, vis::SHADOW));
@@ -588,7 +594,10 @@ fn degenerate_mesh_triangles_are_dropped() {
     assert_eq!(blas.get(0).unwrap().triangle_count(), 1);
     let tlas = Tlas::build(&blas, &[instance(0, 0, Affine3A::IDENTITY, None, vis::ALL)]);
     let hit = tlas
-        .intersect(&WorldRay { origin: Vec3::new(0.2, 0.2, 1.0), direction: -Vec3::Z, tmax: f32::INFINITY }, vis::ALL)
+        .intersect(
+            &WorldRay { origin: Vec3::new(0.2, 0.2, 1.0), direction: -Vec3::Z, tmax: f32::INFINITY, time: 0.0 },
+            vis::ALL,
+        )
         .unwrap();
     assert_eq!(hit.triangle, 0);
 }
@@ -611,7 +620,7 @@ fn axis_aligned_rays_hit_shared_edges_and_signed_zeros() {
         for (mesh, m, expected_t) in [(0, Affine3A::IDENTITY, 1.0), (1, Affine3A::IDENTITY, 0.5), (1, turned, 0.5)] {
             let tlas = Tlas::build_with(&blas, &[instance(mesh, 0, m, None, vis::ALL)], kind);
             for d in [-Vec3::Z, Vec3::new(0.0, 0.0, -1.0)] {
-                let ray = WorldRay { origin: Vec3::new(0.2, 0.2, 1.0), direction: d, tmax: f32::INFINITY };
+                let ray = WorldRay { origin: Vec3::new(0.2, 0.2, 1.0), direction: d, tmax: f32::INFINITY, time: 0.0 };
                 let hit = tlas.intersect(&ray, vis::ALL);
                 let t = hit.map(|h| h.t);
                 assert_eq!(t, Some(expected_t), "{kind:?} mesh {mesh} dir {d:?}");
@@ -644,6 +653,7 @@ fn base_color_texture_reaches_the_albedo_aov() {
         },
         sun: None,
         sky: Sky { radiance: Vec3::ONE },
+        motion: None,
     };
     let film = render_frame(&blas, &lib, &scene, &settings(32, 16, 4), None).unwrap();
     // The camera looks down with +Y up on screen = -Z in the world; u runs along +X (image left to right).
@@ -661,6 +671,7 @@ fn empty_scene_renders_sky_and_reports_progress() {
         camera: camera(Vec3::ZERO, -Vec3::Z, 40.0),
         sun: None,
         sky: Sky { radiance: Vec3::new(0.25, 0.5, 1.0) },
+        motion: None,
     };
     let done = std::sync::atomic::AtomicUsize::new(0);
     let report = |n: usize| {
@@ -691,6 +702,7 @@ fn diffuse_only_is_lambert_furnace() {
         camera: camera(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, 40.0),
         sun: None,
         sky: Sky { radiance: Vec3::ONE },
+        motion: None,
     };
     let s = RenderSettings { sky_visible: true, diffuse_only: true, ..settings(48, 36, 16) };
     let film = render_frame(&blas, &lib, &scene, &s, None).unwrap();

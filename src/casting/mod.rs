@@ -4,6 +4,7 @@
 
 pub mod cast;
 pub mod crowd;
+pub mod motion;
 pub mod rig;
 pub mod shot_cache;
 pub mod skin;

@@ -603,6 +603,11 @@ impl SkinnedRig {
         self.animated.clips[self.cycles[cycle].clip].duration() * self.fps
     }
 
+    /// Number of pose steps a cycle is cut into (`steps + 1` poses, 0 to `steps`).
+    pub fn cycle_steps(&self, cycle: usize) -> u32 {
+        self.cycles[cycle].steps
+    }
+
     /// The pose step nearest cycle frame `frame` (wrapped into the cycle):
     /// 0 to `steps` inclusive, since a clip that does not loop seamlessly
     /// ends on a pose other than its first.

@@ -24,6 +24,10 @@ pub struct DemoArgs {
     /// Samples per pixel for the demo renders.
     #[arg(long, default_value_t = 16, value_parser = super::values::spp)]
     pub spp: u32,
+    /// Motion blur shutter OPEN,CLOSE in frames (default: a 180-degree shutter centred on the
+    /// frame), or `off` for instants.
+    #[arg(long, default_value = "-0.25,0.25", value_parser = super::values::shutter, allow_hyphen_values = true)]
+    pub shutter: super::values::ShutterFlag,
 }
 
 /// `throng demo`: every stage on the bundled demo shot.
@@ -46,7 +50,12 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     outln!("throng demo: {}", shot_path.display());
 
     let t = Instant::now();
-    let crowd = super::load_crowd(&shot_path)?;
+    let mut crowd = super::load_crowd(&shot_path)?;
+    let shutter = args.shutter.0;
+    if let Some(s) = shutter {
+        crate::casting::motion::prepare_shutter(&mut crowd, s)?;
+    }
+    let crowd = crowd;
     let info = crate::cache::info(&crowd.cache)?;
     outln!(
         "  cache    {} agents over cache frames {}-{}, {} rigs, {} cycles",
@@ -99,12 +108,17 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     layers.push(FULL_LAYER.to_string());
     let render = RenderJob {
         png: true,
+        shutter,
         ..RenderJob::new(layers, vec![f.start, manifest.ref_frame, f.end], args.spp, out.join("render"))
     };
     let done = job::run(&crowd, Some(&manifest), &render)?;
     let [w, h] = crowd.shot.render.resolution;
+    let blur = match shutter {
+        Some([open, close]) => format!("motion blur, shutter {open}..{close} frames"),
+        None => "no motion blur".to_string(),
+    };
     outln!(
-        "  render   {} layer-frames at {w}x{h}, {} spp  [{:.1} s]",
+        "  render   {} layer-frames at {w}x{h}, {} spp, {blur}  [{:.1} s]",
         done.len(),
         render.spp,
         t.elapsed().as_secs_f64()

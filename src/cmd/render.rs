@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 
-use super::values::{frame_list, resolution, spp, threads, FrameList, Resolution};
+use super::values::{frame_list, resolution, shutter, spp, threads, FrameList, Resolution, ShutterFlag};
 use crate::error::{Error, Result};
 use crate::output::FULL_LAYER;
 use crate::render::exr;
@@ -127,12 +127,22 @@ pub struct RenderArgs {
     /// Print a machine-readable summary (files, seconds, instances, peak memory) instead of the line.
     #[arg(long)]
     pub json: bool,
+    /// Motion blur: shutter OPEN,CLOSE in frames relative to each frame (e.g. -0.25,0.25 for a
+    /// 180-degree shutter centred on the frame), or `off` (default: the shot's `render.shutter`).
+    /// Also writes the motion-vector pass (forward.u, forward.v).
+    #[arg(long, value_parser = shutter, allow_hyphen_values = true)]
+    pub shutter: Option<ShutterFlag>,
 }
 
 /// `throng render SHOT ...`: renders the asked layers and frames.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let clock = std::time::Instant::now();
-    let crowd = super::load_crowd(&args.shot)?;
+    let mut crowd = super::load_crowd(&args.shot)?;
+    let shutter = args.shutter.map_or(crowd.shot.render.shutter, |ShutterFlag(s)| s);
+    if let Some(s) = shutter {
+        crate::casting::motion::prepare_shutter(&mut crowd, s)?;
+    }
+    let crowd = crowd;
     let manifest_path = args
         .manifest
         .clone()
@@ -176,6 +186,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         cryptomatte: args.cryptomatte.into(),
         progress: args.progress.into(),
         compression: args.compression.into(),
+        shutter,
         ..RenderJob::new(layers, frames, spp, args.out.clone())
     };
     let done = job::run(&crowd, manifest.as_ref(), &job)?;

@@ -67,3 +67,21 @@ pub fn budget(s: &str) -> Result<String, String> {
     crate::shot::parse_bytes(s)?;
     Ok(s.to_string())
 }
+
+/// `--shutter`: `OPEN,CLOSE` in frames relative to the frame (e.g.
+/// `-0.25,0.25`, a 180-degree shutter centred on the frame), or `off`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShutterFlag(pub Option<[f32; 2]>);
+
+/// Parses `OPEN,CLOSE` or `off`.
+pub fn shutter(s: &str) -> Result<ShutterFlag, String> {
+    if s.trim().eq_ignore_ascii_case("off") {
+        return Ok(ShutterFlag(None));
+    }
+    let bad = |why: String| format!("bad --shutter `{s}`: {why} (use OPEN,CLOSE in frames, e.g. -0.25,0.25, or off)");
+    let (a, b) = s.split_once(',').ok_or_else(|| bad("expected two numbers".into()))?;
+    let open: f32 = a.trim().parse().map_err(|_| bad(format!("`{}` is not a number", a.trim())))?;
+    let close: f32 = b.trim().parse().map_err(|_| bad(format!("`{}` is not a number", b.trim())))?;
+    crate::shot::check_shutter([open, close]).map_err(bad)?;
+    Ok(ShutterFlag(Some([open, close])))
+}

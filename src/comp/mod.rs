@@ -14,6 +14,9 @@
 //!   nearest finite Z at that pixel (ties: the front-most layer), so Z is the
 //!   minimum over the layers that hit something there and the id names the
 //!   surface that Z measures (0 when that surface is the set or sky).
+//! - `forward.u`, `forward.v` (motion vectors, renders with a shutter): like
+//!   `agent.id`, from the layer whose Z wins; zero where no layer hit
+//!   anything. Written when any layer has them.
 //!
 //! - Cryptomatte (`CryptoAgent`, `CryptoPart`): an object's coverage in a
 //!   layer is multiplied by `1 - A` of every layer in front of it (the
@@ -60,9 +63,13 @@ pub fn over(films: &[&Film]) -> Result<Film> {
         return Err(Error::Usage(format!("layers differ in size: {w}x{h} and {}x{}", f.width, f.height)));
     }
     let mut out = Film::new(w, h);
+    let with_motion = films.iter().any(|f| !f.motion.is_empty());
+    if with_motion {
+        out.motion = vec![[0.0; 2]; out.rgba.len()];
+    }
     for i in 0..out.rgba.len() {
         let (mut rgba, mut n, mut albedo) = ([0.0f32; 4], [0.0f32; 3], [0.0f32; 3]);
-        let (mut z, mut id) = (f32::INFINITY, 0u32);
+        let (mut z, mut id, mut motion) = (f32::INFINITY, 0u32, [0.0f32; 2]);
         for f in films {
             let a = f.rgba[i][3];
             let keep = 1.0 - a;
@@ -78,6 +85,7 @@ pub fn over(films: &[&Film]) -> Result<Film> {
             if fz.is_finite() && fz <= z {
                 z = fz;
                 id = f.agent_id[i];
+                motion = f.motion.get(i).copied().unwrap_or([0.0; 2]);
             }
         }
         out.rgba[i] = rgba;
@@ -85,6 +93,9 @@ pub fn over(films: &[&Film]) -> Result<Film> {
         out.albedo[i] = albedo;
         out.z[i] = z;
         out.agent_id[i] = id;
+        if with_motion {
+            out.motion[i] = motion;
+        }
     }
     out.cryptomatte = over_cryptomatte(films);
     Ok(out)

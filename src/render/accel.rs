@@ -3,6 +3,8 @@
 //! instances' world bounds (rebuilt per frame). The only file that names
 //! obvhs, so the BVH library can change without touching the integrator.
 
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use glam::{Affine3A, Vec3, Vec3A};
@@ -20,7 +22,7 @@ use obvhs::{
 };
 use rayon::prelude::*;
 
-use crate::scene::{Instance, Library, Mesh};
+use crate::scene::{Instance, Library, Mesh, SceneMotion};
 
 /// Bottom-level BVH of one mesh, in object space.
 pub struct Blas {
@@ -108,6 +110,91 @@ impl Blas {
     }
 }
 
+/// A BLAS over a mesh blending between two poses of the same topology
+/// (deformation blur): each triangle's vertices at both keys, and a tree over
+/// the union of each triangle's bounds at the two keys. A ray at blend weight
+/// `w` meets the triangle `lerp(lo, hi, w)`, which lies inside that union.
+pub struct DeformBlas {
+    bvh: CwBvh,
+    /// Vertices at the first key, in BVH slot order.
+    lo: Vec<[Vec3A; 3]>,
+    /// Vertices at the second key.
+    hi: Vec<[Vec3A; 3]>,
+    /// Original triangle index of each BVH slot.
+    triangle_index: Vec<u32>,
+}
+
+impl DeformBlas {
+    /// Builds the blend of `a` into `b`. Empty when the index buffers differ
+    /// (not the same piece) or no triangle is valid at both keys.
+    pub fn build(a: &Mesh, b: &Mesh) -> DeformBlas {
+        let empty = || DeformBlas { bvh: CwBvh::default(), lo: Vec::new(), hi: Vec::new(), triangle_index: Vec::new() };
+        if a.indices != b.indices || a.positions.len() != b.positions.len() {
+            return empty();
+        }
+        let (mut lo, mut hi, mut aabbs, mut original) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for (i, idx) in a.indices.chunks_exact(3).enumerate() {
+            let get = |m: &Mesh, k: u32| m.positions.get(k as usize).copied().filter(|p| p.is_finite());
+            let (Some(a0), Some(a1), Some(a2)) = (get(a, idx[0]), get(a, idx[1]), get(a, idx[2])) else { continue };
+            let (Some(b0), Some(b1), Some(b2)) = (get(b, idx[0]), get(b, idx[1]), get(b, idx[2])) else { continue };
+            if (a1 - a0).cross(a2 - a0) == Vec3::ZERO && (b1 - b0).cross(b2 - b0) == Vec3::ZERO {
+                continue;
+            }
+            let mut bounds = Aabb::INVALID;
+            for p in [a0, a1, a2, b0, b1, b2] {
+                bounds.extend(p.into());
+            }
+            lo.push([a0.into(), a1.into(), a2.into()]);
+            hi.push([b0.into(), b1.into(), b2.into()]);
+            aabbs.push(bounds);
+            original.push(i as u32);
+        }
+        if aabbs.is_empty() {
+            return empty();
+        }
+        let bvh = build_cwbvh(&aabbs, BvhBuildParams::medium_build(), &mut Duration::default());
+        let order = &bvh.primitive_indices;
+        DeformBlas {
+            lo: order.iter().map(|&s| lo[s as usize]).collect(),
+            hi: order.iter().map(|&s| hi[s as usize]).collect(),
+            triangle_index: order.iter().map(|&s| original[s as usize]).collect(),
+            bvh,
+        }
+    }
+
+    /// True when nothing can be hit.
+    pub fn is_empty(&self) -> bool {
+        self.lo.is_empty()
+    }
+
+    /// Approximate heap bytes.
+    pub fn bytes(&self) -> usize {
+        self.bvh.nodes.len() * std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>()
+            + self.bvh.primitive_indices.len() * 4
+            + (self.lo.len() + self.hi.len()) * std::mem::size_of::<[Vec3A; 3]>()
+            + self.triangle_index.len() * 4
+    }
+
+    #[inline]
+    fn triangle(&self, slot: usize, w: f32) -> RtTriangle {
+        let (a, b) = (&self.lo[slot], &self.hi[slot]);
+        RtTriangle::new(a[0].lerp(b[0], w), a[1].lerp(b[1], w), a[2].lerp(b[2], w))
+    }
+
+    #[inline]
+    fn intersect(&self, ray: Ray, w: f32) -> Option<(u32, f32)> {
+        let mut hit = RayHit::none();
+        self.bvh
+            .ray_traverse(ray, &mut hit, |r, s| intersect_triangle(&self.triangle(s, w), r))
+            .then_some((hit.primitive_id, hit.t))
+    }
+
+    #[inline]
+    fn occluded(&self, ray: Ray, w: f32) -> bool {
+        !self.bvh.ray_traverse_miss(ray, |r, s| intersect_triangle(&self.triangle(s, w), r))
+    }
+}
+
 /// Möller-Trumbore on obvhs' `RtTriangle` layout, as `RtTriangle::intersect`
 /// but with comparisons instead of sign-bit tests: obvhs rejects barycentrics
 /// of -0.0, so a ray exactly on the shared edge of two triangles (an
@@ -131,9 +218,12 @@ fn intersect_triangle(tri: &RtTriangle, ray: &Ray) -> f32 {
 /// One BLAS per [`Library::meshes`] entry, indexed by `MeshId`, each built
 /// the first time a render needs it: a layer render builds only the meshes
 /// its instances use (its agents, the set, the other layers' casters), not
-/// the whole library.
+/// the whole library. Also the deforming BLASes motion blur has asked for
+/// so far (built on first use, shared by every later frame and layer).
 pub struct BlasSet {
     blas: Vec<std::sync::OnceLock<Blas>>,
+    /// Deforming BLASes by (mesh at the first key, mesh at the second).
+    deform: Mutex<HashMap<(u32, u32), Arc<DeformBlas>>>,
     /// Wall time of all builds so far.
     pub build_time: Duration,
 }
@@ -143,6 +233,7 @@ impl BlasSet {
     pub fn lazy(lib: &Library) -> BlasSet {
         BlasSet {
             blas: (0..lib.meshes.len()).map(|_| std::sync::OnceLock::new()).collect(),
+            deform: Mutex::new(HashMap::new()),
             build_time: Duration::ZERO,
         }
     }
@@ -189,9 +280,23 @@ impl BlasSet {
         self.blas.iter().filter(|b| b.get().is_some()).count()
     }
 
-    /// Approximate heap bytes of the BLASes built so far.
+    /// The deforming BLAS blending mesh `a` into mesh `b` (same topology),
+    /// built once and cached. `None` when either mesh is unknown or their
+    /// topologies differ, or nothing in them can be hit.
+    pub fn deforming(&self, lib: &Library, a: u32, b: u32) -> Option<Arc<DeformBlas>> {
+        if let Some(d) = self.deform.lock().ok()?.get(&(a, b)) {
+            return (!d.is_empty()).then(|| d.clone());
+        }
+        let built = Arc::new(DeformBlas::build(lib.meshes.get(a as usize)?, lib.meshes.get(b as usize)?));
+        // Two threads may build the same pair: either result is the same tree.
+        let d = self.deform.lock().ok()?.entry((a, b)).or_insert(built).clone();
+        (!d.is_empty()).then_some(d)
+    }
+
+    /// Approximate heap bytes of the BLASes built so far (deforming ones included).
     pub fn bytes(&self) -> usize {
-        self.blas.iter().filter_map(|b| b.get()).map(Blas::bytes).sum()
+        let deform: usize = self.deform.lock().map_or(0, |d| d.values().map(|b| b.bytes()).sum());
+        self.blas.iter().filter_map(|b| b.get()).map(Blas::bytes).sum::<usize>() + deform
     }
 
     /// Validates every built BLAS (tests only).
@@ -234,6 +339,38 @@ struct TlasInstance {
     index: u32,
     mesh: u32,
     visibility: u8,
+    /// Index into `Tlas::moving`, or [`STILL`].
+    motion: u32,
+}
+
+/// `TlasInstance::motion` of an instance that does not move.
+const STILL: u32 = u32::MAX;
+
+/// A moving instance: its two transform keys and, when it deforms, the
+/// deforming BLAS and blend weights at the keys.
+struct MovingInstance {
+    world_from_object: [Affine3A; 2],
+    deform: Option<(Arc<DeformBlas>, [f32; 2])>,
+}
+
+impl MovingInstance {
+    /// Object from world at shutter fraction `time` (the transform keys
+    /// interpolated linearly, then inverted); `None` if singular there.
+    #[inline]
+    fn object_from_world(&self, time: f32) -> Option<Affine3A> {
+        let [a, b] = &self.world_from_object;
+        let m = Affine3A {
+            matrix3: a.matrix3 + (b.matrix3 - a.matrix3) * time,
+            translation: a.translation + (b.translation - a.translation) * time,
+        };
+        let inv = m.inverse();
+        inv.is_finite().then_some(inv)
+    }
+
+    #[inline]
+    fn weight(&self, time: f32) -> f32 {
+        self.deform.as_ref().map_or(0.0, |(_, [w0, w1])| w0 + (w1 - w0) * time)
+    }
 }
 
 /// A ray in world space. The direction need not be normalised; `t` is in
@@ -246,6 +383,9 @@ pub struct WorldRay {
     pub direction: Vec3,
     /// Largest accepted `t`.
     pub tmax: f32,
+    /// Shutter fraction 0..1 at which the ray travels (motion blur; ignored
+    /// by a scene that does not move).
+    pub time: f32,
 }
 
 /// Closest hit through both levels.
@@ -278,6 +418,8 @@ pub struct Tlas<'a> {
     clusters: Vec<(u32, u32)>,
     /// World bounds per TLAS slot (kept for `validate`).
     aabbs: Vec<Aabb>,
+    /// Instances that move over the shutter (empty for a still scene).
+    moving: Vec<MovingInstance>,
     /// Wall time of the build.
     pub build_time: Duration,
 }
@@ -307,10 +449,15 @@ fn world_ray(ray: &WorldRay) -> Ray {
 /// not renormalised, so `t` means the same distance in both spaces.
 #[inline]
 fn object_ray(inst: &TlasInstance, r: &Ray, tmax: f32) -> Ray {
+    transform_ray(&inst.object_from_world, r, tmax)
+}
+
+#[inline]
+fn transform_ray(object_from_world: &Affine3A, r: &Ray, tmax: f32) -> Ray {
     Ray::new(
-        inst.object_from_world.transform_point3a(r.origin),
+        object_from_world.transform_point3a(r.origin),
         // + 0.0: no -0.0 components (see `world_ray`).
-        inst.object_from_world.transform_vector3a(r.direction) + Vec3A::ZERO,
+        object_from_world.transform_vector3a(r.direction) + Vec3A::ZERO,
         r.tmin,
         tmax,
     )
@@ -324,8 +471,75 @@ impl<'a> Tlas<'a> {
         Self::build_with(blas, instances, TlasKind::for_count(instances.len()))
     }
 
+    /// Builds the TLAS of a frame scene's instances, moving over the shutter
+    /// when the scene has motion: a moving instance's leaf bounds are the
+    /// union of its bounds at the two keys (exact for transforms interpolated
+    /// linearly), and rays meet it at their own time. Instances that do not
+    /// move are stored and traced exactly as in a still scene.
+    pub fn build_scene(
+        blas: &'a BlasSet,
+        lib: &Library,
+        instances: &[Instance],
+        motion: Option<&SceneMotion>,
+    ) -> Tlas<'a> {
+        let Some(motion) = motion.filter(|m| m.instances.len() == instances.len()) else {
+            return Self::build(blas, instances);
+        };
+        let kind = TlasKind::for_count(instances.len());
+        let mut moving = Vec::new();
+        let mut index = vec![STILL; instances.len()];
+        for (i, (inst, m)) in instances.iter().zip(&motion.instances).enumerate() {
+            let deform = m.deform.filter(|d| d.mesh != inst.mesh || d.weight[0] != 0.0 || d.weight[1] != 0.0);
+            let deform = deform.and_then(|d| blas.deforming(lib, inst.mesh, d.mesh).map(|b| (b, d.weight)));
+            let close = m.world_from_object_close;
+            let det = close.matrix3.determinant();
+            if !close.is_finite() || !det.is_finite() || det.abs() < 1e-18 {
+                continue; // a broken close key: the instance stays still
+            }
+            if close == inst.world_from_object && deform.is_none() {
+                continue;
+            }
+            index[i] = moving.len() as u32;
+            moving.push(MovingInstance { world_from_object: [inst.world_from_object, close], deform });
+        }
+        if moving.is_empty() {
+            return Self::build(blas, instances);
+        }
+        // Moving bounds: the union over the two keys (the deforming BLAS's
+        // bounds already cover both poses). An unknown mesh is skipped later.
+        let moving_bounds: Vec<Option<Aabb>> = moving
+            .iter()
+            .zip(index.iter().enumerate().filter(|(_, &k)| k != STILL))
+            .map(|(mv, (i, _))| {
+                let object = match &mv.deform {
+                    Some((d, _)) => d.bvh.total_aabb,
+                    None => blas.get(instances[i].mesh)?.bounds(),
+                };
+                let [a, b] = &mv.world_from_object;
+                Some(world_bounds(&object, a).union(&world_bounds(&object, b)))
+            })
+            .collect();
+        let bounds = |i: usize, inst: &Instance, b: &Blas| match index[i] {
+            STILL => world_bounds(&b.bounds(), &inst.world_from_object),
+            k => moving_bounds[k as usize].unwrap_or_else(|| world_bounds(&b.bounds(), &inst.world_from_object)),
+        };
+        Self::build_keyed(blas, instances, kind, bounds, &index, moving)
+    }
+
     /// Builds the TLAS with a chosen tree kind (for benchmarks).
     pub fn build_with(blas: &'a BlasSet, instances: &[Instance], kind: TlasKind) -> Tlas<'a> {
+        let bounds = |_: usize, inst: &Instance, b: &Blas| world_bounds(&b.bounds(), &inst.world_from_object);
+        Self::build_keyed(blas, instances, kind, bounds, &[], Vec::new())
+    }
+
+    fn build_keyed(
+        blas: &'a BlasSet,
+        instances: &[Instance],
+        kind: TlasKind,
+        world: impl Fn(usize, &Instance, &Blas) -> Aabb,
+        motion_index: &[u32],
+        moving: Vec<MovingInstance>,
+    ) -> Tlas<'a> {
         let start = Instant::now();
         // Group instances with identical world bounds into one leaf (a pile of
         // them would otherwise build a degenerate chain). A sort over flat
@@ -339,7 +553,7 @@ impl<'a> Tlas<'a> {
             if b.is_empty() || inst.visibility == 0 || !det.is_finite() || det.abs() < 1e-18 || !m.is_finite() {
                 continue;
             }
-            let bounds = world_bounds(&b.bounds(), m);
+            let bounds = world(i, inst, b);
             let key =
                 [bounds.min.x, bounds.min.y, bounds.min.z, bounds.max.x, bounds.max.y, bounds.max.z].map(f32::to_bits);
             keyed.push((key, i as u32, bounds));
@@ -385,11 +599,12 @@ impl<'a> Tlas<'a> {
                     index: i,
                     mesh: inst.mesh,
                     visibility: inst.visibility,
+                    motion: motion_index.get(i as usize).copied().unwrap_or(STILL),
                 });
             }
         }
         let aabbs = order.iter().map(|&c| aabbs[c as usize]).collect();
-        Tlas { blas, tree, instances, clusters, aabbs, build_time: start.elapsed() }
+        Tlas { blas, tree, instances, clusters, aabbs, moving, build_time: start.elapsed() }
     }
 
     /// Number of instances in the tree.
@@ -408,9 +623,33 @@ impl<'a> Tlas<'a> {
         start as usize..(start + len) as usize
     }
 
+    /// The closest hit of one moving instance at `time`: (BVH slot, t).
+    #[inline]
+    fn intersect_moving(&self, inst: &TlasInstance, r: &Ray, tmax: f32, time: f32) -> Option<(u32, f32)> {
+        let mv = &self.moving[inst.motion as usize];
+        let local = transform_ray(&mv.object_from_world(time)?, r, tmax);
+        match &mv.deform {
+            Some((d, _)) => d.intersect(local, mv.weight(time)),
+            None => self.blas.get(inst.mesh)?.intersect(local),
+        }
+    }
+
+    #[inline]
+    fn occluded_moving(&self, inst: &TlasInstance, r: &Ray, time: f32) -> bool {
+        let mv = &self.moving[inst.motion as usize];
+        let Some(object_from_world) = mv.object_from_world(time) else { return false };
+        let local = transform_ray(&object_from_world, r, r.tmax);
+        match &mv.deform {
+            Some((d, _)) => d.occluded(local, mv.weight(time)),
+            None => self.blas.get(inst.mesh).is_some_and(|b| b.occluded(local)),
+        }
+    }
+
     /// Closest hit among instances whose visibility shares a bit with `mask`.
+    /// Moving instances are met where they are at `ray.time`.
     pub fn intersect(&self, ray: &WorldRay, mask: u8) -> Option<Hit> {
         let world = world_ray(ray);
+        let time = ray.time;
         // (instance position, BLAS slot) of the closest hit so far.
         let mut best = (usize::MAX, u32::MAX);
         let visit = |r: &Ray, slot: usize| {
@@ -422,8 +661,13 @@ impl<'a> Tlas<'a> {
                 if inst.visibility & mask == 0 {
                     continue;
                 }
-                let Some(b) = self.blas.get(inst.mesh) else { continue };
-                if let Some((s, t)) = b.intersect(object_ray(inst, r, closest)) {
+                let hit = if inst.motion == STILL {
+                    let Some(b) = self.blas.get(inst.mesh) else { continue };
+                    b.intersect(object_ray(inst, r, closest))
+                } else {
+                    self.intersect_moving(inst, r, closest, time)
+                };
+                if let Some((s, t)) = hit {
                     if t < closest {
                         (closest, found, best) = (t, t, (k, s));
                     }
@@ -442,21 +686,39 @@ impl<'a> Tlas<'a> {
             return None;
         }
         let inst = &self.instances[best.0];
-        let b = self.blas.get(inst.mesh)?;
-        let local = object_ray(inst, &world, world.tmax);
-        let uv = b.tris[best.1 as usize].compute_barycentric(&local);
-        Some(Hit { instance: inst.index, triangle: b.triangle_index[best.1 as usize], t: hit.t, u: uv.x, v: uv.y })
+        let slot = best.1 as usize;
+        let (uv, triangle) = if inst.motion == STILL {
+            let b = self.blas.get(inst.mesh)?;
+            let local = object_ray(inst, &world, world.tmax);
+            (b.tris[slot].compute_barycentric(&local), b.triangle_index[slot])
+        } else {
+            let mv = &self.moving[inst.motion as usize];
+            let local = transform_ray(&mv.object_from_world(time)?, &world, world.tmax);
+            match &mv.deform {
+                Some((d, _)) => (d.triangle(slot, mv.weight(time)).compute_barycentric(&local), d.triangle_index[slot]),
+                None => {
+                    let b = self.blas.get(inst.mesh)?;
+                    (b.tris[slot].compute_barycentric(&local), b.triangle_index[slot])
+                }
+            }
+        };
+        Some(Hit { instance: inst.index, triangle, t: hit.t, u: uv.x, v: uv.y })
     }
 
     /// True when any instance whose visibility shares a bit with `mask`
-    /// blocks the ray within (0, tmax).
+    /// blocks the ray within (0, tmax), moving instances at `ray.time`.
     pub fn occluded(&self, ray: &WorldRay, mask: u8) -> bool {
         let world = world_ray(ray);
+        let time = ray.time;
         let visit = |r: &Ray, slot: usize| {
             let blocked = self.cluster(slot).any(|k| {
                 let inst = &self.instances[k];
                 inst.visibility & mask != 0
-                    && self.blas.get(inst.mesh).is_some_and(|b| b.occluded(object_ray(inst, r, r.tmax)))
+                    && if inst.motion == STILL {
+                        self.blas.get(inst.mesh).is_some_and(|b| b.occluded(object_ray(inst, r, r.tmax)))
+                    } else {
+                        self.occluded_moving(inst, r, time)
+                    }
             });
             // Any value below tmax stops the walk.
             if blocked {
@@ -470,6 +732,11 @@ impl<'a> Tlas<'a> {
             TlasTree::Bvh2(bvh) => !bvh.ray_traverse_miss(world, visit),
             TlasTree::CwBvh(bvh) => !bvh.ray_traverse_miss(world, visit),
         }
+    }
+
+    /// Number of instances that move over the shutter.
+    pub fn moving_len(&self) -> usize {
+        self.moving.len()
     }
 
     /// World-space bounds of everything in the tree (`None` when empty).

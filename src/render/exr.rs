@@ -53,7 +53,18 @@ pub struct LayerMeta {
     pub fps: f32,
     /// `throng/renderFingerprint`: what `--resume` compares (empty: not written).
     pub render_fingerprint: String,
+    /// `throng/shutter` (v2f): shutter open and close in frames relative to
+    /// the frame; not written for a render without motion blur.
+    pub shutter: Option<[f32; 2]>,
 }
+
+/// Names of the motion-vector channels: Nuke's `forward` layer (VectorBlur's
+/// `uv` input, `motion` = forward + backward), as OpenImageIO lists them.
+pub const MOTION_CHANNELS: [&str; 2] = ["forward.u", "forward.v"];
+
+/// What the motion-vector channels mean, written to `throng/motionConvention`.
+pub const MOTION_CONVENTION: &str =
+    "forward.u/v = screen motion of the surface at the sample nearest the pixel centre, pixels per frame, +u right, +v up (Nuke), from shutter open to close";
 
 /// The working colourspace of every beauty and albedo channel: linear light
 /// with Rec.709 / sRGB primaries and a D65 white (`chromaticities`).
@@ -238,6 +249,14 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
         AnyChannel::new("albedo.B", vec3(&film.albedo, 2)),
         AnyChannel::new("agent.id", FlatSamples::U32(film.agent_id.clone())),
     ];
+    if !film.motion.is_empty() {
+        if film.motion.len() != w * h {
+            return Err(Error::invalid(path, "motion vectors do not match the film size"));
+        }
+        for (c, name) in MOTION_CHANNELS.iter().enumerate() {
+            list.push(AnyChannel::new(*name, FlatSamples::F32(film.motion.iter().map(|m| m[c]).collect())));
+        }
+    }
     for m in &film.cryptomatte {
         if m.width != film.width || m.height != film.height || m.pairs.len() != w * h * m.ranks {
             return Err(Error::invalid(path, format!("cryptomatte `{}` does not match the film size", m.name)));
@@ -277,6 +296,10 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
     put("throng/colorspace", AttributeValue::Text(text(COLORSPACE)?))?;
     if !meta.render_fingerprint.is_empty() {
         put("throng/renderFingerprint", AttributeValue::Text(text(&meta.render_fingerprint)?))?;
+    }
+    if let Some([open, close]) = meta.shutter {
+        put("throng/shutter", AttributeValue::FloatVec2(exr::math::Vec2(open, close)))?;
+        put("throng/motionConvention", AttributeValue::Text(text(MOTION_CONVENTION)?))?;
     }
     if meta.fps > 0.0 && meta.fps.is_finite() {
         attrs.frames_per_second = Some(fps_rational(meta.fps));
@@ -410,6 +433,10 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
         albedo: (0..n).map(|i| [ar[i], ag[i], ab[i]]).collect(),
         agent_id,
         cryptomatte: cryptomatte::decode_part(&raw_part(layer, &image.attributes, |n| n.starts_with("Crypto")), path)?,
+        motion: match (floats(MOTION_CHANNELS[0]), floats(MOTION_CHANNELS[1])) {
+            (Ok(u), Ok(v)) => u.iter().zip(&v).map(|(&u, &v)| [u, v]).collect(),
+            _ => Vec::new(),
+        },
     };
 
     let attrs = &layer.attributes;
@@ -440,6 +467,10 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
         far: attrs.far_clip_plane.unwrap_or(0.0),
         fps: attrs.frames_per_second.map_or(0.0, |(n, d)| n as f32 / d.max(1) as f32),
         render_fingerprint: get_text("throng/renderFingerprint").unwrap_or_default(),
+        shutter: match other("throng/shutter") {
+            Some(AttributeValue::FloatVec2(v)) => Some([v.0, v.1]),
+            _ => None,
+        },
     };
     Ok((film, meta))
 }

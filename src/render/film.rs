@@ -10,6 +10,10 @@
 //!   `z` is camera-space depth, positive forward, +inf where that sample
 //!   missed or hit a holdout.
 //!   `agent_id` is 0 for "no agent" (sky, set, holdout), else cache id + 1.
+//! - `motion`: with a shutter only (else empty), the screen-space motion of
+//!   the surface the nearest sample hit, pixels per frame, +u right and +v
+//!   up (Nuke's `forward` vectors); zero where that sample missed, hit a
+//!   holdout or hit something that does not move.
 //! - `cryptomatte`: when rendered with [`CryptoNames`], the `CryptoAgent` and
 //!   `CryptoPart` mattes: per pixel the top [`RANKS`] (id, coverage) pairs,
 //!   ranked from a fixed-size per-pixel accumulator over the samples in
@@ -64,6 +68,8 @@ pub struct Film {
     pub agent_id: Vec<u32>,
     /// Cryptomatte types (`CryptoAgent`, `CryptoPart`); empty when not rendered.
     pub cryptomatte: Vec<Cryptomatte>,
+    /// Motion vectors (u right, v up), pixels per frame; empty when rendered without a shutter.
+    pub motion: Vec<[f32; 2]>,
 }
 
 impl Film {
@@ -79,6 +85,7 @@ impl Film {
             albedo: vec![[0.0; 3]; n],
             agent_id: vec![0; n],
             cryptomatte: Vec::new(),
+            motion: Vec::new(),
         }
     }
 
@@ -104,6 +111,7 @@ struct Pixel {
     normal: [f32; 3],
     albedo: [f32; 3],
     agent: u32,
+    motion: [f32; 2],
     /// Ranked (id, coverage) of the agent and part mattes (when enabled).
     crypto: [[[f32; 2]; RANKS]; 2],
 }
@@ -149,6 +157,7 @@ fn render_pixel(
         normal: (normal * inv).to_array(),
         albedo: (albedo * inv).to_array(),
         agent: nearest.1.agent,
+        motion: nearest.1.motion.to_array(),
         crypto: ranked,
     }
 }
@@ -194,7 +203,7 @@ pub fn render_frame_with_cryptomatte(
         .build()
         .map_err(|e| Error::Usage(format!("cannot start {} render threads: {e}", settings.threads)))?;
     pool.install(|| {
-        let tlas = Tlas::build(blas, &scene.instances);
+        let tlas = Tlas::build_scene(blas, lib, &scene.instances, scene.motion.as_ref());
         let mut stats = RenderStats { tlas_build: tlas.build_time, instances: tlas.len(), ..Default::default() };
         let integrator = Integrator::new(lib, scene, &tlas, settings);
         let (w, h) = (settings.width, settings.height);
@@ -222,6 +231,9 @@ pub fn render_frame_with_cryptomatte(
         stats.trace = start.elapsed();
 
         let mut film = Film::new(w, h);
+        if scene.motion.is_some() {
+            film.motion = vec![[0.0; 2]; film.rgba.len()];
+        }
         let mut mattes = match crypto {
             Some(_) => vec![Cryptomatte::new(AGENT_MATTE, w, h, RANKS), Cryptomatte::new(PART_MATTE, w, h, RANKS)],
             None => Vec::new(),
@@ -236,6 +248,9 @@ pub fn render_frame_with_cryptomatte(
                 film.normal[i] = px.normal;
                 film.albedo[i] = px.albedo;
                 film.agent_id[i] = px.agent;
+                if let Some(m) = film.motion.get_mut(i) {
+                    *m = px.motion;
+                }
                 for (m, ranked) in mattes.iter_mut().zip(&px.crypto) {
                     m.pairs[i * RANKS..(i + 1) * RANKS].copy_from_slice(ranked);
                 }
@@ -294,6 +309,31 @@ fn check(blas: &BlasSet, lib: &Library, scene: &FrameScene, s: &RenderSettings) 
         }
         if !inst.world_from_object.is_finite() {
             return Err(err("transform is not finite".into()));
+        }
+    }
+    if let Some(m) = &scene.motion {
+        if m.instances.len() != scene.instances.len() {
+            return Err(Error::invalid(
+                here,
+                format!("motion has {} instances but the scene {}", m.instances.len(), scene.instances.len()),
+            )
+            .field("motion"));
+        }
+        if crate::shot::check_shutter(m.shutter).is_err() && m.shutter[0] != m.shutter[1] {
+            return Err(Error::invalid(here, format!("shutter {:?} is not valid", m.shutter)).field("motion.shutter"));
+        }
+        for (i, im) in m.instances.iter().enumerate() {
+            let bad_weight = im.deform.is_some_and(|d| !d.weight.iter().all(|w| (0.0..=1.0).contains(w)));
+            let bad_mesh = im.deform.is_some_and(|d| d.mesh as usize >= lib.meshes.len());
+            if !im.world_from_object_close.is_finite() || bad_weight || bad_mesh {
+                return Err(Error::invalid(here, format!("instance {i}: its shutter-close key is not valid"))
+                    .field("motion.instances"));
+            }
+        }
+        for c in &m.camera {
+            if !(c.world_from_camera.is_finite() && c.yfov > 0.0 && c.yfov < std::f32::consts::PI) {
+                return Err(Error::invalid(here, "camera over the shutter is degenerate").field("motion.camera"));
+            }
         }
     }
     Ok(())

@@ -14,7 +14,7 @@ use super::accel::{Hit, Tlas, WorldRay};
 use super::bsdf::{Bsdf, ShadingFrame};
 use super::sampler::Sampler;
 use super::RenderSettings;
-use crate::scene::{vis, FrameScene, Library, Material, Texture};
+use crate::scene::{vis, FrameScene, Library, Material, Mesh, Texture};
 
 /// Bounces before Russian roulette may end a path.
 const RR_START: u32 = 3;
@@ -41,6 +41,9 @@ pub struct SampleResult {
     pub agent: u32,
     /// Index in `scene.instances` of the first hit; `None` for a miss or a holdout.
     pub instance: Option<u32>,
+    /// Screen-space motion of the first hit in pixels per frame, Nuke's
+    /// convention (+u right, +v up); zero without motion or for no hit.
+    pub motion: Vec2,
 }
 
 /// Ray counts, summed per tile (integers, so any thread count gives the same totals).
@@ -194,6 +197,38 @@ impl CameraRays {
     pub fn depth(&self, p: Vec3) -> f32 {
         -self.camera_from_world.transform_point3(p).z
     }
+
+    /// The film position (pixels, y down, (0, 0) the top-left corner) a
+    /// world point projects to; `None` behind the camera. Inverse of [`CameraRays::ray`].
+    pub fn raster(&self, p: Vec3) -> Option<Vec2> {
+        let c = self.camera_from_world.transform_point3(p);
+        if !(c.z < 0.0) {
+            return None;
+        }
+        let (sx, sy) = (c.x / -c.z, c.y / -c.z);
+        Some(Vec2::new(
+            (sx / (self.aspect * self.tan_half_y) + 1.0) * 0.5 * self.width,
+            (1.0 - sy / self.tan_half_y) * 0.5 * self.height,
+        ))
+    }
+}
+
+/// The camera over the shutter: rays at a time, and the film positions at
+/// open and close for motion vectors.
+#[derive(Clone, Copy, Debug)]
+struct ShutterCamera {
+    keys: [CameraRays; 2],
+    /// Whether the two keys differ (else rays come from the frame camera).
+    moves: bool,
+    /// Shutter length in frames (> 0).
+    length: f32,
+}
+
+/// An instance where it is at one time: object to world and, deforming, the
+/// second mesh and its blend weight.
+struct Placed<'m> {
+    world_from_object: Affine3A,
+    blend: Option<(&'m Mesh, f32)>,
 }
 
 /// Everything a render thread reads: immutable, shared by reference.
@@ -204,6 +239,7 @@ pub struct Integrator<'a> {
     /// Per instance: transpose of the inverse 3x3, to carry normals to world space.
     world_normal_from_object: Vec<Mat3A>,
     camera: CameraRays,
+    shutter: Option<ShutterCamera>,
     sun: Option<SunLight>,
     settings: &'a RenderSettings,
     default_material: Material,
@@ -235,12 +271,24 @@ impl<'a> Integrator<'a> {
                 }
             })
             .collect();
+        let shutter = scene.motion.as_ref().map(|m| {
+            let [a, b] = m.camera;
+            ShutterCamera {
+                keys: [a, b].map(|c| CameraRays::new(&c, settings.width, settings.height)),
+                moves: a.world_from_camera != b.world_from_camera
+                    || a.yfov != b.yfov
+                    || a.world_from_camera != scene.camera.world_from_camera
+                    || a.yfov != scene.camera.yfov,
+                length: (m.shutter[1] - m.shutter[0]).max(1e-6),
+            }
+        });
         Integrator {
             lib,
             scene,
             tlas,
             world_normal_from_object,
             camera: CameraRays::new(&scene.camera, settings.width, settings.height),
+            shutter,
             sun: scene.sun.as_ref().and_then(SunLight::new),
             settings,
             default_material: Material::default(),
@@ -258,15 +306,99 @@ impl<'a> Integrator<'a> {
         let s = self.settings;
         let mut sampler = Sampler::new(s.seed, s.frame, s.layer, x, y, sample);
         let offset = sample_filter(sampler.next_2d());
-        let (origin, dir) = self.camera.ray(x as f32 + 0.5 + offset.x, y as f32 + 0.5 + offset.y);
-        let mut result = self.trace_path(origin, dir, &mut sampler, counts);
+        let (fx, fy) = (x as f32 + 0.5 + offset.x, y as f32 + 0.5 + offset.y);
+        // The time stream is drawn only with a shutter, and draws no dimension.
+        let time = if self.shutter.is_some() { sampler.time() } else { 0.0 };
+        let (origin, dir) = match &self.shutter {
+            Some(sh) if sh.moves => {
+                let ((o0, d0), (o1, d1)) = (sh.keys[0].ray(fx, fy), sh.keys[1].ray(fx, fy));
+                (o0.lerp(o1, time), d0.lerp(d1, time).normalize())
+            }
+            _ => self.camera.ray(fx, fy),
+        };
+        let mut result = self.trace_path(origin, dir, time, &mut sampler, counts);
         if !(result.rgb.is_finite()) {
             result.rgb = Vec3::ZERO; // one bad sample must not poison the pixel
         }
         (result, offset)
     }
 
-    fn surface(&self, hit: &Hit, dir: Vec3) -> Option<SurfaceHit> {
+    /// Where instance `i` is at shutter fraction `time`: its open key unless
+    /// the scene moves it.
+    fn placed(&self, i: usize, time: f32) -> Option<Placed<'a>> {
+        let inst = self.scene.instances.get(i)?;
+        let Some(m) = self.scene.motion.as_ref().and_then(|m| m.instances.get(i)) else {
+            return Some(Placed { world_from_object: inst.world_from_object, blend: None });
+        };
+        let (a, b) = (&inst.world_from_object, &m.world_from_object_close);
+        let world_from_object = if a == b {
+            *a
+        } else {
+            Affine3A {
+                matrix3: a.matrix3 + (b.matrix3 - a.matrix3) * time,
+                translation: a.translation + (b.translation - a.translation) * time,
+            }
+        };
+        let lib: &'a Library = self.lib;
+        let blend = m.deform.and_then(|d| {
+            let (lo, hi) = (lib.meshes.get(inst.mesh as usize)?, lib.meshes.get(d.mesh as usize)?);
+            (hi.positions.len() == lo.positions.len() && hi.indices.len() == lo.indices.len())
+                .then(|| (hi, d.weight[0] + (d.weight[1] - d.weight[0]) * time))
+        });
+        Some(Placed { world_from_object, blend })
+    }
+
+    /// The object-space hit point on instance `i`'s triangle at barycentrics
+    /// (u, v), with its mesh blended by `blend`.
+    fn object_point(mesh: &Mesh, blend: Option<(&Mesh, f32)>, idx: [usize; 3], u: f32, v: f32) -> Option<Vec3> {
+        let w = 1.0 - u - v;
+        let at = |m: &Mesh| -> Option<Vec3> {
+            Some(*m.positions.get(idx[0])? * w + *m.positions.get(idx[1])? * u + *m.positions.get(idx[2])? * v)
+        };
+        let p = at(mesh)?;
+        match blend {
+            Some((hi, k)) => Some(p.lerp(at(hi)?, k)),
+            None => Some(p),
+        }
+    }
+
+    /// Screen-space motion (pixels per frame, +v up) of the surface point at
+    /// barycentrics (u, v) of triangle `triangle` of instance `i`: where the
+    /// point is at shutter open and close, through the camera at each.
+    fn motion_vector(&self, i: usize, triangle: u32, u: f32, v: f32) -> Vec2 {
+        let Some(sh) = &self.shutter else { return Vec2::ZERO };
+        let (Some(inst), Some(m)) =
+            (self.scene.instances.get(i), self.scene.motion.as_ref().and_then(|m| m.instances.get(i)))
+        else {
+            return Vec2::ZERO;
+        };
+        let Some(mesh) = self.lib.meshes.get(inst.mesh as usize) else { return Vec2::ZERO };
+        let tri = triangle as usize * 3;
+        let Some(idx) = mesh.indices.get(tri..tri + 3) else { return Vec2::ZERO };
+        let idx = [idx[0] as usize, idx[1] as usize, idx[2] as usize];
+        let hi = m
+            .deform
+            .and_then(|d| self.lib.meshes.get(d.mesh as usize))
+            .filter(|h| h.positions.len() == mesh.positions.len());
+        let weights = m.deform.map_or([0.0; 2], |d| d.weight);
+        let key = |k: usize, world_from_object: &Affine3A| {
+            let p = Self::object_point(mesh, hi.map(|h| (h, weights[k])), idx, u, v)?;
+            sh.keys[k].raster(world_from_object.transform_point3(p))
+        };
+        match (key(0, &inst.world_from_object), key(1, &m.world_from_object_close)) {
+            (Some(a), Some(b)) => {
+                let d = (b - a) / sh.length;
+                if d.is_finite() {
+                    Vec2::new(d.x, -d.y)
+                } else {
+                    Vec2::ZERO
+                }
+            }
+            _ => Vec2::ZERO,
+        }
+    }
+
+    fn surface(&self, hit: &Hit, dir: Vec3, time: f32) -> Option<SurfaceHit> {
         let inst = self.scene.instances.get(hit.instance as usize)?;
         let mesh = self.lib.meshes.get(inst.mesh as usize)?;
         let tri = hit.triangle as usize * 3;
@@ -274,10 +406,33 @@ impl<'a> Integrator<'a> {
         let idx = [idx[0] as usize, idx[1] as usize, idx[2] as usize];
         let (u, v) = (hit.u, hit.v);
         let w = 1.0 - u - v;
-        let (p0, p1, p2) = (*mesh.positions.get(idx[0])?, *mesh.positions.get(idx[1])?, *mesh.positions.get(idx[2])?);
+        let placed = match &self.scene.motion {
+            None => None,
+            Some(_) => Some(self.placed(hit.instance as usize, time)?),
+        };
+        let blend = placed.as_ref().and_then(|p| p.blend);
+        let vertex = |k: usize| -> Option<Vec3> {
+            let p = *mesh.positions.get(idx[k])?;
+            match blend {
+                Some((hi, b)) => Some(p.lerp(*hi.positions.get(idx[k])?, b)),
+                None => Some(p),
+            }
+        };
+        let (p0, p1, p2) = (vertex(0)?, vertex(1)?, vertex(2)?);
         // Interpolate in object space, then transform: error scales with |p|, which the offset covers.
-        let p = inst.world_from_object.transform_point3(p0 * w + p1 * u + p2 * v);
-        let nmat = self.world_normal_from_object[hit.instance as usize];
+        let world_from_object = placed.as_ref().map_or(&inst.world_from_object, |p| &p.world_from_object);
+        let p = world_from_object.transform_point3(p0 * w + p1 * u + p2 * v);
+        let nmat = match &placed {
+            Some(pl) if pl.world_from_object != inst.world_from_object => {
+                let m = pl.world_from_object.matrix3;
+                if m.determinant().abs() > 1e-30 {
+                    m.inverse().transpose()
+                } else {
+                    Mat3A::IDENTITY
+                }
+            }
+            _ => self.world_normal_from_object[hit.instance as usize],
+        };
         let mut ng = (nmat * (p1 - p0).cross(p2 - p0)).normalize_or_zero();
         if ng == Vec3::ZERO {
             return None;
@@ -287,7 +442,11 @@ impl<'a> Integrator<'a> {
         }
         let mut ns = ng;
         if mesh.normals.len() == mesh.positions.len() {
-            let [n0, n1, n2] = idx.map(|i| mesh.normals[i]);
+            let [mut n0, mut n1, mut n2] = idx.map(|i| mesh.normals[i]);
+            if let Some((hi, b)) = blend.filter(|(hi, _)| hi.normals.len() == mesh.normals.len()) {
+                [n0, n1, n2] =
+                    [n0.lerp(hi.normals[idx[0]], b), n1.lerp(hi.normals[idx[1]], b), n2.lerp(hi.normals[idx[2]], b)];
+            }
             let n = (nmat * (n0 * w + n1 * u + n2 * v)).normalize_or_zero();
             if n.is_finite() && n != Vec3::ZERO {
                 ns = if n.dot(ng) < 0.0 { -n } else { n };
@@ -330,6 +489,7 @@ impl<'a> Integrator<'a> {
         &self,
         mut origin: Vec3,
         mut dir: Vec3,
+        time: f32,
         sampler: &mut Sampler,
         counts: &mut RayCounts,
     ) -> SampleResult {
@@ -340,7 +500,7 @@ impl<'a> Integrator<'a> {
         counts.camera += 1;
         for depth in 0.. {
             let mask = if depth == 0 { vis::CAMERA | vis::HOLDOUT } else { vis::INDIRECT };
-            let hit = self.tlas.intersect(&WorldRay { origin, direction: dir, tmax: f32::INFINITY }, mask);
+            let hit = self.tlas.intersect(&WorldRay { origin, direction: dir, tmax: f32::INFINITY, time }, mask);
             let Some(hit) = hit else {
                 if depth == 0 {
                     if self.settings.sky_visible {
@@ -359,7 +519,7 @@ impl<'a> Integrator<'a> {
                 }
                 break;
             };
-            let Some(surface) = self.surface(&hit, dir) else { break };
+            let Some(surface) = self.surface(&hit, dir, time) else { break };
             if depth == 0 {
                 let inst = &self.scene.instances[hit.instance as usize];
                 if inst.visibility & vis::HOLDOUT != 0 {
@@ -371,6 +531,9 @@ impl<'a> Integrator<'a> {
                 out.albedo = surface.base_color;
                 out.agent = inst.agent.map_or(0, |a| a.wrapping_add(1));
                 out.instance = Some(hit.instance);
+                if self.shutter.is_some() {
+                    out.motion = self.motion_vector(hit.instance as usize, hit.triangle, hit.u, hit.v);
+                }
             }
 
             let material = self.material(surface.material);
@@ -396,6 +559,7 @@ impl<'a> Integrator<'a> {
                             origin: offset_ray_origin(surface.p, surface.ng),
                             direction: wi,
                             tmax: f32::INFINITY,
+                            time,
                         };
                         if !self.tlas.occluded(&shadow, vis::SHADOW) {
                             let contribution = if sun.pdf == 0.0 {

@@ -9,13 +9,14 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
+use crate::casting::motion::MotionFrame;
 use crate::casting::{AgentPose, Lod, ShotCrowd};
 use crate::error::{Error, Result};
 use crate::layers::Manifest;
 use crate::output::{layer_path, FULL_LAYER};
 use crate::render::cryptomatte::CryptoNames;
 use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, RenderSettings};
-use crate::scene::{vis, FrameScene, Instance};
+use crate::scene::{vis, Deform, FrameScene, Instance, InstanceMotion, SceneMotion};
 
 /// What to render.
 #[derive(Debug, Clone)]
@@ -42,6 +43,11 @@ pub struct RenderJob {
     pub progress: ProgressStyle,
     /// EXR compression (lossless ZIP by default).
     pub compression: exr::LayerCompression,
+    /// Motion blur: shutter `[open, close]` in frames relative to each frame
+    /// (`None`: no blur, no motion-vector pass). Skinned agents need their
+    /// shutter poses, so call [`crate::casting::motion::prepare_shutter`] on
+    /// the crowd first (without it they blur rigidly only).
+    pub shutter: Option<[f32; 2]>,
 }
 
 impl RenderJob {
@@ -61,6 +67,7 @@ impl RenderJob {
             cryptomatte: CryptoOutput::Header,
             progress: ProgressStyle::Auto,
             compression: exr::LayerCompression::Zip,
+            shutter: None,
         }
     }
 }
@@ -172,7 +179,70 @@ pub fn frame_scene(
     if let Some(bits) = set_bits.filter(|&b| b != 0) {
         instances.extend(crowd.set.iter().map(|i| Instance { visibility: bits, ..*i }));
     }
-    Ok(FrameScene { instances, camera: crowd.camera(frame)?, sun: crowd.shot.sun(), sky: crowd.shot.sky() })
+    Ok(FrameScene {
+        instances,
+        camera: crowd.camera(frame)?,
+        sun: crowd.shot.sun(),
+        sky: crowd.shot.sky(),
+        motion: None,
+    })
+}
+
+/// The instances of one (frame, layer) render moving over the shutter: each
+/// agent's instances at shutter open, and in the scene's motion their close
+/// keys (the set stands still). An agent whose open and close instances do
+/// not pair up (a pose missing at one key) is rendered still at open.
+pub fn motion_scene(
+    crowd: &ShotCrowd,
+    manifest: Option<&Manifest>,
+    layer: &str,
+    motion: &MotionFrame,
+) -> Result<FrameScene> {
+    let frame = motion.frame;
+    let mut instances: Vec<Instance> = Vec::new();
+    let mut keys: Vec<InstanceMotion> = Vec::new();
+    let mut close: Vec<Instance> = Vec::new();
+    let set_bits = if layer == FULL_LAYER {
+        Some(vis::ALL)
+    } else {
+        let m = manifest.ok_or_else(|| Error::Usage(format!("layer `{layer}` needs a layer manifest")))?;
+        m.set_visibility(layer)
+    };
+    for (id, m) in &motion.agents {
+        let how = match manifest {
+            _ if layer == FULL_LAYER => {
+                Some((vis::ALL, manifest.and_then(|m| m.agent(*id)).map_or(Lod::Full, |r| r.lod_at(frame))))
+            }
+            Some(man) => man.agent_visibility(layer, *id, frame),
+            None => None,
+        };
+        let Some((bits, lod)) = how.filter(|&(bits, _)| bits != 0) else { continue };
+        let start = instances.len();
+        crowd.posed_instances(*id, &m.open, lod, bits, &mut instances);
+        close.clear();
+        crowd.posed_instances(*id, &m.close, lod, bits, &mut close);
+        let opened = &instances[start..];
+        if close.len() == opened.len() {
+            keys.extend(opened.iter().zip(&close).map(|(o, c)| InstanceMotion {
+                world_from_object_close: c.world_from_object,
+                deform: m.deform.filter(|_| c.mesh != o.mesh).map(|weight| Deform { mesh: c.mesh, weight }),
+            }));
+        } else {
+            keys.extend(opened.iter().map(InstanceMotion::still));
+        }
+    }
+    if let Some(bits) = set_bits.filter(|&b| b != 0) {
+        let from = instances.len();
+        instances.extend(crowd.set.iter().map(|i| Instance { visibility: bits, ..*i }));
+        keys.extend(instances[from..].iter().map(InstanceMotion::still));
+    }
+    Ok(FrameScene {
+        instances,
+        camera: crowd.camera(frame)?,
+        sun: crowd.shot.sun(),
+        sky: crowd.shot.sky(),
+        motion: Some(SceneMotion { shutter: motion.shutter, instances: keys, camera: motion.camera }),
+    })
 }
 
 /// Every layer a manifest renders, back to front (`set`, then crowd layers far to near).
@@ -263,9 +333,10 @@ impl Progress {
 /// digits): CRC-32 over everything that changes the pixels or channels of a
 /// layer file: samples per pixel, resolution, seed, bounces, the camera and
 /// lights of the shot, Cryptomatte and compression choices, the layer name
-/// and the manifest (whose `made_from` covers the cache and casting). There
-/// is no shutter (no motion blur) to record. `--resume` skips a file only
-/// when its fingerprint matches.
+/// and the manifest (whose `made_from` covers the cache and casting), and the
+/// shutter when motion blur is on (a still render's text is unchanged, so
+/// files rendered before motion blur existed still resume). `--resume` skips
+/// a file only when its fingerprint matches.
 pub fn render_fingerprint(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob, layer: &str) -> String {
     let shot = &crowd.shot;
     let [w, h] = job.resolution.unwrap_or(shot.render.resolution);
@@ -283,6 +354,10 @@ pub fn render_fingerprint(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &
         job.compression,
         env!("CARGO_PKG_VERSION"),
     );
+    let text = match job.shutter {
+        Some([open, close]) => format!("{text} shutter {:08x} {:08x}", open.to_bits(), close.to_bits()),
+        None => text,
+    };
     format!("{:08x}", crc32fast::hash(text.as_bytes()))
 }
 
@@ -350,6 +425,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
     for &frame in &job.frames {
         // Read and pose lazily: a fully resumed frame needs neither.
         let mut posed: Option<PosedFrame> = None;
+        let mut moving: Option<MotionFrame> = None;
         for layer in &job.layers {
             let path = layer_path(&job.out, &crowd.shot.name, layer, frame);
             let fingerprint = fingerprints.get(layer.as_str()).cloned().unwrap_or_default();
@@ -386,11 +462,22 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
             if progress.style == ProgressStyle::Bar {
                 progress.show(out.len(), frame, layer, 0.0);
             }
-            if posed.is_none() {
-                posed = Some(PosedFrame::new(crowd, frame)?);
-            }
-            let Some(posed) = posed.as_ref() else { continue };
-            let scene = frame_scene(crowd, manifest, layer, posed)?;
+            let scene = match job.shutter {
+                Some(shutter) => {
+                    if moving.is_none() {
+                        moving = Some(MotionFrame::new(crowd, frame, shutter)?);
+                    }
+                    let Some(moving) = moving.as_ref() else { continue };
+                    motion_scene(crowd, manifest, layer, moving)?
+                }
+                None => {
+                    if posed.is_none() {
+                        posed = Some(PosedFrame::new(crowd, frame)?);
+                    }
+                    let Some(posed) = posed.as_ref() else { continue };
+                    frame_scene(crowd, manifest, layer, posed)?
+                }
+            };
             // The layer index keys the random streams, so layers are
             // independent samples; `full` and `set` get fixed indices.
             let index =
@@ -435,6 +522,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                 far,
                 fps: crowd.shot.frames.fps,
                 render_fingerprint: fingerprint,
+                shutter: job.shutter,
             };
             let manifest = match job.cryptomatte {
                 CryptoOutput::Sidecar => exr::ManifestMode::Sidecar,

@@ -106,6 +106,10 @@ fn to_unit(x: u32) -> f32 {
     (x >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
 }
 
+/// Salt of the time stream ([`Sampler::time`]): not `mix32` of any small
+/// dimension number, so it never coincides with a numbered dimension's key.
+const TIME_SALT: u32 = 0x7157_a3c1;
+
 /// Random numbers for one camera sample of one pixel.
 #[derive(Clone, Debug)]
 pub struct Sampler {
@@ -137,6 +141,18 @@ impl Sampler {
         let x = nested_uniform_scramble(x, mix32(seed ^ 0x5bd1_e995));
         let y = nested_uniform_scramble(y, mix32(seed ^ 0x27d4_eb2f));
         Vec2::new(to_unit(x), to_unit(y))
+    }
+
+    /// This camera sample's time in [0, 1) across the shutter (motion blur).
+    /// A stream of its own, keyed apart from every numbered dimension, so
+    /// drawing it shifts nothing: a render without motion never calls it and
+    /// a still scene renders the same bits with or without a shutter. Like
+    /// the dimensions, a power-of-two prefix of a pixel's samples is
+    /// stratified in time.
+    pub fn time(&self) -> f32 {
+        let seed = mix32(self.pixel_key ^ TIME_SALT);
+        let index = nested_uniform_scramble(self.sample, seed);
+        to_unit(nested_uniform_scramble(index.reverse_bits(), mix32(seed ^ 0x5bd1_e995)))
     }
 
     /// The next number in [0, 1) (uses one dimension).
@@ -202,6 +218,20 @@ mod tests {
             x = mix32(x);
             assert_eq!(sobol_2d(x).1, reference(x), "index {x}");
         }
+    }
+
+    #[test]
+    fn time_is_stratified_and_leaves_dimensions_alone() {
+        let mut cells = [0u32; 16];
+        for s in 0..16 {
+            let smp = Sampler::new(1, 1, 0, 5, 9, s);
+            cells[(smp.time() * 16.0) as usize] += 1;
+            let mut a = Sampler::new(1, 1, 0, 5, 9, s);
+            let mut b = a.clone();
+            let _ = b.time();
+            assert_eq!(a.next_2d(), b.next_2d());
+        }
+        assert!(cells.iter().all(|&c| c == 1), "{cells:?}");
     }
 
     #[test]

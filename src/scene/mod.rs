@@ -202,10 +202,49 @@ pub struct Sky {
     pub radiance: Vec3,
 }
 
+/// A deforming instance: its vertices blend from [`Instance::mesh`] towards
+/// `mesh` (the same piece at another pose step: same topology) with a weight
+/// that runs linearly from `weight[0]` at shutter open to `weight[1]` at close.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Deform {
+    /// The mesh blended towards (same vertex count and indices).
+    pub mesh: MeshId,
+    /// Blend weight of `mesh` at shutter open and at close, in 0..=1.
+    pub weight: [f32; 2],
+}
+
+/// How one instance moves over the shutter. The instance itself holds the
+/// shutter-open key; this holds the close key.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InstanceMotion {
+    /// Object to world at shutter close (linear in between).
+    pub world_from_object_close: Affine3A,
+    /// Deformation blur, if the instance's mesh changes over the shutter.
+    pub deform: Option<Deform>,
+}
+
+impl InstanceMotion {
+    /// An instance that does not move: its close key equals its open key.
+    pub fn still(inst: &Instance) -> InstanceMotion {
+        InstanceMotion { world_from_object_close: inst.world_from_object, deform: None }
+    }
+}
+
+/// Motion over the shutter of one frame scene (motion blur).
+#[derive(Clone, Debug)]
+pub struct SceneMotion {
+    /// Shutter `[open, close]` in frames relative to the frame.
+    pub shutter: [f32; 2],
+    /// Per instance (parallel to [`FrameScene::instances`]): its close key.
+    pub instances: Vec<InstanceMotion>,
+    /// The camera at shutter open and at close.
+    pub camera: [Camera; 2],
+}
+
 /// Everything to trace for one frame of one layer.
 #[derive(Clone, Debug)]
 pub struct FrameScene {
-    /// Instances (agents' parts and the set).
+    /// Instances (agents' parts and the set). With motion, at shutter open.
     pub instances: Vec<Instance>,
     /// The camera at this frame.
     pub camera: Camera,
@@ -213,4 +252,6 @@ pub struct FrameScene {
     pub sun: Option<Sun>,
     /// The sky.
     pub sky: Sky,
+    /// Motion over the shutter; `None` renders the frame as an instant.
+    pub motion: Option<SceneMotion>,
 }

@@ -1,0 +1,341 @@
+//! Motion over the shutter: agents sampled between cache frames, posed at
+//! shutter open and close (motion blur and motion vectors).
+//!
+//! An agent at shot frame `f` and sub-frame offset `s` (frames, the shutter
+//! lies within -1..=1) is interpolated between its records at cache frame
+//! `cf = f + frame_offset` and the neighbour on the side of `s` (`cf + 1` for
+//! `s > 0`, `cf - 1` for `s < 0`), with weight `|s|`:
+//!
+//! - position: linearly;
+//! - heading: by the shortest arc (a turn from 350 to 10 degrees goes through
+//!   0, not back through 180);
+//! - cycle frame: advances continuously by the difference to the neighbour
+//!   taken modulo the cycle length (the one nearest zero), so a cycle that
+//!   wraps from its last frame to its first inside the shutter keeps moving
+//!   forward and wraps where posing samples it (`rem_euclid`). When the
+//!   neighbour plays another cycle, the cycle frame advances at one frame per
+//!   frame instead.
+//!
+//! **Agents entering or leaving.** An agent is in a frame's render exactly
+//! when it is in that frame's cache record, as without blur (layers, ids and
+//! Cryptomatte see the same agents). Over the shutter it exists for the whole
+//! interval: where the neighbour on the side of `s` lacks it (it enters or
+//! leaves there), its motion is extrapolated at constant velocity from the
+//! other neighbour; with neither neighbour, it holds still. It never pops in
+//! or out mid-shutter.
+//!
+//! Rigid parts (slot rigs) are posed from their clips at the exact cycle
+//! frame of each key. Skinned agents use the shared pose steps: the keys are
+//! the steps just below and above the cycle frames the shutter spans, and the
+//! mesh blends between those two posed meshes with a weight that runs
+//! linearly over the shutter (exact piecewise-linear pose interpolation when
+//! the shutter stays within one step, which a 180-degree shutter does for a
+//! `pose_step` of at least half a frame). Agents at the same keys share the
+//! same posed meshes, as pose instancing does for still frames.
+//! [`prepare_shutter`] poses every step a shutter needs, once, before rendering.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::sync::Arc;
+
+use crate::cache::{AgentSample, FrameBlock};
+use crate::casting::crowd::{AgentPose, ShotCrowd};
+use crate::error::Result;
+use crate::scene::Camera;
+
+/// An agent posed at shutter open and at close.
+#[derive(Debug, Clone)]
+pub struct AgentMotion {
+    /// The pose at shutter open.
+    pub open: AgentPose,
+    /// The pose at shutter close.
+    pub close: AgentPose,
+    /// Skinned agents: the blend weight of the close pose's meshes at open
+    /// and at close (vertices blend from the open pose's meshes); `None` for
+    /// rigid motion only.
+    pub deform: Option<[f32; 2]>,
+}
+
+/// Every rendered agent of a frame posed at shutter open and close, and the
+/// camera at both: computed once per frame and shared by every layer.
+pub struct MotionFrame {
+    /// Shot frame.
+    pub frame: i32,
+    /// Shutter `[open, close]`, frames relative to the frame.
+    pub shutter: [f32; 2],
+    /// (agent id, its motion), in cache order.
+    pub agents: Vec<(u32, AgentMotion)>,
+    /// The camera at shutter open and close.
+    pub camera: [Camera; 2],
+}
+
+/// The cache records of an agent's neighbours.
+struct Neighbours {
+    prev: HashMap<u32, AgentSample>,
+    next: HashMap<u32, AgentSample>,
+}
+
+fn block_map(block: Option<FrameBlock>) -> HashMap<u32, AgentSample> {
+    block.map(|b| b.agents.into_iter().map(|a| (a.id, a)).collect()).unwrap_or_default()
+}
+
+impl Neighbours {
+    fn read(crowd: &ShotCrowd, shot_frame: i32) -> Result<Neighbours> {
+        let cf = crowd.shot.cache.cache_frame(shot_frame);
+        let read = |f: Option<i32>| -> Result<Option<FrameBlock>> {
+            match f {
+                Some(f) if crowd.cache.frames().binary_search(&f).is_ok() => Ok(Some(crowd.cache.read_frame(f)?)),
+                _ => Ok(None),
+            }
+        };
+        Ok(Neighbours { prev: block_map(read(cf.checked_sub(1))?), next: block_map(read(cf.checked_add(1))?) })
+    }
+}
+
+/// The shortest signed angle from `a` to `b`, radians in [-pi, pi].
+pub fn shortest_arc(a: f32, b: f32) -> f32 {
+    let tau = std::f32::consts::TAU;
+    let d = (b - a).rem_euclid(tau);
+    if d > std::f32::consts::PI {
+        d - tau
+    } else {
+        d
+    }
+}
+
+/// `to - from` of two cycle frames, taken modulo `length` to the value
+/// nearest zero (a wrap from the cycle's end to its start is a small step
+/// forward). Without a length, the plain difference.
+pub fn cycle_delta(from: f32, to: f32, length: Option<f32>) -> f32 {
+    let d = to - from;
+    match length {
+        Some(l) if l > 0.0 && l.is_finite() => d - l * (d / l).round(),
+        _ => d,
+    }
+}
+
+/// Length in frames of the cycle an agent record plays (`None` if unknown).
+pub fn cycle_length(crowd: &ShotCrowd, a: &AgentSample) -> Option<f32> {
+    let rig_name = &crowd.casting.get(&a.id)?.rig;
+    let cycle = crowd.cycle_name(a);
+    if let Some(rig) = crowd.skinned.get(&**rig_name) {
+        return rig.cycle_index(cycle).ok().map(|c| rig.cycle_frames(c));
+    }
+    crowd.rigs.get(&**rig_name)?.cycle(cycle).ok().map(|c| c.frames(crowd.shot.frames.fps))
+}
+
+/// The agent record `a` (at the frame's cache frame) moved to sub-frame
+/// offset `s` with the rule of the module docs. `prev` and `next` are its
+/// records at the neighbouring cache frames, if there.
+pub fn sample_at(
+    a: &AgentSample,
+    prev: Option<&AgentSample>,
+    next: Option<&AgentSample>,
+    s: f32,
+    length: Option<f32>,
+) -> AgentSample {
+    if s == 0.0 {
+        return *a;
+    }
+    // The neighbour on the side of `s` (sign +1), or the other one extrapolated (sign -1).
+    let (toward, away) = if s > 0.0 { (next, prev) } else { (prev, next) };
+    let (other, u) = match (toward, away) {
+        (Some(o), _) => (o, s.abs()),
+        (None, Some(o)) => (o, -s.abs()),
+        (None, None) => return *a,
+    };
+    let cycle_frame = if other.cycle == a.cycle {
+        a.cycle_frame + cycle_delta(a.cycle_frame, other.cycle_frame, length) * u
+    } else {
+        a.cycle_frame + s
+    };
+    let position = a.position + (other.position - a.position) * u;
+    let heading = a.heading + shortest_arc(a.heading, other.heading) * u;
+    let ok = position.is_finite() && heading.is_finite() && cycle_frame.is_finite();
+    if !ok {
+        return *a;
+    }
+    AgentSample { position, heading, cycle_frame, ..*a }
+}
+
+/// (rig, cycle, step at open, step at close, blend weights): see [`skin_keys`].
+type SkinKeys = (Arc<str>, usize, u32, u32, [f32; 2]);
+
+/// A skinned agent's shutter keys: (cycle, step at open, step at close, the
+/// close step's blend weight at open and close), for cycle frames `c0` at
+/// open and `c1` at close.
+fn skin_keys(crowd: &ShotCrowd, a: &AgentSample, c0: f32, c1: f32) -> Option<SkinKeys> {
+    let rig_name = &crowd.casting.get(&a.id)?.rig;
+    let rig = crowd.skinned.get(&**rig_name)?;
+    let cycle = rig.cycle_index(crowd.cycle_name(a)).ok()?;
+    let length = rig.cycle_frames(cycle);
+    let steps = rig.cycle_steps(cycle);
+    if !(length > 0.0 && length.is_finite() && steps > 0 && c0.is_finite() && c1.is_finite()) {
+        let step = rig.step_of(cycle, c0);
+        return Some((rig_name.clone(), cycle, step, step, [0.0; 2]));
+    }
+    let step_len = length / steps as f32;
+    // In steps, the open key wrapped into the cycle and the close key unwrapped from it.
+    let x0 = c0.rem_euclid(length) / step_len;
+    let x1 = x0 + (c1 - c0) / step_len;
+    let (lo, hi) = (x0.min(x1).floor(), x0.max(x1).ceil());
+    if lo == hi {
+        // Both keys exactly on one step.
+        let step = (lo.rem_euclid(steps as f32) as u32).min(steps);
+        return Some((rig_name.clone(), cycle, step, step, [0.0; 2]));
+    }
+    let w = |x: f32| ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
+    let wrap = |k: f32| -> u32 {
+        // Poses 0..=steps exist; past the end the cycle starts again.
+        let k = k as i64;
+        let n = steps as i64;
+        if (0..=n).contains(&k) {
+            k as u32
+        } else {
+            k.rem_euclid(n) as u32
+        }
+    };
+    Some((rig_name.clone(), cycle, wrap(lo), wrap(hi), [w(x0), w(x1)]))
+}
+
+/// The camera at a fractional shot frame (keys interpolated; a glTF camera does not move).
+pub fn camera_at(crowd: &ShotCrowd, shot_frame: i32, offset: f32) -> Result<Camera> {
+    match crowd.shot.keyed_camera(shot_frame as f32 + offset) {
+        Some(c) => Ok(c),
+        None => crowd.camera(shot_frame),
+    }
+}
+
+impl MotionFrame {
+    /// Reads the frame and its neighbouring cache frames once and poses
+    /// every rendered agent at shutter open and close.
+    pub fn new(crowd: &ShotCrowd, frame: i32, shutter: [f32; 2]) -> Result<MotionFrame> {
+        let block = crowd.agents_at(frame)?;
+        let near = Neighbours::read(crowd, frame)?;
+        let mut agents = Vec::with_capacity(block.agents.len());
+        for a in block.agents.iter().filter(|a| crowd.renders(a)) {
+            let length = cycle_length(crowd, a);
+            let (prev, next) = (near.prev.get(&a.id), near.next.get(&a.id));
+            let [s0, s1] = shutter.map(|s| sample_at(a, prev, next, s, length));
+            let motion = match skin_keys(crowd, a, s0.cycle_frame, s1.cycle_frame) {
+                Some((_, cycle, k0, k1, weight)) => AgentMotion {
+                    open: AgentPose::Skinned { world_from_rig: crowd.world_from_agent(&s0), cycle, step: k0 },
+                    close: AgentPose::Skinned { world_from_rig: crowd.world_from_agent(&s1), cycle, step: k1 },
+                    deform: (k0 != k1).then_some(weight),
+                },
+                None => AgentMotion { open: crowd.agent_pose(&s0)?, close: crowd.agent_pose(&s1)?, deform: None },
+            };
+            agents.push((a.id, motion));
+        }
+        let camera = [camera_at(crowd, frame, shutter[0])?, camera_at(crowd, frame, shutter[1])?];
+        Ok(MotionFrame { frame, shutter, agents, camera })
+    }
+}
+
+/// Poses, once, every skinned pose step that a shutter needs over the shot's
+/// frames and that loading (which poses the steps still frames take) did
+/// not: call it before rendering with that shutter. Idempotent; does nothing
+/// for a shot without skinned agents.
+pub fn prepare_shutter(crowd: &mut ShotCrowd, shutter: [f32; 2]) -> Result<()> {
+    if crowd.skinned.is_empty() {
+        return Ok(());
+    }
+    let mut needed: BTreeSet<(Arc<str>, usize, u32)> = BTreeSet::new();
+    for f in crowd.shot.frames.iter() {
+        let block = crowd.agents_at(f)?;
+        let near = Neighbours::read(crowd, f)?;
+        for a in block.agents.iter().filter(|a| !a.hidden()) {
+            let Some(cast) = crowd.casting.get(&a.id) else { continue };
+            if !crowd.skinned.contains_key(&*cast.rig) {
+                continue;
+            }
+            let length = cycle_length(crowd, a);
+            let (prev, next) = (near.prev.get(&a.id), near.next.get(&a.id));
+            let [s0, s1] = shutter.map(|s| sample_at(a, prev, next, s, length));
+            if let Some((rig, cycle, k0, k1, _)) = skin_keys(crowd, a, s0.cycle_frame, s1.cycle_frame) {
+                needed.insert((rig.clone(), cycle, k0));
+                needed.insert((rig, cycle, k1));
+            }
+        }
+    }
+    // The pieces worn on each rig (as loading poses them: every worn piece at every used step).
+    let mut worn: BTreeMap<Arc<str>, BTreeSet<usize>> = BTreeMap::new();
+    for (id, pieces) in &crowd.skin_dressed {
+        if let Some(cast) = crowd.casting.get(id) {
+            worn.entry(cast.rig.clone()).or_default().extend(pieces.iter().map(|d| d.piece));
+        }
+    }
+    for (rig_name, cycle, step) in needed {
+        let key = (rig_name.clone(), cycle, step);
+        if crowd.posed.joints.contains_key(&key) {
+            continue;
+        }
+        let Some(pieces) = worn.get(&rig_name) else { continue };
+        let Some(rig) = crowd.skinned.get(&*rig_name) else { continue };
+        let joints = rig.step_joints(cycle, step);
+        let meshes: Vec<_> =
+            pieces.iter().map(|&p| (p, rig.pose_piece(p, &joints, &rig.pose_name(cycle, step)))).collect();
+        for (piece, mesh) in meshes {
+            let id = crowd.assets.add_mesh(mesh);
+            crowd.posed.meshes.insert((rig_name.clone(), piece, cycle, step), id);
+        }
+        crowd.posed.joints.insert(key, joints);
+    }
+    Ok(())
+}
+
+/// Whether a shot's agents move at all over a shutter (tests and benchmarks).
+pub fn moves(m: &MotionFrame) -> bool {
+    let eq = |a: &AgentPose, b: &AgentPose| match (a, b) {
+        (AgentPose::Slots(x), AgentPose::Slots(y)) => x == y,
+        (
+            AgentPose::Skinned { world_from_rig: x, cycle: c, step: s },
+            AgentPose::Skinned { world_from_rig: y, cycle: d, step: t },
+        ) => x == y && c == d && s == t,
+        _ => false,
+    };
+    m.agents.iter().any(|(_, a)| !eq(&a.open, &a.close))
+        || m.camera[0].world_from_camera != m.camera[1].world_from_camera
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use std::f32::consts::PI;
+
+    fn agent(x: f32, heading: f32, cycle_frame: f32) -> AgentSample {
+        AgentSample { id: 1, position: Vec3::new(x, 0.0, 0.0), heading, rig: 0, cycle: 0, cycle_frame, flags: 0 }
+    }
+
+    #[test]
+    fn heading_takes_the_shortest_arc() {
+        let a = agent(0.0, 350f32.to_radians(), 0.0);
+        let b = agent(0.0, 10f32.to_radians(), 0.0);
+        let s = sample_at(&a, None, Some(&b), 0.5, None);
+        assert!((s.heading - 2.0 * PI).abs() < 1e-4, "{}", s.heading.to_degrees());
+        assert!((shortest_arc(0.1, -0.1) + 0.2).abs() < 1e-6);
+    }
+
+    #[test]
+    fn cycle_frames_advance_through_the_wrap() {
+        let a = agent(0.0, 0.0, 23.0);
+        let b = agent(0.0, 0.0, 1.0); // 24-frame cycle: advanced 2 frames
+        let s = sample_at(&a, None, Some(&b), 0.25, Some(24.0));
+        assert!((s.cycle_frame - 23.5).abs() < 1e-5);
+        let s = sample_at(&a, None, Some(&b), 0.75, Some(24.0));
+        assert!((s.cycle_frame - 24.5).abs() < 1e-5, "{}", s.cycle_frame);
+    }
+
+    #[test]
+    fn entering_agents_extrapolate_and_lone_agents_hold() {
+        let prev = agent(-1.0, 0.0, 4.0);
+        let a = agent(0.0, 0.0, 5.0);
+        // No next record (the agent leaves): constant velocity from the previous one.
+        let s = sample_at(&a, Some(&prev), None, 0.25, Some(24.0));
+        assert!((s.position.x - 0.25).abs() < 1e-6 && (s.cycle_frame - 5.25).abs() < 1e-6);
+        let s = sample_at(&a, Some(&prev), None, -0.25, Some(24.0));
+        assert!((s.position.x + 0.25).abs() < 1e-6);
+        let s = sample_at(&a, None, None, 0.25, Some(24.0));
+        assert_eq!(s, a);
+    }
+}
