@@ -123,13 +123,18 @@ fn accel_matches_brute_force() {
         let m = Affine3A::from_scale_rotation_translation(scale, rot, rng.vec3(-8.0, 8.0));
         let visibility =
             [vis::ALL, vis::CAMERA, vis::SHADOW, vis::INDIRECT | vis::SHADOW, vis::HOLDOUT][i as usize % 5];
-        instances.push(instance(i % 4, 0, m, Some(i), visibility));
+        // Three parts per agent, so agent leaves hold several instances.
+        instances.push(instance(i % 4, 0, m, Some(i / 3), visibility));
     }
 
-    for kind in [TlasKind::Bvh2, TlasKind::CwBvh] {
-        let tlas = Tlas::build_with(&blas, &instances, kind);
+    // Per-part leaves (both tree kinds) and per-agent leaves (what scenes of
+    // millions of parts use) must find the same hits.
+    for (kind, by_agent) in [(TlasKind::Bvh2, false), (TlasKind::CwBvh, false), (TlasKind::CwBvh, true)] {
+        let tlas = Tlas::build_clustered(&blas, &instances, kind, by_agent);
         tlas.validate();
         assert_eq!(tlas.len(), 30, "empty-mesh instances are skipped");
+        // Agents 0..=12 keep a part with a mesh (agent 13 has only instance 39, on the empty mesh).
+        assert_eq!(tlas.leaves(), if by_agent { 13 } else { 30 });
         let mut rng = Lcg(7);
         let (mut hits, mut occluded) = (0, 0);
         for r in 0..3000 {

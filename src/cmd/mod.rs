@@ -151,6 +151,8 @@ struct LayerFrameSummary {
     instances: u64,
     /// Peak resident memory while this layer-frame rendered, bytes.
     peak_rss_bytes: Option<u64>,
+    /// Seconds building the top-level tree.
+    tlas_build_s: f64,
 }
 
 impl Summary {

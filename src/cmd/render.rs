@@ -204,6 +204,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 seconds: d.seconds,
                 instances: d.instances as u64,
                 peak_rss_bytes: d.peak_rss_bytes,
+                tlas_build_s: d.tlas_build_s,
             })
             .collect();
         // The per-layer resets lower VmHWM: the process peak is the largest of them.

@@ -334,7 +334,9 @@ enum TlasTree {
 
 /// An instance as the TLAS stores it, in TLAS slot order.
 struct TlasInstance {
-    object_from_world: Affine3A,
+    /// Object from world, column-major 3x4 (48 bytes, not `Affine3A`'s 64:
+    /// eleven million part instances keep one each).
+    object_from_world: [f32; 12],
     /// Index into `FrameScene::instances`.
     index: u32,
     mesh: u32,
@@ -342,6 +344,11 @@ struct TlasInstance {
     /// Index into `Tlas::moving`, or [`STILL`].
     motion: u32,
 }
+
+/// From this many instances on, each agent's parts share one TLAS leaf:
+/// below it, a tree over parts traces faster; above it, memory and build
+/// time per part dominate (a million robots are eleven million parts).
+pub const AGENT_CLUSTERS_FROM: usize = 1_000_000;
 
 /// `TlasInstance::motion` of an instance that does not move.
 const STILL: u32 = u32::MAX;
@@ -449,7 +456,7 @@ fn world_ray(ray: &WorldRay) -> Ray {
 /// not renormalised, so `t` means the same distance in both spaces.
 #[inline]
 fn object_ray(inst: &TlasInstance, r: &Ray, tmax: f32) -> Ray {
-    transform_ray(&inst.object_from_world, r, tmax)
+    transform_ray(&Affine3A::from_cols_array(&inst.object_from_world), r, tmax)
 }
 
 #[inline]
@@ -523,13 +530,26 @@ impl<'a> Tlas<'a> {
             STILL => world_bounds(&b.bounds(), &inst.world_from_object),
             k => moving_bounds[k as usize].unwrap_or_else(|| world_bounds(&b.bounds(), &inst.world_from_object)),
         };
-        Self::build_keyed(blas, instances, kind, bounds, &index, moving)
+        let by_agent = instances.len() >= AGENT_CLUSTERS_FROM;
+        Self::build_keyed(blas, instances, kind, bounds, &index, moving, by_agent)
     }
 
     /// Builds the TLAS with a chosen tree kind (for benchmarks).
     pub fn build_with(blas: &'a BlasSet, instances: &[Instance], kind: TlasKind) -> Tlas<'a> {
+        Self::build_clustered(blas, instances, kind, instances.len() >= AGENT_CLUSTERS_FROM)
+    }
+
+    /// Builds the TLAS with each agent's parts in one leaf or not, whatever
+    /// the instance count (tests compare the two).
+    #[doc(hidden)]
+    pub fn build_clustered(blas: &'a BlasSet, instances: &[Instance], kind: TlasKind, by_agent: bool) -> Tlas<'a> {
         let bounds = |_: usize, inst: &Instance, b: &Blas| world_bounds(&b.bounds(), &inst.world_from_object);
-        Self::build_keyed(blas, instances, kind, bounds, &[], Vec::new())
+        Self::build_keyed(blas, instances, kind, bounds, &[], Vec::new(), by_agent)
+    }
+
+    /// Leaves (clusters) in the tree.
+    pub fn leaves(&self) -> usize {
+        self.clusters.len()
     }
 
     fn build_keyed(
@@ -539,13 +559,18 @@ impl<'a> Tlas<'a> {
         world: impl Fn(usize, &Instance, &Blas) -> Aabb,
         motion_index: &[u32],
         moving: Vec<MovingInstance>,
+        by_agent: bool,
     ) -> Tlas<'a> {
         let start = Instant::now();
-        // Group instances with identical world bounds into one leaf (a pile of
-        // them would otherwise build a degenerate chain). A sort over flat
-        // arrays, not a hash map: clusters come out in first-seen order and
-        // members in instance order, so the tree is deterministic.
-        let mut keyed: Vec<([u32; 6], u32, Aabb)> = Vec::with_capacity(instances.len());
+        // Group instances into TLAS leaves (clusters): instances with
+        // identical world bounds always (a pile of them would otherwise build
+        // a degenerate chain), and in very large scenes every agent's parts
+        // (a tree over agents, not parts: a tenth of the nodes and build
+        // scratch for a million agents). A sort over flat arrays, not a hash
+        // map: clusters come out in first-seen order and members in instance
+        // order, so the tree is deterministic.
+        let mut bounds: Vec<Aabb> = Vec::with_capacity(instances.len());
+        let mut member: Vec<u32> = Vec::with_capacity(instances.len());
         for (i, inst) in instances.iter().enumerate() {
             let Some(b) = blas.get(inst.mesh) else { continue };
             let m = &inst.world_from_object;
@@ -553,22 +578,44 @@ impl<'a> Tlas<'a> {
             if b.is_empty() || inst.visibility == 0 || !det.is_finite() || det.abs() < 1e-18 || !m.is_finite() {
                 continue;
             }
-            let bounds = world(i, inst, b);
-            let key =
-                [bounds.min.x, bounds.min.y, bounds.min.z, bounds.max.x, bounds.max.y, bounds.max.z].map(f32::to_bits);
-            keyed.push((key, i as u32, bounds));
+            bounds.push(world(i, inst, b));
+            member.push(i as u32);
         }
-        keyed.sort_unstable_by_key(|a| (a.0, a.1));
-        // Runs of equal keys are clusters; order them by their first instance.
-        let mut runs: Vec<(u32, std::ops::Range<usize>)> = Vec::new();
+        let key = |k: usize| -> [u32; 7] {
+            match instances[member[k] as usize].agent {
+                Some(a) if by_agent => [0, a, 0, 0, 0, 0, 0],
+                _ => {
+                    let b = &bounds[k];
+                    let [x0, y0, z0, x1, y1, z1] =
+                        [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z].map(f32::to_bits);
+                    [1, x0, y0, z0, x1, y1, z1]
+                }
+            }
+        };
+        let mut sorted: Vec<u32> = (0..member.len() as u32).collect();
+        sorted.sort_unstable_by_key(|&k| (key(k as usize), member[k as usize]));
+        // Runs of equal keys are clusters (first instance, start, length),
+        // ordered by their first instance.
+        let mut runs: Vec<(u32, u32, u32)> = Vec::new();
         let mut at = 0;
-        while at < keyed.len() {
-            let end = keyed[at..].iter().position(|k| k.0 != keyed[at].0).map_or(keyed.len(), |n| at + n);
-            runs.push((keyed[at].1, at..end));
+        while at < sorted.len() {
+            let k = key(sorted[at] as usize);
+            let end = sorted[at..].iter().position(|&j| key(j as usize) != k).map_or(sorted.len(), |n| at + n);
+            runs.push((member[sorted[at] as usize], at as u32, (end - at) as u32));
             at = end;
         }
         runs.sort_unstable_by_key(|r| r.0);
-        let aabbs: Vec<Aabb> = runs.iter().map(|(_, r)| keyed[r.start].2).collect();
+        let aabbs: Vec<Aabb> = runs
+            .iter()
+            .map(|&(_, start, len)| {
+                let mut b = Aabb::INVALID;
+                for &j in &sorted[start as usize..(start + len) as usize] {
+                    b = b.union(&bounds[j as usize]);
+                }
+                b
+            })
+            .collect();
+        drop(bounds);
         let (tree, order) = if aabbs.is_empty() {
             (TlasTree::Empty, Vec::new())
         } else {
@@ -587,15 +634,16 @@ impl<'a> Tlas<'a> {
         };
         // Lay clusters out in slot order: one fewer indirection per visit.
         let source = instances;
-        let mut instances = Vec::with_capacity(keyed.len());
+        let mut instances = Vec::with_capacity(member.len());
         let mut clusters = Vec::with_capacity(order.len());
         for &c in &order {
-            let range = runs[c as usize].1.clone();
-            clusters.push((instances.len() as u32, range.len() as u32));
-            for &(_, i, _) in &keyed[range] {
+            let (_, start, len) = runs[c as usize];
+            clusters.push((instances.len() as u32, len));
+            for &j in &sorted[start as usize..(start + len) as usize] {
+                let i = member[j as usize];
                 let inst = &source[i as usize];
                 instances.push(TlasInstance {
-                    object_from_world: inst.world_from_object.inverse(),
+                    object_from_world: inst.world_from_object.inverse().to_cols_array(),
                     index: i,
                     mesh: inst.mesh,
                     visibility: inst.visibility,
@@ -603,7 +651,9 @@ impl<'a> Tlas<'a> {
                 });
             }
         }
-        let aabbs = order.iter().map(|&c| aabbs[c as usize]).collect();
+        // The leaves' bounds are kept for `validate` in debug builds only.
+        let aabbs =
+            if cfg!(debug_assertions) { order.iter().map(|&c| aabbs[c as usize]).collect() } else { Vec::new() };
         Tlas { blas, tree, instances, clusters, aabbs, moving, build_time: start.elapsed() }
     }
 
@@ -753,6 +803,9 @@ impl<'a> Tlas<'a> {
     #[doc(hidden)]
     pub fn validate(&self) {
         let aabbs = &self.aabbs;
+        if aabbs.is_empty() {
+            return; // a release build keeps no leaf bounds
+        }
         match &self.tree {
             TlasTree::Empty => {}
             TlasTree::Bvh2(bvh) => {

@@ -236,8 +236,6 @@ pub struct Integrator<'a> {
     lib: &'a Library,
     scene: &'a FrameScene,
     tlas: &'a Tlas<'a>,
-    /// Per instance: transpose of the inverse 3x3, to carry normals to world space.
-    world_normal_from_object: Vec<Mat3A>,
     camera: CameraRays,
     shutter: Option<ShutterCamera>,
     sun: Option<SunLight>,
@@ -259,18 +257,6 @@ struct SurfaceHit {
 impl<'a> Integrator<'a> {
     /// Prepares per-frame data. `tlas` must be built from `scene.instances`.
     pub fn new(lib: &'a Library, scene: &'a FrameScene, tlas: &'a Tlas<'a>, settings: &'a RenderSettings) -> Self {
-        let world_normal_from_object = scene
-            .instances
-            .iter()
-            .map(|i| {
-                let m = i.world_from_object.matrix3;
-                if m.determinant().abs() > 1e-30 {
-                    m.inverse().transpose()
-                } else {
-                    Mat3A::IDENTITY
-                }
-            })
-            .collect();
         let shutter = scene.motion.as_ref().map(|m| {
             let [a, b] = m.camera;
             ShutterCamera {
@@ -286,7 +272,6 @@ impl<'a> Integrator<'a> {
             lib,
             scene,
             tlas,
-            world_normal_from_object,
             camera: CameraRays::new(&scene.camera, settings.width, settings.height),
             shutter,
             sun: scene.sun.as_ref().and_then(SunLight::new),
@@ -422,16 +407,15 @@ impl<'a> Integrator<'a> {
         // Interpolate in object space, then transform: error scales with |p|, which the offset covers.
         let world_from_object = placed.as_ref().map_or(&inst.world_from_object, |p| &p.world_from_object);
         let p = world_from_object.transform_point3(p0 * w + p1 * u + p2 * v);
-        let nmat = match &placed {
-            Some(pl) if pl.world_from_object != inst.world_from_object => {
-                let m = pl.world_from_object.matrix3;
-                if m.determinant().abs() > 1e-30 {
-                    m.inverse().transpose()
-                } else {
-                    Mat3A::IDENTITY
-                }
+        // The normal matrix per hit, not per instance: a 3x3 inverse is cheap
+        // beside the ray walk, and a million agents' parts keep 48 bytes each.
+        let nmat = {
+            let m = world_from_object.matrix3;
+            if m.determinant().abs() > 1e-30 {
+                m.inverse().transpose()
+            } else {
+                Mat3A::IDENTITY
             }
-            _ => self.world_normal_from_object[hit.instance as usize],
         };
         let mut ng = (nmat * (p1 - p0).cross(p2 - p0)).normalize_or_zero();
         if ng == Vec3::ZERO {

@@ -124,6 +124,8 @@ pub struct RenderedLayer {
     /// bytes (from its posing to its file written; `None` when skipped or
     /// where /proc cannot say). The figure a layer budget must hold.
     pub peak_rss_bytes: Option<u64>,
+    /// Seconds building the top-level tree (0 when skipped).
+    pub tlas_build_s: f64,
 }
 
 /// Every rendered agent of a frame with its posed slots (world_from_slot):
@@ -452,6 +454,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                     seconds: 0.0,
                     instances: 0,
                     peak_rss_bytes: None,
+                    tlas_build_s: 0.0,
                 });
                 progress.finished(out.len(), frame, layer, true);
                 continue;
@@ -478,6 +481,11 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                     frame_scene(crowd, manifest, layer, posed)?
                 }
             };
+            if job.layers.last() == Some(layer) {
+                // The frame's last layer has its instances: free the poses
+                // before its trees are built (a million agents' slots).
+                (posed, moving) = (None, None);
+            }
             // The layer index keys the random streams, so layers are
             // independent samples; `full` and `set` get fixed indices.
             let index =
@@ -499,7 +507,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
             let report = |p: usize| progress.show(done, frame, layer, p as f64 / pixels as f64);
             blas.prepare(crowd.library(), scene.instances.iter().map(|i| i.mesh));
             let names = (job.cryptomatte != CryptoOutput::Off).then(|| crypto_names(crowd, &scene));
-            let (film, _stats) = render_frame_with_cryptomatte(
+            let (film, stats) = render_frame_with_cryptomatte(
                 &blas,
                 crowd.library(),
                 &scene,
@@ -540,6 +548,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                 seconds: started.elapsed().as_secs_f64(),
                 instances: scene.instances.len(),
                 peak_rss_bytes: measured.then(crate::bench::peak_rss_bytes).flatten(),
+                tlas_build_s: stats.tlas_build.as_secs_f64(),
             });
             progress.finished(out.len(), frame, layer, false);
         }
