@@ -325,7 +325,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
 
     // Materials, and the base colour textures they read (written beside the
     // export, or into the .usdz package).
-    let mat_names = unique_names(g.materials.iter().map(|&m| (m, lib.materials[m as usize].name.clone())));
+    let mat_names = unique_names(g.materials.iter().map(|&m| (m, material_name(&lib.materials[m as usize].name))));
     let textures = Textures::of(lib, &g.materials, out)?;
     root.def("/World/Looks", "Scope");
     for (&m, name) in &mat_names {
@@ -530,6 +530,16 @@ impl Textures {
     /// The asset path a material's `inputs:file` holds.
     fn asset(&self, texture: u32) -> Option<String> {
         self.files.get(&texture).map(|(rel, _)| format!("./{rel}"))
+    }
+}
+
+/// A material's name: a wardrobe material's own (`robots/chrome`), a glTF
+/// material `<file>#<name>` as `<file stem>_<name>`, never the directory
+/// (which depends on how the shot's paths were given).
+fn material_name(name: &str) -> String {
+    match name.contains('#') {
+        true => prototype_name(name),
+        false => name.to_string(),
     }
 }
 
