@@ -228,8 +228,16 @@ fn a_point_instancer_under_transformed_xforms_lands_in_world_space() {
         let want2 = glam::Vec3::new(14.0 + f, 0.0, -8.0);
         assert!((a1.position - want1).length() < 1e-4, "frame {f}: agent 1 at {} not {want1}", a1.position);
         assert!((a2.position - want2).length() < 1e-3, "frame {f}: agent 2 at {} not {want2}", a2.position);
-        assert!((a1.heading - 90f32.to_radians()).abs() < 2e-3, "frame {f}: agent 1 heading {}", a1.heading.to_degrees());
-        assert!((a2.heading - 120f32.to_radians()).abs() < 2e-3, "frame {f}: agent 2 heading {}", a2.heading.to_degrees());
+        assert!(
+            (a1.heading - 90f32.to_radians()).abs() < 2e-3,
+            "frame {f}: agent 1 heading {}",
+            a1.heading.to_degrees()
+        );
+        assert!(
+            (a2.heading - 120f32.to_radians()).abs() < 2e-3,
+            "frame {f}: agent 2 heading {}",
+            a2.heading.to_degrees()
+        );
     }
 }
 

@@ -364,9 +364,8 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     // geometry and binding the material on the Mesh inside it, where
     // importers that read bindings only inside an instance's prototype
     // (Blender) see it. Instances of a pair share one prototype.
-    let proto_names = unique_names(
-        g.pairs.iter().map(|&(m, mt)| ((m, mt), format!("{}__{}", mesh_names[&m], mat_names[&mt]))),
-    );
+    let proto_names =
+        unique_names(g.pairs.iter().map(|&(m, mt)| ((m, mt), format!("{}__{}", mesh_names[&m], mat_names[&mt]))));
     for (&(m, mt), name) in &proto_names {
         let path = format!("/World/Prototypes/{name}");
         let p = root.def(&path, "Xform");
@@ -518,7 +517,8 @@ impl Textures {
             materials.iter().filter_map(|&m| lib.materials.get(m as usize)?.base_color_texture).collect();
         let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         let dir = format!("{}_textures", identifier(&stem));
-        let names = unique_names(used.iter().filter_map(|&t| Some((t, texture_name(&lib.textures.get(t as usize)?.name)))));
+        let names =
+            unique_names(used.iter().filter_map(|&t| Some((t, texture_name(&lib.textures.get(t as usize)?.name)))));
         let mut files = BTreeMap::new();
         for (t, name) in names {
             let tex = &lib.textures[t as usize];
