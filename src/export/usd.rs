@@ -803,3 +803,24 @@ fn write_lights(l: &mut LayerBuilder, crowd: &ShotCrowd) {
     l.attr(p, "inputs:intensity", "float", Value::Float(peak));
     l.attr(p, "inputs:color", "color3f", Value::Vec3f(vec3(sky.radiance / peak)));
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_codes_survive_the_loaders_decode() {
+        for code in 0..=255u8 {
+            let linear = crate::scene::gltf::srgb_to_linear(f32::from(code) / 255.0);
+            assert_eq!(srgb8(linear), code);
+        }
+    }
+
+    #[test]
+    fn names_drop_directories() {
+        assert_eq!(material_name("/a/b/set.glb#floor"), "set_floor");
+        assert_eq!(material_name("robots/chrome"), "robots/chrome");
+        assert_eq!(texture_name("/a/wardrobes/textures/hazard.png"), "hazard");
+        assert_eq!(texture_name("../demo/set/set.glb#paint"), "set_paint");
+    }
+}
