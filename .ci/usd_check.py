@@ -2,7 +2,12 @@
 """Reads a `throng export --format usd` stage with Pixar's USD (usd-core) and
 compares it with throng itself: agent ids and transforms at several frames
 against `throng botinfo --json`, the camera against the shot file, the stage
-metadata, and instancing (prototypes shared, not copied).
+metadata, instancing (prototypes shared, not copied), material bindings
+inside the prototypes (where Blender reads them), and base-colour textures
+that resolve from the stage with st on their meshes.
+
+Camera lengths are tenths of a scene unit (the UsdGeomCamera spec): at
+metersPerUnit = 1, focalLength x 100 is millimetres (docs/usd.md).
 
 usage: usd_check.py THRONG SHOT STAGE FRAME...
 """
@@ -12,7 +17,7 @@ import subprocess
 import sys
 import tomllib
 
-from pxr import Gf, Usd, UsdGeom
+from pxr import Gf, Usd, UsdGeom, UsdShade
 
 failures = []
 
@@ -43,6 +48,27 @@ def main(throng, shot_path, stage_path, frames):
     protos = {p.GetPrototype().GetPath() for p in instances}
     print(f"{len(agents)} agents, {len(instances)} instanceable parts sharing {len(protos)} prototypes")
     check(len(instances) > len(protos) > 0, "parts share prototypes")
+    # Materials: bound on the Mesh inside every prototype (an importer that
+    # reads bindings only inside prototypes, as Blender does, sees them).
+    textured = 0
+    for proto in stage.GetPrototypes():
+        meshes = [p for p in Usd.PrimRange(proto) if p.IsA(UsdGeom.Mesh)]
+        check(len(meshes) > 0, f"prototype {proto.GetPath()} holds a mesh")
+        for m in meshes:
+            mat, _ = UsdShade.MaterialBindingAPI(m).ComputeBoundMaterial()
+            check(bool(mat), f"{m.GetPath()} (prototype of {proto.GetInstances()[0].GetPath()}): material bound inside the prototype")
+            if not mat:
+                continue
+            for sh in Usd.PrimRange(mat.GetPrim()):
+                shader = UsdShade.Shader(sh)
+                if not shader or shader.GetIdAttr().Get() != "UsdUVTexture":
+                    continue
+                textured += 1
+                f = shader.GetInput("file").Get()
+                check(f is not None and f.resolvedPath != "", f"{sh.GetPath()}: texture {f} resolves from the stage")
+                st = UsdGeom.PrimvarsAPI(m).GetPrimvar("st")
+                check(st and st.HasValue(), f"{m.GetPath()}: textured mesh has primvars:st")
+    print(f"{len(stage.GetPrototypes())} prototypes, every mesh in them bound; {textured} textured prototype meshes")
     for p in agents:
         pv = UsdGeom.PrimvarsAPI(p)
         aid = pv.GetPrimvar("throng:agentId").Get()
@@ -83,8 +109,10 @@ def main(throng, shot_path, stage_path, frames):
     cam = UsdGeom.Camera(stage.GetPrimAtPath("/World/shotcam"))
     res = shot.get("render", {}).get("resolution", [1920, 1080])
     width = shot["camera"]["sensor_width"]
-    check(abs(cam.GetHorizontalApertureAttr().Get() - width) < 1e-4, "horizontal aperture is the sensor width")
-    check(abs(cam.GetVerticalApertureAttr().Get() - width * res[1] / res[0]) < 1e-3, "vertical aperture from the aspect")
+    # Tenths of a scene unit: at metersPerUnit 1, x 100 gives millimetres.
+    mm = 0.1 / UsdGeom.GetStageMetersPerUnit(stage) * 1000.0
+    check(abs(cam.GetHorizontalApertureAttr().Get() * mm - width) < 1e-3, "horizontal aperture is the sensor width")
+    check(abs(cam.GetVerticalApertureAttr().Get() * mm - width * res[1] / res[0]) < 1e-3, "vertical aperture from the aspect")
     near, far = cam.GetClippingRangeAttr().Get()
     check(0 < near < far, f"clipping range {near}-{far}")
     keys = shot["camera"].get("keys", [])
@@ -98,9 +126,17 @@ def main(throng, shot_path, stage_path, frames):
         fwd = m.TransformDir(Gf.Vec3d(0, 0, -1)).GetNormalized()
         aim = Gf.Vec3d(*k["aim"]) - Gf.Vec3d(*k["position"])
         check(close(fwd, aim.GetNormalized()), f"camera looks at the aim at key frame {f}")
-        check(abs(cam.GetFocalLengthAttr().Get(f) - k["focal_length"]) < 1e-4, f"focal length at key frame {f}")
-    print(f"camera: aperture {width} x {cam.GetVerticalApertureAttr().Get():.3f} mm, "
-          f"focal {cam.GetFocalLengthAttr().Get(stage.GetStartTimeCode())} mm, clipping {near}-{far}")
+        check(abs(cam.GetFocalLengthAttr().Get(f) * mm - k["focal_length"]) < 1e-3, f"focal length at key frame {f}")
+    # GfCamera (usd-core's own reading) gives the same field of view as the shot.
+    gf = cam.GetCamera(stage.GetStartTimeCode())
+    fov = gf.GetFieldOfView(Gf.Camera.FOVHorizontal)
+    want = math.degrees(2 * math.atan(width / (2 * cam.GetFocalLengthAttr().Get(stage.GetStartTimeCode()) * mm)))
+    check(abs(fov - want) < 1e-3, f"GfCamera horizontal field of view {fov} == {want}")
+    print(f"camera: aperture {cam.GetHorizontalApertureAttr().Get() * mm:.3f} x "
+          f"{cam.GetVerticalApertureAttr().Get() * mm:.3f} mm, "
+          f"focal {cam.GetFocalLengthAttr().Get(stage.GetStartTimeCode()) * mm:.3f} mm "
+          f"(tenths of a metre: {cam.GetFocalLengthAttr().Get(stage.GetStartTimeCode())}), "
+          f"field of view {fov:.3f} deg, clipping {near}-{far}")
     if failures:
         print(f"{len(failures)} failures")
         return 1

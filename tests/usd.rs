@@ -68,9 +68,10 @@ fn demo_exports_and_reads_back_through_openusd() {
     // Camera with film back and focal length, lights.
     let focal: f32 =
         stage.attribute(path("/World/shotcam.focalLength")).get_at(TimeCode::new(1002.0)).unwrap().unwrap();
-    assert!((focal - 35.0).abs() < 1e-4);
+    // Tenths of a scene unit (metres): 35 mm is 0.35, the 36 mm film back 0.36.
+    assert!((focal - 0.35).abs() < 1e-6, "focal {focal}");
     let ha: f32 = stage.attribute(path("/World/shotcam.horizontalAperture")).get().unwrap().unwrap();
-    assert_eq!(ha, 36.0);
+    assert!((ha - 0.36).abs() < 1e-6, "aperture {ha}");
     assert_eq!(stage.prim(path("/World/Lights/sun")).type_name().unwrap().unwrap().as_str(), "DistantLight");
     assert_eq!(stage.prim(path("/World/Lights/sky")).type_name().unwrap().unwrap().as_str(), "DomeLight");
 }
@@ -78,11 +79,18 @@ fn demo_exports_and_reads_back_through_openusd() {
 #[test]
 fn export_is_deterministic_and_round_trips_as_a_cache() {
     let dir = tempfile::tempdir().unwrap();
+    // The same name in two folders: the layer names its texture folder after itself.
+    std::fs::create_dir(dir.path().join("b")).unwrap();
     let a = dir.path().join("a.usda");
-    let b = dir.path().join("b.usda");
+    let b = dir.path().join("b/a.usda");
     export(&a, "1010-1011", &[]);
     export(&b, "1010-1011", &[]);
-    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "two exports differ");
+    assert!(std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(), "two exports differ");
+    for tex in std::fs::read_dir(dir.path().join("a_textures")).unwrap() {
+        let tex = tex.unwrap().path();
+        let twin = dir.path().join("b/a_textures").join(tex.file_name().unwrap());
+        assert!(std::fs::read(&tex).unwrap() == std::fs::read(&twin).unwrap(), "{} differs", tex.display());
+    }
 
     // The export read back as a cache: same agents and positions as the demo cache.
     let usd = throng::cache::read(&a).unwrap();
@@ -132,6 +140,11 @@ fn layers_split_into_sublayers_and_collections() {
 
 /// A shot like the demo's, reading `cache` with frame_offset -1000 over shot frames 1001-1005.
 fn shot_on(dir: &Path, cache: &Path) -> PathBuf {
+    shot_until(dir, cache, 1005)
+}
+
+/// [`shot_on`], over shot frames 1001-`end`.
+fn shot_until(dir: &Path, cache: &Path, end: i32) -> PathBuf {
     let demo = repo_path("demo");
     let text = std::fs::read_to_string(demo_shot()).unwrap();
     let text = text
@@ -139,7 +152,7 @@ fn shot_on(dir: &Path, cache: &Path) -> PathBuf {
         .replace("\"rigs/", &format!("\"{}/rigs/", demo.display()))
         .replace("\"set/", &format!("\"{}/set/", demo.display()))
         .replace("path = \"cache/demo.crowd\"", &format!("path = \"{}\"", cache.display()))
-        .replace("end = 1048", "end = 1005");
+        .replace("end = 1048", &format!("end = {end}"));
     let p = dir.join("usd_shot.toml");
     std::fs::write(&p, text).unwrap();
     p
@@ -182,6 +195,82 @@ fn a_usd_core_crowd_renders_through_throng() {
     let (code, stdout, err) = run(&["botinfo", shot.to_str().unwrap(), "40", "--frame", "1002", "--json"]);
     assert_eq!(code, 0, "{err}");
     assert!(stdout.contains("\"cycle\": \"IdleA\""), "{stdout}");
+}
+
+#[test]
+fn shot_frames_beyond_the_usd_time_samples_name_file_prim_and_frame() {
+    // The usd-core crowd holds frames 1-5; a shot over 1001-1008 (frame_offset
+    // -1000) asks for 6-8.
+    let dir = tempfile::tempdir().unwrap();
+    let cache = fixture("usd/pointinstancer_crowd.usda");
+    let shot = shot_until(dir.path(), &cache, 1008);
+    let (code, _, err) = run(&["botinfo", shot.to_str().unwrap(), "7", "--frame", "1002", "--json"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("pointinstancer_crowd.usda"), "names the USD file: {err}");
+    assert!(err.contains("</World/crowd."), "names the prim: {err}");
+    assert!(err.contains("1006"), "names the first shot frame outside: {err}");
+    assert!(err.contains("cover 1-5, not frame 6"), "says what the samples cover: {err}");
+    assert!(!err.contains("panick"), "{err}");
+}
+
+#[test]
+fn a_point_instancer_under_transformed_xforms_lands_in_world_space() {
+    // tests/fixtures/usd/make_parented_crowd.py: /World/site translated
+    // (time-sampled), turned 90 degrees about +Y and scaled 2x; the
+    // instancer translated (1, 0, 0).
+    let c = throng::cache::read(fixture("usd/parented_crowd.usda")).unwrap();
+    assert_eq!(c.frames.iter().map(|b| b.frame).collect::<Vec<_>>(), [1, 2, 3]);
+    for b in &c.frames {
+        let f = b.frame as f32;
+        let [a1, a2] = [b.agents[0], b.agents[1]];
+        assert_eq!((a1.id, a2.id), (1, 2));
+        let want1 = glam::Vec3::new(10.0 + f, 0.0, -6.0);
+        let want2 = glam::Vec3::new(14.0 + f, 0.0, -8.0);
+        assert!((a1.position - want1).length() < 1e-4, "frame {f}: agent 1 at {} not {want1}", a1.position);
+        assert!((a2.position - want2).length() < 1e-3, "frame {f}: agent 2 at {} not {want2}", a2.position);
+        assert!(
+            (a1.heading - 90f32.to_radians()).abs() < 2e-3,
+            "frame {f}: agent 1 heading {}",
+            a1.heading.to_degrees()
+        );
+        assert!(
+            (a2.heading - 120f32.to_radians()).abs() < 2e-3,
+            "frame {f}: agent 2 heading {}",
+            a2.heading.to_degrees()
+        );
+    }
+}
+
+#[test]
+fn agent_prims_compose_ancestor_ops_and_every_rotate_order() {
+    // Hand-written: /World/g translated, rotateXYZ (0, 90, 0), and the agent
+    // under it with its own translate; a second agent under a
+    // `!resetXformStack!` ignores /World/g.
+    let dir = tempfile::tempdir().unwrap();
+    let text = "#usda 1.0\n(\n    startTimeCode = 1\n    endTimeCode = 2\n)\n\
+        def Xform \"World\"\n{\n    def Xform \"g\"\n    {\n        \
+        double3 xformOp:translate.timeSamples = { 1: (5, 0, 0), 2: (6, 0, 0) }\n        \
+        float3 xformOp:rotateXYZ = (0, 90, 0)\n        \
+        uniform token[] xformOpOrder = [\"xformOp:translate\", \"xformOp:rotateXYZ\"]\n        \
+        def Xform \"a\"\n        {\n            int primvars:throng:agentId = 3\n            \
+        double3 xformOp:translate = (1, 0, 0)\n            \
+        uniform token[] xformOpOrder = [\"xformOp:translate\"]\n        }\n        \
+        def Xform \"b\"\n        {\n            int primvars:throng:agentId = 4\n            \
+        double3 xformOp:translate = (1, 0, 0)\n            \
+        uniform token[] xformOpOrder = [\"!resetXformStack!\", \"xformOp:translate\"]\n        }\n    }\n}\n";
+    let p = dir.path().join("nested.usda");
+    std::fs::write(&p, text).unwrap();
+    let c = throng::cache::read(&p).unwrap();
+    assert_eq!(c.frames.len(), 2);
+    for b in &c.frames {
+        let x = 4.0 + b.frame as f32;
+        let (a, r) = (b.agents[0], b.agents[1]);
+        assert_eq!((a.id, r.id), (3, 4));
+        assert!((a.position - glam::Vec3::new(x, 0.0, -1.0)).length() < 1e-5, "agent 3 at {}", a.position);
+        assert!((a.heading - std::f32::consts::FRAC_PI_2).abs() < 1e-5, "agent 3 heading {}", a.heading);
+        assert!((r.position - glam::Vec3::new(1.0, 0.0, 0.0)).length() < 1e-5, "agent 4 at {}", r.position);
+        assert!(r.heading.abs() < 1e-5);
+    }
 }
 
 fn bad(dir: &Path, name: &str, text: &str) -> (i32, String) {

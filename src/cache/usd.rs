@@ -217,46 +217,15 @@ pub fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
         return Err(Error::invalid(path, format!("USD composition error: {e}")));
     }
 
-    // Find the crowd: PointInstancers and agent prims.
-    let mut instancers = Vec::new();
-    let mut agent_prims = Vec::new();
-    let mut visited = 0usize;
-    let mut paths = Vec::new();
-    ctx.stage
-        .traverse(PrimPredicate::DEFAULT, |p| paths.push(p.clone()))
-        .map_err(|e| Error::invalid(path, format!("cannot traverse the USD stage: {e:#}")))?;
-    for p in &paths {
-        visited += 1;
-        let prim = ctx.stage.prim(p.clone());
-        let ty = prim.type_name().ok().flatten().map(|t| t.as_str().to_string()).unwrap_or_default();
-        if ty == "PointInstancer" {
-            instancers.push(p.as_str().to_string());
-        } else if props(&ctx.stage, p).contains("primvars:throng:agentId") {
-            agent_prims.push(p.as_str().to_string());
-        }
-    }
-    if instancers.is_empty() && agent_prims.is_empty() {
-        return Err(Error::invalid(
-            path,
-            format!(
-                "no crowd in this USD file: no PointInstancer and no prim with primvars:throng:agentId \
-                 among its {visited} prims"
-            ),
-        ));
-    }
+    let (instancers, agent_prims) = find_crowd(&ctx)?;
 
     // The frames.
     let frames: (i64, i64) = if ctx.stage.has_authored_time_code_range() {
         (ctx.stage.start_time_code().ceil() as i64, ctx.stage.end_time_code().floor() as i64)
     } else {
         let mut all = Vec::new();
-        for p in &instancers {
-            all.extend(ctx.times(p, "positions")?);
-        }
-        for p in &agent_prims {
-            for op in xform_ops(&ctx, p)? {
-                all.extend(ctx.times(p, &op)?);
-            }
+        for (p, attr) in sampled_attrs(&ctx, &instancers, &agent_prims)? {
+            all.extend(ctx.times(&p, &attr)?);
         }
         let lo = all.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = all.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -318,9 +287,15 @@ pub fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
         for a in ["ids", "positions"].into_iter().chain(orient) {
             ctx.covers(pi, a, frames)?;
         }
+        for (prim, op) in xform_chain_ops(&ctx, pi)? {
+            ctx.covers(&prim, &op, frames)?;
+        }
         for f in frames.0..=frames.1 {
             let t = f as f64;
             let frame_err = |attr: &str, msg: String| ctx.err(&format!("{pi}.{attr}"), msg).frame(f);
+            // Positions and orientations are in the instancer's space: its
+            // own and its ancestors' xform ops place them in the world.
+            let world_from_pi = world_matrix(&ctx, pi, t)?;
             let ids = ctx
                 .value(pi, "ids", t)?
                 .and_then(|v| ids_of(&v))
@@ -379,8 +354,8 @@ pub fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
                 let too_many = || frame_err("primvars:throng:rig", "more than 65536 rig or cycle names".into());
                 let a = AgentSample {
                     id,
-                    position: pos[i],
-                    heading: heading_of(&Mat4::from_quat(rot[i])),
+                    position: world_from_pi.transform_point3(pos[i]),
+                    heading: heading_of(&(world_from_pi * Mat4::from_quat(rot[i]))),
                     rig: names.rig(&rig_name).ok_or_else(too_many)?,
                     cycle: names.cycle(&cycle_name).ok_or_else(too_many)?,
                     cycle_frame: cf,
@@ -403,8 +378,8 @@ pub fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
         if ops.is_empty() {
             return Err(ctx.err(ap, format!("agent prim <{ap}> has no xformOpOrder: throng needs its transform")));
         }
-        for op in &ops {
-            ctx.covers(ap, op, frames)?;
+        for (prim, op) in xform_chain_ops(&ctx, ap)? {
+            ctx.covers(&prim, &op, frames)?;
         }
         let p = props(&ctx.stage, &ctx.sdf_path(ap)?);
         for f in frames.0..=frames.1 {
@@ -458,6 +433,88 @@ pub fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
     Ok(crowd)
 }
 
+/// The crowd's prims: PointInstancers, and prims carrying
+/// `primvars:throng:agentId`. Neither: an error naming the file.
+fn find_crowd(ctx: &Ctx) -> Result<(Vec<String>, Vec<String>)> {
+    let path = ctx.path;
+    let mut instancers = Vec::new();
+    let mut agent_prims = Vec::new();
+    let mut paths = Vec::new();
+    ctx.stage
+        .traverse(PrimPredicate::DEFAULT, |p| paths.push(p.clone()))
+        .map_err(|e| Error::invalid(path, format!("cannot traverse the USD stage: {e:#}")))?;
+    for p in &paths {
+        let prim = ctx.stage.prim(p.clone());
+        let ty = prim.type_name().ok().flatten().map(|t| t.as_str().to_string()).unwrap_or_default();
+        if ty == "PointInstancer" {
+            instancers.push(p.as_str().to_string());
+        } else if props(&ctx.stage, p).contains("primvars:throng:agentId") {
+            agent_prims.push(p.as_str().to_string());
+        }
+    }
+    if instancers.is_empty() && agent_prims.is_empty() {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "no crowd in this USD file: no PointInstancer and no prim with primvars:throng:agentId \
+                 among its {} prims",
+                paths.len()
+            ),
+        ));
+    }
+    Ok((instancers, agent_prims))
+}
+
+/// Every (prim, attribute) whose time samples place the crowd: the
+/// instancers' `ids`, `positions`, `orientations`, the agent prims' xform
+/// ops, and the xform ops of every ancestor (and of the instancers themselves).
+fn sampled_attrs(ctx: &Ctx, instancers: &[String], agent_prims: &[String]) -> Result<Vec<(String, String)>> {
+    let mut out = Vec::new();
+    for pi in instancers {
+        let p = props(&ctx.stage, &ctx.sdf_path(pi)?);
+        for a in ["ids", "positions", "orientations", "orientationsf"] {
+            if p.contains(a) {
+                out.push((pi.clone(), a.to_string()));
+            }
+        }
+        out.extend(xform_chain_ops(ctx, pi)?);
+    }
+    for ap in agent_prims {
+        out.extend(xform_chain_ops(ctx, ap)?);
+    }
+    out.sort();
+    out.dedup();
+    Ok(out)
+}
+
+/// Why a USD crowd holds no `cache_frame`, naming the prim: the first
+/// attribute (of [`sampled_attrs`]) whose time samples do not reach it, or
+/// the stage's time code range. `None` when the file does not open as a
+/// crowd (its own error is reported elsewhere). For the shot's error on
+/// frames outside the cache.
+pub fn coverage(path: &Path, cache_frame: i32) -> Option<String> {
+    let stage = Stage::open(path.to_str()?).ok()?;
+    let ctx = Ctx { path, stage };
+    let (instancers, agent_prims) = find_crowd(&ctx).ok()?;
+    let f = f64::from(cache_frame);
+    for (prim, attr) in sampled_attrs(&ctx, &instancers, &agent_prims).ok()? {
+        let times = ctx.times(&prim, &attr).ok()?;
+        if let (Some(&first), Some(&last)) = (times.first(), times.last()) {
+            if f < first || f > last {
+                return Some(format!("time samples of <{prim}.{attr}> cover {first}-{last}, not frame {cache_frame}"));
+            }
+        }
+    }
+    if ctx.stage.has_authored_time_code_range() {
+        let (a, b) = (ctx.stage.start_time_code(), ctx.stage.end_time_code());
+        let crowd = instancers.first().or(agent_prims.first())?;
+        return Some(format!(
+            "the stage's startTimeCode-endTimeCode {a}-{b} (crowd <{crowd}>) does not hold frame {cache_frame}"
+        ));
+    }
+    None
+}
+
 /// The prim's `xformOpOrder`.
 fn xform_ops(ctx: &Ctx, prim: &str) -> Result<Vec<String>> {
     Ok(match ctx.value(prim, "xformOpOrder", 0.0)? {
@@ -466,16 +523,62 @@ fn xform_ops(ctx: &Ctx, prim: &str) -> Result<Vec<String>> {
     })
 }
 
-/// The prim's local matrix at `t` from its xform ops (column vectors).
-fn local_matrix(ctx: &Ctx, prim: &str, t: f64) -> Result<Mat4> {
+/// The prims whose ops make `prim`'s world matrix, `prim` first, up to the
+/// root or to the first prim whose ops start with `!resetXformStack!`.
+fn xform_chain(ctx: &Ctx, prim: &str) -> Result<Vec<(String, Vec<String>)>> {
+    let mut chain = Vec::new();
+    let mut p = prim;
+    loop {
+        let ops = xform_ops(ctx, p)?;
+        let reset = ops.iter().any(|o| o == "!resetXformStack!");
+        chain.push((p.to_string(), ops));
+        match p.rfind('/') {
+            Some(i) if i > 0 && !reset => p = &p[..i],
+            _ => break,
+        }
+    }
+    Ok(chain)
+}
+
+/// (prim, attribute) of every xform op in `prim`'s chain ([`xform_chain`]).
+fn xform_chain_ops(ctx: &Ctx, prim: &str) -> Result<Vec<(String, String)>> {
+    let mut out = Vec::new();
+    for (p, ops) in xform_chain(ctx, prim)? {
+        for op in ops {
+            if op != "!resetXformStack!" {
+                let attr = op.strip_prefix("!invert!").unwrap_or(&op).to_string();
+                out.push((p.clone(), attr));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// A rotation about axis `X`, `Y` or `Z` by `deg` degrees.
+fn axis_rotation(axis: char, deg: f32) -> Mat4 {
+    let r = deg.to_radians();
+    match axis {
+        'X' => Mat4::from_rotation_x(r),
+        'Y' => Mat4::from_rotation_y(r),
+        _ => Mat4::from_rotation_z(r),
+    }
+}
+
+/// The prim's local matrix at `t` from `ops` (column vectors: the first op
+/// in `xformOpOrder` is the outermost).
+fn local_matrix(ctx: &Ctx, prim: &str, ops: &[String], t: f64) -> Result<Mat4> {
     let mut m = Mat4::IDENTITY;
-    for op in xform_ops(ctx, prim)? {
+    for op in ops {
         if op == "!resetXformStack!" {
             continue;
         }
-        let bad = || ctx.err(&format!("{prim}.{op}"), format!("<{prim}.{op}> has no usable value at time {t}"));
-        let v = ctx.value(prim, &op, t)?.ok_or_else(bad)?;
-        let kind = op.strip_prefix("xformOp:").unwrap_or(&op).split(':').next().unwrap_or("");
+        let (invert, attr) = match op.strip_prefix("!invert!") {
+            Some(a) => (true, a),
+            None => (false, op.as_str()),
+        };
+        let bad = || ctx.err(&format!("{prim}.{attr}"), format!("<{prim}.{attr}> has no usable value at time {t}"));
+        let v = ctx.value(prim, attr, t)?.ok_or_else(bad)?;
+        let kind = attr.strip_prefix("xformOp:").unwrap_or(attr).split(':').next().unwrap_or("");
         let step = match kind {
             "transform" => match &v {
                 // USD matrices are row-major for row vectors: the same 16 numbers
@@ -485,32 +588,52 @@ fn local_matrix(ctx: &Ctx, prim: &str, t: f64) -> Result<Mat4> {
             },
             "translate" => Mat4::from_translation(vec3_of(&v).ok_or_else(bad)?),
             "scale" => Mat4::from_scale(vec3_of(&v).ok_or_else(bad)?),
-            "orient" => Mat4::from_quat(quat_of(&v).ok_or_else(bad)?),
-            "rotateY" => Mat4::from_rotation_y(f32_of(&v).ok_or_else(bad)?.to_radians()),
-            "rotateX" => Mat4::from_rotation_x(f32_of(&v).ok_or_else(bad)?.to_radians()),
-            "rotateZ" => Mat4::from_rotation_z(f32_of(&v).ok_or_else(bad)?.to_radians()),
+            "orient" => Mat4::from_quat(quat_of(&v).ok_or_else(bad)?.normalize()),
+            "rotateX" | "rotateY" | "rotateZ" => {
+                axis_rotation(kind.chars().last().unwrap_or('Z'), f32_of(&v).ok_or_else(bad)?)
+            }
+            // rotateXYZ: X first, then Y, then Z (so Z is outermost).
+            "rotateXYZ" | "rotateXZY" | "rotateYXZ" | "rotateYZX" | "rotateZXY" | "rotateZYX" => {
+                let d = vec3_of(&v).ok_or_else(bad)?;
+                let angle = |c: char| match c {
+                    'X' => d.x,
+                    'Y' => d.y,
+                    _ => d.z,
+                };
+                kind[6..].chars().fold(Mat4::IDENTITY, |acc, c| axis_rotation(c, angle(c)) * acc)
+            }
             _ => {
                 return Err(ctx.err(
-                    &format!("{prim}.{op}"),
-                    format!("<{prim}>: xform op `{op}` is not read by throng (transform, translate, orient, rotateX/Y/Z, scale are)"),
+                    &format!("{prim}.{attr}"),
+                    format!(
+                        "<{prim}>: xform op `{op}` is not read by throng (transform, translate, orient, \
+                         rotateX/Y/Z, rotateXYZ and the other orders, scale are)"
+                    ),
                 ))
             }
+        };
+        let step = if invert {
+            if step.determinant().abs() < 1e-12 {
+                return Err(ctx.err(&format!("{prim}.{attr}"), format!("<{prim}.{op}> is not invertible at time {t}")));
+            }
+            step.inverse()
+        } else {
+            step
         };
         m *= step;
     }
     Ok(m)
 }
 
-/// World matrix: the prim's and its ancestors' ops.
+/// World matrix at `t`: the prim's and its ancestors' ops, composed as USD
+/// does (a `!resetXformStack!` drops the ancestors).
 fn world_matrix(ctx: &Ctx, prim: &str, t: f64) -> Result<Mat4> {
-    let mut m = local_matrix(ctx, prim, t)?;
-    let mut p = prim;
-    while let Some(i) = p.rfind('/') {
-        p = &p[..i];
-        if p.is_empty() {
-            break;
-        }
-        m = local_matrix(ctx, p, t)? * m;
+    let mut m = Mat4::IDENTITY;
+    for (p, ops) in xform_chain(ctx, prim)? {
+        m = local_matrix(ctx, &p, &ops, t)? * m;
+    }
+    if !m.is_finite() {
+        return Err(ctx.err(prim, format!("<{prim}>'s world transform at time {t} is not finite")));
     }
     Ok(m)
 }

@@ -39,10 +39,16 @@ pub fn check_outside_cache(
     outside: &[i32],
 ) -> crate::error::Result<Vec<String>> {
     let Some(&first) = outside.first() else { return Ok(Vec::new()) };
-    let held = match (cache_frames.first(), cache_frames.last()) {
+    let mut held = match (cache_frames.first(), cache_frames.last()) {
         (Some(a), Some(b)) => format!("the cache holds frames {a}-{b}"),
         _ => "the cache holds no frames".into(),
     };
+    // A USD cache names the prim whose time samples stop short (docs/usd.md).
+    if crate::cache::Format::of(cache).ok() == Some(crate::cache::Format::Usd) {
+        if let Some(why) = crate::cache::usd::coverage(cache, shot.cache.cache_frame(first)) {
+            held = format!("{held}: {why}");
+        }
+    }
     let list = |n: usize| {
         let mut s = outside.iter().take(n).map(i32::to_string).collect::<Vec<_>>().join(", ");
         if outside.len() > n {

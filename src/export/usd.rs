@@ -6,14 +6,19 @@
 //!
 //! ```text
 //! /World                         Xform (defaultPrim)
-//!   /Prototypes                  invisible Scope: per library mesh used, an Xform holding a Mesh
-//!   /Looks                       Scope: one Material (UsdPreviewSurface) per cast material
-//!   /Set/set_<i>                 instanceable, references a prototype, binds its material
+//!   /Prototypes                  invisible Scope
+//!     /Meshes/<mesh>/mesh        per library mesh used, an Xform holding the Mesh (points, normals, st)
+//!     /<mesh>__<material>        per (mesh, material) used: references the geometry, binds the
+//!                                material on its Mesh; every instance references one of these
+//!   /Looks                       Scope: one Material (UsdPreviewSurface) per cast material; a base
+//!                                colour texture as UsdUVTexture + UsdPrimvarReader_float2 (st), its
+//!                                PNG in `<stem>_textures/` beside the file (or in the .usdz)
+//!   /Set/set_<i>                 instanceable, references a (mesh, material) prototype
 //!   /Crowd                       Scope (one collection per render layer)
 //!     /agent_<id>                Xform, time-sampled world_from_agent, throng primvars
 //!       /<slot>                  instanceable, references a prototype, time-sampled
 //!                                agent_from_part (skinned: one child per pose, visibility-sampled)
-//!   /shotcam                     Camera: focal length, apertures, clipping, time-sampled transform
+//!   /shotcam                     Camera: focal length, apertures (tenths of a metre), clipping, time-sampled transform
 //!   /Lights/sun, /Lights/sky     DistantLight, DomeLight
 //! ```
 //!
@@ -39,6 +44,10 @@ pub const MAX_SAMPLES: usize = 40_000_000;
 /// Near and far clipping planes written on the camera: the shot has no
 /// clipping keys, and throng's renderer clips at neither.
 pub const CLIPPING_RANGE: [f32; 2] = [0.05, 100_000.0];
+/// UsdGeomCamera lengths (focal length, apertures) are in tenths of a scene
+/// unit; at `metersPerUnit = 1` that is 100 mm, so 35 mm is written 0.35
+/// (docs/usd.md, "Camera units").
+pub const CAMERA_UNITS_PER_MM: f32 = 0.01;
 
 /// How agents are instanced in the stage.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -80,8 +89,10 @@ pub struct UsdExportSummary {
     pub agents: usize,
     /// Frames sampled.
     pub frames: usize,
-    /// Shared prototype meshes.
+    /// Shared instancing prototypes: one per (mesh, material).
     pub prototypes: usize,
+    /// Meshes (geometry written once each, under /World/Prototypes/Meshes).
+    pub meshes: usize,
     /// Materials.
     pub materials: usize,
     /// Instanceable prims (agent parts and set pieces) or point instances per frame.
@@ -179,6 +190,8 @@ struct Gathered {
     agents: BTreeMap<u32, AgentTrack>,
     meshes: BTreeSet<MeshId>,
     materials: BTreeSet<MaterialId>,
+    /// Every (mesh, material) an instance uses: one bound prototype each.
+    pairs: BTreeSet<(MeshId, MaterialId)>,
 }
 
 fn gather(crowd: &ShotCrowd, opts: &UsdExportOptions) -> Result<Gathered> {
@@ -186,6 +199,7 @@ fn gather(crowd: &ShotCrowd, opts: &UsdExportOptions) -> Result<Gathered> {
     let mut agents: BTreeMap<u32, AgentTrack> = BTreeMap::new();
     let mut meshes = BTreeSet::new();
     let mut materials = BTreeSet::new();
+    let mut pairs = BTreeSet::new();
     let mut samples = 0usize;
     let mut insts = Vec::new();
     for f in a..=b {
@@ -219,14 +233,16 @@ fn gather(crowd: &ShotCrowd, opts: &UsdExportOptions) -> Result<Gathered> {
                 part.samples.push((f, inst.mesh, agent_from_world * inst.world_from_object));
                 meshes.insert(inst.mesh);
                 materials.insert(inst.material);
+                pairs.insert((inst.mesh, part.material));
             }
         }
     }
     for inst in &crowd.set {
         meshes.insert(inst.mesh);
         materials.insert(inst.material);
+        pairs.insert((inst.mesh, inst.material));
     }
-    Ok(Gathered { agents, meshes, materials })
+    Ok(Gathered { agents, meshes, materials, pairs })
 }
 
 /// Writes the crowd as USD to `out` (the encoding from its extension:
@@ -272,20 +288,22 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     root.layer_meta("framesPerSecond", Value::Double(shot.frames.fps.into()));
     root.def("/World", "Xform");
 
-    // Prototypes: one Mesh per library mesh, named from the mesh name.
-    let proto_names = unique_names(g.meshes.iter().map(|&m| (m, prototype_name(&lib.meshes[m as usize].name))));
+    // Geometry: one Mesh per library mesh, named from the mesh name, under
+    // /World/Prototypes/Meshes.
+    let mesh_names = unique_names(g.meshes.iter().map(|&m| (m, prototype_name(&lib.meshes[m as usize].name))));
     // A defined but invisible Scope: importers that skip abstract (`class`)
     // prims, Blender's among them, still find the prototypes, and a reference
     // to one brings only its own opinions, not the Scope's invisibility.
     let protos = root.def("/World/Prototypes", "Scope");
     root.attr(protos, "visibility", "token", Value::Token("invisible".into()));
-    for (&m, name) in &proto_names {
+    root.def("/World/Prototypes/Meshes", "Scope");
+    for (&m, name) in &mesh_names {
         let mesh = &lib.meshes[m as usize];
         // An Xform holding the Mesh: an instance's prototype root is the
         // instance prim itself, so the geometry sits one level down (DCCs
         // such as Blender build their shared prototype from the root's children).
-        root.def(&format!("/World/Prototypes/{name}"), "Xform");
-        let p = root.def(&format!("/World/Prototypes/{name}/mesh"), "Mesh");
+        root.def(&format!("/World/Prototypes/Meshes/{name}"), "Xform");
+        let p = root.def(&format!("/World/Prototypes/Meshes/{name}/mesh"), "Mesh");
         let (lo, hi) = mesh.bounds();
         root.attr(p, "extent", "float3[]", Value::Vec3fVec(vec![vec3(lo), vec3(hi)]));
         root.attr(p, "points", "point3f[]", Value::Vec3fVec(mesh.positions.iter().map(|&v| vec3(v)).collect()));
@@ -297,6 +315,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
             root.attr_meta(p, "normals", "interpolation", Value::Token("vertex".into()));
         }
         if mesh.uvs.len() == mesh.positions.len() {
+            // glTF's v runs down the image, USD's st up it.
             let st = mesh.uvs.iter().map(|u| gf::Vec2f { x: u.x, y: 1.0 - u.y }).collect();
             root.attr(p, "primvars:st", "texCoord2f[]", Value::Vec2fVec(st));
             root.attr_meta(p, "primvars:st", "interpolation", Value::Token("vertex".into()));
@@ -304,8 +323,10 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
         root.uniform(p, "subdivisionScheme", "token", Value::Token("none".into()));
     }
 
-    // Materials.
-    let mat_names = unique_names(g.materials.iter().map(|&m| (m, lib.materials[m as usize].name.clone())));
+    // Materials, and the base colour textures they read (written beside the
+    // export, or into the .usdz package).
+    let mat_names = unique_names(g.materials.iter().map(|&m| (m, material_name(&lib.materials[m as usize].name))));
+    let textures = Textures::of(lib, &g.materials, out)?;
     root.def("/World/Looks", "Scope");
     for (&m, name) in &mat_names {
         let src = &lib.materials[m as usize];
@@ -315,15 +336,44 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
         let sh = root.def(&format!("{path}/PreviewSurface"), "Shader");
         root.uniform(sh, "info:id", "token", Value::Token("UsdPreviewSurface".into()));
         root.attr(sh, "inputs:diffuseColor", "color3f", Value::Vec3f(vec3(src.base_color)));
+        if let Some(file) = src.base_color_texture.and_then(|t| textures.asset(t)) {
+            // diffuseColor = texture x base colour factor (glTF's rule), the
+            // factor as the texture's scale; st from the mesh's primvars:st.
+            root.connect(sh, "inputs:diffuseColor", "color3f", &format!("{path}/BaseColor.outputs:rgb"));
+            let tex = root.def(&format!("{path}/BaseColor"), "Shader");
+            root.uniform(tex, "info:id", "token", Value::Token("UsdUVTexture".into()));
+            root.attr(tex, "inputs:file", "asset", Value::AssetPath(file.into()));
+            root.connect(tex, "inputs:st", "float2", &format!("{path}/TexCoord.outputs:result"));
+            root.attr(tex, "inputs:sourceColorSpace", "token", Value::Token("sRGB".into()));
+            let c = src.base_color;
+            root.attr(tex, "inputs:scale", "float4", Value::Vec4f(gf::Vec4f { x: c.x, y: c.y, z: c.z, w: 1.0 }));
+            root.attr(tex, "inputs:wrapS", "token", Value::Token("repeat".into()));
+            root.attr(tex, "inputs:wrapT", "token", Value::Token("repeat".into()));
+            root.declare(tex, "outputs:rgb", "float3");
+            let st = root.def(&format!("{path}/TexCoord"), "Shader");
+            root.uniform(st, "info:id", "token", Value::Token("UsdPrimvarReader_float2".into()));
+            root.attr(st, "inputs:varname", "string", string("st"));
+            root.declare(st, "outputs:result", "float2");
+        }
         root.attr(sh, "inputs:roughness", "float", Value::Float(src.roughness));
         root.attr(sh, "inputs:metallic", "float", Value::Float(src.metallic));
         root.attr(sh, "outputs:surface", "token", Value::Token("".into()));
-        let _ = mat;
     }
-    let bind = |l: &mut LayerBuilder, prim: PrimId, m: MaterialId| {
-        l.api_schemas(prim, &["MaterialBindingAPI"]);
-        l.rel(prim, "material:binding", vec![format!("/World/Looks/{}", mat_names[&m])]);
-    };
+
+    // Instancing prototypes: one per (mesh, material), referencing the
+    // geometry and binding the material on the Mesh inside it, where
+    // importers that read bindings only inside an instance's prototype
+    // (Blender) see it. Instances of a pair share one prototype.
+    let proto_names =
+        unique_names(g.pairs.iter().map(|&(m, mt)| ((m, mt), format!("{}__{}", mesh_names[&m], mat_names[&mt]))));
+    for (&(m, mt), name) in &proto_names {
+        let path = format!("/World/Prototypes/{name}");
+        let p = root.def(&path, "Xform");
+        root.reference(p, &format!("/World/Prototypes/Meshes/{}", mesh_names[&m]))?;
+        let inner = root.prim(&format!("{path}/mesh"), Specifier::Over, "");
+        root.api_schemas(inner, &["MaterialBindingAPI"]);
+        root.rel(inner, "material:binding", vec![format!("/World/Looks/{}", mat_names[&mt])]);
+    }
 
     // The set.
     let mut instances = 0;
@@ -333,8 +383,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
         for (i, inst) in crowd.set.iter().enumerate() {
             let p = root.def(&format!("/World/Set/set_{i}"), "Xform");
             root.meta(p, "instanceable", Value::Bool(true));
-            root.reference(p, &format!("/World/Prototypes/{}", proto_names[&inst.mesh]))?;
-            bind(&mut root, p, inst.material);
+            root.reference(p, &format!("/World/Prototypes/{}", proto_names[&(inst.mesh, inst.material)]))?;
             xform(&mut root, p, vec![(0.0, matrix(&inst.world_from_object))]);
             instances += 1;
         }
@@ -364,11 +413,11 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
                     }),
                     _ => &mut root,
                 };
-                instances += write_agent(l, crowd, id, t, layer, &times, &proto_names, &mat_names)?;
+                instances += write_agent(l, crowd, id, t, layer, &times, &proto_names)?;
             }
         }
         Instancing::PointInstancer => {
-            instances += write_point_instancers(&mut root, crowd, &g, &times, &proto_names, &mat_names)?;
+            instances += write_point_instancers(&mut root, &g, &times, &proto_names)?;
         }
     }
     // One collection per render layer on /World/Crowd.
@@ -409,6 +458,22 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     let mut files = Vec::new();
     let mut bytes = 0u64;
     let mut prims = root.prim_count();
+    // Textures: files beside a text export, entries of a package.
+    let mut package = Vec::new();
+    for (rel, data) in textures.files.values() {
+        match encoding {
+            UsdEncoding::Usdz => package.push((rel.clone(), data.clone())),
+            _ => {
+                let path = out.with_file_name(rel);
+                if let Some(dir) = path.parent() {
+                    std::fs::create_dir_all(dir).at(dir)?;
+                }
+                write_bytes(&path, data)?;
+                bytes += data.len() as u64;
+                files.push(path);
+            }
+        }
+    }
     for (layer, l) in &layer_files {
         let name = format!("{stem}.{layer}.{ext}");
         let path = out.with_file_name(&name);
@@ -420,7 +485,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
         files.push(path);
     }
     let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let data = root.encode(encoding, &name)?;
+    let data = root.encode_with(encoding, &name, &package)?;
     write_bytes(out, &data)?;
     bytes += data.len() as u64;
     files.push(out.to_path_buf());
@@ -428,12 +493,92 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
         agents: g.agents.len(),
         frames: times.len(),
         prototypes: proto_names.len(),
+        meshes: mesh_names.len(),
         materials: mat_names.len(),
         instances,
         prims,
         files,
         bytes,
     })
+}
+
+/// The base colour textures an export writes, as PNG files in
+/// `<out stem>_textures/` beside the exported file (or inside the `.usdz`
+/// package, at the same relative path), so `inputs:file` resolves from the
+/// layer wherever the export is copied.
+struct Textures {
+    /// Texture id -> (path relative to the exported file, PNG bytes).
+    files: BTreeMap<u32, (String, Vec<u8>)>,
+}
+
+impl Textures {
+    fn of(lib: &crate::scene::Library, materials: &BTreeSet<MaterialId>, out: &Path) -> Result<Textures> {
+        let used: BTreeSet<u32> =
+            materials.iter().filter_map(|&m| lib.materials.get(m as usize)?.base_color_texture).collect();
+        let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let dir = format!("{}_textures", identifier(&stem));
+        let names =
+            unique_names(used.iter().filter_map(|&t| Some((t, texture_name(&lib.textures.get(t as usize)?.name)))));
+        let mut files = BTreeMap::new();
+        for (t, name) in names {
+            let tex = &lib.textures[t as usize];
+            files.insert(t, (format!("{dir}/{name}.png"), png(tex)?));
+        }
+        Ok(Textures { files })
+    }
+
+    /// The asset path a material's `inputs:file` holds.
+    fn asset(&self, texture: u32) -> Option<String> {
+        self.files.get(&texture).map(|(rel, _)| format!("./{rel}"))
+    }
+}
+
+/// A material's name: a wardrobe material's own (`robots/chrome`), a glTF
+/// material `<file>#<name>` as `<file stem>_<name>`, never the directory
+/// (which depends on how the shot's paths were given).
+fn material_name(name: &str) -> String {
+    match name.contains('#') {
+        true => prototype_name(name),
+        false => name.to_string(),
+    }
+}
+
+/// A texture's file name (without `.png`) from its library name: a glTF
+/// image `<file>#<label>` gives `<file stem>_<label>`, a PNG its stem.
+fn texture_name(name: &str) -> String {
+    match name.contains('#') {
+        true => prototype_name(name),
+        false => Path::new(name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+    }
+}
+
+/// Linear 0..1 to an 8-bit sRGB code (the inverse of the loader's decode,
+/// so an 8-bit sRGB texture comes back with the same bytes).
+fn srgb8(c: f32) -> u8 {
+    let c = c.clamp(0.0, 1.0);
+    let e = if c <= 0.0031308 { c * 12.92 } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+    (e * 255.0).round().clamp(0.0, 255.0) as u8
+}
+
+/// A library texture (linear RGBA, sRGB colour) as PNG bytes.
+fn png(tex: &crate::scene::Texture) -> Result<Vec<u8>> {
+    let n = tex.width as usize * tex.height as usize;
+    if tex.texels.len() != n || n == 0 {
+        return Err(Error::invalid(
+            &tex.name,
+            format!("texture holds {} texels for {}x{}", tex.texels.len(), tex.width, tex.height),
+        ));
+    }
+    let mut bytes = Vec::with_capacity(n * 4);
+    for t in &tex.texels {
+        bytes.extend([srgb8(t[0]), srgb8(t[1]), srgb8(t[2]), (t[3].clamp(0.0, 1.0) * 255.0).round() as u8]);
+    }
+    let img = image::RgbaImage::from_raw(tex.width, tex.height, bytes)
+        .ok_or_else(|| Error::invalid(&tex.name, "texture size does not match its texels"))?;
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png)
+        .map_err(|e| Error::invalid(&tex.name, format!("cannot encode the texture as PNG: {e}")))?;
+    Ok(out.into_inner())
 }
 
 /// A prototype's name from its mesh's library name `<file>#<mesh>`: the
@@ -462,8 +607,7 @@ fn write_agent(
     t: &AgentTrack,
     layer: Option<&str>,
     times: &[i32],
-    proto_names: &BTreeMap<MeshId, String>,
-    mat_names: &BTreeMap<MaterialId, String>,
+    proto_names: &BTreeMap<(MeshId, MaterialId), String>,
 ) -> Result<usize> {
     let path = format!("/World/Crowd/{}", agent_name(id));
     let p = l.def(&path, "Xform");
@@ -504,23 +648,19 @@ fn write_agent(
         l.primvar(pp, "throng:name", "string", string(&part.crypto));
         xform(l, pp, part.samples.iter().map(|(f, _, m)| (f64::from(*f), matrix(m))).collect());
         let used: BTreeSet<MeshId> = part.samples.iter().map(|s| s.1).collect();
-        let binding = format!("/World/Looks/{}", mat_names[&part.material]);
+        let proto = |mesh: MeshId| &proto_names[&(mesh, part.material)];
         if used.len() == 1 {
             let mesh = part.samples[0].1;
             l.meta(pp, "instanceable", Value::Bool(true));
-            l.reference(pp, &format!("/World/Prototypes/{}", proto_names[&mesh]))?;
-            l.api_schemas(pp, &["MaterialBindingAPI"]);
-            l.rel(pp, "material:binding", vec![binding]);
+            l.reference(pp, &format!("/World/Prototypes/{}", proto(mesh)))?;
             count += 1;
             continue;
         }
         // A skinned part: one child per pose it takes, shown on its frames.
         for &mesh in &used {
-            let c = l.def(&format!("{ppath}/{}", proto_names[&mesh]), "");
+            let c = l.def(&format!("{ppath}/{}", proto(mesh)), "");
             l.meta(c, "instanceable", Value::Bool(true));
-            l.reference(c, &format!("/World/Prototypes/{}", proto_names[&mesh]))?;
-            l.api_schemas(c, &["MaterialBindingAPI"]);
-            l.rel(c, "material:binding", vec![binding.clone()]);
+            l.reference(c, &format!("/World/Prototypes/{}", proto(mesh)))?;
             let on: BTreeSet<i32> = part.samples.iter().filter(|s| s.1 == mesh).map(|s| s.0).collect();
             let vis = part
                 .samples
@@ -542,11 +682,9 @@ fn write_agent(
 /// `protoIndices`, `positions`, `orientations`, `scales`.
 fn write_point_instancers(
     l: &mut LayerBuilder,
-    crowd: &ShotCrowd,
     g: &Gathered,
     times: &[i32],
-    proto_names: &BTreeMap<MeshId, String>,
-    mat_names: &BTreeMap<MaterialId, String>,
+    proto_names: &BTreeMap<(MeshId, MaterialId), String>,
 ) -> Result<usize> {
     // part name -> frame -> (id, (mesh, material), world_from_object)
     type Frames = BTreeMap<i32, Vec<(u32, (MeshId, MaterialId), Affine3A)>>;
@@ -560,7 +698,6 @@ fn write_point_instancers(
             }
         }
     }
-    let _ = crowd;
     let mut total = 0;
     for (name, frames) in &groups {
         let mut most = 0;
@@ -571,12 +708,10 @@ fn write_point_instancers(
             protos.iter().enumerate().map(|(i, &k)| (k, i as i32)).collect();
         l.def(&format!("{path}/Prototypes"), "Scope");
         let mut targets = Vec::new();
-        for &(mesh, mat) in &protos {
-            let pp = format!("{path}/Prototypes/{}__{}", proto_names[&mesh], mat_names[&mat]);
+        for key in &protos {
+            let pp = format!("{path}/Prototypes/{}", proto_names[key]);
             let c = l.def(&pp, "");
-            l.reference(c, &format!("/World/Prototypes/{}", proto_names[&mesh]))?;
-            l.api_schemas(c, &["MaterialBindingAPI"]);
-            l.rel(c, "material:binding", vec![format!("/World/Looks/{}", mat_names[&mat])]);
+            l.reference(c, &format!("/World/Prototypes/{}", proto_names[key]))?;
             targets.push(pp);
         }
         l.rel(pi, "prototypes", targets);
@@ -623,12 +758,12 @@ fn write_camera(l: &mut LayerBuilder, crowd: &ShotCrowd, times: &[i32]) -> Resul
             true => height * 0.5 / (c.yfov * 0.5).tan(),
             false => keyed_focal(shot, f as f32),
         };
-        focal.push((f64::from(f), Value::Float(mm)));
+        focal.push((f64::from(f), Value::Float(mm * CAMERA_UNITS_PER_MM)));
     }
     xform(l, cam, xf);
     put(l, cam, "focalLength", "float", focal);
-    l.attr(cam, "horizontalAperture", "float", Value::Float(width));
-    l.attr(cam, "verticalAperture", "float", Value::Float(height));
+    l.attr(cam, "horizontalAperture", "float", Value::Float(width * CAMERA_UNITS_PER_MM));
+    l.attr(cam, "verticalAperture", "float", Value::Float(height * CAMERA_UNITS_PER_MM));
     l.attr(cam, "clippingRange", "float2", Value::Vec2f(gf::Vec2f { x: CLIPPING_RANGE[0], y: CLIPPING_RANGE[1] }));
     l.uniform(cam, "projection", "token", Value::Token("perspective".into()));
     Ok(())
@@ -667,4 +802,25 @@ fn write_lights(l: &mut LayerBuilder, crowd: &ShotCrowd) {
     let p = l.def("/World/Lights/sky", "DomeLight");
     l.attr(p, "inputs:intensity", "float", Value::Float(peak));
     l.attr(p, "inputs:color", "color3f", Value::Vec3f(vec3(sky.radiance / peak)));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_codes_survive_the_loaders_decode() {
+        for code in 0..=255u8 {
+            let linear = crate::scene::gltf::srgb_to_linear(f32::from(code) / 255.0);
+            assert_eq!(srgb8(linear), code);
+        }
+    }
+
+    #[test]
+    fn names_drop_directories() {
+        assert_eq!(material_name("/a/b/set.glb#floor"), "set_floor");
+        assert_eq!(material_name("robots/chrome"), "robots/chrome");
+        assert_eq!(texture_name("/a/wardrobes/textures/hazard.png"), "hazard");
+        assert_eq!(texture_name("../demo/set/set.glb#paint"), "set_paint");
+    }
 }

@@ -232,6 +232,11 @@ impl LayerBuilder {
         self.prop(prim, name, Some(type_name)).targets = vec![source.to_string()];
     }
 
+    /// An attribute declared with no value (a shader output).
+    pub fn declare(&mut self, prim: PrimId, name: &str, type_name: &str) {
+        self.prop(prim, name, Some(type_name));
+    }
+
     /// A relationship with explicit targets.
     pub fn rel(&mut self, prim: PrimId, name: &str, targets: Vec<String>) {
         self.prop(prim, name, None).targets = targets;
@@ -318,8 +323,18 @@ impl LayerBuilder {
     /// The layer encoded. `name` is the layer's file name (the entry inside
     /// a `.usdz` package).
     pub fn encode(&self, encoding: UsdEncoding, name: &str) -> Result<Vec<u8>> {
+        self.encode_with(encoding, name, &[])
+    }
+
+    /// [`LayerBuilder::encode`], with `extra` files (package-relative path,
+    /// bytes) after the layer in a `.usdz` package; ignored for the other
+    /// encodings.
+    pub fn encode_with(&self, encoding: UsdEncoding, name: &str, extra: &[(String, Vec<u8>)]) -> Result<Vec<u8>> {
         let data = self.to_data()?;
-        encode_data(&data, encoding, name)
+        match encoding {
+            UsdEncoding::Usdz => encode_package(&data, name, extra),
+            _ => encode_data(&data, encoding, name),
+        }
     }
 }
 
@@ -340,15 +355,26 @@ pub fn encode_data(data: &dyn AbstractData, encoding: UsdEncoding, name: &str) -
             openusd::usdc::CrateWriter::write(data, &mut out).map_err(fail)?;
             Ok(out.into_inner())
         }
-        UsdEncoding::Usdz => {
-            let text = encode_data(data, UsdEncoding::Usda, name)?;
-            let entry = std::path::Path::new(name).with_extension("usda");
-            let entry = entry.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or("root.usda".into());
-            let mut archive = openusd::usdz::ArchiveWriter::new(Cursor::new(Vec::new()));
-            archive.add_layer(&entry, &text).map_err(fail)?;
-            Ok(archive.finish().map_err(fail)?.into_inner())
-        }
+        UsdEncoding::Usdz => encode_package(data, name, &[]),
     }
+}
+
+/// A `.usdz` package: the text layer first (the package's root layer), then
+/// `extra` (package-relative path, bytes) in order.
+fn encode_package(data: &dyn AbstractData, name: &str, extra: &[(String, Vec<u8>)]) -> Result<Vec<u8>> {
+    fn cannot(name: &str, e: impl std::fmt::Display) -> Error {
+        Error::invalid(name, format!("openusd cannot encode the package: {e}"))
+    }
+    let fail = |e| cannot(name, e);
+    let text = encode_data(data, UsdEncoding::Usda, name)?;
+    let entry = std::path::Path::new(name).with_extension("usda");
+    let entry = entry.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or("root.usda".into());
+    let mut archive = openusd::usdz::ArchiveWriter::new(Cursor::new(Vec::new()));
+    archive.add_layer(&entry, &text).map_err(fail)?;
+    for (path, bytes) in extra {
+        archive.add_layer(path, bytes).map_err(fail)?;
+    }
+    Ok(archive.finish().map_err(fail)?.into_inner())
 }
 
 /// openusd 0.6 writes a one-item list op without brackets
