@@ -354,6 +354,20 @@ fn blurred_stack_matches_blurred_full_render() {
 
 // ---------------------------------------------------------------- input
 
+/// `--resume` re-renders when the shutter changes; a still job's fingerprint
+/// is the one renders made before motion blur existed (no shutter term).
+#[test]
+fn the_shutter_is_in_the_render_fingerprint() {
+    let crowd = demo();
+    let still = RenderJob::new(vec!["full".into()], vec![1024], 4, "/tmp/x".into());
+    let blur = RenderJob { shutter: Some([-0.25, 0.25]), ..still.clone() };
+    let other = RenderJob { shutter: Some([0.0, 0.5]), ..still.clone() };
+    let f = |j: &RenderJob| job::render_fingerprint(&crowd, None, j, "full");
+    assert_ne!(f(&still), f(&blur));
+    assert_ne!(f(&blur), f(&other));
+    assert_eq!(f(&blur), f(&blur.clone()));
+}
+
 #[test]
 fn bad_shutters_are_refused_naming_the_field() {
     let dir = tempfile::tempdir().unwrap();

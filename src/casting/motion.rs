@@ -169,7 +169,9 @@ fn skin_keys(crowd: &ShotCrowd, a: &AgentSample, c0: f32, c1: f32) -> Option<Ski
     let cycle = rig.cycle_index(crowd.cycle_name(a)).ok()?;
     let length = rig.cycle_frames(cycle);
     let steps = rig.cycle_steps(cycle);
-    if !(length > 0.0 && length.is_finite() && steps > 0 && c0.is_finite() && c1.is_finite()) {
+    // A cycle that does not advance over the shutter keeps the still frame's
+    // nearest step, so an agent that stands still renders as without blur.
+    if c0 == c1 || !(length > 0.0 && length.is_finite() && steps > 0 && c0.is_finite() && c1.is_finite()) {
         let step = rig.step_of(cycle, c0);
         return Some((rig_name.clone(), cycle, step, step, [0.0; 2]));
     }
