@@ -57,24 +57,24 @@ pub fn run(args: &CastArgs) -> Result<()> {
         return Ok(());
     }
     outln!("{:>6}  {:<12} {:<20} {:>6}  {:<16} parts", "id", "rig", "scheme", "height", "head");
+    // Straight from the casting: the table row's paths and names are for --json.
     for cast in crowd.casting.values() {
-        let r = cast_row(&crowd, cast);
         let head = cast
             .slots
             .iter()
             .find(|s| s.part.as_ref().is_some_and(|p| p.uniform))
             .and_then(|s| s.part.as_ref())
             .map_or("-", |p| &*p.mesh);
-        let filled = r.parts.iter().filter(|p| p.mesh.is_some()).count();
+        let filled = cast.slots.iter().filter(|s| s.part.is_some()).count();
         outln!(
             "{:>6}  {:<12} {:<20} {:>6.3}  {:<16} {}/{}",
-            r.id,
-            r.rig,
-            r.scheme,
-            r.height_scale,
+            cast.id,
+            cast.rig,
+            cast.scheme,
+            cast.height_scale,
             head,
             filled,
-            r.parts.len()
+            cast.slots.len()
         );
     }
     Ok(())
