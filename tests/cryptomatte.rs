@@ -450,7 +450,7 @@ fn set_scene() -> (Library, FrameScene, Vec<String>) {
     let boxed = |x: f32, y: f32, size: f32| {
         Affine3A::from_scale_rotation_translation(Vec3::splat(size), Default::default(), Vec3::new(x, y, 0.0))
     };
-    let inst = |mesh, material, world_from_object, part| Instance {
+    let inst = |mesh, world_from_object, material, part| Instance {
         mesh,
         material,
         world_from_object,
