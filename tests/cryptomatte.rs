@@ -431,7 +431,12 @@ fn material_matte_covers_the_agents_wearing_it() {
     let want_tiles = agents.matte(SET_NAME);
     for i in 0..film.rgba.len() {
         assert!((red[i] - want_red[i]).abs() < 1e-6, "pixel {i}: red {} vs agent 3 {}", red[i], want_red[i]);
-        assert!((blue[i] - want_blue[i]).abs() < 1e-6, "pixel {i}: blue {} vs agents 78 + 1000 {}", blue[i], want_blue[i]);
+        assert!(
+            (blue[i] - want_blue[i]).abs() < 1e-6,
+            "pixel {i}: blue {} vs agents 78 + 1000 {}",
+            blue[i],
+            want_blue[i]
+        );
         assert!((tiles[i] - want_tiles[i]).abs() < 1e-6, "pixel {i}: tiles {} vs set {}", tiles[i], want_tiles[i]);
         // The holdout and the sky have no material: coverage adds up to alpha.
         assert!((red[i] + blue[i] + tiles[i] - film.rgba[i][3]).abs() < 1e-5);

@@ -181,8 +181,11 @@ impl Wardrobes {
                 if name.contains('#') || file.name.contains('#') {
                     // `#` separates a glTF material's file from its name in
                     // the library (and Cryptomatte keeps only what follows it).
-                    return Err(Error::invalid(path, format!("material `{}/{name}`: names cannot contain `#`", file.name))
-                        .field(format!("materials.{name}")));
+                    return Err(Error::invalid(
+                        path,
+                        format!("material `{}/{name}`: names cannot contain `#`", file.name),
+                    )
+                    .field(format!("materials.{name}")));
                 }
                 if let Some(t) = &m.base_color_texture {
                     let full = base.join(t);
