@@ -1,7 +1,9 @@
 """CI check with third-party readers (PyPI's OpenEXR and cryptomatte-api):
 every channel of every EXR under DIR reads back with the right size and
-type, and the Cryptomatte matte of the agent covering the most pixels in the
-full render agrees with its agent.id pixels.
+type, every file has the three Cryptomatte types (CryptoAgent, CryptoPart,
+CryptoMaterial) and cryptomatte-api loads them, and the Cryptomatte matte of
+the agent covering the most pixels in the full render agrees with its
+agent.id pixels.
 
 Usage: python exr_pixels.py DIR
 """
@@ -18,6 +20,9 @@ EXPECTED = {
     "albedo.R": np.float16, "albedo.G": np.float16, "albedo.B": np.float16,
     "agent.id": np.uint32,
 }
+
+# The Cryptomatte types every layer file carries (docs/cryptomatte.md).
+TYPES = ["CryptoAgent", "CryptoMaterial", "CryptoPart"]
 
 failed = 0
 passed = 0
@@ -52,7 +57,13 @@ for path in files:
     a = channels["A"].astype(np.float32)
     check(bool(((a >= 0) & (a <= 1.001)).all()), f"{path}: alpha outside [0, 1]")
     crypto = [n for n in channels if n.startswith("Crypto")]
-    check(len(crypto) >= 12, f"{path}: {len(crypto)} Cryptomatte channels")
+    check(len(crypto) == 12 * len(TYPES), f"{path}: {len(crypto)} Cryptomatte channels, want {12 * len(TYPES)}")
+    for t in TYPES:
+        for level in range(3):
+            for c in "RGBA":
+                check(f"{t}{level:02}.{c}" in channels, f"{path}: no channel {t}{level:02}.{c}")
+    loaded = {m.metadata().name(): m for m in cryptomatte_api.Cryptomatte.load(path)}
+    check(sorted(loaded) == sorted(TYPES), f"{path}: cryptomatte-api finds types {sorted(loaded)}, want {TYPES}")
 
     if "/full/" in path:
         ids = channels["agent.id"]

@@ -439,7 +439,29 @@ fn comp_mattes_match_the_full_render() {
     let comp = comp::comp_frame(&r.a, FRAME, Some(&r.manifest)).unwrap().film;
     let full = read(&r.a, "full");
     let names: Vec<&str> = comp.cryptomatte.iter().map(|m| m.name.as_str()).collect();
-    assert!(names.contains(&"CryptoAgent") && names.contains(&"CryptoPart"), "{names:?}");
+    assert_eq!(names, ["CryptoAgent", "CryptoMaterial", "CryptoPart"]);
+    // Named set objects and materials survive the stack: the floor, a
+    // building, the floor's glTF material and the robots' wardrobe ones.
+    let comp_type = |name: &str| comp.cryptomatte.iter().find(|m| m.name == name).unwrap();
+    for type_name in ["CryptoAgent", "CryptoPart"] {
+        let m = comp_type(type_name);
+        assert!(m.manifest.contains_key("set/floor"), "{type_name}: {:?}", m.manifest.keys());
+        assert!(m.manifest.keys().any(|n| n.starts_with("set/building_")), "{type_name}");
+        assert!(!m.manifest.contains_key("set"), "{type_name}: unnamed set geometry");
+        assert!(m.matte("set/floor").iter().sum::<f32>() > 100.0);
+    }
+    let materials = comp_type("CryptoMaterial");
+    assert!(materials.manifest.contains_key("floor_polished"), "{:?}", materials.manifest.keys());
+    assert!(materials.manifest.keys().any(|n| n.starts_with("robots/")), "{:?}", materials.manifest.keys());
+    // Where a layer covers the pixel, its materials' coverage adds up to the
+    // comp's alpha (no material gets lost in the stack).
+    let cover = materials.coverage_sum();
+    for (i, px) in comp.rgba.iter().enumerate() {
+        assert!(cover[i] <= px[3] + 1e-3, "pixel {i}: material coverage {} over alpha {}", cover[i], px[3]);
+    }
+    let full_cover: f32 = cover.iter().sum();
+    let alpha: f32 = comp.rgba.iter().map(|p| p[3]).sum();
+    assert!(full_cover > 0.97 * alpha, "material coverage {full_cover} of alpha {alpha}");
     for m in &comp.cryptomatte {
         let f = full.cryptomatte.iter().find(|f| f.name == m.name).expect("full render has the same matte type");
         // Every name the full render shows is in the comp's manifest.
@@ -469,6 +491,7 @@ fn comp_mattes_match_the_full_render() {
     let comped = comp::comp_frame(&r.a, FRAME, Some(&r.manifest)).unwrap();
     exr::write_layer(&out, &comped.film, &comped.meta).unwrap();
     let back = throng::render::cryptomatte::read(&out).unwrap();
+    assert_eq!(back.len(), 3);
     assert_eq!(back.len(), comped.film.cryptomatte.len());
     for (a, b) in back.iter().zip(&comped.film.cryptomatte) {
         assert_eq!((&a.name, &a.manifest), (&b.name, &b.manifest));

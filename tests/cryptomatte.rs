@@ -1,6 +1,7 @@
 //! Cryptomatte: ids against the specification's 432 test vectors, the
-//! decoder on Psyop's sample files, and our own agent / part mattes (ranking,
-//! coverage, manifest, determinism, EXR round trip, sidecar manifests).
+//! decoder on Psyop's sample files, and our own agent / part / material
+//! mattes (ranking, coverage, manifest, determinism, EXR round trip, sidecar
+//! manifests) and named set objects.
 
 mod common;
 
@@ -10,8 +11,8 @@ use std::path::PathBuf;
 use glam::{Affine3A, Vec2, Vec3};
 use throng::render::accel::BlasSet;
 use throng::render::cryptomatte::{
-    self, agent_name, id_hex, layer_key, name_id, part_name, CryptoNames, Cryptomatte, AGENT_MATTE, PART_MATTE, RANKS,
-    SET_NAME,
+    self, agent_name, id_hex, layer_key, name_id, part_name, set_object_name, CryptoNames, Cryptomatte, NameTables,
+    AGENT_MATTE, MATERIAL_MATTE, PART_MATTE, RANKS, SET_NAME,
 };
 use throng::render::exr::{
     camera_matrices, read_layer, read_parts, write_layer, write_layer_with, LayerMeta, ManifestMode, WriteOptions,
@@ -158,23 +159,37 @@ fn camera(eye: Vec3, target: Vec3, yfov_deg: f32) -> Camera {
 
 const SLOTS: [&str; 2] = ["torso", "head"];
 
-/// A floor (set), agents 3, 78 and 1000 as two stacked boxes (torso, head),
-/// agent 5 far off screen, and a holdout box over part of agent 1000.
+fn material(name: &str, grey: f32) -> Material {
+    Material {
+        name: name.into(),
+        base_color: Vec3::splat(grey),
+        base_color_texture: None,
+        roughness: 0.5,
+        metallic: 0.0,
+    }
+}
+
+/// The library's materials: a glTF set material (library name
+/// `<file>#<name>`) and two wardrobe materials.
+const MATERIALS: [&str; 3] = ["../shared/sets/floor.glb#tiles", "robots/red", "robots/blue"];
+
+/// A floor (set, material `tiles`), agents 3, 78 and 1000 as two stacked
+/// boxes (torso, head; agent 3 in `robots/red`, the others in
+/// `robots/blue`), agent 5 (red) far off screen, and a holdout box over part
+/// of agent 1000.
 fn crowd_scene() -> (Library, FrameScene) {
     let lib = Library {
         meshes: vec![floor(), Mesh::cube("cube")],
-        materials: vec![Material {
-            name: "grey".into(),
-            base_color: Vec3::splat(0.5),
-            base_color_texture: None,
-            roughness: 0.5,
-            metallic: 0.0,
-        }],
+        materials: MATERIALS.iter().zip([0.5, 0.6, 0.4]).map(|(n, g)| material(n, g)).collect(),
         textures: vec![],
     };
-    let inst = |mesh, m: Affine3A, agent, part, visibility| Instance {
+    let inst = |mesh, m: Affine3A, agent: Option<u32>, part, visibility| Instance {
         mesh,
-        material: 0,
+        material: match agent {
+            None => 0,
+            Some(3 | 5) => 1,
+            Some(_) => 2,
+        },
         world_from_object: m,
         agent,
         part,
@@ -205,8 +220,14 @@ fn crowd_scene() -> (Library, FrameScene) {
     (lib, scene)
 }
 
-fn names(scene: &FrameScene) -> CryptoNames {
-    CryptoNames::new(&scene.instances, |_, part| SLOTS.get(part as usize).copied())
+fn names(lib: &Library, scene: &FrameScene, set_objects: &[String]) -> CryptoNames {
+    let tables = NameTables { materials: &lib.materials, set_objects };
+    CryptoNames::new(&scene.instances, &tables, |_, part| SLOTS.get(part as usize).copied())
+}
+
+/// The film's matte of type `name`.
+fn matte<'a>(film: &'a Film, name: &str) -> &'a Cryptomatte {
+    film.cryptomatte.iter().find(|m| m.name == name).unwrap_or_else(|| panic!("no {name} matte"))
 }
 
 fn settings(spp: u32, threads: usize) -> RenderSettings {
@@ -228,7 +249,7 @@ fn settings(spp: u32, threads: usize) -> RenderSettings {
 fn render(spp: u32, threads: usize) -> (FrameScene, Film) {
     let (lib, scene) = crowd_scene();
     let blas = BlasSet::build(&lib);
-    let crypto = names(&scene);
+    let crypto = names(&lib, &scene, &[]);
     let (film, _) =
         render_frame_with_cryptomatte(&blas, &lib, &scene, &settings(spp, threads), Some(&crypto), None).unwrap();
     (scene, film)
@@ -256,9 +277,10 @@ fn meta(film: &Film, scene: &FrameScene) -> LayerMeta {
 #[test]
 fn agent_and_part_mattes_match_the_render() {
     let (_, film) = render(16, 2);
-    assert_eq!(film.cryptomatte.len(), 2);
-    let (agents, parts) = (&film.cryptomatte[0], &film.cryptomatte[1]);
-    assert_eq!((agents.name.as_str(), parts.name.as_str()), (AGENT_MATTE, PART_MATTE));
+    // Sorted by type name, as the file reads back.
+    let types: Vec<&str> = film.cryptomatte.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(types, [AGENT_MATTE, MATERIAL_MATTE, PART_MATTE]);
+    let (agents, parts) = (matte(&film, AGENT_MATTE), matte(&film, PART_MATTE));
     assert_eq!(agents.ranks, RANKS);
 
     // Manifests: only what is on screen (agent 5 is off to the side, the holdout is nameless).
@@ -365,6 +387,7 @@ fn sidecar_manifest_option() {
     .unwrap();
     let side = dir.path().join("demo.crowd_0.1001.CryptoAgent.json");
     assert!(side.exists() && dir.path().join("demo.crowd_0.1001.CryptoPart.json").exists());
+    assert!(dir.path().join("demo.crowd_0.1001.CryptoMaterial.json").exists());
     let p = &read_parts(&path, |_| false).unwrap()[0];
     let key = layer_key(AGENT_MATTE);
     assert_eq!(p.attributes[&format!("cryptomatte/{key}/manif_file")], "demo.crowd_0.1001.CryptoAgent.json");
@@ -382,4 +405,149 @@ fn no_cryptomatte_without_names() {
     let blas = BlasSet::build(&lib);
     let (film, _) = render_frame_with_cryptomatte(&blas, &lib, &scene, &settings(2, 1), None, None).unwrap();
     assert!(film.cryptomatte.is_empty());
+}
+
+#[test]
+fn material_matte_covers_the_agents_wearing_it() {
+    let (_, film) = render(16, 2);
+    let (agents, materials) = (matte(&film, AGENT_MATTE), matte(&film, MATERIAL_MATTE));
+    // Names: a glTF material keeps its own name, wardrobe ones `wardrobe/name`.
+    let names: Vec<&str> = materials.manifest.keys().map(String::as_str).collect();
+    assert_eq!(names, ["robots/blue", "robots/red", "tiles"]);
+    for (name, &bits) in &materials.manifest {
+        assert_eq!(bits, name_id(name).to_bits(), "{name}");
+    }
+    assert_eq!(cryptomatte::layer_key(MATERIAL_MATTE), "be359d6");
+
+    let sum = |names: &[String]| -> Vec<f32> {
+        let mattes: Vec<Vec<f32>> = names.iter().map(|n| agents.matte(n)).collect();
+        (0..film.rgba.len()).map(|i| mattes.iter().map(|m| m[i]).sum()).collect()
+    };
+    let red = materials.matte("robots/red");
+    let blue = materials.matte("robots/blue");
+    let tiles = materials.matte("tiles");
+    let want_red = sum(&[agent_name(3)]);
+    let want_blue = sum(&[agent_name(78), agent_name(1000)]);
+    let want_tiles = agents.matte(SET_NAME);
+    for i in 0..film.rgba.len() {
+        assert!((red[i] - want_red[i]).abs() < 1e-6, "pixel {i}: red {} vs agent 3 {}", red[i], want_red[i]);
+        assert!(
+            (blue[i] - want_blue[i]).abs() < 1e-6,
+            "pixel {i}: blue {} vs agents 78 + 1000 {}",
+            blue[i],
+            want_blue[i]
+        );
+        assert!((tiles[i] - want_tiles[i]).abs() < 1e-6, "pixel {i}: tiles {} vs set {}", tiles[i], want_tiles[i]);
+        // The holdout and the sky have no material: coverage adds up to alpha.
+        assert!((red[i] + blue[i] + tiles[i] - film.rgba[i][3]).abs() < 1e-5);
+    }
+    assert!(red.iter().sum::<f32>() > 20.0 && blue.iter().sum::<f32>() > 40.0);
+}
+
+/// A floor and two set boxes, one of them (`box_b`) two primitives with
+/// their own materials placed by one node: objects 0, 1, 2 of the set.
+fn set_scene() -> (Library, FrameScene, Vec<String>) {
+    let lib = Library {
+        meshes: vec![floor(), Mesh::cube("cube")],
+        materials: ["set.glb#tiles", "set.glb#brick", "set.glb#glass"].iter().map(|n| material(n, 0.5)).collect(),
+        textures: vec![],
+    };
+    let boxed = |x: f32, y: f32, size: f32| {
+        Affine3A::from_scale_rotation_translation(Vec3::splat(size), Default::default(), Vec3::new(x, y, 0.0))
+    };
+    let inst = |mesh, world_from_object, material, part| Instance {
+        mesh,
+        material,
+        world_from_object,
+        agent: None,
+        part,
+        visibility: vis::ALL,
+    };
+    let instances = vec![
+        inst(0, Affine3A::IDENTITY, 0, 0),
+        inst(1, boxed(-1.0, 0.5, 1.0), 1, 1),
+        inst(1, boxed(1.0, 0.4, 0.8), 1, 2),
+        inst(1, boxed(1.0, 1.0, 0.4), 2, 2),
+    ];
+    let scene = FrameScene {
+        instances,
+        camera: camera(Vec3::new(0.0, 1.0, 4.5), Vec3::new(0.0, 0.5, 0.0), 40.0),
+        sun: None,
+        sky: Sky { radiance: Vec3::splat(0.5) },
+        motion: None,
+    };
+    (lib, scene, ["floor", "box_a", "box_b"].map(String::from).to_vec())
+}
+
+#[test]
+fn set_object_mattes_cover_exactly_their_object() {
+    let (lib, scene, objects) = set_scene();
+    let blas = BlasSet::build(&lib);
+    let s = settings(16, 2);
+    let crypto = names(&lib, &scene, &objects);
+    let (film, _) = render_frame_with_cryptomatte(&blas, &lib, &scene, &s, Some(&crypto), None).unwrap();
+    for type_name in [AGENT_MATTE, PART_MATTE] {
+        let m = matte(&film, type_name);
+        let names: Vec<&str> = m.manifest.keys().map(String::as_str).collect();
+        assert_eq!(names, ["set/box_a", "set/box_b", "set/floor"], "{type_name}");
+        assert_eq!(set_object_name("box_a"), "set/box_a");
+    }
+    let agents = matte(&film, AGENT_MATTE);
+    assert!(agents.manifest.values().all(|&b| b != name_id(SET_NAME).to_bits()), "no plain `set` left");
+    // Each object alone in the scene: its alpha is exactly the coverage of
+    // the camera samples that hit it first (the same samples: the boxes do
+    // not overlap on screen and the floor is behind them), so it must equal
+    // the object's matte in the whole scene, pixel by pixel.
+    for (object, name) in objects.iter().enumerate() {
+        let alone = FrameScene {
+            instances: scene.instances.iter().filter(|i| i.part as usize == object).copied().collect(),
+            ..scene.clone()
+        };
+        let (only, _) = render_frame_with_cryptomatte(&blas, &lib, &alone, &s, None, None).unwrap();
+        let want: Vec<f32> = only.rgba.iter().map(|p| p[3]).collect();
+        if name != "floor" {
+            let got = agents.matte(&set_object_name(name));
+            assert!(got.iter().sum::<f32>() > 30.0, "{name} barely visible");
+            for i in 0..got.len() {
+                assert!((got[i] - want[i]).abs() < 1e-6, "{name} pixel {i}: matte {} alpha alone {}", got[i], want[i]);
+            }
+            assert_eq!(matte(&film, PART_MATTE).matte(&set_object_name(name)), got);
+        }
+    }
+    // The floor is hidden behind the boxes in places: its matte is alpha
+    // minus the boxes'.
+    let floor = agents.matte("set/floor");
+    let (a, b) = (agents.matte("set/box_a"), agents.matte("set/box_b"));
+    for i in 0..floor.len() {
+        assert!((floor[i] + a[i] + b[i] - film.rgba[i][3]).abs() < 1e-5, "pixel {i}");
+    }
+    // The material matte names the materials, box_b's two among them.
+    let materials = matte(&film, MATERIAL_MATTE);
+    let names: Vec<&str> = materials.manifest.keys().map(String::as_str).collect();
+    assert_eq!(names, ["brick", "glass", "tiles"]);
+    let brick = materials.matte("brick");
+    let glass = materials.matte("glass");
+    for i in 0..brick.len() {
+        assert!((brick[i] + glass[i] - a[i] - b[i]).abs() < 1e-5, "pixel {i}");
+    }
+    assert!(glass.iter().sum::<f32>() > 5.0);
+}
+
+#[test]
+fn set_objects_are_named_from_the_glb_nodes() {
+    // The demo set: every node with a mesh is an object named after it
+    // (the four benches share one mesh and keep their own names).
+    let mut assets = throng::scene::gltf::AssetCache::new();
+    let set = concat!(env!("CARGO_MANIFEST_DIR"), "/demo/set/set.glb");
+    let (placed, names) = assets.load_scene_objects(set).unwrap();
+    assert_eq!(names.len(), 12, "{names:?}");
+    assert_eq!(names[0], "floor");
+    assert!(names.contains(&"bench_3".to_string()) && names.contains(&"building_back_mid".to_string()), "{names:?}");
+    assert!(placed.iter().all(|p| (p.3 as usize) < names.len()));
+    let benches: BTreeSet<u32> =
+        placed.iter().filter(|p| names[p.3 as usize].starts_with("bench_")).map(|p| p.3).collect();
+    assert_eq!(benches.len(), 4);
+    // The placed primitives are the ones load_scene_instances gives.
+    let plain = assets.load_scene_instances(set).unwrap();
+    assert_eq!(plain.len(), placed.len());
 }

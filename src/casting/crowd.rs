@@ -133,8 +133,13 @@ pub struct ShotCrowd {
     pub posed: PosedSkins,
     /// The unit cube used for proxy boxes.
     pub proxy_mesh: MeshId,
-    /// The set's instances (agent `None`), fully visible.
+    /// The set's instances (agent `None`), fully visible; each one's `part`
+    /// indexes [`ShotCrowd::set_names`].
     pub set: Vec<Instance>,
+    /// Unique names of the set's objects (its glTF nodes with a mesh, by
+    /// [`crate::scene::gltf::set_object_names`]): Cryptomatte's `set/<name>`.
+    /// At most [`SET_OBJECTS_NAMED`]; later objects are plain `set`.
+    pub set_names: Vec<String>,
     /// What loading noticed but accepted (weights renormalised, morph targets ignored).
     pub warnings: Vec<String>,
     /// The camera from a glTF node, when the shot names one instead of keys.
@@ -142,6 +147,10 @@ pub struct ShotCrowd {
     /// Standing height of each rig, metres.
     rig_heights: BTreeMap<String, f32>,
 }
+
+/// Set objects with their own Cryptomatte name: every [`Instance::part`]
+/// value but `u16::MAX` (which marks the unnamed rest).
+pub const SET_OBJECTS_NAMED: usize = u16::MAX as usize;
 
 /// Unit cube [0,1]^3 with flat normals: the proxy box of every slot.
 fn unit_cube() -> Mesh {
@@ -492,20 +501,32 @@ impl ShotCrowd {
             posed.joints.insert((key, *cycle, *step), joints);
         }
 
-        let set = match &shot.set {
-            Some(s) => assets
-                .load_scene_instances(&s.file)?
-                .into_iter()
-                .map(|(mesh, material, world_from_object)| Instance {
-                    mesh,
-                    material,
-                    world_from_object,
-                    agent: None,
-                    part: 0,
-                    visibility: vis::ALL,
-                })
-                .collect(),
-            None => Vec::new(),
+        let (set, set_names) = match &shot.set {
+            Some(s) => {
+                let (placed, mut names) = assets.load_scene_objects(&s.file)?;
+                if names.len() > SET_OBJECTS_NAMED {
+                    warnings.push(format!(
+                        "set {} has {} objects: Cryptomatte names the first {SET_OBJECTS_NAMED} and calls the rest `set`",
+                        s.file.display(),
+                        names.len()
+                    ));
+                    names.truncate(SET_OBJECTS_NAMED);
+                }
+                let set = placed
+                    .into_iter()
+                    .map(|(mesh, material, world_from_object, object)| Instance {
+                        mesh,
+                        material,
+                        world_from_object,
+                        agent: None,
+                        // Past the names: u16::MAX, which no name has.
+                        part: u16::try_from(object).unwrap_or(u16::MAX),
+                        visibility: vis::ALL,
+                    })
+                    .collect();
+                (set, names)
+            }
+            None => (Vec::new(), Vec::new()),
         };
         let gltf_camera = match &shot.camera.gltf {
             Some((file, node)) => Some(assets.find_camera(file, node)?),
@@ -531,6 +552,7 @@ impl ShotCrowd {
             posed,
             proxy_mesh,
             set,
+            set_names,
             warnings,
             gltf_camera,
             rig_heights,

@@ -178,6 +178,15 @@ impl Wardrobes {
             }
             let base = path.parent().unwrap_or(Path::new(""));
             for (name, mut m) in file.materials {
+                if name.contains('#') || file.name.contains('#') {
+                    // `#` separates a glTF material's file from its name in
+                    // the library (and Cryptomatte keeps only what follows it).
+                    return Err(Error::invalid(
+                        path,
+                        format!("material `{}/{name}`: names cannot contain `#`", file.name),
+                    )
+                    .field(format!("materials.{name}")));
+                }
                 if let Some(t) = &m.base_color_texture {
                     let full = base.join(t);
                     if !full.exists() {

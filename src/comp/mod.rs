@@ -18,7 +18,8 @@
 //!   `agent.id`, from the layer whose Z wins; zero where no layer hit
 //!   anything. Written when any layer has them.
 //!
-//! - Cryptomatte (`CryptoAgent`, `CryptoPart`): an object's coverage in a
+//! - Cryptomatte (`CryptoAgent`, `CryptoPart`, `CryptoMaterial`, any type
+//!   a layer has, matched by name): an object's coverage in a
 //!   layer is multiplied by `1 - A` of every layer in front of it (the
 //!   colour over, per pixel), coverages of one id add, each pixel keeps its
 //!   highest ranks (ties by id bits) and the manifests are merged, so mattes

@@ -427,8 +427,8 @@ pub const AGENT_LOADED_BYTES: u64 = 1_000;
 /// arenas and the worker threads' stacks.
 pub const PROCESS_BYTES: u64 = 24_000_000;
 /// Bytes per pixel of the shot's resolution: the film and its AOVs, the
-/// Cryptomatte ranks, tile results and the EXR channels being encoded.
-pub const PIXEL_BYTES: u64 = 420;
+/// Cryptomatte ranks of three types, tile results and the EXR channels being encoded.
+pub const PIXEL_BYTES: u64 = 520;
 
 /// An agent's render memory as `instances` traced instances (its parts, or
 /// its proxy boxes); its meshes' BLASes are in [`estimate_render_floor`].

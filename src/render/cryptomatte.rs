@@ -1,5 +1,5 @@
 //! Cryptomatte ID mattes (Psyop's open specification, version 1.2.0) for
-//! agents and their parts: encoding during the render, and a decoder.
+//! agents, their parts and materials: encoding during the render, and a decoder.
 //!
 //! - IDs: MurmurHash3_x86_32 (seed 0) of the UTF-8 name, converted to a
 //!   float32 by `uint32_to_float32` (the exponent kept in 1..=254, so no id
@@ -7,8 +7,12 @@
 //!   "no object".
 //! - Names: agent matte `CryptoAgent`: `agent_<cache id>`; part matte
 //!   `CryptoPart`: `agent_<cache id>/<rig slot name>`. Visible set geometry is
-//!   `set` in both. Samples that hit nothing (sky, escaped rays) or a holdout
-//!   record id 0 and are not written to any rank.
+//!   `set/<object>` in both (the set object's unique name from its glTF node,
+//!   [`crate::scene::gltf::set_object_names`]), or `set` for set geometry
+//!   without an object name. Material matte `CryptoMaterial`: the name of the
+//!   material ([`material_name`]: `wardrobe/material`, or a glTF material's
+//!   own name), agents and set alike. Samples that hit nothing (sky, escaped
+//!   rays) or a holdout record id 0 and are not written to any rank.
 //! - Ranking: each camera sample has weight 1 (the Gaussian pixel filter is
 //!   importance-sampled), so an id's coverage is (its samples) / spp, summed
 //!   per pixel in sample order and ranked by coverage, ties by id bits:
@@ -21,13 +25,20 @@ use std::path::Path;
 
 use super::exr::RawPart;
 use crate::error::{Error, IoContext, Result};
-use crate::scene::{vis, Instance};
+use crate::scene::{vis, Instance, Material};
 
 /// Type name of the agent matte (channels `CryptoAgent00.R` ...).
 pub const AGENT_MATTE: &str = "CryptoAgent";
 /// Type name of the part matte (channels `CryptoPart00.R` ...).
 pub const PART_MATTE: &str = "CryptoPart";
-/// Name of visible set (non-agent) geometry in both mattes.
+/// Type name of the material matte (channels `CryptoMaterial00.R` ...).
+pub const MATERIAL_MATTE: &str = "CryptoMaterial";
+/// The matte types a render writes, in [`CryptoNames`] order (agent, part,
+/// material: the index [`CryptoNames::manifest`] takes). Films and files
+/// list them sorted by type name instead.
+pub const MATTES: [&str; 3] = [AGENT_MATTE, PART_MATTE, MATERIAL_MATTE];
+/// Name of set (non-agent) geometry that has no object name, in the agent
+/// and part mattes; named set objects are `set/<object>` ([`set_object_name`]).
 pub const SET_NAME: &str = "set";
 /// Ranks written per matte (the spec's suggested default: 3 RGBA layers).
 pub const RANKS: usize = 6;
@@ -100,6 +111,20 @@ pub fn agent_name(agent: u32) -> String {
 /// `agent_<id>/<slot>`: a part's name in the part matte.
 pub fn part_name(agent: u32, slot: &str) -> String {
     format!("agent_{agent}/{slot}")
+}
+
+/// `set/<object>`: a set object's name in the agent and part mattes, from
+/// its unique name in the set file.
+pub fn set_object_name(object: &str) -> String {
+    format!("{SET_NAME}/{object}")
+}
+
+/// A material's name in the material matte, from its library name: glTF
+/// materials are `<file>#<material>` in the library and keep `<material>`,
+/// the name given in the file (the same on every machine, wherever the file
+/// lives); wardrobe materials (`wardrobe/material`, no `#`) keep theirs.
+pub fn material_name(library_name: &str) -> &str {
+    library_name.rsplit_once('#').map_or(library_name, |(_, name)| name)
 }
 
 /// One pixel's running (id, sample count) table: fixed capacity, no heap.
@@ -340,39 +365,78 @@ enum NameKey {
     Agent(u32),
     /// Agent, index into `CryptoNames::slots`.
     Part(u32, u32),
+    /// A whole name (set object or material), index into `CryptoNames::labels`.
+    Label(u32),
 }
 
-/// The ids of every instance of one frame scene, for both mattes, and the
-/// way back from an id to its name (for the manifest).
+/// The name tables of a frame scene's set objects and materials, for
+/// [`CryptoNames::new`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NameTables<'a> {
+    /// The library's materials, by [`Instance::material`]; a material past
+    /// the end is named `material<index>`.
+    pub materials: &'a [Material],
+    /// Set object names, by a set instance's [`Instance::part`]; a set
+    /// instance past the end is named [`SET_NAME`].
+    pub set_objects: &'a [String],
+}
+
+/// The ids of every instance of one frame scene, for the three mattes, and
+/// the way back from an id to its name (for the manifests).
 #[derive(Clone, Debug, Default)]
 pub struct CryptoNames {
-    /// Per instance: [agent matte id bits, part matte id bits]; 0 = nothing.
-    ids: Vec<[u32; 2]>,
-    names: [HashMap<u32, NameKey>; 2],
+    /// Per instance: [agent, part, material] matte id bits; 0 = nothing.
+    ids: Vec<[u32; 3]>,
+    names: [HashMap<u32, NameKey>; 3],
     /// Extra names of ids that collide (the manifest lists them all).
-    collisions: [Vec<(u32, NameKey)>; 2],
+    collisions: [Vec<(u32, NameKey)>; 3],
     slots: Vec<String>,
+    labels: Vec<String>,
+    label_index: HashMap<String, u32>,
 }
 
 impl CryptoNames {
     /// Names the instances of a frame scene. `slot_name(agent, part)` gives
     /// the rig slot name of an agent's part index; `None` falls back to
-    /// `part<index>`. Holdouts get id 0 (they are never a first hit anyway).
-    pub fn new<'a>(instances: &[Instance], slot_name: impl Fn(u32, u16) -> Option<&'a str>) -> CryptoNames {
+    /// `part<index>`. Set objects and materials are named from `tables`.
+    /// Holdouts get id 0 (they are never a first hit anyway).
+    pub fn new<'a>(
+        instances: &[Instance],
+        tables: &NameTables,
+        slot_name: impl Fn(u32, u16) -> Option<&'a str>,
+    ) -> CryptoNames {
         let mut names = CryptoNames::default();
         let mut slot_index: HashMap<String, u32> = HashMap::new();
+        // Id bits per set object (by `part`) and per material, hashed once.
+        let mut objects: HashMap<u16, u32> = HashMap::new();
+        let mut materials: Vec<Option<u32>> = Vec::new();
         let mut last_agent: Option<(u32, u32)> = None;
         let mut buf = String::new();
         for inst in instances {
             if inst.visibility & vis::HOLDOUT != 0 {
-                names.ids.push([0, 0]);
+                names.ids.push([0, 0, 0]);
                 continue;
             }
+            let material = names.material_id(inst.material, tables.materials, &mut materials);
             let Some(agent) = inst.agent else {
-                let id = name_id(SET_NAME).to_bits();
-                names.insert(0, id, NameKey::Set);
-                names.insert(1, id, NameKey::Set);
-                names.ids.push([id, id]);
+                let id = match objects.get(&inst.part) {
+                    Some(&id) => id,
+                    None => {
+                        let (key, id) = match tables.set_objects.get(inst.part as usize) {
+                            Some(object) => {
+                                let name = set_object_name(object);
+                                let id = name_id(&name).to_bits();
+                                (names.label(name), id)
+                            }
+                            None => (NameKey::Set, name_id(SET_NAME).to_bits()),
+                        };
+                        names.insert(0, id, key);
+                        names.insert(1, id, key);
+                        objects.insert(inst.part, id);
+                        id
+                    }
+                };
+                names.ids.push([id, id, material]);
                 continue;
             };
             // An agent's instances are contiguous: hash its name once.
@@ -407,9 +471,41 @@ impl CryptoNames {
             let _ = write!(buf, "agent_{agent}/{slot}");
             let part_id = name_id(&buf).to_bits();
             names.insert(1, part_id, NameKey::Part(agent, si));
-            names.ids.push([agent_id, part_id]);
+            names.ids.push([agent_id, part_id, material]);
         }
         names
+    }
+
+    /// The key of a whole name, stored once.
+    fn label(&mut self, name: String) -> NameKey {
+        if let Some(&i) = self.label_index.get(&name) {
+            return NameKey::Label(i);
+        }
+        let i = self.labels.len() as u32;
+        self.label_index.insert(name.clone(), i);
+        self.labels.push(name);
+        NameKey::Label(i)
+    }
+
+    /// The material matte id bits of library material `material` (hashed
+    /// once per material; `cache` by material index).
+    fn material_id(&mut self, material: u32, library: &[Material], cache: &mut Vec<Option<u32>>) -> u32 {
+        let m = material as usize;
+        if cache.len() <= m {
+            cache.resize(m + 1, None);
+        }
+        if let Some(id) = cache[m] {
+            return id;
+        }
+        let name = match library.get(m) {
+            Some(mat) => material_name(&mat.name).to_string(),
+            None => format!("material{m}"),
+        };
+        let id = name_id(&name).to_bits();
+        let key = self.label(name);
+        self.insert(2, id, key);
+        cache[m] = Some(id);
+        id
     }
 
     fn insert(&mut self, matte: usize, id: u32, key: NameKey) {
@@ -426,9 +522,9 @@ impl CryptoNames {
         }
     }
 
-    /// [agent matte id bits, part matte id bits] of instance `i` (0 = none).
-    pub fn ids(&self, instance: u32) -> [u32; 2] {
-        self.ids.get(instance as usize).copied().unwrap_or([0, 0])
+    /// [agent, part, material] matte id bits of instance `i` (0 = none).
+    pub fn ids(&self, instance: u32) -> [u32; 3] {
+        self.ids.get(instance as usize).copied().unwrap_or([0; 3])
     }
 
     fn name(&self, key: NameKey) -> String {
@@ -436,14 +532,17 @@ impl CryptoNames {
             NameKey::Set => SET_NAME.to_string(),
             NameKey::Agent(a) => agent_name(a),
             NameKey::Part(a, s) => part_name(a, self.slots.get(s as usize).map_or("?", String::as_str)),
+            NameKey::Label(i) => self.labels.get(i as usize).cloned().unwrap_or_default(),
         }
     }
 
-    /// The manifest of matte 0 (agents) or 1 (parts) restricted to `present` ids.
+    /// The manifest of matte `matte` (index into [`MATTES`]: 0 agents, 1
+    /// parts, 2 materials) restricted to `present` ids.
     pub fn manifest(&self, matte: usize, present: &BTreeSet<u32>) -> BTreeMap<String, u32> {
         let mut out = BTreeMap::new();
+        let Some(names) = self.names.get(matte) else { return out };
         for &id in present {
-            if let Some(&k) = self.names[matte].get(&id) {
+            if let Some(&k) = names.get(&id) {
                 out.insert(self.name(k), id);
             }
         }
@@ -473,9 +572,21 @@ mod tests {
         assert!(hash_to_float(u32::MAX).is_finite());
         // The keys and ids quoted in docs/cryptomatte.md.
         assert_eq!((layer_key(AGENT_MATTE).as_str(), layer_key(PART_MATTE).as_str()), ("f7945dc", "3201c4f"));
+        assert_eq!(layer_key(MATERIAL_MATTE), MATERIAL_KEY_IN_DOCS);
         assert_eq!(id_hex(name_id(&agent_name(78))), "26e5095d");
         assert_eq!(id_hex(name_id(SET_NAME)), "5ecc6fe8");
         assert_eq!(id_hex(name_id(&part_name(78, "head"))), "ff7184e5");
+    }
+
+    /// `CryptoMaterial`'s header key, as docs/cryptomatte.md quotes it.
+    const MATERIAL_KEY_IN_DOCS: &str = "be359d6";
+
+    #[test]
+    fn material_and_set_object_names() {
+        assert_eq!(material_name("/show/sets/city.glb#brick_red"), "brick_red");
+        assert_eq!(material_name("sets/a#b.glb#glass"), "glass");
+        assert_eq!(material_name("robots/chrome"), "robots/chrome");
+        assert_eq!(set_object_name("street/lamp#2"), "set/street/lamp#2");
     }
 
     #[test]

@@ -6,7 +6,8 @@
 //! `Z` (float, camera-space depth, +inf = no hit), `agent.id` (uint, 0 = no
 //! agent, else cache id + 1), `albedo.B albedo.G albedo.R` (half), and when
 //! the film has them the Cryptomatte rank channels `CryptoAgent00.R ...`,
-//! `CryptoPart00.R ...` (float) with their `cryptomatte/<key>/...` header
+//! `CryptoMaterial00.R ...`, `CryptoPart00.R ...` (float) with their
+//! `cryptomatte/<key>/...` header
 //! (see [`super::cryptomatte`]).
 
 use std::collections::BTreeMap;

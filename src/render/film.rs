@@ -14,10 +14,11 @@
 //!   the surface the nearest sample hit, pixels per frame, +u right and +v
 //!   up (Nuke's `forward` vectors); zero where that sample missed, hit a
 //!   holdout or hit something that does not move.
-//! - `cryptomatte`: when rendered with [`CryptoNames`], the `CryptoAgent` and
-//!   `CryptoPart` mattes: per pixel the top [`RANKS`] (id, coverage) pairs,
-//!   ranked from a fixed-size per-pixel accumulator over the samples in
-//!   index order (so also independent of threading).
+//! - `cryptomatte`: when rendered with [`CryptoNames`], the `CryptoAgent`,
+//!   `CryptoMaterial` and `CryptoPart` mattes (sorted by type name, as a file
+//!   reads back): per pixel the top [`RANKS`] (id, coverage) pairs, ranked
+//!   from a fixed-size per-pixel accumulator over the samples in index order
+//!   (so also independent of threading).
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -26,7 +27,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::accel::{BlasSet, Tlas};
-use super::cryptomatte::{CryptoNames, Cryptomatte, RankAccumulator, AGENT_MATTE, PART_MATTE, RANKS};
+use super::cryptomatte::{CryptoNames, Cryptomatte, RankAccumulator, MATTES, RANKS};
 use super::integrator::{Integrator, RayCounts, SampleResult};
 use super::RenderSettings;
 use crate::error::{Error, Result};
@@ -66,7 +67,8 @@ pub struct Film {
     pub albedo: Vec<[f32; 3]>,
     /// 0 = no agent, else cache agent id + 1.
     pub agent_id: Vec<u32>,
-    /// Cryptomatte types (`CryptoAgent`, `CryptoPart`); empty when not rendered.
+    /// Cryptomatte types (`CryptoAgent`, `CryptoMaterial`, `CryptoPart`),
+    /// sorted by type name; empty when not rendered.
     pub cryptomatte: Vec<Cryptomatte>,
     /// Motion vectors (u right, v up), pixels per frame; empty when rendered without a shutter.
     pub motion: Vec<[f32; 2]>,
@@ -112,8 +114,9 @@ struct Pixel {
     albedo: [f32; 3],
     agent: u32,
     motion: [f32; 2],
-    /// Ranked (id, coverage) of the agent and part mattes (when enabled).
-    crypto: [[[f32; 2]; RANKS]; 2],
+    /// Ranked (id, coverage) of the agent, part and material mattes (when
+    /// enabled), in [`MATTES`] order.
+    crypto: [[[f32; 2]; RANKS]; 3],
 }
 
 fn render_pixel(
@@ -126,15 +129,16 @@ fn render_pixel(
 ) -> Pixel {
     let (mut rgb, mut alpha, mut normal, mut albedo) = (Vec3::ZERO, 0.0f32, Vec3::ZERO, Vec3::ZERO);
     let mut nearest = (f32::INFINITY, SampleResult { z: f32::INFINITY, ..Default::default() });
-    let mut acc = [RankAccumulator::default(), RankAccumulator::default()];
+    let mut acc: [RankAccumulator; 3] = Default::default();
     // Samples summed in index order: the float result is independent of threading.
     for s in 0..spp {
         let (r, offset) = integrator.sample_pixel(x, y, s, counts);
         if let Some(names) = crypto {
             // Each sample has filter weight 1 (importance-sampled filter).
-            let ids = r.instance.map_or([0, 0], |i| names.ids(i));
-            acc[0].add(ids[0]);
-            acc[1].add(ids[1]);
+            let ids = r.instance.map_or([0; 3], |i| names.ids(i));
+            for (a, id) in acc.iter_mut().zip(ids) {
+                a.add(id);
+            }
         }
         rgb += r.rgb;
         alpha += r.alpha;
@@ -146,10 +150,11 @@ fn render_pixel(
         }
     }
     let inv = 1.0 / spp as f32;
-    let mut ranked = [[[0.0f32; 2]; RANKS]; 2];
+    let mut ranked = [[[0.0f32; 2]; RANKS]; 3];
     if crypto.is_some() {
-        acc[0].write_ranked(spp, &mut ranked[0]);
-        acc[1].write_ranked(spp, &mut ranked[1]);
+        for (a, out) in acc.iter().zip(&mut ranked) {
+            a.write_ranked(spp, out);
+        }
     }
     Pixel {
         rgba: (rgb * inv).extend(alpha * inv).to_array(),
@@ -186,9 +191,10 @@ pub fn render_frame_with_stats(
     render_frame_with_cryptomatte(blas, lib, scene, settings, None, progress)
 }
 
-/// As [`render_frame_with_stats`], also rendering the `CryptoAgent` and
-/// `CryptoPart` mattes when `crypto` (built from `scene.instances`) is given.
-/// Their manifests list only the names present in this image.
+/// As [`render_frame_with_stats`], also rendering the `CryptoAgent`,
+/// `CryptoPart` and `CryptoMaterial` mattes when `crypto` (built from
+/// `scene.instances`) is given. Their manifests list only the names present
+/// in this image; the film holds them sorted by type name.
 pub fn render_frame_with_cryptomatte(
     blas: &BlasSet,
     lib: &Library,
@@ -235,7 +241,7 @@ pub fn render_frame_with_cryptomatte(
             film.motion = vec![[0.0; 2]; film.rgba.len()];
         }
         let mut mattes = match crypto {
-            Some(_) => vec![Cryptomatte::new(AGENT_MATTE, w, h, RANKS), Cryptomatte::new(PART_MATTE, w, h, RANKS)],
+            Some(_) => MATTES.iter().map(|name| Cryptomatte::new(name, w, h, RANKS)).collect(),
             None => Vec::new(),
         };
         for (&(x0, y0), (pixels, counts)) in tiles.iter().zip(&rendered) {
@@ -261,6 +267,7 @@ pub fn render_frame_with_cryptomatte(
                 m.manifest = names.manifest(k, &m.ids_present());
             }
         }
+        mattes.sort_by(|a, b| a.name.cmp(&b.name));
         film.cryptomatte = mattes;
         Ok((film, stats))
     })

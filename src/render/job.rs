@@ -14,7 +14,7 @@ use crate::casting::{AgentPose, Lod, ShotCrowd};
 use crate::error::{Error, Result};
 use crate::layers::Manifest;
 use crate::output::{layer_path, FULL_LAYER};
-use crate::render::cryptomatte::CryptoNames;
+use crate::render::cryptomatte::{CryptoNames, NameTables};
 use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, RenderSettings};
 use crate::scene::{vis, Deform, FrameScene, Instance, InstanceMotion, SceneMotion};
 
@@ -37,7 +37,7 @@ pub struct RenderJob {
     pub png: bool,
     /// Image size override (width, height); the shot's when `None`.
     pub resolution: Option<[u32; 2]>,
-    /// Cryptomatte output (`CryptoAgent`, `CryptoPart`).
+    /// Cryptomatte output (`CryptoAgent`, `CryptoPart`, `CryptoMaterial`).
     pub cryptomatte: CryptoOutput,
     /// How progress is reported on stderr.
     pub progress: ProgressStyle,
@@ -100,9 +100,11 @@ pub enum CryptoOutput {
 }
 
 /// The Cryptomatte names of a frame scene's instances: slot names from each
-/// agent's rig.
+/// agent's rig, set objects from the set file's nodes
+/// ([`ShotCrowd::set_names`]), materials from the library.
 pub fn crypto_names(crowd: &ShotCrowd, scene: &FrameScene) -> CryptoNames {
-    CryptoNames::new(&scene.instances, |agent, part| crowd.slot_name(agent, part))
+    let tables = NameTables { materials: &crowd.library().materials, set_objects: &crowd.set_names };
+    CryptoNames::new(&scene.instances, &tables, |agent, part| crowd.slot_name(agent, part))
 }
 
 /// One file the job wrote or skipped.
@@ -337,8 +339,10 @@ impl Progress {
 /// lights of the shot, Cryptomatte and compression choices, the layer name
 /// and the manifest (whose `made_from` covers the cache and casting), and the
 /// shutter when motion blur is on (a still render's text is unchanged, so
-/// files rendered before motion blur existed still resume). `--resume` skips
-/// a file only when its fingerprint matches.
+/// files rendered before motion blur existed still resume), and with
+/// Cryptomatte on the matte types and set object naming (files from before
+/// `CryptoMaterial` and named set objects render again). `--resume` skips a
+/// file only when its fingerprint matches.
 pub fn render_fingerprint(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob, layer: &str) -> String {
     let shot = &crowd.shot;
     let [w, h] = job.resolution.unwrap_or(shot.render.resolution);
@@ -359,6 +363,10 @@ pub fn render_fingerprint(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &
     let text = match job.shutter {
         Some([open, close]) => format!("{text} shutter {:08x} {:08x}", open.to_bits(), close.to_bits()),
         None => text,
+    };
+    let text = match job.cryptomatte {
+        CryptoOutput::Off => text,
+        _ => format!("{text} mattes {} set-objects", crate::render::cryptomatte::MATTES.join(",")),
     };
     format!("{:08x}", crc32fast::hash(text.as_bytes()))
 }

@@ -13,12 +13,14 @@
 //! most triangles of that mesh. Where every primitive's own material matters
 //! (the set, multi-material parts), use [`AssetCache::mesh_primitives`] or
 //! [`AssetCache::load_scene_instances`], which keep one mesh per primitive.
+//! [`AssetCache::load_scene_objects`] also names the set's objects (its
+//! nodes with a mesh) uniquely for Cryptomatte ([`set_object_names`]).
 //!
 //! Accessors are checked (type, count, stride, range) before they are read,
 //! so a malformed file gives an error naming the file and mesh or animation,
 //! never a panic.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -152,6 +154,57 @@ impl GltfFile {
 /// A node's local transform as an affine (glTF: T * R * S, or its matrix).
 pub fn node_affine(node: &gltf::Node) -> Affine3A {
     Affine3A::from_mat4(Mat4::from_cols_array_2d(&node.transform().matrix()))
+}
+
+/// What [`AssetCache::load_scene_objects`] gives: (mesh, material,
+/// world_from_object, object index) per placed primitive, and the objects' names.
+pub type SceneObjects = (Vec<(MeshId, MaterialId, Affine3A, u32)>, Vec<String>);
+
+/// Unique, stable names for a set's objects from their node paths (the node
+/// names from a scene root down to the object's node, `#<index>` for an
+/// unnamed node), given in file order:
+/// - the node's own name, where no other object has it;
+/// - else its path joined with `/` (`street_2/lamp`);
+/// - objects whose paths are still shared (siblings of one name) add `#1`,
+///   `#2`, ... in file order (`street_2/lamp#1`);
+/// - a result that still equals an earlier one (a node really named
+///   `lamp#1`) adds `~2`, `~3`, ...
+///
+/// Depends only on the file's names and order: the same file gives the same
+/// names on every machine and run.
+pub fn set_object_names(paths: &[Vec<String>]) -> Vec<String> {
+    let leaf = |p: &[String]| p.last().cloned().unwrap_or_default();
+    let mut leaves: HashMap<String, usize> = HashMap::new();
+    for p in paths {
+        *leaves.entry(leaf(p)).or_default() += 1;
+    }
+    let first: Vec<String> =
+        paths.iter().map(|p| if leaves.get(&leaf(p)) == Some(&1) { leaf(p) } else { p.join("/") }).collect();
+    let mut count: HashMap<&str, usize> = HashMap::new();
+    for n in &first {
+        *count.entry(n.as_str()).or_default() += 1;
+    }
+    let mut seen: HashMap<&str, usize> = HashMap::new();
+    let mut used: HashSet<String> = HashSet::new();
+    let mut out = Vec::with_capacity(first.len());
+    for n in &first {
+        let base = if count.get(n.as_str()) == Some(&1) {
+            n.clone()
+        } else {
+            let k = seen.entry(n.as_str()).or_default();
+            *k += 1;
+            format!("{n}#{k}")
+        };
+        let mut name = base.clone();
+        let mut k = 2;
+        while used.contains(&name) {
+            name = format!("{base}~{k}");
+            k += 1;
+        }
+        used.insert(name.clone());
+        out.push(name);
+    }
+    out
 }
 
 /// `name` or `#index` for messages about unnamed nodes.
@@ -658,27 +711,43 @@ impl AssetCache {
     /// scene): (mesh, the primitive's own material, world_from_object with
     /// parent transforms composed), depth-first in file order.
     pub fn load_scene_instances(&mut self, path: impl AsRef<Path>) -> Result<Vec<(MeshId, MaterialId, Affine3A)>> {
+        let (placed, _) = self.load_scene_objects(path)?;
+        Ok(placed.into_iter().map(|(mesh, material, world, _)| (mesh, material, world)).collect())
+    }
+
+    /// As [`AssetCache::load_scene_instances`], each primitive also with its
+    /// object: the index, in the returned names, of the node that places it.
+    /// Objects are the nodes with a mesh, in the same depth-first file order,
+    /// named uniquely by [`set_object_names`] from their node paths.
+    pub fn load_scene_objects(&mut self, path: impl AsRef<Path>) -> Result<SceneObjects> {
         let src = self.source(path.as_ref())?;
         let file = src.file.clone();
         file.parents()?; // a forest, so the walk below ends
         let scene =
             file.doc.default_scene().or_else(|| file.doc.scenes().next()).ok_or_else(|| file.err("has no scene"))?;
-        let mut stack: Vec<(gltf::Node, Affine3A)> = scene.nodes().map(|n| (n.clone(), node_affine(&n))).collect();
+        let label = |n: &gltf::Node| n.name().map(str::to_string).unwrap_or_else(|| format!("#{}", n.index()));
+        let mut stack: Vec<(gltf::Node, Affine3A, Vec<String>)> =
+            scene.nodes().map(|n| (n.clone(), node_affine(&n), vec![label(&n)])).collect();
         stack.reverse();
         let mut out = Vec::new();
-        while let Some((node, world)) = stack.pop() {
+        let mut paths: Vec<Vec<String>> = Vec::new();
+        while let Some((node, world, path)) = stack.pop() {
             if let Some(mesh) = node.mesh() {
+                let object = paths.len() as u32;
                 for (mesh, material) in self.primitives_of(&src, mesh.index())? {
-                    out.push((mesh, material, world));
+                    out.push((mesh, material, world, object));
                 }
+                paths.push(path.clone());
             }
             let children: Vec<_> = node.children().collect();
             for child in children.into_iter().rev() {
                 let child_world = world * node_affine(&child);
-                stack.push((child, child_world));
+                let mut child_path = path.clone();
+                child_path.push(label(&child));
+                stack.push((child, child_world, child_path));
             }
         }
-        Ok(out)
+        Ok((out, set_object_names(&paths)))
     }
 
     /// The camera on node `node_name`. `world_from_camera` keeps the node's
@@ -771,5 +840,40 @@ pub fn quat_from_gltf(q: [f32; 4]) -> Quat {
         q.normalize()
     } else {
         Quat::IDENTITY
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn paths(list: &[&str]) -> Vec<Vec<String>> {
+        list.iter().map(|p| p.split('/').map(str::to_string).collect()).collect()
+    }
+
+    #[test]
+    fn set_object_names_are_unique_and_stable() {
+        let mut input = paths(&["floor", "street_1/lamp", "street_2/lamp", "street_2/lamp", "#7", "tower"]);
+        // A root node whose own name is what the rules make of another.
+        input.push(vec!["street_2/lamp#2".to_string()]);
+        input.extend(paths(&["block/bench", "block/lamp"]));
+        let names = set_object_names(&input);
+        assert_eq!(
+            names,
+            [
+                "floor",
+                "street_1/lamp",
+                "street_2/lamp#1",
+                "street_2/lamp#2",
+                "#7",
+                "tower",
+                "street_2/lamp#2~2",
+                "bench",
+                "block/lamp",
+            ]
+        );
+        let unique: HashSet<&String> = names.iter().collect();
+        assert_eq!(unique.len(), names.len());
+        assert_eq!(set_object_names(&input), names, "deterministic");
     }
 }

@@ -169,7 +169,9 @@ pub struct Instance {
     pub world_from_object: Affine3A,
     /// Cache agent id; `None` for the set.
     pub agent: Option<u32>,
-    /// Slot index within the agent's rig (0 for the set).
+    /// Slot index within the agent's rig; for the set, the index of the set
+    /// object (the glTF node placing it) in the shot's set object names
+    /// (`ShotCrowd::set_names`, what Cryptomatte calls it).
     pub part: u16,
     /// [`vis`] bits.
     pub visibility: u8,
