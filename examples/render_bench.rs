@@ -184,7 +184,7 @@ fn main() {
 
         // A small frame on all cores through the public entry point.
         let scene = FrameScene {
-            instances,
+            instances: instances.clone(),
             camera: Camera {
                 world_from_camera: Affine3A::from_rotation_translation(
                     Quat::from_rotation_x(-0.05),

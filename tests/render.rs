@@ -597,7 +597,8 @@ fn degenerate_mesh_triangles_are_dropped() {
     let blas = BlasSet::build(&lib);
     blas.validate();
     assert_eq!(blas.get(0).unwrap().triangle_count(), 1);
-    let tlas = Tlas::build(&blas, &[instance(0, 0, Affine3A::IDENTITY, None, vis::ALL)]);
+    let one = [instance(0, 0, Affine3A::IDENTITY, None, vis::ALL)];
+    let tlas = Tlas::build(&blas, &one);
     let hit = tlas
         .intersect(
             &WorldRay { origin: Vec3::new(0.2, 0.2, 1.0), direction: -Vec3::Z, tmax: f32::INFINITY, time: 0.0 },
@@ -623,7 +624,8 @@ fn axis_aligned_rays_hit_shared_edges_and_signed_zeros() {
     let turned = Affine3A::from_rotation_y(PI); // object-space directions pick up -0.0 too
     for kind in [TlasKind::Bvh2, TlasKind::CwBvh] {
         for (mesh, m, expected_t) in [(0, Affine3A::IDENTITY, 1.0), (1, Affine3A::IDENTITY, 0.5), (1, turned, 0.5)] {
-            let tlas = Tlas::build_with(&blas, &[instance(mesh, 0, m, None, vis::ALL)], kind);
+            let one = [instance(mesh, 0, m, None, vis::ALL)];
+            let tlas = Tlas::build_with(&blas, &one, kind);
             for d in [-Vec3::Z, Vec3::new(0.0, 0.0, -1.0)] {
                 let ray = WorldRay { origin: Vec3::new(0.2, 0.2, 1.0), direction: d, tmax: f32::INFINITY, time: 0.0 };
                 let hit = tlas.intersect(&ray, vis::ALL);

@@ -334,15 +334,12 @@ enum TlasTree {
 
 /// An instance as the TLAS stores it, in TLAS slot order.
 struct TlasInstance {
-    /// Object from world, column-major 3x4 (48 bytes, not `Affine3A`'s 64:
-    /// eleven million part instances keep one each).
-    object_from_world: [f32; 12],
     /// Index into `FrameScene::instances`.
     index: u32,
     mesh: u32,
-    visibility: u8,
     /// Index into `Tlas::moving`, or [`STILL`].
     motion: u32,
+    visibility: u8,
 }
 
 /// From this many instances on, each agent's parts share one TLAS leaf:
@@ -418,6 +415,13 @@ pub struct Hit {
 /// deep, overflowing obvhs' fixed traversal stacks silently.
 pub struct Tlas<'a> {
     blas: &'a BlasSet,
+    /// The frame scene's instances (transforms of agent-leaf trees).
+    source: &'a [Instance],
+    /// Object from world per entry of `instances`, column-major 3x4; empty
+    /// in a tree of agent leaves, where each visit inverts the scene
+    /// instance's transform instead (48 bytes fewer for each of millions
+    /// of parts, for an inverse per visit).
+    inverses: Vec<[f32; 12]>,
     tree: TlasTree,
     /// Instances grouped by cluster, clusters in TLAS slot order.
     instances: Vec<TlasInstance>,
@@ -455,8 +459,8 @@ fn world_ray(ray: &WorldRay) -> Ray {
 /// Transforms a world ray into an instance's object space. The direction is
 /// not renormalised, so `t` means the same distance in both spaces.
 #[inline]
-fn object_ray(inst: &TlasInstance, r: &Ray, tmax: f32) -> Ray {
-    transform_ray(&Affine3A::from_cols_array(&inst.object_from_world), r, tmax)
+fn object_ray(object_from_world: &Affine3A, r: &Ray, tmax: f32) -> Ray {
+    transform_ray(object_from_world, r, tmax)
 }
 
 #[inline]
@@ -474,7 +478,7 @@ impl<'a> Tlas<'a> {
     /// Builds the TLAS of `instances` with the tree kind suited to their
     /// number. Instances with an unknown or empty mesh, a singular or
     /// non-finite transform, or no visibility bits are left out.
-    pub fn build(blas: &'a BlasSet, instances: &[Instance]) -> Tlas<'a> {
+    pub fn build(blas: &'a BlasSet, instances: &'a [Instance]) -> Tlas<'a> {
         Self::build_with(blas, instances, TlasKind::for_count(instances.len()))
     }
 
@@ -486,7 +490,7 @@ impl<'a> Tlas<'a> {
     pub fn build_scene(
         blas: &'a BlasSet,
         lib: &Library,
-        instances: &[Instance],
+        instances: &'a [Instance],
         motion: Option<&SceneMotion>,
     ) -> Tlas<'a> {
         let Some(motion) = motion.filter(|m| m.instances.len() == instances.len()) else {
@@ -535,14 +539,14 @@ impl<'a> Tlas<'a> {
     }
 
     /// Builds the TLAS with a chosen tree kind (for benchmarks).
-    pub fn build_with(blas: &'a BlasSet, instances: &[Instance], kind: TlasKind) -> Tlas<'a> {
+    pub fn build_with(blas: &'a BlasSet, instances: &'a [Instance], kind: TlasKind) -> Tlas<'a> {
         Self::build_clustered(blas, instances, kind, instances.len() >= AGENT_CLUSTERS_FROM)
     }
 
     /// Builds the TLAS with each agent's parts in one leaf or not, whatever
     /// the instance count (tests compare the two).
     #[doc(hidden)]
-    pub fn build_clustered(blas: &'a BlasSet, instances: &[Instance], kind: TlasKind, by_agent: bool) -> Tlas<'a> {
+    pub fn build_clustered(blas: &'a BlasSet, instances: &'a [Instance], kind: TlasKind, by_agent: bool) -> Tlas<'a> {
         let bounds = |_: usize, inst: &Instance, b: &Blas| world_bounds(&b.bounds(), &inst.world_from_object);
         Self::build_keyed(blas, instances, kind, bounds, &[], Vec::new(), by_agent)
     }
@@ -554,7 +558,7 @@ impl<'a> Tlas<'a> {
 
     fn build_keyed(
         blas: &'a BlasSet,
-        instances: &[Instance],
+        instances: &'a [Instance],
         kind: TlasKind,
         world: impl Fn(usize, &Instance, &Blas) -> Aabb,
         motion_index: &[u32],
@@ -635,6 +639,7 @@ impl<'a> Tlas<'a> {
         // Lay clusters out in slot order: one fewer indirection per visit.
         let source = instances;
         let mut instances = Vec::with_capacity(member.len());
+        let mut inverses = Vec::with_capacity(if by_agent { 0 } else { member.len() });
         let mut clusters = Vec::with_capacity(order.len());
         for &c in &order {
             let (_, start, len) = runs[c as usize];
@@ -642,8 +647,10 @@ impl<'a> Tlas<'a> {
             for &j in &sorted[start as usize..(start + len) as usize] {
                 let i = member[j as usize];
                 let inst = &source[i as usize];
+                if !by_agent {
+                    inverses.push(inst.world_from_object.inverse().to_cols_array());
+                }
                 instances.push(TlasInstance {
-                    object_from_world: inst.world_from_object.inverse().to_cols_array(),
                     index: i,
                     mesh: inst.mesh,
                     visibility: inst.visibility,
@@ -654,7 +661,7 @@ impl<'a> Tlas<'a> {
         // The leaves' bounds are kept for `validate` in debug builds only.
         let aabbs =
             if cfg!(debug_assertions) { order.iter().map(|&c| aabbs[c as usize]).collect() } else { Vec::new() };
-        Tlas { blas, tree, instances, clusters, aabbs, moving, build_time: start.elapsed() }
+        Tlas { blas, source, inverses, tree, instances, clusters, aabbs, moving, build_time: start.elapsed() }
     }
 
     /// Number of instances in the tree.
@@ -665,6 +672,15 @@ impl<'a> Tlas<'a> {
     /// True when nothing can be hit.
     pub fn is_empty(&self) -> bool {
         self.instances.is_empty()
+    }
+
+    /// Object from world of `instances[k]`.
+    #[inline]
+    fn object_from_world(&self, k: usize, inst: &TlasInstance) -> Affine3A {
+        match self.inverses.get(k) {
+            Some(m) => Affine3A::from_cols_array(m),
+            None => self.source[inst.index as usize].world_from_object.inverse(),
+        }
     }
 
     #[inline]
@@ -713,7 +729,7 @@ impl<'a> Tlas<'a> {
                 }
                 let hit = if inst.motion == STILL {
                     let Some(b) = self.blas.get(inst.mesh) else { continue };
-                    b.intersect(object_ray(inst, r, closest))
+                    b.intersect(object_ray(&self.object_from_world(k, inst), r, closest))
                 } else {
                     self.intersect_moving(inst, r, closest, time)
                 };
@@ -739,7 +755,7 @@ impl<'a> Tlas<'a> {
         let slot = best.1 as usize;
         let (uv, triangle) = if inst.motion == STILL {
             let b = self.blas.get(inst.mesh)?;
-            let local = object_ray(inst, &world, world.tmax);
+            let local = object_ray(&self.object_from_world(best.0, inst), &world, world.tmax);
             (b.tris[slot].compute_barycentric(&local), b.triangle_index[slot])
         } else {
             let mv = &self.moving[inst.motion as usize];
@@ -765,7 +781,9 @@ impl<'a> Tlas<'a> {
                 let inst = &self.instances[k];
                 inst.visibility & mask != 0
                     && if inst.motion == STILL {
-                        self.blas.get(inst.mesh).is_some_and(|b| b.occluded(object_ray(inst, r, r.tmax)))
+                        self.blas
+                            .get(inst.mesh)
+                            .is_some_and(|b| b.occluded(object_ray(&self.object_from_world(k, inst), r, r.tmax)))
                     } else {
                         self.occluded_moving(inst, r, time)
                     }
