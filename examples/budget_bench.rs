@@ -20,13 +20,27 @@ use throng::layers::{build_layers, LayerOverrides};
 use throng::render::job::{all_layers, run, ProgressStyle, RenderJob};
 
 fn main() {
-    if let Err(e) = bench() {
-        eprintln!("budget_bench: {e}");
-        std::process::exit(2);
+    match bench() {
+        Ok(true) => {}
+        Ok(false) => std::process::exit(1),
+        Err(e) => {
+            eprintln!("budget_bench: {e}");
+            std::process::exit(2);
+        }
     }
 }
 
-fn bench() -> Result<(), String> {
+/// Removes the benchmark's shot copy however the benchmark ends.
+struct RemoveOnDrop(PathBuf);
+
+impl Drop for RemoveOnDrop {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+/// Whether the budget held.
+fn bench() -> Result<bool, String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let flag = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).cloned();
     let takes_value = ["--resolution", "--spp", "--frame", "--out"];
@@ -60,6 +74,7 @@ fn bench() -> Result<(), String> {
     }
     let copy = std::path::Path::new(shot.as_str()).with_file_name(".budget_bench.shot.toml");
     std::fs::write(&copy, toml::to_string(&doc).map_err(|e| e.to_string())?).map_err(|e| e.to_string())?;
+    let _remove = RemoveOnDrop(copy.clone());
     let shot = copy.to_string_lossy().into_owned();
     let crowd = ShotCrowd::load(&copy).map_err(|e| e.to_string())?;
     let overrides = LayerOverrides { budget: Some(budget.to_string()), ..Default::default() };
@@ -115,12 +130,8 @@ fn bench() -> Result<(), String> {
         };
         println!("{:<10} {:>8} {:>14} {:>14} {:>7}  {under}", d.layer, agents, mib(estimate), mib(measured), ratio);
     }
-    let _ = std::fs::remove_file(&copy);
     println!("holds: {holds}");
-    if !holds {
-        std::process::exit(1);
-    }
-    Ok(())
+    Ok(holds)
 }
 
 /// Renders each layer of the job in its own `throng render` process and

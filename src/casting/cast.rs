@@ -154,19 +154,7 @@ pub fn cast_agent(
                 uniform_hashed(seed, id, fnv1a_from(fnv1a("material/"), slot)),
             )
             .unwrap_or(0);
-            // Loaded wardrobes hold one shared CastPart per material.
-            p.cast.get(m).cloned().unwrap_or_else(|| {
-                Arc::new(CastPart {
-                    file: p.file.clone(),
-                    mesh: p.mesh.clone(),
-                    material: p
-                        .materials
-                        .get(m)
-                        .cloned()
-                        .unwrap_or_else(|| crate::casting::wardrobe::GLTF_MATERIAL.into()),
-                    uniform: scheme.is_uniform(slot),
-                })
-            })
+            p.cast_part(m, scheme.is_uniform(slot))
         });
         slots.push(SlotCast { slot: slot.clone(), part });
     }

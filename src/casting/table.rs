@@ -79,11 +79,6 @@ pub struct SkinStats {
     pub worst_quantisation_error_m: f32,
 }
 
-/// Every agent's row, by id.
-pub fn cast_rows(crowd: &ShotCrowd) -> Vec<CastRow> {
-    crowd.casting.values().map(|c| cast_row(crowd, c)).collect()
-}
-
 /// One agent's row: its scheme, height, and part and material per slot.
 pub fn cast_row(crowd: &ShotCrowd, c: &AgentCast) -> CastRow {
     let lib = crowd.library();

@@ -93,6 +93,19 @@ fn gltf_only() -> Vec<Arc<str>> {
 }
 
 impl PartSpec {
+    /// The cast part for material variant `m`: the shared one a loaded
+    /// wardrobe made (see [`PartSpec::cast`]), else a new one.
+    pub fn cast_part(&self, m: usize, uniform: bool) -> Arc<crate::casting::cast::CastPart> {
+        self.cast.get(m).cloned().unwrap_or_else(|| {
+            Arc::new(crate::casting::cast::CastPart {
+                file: self.file.clone(),
+                mesh: self.mesh.clone(),
+                material: self.materials.get(m).cloned().unwrap_or_else(|| GLTF_MATERIAL.into()),
+                uniform,
+            })
+        })
+    }
+
     /// The weight of each material variant.
     pub fn material_weight_list(&self) -> Vec<f32> {
         self.material_weights.clone().unwrap_or_else(|| vec![1.0; self.materials.len()])
@@ -245,18 +258,7 @@ impl Wardrobes {
                 }
                 for part in &mut scheme.parts {
                     let uniform = file.uniform_slots.contains(&part.slot);
-                    part.cast = part
-                        .materials
-                        .iter()
-                        .map(|m| {
-                            Arc::new(crate::casting::cast::CastPart {
-                                file: part.file.clone(),
-                                mesh: part.mesh.clone(),
-                                material: m.clone(),
-                                uniform,
-                            })
-                        })
-                        .collect();
+                    part.cast = (0..part.materials.len()).map(|m| part.cast_part(m, uniform)).collect();
                 }
                 scheme.name = name.as_str().into();
                 scheme.wardrobe = file.name.clone();

@@ -275,11 +275,6 @@ impl BlasSet {
         self.blas.is_empty()
     }
 
-    /// Number of BLASes built so far.
-    pub fn built(&self) -> usize {
-        self.blas.iter().filter(|b| b.get().is_some()).count()
-    }
-
     /// The deforming BLAS blending mesh `a` into mesh `b` (same topology),
     /// built once and cached. `None` when either mesh is unknown or their
     /// topologies differ, or nothing in them can be hit.

@@ -153,6 +153,29 @@ impl PosedFrame {
     }
 }
 
+/// The set's visibility bits in `layer` (`None`: not in it).
+fn set_bits(manifest: Option<&Manifest>, layer: &str) -> Result<Option<u8>> {
+    if layer == FULL_LAYER {
+        return Ok(Some(vis::ALL));
+    }
+    let m = manifest.ok_or_else(|| Error::Usage(format!("layer `{layer}` needs a layer manifest")))?;
+    Ok(m.set_visibility(layer).filter(|&b| b != 0))
+}
+
+/// How agent `id` appears in `layer` at `frame`: its visibility bits (never
+/// 0) and LOD, or `None` when it is not traced there. `full` shows every
+/// agent at the LOD the manifest gives it (full without one).
+fn agent_bits(manifest: Option<&Manifest>, layer: &str, id: u32, frame: i32) -> Option<(u8, Lod)> {
+    let how = match manifest {
+        _ if layer == FULL_LAYER => {
+            Some((vis::ALL, manifest.and_then(|m| m.agent(id)).map_or(Lod::Full, |r| r.lod_at(frame))))
+        }
+        Some(m) => m.agent_visibility(layer, id, frame),
+        None => None,
+    };
+    how.filter(|&(bits, _)| bits != 0)
+}
+
 /// The instances of one (frame, layer) render.
 pub fn frame_scene(
     crowd: &ShotCrowd,
@@ -162,25 +185,13 @@ pub fn frame_scene(
 ) -> Result<FrameScene> {
     let frame = posed.frame;
     let mut instances: Vec<Instance> = Vec::new();
-    let set_bits = if layer == FULL_LAYER {
-        Some(vis::ALL)
-    } else {
-        let m = manifest.ok_or_else(|| Error::Usage(format!("layer `{layer}` needs a layer manifest")))?;
-        m.set_visibility(layer)
-    };
+    let set_bits = set_bits(manifest, layer)?;
     for (id, pose) in &posed.agents {
-        let how = match manifest {
-            _ if layer == FULL_LAYER => {
-                Some((vis::ALL, manifest.and_then(|m| m.agent(*id)).map_or(Lod::Full, |r| r.lod_at(frame))))
-            }
-            Some(m) => m.agent_visibility(layer, *id, frame),
-            None => None,
-        };
-        if let Some((bits, lod)) = how.filter(|&(bits, _)| bits != 0) {
+        if let Some((bits, lod)) = agent_bits(manifest, layer, *id, frame) {
             crowd.posed_instances(*id, pose, lod, bits, &mut instances);
         }
     }
-    if let Some(bits) = set_bits.filter(|&b| b != 0) {
+    if let Some(bits) = set_bits {
         instances.extend(crowd.set.iter().map(|i| Instance { visibility: bits, ..*i }));
     }
     Ok(FrameScene {
@@ -206,21 +217,9 @@ pub fn motion_scene(
     let mut instances: Vec<Instance> = Vec::new();
     let mut keys: Vec<InstanceMotion> = Vec::new();
     let mut close: Vec<Instance> = Vec::new();
-    let set_bits = if layer == FULL_LAYER {
-        Some(vis::ALL)
-    } else {
-        let m = manifest.ok_or_else(|| Error::Usage(format!("layer `{layer}` needs a layer manifest")))?;
-        m.set_visibility(layer)
-    };
+    let set_bits = set_bits(manifest, layer)?;
     for (id, m) in &motion.agents {
-        let how = match manifest {
-            _ if layer == FULL_LAYER => {
-                Some((vis::ALL, manifest.and_then(|m| m.agent(*id)).map_or(Lod::Full, |r| r.lod_at(frame))))
-            }
-            Some(man) => man.agent_visibility(layer, *id, frame),
-            None => None,
-        };
-        let Some((bits, lod)) = how.filter(|&(bits, _)| bits != 0) else { continue };
+        let Some((bits, lod)) = agent_bits(manifest, layer, *id, frame) else { continue };
         let start = instances.len();
         crowd.posed_instances(*id, &m.open, lod, bits, &mut instances);
         close.clear();
@@ -235,7 +234,7 @@ pub fn motion_scene(
             keys.extend(opened.iter().map(InstanceMotion::still));
         }
     }
-    if let Some(bits) = set_bits.filter(|&b| b != 0) {
+    if let Some(bits) = set_bits {
         let from = instances.len();
         instances.extend(crowd.set.iter().map(|i| Instance { visibility: bits, ..*i }));
         keys.extend(instances[from..].iter().map(InstanceMotion::still));
