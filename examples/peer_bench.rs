@@ -49,7 +49,7 @@ use throng::render::film::render_frame_with_stats;
 use throng::render::integrator::{offset_ray_origin, CameraRays};
 use throng::render::{BlasSet, RenderSettings};
 use throng::scene::gltf::AssetCache;
-use throng::scene::{vis, Camera, FrameScene, Instance, Library, Material, Mesh, Sky, Sun};
+use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun};
 
 /// Lumens per watt: the peers' (Blender glTF importer's) lux to W/m^2 factor.
 const LUMENS_PER_WATT: f32 = 683.0;
@@ -159,7 +159,7 @@ fn load_glb(path: &PathBuf, args: &Args) -> Result<Loaded, String> {
             mesh,
             material,
             world_from_object,
-            agent: None,
+            agent: InstanceAgent::NONE,
             part: 0,
             visibility: vis::ALL,
         })
@@ -257,7 +257,7 @@ fn synthetic(n: usize, args: &Args) -> Loaded {
         mesh: 0,
         material: 0,
         world_from_object: Affine3A::IDENTITY,
-        agent: None,
+        agent: InstanceAgent::NONE,
         part: 0,
         visibility: vis::ALL,
     });
@@ -289,7 +289,7 @@ fn synthetic(n: usize, args: &Args) -> Loaded {
                 mesh: [head, 1, limb][*kind as usize],
                 material: [1, shirt, 5][*mat as usize],
                 world_from_object: agent * local,
-                agent: Some(a as u32),
+                agent: InstanceAgent::some(a as u32),
                 part: k as u16,
                 visibility: vis::ALL,
             });

@@ -12,7 +12,7 @@ use throng::render::accel::{BlasSet, Tlas, TlasKind, WorldRay};
 use throng::render::exr::write_preview_png;
 use throng::render::film::render_frame_with_stats;
 use throng::render::RenderSettings;
-use throng::scene::{vis, Camera, FrameScene, Instance, Library, Material, Mesh, Sky, Sun};
+use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun};
 
 struct Lcg(u64);
 impl Lcg {
@@ -66,7 +66,7 @@ fn crowd(n: usize) -> Vec<Instance> {
         mesh: 0,
         material: 0,
         world_from_object: Affine3A::IDENTITY,
-        agent: None,
+        agent: InstanceAgent::NONE,
         part: 0,
         visibility: vis::ALL,
     }];
@@ -95,7 +95,7 @@ fn crowd(n: usize) -> Vec<Instance> {
                 material: 1 + ((a + k) % 3) as u32,
                 world_from_object: agent_from_world
                     * Affine3A::from_scale_rotation_translation(Vec3::from(*s), Quat::IDENTITY, Vec3::from(*c)),
-                agent: Some(a as u32),
+                agent: InstanceAgent::some(a as u32),
                 part: k as u16,
                 visibility: vis::ALL,
             });

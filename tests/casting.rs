@@ -160,7 +160,7 @@ fn excluded_parts_and_culled_cycles_never_appear() {
     for f in edited.shot.frames.iter() {
         let block = edited.agents_at(f).unwrap();
         let instances = edited.frame_instances(f, |_| Lod::Full).unwrap();
-        let ids: BTreeSet<u32> = instances.iter().filter_map(|i| i.agent).collect();
+        let ids: BTreeSet<u32> = instances.iter().filter_map(|i| i.agent.get()).collect();
         for a in &block.agents {
             if edited.cycle_name(a) == culled {
                 assert!(!ids.contains(&a.id), "agent {} on culled cycle rendered at {f}", a.id);
@@ -210,4 +210,45 @@ fn export_reopens_with_shared_meshes() {
     assert!(doc.meshes().count() * 5 < mesh_nodes, "{} meshes for {mesh_nodes} nodes", doc.meshes().count());
     assert_eq!(doc.cameras().count(), 1);
     assert!(doc.lights().is_some_and(|l| l.count() == 1));
+}
+
+/// Casting runs in parallel: one worker or several, every agent's casting
+/// (scheme, parts, materials, height) is the same, byte for byte.
+#[test]
+fn casting_is_the_same_for_any_thread_count() {
+    let cast = |threads: &str| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_throng"))
+            .args(["cast", demo_shot().to_str().unwrap(), "--json"])
+            .env("RAYON_NUM_THREADS", threads)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", common::text(&out.stderr));
+        out.stdout
+    };
+    let one = cast("1");
+    assert!(one.len() > 10_000, "a cast of the whole demo crowd");
+    assert!(one == cast("3"), "casting differs between 1 and 3 threads");
+}
+
+/// The last layer of a frame poses its agents as it places them: the same
+/// scene, instance for instance, as from the frame's shared poses.
+#[test]
+fn streamed_scene_equals_the_shared_poses_scene() {
+    use throng::render::job;
+    let crowd = ShotCrowd::load(&demo_shot()).unwrap();
+    let manifest = throng::layers::build_layers(&crowd, &Default::default()).unwrap();
+    let posed = job::PosedFrame::new(&crowd, 1024).unwrap();
+    for layer in ["full", &manifest.comp_order[1]] {
+        let shared = job::frame_scene(&crowd, Some(&manifest), layer, &posed).unwrap();
+        let streamed = job::streamed_frame_scene(&crowd, Some(&manifest), layer, 1024).unwrap();
+        assert!(shared.instances.len() > 100, "layer {layer} has agents");
+        assert_eq!(shared.instances.len(), streamed.instances.len(), "layer {layer}");
+        for (a, b) in shared.instances.iter().zip(&streamed.instances) {
+            assert_eq!(
+                (a.mesh, a.material, a.agent, a.part, a.visibility),
+                (b.mesh, b.material, b.agent, b.part, b.visibility)
+            );
+            assert_eq!(a.world_from_object, b.world_from_object);
+        }
+    }
 }

@@ -20,7 +20,7 @@ use throng::render::exr::{
 };
 use throng::render::film::{render_frame_with_cryptomatte, Film};
 use throng::render::RenderSettings;
-use throng::scene::{vis, Camera, FrameScene, Instance, Library, Material, Mesh, Sky};
+use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky};
 
 fn fixtures() -> PathBuf {
     common::fixture("cryptomatte")
@@ -191,7 +191,7 @@ fn crowd_scene() -> (Library, FrameScene) {
             Some(_) => 2,
         },
         world_from_object: m,
-        agent,
+        agent: agent.map_or(InstanceAgent::NONE, InstanceAgent::some),
         part,
         visibility,
     };
@@ -220,9 +220,9 @@ fn crowd_scene() -> (Library, FrameScene) {
     (lib, scene)
 }
 
-fn names(lib: &Library, scene: &FrameScene, set_objects: &[String]) -> CryptoNames {
+fn names<'a>(lib: &'a Library, scene: &'a FrameScene, set_objects: &'a [String]) -> CryptoNames<'a> {
     let tables = NameTables { materials: &lib.materials, set_objects };
-    CryptoNames::new(&scene.instances, &tables, |_, part| SLOTS.get(part as usize).copied())
+    CryptoNames::new(&scene.instances, &tables, |_| Some(|part: u16| SLOTS.get(part as usize).copied()))
 }
 
 /// The film's matte of type `name`.
@@ -252,6 +252,7 @@ fn render(spp: u32, threads: usize) -> (FrameScene, Film) {
     let crypto = names(&lib, &scene, &[]);
     let (film, _) =
         render_frame_with_cryptomatte(&blas, &lib, &scene, &settings(spp, threads), Some(&crypto), None).unwrap();
+    drop(crypto);
     (scene, film)
 }
 
@@ -459,7 +460,7 @@ fn set_scene() -> (Library, FrameScene, Vec<String>) {
         mesh,
         material,
         world_from_object,
-        agent: None,
+        agent: InstanceAgent::NONE,
         part,
         visibility: vis::ALL,
     };

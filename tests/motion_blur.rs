@@ -16,7 +16,9 @@ use throng::render::accel::BlasSet;
 use throng::render::film::{render_frame, Film};
 use throng::render::job::{self, RenderJob};
 use throng::render::RenderSettings;
-use throng::scene::{vis, Camera, FrameScene, Instance, InstanceMotion, Library, Material, Mesh, SceneMotion, Sky};
+use throng::scene::{
+    vis, Camera, FrameScene, Instance, InstanceAgent, InstanceMotion, Library, Material, Mesh, SceneMotion, Sky,
+};
 
 // ---------------------------------------------------------------- fixtures
 
@@ -69,7 +71,7 @@ fn square_at(x: f32, y: f32) -> Instance {
         mesh: 0,
         material: 0,
         world_from_object: Affine3A::from_translation(Vec3::new(x, y, 0.0)),
-        agent: Some(7),
+        agent: InstanceAgent::some(7),
         part: 0,
         visibility: vis::ALL,
     }
@@ -247,7 +249,7 @@ fn demo_agents_move_over_the_shutter() {
     for (a, b) in scene.instances.iter().zip(&still.instances) {
         assert_eq!((a.agent, a.part, a.material, a.visibility), (b.agent, b.part, b.material, b.visibility));
     }
-    for (inst, k) in scene.instances.iter().zip(&motion.instances).filter(|(i, _)| i.agent.is_none()) {
+    for (inst, k) in scene.instances.iter().zip(&motion.instances).filter(|(i, _)| i.agent.get().is_none()) {
         assert_eq!(inst.world_from_object, k.world_from_object_close);
     }
 }

@@ -11,7 +11,7 @@ use throng::render::bsdf::Bsdf;
 use throng::render::exr::{camera_matrices, read_layer, write_layer, write_preview_png, LayerMeta, ID_MAPPING};
 use throng::render::film::{render_frame, Film};
 use throng::render::RenderSettings;
-use throng::scene::{vis, Camera, FrameScene, Instance, Library, Material, Mesh, Sky, Sun};
+use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun};
 
 // ---------------------------------------------------------------- fixtures
 
@@ -48,6 +48,7 @@ fn material(name: &str, base: Vec3, metallic: f32, roughness: f32) -> Material {
 }
 
 fn instance(mesh: u32, material: u32, world_from_object: Affine3A, agent: Option<u32>, visibility: u8) -> Instance {
+    let agent = agent.map_or(InstanceAgent::NONE, InstanceAgent::some);
     Instance { mesh, material, world_from_object, agent, part: 0, visibility }
 }
 

@@ -15,6 +15,8 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::Path;
 use std::sync::Arc;
 
+use rayon::prelude::*;
+
 use glam::{Affine3A, Quat, Vec3};
 
 use crate::cache::{AgentSample, CacheReader, FrameBlock};
@@ -24,7 +26,7 @@ use crate::casting::wardrobe::{Wardrobes, GLTF_MATERIAL};
 use crate::casting::{cast_agent, cast_delivered, fit_part, AgentCast, CastPart, RigCasting, SlotCast};
 use crate::error::{Error, Result};
 use crate::scene::gltf::AssetCache;
-use crate::scene::{vis, Camera, Instance, Library, Material, MaterialId, Mesh, MeshId};
+use crate::scene::{vis, Camera, Instance, InstanceAgent, Library, Material, MaterialId, Mesh, MeshId};
 use crate::shot::{RigKind, Shot};
 
 /// Level of detail an agent renders at.
@@ -305,69 +307,89 @@ impl ShotCrowd {
         let mut dressed = BTreeMap::new();
         let mut skin_dressed = BTreeMap::new();
         // Fits depend only on (rig, slot, mesh): compute each once.
-        let mut fits: HashMap<(Arc<str>, usize, MeshId), u32> = HashMap::new();
+        let mut fits: HashMap<(usize, usize, MeshId), u32> = HashMap::new();
         let mut fit_list: Vec<PartFit> = Vec::new();
         let mut materials: HashMap<String, MaterialId> = HashMap::new();
         // Each wardrobe part (and material) resolved to its (mesh, material) pieces once.
         let mut resolved: HashMap<SharedKey, Vec<(MeshId, MaterialId)>> = HashMap::new();
         // Rig and slot names shared (Arc) by every agent cast on the rig.
-        let mut rig_names: HashMap<String, (Arc<str>, Vec<Arc<str>>)> = HashMap::new();
-        // Skinned rigs: the delivered slot list per rig, and each (rig, part,
-        // material) resolved to its (piece, material) list once.
-        let mut delivered: HashMap<String, Vec<SlotCast>> = HashMap::new();
+        let rig_names: HashMap<String, (Arc<str>, Vec<Arc<str>>)> = (rigs.iter())
+            .map(|(name, rig)| (name.clone(), rig.slots().iter().map(|s| s.name.as_str().into()).collect()))
+            .chain(
+                skinned
+                    .iter()
+                    .map(|(name, rig)| (name.clone(), rig.slots().iter().map(|s| s.as_str().into()).collect())),
+            )
+            .map(|(name, slots)| {
+                let shared: Arc<str> = name.as_str().into();
+                (name, (shared, slots))
+            })
+            .collect();
+        // Skinned rigs without schemes: the character as delivered, in its
+        // own materials; the slot list is made once per rig and shared.
+        let delivered: HashMap<String, Vec<SlotCast>> = (skinned.iter())
+            .filter(|(name, _)| shot.rigs.get(*name).is_some_and(|r| r.schemes.is_empty()))
+            .map(|(name, rig)| {
+                let rig_file: Arc<std::path::Path> = rig.path().into();
+                let parts = (rig.delivered().iter())
+                    .map(|(slot, mesh, _)| SlotCast {
+                        slot: slot.as_str().into(),
+                        part: Some(Arc::new(CastPart {
+                            file: rig_file.clone(),
+                            mesh: mesh.as_str().into(),
+                            material: GLTF_MATERIAL.into(),
+                            uniform: false,
+                        })),
+                    })
+                    .collect();
+                (name.clone(), parts)
+            })
+            .collect();
+        // Casting is a pure function of (seed, agent): cast every agent in
+        // parallel, in id order, then dress them in that order below (so
+        // the first error and every memo are as if cast one by one).
+        let cache_rigs = cache.rigs();
+        let seen_list: Vec<(u32, &Seen)> = seen.iter().map(|(&id, s)| (id, s)).collect();
+        let casts: Vec<Option<Result<AgentCast>>> =
+            seen_list
+                .par_iter()
+                .map(|&(id, s)| {
+                    let rig_name = cache_rigs.get(s.rig as usize).map_or("", String::as_str);
+                    let Some(rig_ref) = shot.rigs.get(rig_name) else {
+                        return Some(Err(Error::invalid(
+                            &shot.path,
+                            format!(
+                            "agent {id} uses rig `{rig_name}`, which the shot's [rigs] does not define (defined: {})",
+                            shot.rigs.keys().cloned().collect::<Vec<_>>().join(", ")
+                        ),
+                        )
+                        .agent(id)
+                        .field("rigs")));
+                    };
+                    let (shared_name, slot_names) = rig_names.get(rig_name)?;
+                    let rc = RigCasting {
+                        name: shared_name.clone(),
+                        slots: slot_names,
+                        schemes: &rig_ref.schemes,
+                        height_jitter: rig_ref.height_jitter,
+                    };
+                    Some(match delivered.get(rig_name) {
+                        Some(parts) => Ok(cast_delivered(shot.seed, id, &rc, parts.clone(), s.never_scale)),
+                        None => cast_agent(shot.seed, id, &rc, &wardrobes, &shot.exclude_parts, s.never_scale).map_err(
+                            |msg| Error::invalid(&shot.path, msg).agent(id).field(format!("rigs.{rig_name}.schemes")),
+                        ),
+                    })
+                })
+                .collect();
+        drop(seen_list);
         let mut skin_resolved: HashMap<SharedKey, Vec<(usize, MaterialId)>> = HashMap::new();
-        for (&id, s) in &seen {
-            let rig_name = cache.rigs().get(s.rig as usize).cloned().unwrap_or_default();
-            let Some(rig_ref) = shot.rigs.get(&rig_name) else {
-                return Err(Error::invalid(
-                    &shot.path,
-                    format!(
-                        "agent {id} uses rig `{rig_name}`, which the shot's [rigs] does not define (defined: {})",
-                        shot.rigs.keys().cloned().collect::<Vec<_>>().join(", ")
-                    ),
-                )
-                .agent(id)
-                .field("rigs"));
-            };
-            let scheme_err =
-                |msg: String| Error::invalid(&shot.path, msg).agent(id).field(format!("rigs.{rig_name}.schemes"));
+        for ((&id, s), cast) in seen.iter().zip(casts) {
+            let Some(cast) = cast else { continue };
+            let cast = cast?;
+            let rig_name = cache_rigs.get(s.rig as usize).map_or("", String::as_str);
+            let Some((shared_name, _)) = rig_names.get(rig_name) else { continue };
 
-            if let Some(rig) = skinned.get_mut(&rig_name) {
-                let (shared_name, slot_names) = rig_names.entry(rig_name.clone()).or_insert_with(|| {
-                    (rig_name.as_str().into(), rig.slots().iter().map(|s| s.as_str().into()).collect())
-                });
-                let rc = RigCasting {
-                    name: shared_name.clone(),
-                    slots: slot_names,
-                    schemes: &rig_ref.schemes,
-                    height_jitter: rig_ref.height_jitter,
-                };
-                let cast = if rig_ref.schemes.is_empty() {
-                    // No schemes: the character as delivered, in its own
-                    // materials; the slot list is made once per rig and shared.
-                    let parts = delivered
-                        .entry(rig_name.clone())
-                        .or_insert_with(|| {
-                            let rig_file: Arc<std::path::Path> = rig.path().into();
-                            rig.delivered()
-                                .iter()
-                                .map(|(slot, mesh, _)| SlotCast {
-                                    slot: slot.as_str().into(),
-                                    part: Some(Arc::new(CastPart {
-                                        file: rig_file.clone(),
-                                        mesh: mesh.as_str().into(),
-                                        material: GLTF_MATERIAL.into(),
-                                        uniform: false,
-                                    })),
-                                })
-                                .collect()
-                        })
-                        .clone();
-                    cast_delivered(shot.seed, id, &rc, parts, s.never_scale)
-                } else {
-                    cast_agent(shot.seed, id, &rc, &wardrobes, &shot.exclude_parts, s.never_scale)
-                        .map_err(scheme_err)?
-                };
+            if let Some(rig) = skinned.get_mut(rig_name) {
                 let mut pieces = Vec::new();
                 for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
                     let Some(part) = &slot_cast.part else { continue };
@@ -403,18 +425,7 @@ impl ShotCrowd {
                 continue;
             }
 
-            let Some(rig) = rigs.get(&rig_name) else { continue };
-            let (shared_name, slot_names) = rig_names.entry(rig_name.clone()).or_insert_with(|| {
-                (rig_name.as_str().into(), rig.slots().iter().map(|s| s.name.as_str().into()).collect())
-            });
-            let rc = RigCasting {
-                name: shared_name.clone(),
-                slots: slot_names,
-                schemes: &rig_ref.schemes,
-                height_jitter: rig_ref.height_jitter,
-            };
-            let cast =
-                cast_agent(shot.seed, id, &rc, &wardrobes, &shot.exclude_parts, s.never_scale).map_err(scheme_err)?;
+            let Some(rig) = rigs.get(rig_name) else { continue };
             let mut parts = Vec::new();
             for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
                 let Some(part) = &slot_cast.part else { continue };
@@ -451,25 +462,27 @@ impl ShotCrowd {
                 };
                 let Some(&(first_mesh, _)) = pieces.first() else { continue };
                 let slot = &rig.slots()[slot_index];
-                let fit = *fits.entry((shared_name.clone(), slot_index, first_mesh)).or_insert_with(|| {
-                    // Fit the whole part (all its pieces) to the box.
-                    let lib = assets.library();
-                    let (lo, hi) = pieces
-                        .iter()
-                        .map(|&(m, _)| lib.meshes[m as usize].bounds())
-                        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
-                        .unwrap_or((Vec3::ZERO, Vec3::ZERO));
-                    let size = (slot.proxy_max - slot.proxy_min).max(Vec3::splat(1e-4));
-                    fit_list.push(PartFit {
-                        slot_from_part: fit_part(lo, hi, slot.proxy_min, slot.proxy_max, part.uniform),
-                        slot_from_proxy: Affine3A::from_scale_rotation_translation(
-                            size,
-                            Quat::IDENTITY,
-                            slot.proxy_min,
-                        ),
+                let fit = *fits
+                    .entry((Arc::as_ptr(shared_name) as *const u8 as usize, slot_index, first_mesh))
+                    .or_insert_with(|| {
+                        // Fit the whole part (all its pieces) to the box.
+                        let lib = assets.library();
+                        let (lo, hi) = pieces
+                            .iter()
+                            .map(|&(m, _)| lib.meshes[m as usize].bounds())
+                            .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+                            .unwrap_or((Vec3::ZERO, Vec3::ZERO));
+                        let size = (slot.proxy_max - slot.proxy_min).max(Vec3::splat(1e-4));
+                        fit_list.push(PartFit {
+                            slot_from_part: fit_part(lo, hi, slot.proxy_min, slot.proxy_max, part.uniform),
+                            slot_from_proxy: Affine3A::from_scale_rotation_translation(
+                                size,
+                                Quat::IDENTITY,
+                                slot.proxy_min,
+                            ),
+                        });
+                        fit_list.len() as u32 - 1
                     });
-                    fit_list.len() as u32 - 1
-                });
                 for (i, &(mesh, material)) in pieces.iter().enumerate() {
                     parts.push(DressedPart { slot: slot_index as u32, mesh, material, fit, proxy: i == 0 });
                 }
@@ -518,7 +531,7 @@ impl ShotCrowd {
                         mesh,
                         material,
                         world_from_object,
-                        agent: None,
+                        agent: InstanceAgent::NONE,
                         // Past the names: u16::MAX, which no name has.
                         part: u16::try_from(object).unwrap_or(u16::MAX),
                         visibility: vis::ALL,
@@ -641,6 +654,24 @@ impl ShotCrowd {
         Ok(())
     }
 
+    /// At most how many instances [`ShotCrowd::posed_instances`] gives
+    /// agent `id` at `lod` (in any pose), so a frame's instance list is
+    /// allocated once (at a million agents its doublings cost a gigabyte).
+    pub fn posed_instance_bound(&self, id: u32, lod: Lod) -> usize {
+        let rigid = self.dressed.get(&id).map_or(0, |d| match lod {
+            Lod::Full => d.len(),
+            Lod::Proxy => d.iter().filter(|p| p.proxy).count(),
+        });
+        let skinned = self.skin_dressed.get(&id).map_or(0, |d| match lod {
+            Lod::Full => d.len(),
+            Lod::Proxy => {
+                let rig = self.casting.get(&id).and_then(|cast| self.skinned.get(&*cast.rig));
+                rig.map_or(0, |rig| d.iter().map(|d| rig.piece(d.piece).joint_boxes.len()).sum())
+            }
+        });
+        rigid + skinned
+    }
+
     /// As [`ShotCrowd::agent_instances`], from a pose already computed (a
     /// render poses each agent once per frame, not once per layer).
     pub fn posed_instances(&self, id: u32, pose: &AgentPose, lod: Lod, visibility: u8, out: &mut Vec<Instance>) {
@@ -648,7 +679,7 @@ impl ShotCrowd {
             mesh,
             material,
             world_from_object,
-            agent: Some(id),
+            agent: InstanceAgent::some(id),
             part: part as u16,
             visibility,
         };

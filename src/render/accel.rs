@@ -581,7 +581,7 @@ impl<'a> Tlas<'a> {
             member.push(i as u32);
         }
         let key = |k: usize| -> [u32; 7] {
-            match instances[member[k] as usize].agent {
+            match instances[member[k] as usize].agent.get() {
                 Some(a) if by_agent => [0, a, 0, 0, 0, 0, 0],
                 _ => {
                     let b = &bounds[k];

@@ -20,7 +20,8 @@
 //!
 //! See docs/cryptomatte.md for channel layout, header and compositing notes.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashSet};
+use std::hash::BuildHasherDefault;
 use std::path::Path;
 
 use super::exr::RawPart;
@@ -358,17 +359,6 @@ pub fn read(path: &Path) -> Result<Vec<Cryptomatte>> {
     Ok(out)
 }
 
-/// Where a matte id came from, kept small so 100,000-agent frames stay cheap.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum NameKey {
-    Set,
-    Agent(u32),
-    /// Agent, index into `CryptoNames::slots`.
-    Part(u32, u32),
-    /// A whole name (set object or material), index into `CryptoNames::labels`.
-    Label(u32),
-}
-
 /// The name tables of a frame scene's set objects and materials, for
 /// [`CryptoNames::new`].
 #[derive(Clone, Copy, Debug, Default)]
@@ -381,145 +371,75 @@ pub struct NameTables<'a> {
     pub set_objects: &'a [String],
 }
 
+/// A rig slot name by part index, for one agent.
+type SlotName<'a> = dyn Fn(u32, u16) -> Option<&'a str> + Sync + 'a;
+
 /// The ids of every instance of one frame scene, for the three mattes, and
 /// the way back from an id to its name (for the manifests).
-#[derive(Clone, Debug, Default)]
-pub struct CryptoNames {
+///
+/// Only the ids are stored (12 bytes an instance): a manifest names just the
+/// ids a film shows, re-deriving each name from its instance, so a
+/// 13-million-instance frame holds no name table.
+pub struct CryptoNames<'a> {
     /// Per instance: [agent, part, material] matte id bits; 0 = nothing.
     ids: Vec<[u32; 3]>,
-    names: [HashMap<u32, NameKey>; 3],
-    /// Extra names of ids that collide (the manifest lists them all).
-    collisions: [Vec<(u32, NameKey)>; 3],
-    slots: Vec<String>,
-    labels: Vec<String>,
-    label_index: HashMap<String, u32>,
+    instances: &'a [Instance],
+    tables: NameTables<'a>,
+    slot_name: Box<SlotName<'a>>,
 }
 
-impl CryptoNames {
-    /// Names the instances of a frame scene. `slot_name(agent, part)` gives
-    /// the rig slot name of an agent's part index; `None` falls back to
-    /// `part<index>`. Set objects and materials are named from `tables`.
-    /// Holdouts get id 0 (they are never a first hit anyway).
-    pub fn new<'a>(
-        instances: &[Instance],
-        tables: &NameTables,
-        slot_name: impl Fn(u32, u16) -> Option<&'a str>,
-    ) -> CryptoNames {
-        let mut names = CryptoNames::default();
-        let mut slot_index: HashMap<String, u32> = HashMap::new();
-        // Id bits per set object (by `part`) and per material, hashed once.
-        let mut objects: HashMap<u16, u32> = HashMap::new();
-        let mut materials: Vec<Option<u32>> = Vec::new();
-        let mut last_agent: Option<(u32, u32)> = None;
-        let mut buf = String::new();
-        for inst in instances {
-            if inst.visibility & vis::HOLDOUT != 0 {
-                names.ids.push([0, 0, 0]);
-                continue;
-            }
-            let material = names.material_id(inst.material, tables.materials, &mut materials);
-            let Some(agent) = inst.agent else {
-                let id = match objects.get(&inst.part) {
-                    Some(&id) => id,
-                    None => {
-                        let (key, id) = match tables.set_objects.get(inst.part as usize) {
-                            Some(object) => {
-                                let name = set_object_name(object);
-                                let id = name_id(&name).to_bits();
-                                (names.label(name), id)
-                            }
-                            None => (NameKey::Set, name_id(SET_NAME).to_bits()),
-                        };
-                        names.insert(0, id, key);
-                        names.insert(1, id, key);
-                        objects.insert(inst.part, id);
-                        id
-                    }
+/// Instances named per parallel task; an agent's instances are contiguous,
+/// so each task hashes an agent's name and looks up its slots once.
+const NAMING_CHUNK: usize = 4096;
+
+impl<'a> CryptoNames<'a> {
+    /// Names the instances of a frame scene. `slots_of(agent)` gives the
+    /// agent's rig slot names by part index (looked up once per run of an
+    /// agent's instances); a missing slot falls back to `part<index>`. Set
+    /// objects and materials are named from `tables`. Holdouts get id 0
+    /// (they are never a first hit anyway). Pure per instance, so the
+    /// parallel naming is the same for any thread count.
+    pub fn new<F, S>(instances: &'a [Instance], tables: &NameTables<'a>, slots_of: F) -> CryptoNames<'a>
+    where
+        F: Fn(u32) -> Option<S> + Sync + 'a,
+        S: Fn(u16) -> Option<&'a str>,
+    {
+        use rayon::prelude::*;
+        let tables = *tables;
+        let mut ids = vec![[0u32; 3]; instances.len()];
+        ids.par_chunks_mut(NAMING_CHUNK).zip(instances.par_chunks(NAMING_CHUNK)).for_each(|(ids, instances)| {
+            let mut materials: Vec<Option<u32>> = Vec::new();
+            let mut agent: Option<(u32, u32, Option<S>)> = None;
+            let mut buf = String::new();
+            let mut prefix = 0;
+            for (out, inst) in ids.iter_mut().zip(instances) {
+                if inst.visibility & vis::HOLDOUT != 0 {
+                    continue;
+                }
+                let material = material_id(inst.material, tables.materials, &mut materials);
+                let Some(a) = inst.agent.get() else {
+                    let id = name_id(&instance_name(inst, 0, &tables, &|_, _| None)).to_bits();
+                    *out = [id, id, material];
+                    continue;
                 };
-                names.ids.push([id, id, material]);
-                continue;
-            };
-            // An agent's instances are contiguous: hash its name once.
-            let agent_id = match last_agent {
-                Some((a, id)) if a == agent => id,
-                _ => {
-                    let id = name_id(&agent_name(agent)).to_bits();
-                    names.insert(0, id, NameKey::Agent(agent));
-                    last_agent = Some((agent, id));
-                    id
+                if agent.as_ref().is_none_or(|(current, _, _)| *current != a) {
+                    buf.clear();
+                    buf.push_str(&agent_name(a));
+                    agent = Some((a, name_id(&buf).to_bits(), slots_of(a)));
+                    buf.push('/');
+                    prefix = buf.len();
                 }
-            };
-            let fallback;
-            let slot = match slot_name(agent, inst.part) {
-                Some(s) => s,
-                None => {
-                    fallback = format!("part{}", inst.part);
-                    &fallback
+                let Some((_, agent_id, slots)) = &agent else { continue };
+                buf.truncate(prefix);
+                match slots.as_ref().and_then(|s| s(inst.part)) {
+                    Some(slot) => buf.push_str(slot),
+                    None => buf.push_str(&fallback_slot(inst.part)),
                 }
-            };
-            let si = match slot_index.get(slot) {
-                Some(&i) => i,
-                None => {
-                    let i = names.slots.len() as u32;
-                    names.slots.push(slot.to_string());
-                    slot_index.insert(slot.to_string(), i);
-                    i
-                }
-            };
-            buf.clear();
-            use std::fmt::Write;
-            let _ = write!(buf, "agent_{agent}/{slot}");
-            let part_id = name_id(&buf).to_bits();
-            names.insert(1, part_id, NameKey::Part(agent, si));
-            names.ids.push([agent_id, part_id, material]);
-        }
-        names
-    }
-
-    /// The key of a whole name, stored once.
-    fn label(&mut self, name: String) -> NameKey {
-        if let Some(&i) = self.label_index.get(&name) {
-            return NameKey::Label(i);
-        }
-        let i = self.labels.len() as u32;
-        self.label_index.insert(name.clone(), i);
-        self.labels.push(name);
-        NameKey::Label(i)
-    }
-
-    /// The material matte id bits of library material `material` (hashed
-    /// once per material; `cache` by material index).
-    fn material_id(&mut self, material: u32, library: &[Material], cache: &mut Vec<Option<u32>>) -> u32 {
-        let m = material as usize;
-        if cache.len() <= m {
-            cache.resize(m + 1, None);
-        }
-        if let Some(id) = cache[m] {
-            return id;
-        }
-        let name = match library.get(m) {
-            Some(mat) => material_name(&mat.name).to_string(),
-            None => format!("material{m}"),
-        };
-        let id = name_id(&name).to_bits();
-        let key = self.label(name);
-        self.insert(2, id, key);
-        cache[m] = Some(id);
-        id
-    }
-
-    fn insert(&mut self, matte: usize, id: u32, key: NameKey) {
-        match self.names[matte].get(&id) {
-            None => {
-                self.names[matte].insert(id, key);
+                *out = [*agent_id, name_id(&buf).to_bits(), material];
             }
-            Some(&k) if k == key => {}
-            Some(_) => {
-                if !self.collisions[matte].contains(&(id, key)) {
-                    self.collisions[matte].push((id, key));
-                }
-            }
-        }
+        });
+        let slot_name = move |a: u32, part: u16| slots_of(a).and_then(|s| s(part));
+        CryptoNames { ids, instances, tables, slot_name: Box::new(slot_name) }
     }
 
     /// [agent, part, material] matte id bits of instance `i` (0 = none).
@@ -527,31 +447,98 @@ impl CryptoNames {
         self.ids.get(instance as usize).copied().unwrap_or([0; 3])
     }
 
-    fn name(&self, key: NameKey) -> String {
-        match key {
-            NameKey::Set => SET_NAME.to_string(),
-            NameKey::Agent(a) => agent_name(a),
-            NameKey::Part(a, s) => part_name(a, self.slots.get(s as usize).map_or("?", String::as_str)),
-            NameKey::Label(i) => self.labels.get(i as usize).cloned().unwrap_or_default(),
-        }
-    }
-
     /// The manifest of matte `matte` (index into [`MATTES`]: 0 agents, 1
-    /// parts, 2 materials) restricted to `present` ids.
+    /// parts, 2 materials) restricted to `present` ids. Every name with a
+    /// present id is listed, so two names that collide on one id both are.
     pub fn manifest(&self, matte: usize, present: &BTreeSet<u32>) -> BTreeMap<String, u32> {
         let mut out = BTreeMap::new();
-        let Some(names) = self.names.get(matte) else { return out };
-        for &id in present {
-            if let Some(&k) = names.get(&id) {
-                out.insert(self.name(k), id);
-            }
+        if matte >= MATTES.len() || present.is_empty() {
+            return out;
         }
-        for &(id, k) in &self.collisions[matte] {
-            if present.contains(&id) {
-                out.insert(self.name(k), id);
+        // Ids are hashes already: spread them for the table, no SipHash.
+        let present: HashSet<u32, BuildHasherDefault<IdHasher>> = present.iter().copied().collect();
+        let mut last: Option<(u32, Option<u32>, u16)> = None;
+        for (inst, ids) in self.instances.iter().zip(&self.ids) {
+            let id = ids[matte];
+            if id == 0 || !present.contains(&id) {
+                continue;
             }
+            // An agent's instances repeat its agent id; name it once.
+            let key = (id, inst.agent.get(), if matte == 0 { 0 } else { inst.part });
+            if last == Some(key) {
+                continue;
+            }
+            last = Some(key);
+            let name = match matte {
+                2 => material_label(inst.material, self.tables.materials),
+                _ => instance_name(inst, matte, &self.tables, &*self.slot_name),
+            };
+            out.insert(name, id);
         }
         out
+    }
+}
+
+impl std::fmt::Debug for CryptoNames<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CryptoNames").field("instances", &self.ids.len()).finish_non_exhaustive()
+    }
+}
+
+/// An instance's name in the agent (`matte` 0) or part (1) matte.
+fn instance_name(inst: &Instance, matte: usize, tables: &NameTables, slot_name: &SlotName) -> String {
+    match inst.agent.get() {
+        None => match tables.set_objects.get(inst.part as usize) {
+            Some(object) => set_object_name(object),
+            None => SET_NAME.to_string(),
+        },
+        Some(a) if matte == 0 => agent_name(a),
+        Some(a) => match slot_name(a, inst.part) {
+            Some(slot) => part_name(a, slot),
+            None => part_name(a, &fallback_slot(inst.part)),
+        },
+    }
+}
+
+/// The slot name of a part index the rig does not name.
+fn fallback_slot(part: u16) -> String {
+    format!("part{part}")
+}
+
+/// Library material `material`'s name in the material matte.
+fn material_label(material: u32, library: &[Material]) -> String {
+    match library.get(material as usize) {
+        Some(mat) => material_name(&mat.name).to_string(),
+        None => format!("material{material}"),
+    }
+}
+
+/// The material matte id bits of library material `material` (hashed once
+/// per material; `cache` by material index).
+fn material_id(material: u32, library: &[Material], cache: &mut Vec<Option<u32>>) -> u32 {
+    let m = material as usize;
+    if cache.len() <= m {
+        cache.resize(m + 1, None);
+    }
+    *cache[m].get_or_insert_with(|| name_id(&material_label(material, library)).to_bits())
+}
+
+/// A hasher for keys that are hashes already (matte ids): one multiply
+/// spreads their bits over the table's.
+#[derive(Default)]
+struct IdHasher(u64);
+
+impl std::hash::Hasher for IdHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0.rotate_left(8) ^ b as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        }
+    }
+    fn write_u32(&mut self, n: u32) {
+        self.0 = (n as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
     }
 }
 

@@ -303,7 +303,7 @@ fn check(blas: &BlasSet, lib: &Library, scene: &FrameScene, s: &RenderSettings) 
     for (i, inst) in scene.instances.iter().enumerate() {
         let err = |msg: String| {
             let e = Error::invalid(here, format!("instance {i}: {msg}")).field("instances");
-            match inst.agent {
+            match inst.agent.get() {
                 Some(a) => e.agent(a),
                 None => e,
             }

@@ -513,7 +513,7 @@ impl<'a> Integrator<'a> {
                 out.z = self.camera.depth(surface.p);
                 out.normal = surface.ns;
                 out.albedo = surface.base_color;
-                out.agent = inst.agent.map_or(0, |a| a.wrapping_add(1));
+                out.agent = inst.agent.get().map_or(0, |a| a.wrapping_add(1));
                 out.instance = Some(hit.instance);
                 if self.shutter.is_some() {
                     out.motion = self.motion_vector(hit.instance as usize, hit.triangle, hit.u, hit.v);

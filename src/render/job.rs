@@ -5,6 +5,7 @@
 //! re-ranks. BLASes are built once per run and shared by every frame and
 //! layer; only the TLAS is rebuilt per (frame, layer).
 
+use std::borrow::Cow;
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -102,9 +103,12 @@ pub enum CryptoOutput {
 /// The Cryptomatte names of a frame scene's instances: slot names from each
 /// agent's rig, set objects from the set file's nodes
 /// ([`ShotCrowd::set_names`]), materials from the library.
-pub fn crypto_names(crowd: &ShotCrowd, scene: &FrameScene) -> CryptoNames {
+pub fn crypto_names<'a>(crowd: &'a ShotCrowd, scene: &'a FrameScene) -> CryptoNames<'a> {
     let tables = NameTables { materials: &crowd.library().materials, set_objects: &crowd.set_names };
-    CryptoNames::new(&scene.instances, &tables, |agent, part| crowd.slot_name(agent, part))
+    CryptoNames::new(&scene.instances, &tables, |agent| {
+        let slots = &crowd.casting.get(&agent)?.slots;
+        Some(move |part: u16| slots.get(part as usize).map(|s| &*s.slot))
+    })
 }
 
 /// One file the job wrote or skipped.
@@ -176,19 +180,54 @@ fn agent_bits(manifest: Option<&Manifest>, layer: &str, id: u32, frame: i32) -> 
     how.filter(|&(bits, _)| bits != 0)
 }
 
-/// The instances of one (frame, layer) render.
+/// The instances of one (frame, layer) render, from the frame's shared poses.
 pub fn frame_scene(
     crowd: &ShotCrowd,
     manifest: Option<&Manifest>,
     layer: &str,
     posed: &PosedFrame,
 ) -> Result<FrameScene> {
-    let frame = posed.frame;
-    let mut instances: Vec<Instance> = Vec::new();
+    let ids = posed.agents.iter().map(|(id, _)| *id);
+    let poses = posed.agents.iter().map(|(id, pose)| Ok((*id, Cow::Borrowed(pose))));
+    scene_from_poses(crowd, manifest, layer, posed.frame, ids, poses)
+}
+
+/// The same scene as [`frame_scene`], posing each agent as it is placed:
+/// for a frame's last layer, so a million agents' slot poses are never
+/// held beside their instances.
+pub fn streamed_frame_scene(
+    crowd: &ShotCrowd,
+    manifest: Option<&Manifest>,
+    layer: &str,
+    frame: i32,
+) -> Result<FrameScene> {
+    let block = crowd.agents_at(frame)?;
+    let rendered = || block.agents.iter().filter(|a| crowd.renders(a));
+    let poses = rendered().map(|a| Ok((a.id, Cow::Owned(crowd.agent_pose(a)?))));
+    scene_from_poses(crowd, manifest, layer, frame, rendered().map(|a| a.id), poses)
+}
+
+/// A frame scene from its agents' poses (`ids` are the same agents, to size
+/// the instance list before any is placed).
+fn scene_from_poses<'p>(
+    crowd: &ShotCrowd,
+    manifest: Option<&Manifest>,
+    layer: &str,
+    frame: i32,
+    ids: impl Iterator<Item = u32>,
+    poses: impl Iterator<Item = Result<(u32, Cow<'p, AgentPose>)>>,
+) -> Result<FrameScene> {
     let set_bits = set_bits(manifest, layer)?;
-    for (id, pose) in &posed.agents {
-        if let Some((bits, lod)) = agent_bits(manifest, layer, *id, frame) {
-            crowd.posed_instances(*id, pose, lod, bits, &mut instances);
+    // Sized once: at a million agents the doublings of a growing list cost a gigabyte.
+    let bound: usize = ids
+        .filter_map(|id| Some(crowd.posed_instance_bound(id, agent_bits(manifest, layer, id, frame)?.1)))
+        .sum::<usize>()
+        + set_bits.map_or(0, |_| crowd.set.len());
+    let mut instances: Vec<Instance> = Vec::with_capacity(bound);
+    for posed in poses {
+        let (id, pose) = posed?;
+        if let Some((bits, lod)) = agent_bits(manifest, layer, id, frame) {
+            crowd.posed_instances(id, &pose, lod, bits, &mut instances);
         }
     }
     if let Some(bits) = set_bits {
@@ -214,10 +253,14 @@ pub fn motion_scene(
     motion: &MotionFrame,
 ) -> Result<FrameScene> {
     let frame = motion.frame;
-    let mut instances: Vec<Instance> = Vec::new();
-    let mut keys: Vec<InstanceMotion> = Vec::new();
-    let mut close: Vec<Instance> = Vec::new();
     let set_bits = set_bits(manifest, layer)?;
+    let bound: usize = (motion.agents.iter())
+        .filter_map(|(id, _)| Some(crowd.posed_instance_bound(*id, agent_bits(manifest, layer, *id, frame)?.1)))
+        .sum::<usize>()
+        + set_bits.map_or(0, |_| crowd.set.len());
+    let mut instances: Vec<Instance> = Vec::with_capacity(bound);
+    let mut keys: Vec<InstanceMotion> = Vec::with_capacity(bound);
+    let mut close: Vec<Instance> = Vec::new();
     for (id, m) in &motion.agents {
         let Some((bits, lod)) = agent_bits(manifest, layer, *id, frame) else { continue };
         let start = instances.len();
@@ -479,6 +522,10 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                     }
                     let Some(moving) = moving.as_ref() else { continue };
                     motion_scene(crowd, manifest, layer, moving)?
+                }
+                // A frame's only (or last unposed) layer poses as it goes.
+                None if posed.is_none() && job.layers.last() == Some(layer) => {
+                    streamed_frame_scene(crowd, manifest, layer, frame)?
                 }
                 None => {
                     if posed.is_none() {
