@@ -411,10 +411,13 @@ pub fn read_manifest(path: &Path) -> Result<Manifest> {
 // Every constant is an upper bound of what was measured, so an estimate errs
 // high.
 
-/// Bytes per traced instance: its scene record (96), TLAS record (64), and
-/// the TLAS build's scratch (bounds, sort keys, the binary tree PLOC builds
-/// before the 8-wide one). Measured: about 300 with a leaf per part (10,000
-/// robots), about 200 with a leaf per agent (100,000 and 1,000,000 robots).
+/// Bytes per traced instance: its scene record (80), TLAS record (16, plus
+/// a 48-byte inverse in trees with a leaf per part), its Cryptomatte ids
+/// (12), and the TLAS build's scratch (bounds, sort keys, the binary tree
+/// PLOC builds before the 8-wide one). Measured: about 230 with a leaf per
+/// part (10,000 robots), about 120 with a leaf per agent (100,000 and
+/// 1,000,000 robots); 360 covers the larger with room, so the estimate
+/// holds in both kinds of tree.
 pub const INSTANCE_BYTES: u64 = 360;
 /// BLAS bytes per triangle: the 8-wide nodes, the 48-byte precomputed
 /// triangle, two index arrays, and the build's scratch.
