@@ -10,6 +10,7 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
+use crate::cache::AgentSample;
 use crate::casting::motion::MotionFrame;
 use crate::casting::{AgentPose, Lod, ShotCrowd};
 use crate::error::{Error, Result};
@@ -146,13 +147,13 @@ pub struct PosedFrame {
 impl PosedFrame {
     /// Reads the frame from the cache once and poses every rendered agent.
     pub fn new(crowd: &ShotCrowd, frame: i32) -> Result<PosedFrame> {
+        use rayon::prelude::*;
         let block = crowd.agents_at(frame)?;
-        let agents = block
-            .agents
-            .iter()
-            .filter(|a| crowd.renders(a))
-            .map(|a| Ok((a.id, crowd.agent_pose(a)?)))
-            .collect::<Result<_>>()?;
+        // Pure per agent: posed in parallel, kept in order (and the first
+        // error in order is the one reported, for any thread count).
+        let posed: Vec<Result<(u32, AgentPose)>> =
+            (block.agents.par_iter()).filter(|a| crowd.renders(a)).map(|a| Ok((a.id, crowd.agent_pose(a)?))).collect();
+        let agents = posed.into_iter().collect::<Result<_>>()?;
         Ok(PosedFrame { frame, agents })
     }
 }
@@ -187,9 +188,15 @@ pub fn frame_scene(
     layer: &str,
     posed: &PosedFrame,
 ) -> Result<FrameScene> {
-    let ids = posed.agents.iter().map(|(id, _)| *id);
-    let poses = posed.agents.iter().map(|(id, pose)| Ok((*id, Cow::Borrowed(pose))));
-    scene_from_poses(crowd, manifest, layer, posed.frame, ids, poses)
+    scene_from_poses(
+        crowd,
+        manifest,
+        layer,
+        posed.frame,
+        &posed.agents,
+        |(id, _)| *id,
+        |(_, pose)| Ok(Cow::Borrowed(pose)),
+    )
 }
 
 /// The same scene as [`frame_scene`], posing each agent as it is placed:
@@ -202,32 +209,53 @@ pub fn streamed_frame_scene(
     frame: i32,
 ) -> Result<FrameScene> {
     let block = crowd.agents_at(frame)?;
-    let rendered = || block.agents.iter().filter(|a| crowd.renders(a));
-    let poses = rendered().map(|a| Ok((a.id, Cow::Owned(crowd.agent_pose(a)?))));
-    scene_from_poses(crowd, manifest, layer, frame, rendered().map(|a| a.id), poses)
+    let rendered: Vec<&AgentSample> = block.agents.iter().filter(|a| crowd.renders(a)).collect();
+    scene_from_poses(crowd, manifest, layer, frame, &rendered, |a| a.id, |a| crowd.agent_pose(a).map(Cow::Owned))
 }
 
-/// A frame scene from its agents' poses (`ids` are the same agents, to size
-/// the instance list before any is placed).
-fn scene_from_poses<'p>(
+/// Agents placed per parallel task, and tasks per wave: a wave's instances
+/// are appended in agent order before the next starts, so placing in
+/// parallel holds only a wave's worth of extra instances.
+const PLACING_CHUNK: usize = 1024;
+const PLACING_WAVE: usize = 16;
+
+/// A frame scene from its agents (`id` and `pose` of each). Posing and
+/// placing are pure per agent: done in parallel, appended in agent order,
+/// so the scene is the same for any thread count.
+fn scene_from_poses<'p, T: Sync>(
     crowd: &ShotCrowd,
     manifest: Option<&Manifest>,
     layer: &str,
     frame: i32,
-    ids: impl Iterator<Item = u32>,
-    poses: impl Iterator<Item = Result<(u32, Cow<'p, AgentPose>)>>,
+    agents: &'p [T],
+    id: impl Fn(&T) -> u32 + Sync,
+    pose: impl Fn(&'p T) -> Result<Cow<'p, AgentPose>> + Sync,
 ) -> Result<FrameScene> {
+    use rayon::prelude::*;
     let set_bits = set_bits(manifest, layer)?;
     // Sized once: at a million agents the doublings of a growing list cost a gigabyte.
-    let bound: usize = ids
-        .filter_map(|id| Some(crowd.posed_instance_bound(id, agent_bits(manifest, layer, id, frame)?.1)))
+    let bound: usize = (agents.iter())
+        .filter_map(|a| Some(crowd.posed_instance_bound(id(a), agent_bits(manifest, layer, id(a), frame)?.1)))
         .sum::<usize>()
         + set_bits.map_or(0, |_| crowd.set.len());
     let mut instances: Vec<Instance> = Vec::with_capacity(bound);
-    for posed in poses {
-        let (id, pose) = posed?;
-        if let Some((bits, lod)) = agent_bits(manifest, layer, id, frame) {
-            crowd.posed_instances(id, &pose, lod, bits, &mut instances);
+    for wave in agents.chunks(PLACING_CHUNK * PLACING_WAVE) {
+        let placed: Vec<Result<Vec<Instance>>> = wave
+            .par_chunks(PLACING_CHUNK)
+            .map(|chunk| {
+                let mut out = Vec::new();
+                for a in chunk {
+                    let id = id(a);
+                    if let Some((bits, lod)) = agent_bits(manifest, layer, id, frame) {
+                        let pose = pose(a)?;
+                        crowd.posed_instances(id, &pose, lod, bits, &mut out);
+                    }
+                }
+                Ok(out)
+            })
+            .collect();
+        for chunk in placed {
+            instances.extend(chunk?);
         }
     }
     if let Some(bits) = set_bits {
