@@ -402,6 +402,10 @@ pub struct RenderSettings {
     /// (the default): no motion blur, every frame an instant.
     #[serde(default)]
     pub shutter: Option<[f32; 2]>,
+    /// The colourspace the renderer works in (`rec709`, the default, or
+    /// `acescg`); inputs are always read as linear Rec.709 (docs/render.md).
+    #[serde(default)]
+    pub working_colourspace: Colourspace,
 }
 
 impl Default for RenderSettings {
@@ -411,8 +415,23 @@ impl Default for RenderSettings {
             spp: default_spp(),
             max_bounces: default_bounces(),
             shutter: None,
+            working_colourspace: Colourspace::Rec709,
         }
     }
+}
+
+/// `render.working_colourspace`: the RGB space light is computed in. Every
+/// input colour (materials, textures, lights) is authored in linear Rec.709;
+/// with `Acescg` the renderer converts them to ACEScg (AP1) as it loads them
+/// (`render::colour`) and the EXRs say so.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Colourspace {
+    /// Linear Rec.709 / sRGB primaries, D65 white.
+    #[default]
+    Rec709,
+    /// ACEScg: linear AP1 primaries, the ACES white (about D60).
+    Acescg,
 }
 
 /// Checks a shutter `[open, close]` (frames relative to the frame): both

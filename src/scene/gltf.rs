@@ -466,6 +466,13 @@ impl AssetCache {
         &self.library
     }
 
+    /// The loaded materials and textures, to change their colours in place
+    /// (the render's working colourspace, `render::colour::prepare`); what
+    /// is loaded and every id stay as they are.
+    pub fn colours_mut(&mut self) -> (&mut [Material], &mut [Texture]) {
+        (&mut self.library.materials, &mut self.library.textures)
+    }
+
     /// Gives up the cache, keeping what was loaded.
     pub fn into_library(self) -> Library {
         self.library
