@@ -661,8 +661,15 @@ impl AssetCache {
             }
         }
         let base = file.path.parent().unwrap_or(Path::new("."));
+        // Name an external image's file: that is what a user can fix.
+        let from = match image.source() {
+            gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
+                format!(" {}", base.join(uri).display())
+            }
+            _ => String::new(),
+        };
         let data = gltf::image::Data::from_source(image.source(), Some(base), &file.buffers)
-            .map_err(|e| ctx(format!("cannot decode: {e}")))?;
+            .map_err(|e| ctx(format!("cannot decode{from}: {e}")))?;
         let texels = decode_texels(&data).ok_or_else(|| ctx(format!("unsupported pixel format {:?}", data.format)))?;
         let texture =
             Texture { name: format!("{}#{label}", src.shown), width: data.width, height: data.height, texels };
