@@ -851,7 +851,7 @@ fn cases() -> Vec<Case> {
             "manifest is a JSON array",
             |d| std::fs::write(d.join("bad.layers.json"), "[1, 2, 3]").unwrap(),
             &["render", "{d}/shot.toml", "--frames", "1001", "--progress", "off", "--out", "{d}/o"],
-            &["bad.layers.json"],
+            &["bad.layers.json", "JSON object"],
             &["o"],
         ),
         // ---------------------------------------------------------- EXR inputs

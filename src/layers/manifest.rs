@@ -392,6 +392,9 @@ pub fn read_manifest(path: &Path) -> Result<Manifest> {
     }
     let text = std::fs::read_to_string(path).at(path)?;
     let json_err = |e: serde_json::Error| Error::invalid(path, e.to_string()).line(e.line());
+    if !text.trim_start().starts_with('{') {
+        return Err(Error::invalid(path, "not a layer manifest: expected a JSON object (`throng layers` writes one)"));
+    }
     let v: Version = serde_json::from_str(&text).map_err(json_err)?;
     if v.version != MANIFEST_VERSION {
         return Err(Error::invalid(
