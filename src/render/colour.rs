@@ -95,7 +95,9 @@ pub fn from_header_name(name: &str) -> Option<Colourspace> {
 /// Converts the crowd's loaded material base colours and texture texels
 /// (RGB; alpha kept) from Rec.709 into `space`, in place. Call once, before
 /// rendering with a [`super::job::RenderJob`] whose `colourspace` is `space`;
-/// a no-op for Rec.709.
+/// a no-op for Rec.709. The exporters write the library's colours as they
+/// find them, so export (glTF, USD: linear Rec.709) before this, as `throng
+/// demo` does.
 pub fn prepare(crowd: &mut ShotCrowd, space: Colourspace) {
     let (materials, textures) = crowd.assets.colours_mut();
     convert_library(materials, textures, space);
