@@ -513,6 +513,7 @@ fn main() {
                 fps: 24.0,
                 render_fingerprint: String::new(),
                 shutter: None,
+                colourspace: Default::default(),
             };
             let exr = prefix.with_extension("exr");
             let png = prefix.with_extension("png");

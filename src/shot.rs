@@ -91,6 +91,35 @@ pub const MAX_RESOLUTION: u32 = 16384;
 pub const MAX_PIXELS: u64 = 8192 * 8192;
 /// Most samples per pixel.
 pub const MAX_SPP: u32 = 65536;
+/// Most bounces after the camera ray (Russian roulette ends paths long before).
+pub const MAX_BOUNCES: u32 = 1024;
+
+/// Checks a shot name: it names output files (`<shot>.<layer>.<frame>.exr`),
+/// so it is one plain file-name part: 1-255 bytes, no `/` or `\`, no
+/// control characters, not starting with `.`.
+pub fn check_shot_name(name: &str) -> std::result::Result<(), String> {
+    if name.is_empty() || name.len() > 255 {
+        return Err(format!("shot name must be 1-255 bytes, got {}", name.len()));
+    }
+    if name.starts_with('.') || name.chars().any(|c| c == '/' || c == '\\' || c.is_control()) {
+        return Err(format!(
+            "shot name `{}` names output files: no `/`, `\\` or control characters, and no leading `.`",
+            name.escape_debug()
+        ));
+    }
+    Ok(())
+}
+
+/// Checks a light's intensity and colour: finite and >= 0. Errors give the key (`intensity`, `color`).
+fn check_light(intensity: f32, color: [f32; 3]) -> std::result::Result<(), (&'static str, String)> {
+    if !(intensity >= 0.0 && intensity.is_finite()) {
+        return Err(("intensity", format!("must be finite and >= 0, got {intensity}")));
+    }
+    if !color.iter().all(|c| *c >= 0.0 && c.is_finite()) {
+        return Err(("color", format!("components must be finite and >= 0, got {color:?}")));
+    }
+    Ok(())
+}
 
 /// Checks a render size: each side 1..=[`MAX_RESOLUTION`], at most [`MAX_PIXELS`].
 pub fn check_resolution(w: u32, h: u32) -> std::result::Result<(), String> {
@@ -402,6 +431,10 @@ pub struct RenderSettings {
     /// (the default): no motion blur, every frame an instant.
     #[serde(default)]
     pub shutter: Option<[f32; 2]>,
+    /// The colourspace the renderer works in (`rec709`, the default, or
+    /// `acescg`); inputs are always read as linear Rec.709 (docs/render.md).
+    #[serde(default)]
+    pub working_colourspace: Colourspace,
 }
 
 impl Default for RenderSettings {
@@ -411,8 +444,23 @@ impl Default for RenderSettings {
             spp: default_spp(),
             max_bounces: default_bounces(),
             shutter: None,
+            working_colourspace: Colourspace::Rec709,
         }
     }
+}
+
+/// `render.working_colourspace`: the RGB space light is computed in. Every
+/// input colour (materials, textures, lights) is authored in linear Rec.709;
+/// with `Acescg` the renderer converts them to ACEScg (AP1) as it loads them
+/// (`render::colour`) and the EXRs say so.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Colourspace {
+    /// Linear Rec.709 / sRGB primaries, D65 white.
+    #[default]
+    Rec709,
+    /// ACEScg: linear AP1 primaries, the ACES white (about D60).
+    Acescg,
 }
 
 /// Checks a shutter `[open, close]` (frames relative to the frame): both
@@ -646,6 +694,7 @@ impl Shot {
             }
         };
 
+        check_shot_name(&file.name).map_err(|m| Error::invalid(path, m).field("name"))?;
         if *file.version.get_ref() != SHOT_VERSION {
             return Err(at(
                 file.version.span(),
@@ -788,8 +837,16 @@ impl Shot {
         if keys.is_empty() && gltf.is_none() {
             return Err(Error::invalid(path, "the camera needs `keys` or `gltf` + `node`").field("camera"));
         }
+        if let Some(w) = keys.windows(2).find(|w| w[0].frame == w[1].frame) {
+            return Err(Error::invalid(path, format!("two camera keys at frame {}", w[0].frame)).field("camera.keys"));
+        }
         for k in &keys {
-            if !(k.focal_length > 0.0) || Vec3::from(k.position) == Vec3::from(k.aim) {
+            let finite = k.frame.is_finite() && k.position.iter().chain(&k.aim).all(|v| v.is_finite());
+            if !finite {
+                return Err(Error::invalid(path, format!("camera key at frame {}: a value is not finite", k.frame))
+                    .field("camera.keys"));
+            }
+            if !(k.focal_length > 0.0 && k.focal_length.is_finite()) || Vec3::from(k.position) == Vec3::from(k.aim) {
                 return Err(Error::invalid(
                     path,
                     format!(
@@ -805,10 +862,23 @@ impl Shot {
         }
 
         if let Some(sun) = &file.lights.sun {
-            if Vec3::from(sun.direction).length_squared() == 0.0 {
-                return Err(Error::invalid(path, "sun direction is zero").field("lights.sun.direction"));
+            let direction = Vec3::from(sun.direction);
+            if !direction.is_finite() || direction.length_squared() == 0.0 {
+                return Err(Error::invalid(path, "sun direction is zero or not finite").field("lights.sun.direction"));
             }
+            if !(0.0..=180.0).contains(&sun.angular_diameter) {
+                return Err(Error::invalid(
+                    path,
+                    format!("angular diameter must be 0-180 degrees, got {}", sun.angular_diameter),
+                )
+                .field("lights.sun.angular_diameter"));
+            }
+            check_light(sun.intensity, sun.color)
+                .map_err(|(k, m)| Error::invalid(path, m).field(format!("lights.sun.{k}")))?;
         }
+        let sky = &file.lights.sky;
+        check_light(sky.intensity, sky.color)
+            .map_err(|(k, m)| Error::invalid(path, m).field(format!("lights.sky.{k}")))?;
         let layers = file.layers;
         if layers.split == SplitMode::Count && layers.count == 0 {
             return Err(Error::invalid(path, "must be at least 1").field("layers.count"));
@@ -819,7 +889,18 @@ impl Shot {
         if let Some(b) = &layers.budget {
             parse_bytes(b).map_err(|m| Error::invalid(path, m).field("layers.budget"))?;
         }
+        if !(layers.lod_full_min_px >= 0.0 && layers.lod_full_min_px.is_finite()) {
+            return Err(Error::invalid(
+                path,
+                format!("must be a finite number of pixels >= 0, got {}", layers.lod_full_min_px),
+            )
+            .field("layers.lod_full_min_px"));
+        }
         let render = file.render;
+        if render.max_bounces > MAX_BOUNCES {
+            return Err(Error::invalid(path, format!("at most {MAX_BOUNCES} bounces, got {}", render.max_bounces))
+                .field("render.max_bounces"));
+        }
         check_resolution(render.resolution[0], render.resolution[1])
             .map_err(|m| Error::invalid(path, m).field("render.resolution"))?;
         check_spp(render.spp).map_err(|m| Error::invalid(path, m).field("render.spp"))?;

@@ -77,6 +77,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
         progress: job::ProgressStyle::Off,
         compression: Default::default(),
         shutter: None,
+        colourspace: Default::default(),
     };
     job::run(crowd, Some(manifest), &job).unwrap();
 }

@@ -272,6 +272,7 @@ fn meta(film: &Film, scene: &FrameScene) -> LayerMeta {
         fps: 24.0,
         render_fingerprint: String::new(),
         shutter: None,
+        colourspace: Default::default(),
     }
 }
 

@@ -121,6 +121,7 @@ fn render_with_shutter(
         progress: job::ProgressStyle::Off,
         compression: Default::default(),
         shutter,
+        colourspace: Default::default(),
     };
     let done = job::run(crowd, Some(manifest), &job).expect("demo renders");
     done.into_iter().map(|r| (r.layer, r.path)).collect()

@@ -507,6 +507,7 @@ fn exr_round_trip() {
         fps: 24.0,
         render_fingerprint: String::new(),
         shutter: None,
+        colourspace: Default::default(),
     };
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("demo.crowd_0.1001.exr");

@@ -321,6 +321,21 @@ pub fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
                     ),
                 ));
             }
+            if ctx.has(&p, "protoIndices") {
+                if let Some(Value::IntVec(idx)) = ctx.value(pi, "protoIndices", t)? {
+                    // USD: protoIndices has one entry per instance.
+                    if idx.len() != ids.len() {
+                        return Err(frame_err(
+                            "protoIndices",
+                            format!(
+                                "{} protoIndices for {} ids at frame {f}; they must be equally long",
+                                idx.len(),
+                                ids.len()
+                            ),
+                        ));
+                    }
+                }
+            }
             if !protos.is_empty() && ctx.has(&p, "protoIndices") {
                 if let Some(Value::IntVec(idx)) = ctx.value(pi, "protoIndices", t)? {
                     if let Some(bad) = idx.iter().find(|&&i| i < 0 || i as usize >= protos.len()) {
@@ -334,6 +349,39 @@ pub fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
             let rig = ctx.value(pi, "primvars:throng:rig", t)?.and_then(|v| names_of(&v));
             let cycle = ctx.value(pi, "primvars:throng:cycle", t)?.and_then(|v| names_of(&v));
             let cycle_frame = ctx.value(pi, "primvars:throng:cycleFrame", t)?;
+            // A per-agent primvar names every agent: a shorter array would
+            // give the rest the defaults without a word.
+            let lengths = [
+                (
+                    "primvars:throng:rig",
+                    match &rig {
+                        Some(Names::Each(v)) => Some(v.len()),
+                        _ => None,
+                    },
+                ),
+                (
+                    "primvars:throng:cycle",
+                    match &cycle {
+                        Some(Names::Each(v)) => Some(v.len()),
+                        _ => None,
+                    },
+                ),
+                (
+                    "primvars:throng:cycleFrame",
+                    match &cycle_frame {
+                        Some(Value::FloatVec(v)) => Some(v.len()),
+                        _ => None,
+                    },
+                ),
+            ];
+            for (attr, n) in lengths {
+                if let Some(n) = n.filter(|&n| n != ids.len()) {
+                    return Err(frame_err(
+                        attr,
+                        format!("{n} values for {} ids at frame {f}; give one per agent", ids.len()),
+                    ));
+                }
+            }
             for (i, &id) in ids.iter().enumerate() {
                 let id =
                     u32::try_from(id).map_err(|_| frame_err("ids", format!("id {id} at frame {f} is not a u32")))?;

@@ -200,6 +200,20 @@ impl Wardrobes {
                     )
                     .field(format!("materials.{name}")));
                 }
+                // glTF's ranges: a base colour factor and metallic/roughness in 0-1.
+                if !m.base_color.iter().all(|c| (0.0..=1.0).contains(c)) {
+                    return Err(Error::invalid(
+                        path,
+                        format!("material `{name}`: base_color components must be 0-1, got {:?}", m.base_color),
+                    )
+                    .field(format!("materials.{name}.base_color")));
+                }
+                for (key, v) in [("metallic", m.metallic), ("roughness", m.roughness)] {
+                    if !(0.0..=1.0).contains(&v) {
+                        return Err(Error::invalid(path, format!("material `{name}`: {key} must be 0-1, got {v}"))
+                            .field(format!("materials.{name}.{key}")));
+                    }
+                }
                 if let Some(t) = &m.base_color_texture {
                     let full = base.join(t);
                     if !full.exists() {

@@ -100,10 +100,10 @@ pub struct ImportArgs {
     #[arg(long, value_parser = parse::<AngleUnits>)]
     pub heading_units: Option<AngleUnits>,
     /// Frames per second of the source's frame column.
-    #[arg(long)]
+    #[arg(long, value_parser = super::values::fps)]
     pub source_fps: Option<f32>,
     /// Frames per second of the cache written (the shot's rate).
-    #[arg(long, default_value_t = 24.0)]
+    #[arg(long, default_value_t = 24.0, value_parser = super::values::fps)]
     pub fps: f32,
     /// Longest interval between samples, seconds, interpolated across; longer is a gap.
     #[arg(long)]

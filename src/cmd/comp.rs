@@ -37,7 +37,7 @@ pub fn run(args: &CompArgs) -> Result<()> {
     let comped = crate::comp::comp_frame(&args.dir, args.frame, manifest.as_ref())?;
     exr::write_layer(&args.out, &comped.film, &comped.meta)?;
     if let Some(png) = &args.png {
-        exr::write_preview_png(png, &comped.film)?;
+        exr::write_preview_png_from(png, &comped.film, comped.meta.colourspace)?;
     }
     if args.json {
         let files = std::iter::once(args.out.clone()).chain(args.png.clone()).collect();

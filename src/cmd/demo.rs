@@ -103,12 +103,19 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     );
 
     let t = Instant::now();
+    // The render's working colourspace converts the library's colours, so
+    // after the glTF export (which writes them as authored, linear Rec.709).
+    let colourspace = crowd.shot.render.working_colourspace;
+    let mut crowd = crowd;
+    crate::render::colour::prepare(&mut crowd, colourspace);
+    let crowd = crowd;
     let f = crowd.shot.frames;
     let mut layers = job::all_layers(&manifest);
     layers.push(FULL_LAYER.to_string());
     let render = RenderJob {
         png: true,
         shutter,
+        colourspace,
         ..RenderJob::new(layers, vec![f.start, manifest.ref_frame, f.end], args.spp, out.join("render"))
     };
     let done = job::run(&crowd, Some(&manifest), &render)?;

@@ -116,6 +116,11 @@ pub fn run(verb: &FarmVerb) -> Result<()> {
         FarmVerb::Status(a) => status(a),
         FarmVerb::RunTask(a) => {
             let plan = farm::open_plan(&a.plan, None)?;
+            if plan.task(&a.task).is_none() {
+                let some: Vec<&str> = plan.tasks.iter().take(3).map(|t| t.id.as_str()).collect();
+                return Err(Error::invalid(&a.plan, format!("no task `{}` (tasks: {}...)", a.task, some.join(", ")))
+                    .field("tasks"));
+            }
             farm::run_task(&plan, &a.task, &exe()?)
         }
     }

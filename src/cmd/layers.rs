@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::values::budget;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::layers::{self, build_layers, set_bounds, LayerOverrides, MapOptions};
 
 /// `throng layers`.
@@ -31,7 +31,7 @@ pub struct LayersArgs {
     pub per_frame: bool,
     /// Projected height in pixels below which an agent renders as proxy boxes
     /// (default: the shot's `lod_full_min_px`).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub lod_px: Option<f32>,
     /// Choose LOD on every frame, with hysteresis, instead of once at the reference frame.
     #[arg(long)]
@@ -48,6 +48,34 @@ pub struct LayersArgs {
 }
 
 impl LayersArgs {
+    /// The flags' own ranges, so an error names the flag (not the shot's key it overrides).
+    fn check(&self, shot: &crate::shot::Shot) -> Result<()> {
+        if self.count == Some(0) {
+            return Err(Error::Usage("--count 0: at least one crowd layer".into()));
+        }
+        if let Some(c) = &self.cutoffs {
+            if c.iter().any(|v| !(*v > 0.0 && v.is_finite())) || c.windows(2).any(|w| !(w[0] < w[1])) {
+                return Err(Error::Usage(format!(
+                    "--cutoffs {c:?}: distances must be positive metres and increase, e.g. 10,25,60"
+                )));
+            }
+        }
+        if let Some(px) = self.lod_px {
+            if !(px >= 0.0 && px.is_finite()) {
+                return Err(Error::Usage(format!("--lod-px {px}: a projected height in pixels, >= 0")));
+            }
+        }
+        if let Some(f) = self.ref_frame {
+            if !shot.frames.contains(f) {
+                return Err(Error::Usage(format!(
+                    "--ref-frame {f} is not a frame of shot {} ({}-{})",
+                    shot.name, shot.frames.start, shot.frames.end
+                )));
+            }
+        }
+        Ok(())
+    }
+
     /// What these flags override of the shot's `[layers]` table.
     pub fn overrides(&self) -> LayerOverrides {
         LayerOverrides {
@@ -65,6 +93,7 @@ impl LayersArgs {
 /// `throng layers SHOT ...`: writes the manifest (and map) and prints the split.
 pub fn run(args: &LayersArgs) -> Result<()> {
     let crowd = super::load_crowd(&args.shot)?;
+    args.check(&crowd.shot)?;
     for w in layers::checks::check_placement(&crowd)?.warnings() {
         eprintln!("throng: warning: {w}");
     }

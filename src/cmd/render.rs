@@ -58,6 +58,24 @@ impl From<CompressionFlag> for exr::LayerCompression {
     }
 }
 
+/// `--colourspace`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ColourspaceFlag {
+    /// Linear Rec.709 / sRGB primaries, D65 white.
+    Rec709,
+    /// ACEScg (AP1 primaries, ACES white): every input colour converted from linear Rec.709.
+    Acescg,
+}
+
+impl From<ColourspaceFlag> for crate::shot::Colourspace {
+    fn from(f: ColourspaceFlag) -> crate::shot::Colourspace {
+        match f {
+            ColourspaceFlag::Rec709 => crate::shot::Colourspace::Rec709,
+            ColourspaceFlag::Acescg => crate::shot::Colourspace::Acescg,
+        }
+    }
+}
+
 /// `--progress`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ProgressFlag {
@@ -132,6 +150,10 @@ pub struct RenderArgs {
     /// Also writes the motion-vector pass (forward.u, forward.v).
     #[arg(long, value_parser = shutter, allow_hyphen_values = true)]
     pub shutter: Option<ShutterFlag>,
+    /// Working colourspace (default: the shot's `render.working_colourspace`, else rec709). Input
+    /// colours are linear Rec.709; acescg converts them and writes AP1 `chromaticities`.
+    #[arg(long, value_enum)]
+    pub colourspace: Option<ColourspaceFlag>,
 }
 
 /// `throng render SHOT ...`: renders the asked layers and frames.
@@ -142,6 +164,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if let Some(s) = shutter {
         crate::casting::motion::prepare_shutter(&mut crowd, s)?;
     }
+    let colourspace = args.colourspace.map_or(crowd.shot.render.working_colourspace, Into::into);
+    crate::render::colour::prepare(&mut crowd, colourspace);
     let crowd = crowd;
     let manifest_path = args
         .manifest
@@ -187,6 +211,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         progress: args.progress.into(),
         compression: args.compression.into(),
         shutter,
+        colourspace,
         ..RenderJob::new(layers, frames, spp, args.out.clone())
     };
     let done = job::run(&crowd, manifest.as_ref(), &job)?;

@@ -49,6 +49,16 @@ pub fn spp(s: &str) -> Result<u32, String> {
     Ok(n)
 }
 
+/// A rate in frames per second (`--fps`): finite and > 0, at most 10000.
+pub fn fps(s: &str) -> Result<f32, String> {
+    let bad = || format!("bad fps `{s}` (a number of frames per second above 0, at most 10000)");
+    let v: f32 = s.trim().parse().map_err(|_| bad())?;
+    if !(v > 0.0 && v <= 10000.0) {
+        return Err(bad());
+    }
+    Ok(v)
+}
+
 /// Most render threads `--threads` accepts.
 pub const MAX_THREADS: usize = 4096;
 

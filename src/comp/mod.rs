@@ -288,6 +288,19 @@ pub fn read_inputs(files: &[(String, PathBuf)], frame: i32) -> Result<Vec<CompIn
                 )
                 .field("throng/shot"));
             }
+            if meta.colourspace != first.meta.colourspace {
+                let name = crate::render::colour::header_name;
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "layer is in colourspace {} but {} is in {}: render every layer with one working colourspace",
+                        name(meta.colourspace),
+                        first.path.display(),
+                        name(first.meta.colourspace)
+                    ),
+                )
+                .field("throng/colorspace"));
+            }
             if (film.width, film.height) != (first.film.width, first.film.height) {
                 return Err(Error::invalid(
                     path,

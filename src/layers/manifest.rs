@@ -392,6 +392,9 @@ pub fn read_manifest(path: &Path) -> Result<Manifest> {
     }
     let text = std::fs::read_to_string(path).at(path)?;
     let json_err = |e: serde_json::Error| Error::invalid(path, e.to_string()).line(e.line());
+    if !text.trim_start().starts_with('{') {
+        return Err(Error::invalid(path, "not a layer manifest: expected a JSON object (`throng layers` writes one)"));
+    }
     let v: Version = serde_json::from_str(&text).map_err(json_err)?;
     if v.version != MANIFEST_VERSION {
         return Err(Error::invalid(
@@ -400,7 +403,55 @@ pub fn read_manifest(path: &Path) -> Result<Manifest> {
         )
         .field("version"));
     }
-    serde_json::from_str(&text).map_err(json_err)
+    let m: Manifest = serde_json::from_str(&text).map_err(json_err)?;
+    check_consistent(path, &m)?;
+    Ok(m)
+}
+
+/// A manifest edited by hand (or by another tool) must still describe one
+/// split: `comp_order` is the set layer then every crowd layer once, each
+/// layer's `index` is its place in `layers`, and every agent's `layer` is one
+/// of them. Otherwise a render would trace layers nobody is in.
+fn check_consistent(path: &Path, m: &Manifest) -> Result<()> {
+    let bad = |field: &str, msg: String| Err(Error::invalid(path, msg).field(field.to_string()));
+    for (i, l) in m.layers.iter().enumerate() {
+        if l.index != i {
+            return bad(
+                &format!("layers[{i}].index"),
+                format!("layer `{}` has index {}, expected {i}", l.name, l.index),
+            );
+        }
+    }
+    let mut order: Vec<&str> = m.comp_order.iter().map(String::as_str).collect();
+    if order.first() != Some(&m.set.name.as_str()) {
+        return bad(
+            "comp_order",
+            format!("comp_order {:?} does not start with the set layer `{}`", m.comp_order, m.set.name),
+        );
+    }
+    order.remove(0);
+    order.sort_unstable();
+    let mut names: Vec<&str> = m.layers.iter().map(|l| l.name.as_str()).collect();
+    names.sort_unstable();
+    if order != names {
+        return bad(
+            "comp_order",
+            format!(
+                "comp_order {:?} does not list the set and each of the layers [{}] exactly once",
+                m.comp_order,
+                m.layers.iter().map(|l| l.name.as_str()).collect::<Vec<_>>().join(", ")
+            ),
+        );
+    }
+    if let Some(a) = m.agents.iter().find(|a| a.layer >= m.layers.len()) {
+        return Err(Error::invalid(
+            path,
+            format!("agent {} is in layer {}, but the manifest has {} layers", a.id, a.layer, m.layers.len()),
+        )
+        .agent(a.id)
+        .field("agents.layer"));
+    }
+    Ok(())
 }
 
 // ---- memory estimates ----

@@ -19,6 +19,7 @@ use exr::prelude::{
 };
 use glam::{Mat4, Vec3, Vec4};
 
+use super::colour::{self, Colourspace};
 use super::cryptomatte;
 use super::film::Film;
 use crate::error::{write_atomic, Error, Result};
@@ -57,6 +58,9 @@ pub struct LayerMeta {
     /// `throng/shutter` (v2f): shutter open and close in frames relative to
     /// the frame; not written for a render without motion blur.
     pub shutter: Option<[f32; 2]>,
+    /// The working colourspace of the beauty and albedo channels
+    /// (`chromaticities`, `throng/colorspace`).
+    pub colourspace: Colourspace,
 }
 
 /// Names of the motion-vector channels: Nuke's `forward` layer (VectorBlur's
@@ -67,19 +71,21 @@ pub const MOTION_CHANNELS: [&str; 2] = ["forward.u", "forward.v"];
 pub const MOTION_CONVENTION: &str =
     "forward.u/v = screen motion of the surface at the sample nearest the pixel centre, pixels per frame, +u right, +v up (Nuke), from shutter open to close";
 
-/// The working colourspace of every beauty and albedo channel: linear light
-/// with Rec.709 / sRGB primaries and a D65 white (`chromaticities`).
+/// The default working colourspace of every beauty and albedo channel:
+/// linear light with Rec.709 / sRGB primaries and a D65 white
+/// (`chromaticities`); `ACEScg` with `render.working_colourspace = "acescg"`.
 pub const COLORSPACE: &str = "lin_rec709";
 
 /// Rec.709 primaries and D65 white, as OpenEXR's `chromaticities` attribute.
 pub fn rec709_chromaticities() -> exr::meta::attribute::Chromaticities {
+    chromaticities(Colourspace::Rec709)
+}
+
+/// The primaries and white of `space` as OpenEXR's `chromaticities` attribute.
+pub fn chromaticities(space: Colourspace) -> exr::meta::attribute::Chromaticities {
     use exr::math::Vec2;
-    exr::meta::attribute::Chromaticities {
-        red: Vec2(0.64, 0.33),
-        green: Vec2(0.30, 0.60),
-        blue: Vec2(0.15, 0.06),
-        white: Vec2(0.3127, 0.3290),
-    }
+    let [r, g, b, w] = colour::chromaticities(space).map(|[x, y]| Vec2(x, y));
+    exr::meta::attribute::Chromaticities { red: r, green: g, blue: b, white: w }
 }
 
 /// `fps` as the rational OpenEXR's `framesPerSecond` wants: 24 -> 24/1,
@@ -294,7 +300,7 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
     put("throng/spp", AttributeValue::I32(meta.spp.min(i32::MAX as u32) as i32))?;
     put("throng/zConvention", AttributeValue::Text(text("cameraDepth")?))?;
     put("throng/idMapping", AttributeValue::Text(text(&meta.id_mapping)?))?;
-    put("throng/colorspace", AttributeValue::Text(text(COLORSPACE)?))?;
+    put("throng/colorspace", AttributeValue::Text(text(colour::header_name(meta.colourspace))?))?;
     if !meta.render_fingerprint.is_empty() {
         put("throng/renderFingerprint", AttributeValue::Text(text(&meta.render_fingerprint)?))?;
     }
@@ -334,7 +340,7 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
         line_order: LineOrder::Increasing,
     };
     let mut image = Image::from_layer(Layer::new((w, h), attrs, encoding, channels));
-    image.attributes.chromaticities = Some(rec709_chromaticities());
+    image.attributes.chromaticities = Some(chromaticities(meta.colourspace));
     let mut bytes = Vec::new();
     image.write().to_buffered(std::io::Cursor::new(&mut bytes)).map_err(|e| exr_error(path, e))?;
     sort_header_attributes(&mut bytes);
@@ -472,6 +478,14 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
             Some(AttributeValue::FloatVec2(v)) => Some([v.0, v.1]),
             _ => None,
         },
+        // Files from before the option, and others' files, are Rec.709.
+        colourspace: match get_text("throng/colorspace") {
+            Ok(name) => colour::from_header_name(&name).ok_or_else(|| {
+                Error::invalid(path, format!("throng/colorspace `{name}` is neither lin_rec709 nor ACEScg"))
+                    .field("throng/colorspace")
+            })?,
+            Err(_) => Colourspace::Rec709,
+        },
     };
     Ok((film, meta))
 }
@@ -546,8 +560,17 @@ fn srgb_encode(linear: f32) -> u8 {
 
 /// Writes an 8-bit sRGB PNG preview: premultiplied RGB over black, clamped.
 pub fn write_preview_png(path: &Path, film: &Film) -> Result<()> {
-    let pixels: Vec<u8> =
-        film.rgba.iter().flat_map(|p| [srgb_encode(p[0]), srgb_encode(p[1]), srgb_encode(p[2])]).collect();
+    write_preview_png_from(path, film, Colourspace::Rec709)
+}
+
+/// [`write_preview_png`] of a film in working colourspace `space`: converted
+/// to Rec.709 for display first (sRGB primaries, then the sRGB transfer).
+pub fn write_preview_png_from(path: &Path, film: &Film, space: Colourspace) -> Result<()> {
+    let pixels: Vec<u8> = film
+        .rgba
+        .iter()
+        .flat_map(|p| colour::to_rec709(space, Vec3::new(p[0], p[1], p[2])).to_array().map(srgb_encode))
+        .collect();
     let img = image::RgbImage::from_raw(film.width, film.height, pixels)
         .ok_or_else(|| Error::invalid(path, "film buffer does not match its size"))?;
     write_atomic(path, |out| {

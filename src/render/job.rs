@@ -16,6 +16,7 @@ use crate::casting::{AgentPose, Lod, ShotCrowd};
 use crate::error::{Error, Result};
 use crate::layers::Manifest;
 use crate::output::{layer_path, FULL_LAYER};
+use crate::render::colour::{self, Colourspace};
 use crate::render::cryptomatte::{CryptoNames, NameTables};
 use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, RenderSettings};
 use crate::scene::{vis, Deform, FrameScene, Instance, InstanceMotion, SceneMotion};
@@ -50,6 +51,10 @@ pub struct RenderJob {
     /// shutter poses, so call [`crate::casting::motion::prepare_shutter`] on
     /// the crowd first (without it they blur rigidly only).
     pub shutter: Option<[f32; 2]>,
+    /// The working colourspace (`render.working_colourspace`). For ACEScg,
+    /// convert the crowd's library first with [`crate::render::colour::prepare`]
+    /// (the job converts each frame's lights itself).
+    pub colourspace: Colourspace,
 }
 
 impl RenderJob {
@@ -70,6 +75,7 @@ impl RenderJob {
             progress: ProgressStyle::Auto,
             compression: exr::LayerCompression::Zip,
             shutter: None,
+            colourspace: Colourspace::Rec709,
         }
     }
 }
@@ -411,7 +417,8 @@ impl Progress {
 /// shutter when motion blur is on (a still render's text is unchanged, so
 /// files rendered before motion blur existed still resume), and with
 /// Cryptomatte on the matte types and set object naming (files from before
-/// `CryptoMaterial` and named set objects render again). `--resume` skips a
+/// `CryptoMaterial` and named set objects render again), and the working
+/// colourspace when it is not Rec.709. `--resume` skips a
 /// file only when its fingerprint matches.
 pub fn render_fingerprint(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob, layer: &str) -> String {
     let shot = &crowd.shot;
@@ -433,6 +440,11 @@ pub fn render_fingerprint(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &
     let text = match job.shutter {
         Some([open, close]) => format!("{text} shutter {:08x} {:08x}", open.to_bits(), close.to_bits()),
         None => text,
+    };
+    // Rec.709 adds nothing: files rendered before the option still resume.
+    let text = match job.colourspace {
+        Colourspace::Rec709 => text,
+        space => format!("{text} colourspace {}", colour::header_name(space)),
     };
     let text = match job.cryptomatte {
         CryptoOutput::Off => text,
@@ -543,7 +555,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
             if progress.style == ProgressStyle::Bar {
                 progress.show(out.len(), frame, layer, 0.0);
             }
-            let scene = match job.shutter {
+            let mut scene = match job.shutter {
                 Some(shutter) => {
                     if moving.is_none() {
                         moving = Some(MotionFrame::new(crowd, frame, shutter)?);
@@ -563,6 +575,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                     frame_scene(crowd, manifest, layer, posed)?
                 }
             };
+            colour::scene_lights(&mut scene, job.colourspace);
             if job.layers.last() == Some(layer) {
                 // The frame's last layer has its instances: free the poses
                 // before its trees are built (a million agents' slots).
@@ -613,6 +626,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                 fps: crowd.shot.frames.fps,
                 render_fingerprint: fingerprint,
                 shutter: job.shutter,
+                colourspace: job.colourspace,
             };
             let manifest = match job.cryptomatte {
                 CryptoOutput::Sidecar => exr::ManifestMode::Sidecar,
@@ -620,7 +634,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
             };
             exr::write_layer_with(&path, &film, &meta, &exr::WriteOptions { manifest, compression: job.compression })?;
             if job.png {
-                exr::write_preview_png(&path.with_extension("png"), &film)?;
+                exr::write_preview_png_from(&path.with_extension("png"), &film, job.colourspace)?;
             }
             out.push(RenderedLayer {
                 layer: layer.clone(),

@@ -12,6 +12,7 @@
 
 pub mod accel;
 pub mod bsdf;
+pub mod colour;
 pub mod cryptomatte;
 pub mod exr;
 pub mod film;

@@ -466,6 +466,13 @@ impl AssetCache {
         &self.library
     }
 
+    /// The loaded materials and textures, to change their colours in place
+    /// (the render's working colourspace, `render::colour::prepare`); what
+    /// is loaded and every id stay as they are.
+    pub fn colours_mut(&mut self) -> (&mut [Material], &mut [Texture]) {
+        (&mut self.library.materials, &mut self.library.textures)
+    }
+
     /// Gives up the cache, keeping what was loaded.
     pub fn into_library(self) -> Library {
         self.library
@@ -654,8 +661,15 @@ impl AssetCache {
             }
         }
         let base = file.path.parent().unwrap_or(Path::new("."));
+        // Name an external image's file: that is what a user can fix.
+        let from = match image.source() {
+            gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
+                format!(" {}", base.join(uri).display())
+            }
+            _ => String::new(),
+        };
         let data = gltf::image::Data::from_source(image.source(), Some(base), &file.buffers)
-            .map_err(|e| ctx(format!("cannot decode: {e}")))?;
+            .map_err(|e| ctx(format!("cannot decode{from}: {e}")))?;
         let texels = decode_texels(&data).ok_or_else(|| ctx(format!("unsupported pixel format {:?}", data.format)))?;
         let texture =
             Texture { name: format!("{}#{label}", src.shown), width: data.width, height: data.height, texels };

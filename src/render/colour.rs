@@ -1,0 +1,144 @@
+//! The working colourspace: linear Rec.709 (the default) or ACEScg.
+//!
+//! Every input colour is authored in linear Rec.709 / sRGB primaries (D65):
+//! material base colours, base-colour texture texels (decoded from sRGB by the
+//! glTF loader), the sun's and sky's colours. With [`Colourspace::Acescg`]
+//! they are converted to ACEScg (AP1 primaries, the ACES white) as the render
+//! loads them ([`prepare`] for the library, [`scene_lights`] for each frame
+//! scene's lights), so the path tracer multiplies and sums AP1 values, and the
+//! EXR header says AP1 ([`chromaticities`], [`header_name`]). The PNG preview
+//! converts back to Rec.709 before the sRGB transfer ([`to_rec709`]).
+//!
+//! The matrix is the standard one (the ACES and OpenColorIO "Linear Rec.709
+//! (sRGB)" -> "ACEScg" transform): RGB -> XYZ with the Rec.709 primaries and
+//! D65 white, a Bradford chromatic adaptation from D65 (0.3127, 0.3290) to the
+//! ACES white (0.32168, 0.33767), XYZ -> AP1. Its rows sum to 1, so a neutral
+//! stays neutral; `tests/colour.rs` derives it from the primaries.
+
+use glam::{Mat3, Vec3};
+
+use crate::casting::ShotCrowd;
+use crate::scene::{FrameScene, Material, Texture};
+pub use crate::shot::Colourspace;
+
+/// Linear Rec.709 (D65) -> ACEScg (AP1, ACES white), rows: `ap1 = M * rec709`.
+pub const REC709_TO_ACESCG: [[f32; 3]; 3] = [
+    [0.613_097_4, 0.339_523_1, 0.047_379_45],
+    [0.070_193_72, 0.916_353_9, 0.013_452_4],
+    [0.020_615_59, 0.109_569_77, 0.869_814_6],
+];
+
+/// ACEScg -> linear Rec.709, the inverse of [`REC709_TO_ACESCG`].
+pub const ACESCG_TO_REC709: [[f32; 3]; 3] = [
+    [1.705_051, -0.621_792_1, -0.083_258_87],
+    [-0.130_256_42, 1.140_804_7, -0.010_548_319],
+    [-0.024_003_357, -0.128_968_98, 1.152_972_3],
+];
+
+/// OpenEXR `chromaticities` of AP1: red, green, blue, white (x, y).
+pub const AP1_CHROMATICITIES: [[f32; 2]; 4] = [[0.713, 0.293], [0.165, 0.830], [0.128, 0.044], [0.32168, 0.33767]];
+
+/// OpenEXR `chromaticities` of Rec.709 / sRGB: red, green, blue, D65 white.
+pub const REC709_CHROMATICITIES: [[f32; 2]; 4] = [[0.64, 0.33], [0.30, 0.60], [0.15, 0.06], [0.3127, 0.3290]];
+
+fn mat(rows: [[f32; 3]; 3]) -> Mat3 {
+    Mat3::from_cols_array_2d(&rows).transpose()
+}
+
+/// A linear Rec.709 colour in ACEScg.
+pub fn rec709_to_acescg(c: Vec3) -> Vec3 {
+    mat(REC709_TO_ACESCG) * c
+}
+
+/// An ACEScg colour in linear Rec.709.
+pub fn acescg_to_rec709(c: Vec3) -> Vec3 {
+    mat(ACESCG_TO_REC709) * c
+}
+
+/// An input colour (authored in linear Rec.709) in the working space.
+pub fn input(space: Colourspace, c: Vec3) -> Vec3 {
+    match space {
+        Colourspace::Rec709 => c,
+        Colourspace::Acescg => rec709_to_acescg(c),
+    }
+}
+
+/// A working-space colour in linear Rec.709, for display (PNG previews).
+pub fn to_rec709(space: Colourspace, c: Vec3) -> Vec3 {
+    match space {
+        Colourspace::Rec709 => c,
+        Colourspace::Acescg => acescg_to_rec709(c),
+    }
+}
+
+/// The primaries and white of `space`, as OpenEXR's `chromaticities` wants them.
+pub fn chromaticities(space: Colourspace) -> [[f32; 2]; 4] {
+    match space {
+        Colourspace::Rec709 => REC709_CHROMATICITIES,
+        Colourspace::Acescg => AP1_CHROMATICITIES,
+    }
+}
+
+/// `throng/colorspace`: `lin_rec709` or `ACEScg` (OpenColorIO's names).
+pub fn header_name(space: Colourspace) -> &'static str {
+    match space {
+        Colourspace::Rec709 => "lin_rec709",
+        Colourspace::Acescg => "ACEScg",
+    }
+}
+
+/// The working space a `throng/colorspace` header names (`None`: not ours).
+pub fn from_header_name(name: &str) -> Option<Colourspace> {
+    [Colourspace::Rec709, Colourspace::Acescg].into_iter().find(|&s| header_name(s) == name)
+}
+
+/// Converts the crowd's loaded material base colours and texture texels
+/// (RGB; alpha kept) from Rec.709 into `space`, in place. Call once, before
+/// rendering with a [`super::job::RenderJob`] whose `colourspace` is `space`;
+/// a no-op for Rec.709. The exporters write the library's colours as they
+/// find them, so export (glTF, USD: linear Rec.709) before this, as `throng
+/// demo` does.
+pub fn prepare(crowd: &mut ShotCrowd, space: Colourspace) {
+    let (materials, textures) = crowd.assets.colours_mut();
+    convert_library(materials, textures, space);
+}
+
+/// Converts material base colours and texture texels (RGB; alpha kept) from
+/// Rec.709 into `space`, in place (what [`prepare`] does to a crowd's library).
+pub fn convert_library(materials: &mut [Material], textures: &mut [Texture], space: Colourspace) {
+    if space == Colourspace::Rec709 {
+        return;
+    }
+    for m in materials {
+        m.base_color = input(space, m.base_color);
+    }
+    for t in textures {
+        for texel in &mut t.texels {
+            let c = input(space, Vec3::new(texel[0], texel[1], texel[2]));
+            texel[..3].copy_from_slice(&c.to_array());
+        }
+    }
+}
+
+/// Converts a frame scene's sun and sky colours from Rec.709 into `space`.
+pub fn scene_lights(scene: &mut FrameScene, space: Colourspace) {
+    if let Some(sun) = &mut scene.sun {
+        sun.irradiance = input(space, sun.irradiance);
+    }
+    scene.sky.radiance = input(space, scene.sky.radiance);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_matrices_are_inverses_and_keep_neutrals() {
+        let m = mat(REC709_TO_ACESCG) * mat(ACESCG_TO_REC709);
+        assert!(m.abs_diff_eq(Mat3::IDENTITY, 1e-6), "{m}");
+        for v in [0.18f32, 0.5, 1.0, 7.0] {
+            let g = rec709_to_acescg(Vec3::splat(v));
+            assert!((g - Vec3::splat(v)).abs().max_element() <= 2e-6 * v, "{g}");
+        }
+    }
+}

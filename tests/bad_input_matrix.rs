@@ -1,0 +1,1262 @@
+//! Issue 15's closing bad-input matrix: a fresh set of cases, none of them
+//! in `tests/bad_input.rs` or `.ci/bad_input_matrix.py`, across every input
+//! kind (shot TOML section by section, wardrobe TOML, rig files, the binary
+//! cache, CSV, JuPedSim sqlite, USD crowds, glTF meshes and textures, layer
+//! manifests, EXR inputs, farm plans and options, the flags of every verb).
+//!
+//! Each case runs the real `throng` binary under a 4 GB address-space cap
+//! and a CPU-time cap (`ulimit -v`, `ulimit -t`), and must exit 2, name the
+//! file and the key, field or flag (and the agent where one is at fault) on
+//! stderr, never panic, and leave no output under its final name. The table of results is written to
+//! `target/tmp/bad_input_matrix.md` (and to `$THRONG_MATRIX_MD` when set).
+
+mod common;
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::{fixture, repo_path};
+
+struct Case {
+    kind: &'static str,
+    name: &'static str,
+    /// Writes or changes files in the case's folder (after the base shot).
+    setup: fn(&Path),
+    /// Arguments; `{d}` is the case's folder.
+    args: &'static [&'static str],
+    /// Every one must appear in stderr (case-sensitive).
+    says: &'static [&'static str],
+    /// Paths under the folder that must not exist afterwards.
+    absent: &'static [&'static str],
+}
+
+const BIN: &str = env!("CARGO_BIN_EXE_throng");
+
+fn demo(rel: &str) -> String {
+    repo_path("demo").join(rel).display().to_string()
+}
+
+/// The base of every case: two idle robots on frames 1001-1003 (cache
+/// frames 1-3), the demo's rig and set, a one-material wardrobe `w.toml`.
+fn base(dir: &Path) {
+    let mut csv = String::from("frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags\n");
+    for f in 1..=3 {
+        csv.push_str(&format!("{f},1,-0.8,0,1.0,0,bipedThinA,IdleA,3,\n{f},2,0.9,0,-1.0,0,bipedThinA,IdleA,3,\n"));
+    }
+    std::fs::write(dir.join("c.csv"), csv).unwrap();
+    let shot = format!(
+        r#"version = 1
+name = "bad"
+seed = 5
+wardrobes = ["{robots}"]
+
+[frames]
+start = 1001
+end = 1003
+fps = 24.0
+
+[cache]
+path = "c.csv"
+frame_offset = -1000
+
+[rigs.bipedThinA]
+file = "{rig}"
+schemes = {{ HighEnd = 1.0 }}
+
+[set]
+file = "{set}"
+
+[camera]
+[[camera.keys]]
+frame = 1001
+position = [0.0, 1.6, 9.0]
+aim = [0.0, 0.9, 0.0]
+focal_length = 35.0
+
+[lights.sun]
+direction = [-0.5, 0.6, 0.4]
+intensity = 3.0
+
+[layers]
+count = 2
+
+[render]
+resolution = [48, 27]
+spp = 1
+"#,
+        robots = repo_path("wardrobes/robots.toml").display(),
+        rig = demo("rigs/bipedThinA.glb"),
+        set = demo("set/set.glb"),
+    );
+    std::fs::write(dir.join("shot.toml"), shot).unwrap();
+    let wardrobe = format!(
+        r#"version = 1
+name = "w"
+[materials.red]
+base_color = [0.6, 0.05, 0.04]
+[schemes.Only]
+[[schemes.Only.parts]]
+file = "{heads}"
+mesh = "head_sphere"
+slot = "head"
+materials = ["red"]
+"#,
+        heads = demo("parts/heads.glb")
+    );
+    std::fs::write(dir.join("w.toml"), wardrobe).unwrap();
+}
+
+/// Replaces `from` by `to` in `dir/file` (which must contain it).
+fn edit(dir: &Path, file: &str, from: &str, to: &str) {
+    let path = dir.join(file);
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains(from), "{file} has no `{from}`");
+    std::fs::write(&path, text.replacen(from, to, 1)).unwrap();
+}
+
+/// Appends `text` to `dir/file`.
+fn append(dir: &Path, file: &str, text: &str) {
+    let path = dir.join(file);
+    let mut t = std::fs::read_to_string(&path).unwrap();
+    t.push_str(text);
+    std::fs::write(&path, t).unwrap();
+}
+
+/// The shot wears `w.toml` (scheme `Only`) instead of the robots.
+fn use_wardrobe(dir: &Path) {
+    edit(dir, "shot.toml", &repo_path("wardrobes/robots.toml").display().to_string(), "w.toml");
+    edit(dir, "shot.toml", "HighEnd = 1.0", "Only = 1.0");
+}
+
+/// Runs throng with `args` in `dir` and asserts success (case setup).
+fn ok(dir: &Path, args: &[&str]) {
+    let out = Command::new(BIN).args(args).current_dir(dir).output().unwrap();
+    assert!(out.status.success(), "setup `throng {}`: {}", args.join(" "), String::from_utf8_lossy(&out.stderr));
+}
+
+/// The base cache as a `.crowd` in `dir/c.crowd`, and the shot reading it.
+fn crowd_cache(dir: &Path) -> Vec<u8> {
+    ok(dir, &["cache", "convert", "c.csv", "c.crowd"]);
+    edit(dir, "shot.toml", "path = \"c.csv\"", "path = \"c.crowd\"");
+    std::fs::read(dir.join("c.crowd")).unwrap()
+}
+
+/// Sets header field `offset` (u32) of a `.crowd` and fixes the header CRC.
+fn patch_header(bytes: &mut [u8], offset: usize, value: u32) {
+    bytes[offset..offset + 4].copy_from_slice(&value.to_le_bytes());
+    let crc = crc32fast::hash(&bytes[..28]);
+    bytes[28..32].copy_from_slice(&crc.to_le_bytes());
+}
+
+/// A one-triangle glTF (`dir/set.gltf`, buffer `tri.bin`) with `extra`
+/// JSON members merged into the top-level object and `material` as the
+/// primitive's material member; the shot's set is that file.
+fn tri_gltf(dir: &Path, extra: &str, material: &str, count: u32) {
+    let mut bin = Vec::new();
+    for v in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] {
+        for c in v {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    std::fs::write(dir.join("tri.bin"), &bin).unwrap();
+    let json = format!(
+        r#"{{"asset":{{"version":"2.0"}},
+"buffers":[{{"byteLength":36,"uri":"tri.bin"}}],
+"bufferViews":[{{"buffer":0,"byteLength":36}}],
+"accessors":[{{"bufferView":0,"componentType":5126,"count":{count},"type":"VEC3","min":[0,0,0],"max":[1,0,1]}}],
+"meshes":[{{"name":"tri","primitives":[{{"attributes":{{"POSITION":0}}{material}}}]}}],
+"nodes":[{{"mesh":0,"name":"tri"}}],
+"scenes":[{{"nodes":[0]}}],"scene":0{extra}}}"#
+    );
+    std::fs::write(dir.join("set.gltf"), json).unwrap();
+    edit(dir, "shot.toml", &demo("set/set.glb"), "set.gltf");
+}
+
+/// A JuPedSim trajectory file `dir/j.sqlite` made by `sql`.
+fn sqlite(dir: &Path, sql: &str) {
+    let db = rusqlite::Connection::open(dir.join("j.sqlite")).unwrap();
+    db.execute_batch(sql).unwrap();
+}
+
+const JUPEDSIM_OK: &str = "CREATE TABLE metadata(key TEXT, value TEXT);
+INSERT INTO metadata VALUES ('version', '1'), ('fps', '25');
+CREATE TABLE trajectory_data(frame INTEGER, id INTEGER, pos_x REAL, pos_y REAL, ori_x REAL, ori_y REAL);
+INSERT INTO trajectory_data VALUES (0, 1, 0.0, 0.0, 1.0, 0.0), (1, 1, 0.05, 0.0, 1.0, 0.0);";
+
+/// A rendered layer set and its manifest for frame 1001 (in `dir/r`).
+fn rendered(dir: &Path) {
+    ok(dir, &["layers", "shot.toml"]);
+    ok(dir, &["render", "shot.toml", "--frames", "1001", "--progress", "off", "--out", "r"]);
+}
+
+/// A farm plan of the base shot in `dir/farm`.
+fn planned(dir: &Path) {
+    ok(dir, &["farm", "plan", "shot.toml", "--frames", "1001", "--out", "farm"]);
+}
+
+const USD_HEAD: &str =
+    "#usda 1.0\n(\n    upAxis = \"Y\"\n    metersPerUnit = 1\n    startTimeCode = 1\n    endTimeCode = 2\n)\n";
+
+/// A case: `setup`, then `throng ARGS` must exit 2 saying every one of `says`, leaving no `absent` path.
+fn c(
+    kind: &'static str,
+    name: &'static str,
+    setup: fn(&Path),
+    args: &'static [&'static str],
+    says: &'static [&'static str],
+    absent: &'static [&'static str],
+) -> Case {
+    Case { kind, name, setup, args, says, absent }
+}
+
+fn cases() -> Vec<Case> {
+    let cast: &'static [&'static str] = &["cast", "{d}/shot.toml"];
+    let full: &'static [&'static str] =
+        &["render", "{d}/shot.toml", "--layer", "full", "--frames", "1001", "--progress", "off", "--out", "{d}/o"];
+    let full_exr: &'static [&'static str] = &["o/full/bad.full.1001.exr"];
+    vec![
+        // ---------------------------------------------------------- shot TOML
+        c(
+            "shot [frames]",
+            "start is a string",
+            |d| edit(d, "shot.toml", "start = 1001", "start = \"1001\""),
+            cast,
+            &["shot.toml", "start"],
+            &[],
+        ),
+        c(
+            "shot [frames]",
+            "fps is infinite",
+            |d| edit(d, "shot.toml", "fps = 24.0", "fps = inf"),
+            cast,
+            &["shot.toml", "fps"],
+            &[],
+        ),
+        c(
+            "shot [cache]",
+            "no cache path",
+            |d| edit(d, "shot.toml", "path = \"c.csv\"\n", ""),
+            cast,
+            &["shot.toml", "path"],
+            &[],
+        ),
+        c(
+            "shot [cache]",
+            "frame_offset 1.5",
+            |d| edit(d, "shot.toml", "frame_offset = -1000", "frame_offset = -999.5"),
+            cast,
+            &["shot.toml", "frame_offset"],
+            &[],
+        ),
+        c(
+            "shot [rigs]",
+            "rig file missing",
+            |d| edit(d, "shot.toml", &demo("rigs/bipedThinA.glb"), "nope.glb"),
+            cast,
+            &["shot.toml", "rigs.bipedThinA.file"],
+            &[],
+        ),
+        c(
+            "shot [rigs]",
+            "scheme no wardrobe has",
+            |d| edit(d, "shot.toml", "HighEnd = 1.0", "Nowhere = 1.0"),
+            cast,
+            &["shot.toml", "Nowhere"],
+            &[],
+        ),
+        c(
+            "shot [rigs]",
+            "no schemes at all",
+            |d| edit(d, "shot.toml", "schemes = { HighEnd = 1.0 }", "schemes = {}"),
+            cast,
+            &["shot.toml", "schemes"],
+            &[],
+        ),
+        c(
+            "shot [set]",
+            "set file is not glTF",
+            |d| {
+                std::fs::write(d.join("junk.glb"), b"not a gltf at all").unwrap();
+                edit(d, "shot.toml", &demo("set/set.glb"), "junk.glb")
+            },
+            cast,
+            &["junk.glb"],
+            &[],
+        ),
+        c(
+            "shot [camera]",
+            "aim at the camera position",
+            |d| edit(d, "shot.toml", "aim = [0.0, 0.9, 0.0]", "aim = [0.0, 1.6, 9.0]"),
+            full,
+            &["shot.toml", "camera.keys"],
+            full_exr,
+        ),
+        c(
+            "shot [camera]",
+            "two keys on one frame",
+            |d| {
+                append(d, "shot.toml", "\n[[camera.keys]]\nframe = 1001\nposition = [1.0, 1.6, 9.0]\naim = [0.0, 0.9, 0.0]\nfocal_length = 35.0\n")
+            },
+            cast,
+            &["shot.toml", "camera.keys"],
+            &[],
+        ),
+        c(
+            "shot [camera]",
+            "focal length NaN",
+            |d| edit(d, "shot.toml", "focal_length = 35.0", "focal_length = nan"),
+            cast,
+            &["shot.toml", "camera.keys", "focal length"],
+            &[],
+        ),
+        c(
+            "shot [lights]",
+            "sun intensity -3",
+            |d| edit(d, "shot.toml", "intensity = 3.0", "intensity = -3.0"),
+            cast,
+            &["shot.toml", "lights.sun.intensity"],
+            &[],
+        ),
+        c(
+            "shot [lights]",
+            "sun colour NaN",
+            |d| edit(d, "shot.toml", "intensity = 3.0", "intensity = 3.0\ncolor = [1.0, nan, 1.0]"),
+            cast,
+            &["shot.toml", "lights.sun.color"],
+            &[],
+        ),
+        c(
+            "shot [lights]",
+            "sun 400 degrees wide",
+            |d| edit(d, "shot.toml", "intensity = 3.0", "intensity = 3.0\nangular_diameter = 400.0"),
+            cast,
+            &["shot.toml", "lights.sun.angular_diameter"],
+            &[],
+        ),
+        c(
+            "shot [lights]",
+            "sky intensity infinite",
+            |d| append(d, "shot.toml", "\n[lights.sky]\ncolor = [0.3, 0.38, 0.5]\nintensity = inf\n"),
+            cast,
+            &["shot.toml", "lights.sky.intensity"],
+            &[],
+        ),
+        c(
+            "shot [layers]",
+            "split mode magic",
+            |d| edit(d, "shot.toml", "count = 2", "split = \"magic\""),
+            cast,
+            &["shot.toml", "split"],
+            &[],
+        ),
+        c(
+            "shot [layers]",
+            "lod_full_min_px -5",
+            |d| edit(d, "shot.toml", "count = 2", "count = 2\nlod_full_min_px = -5.0"),
+            cast,
+            &["shot.toml", "layers.lod_full_min_px"],
+            &[],
+        ),
+        c(
+            "shot [render]",
+            "resolution with one number",
+            |d| edit(d, "shot.toml", "[48, 27]", "[48]"),
+            cast,
+            &["shot.toml", "resolution"],
+            &[],
+        ),
+        c(
+            "shot [render]",
+            "max_bounces 10^9",
+            |d| edit(d, "shot.toml", "spp = 1", "spp = 1\nmax_bounces = 1000000000"),
+            cast,
+            &["shot.toml", "render.max_bounces"],
+            &[],
+        ),
+        c(
+            "shot [render]",
+            "working_colourspace 7",
+            |d| edit(d, "shot.toml", "spp = 1", "spp = 1\nworking_colourspace = 7"),
+            cast,
+            &["shot.toml", "working_colourspace"],
+            &[],
+        ),
+        c(
+            "shot (top)",
+            "shot name with a slash",
+            |d| edit(d, "shot.toml", "name = \"bad\"", "name = \"../escape\""),
+            full,
+            &["shot.toml", "name"],
+            &["escape.full.1001.exr", "o/escape.full.1001.exr"],
+        ),
+        c(
+            "shot (top)",
+            "empty shot name",
+            |d| edit(d, "shot.toml", "name = \"bad\"", "name = \"\""),
+            cast,
+            &["shot.toml", "name"],
+            &[],
+        ),
+        c(
+            "shot (top)",
+            "seed -1",
+            |d| edit(d, "shot.toml", "seed = 5", "seed = -1"),
+            cast,
+            &["shot.toml", "seed"],
+            &[],
+        ),
+        c(
+            "shot (top)",
+            "wardrobe file missing",
+            |d| edit(d, "shot.toml", &repo_path("wardrobes/robots.toml").display().to_string(), "gone.toml"),
+            cast,
+            &["shot.toml", "gone.toml"],
+            &[],
+        ),
+        c(
+            "shot (top)",
+            "removed is not a list",
+            |d| edit(d, "shot.toml", "seed = 5", "seed = 5\nremoved = 3"),
+            cast,
+            &["shot.toml", "removed"],
+            &[],
+        ),
+        // ---------------------------------------------------------- wardrobe TOML
+        c(
+            "wardrobe",
+            "base_color with 2 numbers",
+            |d| {
+                use_wardrobe(d);
+                edit(d, "w.toml", "[0.6, 0.05, 0.04]", "[0.6, 0.05]")
+            },
+            cast,
+            &["w.toml", "base_color"],
+            &[],
+        ),
+        c(
+            "wardrobe",
+            "base_color NaN",
+            |d| {
+                use_wardrobe(d);
+                edit(d, "w.toml", "[0.6, 0.05, 0.04]", "[0.6, nan, 0.04]")
+            },
+            cast,
+            &["w.toml", "materials.red.base_color"],
+            &[],
+        ),
+        c(
+            "wardrobe",
+            "roughness 2",
+            |d| {
+                use_wardrobe(d);
+                edit(d, "w.toml", "base_color = [0.6, 0.05, 0.04]", "base_color = [0.6, 0.05, 0.04]\nroughness = 2.0")
+            },
+            cast,
+            &["w.toml", "materials.red.roughness"],
+            &[],
+        ),
+        c(
+            "wardrobe",
+            "metallic -1",
+            |d| {
+                use_wardrobe(d);
+                edit(d, "w.toml", "base_color = [0.6, 0.05, 0.04]", "base_color = [0.6, 0.05, 0.04]\nmetallic = -1.0")
+            },
+            cast,
+            &["w.toml", "materials.red.metallic"],
+            &[],
+        ),
+        c(
+            "wardrobe",
+            "material name with #",
+            |d| {
+                use_wardrobe(d);
+                edit(d, "w.toml", "[materials.red]", "[materials.\"re#d\"]");
+                edit(d, "w.toml", "materials = [\"red\"]", "materials = [\"re#d\"]")
+            },
+            cast,
+            &["w.toml", "re#d"],
+            &[],
+        ),
+        c(
+            "wardrobe",
+            "part mesh not in its file",
+            |d| {
+                use_wardrobe(d);
+                edit(d, "w.toml", "head_sphere", "head_cube_x")
+            },
+            cast,
+            &["heads.glb", "head_cube_x"],
+            &[],
+        ),
+        c(
+            "wardrobe",
+            "material_weights longer than materials",
+            |d| {
+                use_wardrobe(d);
+                edit(d, "w.toml", "materials = [\"red\"]", "materials = [\"red\"]\nmaterial_weights = [1.0, 2.0]")
+            },
+            cast,
+            &["w.toml", "material_weights"],
+            &[],
+        ),
+        // ---------------------------------------------------------- rig files
+        c(
+            "rig file",
+            "rig file of garbage",
+            |d| {
+                std::fs::write(d.join("rig.glb"), b"glTF\x02\x00\x00\x00garbage").unwrap();
+                edit(d, "shot.toml", &demo("rigs/bipedThinA.glb"), "rig.glb")
+            },
+            cast,
+            &["rig.glb"],
+            &[],
+        ),
+        c(
+            "rig file",
+            "the set used as a rig",
+            |d| edit(d, "shot.toml", &demo("rigs/bipedThinA.glb"), &demo("set/set.glb")),
+            cast,
+            &["set.glb", "root"],
+            &[],
+        ),
+        c(
+            "rig file",
+            "empty rig file",
+            |d| {
+                std::fs::write(d.join("rig.glb"), b"").unwrap();
+                edit(d, "shot.toml", &demo("rigs/bipedThinA.glb"), "rig.glb")
+            },
+            cast,
+            &["rig.glb"],
+            &[],
+        ),
+        // ---------------------------------------------------------- binary cache
+        c(
+            "cache .crowd",
+            "truncated to 100 bytes",
+            |d| {
+                let b = crowd_cache(d);
+                std::fs::write(d.join("c.crowd"), &b[..100]).unwrap()
+            },
+            cast,
+            &["c.crowd"],
+            &[],
+        ),
+        c(
+            "cache .crowd",
+            "frame_count 2^32-1 (CRC fixed)",
+            |d| {
+                let mut b = crowd_cache(d);
+                patch_header(&mut b, 16, u32::MAX);
+                std::fs::write(d.join("c.crowd"), b).unwrap()
+            },
+            &["cache", "info", "{d}/c.crowd"],
+            &["c.crowd"],
+            &[],
+        ),
+        c(
+            "cache .crowd",
+            "index_len 2^32-16 (CRC fixed)",
+            |d| {
+                let mut b = crowd_cache(d);
+                patch_header(&mut b, 12, u32::MAX - 15);
+                std::fs::write(d.join("c.crowd"), b).unwrap()
+            },
+            &["cache", "info", "{d}/c.crowd"],
+            &["c.crowd"],
+            &[],
+        ),
+        c(
+            "cache .crowd",
+            "version 2 (CRC fixed)",
+            |d| {
+                let mut b = crowd_cache(d);
+                patch_header(&mut b, 8, 2);
+                std::fs::write(d.join("c.crowd"), b).unwrap()
+            },
+            cast,
+            &["c.crowd", "version"],
+            &[],
+        ),
+        c(
+            "cache .crowd",
+            "a flipped byte in the last frame",
+            |d| {
+                let mut b = crowd_cache(d);
+                let n = b.len();
+                b[n - 10] ^= 0x55;
+                std::fs::write(d.join("c.crowd"), b).unwrap()
+            },
+            cast,
+            &["c.crowd"],
+            &[],
+        ),
+        c(
+            "cache convert",
+            "convert into a read-only format",
+            |_| {},
+            &["cache", "convert", "{d}/c.csv", "{d}/out.sqlite"],
+            &["out.sqlite", "read only"],
+            &["out.sqlite"],
+        ),
+        // ---------------------------------------------------------- CSV
+        c(
+            "cache CSV",
+            "no heading column",
+            |d| {
+                let t = std::fs::read_to_string(d.join("c.csv")).unwrap();
+                let t: String = t
+                    .lines()
+                    .map(|l| {
+                        let mut f: Vec<&str> = l.split(',').collect();
+                        f.remove(5);
+                        f.join(",") + "\n"
+                    })
+                    .collect();
+                std::fs::write(d.join("c.csv"), t).unwrap()
+            },
+            cast,
+            &["c.csv", "heading"],
+            &[],
+        ),
+        c(
+            "cache CSV",
+            "flags 4 (unknown bit)",
+            |d| append(d, "c.csv", "3,9,0,0,0,0,bipedThinA,IdleA,3,4\n"),
+            cast,
+            &["c.csv", "flags"],
+            &[],
+        ),
+        c(
+            "cache CSV",
+            "cycle_frame infinite",
+            |d| append(d, "c.csv", "3,9,0,0,0,0,bipedThinA,IdleA,inf,\n"),
+            cast,
+            &["c.csv", "cycle_frame", "agent 9"],
+            &[],
+        ),
+        c(
+            "cache CSV",
+            "negative agent id",
+            |d| append(d, "c.csv", "3,-4,0,0,0,0,bipedThinA,IdleA,3,\n"),
+            cast,
+            &["c.csv", "id"],
+            &[],
+        ),
+        c(
+            "cache CSV",
+            "a row with 12 fields",
+            |d| append(d, "c.csv", "3,9,0,0,0,0,bipedThinA,IdleA,3,,7,8\n"),
+            cast,
+            &["c.csv:8", "columns"],
+            &[],
+        ),
+        c(
+            "cache CSV",
+            "frame past i32",
+            |d| append(d, "c.csv", "99999999999,9,0,0,0,0,bipedThinA,IdleA,3,\n"),
+            cast,
+            &["c.csv", "frame"],
+            &[],
+        ),
+        c(
+            "cache CSV",
+            "rig name of 300 bytes",
+            |d| append(d, "c.csv", &format!("3,9,0,0,0,0,{},IdleA,3,\n", "r".repeat(300))),
+            cast,
+            &["c.csv", "rig"],
+            &[],
+        ),
+        // ---------------------------------------------------------- JuPedSim sqlite
+        c(
+            "cache sqlite",
+            "sqlite file of garbage",
+            |d| std::fs::write(d.join("j.sqlite"), b"SQLite format 3\0garbage garbage garbage").unwrap(),
+            &["cache", "info", "{d}/j.sqlite"],
+            &["j.sqlite"],
+            &[],
+        ),
+        c(
+            "cache sqlite",
+            "no trajectory_data table",
+            |d| {
+                sqlite(d, "CREATE TABLE metadata(key TEXT, value TEXT); INSERT INTO metadata VALUES ('version','1'),('fps','25');")
+            },
+            &["cache", "info", "{d}/j.sqlite"],
+            &["j.sqlite", "trajectory_data"],
+            &[],
+        ),
+        c(
+            "cache sqlite",
+            "one agent twice in a frame",
+            |d| sqlite(d, &format!("{JUPEDSIM_OK} INSERT INTO trajectory_data VALUES (1, 1, 0.5, 0.0, 1.0, 0.0);")),
+            &["cache", "info", "{d}/j.sqlite"],
+            &["j.sqlite", "agent 1"],
+            &[],
+        ),
+        c(
+            "cache sqlite",
+            "NaN position",
+            |d| sqlite(d, &JUPEDSIM_OK.replace("(1, 1, 0.05,", "(1, 1, 'nan',")),
+            &["cache", "info", "{d}/j.sqlite"],
+            &["j.sqlite", "pos_x"],
+            &[],
+        ),
+        c(
+            "cache sqlite",
+            "agent id 2^40",
+            |d| sqlite(d, &JUPEDSIM_OK.replace("(1, 1, 0.05,", "(1, 1099511627776, 0.05,")),
+            &["cache", "info", "{d}/j.sqlite"],
+            &["j.sqlite", "id"],
+            &[],
+        ),
+        // ---------------------------------------------------------- USD crowd import
+        c(
+            "cache USD",
+            "usda of garbage",
+            |d| std::fs::write(d.join("u.usda"), "#usda 1.0\ndef Xform \"a\" { this is not usd }\n").unwrap(),
+            &["cache", "info", "{d}/u.usda"],
+            &["u.usda"],
+            &[],
+        ),
+        c(
+            "cache USD",
+            "usda without a PointInstancer",
+            |d| std::fs::write(d.join("u.usda"), format!("{USD_HEAD}def Xform \"World\"\n{{\n}}\n")).unwrap(),
+            &["cache", "info", "{d}/u.usda"],
+            &["u.usda", "PointInstancer"],
+            &[],
+        ),
+        c(
+            "cache USD",
+            "usdc header then garbage",
+            |d| {
+                let mut b = b"PXR-USDC\x00\x08\x00\x00\x00\x00\x00\x00".to_vec();
+                b.extend_from_slice(&[0xff; 200]);
+                std::fs::write(d.join("u.usdc"), b).unwrap()
+            },
+            &["cache", "info", "{d}/u.usdc"],
+            &["u.usdc"],
+            &[],
+        ),
+        c(
+            "cache USD",
+            "protoIndices shorter than positions",
+            |d| {
+                std::fs::write(d.join("u.usda"), format!("{}def PointInstancer \"crowd\"\n{{\n    int[] protoIndices.timeSamples = {{ 1: [0] }}\n    point3f[] positions.timeSamples = {{ 1: [(0, 0, 0), (1, 0, 0)] }}\n    int64[] ids.timeSamples = {{ 1: [1, 2] }}\n    rel prototypes = </crowd/Protos/walker>\n    def Scope \"Protos\"\n    {{\n        def Xform \"walker\"\n        {{\n        }}\n    }}\n}}\n", USD_HEAD.replace("endTimeCode = 2", "endTimeCode = 1"))).unwrap()
+            },
+            &["cache", "info", "{d}/u.usda"],
+            &["u.usda", "protoIndices"],
+            &[],
+        ),
+        c(
+            "cache USD",
+            "per-agent rig primvar shorter than ids",
+            |d| {
+                std::fs::write(d.join("u.usda"), format!("{}def PointInstancer \"crowd\"\n{{\n    point3f[] positions.timeSamples = {{ 1: [(0, 0, 0), (1, 0, 0)] }}\n    int64[] ids.timeSamples = {{ 1: [1, 2] }}\n    string[] primvars:throng:rig = [\"bipedThinA\"]\n}}\n", USD_HEAD.replace("endTimeCode = 2", "endTimeCode = 1"))).unwrap()
+            },
+            &["cache", "info", "{d}/u.usda"],
+            &["u.usda", "primvars:throng:rig"],
+            &[],
+        ),
+        // ---------------------------------------------------------- glTF meshes and textures
+        c(
+            "glTF",
+            "accessor count 10^9 over a 36-byte buffer",
+            |d| tri_gltf(d, "", "", 1_000_000_000),
+            cast,
+            &["set.gltf", "accessor"],
+            &[],
+        ),
+        c(
+            "glTF",
+            "buffer file missing",
+            |d| {
+                tri_gltf(d, "", "", 3);
+                std::fs::remove_file(d.join("tri.bin")).unwrap()
+            },
+            cast,
+            &["set.gltf", "tri.bin"],
+            &[],
+        ),
+        c(
+            "glTF",
+            "base colour texture file missing",
+            |d| {
+                tri_gltf(
+                    d,
+                    r#","images":[{"uri":"gone.png"}],"textures":[{"source":0}],"materials":[{"name":"m","pbrMetallicRoughness":{"baseColorTexture":{"index":0}}}]"#,
+                    r#","material":0"#,
+                    3,
+                )
+            },
+            cast,
+            &["set.gltf", "gone.png"],
+            &[],
+        ),
+        c(
+            "glTF",
+            "base colour texture not a PNG",
+            |d| {
+                std::fs::write(d.join("bad.png"), b"\x89PNG\r\n\x1a\nnot really").unwrap();
+                tri_gltf(
+                    d,
+                    r#","images":[{"uri":"bad.png"}],"textures":[{"source":0}],"materials":[{"name":"m","pbrMetallicRoughness":{"baseColorTexture":{"index":0}}}]"#,
+                    r#","material":0"#,
+                    3,
+                )
+            },
+            cast,
+            &["set.gltf", "bad.png"],
+            &[],
+        ),
+        c(
+            "glTF",
+            "material index out of range",
+            |d| tri_gltf(d, "", r#","material":5"#, 3),
+            cast,
+            &["set.gltf", "material"],
+            &[],
+        ),
+        // ---------------------------------------------------------- layer manifests
+        c(
+            "manifest",
+            "manifest of another shot",
+            |d| {
+                ok(d, &["layers", "shot.toml"]);
+                let t = std::fs::read_to_string(d.join("bad.layers.json")).unwrap();
+                std::fs::write(d.join("bad.layers.json"), t.replacen("\"shot\": \"bad\"", "\"shot\": \"other\"", 1))
+                    .unwrap()
+            },
+            &["render", "{d}/shot.toml", "--frames", "1001", "--progress", "off", "--out", "{d}/o"],
+            &["bad.layers.json", "other"],
+            &["o/set/bad.set.1001.exr"],
+        ),
+        c(
+            "manifest",
+            "comp_order with an unknown layer",
+            |d| {
+                ok(d, &["layers", "shot.toml"]);
+                let t = std::fs::read_to_string(d.join("bad.layers.json")).unwrap();
+                std::fs::write(d.join("bad.layers.json"), t.replacen("\"crowd0\"", "\"crowd9\"", 1)).unwrap()
+            },
+            &["render", "{d}/shot.toml", "--frames", "1001", "--progress", "off", "--out", "{d}/o"],
+            &["bad.layers.json", "crowd9"],
+            &["o/set/bad.set.1001.exr"],
+        ),
+        c(
+            "manifest",
+            "manifest is a JSON array",
+            |d| std::fs::write(d.join("bad.layers.json"), "[1, 2, 3]").unwrap(),
+            &["render", "{d}/shot.toml", "--frames", "1001", "--progress", "off", "--out", "{d}/o"],
+            &["bad.layers.json", "JSON object"],
+            &["o"],
+        ),
+        // ---------------------------------------------------------- EXR inputs
+        c(
+            "EXR",
+            "botinfo pixel outside the image",
+            rendered,
+            &["botinfo", "{d}/shot.toml", "--exr", "{d}/r/set/bad.set.1001.exr", "--pixel", "4800,10"],
+            &["bad.set.1001.exr", "4800,10", "outside"],
+            &[],
+        ),
+        c(
+            "EXR",
+            "botinfo on an EXR without agent.id",
+            |_| {},
+            &["botinfo", "--exr", "{fixture}/cryptomatte/special_chars.exr", "--pixel", "1,1"],
+            &["special_chars.exr", "channel"],
+            &[],
+        ),
+        c(
+            "EXR",
+            "comp of a layer renamed to another frame",
+            |d| {
+                rendered(d);
+                std::fs::rename(d.join("r/crowd0/bad.crowd0.1001.exr"), d.join("r/crowd0/bad.crowd0.1002.exr"))
+                    .unwrap();
+                for l in ["set", "crowd1"] {
+                    std::fs::copy(d.join(format!("r/{l}/bad.{l}.1001.exr")), d.join(format!("r/{l}/bad.{l}.1002.exr")))
+                        .unwrap();
+                }
+            },
+            &["comp", "{d}/r", "--frame", "1002", "--out", "{d}/c.exr"],
+            &["bad.set.1002.exr", "throng/frame", "header says frame 1001"],
+            &["c.exr"],
+        ),
+        c(
+            "EXR",
+            "comp of layers of two sizes",
+            |d| {
+                rendered(d);
+                ok(
+                    d,
+                    &[
+                        "render",
+                        "shot.toml",
+                        "--layer",
+                        "crowd1",
+                        "--frames",
+                        "1001",
+                        "--resolution",
+                        "32x18",
+                        "--progress",
+                        "off",
+                        "--out",
+                        "r",
+                    ],
+                )
+            },
+            &["comp", "{d}/r", "--frame", "1001", "--out", "{d}/c.exr"],
+            &["bad.crowd1.1001.exr", "32x18"],
+            &["c.exr"],
+        ),
+        c(
+            "EXR",
+            "comp layer that is a PNG",
+            |d| {
+                rendered(d);
+                std::fs::write(d.join("r/crowd0/bad.crowd0.1001.exr"), b"\x89PNG\r\n\x1a\n").unwrap()
+            },
+            &["comp", "{d}/r", "--frame", "1001", "--out", "{d}/c.exr"],
+            &["bad.crowd0.1001.exr"],
+            &["c.exr"],
+        ),
+        // ---------------------------------------------------------- farm plans and options
+        c(
+            "farm",
+            "plan --chunk 0",
+            |_| {},
+            &["farm", "plan", "{d}/shot.toml", "--chunk", "0", "--out", "{d}/farm"],
+            &["--chunk"],
+            &["farm/plan.json"],
+        ),
+        c(
+            "farm",
+            "status of a plan of garbage",
+            |d| {
+                std::fs::create_dir(d.join("farm")).unwrap();
+                std::fs::write(d.join("farm/plan.json"), "{\"version\": 1, \"tasks\": 7}").unwrap()
+            },
+            &["farm", "status", "{d}/farm/plan.json"],
+            &["plan.json", "format"],
+            &[],
+        ),
+        c(
+            "farm",
+            "submit --workers 0",
+            planned,
+            &["farm", "submit", "{d}/farm/plan.json", "--engine", "local", "--workers", "0"],
+            &["--workers"],
+            &["farm/o"],
+        ),
+        c(
+            "farm",
+            "run-task of an unknown task",
+            planned,
+            &["farm", "run-task", "{d}/farm/plan.json", "render-nothing-9"],
+            &["plan.json", "render-nothing-9"],
+            &[],
+        ),
+        c(
+            "farm",
+            "plan version 99",
+            |d| {
+                planned(d);
+                edit(d, "farm/plan.json", "\"version\": 1", "\"version\": 99")
+            },
+            &["farm", "status", "{d}/farm/plan.json"],
+            &["plan.json", "version"],
+            &[],
+        ),
+        // ---------------------------------------------------------- flags of every verb
+        c(
+            "flags sim",
+            "sim of a missing scene",
+            |_| {},
+            &["sim", "{d}/nope.toml", "--out", "{d}/s.crowd"],
+            &["nope.toml"],
+            &["s.crowd"],
+        ),
+        c(
+            "flags sim",
+            "sim scene with 0 fps",
+            |d| {
+                let t = std::fs::read_to_string(repo_path("demo/sim/demo.toml")).unwrap();
+                std::fs::write(d.join("sim.toml"), t.replace("fps = 24.0", "fps = 0.0")).unwrap()
+            },
+            &["sim", "{d}/sim.toml", "--out", "{d}/s.crowd"],
+            &["sim.toml", "fps"],
+            &["s.crowd"],
+        ),
+        c(
+            "flags cache",
+            "cache convert --fps 0",
+            |d| sqlite(d, JUPEDSIM_OK),
+            &["cache", "convert", "{d}/j.sqlite", "{d}/j.crowd", "--fps", "0"],
+            &["--fps"],
+            &["j.crowd"],
+        ),
+        c(
+            "flags cache",
+            "cache convert --scale NaN",
+            |d| sqlite(d, JUPEDSIM_OK),
+            &["cache", "convert", "{d}/j.sqlite", "{d}/j.crowd", "--scale", "NaN"],
+            &["--scale"],
+            &["j.crowd"],
+        ),
+        c(
+            "flags cache",
+            "cache info --columns with an unknown name",
+            |_| {},
+            &["cache", "info", "{fixture}/tabular/foreign.csv", "--columns", "frame=1,id=2,x=3,y=4,banana=5"],
+            &["--columns", "banana"],
+            &[],
+        ),
+        c(
+            "flags layers",
+            "layers --cutoffs 9,3",
+            |_| {},
+            &["layers", "{d}/shot.toml", "--cutoffs", "9,3", "--out", "{d}/m.json"],
+            &["--cutoffs"],
+            &["m.json"],
+        ),
+        c(
+            "flags layers",
+            "layers --lod-px -1",
+            |_| {},
+            &["layers", "{d}/shot.toml", "--lod-px", "-1", "--out", "{d}/m.json"],
+            &["--lod-px"],
+            &["m.json"],
+        ),
+        c(
+            "flags layers",
+            "layers --ref-frame 5000",
+            |_| {},
+            &["layers", "{d}/shot.toml", "--ref-frame", "5000", "--out", "{d}/m.json"],
+            &["--ref-frame", "5000"],
+            &["m.json"],
+        ),
+        c(
+            "flags botinfo",
+            "botinfo --frame outside the shot",
+            |_| {},
+            &["botinfo", "{d}/shot.toml", "1", "--frame", "99999"],
+            &["99999"],
+            &[],
+        ),
+        c(
+            "flags botinfo",
+            "botinfo of an agent not in the cache",
+            |_| {},
+            &["botinfo", "{d}/shot.toml", "77"],
+            &["agent 77"],
+            &[],
+        ),
+        c(
+            "flags export",
+            "export --format obj",
+            |_| {},
+            &["export", "{d}/shot.toml", "--frame", "1001", "--format", "obj", "--out", "{d}/x.obj"],
+            &["--format"],
+            &["x.obj"],
+        ),
+        c(
+            "flags export",
+            "export --frame outside the shot",
+            |_| {},
+            &["export", "{d}/shot.toml", "--frame", "7", "--out", "{d}/x.glb"],
+            &["frame 7"],
+            &["x.glb"],
+        ),
+        c(
+            "flags render",
+            "render --shutter 0.5,0.2",
+            |_| {},
+            &[
+                "render",
+                "{d}/shot.toml",
+                "--layer",
+                "full",
+                "--frames",
+                "1001",
+                "--shutter",
+                "0.5,0.2",
+                "--out",
+                "{d}/o",
+            ],
+            &["--shutter"],
+            &["o"],
+        ),
+        c(
+            "flags render",
+            "render --colourspace p3",
+            |_| {},
+            &["render", "{d}/shot.toml", "--layer", "full", "--colourspace", "p3", "--out", "{d}/o"],
+            &["--colourspace", "p3"],
+            &["o"],
+        ),
+        c(
+            "flags comp",
+            "comp of a frame with no layers",
+            rendered,
+            &["comp", "{d}/r", "--frame", "1003", "--out", "{d}/c.exr"],
+            &["1003"],
+            &["c.exr"],
+        ),
+        c("flags demo", "demo --spp 0", |_| {}, &["demo", "--spp", "0", "--out", "{d}/demo"], &["--spp"], &["demo"]),
+    ]
+}
+
+/// One case's outcome.
+struct Outcome {
+    code: i32,
+    stderr: String,
+    problems: Vec<String>,
+}
+
+fn run_case(case: &Case, root: &Path, index: usize) -> Outcome {
+    let dir = root.join(format!("c{index:02}"));
+    std::fs::create_dir_all(&dir).unwrap();
+    base(&dir);
+    (case.setup)(&dir);
+    let args: Vec<String> = case
+        .args
+        .iter()
+        .map(|a| a.replace("{d}", &dir.display().to_string()).replace("{fixture}", &fixture("").display().to_string()))
+        .collect();
+    // A 4 GB address-space cap and 120 s of CPU: a runaway ends here, not in the machine's swap.
+    let out = Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -v 4000000; ulimit -t 120; exec \"$0\" \"$@\"")
+        .arg(BIN)
+        .args(&args)
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let code = out.status.code().unwrap_or(-1);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    let mut problems = Vec::new();
+    if code != 2 {
+        problems.push(format!("exit {code}, want 2"));
+    }
+    if stderr.contains("panicked") {
+        problems.push("panicked".into());
+    }
+    for s in case.says {
+        if !stderr.contains(s) {
+            problems.push(format!("stderr does not say `{s}`"));
+        }
+    }
+    for a in case.absent {
+        if dir.join(a).exists() {
+            problems.push(format!("{a} exists"));
+        }
+    }
+    // No output under a final name from a failed run: nothing named *.exr,
+    // *.crowd, *.json or *.glb appeared beyond what setup made is checked
+    // by `absent`; temporaries must be gone too.
+    for e in walk(&dir) {
+        let name = e.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        if name.ends_with(".tmp") {
+            problems.push(format!("temporary {} left behind", e.display()));
+        }
+    }
+    // Shown relative to the case folder and the repository, as the table's commands are.
+    let stderr = stderr
+        .replace(&format!("{}/", dir.display()), "")
+        .replace(&format!("{}/", repo_path("").display().to_string().trim_end_matches('/')), "");
+    Outcome { code, stderr, problems }
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let Ok(entries) = std::fs::read_dir(dir) else { return out };
+    for e in entries.flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// The message line to show: the first line naming an error or warning.
+fn excerpt(stderr: &str) -> String {
+    let line = stderr
+        .lines()
+        .find(|l| l.contains("error") || l.contains("warning"))
+        .or_else(|| stderr.lines().next())
+        .unwrap_or("");
+    let line: String = line.chars().take(160).collect();
+    line.replace('|', "\\|").replace('`', "'")
+}
+
+#[test]
+fn bad_input_matrix() {
+    let temp = tempfile::tempdir().unwrap();
+    // THRONG_MATRIX_KEEP=DIR keeps every case's folder there, to look at.
+    let root = std::env::var_os("THRONG_MATRIX_KEEP").map_or_else(|| temp.path().to_path_buf(), PathBuf::from);
+    let cases = cases();
+    let mut table = String::from(
+        "| # | case | input kind | command | exit | message (excerpt) | result |\n|---|---|---|---|---|---|---|\n",
+    );
+    let mut failures = Vec::new();
+    for (i, case) in cases.iter().enumerate() {
+        let o = run_case(case, &root, i);
+        let cmd: Vec<String> = std::iter::once("throng".to_string())
+            .chain(case.args.iter().map(|a| a.replace("{d}/", "").replace("{fixture}", "tests/fixtures")))
+            .collect();
+        let result = if o.problems.is_empty() { "ok".to_string() } else { format!("FAIL: {}", o.problems.join("; ")) };
+        writeln!(
+            table,
+            "| {} | {} | {} | `{}` | {} | {} | {} |",
+            i + 1,
+            case.name,
+            case.kind,
+            cmd.join(" ").replace('|', "\\|"),
+            o.code,
+            excerpt(&o.stderr),
+            result
+        )
+        .unwrap();
+        if !o.problems.is_empty() {
+            failures.push(format!(
+                "{} ({}): {}\n    stderr: {}",
+                case.name,
+                case.kind,
+                o.problems.join("; "),
+                o.stderr.trim()
+            ));
+        }
+    }
+    let passed = cases.len() - failures.len();
+    let mut kinds: Vec<(&str, usize)> = Vec::new();
+    for case in &cases {
+        match kinds.iter_mut().find(|k| k.0 == case.kind) {
+            Some(k) => k.1 += 1,
+            None => kinds.push((case.kind, 1)),
+        }
+    }
+    let kinds: Vec<String> = kinds.iter().map(|(k, n)| format!("{k} {n}")).collect();
+    writeln!(
+        table,
+        "\n{} cases ({}): {passed} exit 2 naming file and key or flag, with no panic, no output left and no runaway under a 4 GB cap; {} not.",
+        cases.len(),
+        kinds.join(", "),
+        failures.len()
+    )
+    .unwrap();
+    let md = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("bad_input_matrix.md");
+    std::fs::write(&md, &table).unwrap();
+    if let Ok(p) = std::env::var("THRONG_MATRIX_MD") {
+        std::fs::write(p, &table).unwrap();
+    }
+    assert!(cases.len() >= 45, "the matrix has {} cases", cases.len());
+    assert!(failures.is_empty(), "{} of {} cases failed:\n{}", failures.len(), cases.len(), failures.join("\n"));
+}
