@@ -124,6 +124,14 @@ impl Error {
         let field = field.into();
         self.with(|l| l.field = Some(field))
     }
+    /// Names the field or key when the error does not name one yet: the
+    /// key of the file that led here (`rigs.walker.file` for a rig's glTF).
+    pub fn or_field(self, field: impl Into<String>) -> Self {
+        let field = field.into();
+        self.with(|l| {
+            l.field.get_or_insert(field);
+        })
+    }
     /// Qualifies the field, if any, with the key path it sits under (`rigs.walker`).
     pub fn field_prefix(self, prefix: &str) -> Self {
         self.with(|l| {

@@ -422,6 +422,25 @@ fn cases() -> Vec<Case> {
             &["shot.toml", "removed"],
             &[],
         ),
+        c(
+            "shot [rigs]",
+            "rig file is a glTF without the rig",
+            |d| edit(d, "shot.toml", &demo("rigs/bipedThinA.glb"), &demo("set/set.glb")),
+            cast,
+            &["set.glb", "rigs.bipedThinA.file", "root"],
+            &[],
+        ),
+        c(
+            "wardrobe",
+            "part mesh missing from its glTF",
+            |d| {
+                use_wardrobe(d);
+                edit(d, "w.toml", "mesh = \"head_sphere\"", "mesh = \"head_gone\"")
+            },
+            cast,
+            &["heads.glb", "head_gone", "schemes.Only.parts", "agent "],
+            &[],
+        ),
         // ---------------------------------------------------------- wardrobe TOML
         c(
             "wardrobe",

@@ -223,11 +223,11 @@ impl ShotCrowd {
             let kind = if is_skinned_rig(r)? { RigKind::Skinned } else { RigKind::Slots };
             match kind {
                 RigKind::Slots => {
-                    rigs.insert(name.clone(), Rig::load(&r.file)?);
+                    rigs.insert(name.clone(), Rig::load(&r.file).map_err(|e| e.or_field(format!("rigs.{name}.file")))?);
                 }
                 RigKind::Skinned => {
                     let rig = SkinnedRig::load(&r.file, &r.skin, shot.frames.fps)
-                        .map_err(|e| e.field_prefix(&format!("rigs.{name}")))?;
+                        .map_err(|e| e.field_prefix(&format!("rigs.{name}")).or_field(format!("rigs.{name}.file")))?;
                     skinned.insert(name.clone(), rig);
                 }
             }
@@ -426,6 +426,8 @@ impl ShotCrowd {
             }
 
             let Some(rig) = rigs.get(rig_name) else { continue };
+            // A part's mesh missing from its glTF: say which scheme asked for it.
+            let part_err = |e: Error, scheme: &str| e.agent(id).or_field(format!("schemes.{scheme}.parts"));
             let mut parts = Vec::new();
             for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
                 let Some(part) = &slot_cast.part else { continue };
@@ -441,7 +443,7 @@ impl ShotCrowd {
                 let pieces = match resolved.get(&key) {
                     Some(p) => p,
                     None => {
-                        if assets.is_skinned_mesh(&part.file, &part.mesh)? {
+                        if assets.is_skinned_mesh(&part.file, &part.mesh).map_err(|e| part_err(e, &cast.scheme))? {
                             return Err(skinned_refusal(
                                 &part.file,
                                 &format!("wardrobe part `{}` (slot `{}`)", part.mesh, slot_cast.slot),
@@ -452,9 +454,9 @@ impl ShotCrowd {
                         // A part wearing its own glTF materials keeps one piece per
                         // primitive (a multi-material mesh); otherwise one mesh, one material.
                         let pieces: Vec<(MeshId, MaterialId)> = if *part.material == *GLTF_MATERIAL {
-                            assets.mesh_primitives(&part.file, &part.mesh)?
+                            assets.mesh_primitives(&part.file, &part.mesh).map_err(|e| part_err(e, &cast.scheme))?
                         } else {
-                            let mesh = assets.mesh(&part.file, &part.mesh)?;
+                            let mesh = assets.mesh(&part.file, &part.mesh).map_err(|e| part_err(e, &cast.scheme))?;
                             vec![(mesh, wardrobe_material(&mut assets, &mut materials, &wardrobes, &part.material)?)]
                         };
                         resolved.entry(key).or_insert(pieces)
