@@ -12,7 +12,7 @@ use exr::prelude::{ReadChannels, ReadLayers};
 use glam::{Affine3A, Mat3, Quat, Vec2, Vec3};
 use throng::render::colour::{self, Colourspace};
 use throng::render::{render_frame, BlasSet, RenderSettings};
-use throng::scene::{vis, Camera, FrameScene, Instance, Library, Material, Mesh, Sky, Sun, Texture};
+use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun, Texture};
 
 use common::{repo_path, run};
 
@@ -94,7 +94,7 @@ fn floor_scene(base: Vec3, texel: Option<[f32; 4]>, sun: Vec3, sky: Vec3) -> (Li
             mesh: 0,
             material: 0,
             world_from_object: Affine3A::IDENTITY,
-            agent: None,
+            agent: InstanceAgent::NONE,
             part: 0,
             visibility: vis::ALL,
         }],
