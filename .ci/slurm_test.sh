@@ -124,6 +124,7 @@ wait_done "$work/farm/plan.json" 90
 echo "slurm: demo plan done in $(( SECONDS - started )) s"
 m="$work/farm/demo.layers.json"
 "$bin" render demo/shot.toml --manifest "$m" --frames 1024-1025 --spp 1 --resolution 32x18 --progress off --out "$work/local" >/dev/null
+mkdir -p "$work/local/comp"
 for f in 1024 1025; do
     "$bin" comp "$work/local" --frame $f --manifest "$m" --out "$work/local/comp/demo.comp.$f.exr" >/dev/null
 done

@@ -251,13 +251,26 @@ fn spp_and_threads_zero_are_refused_not_replaced() {
     assert!(!out.exists());
 }
 
+/// One rule for every verb that writes a file: its folder must exist.
 #[test]
-fn export_refuses_a_missing_output_folder_like_other_verbs() {
+fn output_files_need_an_existing_folder_in_every_verb() {
     let dir = tempfile::tempdir().unwrap();
     let shot = shot(dir.path());
-    let out = dir.path().join("no/such/folder/x.glb");
-    let err = fails(&["export", s(&shot), "--frame", "1001", "--out", s(&out)]);
-    assert!(err.contains("does not exist"), "{err}");
+    let out = |name: &str| dir.path().join("no/such/folder").join(name).to_str().unwrap().to_string();
+    let cache = common::fixture("jupedsim_small.sqlite");
+    let render = dir.path().join("r");
+    let cases: Vec<Vec<String>> = vec![
+        vec!["export".into(), s(&shot).into(), "--frame".into(), "1001".into(), "--out".into(), out("x.glb")],
+        vec!["layers".into(), s(&shot).into(), "--out".into(), out("x.layers.json")],
+        vec!["cache".into(), "convert".into(), s(&cache).into(), out("x.crowd")],
+        vec!["sim".into(), s(&common::repo_path("demo/sim/demo.toml")).into(), "--out".into(), out("x.crowd")],
+        vec!["comp".into(), s(&render).into(), "--frame".into(), "1001".into(), "--out".into(), out("x.exr")],
+    ];
+    for args in &cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let err = fails(&args);
+        assert!(err.contains("does not exist") && err.contains("no/such/folder"), "throng {}: {err}", args.join(" "));
+    }
     assert!(!dir.path().join("no").exists());
 }
 

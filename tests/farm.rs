@@ -210,6 +210,7 @@ fn the_local_engine_matches_a_local_render_and_comp_byte_for_byte() {
     ]);
     for f in ["1024", "1025"] {
         let comp = local.join(format!("comp/demo.comp.{f}.exr"));
+        std::fs::create_dir_all(comp.parent().unwrap()).unwrap();
         ok(&["comp", s(&local), "--frame", f, "--manifest", s(&manifest), "--out", s(&comp)]);
     }
     let farm = exrs(&tmp.path().join("farm/render"));

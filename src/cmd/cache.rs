@@ -303,6 +303,7 @@ fn run_info(args: &CacheInfoArgs) -> Result<()> {
 /// `throng cache convert IN OUT`: reads IN whole, writes OUT atomically.
 fn run_convert(args: &CacheConvertArgs) -> Result<()> {
     let (from, to) = (Format::of(&args.input)?, Format::of(&args.output)?);
+    super::existing_folder_of(&args.output, "OUTPUT")?;
     if matches!(to, Format::JuPedSim | Format::Tabular) {
         return Err(Error::Usage(format!(
             "{}: {} files are read only; convert to .crowd or .csv",

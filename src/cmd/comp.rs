@@ -33,6 +33,10 @@ pub struct CompArgs {
 /// `throng comp DIR --frame F --out FILE.exr [--png FILE.png] [--manifest FILE]`.
 pub fn run(args: &CompArgs) -> Result<()> {
     let clock = std::time::Instant::now();
+    super::existing_folder_of(&args.out, "--out")?;
+    if let Some(png) = &args.png {
+        super::existing_folder_of(png, "--png")?;
+    }
     let manifest = args.manifest.as_deref().map(crate::layers::read_manifest).transpose()?;
     let comped = crate::comp::comp_frame(&args.dir, args.frame, manifest.as_ref())?;
     exr::write_layer(&args.out, &comped.film, &comped.meta)?;

@@ -62,15 +62,7 @@ pub struct ExportArgs {
 /// `throng export SHOT --frame F [--layer L] --out scene.glb`.
 pub fn run(args: &ExportArgs) -> Result<()> {
     let clock = std::time::Instant::now();
-    // Like a shell redirect, export writes into an existing folder only: a
-    // typo in --out must not create a tree somewhere unexpected.
-    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty() && !d.is_dir()) {
-        return Err(Error::Usage(format!(
-            "--out {}: the folder {} does not exist (create it first)",
-            args.out.display(),
-            dir.display()
-        )));
-    }
+    super::existing_folder_of(&args.out, "--out")?;
     if args.format == ExportFormat::Usd {
         return run_usd(args, clock);
     }

@@ -92,6 +92,9 @@ impl LayersArgs {
 
 /// `throng layers SHOT ...`: writes the manifest (and map) and prints the split.
 pub fn run(args: &LayersArgs) -> Result<()> {
+    if let Some(out) = &args.out {
+        super::existing_folder_of(out, "--out")?;
+    }
     let crowd = super::load_crowd(&args.shot)?;
     args.check(&crowd.shot)?;
     for w in layers::checks::check_placement(&crowd)?.warnings() {

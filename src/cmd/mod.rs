@@ -106,6 +106,21 @@ pub(crate) fn emit(text: &str) {
     }
 }
 
+/// One rule for every verb: an output file goes into a folder that exists
+/// (like a shell redirect, so a typo in a path never grows a tree
+/// somewhere unexpected); an output folder (`render --out`, `farm plan
+/// --out`, `demo --out`) is created.
+fn existing_folder_of(out: &std::path::Path, flag: &str) -> Result<()> {
+    match out.parent().filter(|d| !d.as_os_str().is_empty() && !d.is_dir()) {
+        Some(dir) => Err(crate::error::Error::Usage(format!(
+            "{flag} {}: the folder {} does not exist (create it first)",
+            out.display(),
+            dir.display()
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// Loads and casts a shot, printing what loading noticed but accepted
 /// (renormalised weights, ignored morph targets) to stderr, once.
 fn load_crowd(shot: &std::path::Path) -> Result<crate::casting::ShotCrowd> {

@@ -24,6 +24,7 @@ pub struct SimArgs {
 /// Simulates the scene and writes its cache.
 pub fn run(args: &SimArgs) -> Result<()> {
     let clock = Instant::now();
+    super::existing_folder_of(&args.out, "--out")?;
     let scene = SimScene::load(&args.scene)?;
     let crowd = crate::sim::run(&scene);
     crate::cache::write(&args.out, &crowd)?;

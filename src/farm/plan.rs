@@ -109,6 +109,13 @@ pub fn write_new_plan(opts: &PlanOptions) -> Result<(PathBuf, Plan)> {
         crate::layers::write_manifest(&manifest_path, &manifest)?;
         fingerprint(inputs)
     })?;
+    // The plan owns its tree: the comps' folder is made here, since a verb
+    // writing one file (`comp --out`) needs its folder to exist.
+    for dir in
+        plan.tasks.iter().filter(|t| t.kind == TaskKind::Comp).flat_map(|t| &t.outputs).filter_map(|o| o.parent())
+    {
+        std::fs::create_dir_all(dir).at(dir)?;
+    }
     super::write_plan(&plan_path, &plan)?;
     Ok((plan_path, plan))
 }
