@@ -34,7 +34,7 @@ q cache convert "$S/empty.csv" "$C/cache_reader/empty.crowd"
 q cache convert "$S/gap.csv" "$C/cache_reader/gap.crowd"
 q cache convert tests/fixtures/tabular/eth_obsmat.txt "$C/cache_reader/eth.crowd" --preset eth
 q cache convert tests/fixtures/jupedsim_small.sqlite "$S/jupedsim_small.crowd"
-# The first 64 KiB frames' worth of the JuPedSim fixture, as a whole file.
+# The JuPedSim fixture as a .crowd, when it fits the fuzzer's 64 KiB inputs.
 python3 - "$S/jupedsim_small.crowd" "$C/cache_reader/jupedsim_small.crowd" <<'EOF'
 import sys
 data = open(sys.argv[1], "rb").read()
