@@ -6,7 +6,7 @@ mod common;
 
 use glam::{Affine3A, Quat, Vec3};
 use throng::error::Error;
-use throng::scene::gltf::{srgb_to_linear, AssetCache};
+use throng::scene::gltf::{srgb_to_linear, AssetCache, GltfFile};
 use throng::scene::Material;
 
 fn fixture(name: &str) -> String {
@@ -165,6 +165,41 @@ fn garbage_file_is_invalid_not_a_panic() {
     std::fs::write(&path, gltf).unwrap_or_else(|e| panic!("{e}"));
     let err = AssetCache::new().mesh(&path, "Cube").err().map(|e| e.to_string()).unwrap_or_default();
     assert!(err.contains("nobin.gltf") && err.contains("interpolation.bin"), "{err}");
+}
+
+/// Found by the `gltf_load` fuzz target (docs/fuzzing.md): gltf's own
+/// validation indexed the accessors with a primitive's POSITION unchecked.
+#[test]
+fn a_position_accessor_past_the_end_is_invalid_not_a_panic() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let path = dir.path().join("bad_position.gltf");
+    let gltf = r#"{"asset":{"version":"2.0"},"meshes":[{"name":"m","primitives":[{"attributes":{"POSITION":1}}]}]}"#;
+    std::fs::write(&path, gltf).unwrap_or_else(|e| panic!("{e}"));
+    let err = GltfFile::open(&path).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.contains("bad_position.gltf"), "{err}");
+    assert!(err.contains("mesh `m` primitive 0: POSITION is accessor 1, but the file has 0"), "{err}");
+    let err = AssetCache::new().load_scene_objects(&path).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.contains("POSITION is accessor 1"), "{err}");
+}
+
+/// Found by the `gltf_load` fuzz target (docs/fuzzing.md): gltf's
+/// `Image::source` unwraps the uri of an image without a bufferView, and
+/// the mimeType of one with a bufferView.
+#[test]
+fn an_image_without_uri_or_mime_type_is_invalid_not_a_panic() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let text = std::fs::read_to_string(set()).unwrap_or_else(|e| panic!("{e}"));
+    let uri = text.find("\"uri\": \"data:image/png").unwrap_or_else(|| panic!("set_small.gltf has no image uri"));
+    let end = uri + text[uri..].find('\n').unwrap_or(0);
+    for (name, image, msg) in [
+        ("no_uri.gltf", "\"extras\": {}", "has neither a uri nor a bufferView"),
+        ("no_mime.gltf", "\"bufferView\": 0", "an image in a bufferView needs a mimeType"),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, format!("{}{image}{}", &text[..uri], &text[end..])).unwrap_or_else(|e| panic!("{e}"));
+        let err = AssetCache::new().load_scene_objects(&path).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(err.contains(name) && err.contains(&format!("image `tiles.png`: {msg}")), "{err}");
+    }
 }
 
 #[test]

@@ -31,6 +31,31 @@ fn shared_sample(name: &str) -> PathBuf {
     common::shared_asset("exr/cryptomatte_psyop").join(name)
 }
 
+/// Found by the `exr_reader` fuzz target (docs/fuzzing.md): a data window
+/// far larger than the file made the exr crate allocate every channel of
+/// it before reading a pixel. Readers now refuse it, naming the file.
+#[test]
+fn a_data_window_larger_than_the_file_can_hold_is_refused() {
+    let bytes = std::fs::read(fixtures().join("special_chars.exr")).unwrap();
+    let key = b"dataWindow\0box2i\0\x10\0\0\0";
+    let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len();
+    let mut huge = bytes.clone();
+    // xMax and yMax: 64x64 becomes 30000x30000.
+    for offset in [8, 12] {
+        huge[at + offset..at + offset + 4].copy_from_slice(&29_999i32.to_le_bytes());
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("huge.exr");
+    std::fs::write(&path, &huge).unwrap();
+    let errors = [read_layer(&path).err(), read_parts(&path, |_| true).err(), cryptomatte::read(&path).err()];
+    for err in errors.map(|e| e.map(|e| e.to_string()).unwrap_or_default()) {
+        assert!(err.contains("huge.exr") && err.contains("more than a"), "{err}");
+    }
+    // The file as it was reads.
+    std::fs::write(&path, &bytes).unwrap();
+    assert_eq!(cryptomatte::read(&path).unwrap().len(), 1);
+}
+
 // ------------------------------------------------------------ ids
 
 #[test]

@@ -116,3 +116,28 @@ fn bad_values_are_refused() {
     let err = parse(d.path(), &format!("{GOOD}\n[layers]\nbudget = \"3 parsecs\"\n")).unwrap_err();
     assert!(err.contains("layers.budget"), "{err}");
 }
+
+/// Found writing the `shot_toml` fuzz target and confirmed through it
+/// (docs/fuzzing.md), and fixed on main meanwhile: a lone camera key at
+/// frame `nan` made `keyed_camera` index past the end of the keys.
+#[test]
+fn non_finite_camera_keys_are_refused() {
+    let d = dir_with_files();
+    let one_key = |from: &str, to: &str| {
+        let start = GOOD.find("[[camera.keys]]\nframe = 1011").unwrap();
+        let end = GOOD.find("[lights.sun]").unwrap();
+        format!("{}{}", &GOOD[..start], &GOOD[end..]).replace(from, to)
+    };
+    for (from, to) in [
+        ("frame = 1001", "frame = nan"),
+        ("frame = 1001", "frame = -inf"),
+        ("position = [0.0, 1.0, 10.0]", "position = [0.0, inf, 10.0]"),
+        ("aim = [0.0, 1.0, 0.0]", "aim = [nan, 1.0, 0.0]"),
+        ("focal_length = 35.0", "focal_length = inf"),
+    ] {
+        let err = parse(d.path(), &one_key(from, to)).unwrap_err();
+        assert!(err.contains("shot.toml") && err.contains("field `camera.keys`"), "{to}: {err}");
+        assert!(err.contains("not finite") || err.contains("focal length must be > 0"), "{to}: {err}");
+    }
+    parse(d.path(), &one_key("", "")).unwrap().keyed_camera(1001.5).unwrap();
+}

@@ -1,13 +1,23 @@
-//! Fuzzes the EXR reader botinfo, comp and `--resume` use (`read_layer`) and
-//! the Cryptomatte part reader. Run: `cargo +nightly fuzz run exr_reader`.
+//! Fuzzes the EXR readers: `render::exr::read_layer` (what botinfo, comp and
+//! `render --resume` read back) and `render::cryptomatte::read` (every part,
+//! every Cryptomatte type, as botinfo reads any EXR's mattes).
+//! Run: `cargo +nightly fuzz run exr_reader` (docs/fuzzing.md).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+fn file() -> &'static Path {
+    static P: OnceLock<PathBuf> = OnceLock::new();
+    P.get_or_init(|| std::env::temp_dir().join(format!("throng-fuzz-{}.exr", std::process::id())))
+}
 
 fuzz_target!(|data: &[u8]| {
-    let path = std::env::temp_dir().join(format!("throng-fuzz-{}.exr", std::process::id()));
-    if std::fs::write(&path, data).is_ok() {
-        let _ = throng::render::exr::read_layer(&path);
-        let _ = throng::render::exr::read_parts(&path, |n| n.starts_with("Crypto"));
+    let path = file();
+    if std::fs::write(path, data).is_err() {
+        return;
     }
+    let _ = throng::render::exr::read_layer(path);
+    let _ = throng::render::cryptomatte::read(path);
 });

@@ -46,8 +46,24 @@ impl GltfFile {
     pub fn open(path: impl AsRef<Path>) -> Result<GltfFile> {
         let path = path.as_ref();
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        let gltf::Gltf { document, mut blob } =
-            gltf::Gltf::from_slice(&bytes).map_err(|e| Error::invalid(path, format!("not a valid glTF file: {e}")))?;
+        let invalid = |e: gltf::Error| Error::invalid(path, format!("not a valid glTF file: {e}"));
+        let gltf::Gltf { document, mut blob } = gltf::Gltf::from_slice_without_validation(&bytes).map_err(invalid)?;
+        // gltf's validation reads each primitive's POSITION accessor by index
+        // without checking it, so a bad index must be refused first.
+        let accessors = document.as_json().accessors.len();
+        for (m, mesh) in document.as_json().meshes.iter().enumerate() {
+            for (p, prim) in mesh.primitives.iter().enumerate() {
+                let position = prim.attributes.get(&gltf::json::validation::Checked::Valid(gltf::Semantic::Positions));
+                if let Some(i) = position.map(|i| i.value()).filter(|&i| i >= accessors) {
+                    let name = mesh.name.as_deref().map_or(format!("#{m}"), |n| format!("`{n}`"));
+                    return Err(Error::invalid(
+                        path,
+                        format!("mesh {name} primitive {p}: POSITION is accessor {i}, but the file has {accessors}"),
+                    ));
+                }
+            }
+        }
+        let document = gltf::Document::from_json(document.into_json()).map_err(invalid)?;
         let base = path.parent().unwrap_or(Path::new("."));
         let mut buffers = Vec::new();
         for buffer in document.buffers() {
@@ -646,7 +662,15 @@ impl AssetCache {
         let label = image.name().map(str::to_string).unwrap_or_else(|| format!("image{index}"));
         let ctx = |msg: String| file.err(format!("image `{label}`: {msg}"));
         // The gltf crate slices buffer views unchecked and unwraps URI
-        // decoding; check both first so a bad file cannot panic.
+        // decoding; check both first so a bad file cannot panic. Its
+        // `source()` unwraps a view's mimeType, and the uri when there is no
+        // view: check those in the JSON before asking.
+        let json = file.doc.as_json().images.get(index).ok_or_else(|| file.err(format!("no image #{index}")))?;
+        match (&json.buffer_view, &json.uri, &json.mime_type) {
+            (Some(_), _, None) => return Err(ctx("an image in a bufferView needs a mimeType".into())),
+            (None, None, _) => return Err(ctx("has neither a uri nor a bufferView".into())),
+            _ => {}
+        }
         match image.source() {
             gltf::image::Source::View { view, .. } => {
                 let len = file.buffers.get(view.buffer().index()).map_or(0, |b| b.len());
