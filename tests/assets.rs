@@ -351,3 +351,21 @@ fn malformed_meshes_are_errors_naming_the_mesh() {
     let err = load(&|j| j["meshes"][0]["primitives"][0]["mode"] = 5.into());
     assert!(err.contains("TriangleStrip"), "{err}");
 }
+
+/// A buffer URI naming a device or a FIFO would be read forever (and
+/// grow without bound): only regular files are read.
+#[test]
+fn a_buffer_that_is_not_a_regular_file_is_refused() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let path = dir.path().join("device.gltf");
+    let gltf = r#"{"asset":{"version":"2.0"},"buffers":[{"uri":"/dev/zero","byteLength":12}]}"#;
+    std::fs::write(&path, gltf).unwrap_or_else(|e| panic!("{e}"));
+    let err = GltfFile::open(&path).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.contains("device.gltf") && err.contains("/dev/zero is not a regular file"), "{err}");
+    // A texture image the same way.
+    let path = dir.path().join("device_image.gltf");
+    let gltf = r#"{"asset":{"version":"2.0"},"buffers":[{"uri":"data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAAAAAAAAAAAAIA/AAAAAAAAAAAAAIA/","byteLength":60}],"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":36},{"buffer":0,"byteOffset":36,"byteLength":24}],"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]},{"bufferView":1,"componentType":5126,"count":3,"type":"VEC2"}],"images":[{"uri":"/dev/zero"}],"textures":[{"source":0}],"materials":[{"name":"m","pbrMetallicRoughness":{"baseColorTexture":{"index":0}}}],"meshes":[{"name":"q","primitives":[{"attributes":{"POSITION":0,"TEXCOORD_0":1},"material":0}]}],"nodes":[{"mesh":0}],"scenes":[{"nodes":[0]}],"scene":0}"#;
+    std::fs::write(&path, gltf).unwrap_or_else(|e| panic!("{e}"));
+    let err = AssetCache::new().load_scene_objects(&path).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.contains("device_image.gltf") && err.contains("/dev/zero is not a regular file"), "{err}");
+}

@@ -75,8 +75,16 @@ impl GltfFile {
                 gltf::buffer::Source::Bin => format!("buffer {} (GLB chunk)", buffer.index()),
             };
             if let gltf::buffer::Source::Uri(uri) = buffer.source() {
-                if !uri.contains(':') && !uri_decodes(uri) {
-                    return Err(Error::invalid(path, format!("{what}: URI is not valid percent-encoded UTF-8")));
+                if !uri.contains(':') {
+                    let Some(rel) = decode_uri(uri) else {
+                        return Err(Error::invalid(path, format!("{what}: URI is not valid percent-encoded UTF-8")));
+                    };
+                    // Read whole by gltf: only a regular file has an end
+                    // (a device or a FIFO would be read forever).
+                    let file = base.join(rel);
+                    if file.metadata().is_ok_and(|m| !m.is_file()) {
+                        return Err(Error::invalid(path, format!("{what}: {} is not a regular file", file.display())));
+                    }
                 }
             }
             let data = gltf::buffer::Data::from_source_and_blob(buffer.source(), Some(base), &mut blob)
@@ -298,9 +306,9 @@ fn fits(
     }
 }
 
-/// True when a relative URI's percent-escapes decode to UTF-8; the gltf
-/// crate panics on any that do not.
-fn uri_decodes(uri: &str) -> bool {
+/// A relative URI with its percent-escapes decoded, if they decode to
+/// UTF-8 (the gltf crate panics on any that do not).
+fn decode_uri(uri: &str) -> Option<String> {
     let bytes = uri.as_bytes();
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;
@@ -320,7 +328,7 @@ fn uri_decodes(uri: &str) -> bool {
             }
         }
     }
-    String::from_utf8(out).is_ok()
+    String::from_utf8(out).ok()
 }
 
 /// Error text for an accessor whose bytes lie outside its buffer.
@@ -678,11 +686,17 @@ impl AssetCache {
                     return Err(ctx("buffer view reaches outside its buffer".into()));
                 }
             }
-            gltf::image::Source::Uri { uri, .. } => {
-                if !uri.contains(':') && !uri_decodes(uri) {
+            gltf::image::Source::Uri { uri, .. } if !uri.contains(':') => {
+                let Some(rel) = decode_uri(uri) else {
                     return Err(ctx("URI is not valid percent-encoded UTF-8".into()));
+                };
+                // Only a regular file has an end (see the buffers in `GltfFile::open`).
+                let image_file = file.path.parent().unwrap_or(Path::new(".")).join(rel);
+                if image_file.metadata().is_ok_and(|m| !m.is_file()) {
+                    return Err(ctx(format!("{} is not a regular file", image_file.display())));
                 }
             }
+            gltf::image::Source::Uri { .. } => {}
         }
         let base = file.path.parent().unwrap_or(Path::new("."));
         // Name an external image's file: that is what a user can fix.
