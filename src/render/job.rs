@@ -240,10 +240,7 @@ fn scene_from_poses<'p, T: Sync>(
     use rayon::prelude::*;
     let set_bits = set_bits(manifest, layer)?;
     // Sized once: at a million agents the doublings of a growing list cost a gigabyte.
-    let bound: usize = (agents.iter())
-        .filter_map(|a| Some(crowd.posed_instance_bound(id(a), agent_bits(manifest, layer, id(a), frame)?.1)))
-        .sum::<usize>()
-        + set_bits.map_or(0, |_| crowd.set.len());
+    let bound = instance_bound(crowd, manifest, layer, frame, agents.iter().map(&id), set_bits);
     let mut instances: Vec<Instance> = Vec::with_capacity(bound);
     for wave in agents.chunks(PLACING_CHUNK * PLACING_WAVE) {
         let placed: Vec<Result<Vec<Instance>>> = wave
@@ -276,6 +273,20 @@ fn scene_from_poses<'p, T: Sync>(
     })
 }
 
+/// At most how many instances a (frame, layer) scene of agents `ids` holds
+/// (the set's too when it is in the layer), so its list is allocated once.
+fn instance_bound(
+    crowd: &ShotCrowd,
+    manifest: Option<&Manifest>,
+    layer: &str,
+    frame: i32,
+    ids: impl Iterator<Item = u32>,
+    set_bits: Option<u8>,
+) -> usize {
+    ids.filter_map(|id| Some(crowd.posed_instance_bound(id, agent_bits(manifest, layer, id, frame)?.1))).sum::<usize>()
+        + set_bits.map_or(0, |_| crowd.set.len())
+}
+
 /// The instances of one (frame, layer) render moving over the shutter: each
 /// agent's instances at shutter open, and in the scene's motion their close
 /// keys (the set stands still). An agent whose open and close instances do
@@ -288,10 +299,7 @@ pub fn motion_scene(
 ) -> Result<FrameScene> {
     let frame = motion.frame;
     let set_bits = set_bits(manifest, layer)?;
-    let bound: usize = (motion.agents.iter())
-        .filter_map(|(id, _)| Some(crowd.posed_instance_bound(*id, agent_bits(manifest, layer, *id, frame)?.1)))
-        .sum::<usize>()
-        + set_bits.map_or(0, |_| crowd.set.len());
+    let bound = instance_bound(crowd, manifest, layer, frame, motion.agents.iter().map(|(id, _)| *id), set_bits);
     let mut instances: Vec<Instance> = Vec::with_capacity(bound);
     let mut keys: Vec<InstanceMotion> = Vec::with_capacity(bound);
     let mut close: Vec<Instance> = Vec::new();
