@@ -17,7 +17,7 @@ use std::path::PathBuf;
 
 use throng::casting::ShotCrowd;
 use throng::layers::{build_layers, LayerOverrides};
-use throng::render::job::{all_layers, run, ProgressStyle, RenderJob};
+use throng::render::job::{all_layers, run, RenderJob, Silent};
 
 fn main() {
     match bench() {
@@ -87,15 +87,12 @@ fn bench() -> Result<bool, String> {
     let out = PathBuf::from(flag("--out").unwrap_or_else(|| "/tmp/budget_bench".into()));
     std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
     let budget_bytes = manifest.split.budget_bytes.unwrap_or(u64::MAX);
-    let job = RenderJob {
-        progress: ProgressStyle::Off,
-        ..RenderJob::new(all_layers(&manifest), vec![frame], spp, out.clone())
-    };
+    let job = RenderJob::new(all_layers(&manifest), vec![frame], spp, out.clone());
     for layer in &job.layers {
         std::fs::create_dir_all(out.join(layer)).map_err(|e| e.to_string())?;
     }
     let done = if args.iter().any(|a| a == "--in-process") {
-        run(&crowd, Some(&manifest), &job).map_err(|e| e.to_string())?
+        run(&crowd, Some(&manifest), &job, &Silent).map_err(|e| e.to_string())?.layers
     } else {
         separate(&manifest, &job, &shot)?
     };

@@ -76,10 +76,10 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
         };
         let rec: Option<&AgentSample> = block.agents.iter().find(|a| a.id == id);
         let Some(a) = rec else {
-            return Err(Error::Usage(format!(
-                "agent {id} is in shot {} but not at frame {frame}; try another --frame",
-                crowd.shot.name
-            )));
+            return Err(Error::setting(
+                "frame",
+                format!("agent {id} is in shot {} but not at frame {frame}; try another frame", crowd.shot.name),
+            ));
         };
         let height = crowd.agent_height(id).unwrap_or(1.8);
         let (distance, _, _) = crate::layers::measure(&camera, crowd.shot.render.resolution[1], a.position, height);

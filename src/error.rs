@@ -68,6 +68,16 @@ pub enum Error {
     /// The command line asks for something impossible.
     #[error("{0}")]
     Usage(String),
+    /// A stage's option is out of range or conflicts with another. `option`
+    /// is its name in the stage's options struct (`workers`); the command
+    /// line words it as its flag (`--workers`), so no stage names a flag.
+    #[error("{option}: {msg}")]
+    Setting {
+        /// The option's name, snake_case.
+        option: &'static str,
+        /// What is wrong with it.
+        msg: String,
+    },
 }
 
 impl Error {
@@ -93,6 +103,11 @@ impl Error {
             }
         }
         err
+    }
+
+    /// A bad value for the stage option `option` (see [`Error::Setting`]).
+    pub fn setting(option: &'static str, msg: impl Into<String>) -> Self {
+        Error::Setting { option, msg: msg.into() }
     }
 
     /// An I/O error on `path`.

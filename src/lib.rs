@@ -12,7 +12,7 @@ pub mod bench;
 pub mod botinfo; // a cast crowd + agent ids -> the botInfo block of each
 pub mod cache; // simulation caches (.crowd, CSV, JuPedSim) -> per-frame agent samples
 pub mod casting; // shot + cache + rigs + wardrobes -> `ShotCrowd`: every agent dressed, any frame posed
-pub mod cmd; // the command line: one file per verb, the only user of clap
+
 pub mod comp; // a frame's layer EXRs -> one stacked EXR
 pub mod error; // typed errors naming file, line, frame, agent and field; atomic writes
 pub mod export; // a cast frame -> glTF (.glb); a frame range -> USD (.usda/.usd/.usdz)

@@ -154,7 +154,7 @@ fn missing_file_is_an_io_error_naming_it() {
 
 #[test]
 fn garbage_file_is_invalid_not_a_panic() {
-    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let dir = common::tempdir().unwrap_or_else(|e| panic!("{e}"));
     let path = dir.path().join("broken.glb");
     std::fs::write(&path, b"glTF\x02\0\0\0garbage").unwrap_or_else(|e| panic!("{e}"));
     let err = AssetCache::new().mesh(&path, "x").err().map(|e| e.to_string()).unwrap_or_default();
@@ -171,7 +171,7 @@ fn garbage_file_is_invalid_not_a_panic() {
 /// validation indexed the accessors with a primitive's POSITION unchecked.
 #[test]
 fn a_position_accessor_past_the_end_is_invalid_not_a_panic() {
-    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let dir = common::tempdir().unwrap_or_else(|e| panic!("{e}"));
     let path = dir.path().join("bad_position.gltf");
     let gltf = r#"{"asset":{"version":"2.0"},"meshes":[{"name":"m","primitives":[{"attributes":{"POSITION":1}}]}]}"#;
     std::fs::write(&path, gltf).unwrap_or_else(|e| panic!("{e}"));
@@ -187,7 +187,7 @@ fn a_position_accessor_past_the_end_is_invalid_not_a_panic() {
 /// the mimeType of one with a bufferView.
 #[test]
 fn an_image_without_uri_or_mime_type_is_invalid_not_a_panic() {
-    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let dir = common::tempdir().unwrap_or_else(|e| panic!("{e}"));
     let text = std::fs::read_to_string(set()).unwrap_or_else(|e| panic!("{e}"));
     let uri = text.find("\"uri\": \"data:image/png").unwrap_or_else(|| panic!("set_small.gltf has no image uri"));
     let end = uri + text[uri..].find('\n').unwrap_or(0);
@@ -316,7 +316,7 @@ fn interpolation_test_meshes_load_without_their_image() {
 #[test]
 fn malformed_meshes_are_errors_naming_the_mesh() {
     let text = std::fs::read_to_string(set()).unwrap_or_else(|e| panic!("{e}"));
-    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let dir = common::tempdir().unwrap_or_else(|e| panic!("{e}"));
     let load = |edit: &dyn Fn(&mut serde_json::Value)| {
         let mut json: serde_json::Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
         edit(&mut json);
@@ -356,7 +356,7 @@ fn malformed_meshes_are_errors_naming_the_mesh() {
 /// grow without bound): only regular files are read.
 #[test]
 fn a_buffer_that_is_not_a_regular_file_is_refused() {
-    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let dir = common::tempdir().unwrap_or_else(|e| panic!("{e}"));
     let path = dir.path().join("device.gltf");
     let gltf = r#"{"asset":{"version":"2.0"},"buffers":[{"uri":"/dev/zero","byteLength":12}]}"#;
     std::fs::write(&path, gltf).unwrap_or_else(|e| panic!("{e}"));

@@ -113,7 +113,7 @@ fn succeeds(args: &[&str]) -> (String, String) {
 
 #[test]
 fn render_refuses_a_manifest_made_before_the_cache_changed() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = shot(dir.path());
     let m = dir.path().join("bad.layers.json");
     succeeds(&["layers", s(&shot), "--out", s(&m)]);
@@ -131,7 +131,7 @@ fn render_refuses_a_manifest_made_before_the_cache_changed() {
 
 #[test]
 fn render_refuses_a_manifest_made_for_other_frames_or_casting() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = shot(dir.path());
     let m = dir.path().join("bad.layers.json");
     succeeds(&["layers", s(&shot), "--out", s(&m)]);
@@ -146,7 +146,7 @@ fn render_refuses_a_manifest_made_for_other_frames_or_casting() {
 
 #[test]
 fn shot_frames_past_the_cache_or_in_a_gap_are_an_error() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     // Past the end: the cache holds 1-3, the shot asks for 1001-1005.
     let shot = shot_with(dir.path(), &rows(), (1001, 1005), "", "");
     let err = fails(&["layers", s(&shot), "--out", s(&dir.path().join("m.json"))]);
@@ -160,7 +160,7 @@ fn shot_frames_past_the_cache_or_in_a_gap_are_an_error() {
 
 #[test]
 fn frames_outside_the_cache_render_empty_when_the_shot_asks_with_a_warning() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = shot_with(dir.path(), &rows(), (1001, 1004), "outside_cache = \"empty\"", "");
     let (_, err) = succeeds(&["layers", s(&shot), "--out", s(&dir.path().join("bad.layers.json"))]);
     assert!(err.contains("warning") && err.contains("1004") && err.contains("no agents"), "{err}");
@@ -170,7 +170,7 @@ fn frames_outside_the_cache_render_empty_when_the_shot_asks_with_a_warning() {
 
 #[test]
 fn an_agent_id_that_agent_id_channels_cannot_hold_is_refused_at_load() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let mut r = rows();
     r.insert(2, (1, u32::MAX as u64, 0.0, 0.0));
     let shot = shot_with(dir.path(), &r, (1001, 1003), "", "");
@@ -180,7 +180,7 @@ fn an_agent_id_that_agent_id_channels_cannot_hold_is_refused_at_load() {
 
 #[test]
 fn a_pin_to_layer_7_of_2_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = shot_with(dir.path(), &rows(), (1001, 1003), "", "");
     let text =
         std::fs::read_to_string(&shot).unwrap().replace("count = 2", "count = 2\npins = [{ agent = 1, layer = 7 }]");
@@ -220,7 +220,7 @@ mesh = "head_sphere"
 
 #[test]
 fn all_zero_material_weights_are_refused() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot =
         wardrobe_shot(dir.path(), "slot = \"head\"\nmaterials = [\"red\", \"blue\"]\nmaterial_weights = [0.0, 0.0]");
     let err = fails(&["cast", s(&shot)]);
@@ -229,7 +229,7 @@ fn all_zero_material_weights_are_refused() {
 
 #[test]
 fn a_part_for_a_slot_the_rig_lacks_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = wardrobe_shot(dir.path(), "slot = \"tail\"\nmaterials = [\"red\"]");
     let err = fails(&["cast", s(&shot)]);
     assert!(err.contains("w.toml") && err.contains("slot `tail`") && err.contains("bipedThinA"), "{err}");
@@ -240,7 +240,7 @@ fn a_part_for_a_slot_the_rig_lacks_is_refused() {
 
 #[test]
 fn spp_and_threads_zero_are_refused_not_replaced() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = shot(dir.path());
     let out = dir.path().join("o");
     for flag in [["--spp", "0"], ["--threads", "0"], ["--spp", "1000000"]] {
@@ -254,7 +254,7 @@ fn spp_and_threads_zero_are_refused_not_replaced() {
 /// One rule for every verb that writes a file: its folder must exist.
 #[test]
 fn output_files_need_an_existing_folder_in_every_verb() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = shot(dir.path());
     let out = |name: &str| dir.path().join("no/such/folder").join(name).to_str().unwrap().to_string();
     let cache = common::fixture("jupedsim_small.sqlite");
@@ -276,7 +276,7 @@ fn output_files_need_an_existing_folder_in_every_verb() {
 
 #[test]
 fn a_huge_shot_resolution_is_refused_before_any_allocation() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = shot(dir.path());
     let text = std::fs::read_to_string(&shot).unwrap().replace("[48, 27]", "[100000, 100000]");
     std::fs::write(&shot, text).unwrap();
@@ -289,7 +289,7 @@ fn a_huge_shot_resolution_is_refused_before_any_allocation() {
 
 #[test]
 fn a_four_billion_frame_list_is_refused_before_allocating() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = shot(dir.path());
     let err = fails(&["render", s(&shot), "--frames=-2147483648-2147483647", "--out", s(&dir.path().join("o"))]);
     assert!(err.contains("more than 100000 frames"), "{err}");
@@ -301,7 +301,7 @@ fn a_four_billion_frame_list_is_refused_before_allocating() {
 
 #[test]
 fn frame_plus_frame_offset_overflow_is_an_error() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = shot_with(dir.path(), &rows(), (1001, 1003), "", "");
     let text = std::fs::read_to_string(&shot).unwrap().replace("frame_offset = -1000", "frame_offset = -2147483000");
     std::fs::write(&shot, text.replace("start = 1001", "start = -1001")).unwrap();
@@ -313,7 +313,7 @@ fn frame_plus_frame_offset_overflow_is_an_error() {
 
 #[test]
 fn resume_rerenders_frames_made_with_other_settings_and_removes_stale_temporaries() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = shot(dir.path());
     let out = dir.path().join("o");
     let base = ["render", s(&shot), "--layer", "full", "--frames", "1001-1002", "--progress", "off", "--json"];
@@ -351,7 +351,7 @@ fn resume_rerenders_frames_made_with_other_settings_and_removes_stale_temporarie
 
 #[test]
 fn a_closed_stdout_ends_quietly_with_status_0() {
-    let bin = env!("CARGO_BIN_EXE_throng");
+    let bin = common::bin();
     let shot = repo_path("demo/shot.toml");
     // More than a pipe buffer (64 KiB) of JSON: the demo's 12 agents, 30 times.
     let ids: Vec<String> = (0..360).map(|i| (i % 12 + 1).to_string()).collect();
@@ -391,7 +391,7 @@ fn completions_and_man_pages() {
     fails(&["completions", "tcsh"]);
     let (man, _) = succeeds(&["man"]);
     assert!(man.contains(".TH") && man.contains("throng"), "{man}");
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     succeeds(&["man", "--out", s(dir.path())]);
     assert!(dir.path().join("throng.1").exists() && dir.path().join("throng-render.1").exists());
     fails(&["man", "--out", s(&dir.path().join("missing"))]);
@@ -401,7 +401,7 @@ fn completions_and_man_pages() {
 
 #[test]
 fn world_to_ndc_projects_an_agent_onto_its_pixels() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = shot(dir.path());
     let out = dir.path().join("o");
     succeeds(&[
@@ -448,7 +448,7 @@ fn world_to_ndc_projects_an_agent_onto_its_pixels() {
 #[test]
 fn compression_is_chosen_and_lossless_by_default() {
     use exr::prelude::Compression;
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = shot(dir.path());
     let read = |out: &Path| {
         let image = exr::prelude::read()

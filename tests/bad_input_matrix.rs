@@ -31,7 +31,7 @@ struct Case {
     absent: &'static [&'static str],
 }
 
-const BIN: &str = env!("CARGO_BIN_EXE_throng");
+
 
 fn demo(rel: &str) -> String {
     repo_path("demo").join(rel).display().to_string()
@@ -131,7 +131,7 @@ fn use_wardrobe(dir: &Path) {
 
 /// Runs throng with `args` in `dir` and asserts success (case setup).
 fn ok(dir: &Path, args: &[&str]) {
-    let out = Command::new(BIN).args(args).current_dir(dir).output().unwrap();
+    let out = Command::new(common::bin()).args(args).current_dir(dir).output().unwrap();
     assert!(out.status.success(), "setup `throng {}`: {}", args.join(" "), String::from_utf8_lossy(&out.stderr));
 }
 
@@ -1151,7 +1151,7 @@ fn run_case(case: &Case, root: &Path, index: usize) -> Outcome {
     let out = Command::new("sh")
         .arg("-c")
         .arg("ulimit -v 4000000; ulimit -t 120; exec \"$0\" \"$@\"")
-        .arg(BIN)
+        .arg(common::bin())
         .args(&args)
         .current_dir(&dir)
         .output()
@@ -1218,7 +1218,7 @@ fn excerpt(stderr: &str) -> String {
 
 #[test]
 fn bad_input_matrix() {
-    let temp = tempfile::tempdir().unwrap();
+    let temp = common::tempdir().unwrap();
     // THRONG_MATRIX_KEEP=DIR keeps every case's folder there, to look at.
     let root = std::env::var_os("THRONG_MATRIX_KEEP").map_or_else(|| temp.path().to_path_buf(), PathBuf::from);
     let cases = cases();

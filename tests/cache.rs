@@ -64,7 +64,7 @@ fn assert_has(msg: &str, parts: &[&str]) {
 
 #[test]
 fn binary_write_read_equal() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join("a.crowd");
     cache::write(&p, &sample()).unwrap();
     assert_eq!(cache::read(&p).unwrap(), sample());
@@ -76,7 +76,7 @@ fn binary_write_read_equal() {
 
 #[test]
 fn csv_write_read_equal() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join("a.csv");
     cache::write(&p, &sample()).unwrap();
     assert_eq!(cache::read(&p).unwrap(), sample());
@@ -88,7 +88,7 @@ fn csv_write_read_equal() {
 
 #[test]
 fn binary_csv_binary_is_byte_identical() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let (a, c, b) = (dir.path().join("a.crowd"), dir.path().join("a.csv"), dir.path().join("b.crowd"));
     cache::write(&a, &sample()).unwrap();
     // Through the CLI, as a lighter would.
@@ -112,7 +112,7 @@ fn tables_are_stored_in_first_use_order() {
             a.rig = if a.rig == 0 { 2 } else { 1 };
         }
     }
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let (a, c, b) = (dir.path().join("a.crowd"), dir.path().join("a.csv"), dir.path().join("b.crowd"));
     cache::write(&a, &crowd).unwrap();
     let back = cache::read(&a).unwrap();
@@ -125,7 +125,7 @@ fn tables_are_stored_in_first_use_order() {
 
 #[test]
 fn writes_are_deterministic() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let (a, b) = (dir.path().join("a.crowd"), dir.path().join("b.crowd"));
     cache::write(&a, &sample()).unwrap();
     cache::write(&b, &sample()).unwrap();
@@ -135,7 +135,7 @@ fn writes_are_deterministic() {
 
 #[test]
 fn random_access_equals_full_read() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     for name in ["a.crowd", "a.csv"] {
         let p = dir.path().join(name);
         cache::write(&p, &sample()).unwrap();
@@ -156,7 +156,7 @@ fn random_access_equals_full_read() {
 fn binary_reader_reads_only_the_frame_asked_for() {
     // Corrupt the last block: opening and reading other frames still work,
     // so neither reads the whole file.
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join("a.crowd");
     cache::write(&p, &sample()).unwrap();
     let mut bytes = std::fs::read(&p).unwrap();
@@ -170,7 +170,7 @@ fn binary_reader_reads_only_the_frame_asked_for() {
 
 #[test]
 fn info_counts() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join("a.crowd");
     cache::write(&p, &sample()).unwrap();
     let i = cache::info(&CacheReader::open(&p).unwrap()).unwrap();
@@ -229,7 +229,7 @@ fn record_at(p: &Path, entry: usize, agent: usize) -> usize {
 /// Writes the sample, lets `edit` change its bytes, and returns the reader
 /// error and the CLI's stderr for the result.
 fn corrupt(name: &str, edit: impl FnOnce(&Path, &mut Vec<u8>)) -> (String, String) {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join(name);
     cache::write(&p, &sample()).unwrap();
     let mut bytes = std::fs::read(&p).unwrap();
@@ -249,7 +249,7 @@ fn corrupt(name: &str, edit: impl FnOnce(&Path, &mut Vec<u8>)) -> (String, Strin
 #[test]
 fn truncated_binary() {
     let full = {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = common::tempdir().unwrap();
         let p = dir.path().join("x.crowd");
         cache::write(&p, &sample()).unwrap();
         std::fs::read(&p).unwrap().len()
@@ -363,7 +363,7 @@ fn bad_records_in_binary() {
 const HEADER: &str = "frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags";
 
 fn csv_error(body: &str) -> (String, String) {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join("bad.csv");
     std::fs::write(&p, format!("{HEADER}\n{body}")).unwrap();
     let lib = err_text(cache::read(&p));
@@ -411,7 +411,7 @@ fn bad_csv_lines() {
     let (msg, _) = csv_error(&format!("{ok}1,5,0,0,0,0,,C,0,\n"));
     assert_has(&msg, &["bad.csv:3", "column 7 (rig)", "empty name"]);
 
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join("head.csv");
     std::fs::write(&p, "frame,id,x,y,z\n1,2,3,4,5\n").unwrap();
     assert_has(&err_text(cache::read(&p)), &["head.csv:1", "expected the header"]);
@@ -439,7 +439,7 @@ fn bad_csv_lines() {
 
 #[test]
 fn usage_errors() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join("a.crowd");
     cache::write(&p, &sample()).unwrap();
     let out = throng(&["cache", "convert", s(&p), s(&dir.path().join("a.sqlite"))]);
@@ -513,7 +513,7 @@ fn jupedsim_fixture_import() {
 #[test]
 fn jupedsim_heading_from_motion_and_cycle_advance() {
     // Zero one agent's orientation mid-walk: the heading follows its motion.
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join("edit.sqlite");
     std::fs::copy(fixture(), &p).unwrap();
     let conn = rusqlite::Connection::open(&p).unwrap();
@@ -630,7 +630,7 @@ fn jupedsim_rig_file_gives_stride_and_length() {
     assert!((v["import"]["stride"].as_f64().unwrap() - 1.7).abs() < 1e-4, "{v}");
     assert!((v["import"]["cycle_length"].as_f64().unwrap() - 32.0).abs() < 1e-3, "{v}");
     assert!(v["import"]["rig_file"].as_str().unwrap().ends_with("bipedTallB.glb"), "{v}");
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let outp = dir.path().join("j.crowd");
     let out = throng(&["cache", "convert", s(&fixture()), s(&outp), "--rig", "bipedTallB", "--rig-file", s(&rig)]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -639,7 +639,7 @@ fn jupedsim_rig_file_gives_stride_and_length() {
 }
 
 fn sqlite_error(name: &str, setup: &str) -> String {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join(name);
     std::fs::copy(fixture(), &p).unwrap();
     rusqlite::Connection::open(&p).unwrap().execute_batch(setup).unwrap();
@@ -668,7 +668,7 @@ fn bad_jupedsim_files() {
     let msg = sqlite_error("ver.sqlite", "UPDATE metadata SET value = '9' WHERE key = 'version';");
     assert_has(&msg, &["ver.sqlite", "version 9"]);
 
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join("junk.sqlite");
     std::fs::write(&p, b"this is not a database, just text that is long enough to have a header").unwrap();
     assert_has(&err_text(cache::read(&p)), &["junk.sqlite", "JuPedSim SQLite"]);
@@ -697,7 +697,7 @@ fn real_jupedsim_file_info() {
 #[ignore]
 fn timings_on_real_file() {
     let real = common::shared_asset("crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join("real.crowd");
     let t = std::time::Instant::now();
     let crowd = cache::read(&real).unwrap();

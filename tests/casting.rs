@@ -193,7 +193,7 @@ fn posed_agents_stand_on_the_floor() {
 #[test]
 fn export_reopens_with_shared_meshes() {
     let crowd = ShotCrowd::load(&demo_shot()).unwrap();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let out = dir.path().join("frame.glb");
     let frame = crowd.shot.frames.middle();
     let s = throng::export::export_frame(&crowd, frame, None, &out).unwrap();
@@ -217,7 +217,7 @@ fn export_reopens_with_shared_meshes() {
 #[test]
 fn casting_is_the_same_for_any_thread_count() {
     let cast = |threads: &str| {
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_throng"))
+        let out = std::process::Command::new(common::bin())
             .args(["cast", demo_shot().to_str().unwrap(), "--json"])
             .env("RAYON_NUM_THREADS", threads)
             .output()

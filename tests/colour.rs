@@ -199,7 +199,7 @@ fn check_red(a: &throng::render::Film, b: &throng::render::Film) {
 fn previews_of_acescg_films_convert_back_to_rec709() {
     let (lib, scene) = floor_scene(Vec3::new(0.8, 0.05, 0.03), None, Vec3::ONE * 2.0, Vec3::ONE);
     let (a, b) = both(&lib, &scene, &settings(true, 1));
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let (pa, pb) = (dir.path().join("a.png"), dir.path().join("b.png"));
     throng::render::exr::write_preview_png(&pa, &a).unwrap();
     throng::render::exr::write_preview_png_from(&pb, &b, Colourspace::Acescg).unwrap();
@@ -280,7 +280,7 @@ fn header(path: &Path) -> (exr::meta::attribute::Chromaticities, String) {
 
 #[test]
 fn acescg_headers_state_ap1_and_the_aces_white_and_rec709_stays_the_default() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let exr = |o: &str| dir.path().join(o).join("full/col.full.1001.exr");
     // The default: Rec.709.
     let shot = small_shot(dir.path(), "");
@@ -312,7 +312,7 @@ fn acescg_headers_state_ap1_and_the_aces_white_and_rec709_stays_the_default() {
 
 #[test]
 fn resume_rerenders_a_frame_made_in_the_other_colourspace() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = small_shot(dir.path(), "");
     let out = dir.path().join("o");
     assert_eq!(render(&shot, &out, &[]).0, 0);
@@ -326,7 +326,7 @@ fn resume_rerenders_a_frame_made_in_the_other_colourspace() {
 
 #[test]
 fn bad_colourspaces_are_refused_naming_the_key_or_flag() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = small_shot(dir.path(), "working_colourspace = \"p3\"");
     let (code, text) = render(&shot, &dir.path().join("o"), &[]);
     assert_eq!(code, 2, "{text}");
@@ -341,7 +341,7 @@ fn bad_colourspaces_are_refused_naming_the_key_or_flag() {
 
 #[test]
 fn the_comp_refuses_layers_of_two_colourspaces() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = small_shot(dir.path(), "");
     let (code, _, err) = run(&["layers", s(&shot)]);
     assert_eq!(code, 0, "{err}");

@@ -74,12 +74,11 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
         png: true,
         resolution: None,
         cryptomatte: job::CryptoOutput::Header,
-        progress: job::ProgressStyle::Off,
         compression: Default::default(),
         shutter: None,
         colourspace: Default::default(),
     };
-    job::run(crowd, Some(manifest), &job).unwrap();
+    job::run(crowd, Some(manifest), &job, &job::Silent).unwrap();
 }
 
 fn read(dir: &Path, layer: &str) -> Film {

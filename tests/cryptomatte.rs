@@ -44,7 +44,7 @@ fn a_data_window_larger_than_the_file_can_hold_is_refused() {
     for offset in [8, 12] {
         huge[at + offset..at + offset + 4].copy_from_slice(&29_999i32.to_le_bytes());
     }
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let path = dir.path().join("huge.exr");
     std::fs::write(&path, &huge).unwrap();
     let errors = [read_layer(&path).err(), read_parts(&path, |_| true).err(), cryptomatte::read(&path).err()];
@@ -368,7 +368,7 @@ fn mattes_are_identical_for_any_thread_count() {
 #[test]
 fn exr_round_trip_and_header() {
     let (scene, film) = render(4, 2);
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let path = dir.path().join("demo.crowd_0.1001.exr");
     write_layer(&path, &film, &meta(&film, &scene)).unwrap();
     let (back, _) = read_layer(&path).unwrap();
@@ -403,7 +403,7 @@ fn exr_round_trip_and_header() {
 #[test]
 fn sidecar_manifest_option() {
     let (scene, film) = render(4, 2);
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let path = dir.path().join("demo.crowd_0.1001.exr");
     write_layer_with(
         &path,

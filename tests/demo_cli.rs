@@ -154,7 +154,7 @@ fn a_wardrobe_type_error_names_file_line_and_key() {
     let (before, after) = text.split_once("roughness = ").unwrap();
     let line = before.lines().count() + 1; // `before` ends at the start of that line
     let broken = format!("{before}roughness = \"shiny\"{}", &after[after.find('\n').unwrap()..]);
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let path = dir.path().join("robots.toml");
     std::fs::write(&path, broken).unwrap();
     let err = throng::casting::wardrobe::Wardrobes::load(&[path]).unwrap_err().to_string();

@@ -74,7 +74,7 @@ fn demo_copy(root: &Path) -> PathBuf {
 
 #[test]
 fn planning_twice_gives_the_same_bytes() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = common::tempdir().unwrap();
     let plan = plan_demo(&demo_shot(), tmp.path(), &["--chunk", "2"]);
     let first = std::fs::read(&plan).unwrap();
     let manifest = std::fs::read(tmp.path().join("demo.layers.json")).unwrap();
@@ -103,7 +103,7 @@ fn planning_twice_gives_the_same_bytes() {
 
 #[test]
 fn comps_depend_on_their_frames_layer_tasks() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = common::tempdir().unwrap();
     let path = plan_demo(&demo_shot(), tmp.path(), &["--frames", "1024-1026", "--chunk", "2", "--cores", "2"]);
     let plan = read_plan(&path).unwrap();
     let manifest = throng::layers::read_manifest(&plan.manifest).unwrap();
@@ -154,7 +154,7 @@ fn refused(args: &[&str], want: &[&str]) -> String {
 
 #[test]
 fn an_edited_shot_or_another_shot_is_refused() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = common::tempdir().unwrap();
     let shot = demo_copy(&tmp.path().join("copy"));
     let plan = plan_demo(&shot, &tmp.path().join("plan"), &[]);
     // The right shot: status answers (not done: exit 1).
@@ -187,7 +187,7 @@ fn an_edited_shot_or_another_shot_is_refused() {
 
 #[test]
 fn the_local_engine_matches_a_local_render_and_comp_byte_for_byte() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = common::tempdir().unwrap();
     let plan = plan_demo(&demo_shot(), &tmp.path().join("farm"), &["--chunk", "2"]);
     let out = ok(&["farm", "submit", s(&plan), "--engine", "local", "--workers", "2"]);
     assert!(out.contains("local: comp.1025 done"), "{out}");
@@ -225,7 +225,7 @@ fn the_local_engine_matches_a_local_render_and_comp_byte_for_byte() {
 
 #[test]
 fn status_reports_waiting_done_and_failed_with_the_log() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = common::tempdir().unwrap();
     let plan = plan_demo(&demo_shot(), tmp.path(), &["--retries", "0"]);
     let (code, out, _) = run(&["farm", "status", s(&plan)]);
     assert_eq!(code, 1, "nothing rendered: not done\n{out}");
@@ -264,7 +264,7 @@ fn status_reports_waiting_done_and_failed_with_the_log() {
 
 #[test]
 fn a_resubmit_runs_only_what_is_missing() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = common::tempdir().unwrap();
     let plan = plan_demo(&demo_shot(), tmp.path(), &[]);
     ok(&["farm", "submit", s(&plan), "--engine", "local", "--workers", "2"]);
     let untouched = tmp.path().join("render/set/demo.set.1024.exr");
@@ -291,13 +291,13 @@ fn a_resubmit_runs_only_what_is_missing() {
 
 #[test]
 fn engine_errors_are_one_message_and_exit_2() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = common::tempdir().unwrap();
     let plan = plan_demo(&demo_shot(), tmp.path(), &[]);
     refused(&["farm", "submit", s(&plan), "--engine", "tractor"], &["invalid value 'tractor'", "slurm", "local"]);
     // No sbatch on PATH.
     let empty = tmp.path().join("empty-path");
     std::fs::create_dir_all(&empty).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_throng"))
+    let out = Command::new(common::bin())
         .args(["farm", "submit", s(&plan), "--engine", "slurm"])
         .env("PATH", &empty)
         .output()
@@ -311,7 +311,7 @@ fn engine_errors_are_one_message_and_exit_2() {
     let sbatch = fake.join("sbatch");
     std::fs::write(&sbatch, "#!/bin/sh\necho 'sbatch: error: Batch job submission failed: Requested node configuration is not available' >&2\nexit 1\n").unwrap();
     std::fs::set_permissions(&sbatch, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_throng"))
+    let out = Command::new(common::bin())
         .args(["farm", "submit", s(&plan), "--engine", "slurm"])
         .env("PATH", &fake)
         .output()
@@ -336,7 +336,7 @@ fn engine_errors_are_one_message_and_exit_2() {
 
 #[test]
 fn json_summaries_and_plain_progress() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = common::tempdir().unwrap();
     let plan = plan_demo(&demo_shot(), tmp.path(), &[]);
     let manifest = tmp.path().join("demo.layers.json");
     let out = tmp.path().join("r");

@@ -118,12 +118,11 @@ fn render_with_shutter(
         png: true,
         resolution: Some([WIDTH, HEIGHT]),
         cryptomatte: job::CryptoOutput::Header,
-        progress: job::ProgressStyle::Off,
         compression: Default::default(),
         shutter,
         colourspace: Default::default(),
     };
-    let done = job::run(crowd, Some(manifest), &job).expect("demo renders");
+    let done = job::run(crowd, Some(manifest), &job, &job::Silent).expect("demo renders").layers;
     done.into_iter().map(|r| (r.layer, r.path)).collect()
 }
 
@@ -514,7 +513,7 @@ fn update_goldens(rendered: &[(String, PathBuf)]) -> bool {
 /// render and its nearest crowd layer.
 #[test]
 fn rigged_figure_matches_golden() {
-    let dir = tempfile::tempdir().expect("temp dir");
+    let dir = common::tempdir().expect("temp dir");
     let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
     let crowd = ShotCrowd::load(&shot).expect("figure shot loads");
     let manifest = build_layers(&crowd, &LayerOverrides::default()).expect("figure layers");
@@ -540,7 +539,7 @@ fn rigged_figure_matches_golden() {
 fn demo_layers_match_golden() {
     let (crowd, manifest) = demo();
     let layers = golden_layers(&manifest);
-    let tmp = tempfile::tempdir().expect("temp dir");
+    let tmp = common::tempdir().expect("temp dir");
     let started = std::time::Instant::now();
     let rendered = render(&crowd, &manifest, &layers, tmp.path());
     println!(
@@ -575,7 +574,7 @@ fn blurred_demo_matches_golden() {
     let (mut crowd, manifest) = demo();
     let shutter = [-0.25, 0.25];
     throng::casting::motion::prepare_shutter(&mut crowd, shutter).expect("shutter poses");
-    let tmp = tempfile::tempdir().expect("temp dir");
+    let tmp = common::tempdir().expect("temp dir");
     let rendered = render_with_shutter(&crowd, &manifest, &[FULL_LAYER.to_string()], tmp.path(), Some(shutter));
     // Golden names carry `demo_blur` so they sit beside the still goldens.
     let renamed: Vec<(String, PathBuf)> = rendered
@@ -614,7 +613,7 @@ fn metric_accepts_another_seed() {
     // Casting already happened at load: this changes only the render's samples.
     crowd.shot.seed = crowd.shot.seed.wrapping_add(7919);
     let layers = golden_layers(&manifest);
-    let tmp = tempfile::tempdir().expect("temp dir");
+    let tmp = common::tempdir().expect("temp dir");
     let rendered = render(&crowd, &manifest, &layers, tmp.path());
     let (lines, failures) = check_against_golden(&rendered, &crowd.shot.name, RESEED_POINTS, false);
     for l in &lines {
@@ -641,7 +640,7 @@ fn metric_rejects_a_moved_sun() {
     // The crowd layers barely change at this size (their shading turns a
     // little); the set's shadows move, and `full` has both.
     let layers = vec![manifest.set.name.clone(), FULL_LAYER.to_string()];
-    let tmp = tempfile::tempdir().expect("temp dir");
+    let tmp = common::tempdir().expect("temp dir");
     let rendered = render(&crowd, &manifest, &layers, tmp.path());
     // Same seed as the golden: only the sun differs.
     let (lines, failures) = check_against_golden(&rendered, &crowd.shot.name, GOLDEN_POINTS, false);

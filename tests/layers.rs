@@ -1,6 +1,8 @@
 //! Layering: fixed-frame membership, distance order, budget, removal
 //! invariance, pins, per-frame pops, LOD, the manifest and the map.
 
+mod common;
+
 use glam::Vec3;
 use throng::layers::{
     build_manifest, draw_map, membership, pops_in, read_manifest, render_map, summary, write_manifest, AgentInput,
@@ -354,7 +356,7 @@ fn visibility_per_layer() {
 
 #[test]
 fn manifest_round_trips_and_checks_its_version() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let path = dir.path().join("layers.json");
     let m = build_manifest(&input(grid(5, 5), count(3))).unwrap();
     write_manifest(&path, &m).unwrap();
@@ -409,7 +411,7 @@ fn map_decodes_as_png_of_the_requested_size() {
     let png = render_map(&m, &opts).unwrap();
     let img = image::load_from_memory_with_format(&png, image::ImageFormat::Png).unwrap();
     assert_eq!((img.width(), img.height()), (1200, 700));
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let path = dir.path().join("map.png");
     draw_map(&m, &MapOptions { size: (400, 240), set_bounds: None }, &path).unwrap();
     let img = image::open(&path).unwrap();
@@ -418,38 +420,10 @@ fn map_decodes_as_png_of_the_requested_size() {
 }
 
 #[test]
-fn command_line_flags_override_the_shot() {
-    use clap::Parser;
-    use throng::cmd::{Cli, Verb};
-    use throng::layers::settings_with_overrides;
-    let parse = |args: &[&str]| match Cli::try_parse_from(args).unwrap().verb {
-        Verb::Layers(a) => a,
-        _ => unreachable!(),
-    };
-    let shot = count(3);
-    let a = parse(&["throng", "layers", "shot.toml", "--cutoffs", "10,25,60", "--ref-frame", "1010", "--per-frame"]);
-    let (s, o) = settings_with_overrides(&shot, &a.overrides()).unwrap();
-    assert_eq!(
-        (s.split, s.cutoffs.clone(), s.ref_frame, o.per_frame),
-        (SplitMode::Cutoffs, vec![10.0, 25.0, 60.0], Some(1010), true)
-    );
-    let a = parse(&["throng", "layers", "shot.toml", "--budget", "2.8GB", "--lod-px", "25", "--lod-per-frame"]);
-    let (s, o) = settings_with_overrides(&shot, &a.overrides()).unwrap();
-    assert_eq!(
-        (s.split, s.budget.as_deref(), s.lod_full_min_px, o.lod_per_frame),
-        (SplitMode::Budget, Some("2.8GB"), 25.0, true)
-    );
-    // A bad budget is refused at parse time, naming the flag.
-    let e = Cli::try_parse_from(["throng", "layers", "shot.toml", "--budget", "lots"]).unwrap_err().to_string();
-    assert!(e.contains("--budget"), "{e}");
-    assert!(Cli::try_parse_from(["throng", "layers", "s.toml", "--count", "2", "--budget", "1GB"]).is_err());
-}
-
-#[test]
 fn input_from_a_shot_and_crowd() {
     use throng::cache::{AgentSample as Rec, CrowdCache, FrameBlock};
     use throng::layers::shot_input;
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     std::fs::write(dir.path().join("c.crowd"), b"").unwrap();
     let text = r#"
 version = 1

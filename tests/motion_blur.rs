@@ -259,7 +259,7 @@ fn demo_agents_move_over_the_shutter() {
 /// across thread counts.
 #[test]
 fn skinned_agents_deformation_blur() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = common::figure_shot(dir.path(), &common::five_walkers(), "pose_step = 1.0");
     let mut crowd = ShotCrowd::load(&shot).unwrap();
     prepare_shutter(&mut crowd, [-0.25, 0.25]).unwrap();
@@ -270,10 +270,9 @@ fn skinned_agents_deformation_blur() {
         let job = RenderJob {
             threads,
             shutter,
-            progress: job::ProgressStyle::Off,
             ..RenderJob::new(vec!["full".into()], vec![1023], 8, out.to_path_buf())
         };
-        let done = job::run(&crowd, Some(&manifest), &job).unwrap();
+        let done = job::run(&crowd, Some(&manifest), &job, &job::Silent).unwrap().layers;
         throng::render::exr::read_layer(&done[0].path).unwrap().0
     };
     let a = run(1, Some([-0.25, 0.25]), &dir.path().join("a"));
@@ -297,7 +296,7 @@ fn lum(p: &[f32; 4]) -> f64 {
 /// motion vectors and ids carry through the comp.
 #[test]
 fn blurred_stack_matches_blurred_full_render() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let mut crowd = demo();
     let shutter = [-0.25, 0.25];
     prepare_shutter(&mut crowd, shutter).unwrap();
@@ -307,10 +306,9 @@ fn blurred_stack_matches_blurred_full_render() {
         let job = RenderJob {
             shutter: Some(shutter),
             resolution: Some([160, 90]),
-            progress: job::ProgressStyle::Off,
             ..RenderJob::new(layers, vec![frame], 32, out.to_path_buf())
         };
-        job::run(crowd, Some(&manifest), &job).unwrap();
+        job::run(crowd, Some(&manifest), &job, &job::Silent).unwrap();
     };
     let mut layers = job::all_layers(&manifest);
     layers.push("full".into());
@@ -372,7 +370,7 @@ fn the_shutter_is_in_the_render_fingerprint() {
 
 #[test]
 fn bad_shutters_are_refused_naming_the_field() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let text = std::fs::read_to_string(common::demo_shot()).unwrap();
     let demo_dir = common::demo_shot().parent().unwrap().to_path_buf();
     for (shutter, says) in

@@ -3,6 +3,8 @@
 //! far from the origin, and the EXR round trip. Images are tiny so this runs
 //! in seconds in the dev profile.
 
+mod common;
+
 use std::f32::consts::PI;
 
 use glam::{Affine3A, Quat, Vec2, Vec3};
@@ -509,7 +511,7 @@ fn exr_round_trip() {
         shutter: None,
         colourspace: Default::default(),
     };
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let path = dir.path().join("demo.crowd_0.1001.exr");
     write_layer(&path, &film, &meta).unwrap();
     // No temporary file left behind.

@@ -178,7 +178,7 @@ fn canonical_files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
 
 #[test]
 fn layers_render_resume_and_errors() {
-    let tmp = tempfile::tempdir().expect("temp dir");
+    let tmp = common::tempdir().expect("temp dir");
     let (manifest, layers) = manifest_in(tmp.path());
     assert_eq!(layers, ["set", "crowd2", "crowd1", "crowd0"], "the demo's layers, back to front");
     let out = tmp.path().join("out");
@@ -281,7 +281,7 @@ fn layers_render_resume_and_errors() {
 
 #[test]
 fn output_is_byte_identical_for_1_and_2_threads() {
-    let tmp = tempfile::tempdir().expect("temp dir");
+    let tmp = common::tempdir().expect("temp dir");
     let (manifest, layers) = manifest_in(tmp.path());
     let shot = demo_shot();
     let frame = FRAME.to_string();
@@ -326,7 +326,7 @@ fn output_is_byte_identical_for_1_and_2_threads() {
 /// `HashMap`).
 #[test]
 fn output_is_byte_identical_including_header_order() {
-    let tmp = tempfile::tempdir().expect("temp dir");
+    let tmp = common::tempdir().expect("temp dir");
     let (manifest, _) = manifest_in(tmp.path());
     let shot = demo_shot();
     let frame = FRAME.to_string();

@@ -366,7 +366,7 @@ fn broken_rig(edit: impl FnOnce(&mut serde_json::Value)) -> String {
     let text = std::fs::read_to_string(fixture("rig_small.gltf")).unwrap_or_else(|e| panic!("{e}"));
     let mut json: serde_json::Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
     edit(&mut json);
-    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let dir = common::tempdir().unwrap_or_else(|e| panic!("{e}"));
     let path = dir.path().join("broken_rig.gltf");
     std::fs::write(&path, json.to_string()).unwrap_or_else(|e| panic!("{e}"));
     let err = match Rig::load(&path) {

@@ -1,5 +1,7 @@
 //! The shot file: strict parsing, errors that name file, line and key.
 
+mod common;
+
 use std::path::Path;
 
 use throng::shot::Shot;
@@ -35,8 +37,8 @@ focal_length = 70.0
 direction = [0.0, 2.0, 0.0]
 "#;
 
-fn dir_with_files() -> tempfile::TempDir {
-    let d = tempfile::tempdir().unwrap();
+fn dir_with_files() -> common::TempDir {
+    let d = common::tempdir().unwrap();
     std::fs::write(d.path().join("c.csv"), "").unwrap();
     std::fs::write(d.path().join("r.glb"), "").unwrap();
     d

@@ -658,7 +658,7 @@ fn errors_name_file_key_and_agent() {
 
 #[test]
 fn same_seed_byte_identical_cache_file() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let write = |seed: u64, name: &str| {
         let path = dir.path().join(name);
         throng::cache::write(&path, &run(&big_scene(seed))).unwrap();
@@ -678,7 +678,7 @@ fn same_seed_byte_identical_cache_file() {
 
 #[test]
 fn cli_writes_cache_and_reports() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let scene = dir.path().join("s.toml");
     let text =
         format!("version = 1\nseed = 1\n[frames]\nstart = 1\nend = 10\n{CYCLES}\n{}", walker(1, 0.0, 0.0, 0.0, ""));
@@ -791,7 +791,7 @@ fn demo_scene_matches_spec_and_committed_cache() {
     assert!(checked > 8000, "{checked}");
     // The committed demo cache is this scene's output, byte for byte
     // (regenerate: cargo run -- sim demo/sim/demo.toml --out demo/cache/demo.crowd).
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let fresh = dir.path().join("demo.crowd");
     throng::cache::write(&fresh, &c).unwrap();
     let committed = std::fs::read(root.join("demo/cache/demo.crowd")).unwrap();

@@ -134,7 +134,7 @@ fn mesh_of(crowd: &ShotCrowd, frame: i32, id: u32) -> u32 {
 
 #[test]
 fn agents_on_one_quantised_pose_share_one_mesh_and_others_do_not() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     // Agents 1 and 2 play the same cycle frame (up to less than half a step);
     // agent 3 is 6 frames further on.
     let rows = [
@@ -157,11 +157,11 @@ fn agents_on_one_quantised_pose_share_one_mesh_and_others_do_not() {
 
 #[test]
 fn removing_an_agent_changes_no_other_agents_cast_or_pose() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let all = common::five_walkers();
     let without: Vec<_> = all.iter().copied().filter(|r| r.1 != 3).collect();
     let a = ShotCrowd::load(&common::figure_shot(dir.path(), &all, "")).unwrap();
-    let dir2 = tempfile::tempdir().unwrap();
+    let dir2 = common::tempdir().unwrap();
     let b = ShotCrowd::load(&common::figure_shot(dir2.path(), &without, "")).unwrap();
     for id in [1u32, 2, 4, 5] {
         assert_eq!(a.casting[&id], b.casting[&id], "agent {id}'s casting");
@@ -196,12 +196,12 @@ fn render_layers(shot: &Path, out: &Path, threads: usize, layers: &[&str]) -> Ve
             out.to_path_buf(),
         )
     };
-    throng::render::job::run(&crowd, Some(&manifest), &job).unwrap().into_iter().map(|r| r.path).collect()
+    throng::render::job::run(&crowd, Some(&manifest), &job, &throng::render::job::Silent).unwrap().layers.into_iter().map(|r| r.path).collect()
 }
 
 #[test]
 fn skinned_renders_are_bit_identical_for_one_and_two_threads() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
     let one = render_layers(&shot, &dir.path().join("t1"), 1, &["crowd0", "full"]);
     let two = render_layers(&shot, &dir.path().join("t2"), 2, &["crowd0", "full"]);
@@ -212,7 +212,7 @@ fn skinned_renders_are_bit_identical_for_one_and_two_threads() {
 
 #[test]
 fn the_layer_stack_matches_the_full_render_with_skinned_agents() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
     let out = dir.path().join("r");
     let files = render_layers(&shot, &out, 0, &["set", "crowd1", "crowd0", "full"]);
@@ -239,7 +239,7 @@ fn the_layer_stack_matches_the_full_render_with_skinned_agents() {
 /// Runs `throng cast` on a figure shot with `extra` in its rig table; the
 /// error text on failure.
 fn cast_error(extra_rig: &str, rows: &[(i32, u32, f32, f32, f32, f32)]) -> String {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = common::figure_shot(dir.path(), rows, extra_rig);
     let (code, _, err) = common::run(&["cast".as_ref(), shot.as_os_str()]);
     assert_eq!(code, 2, "should be refused: {err}");
@@ -248,7 +248,7 @@ fn cast_error(extra_rig: &str, rows: &[(i32, u32, f32, f32, f32, f32)]) -> Strin
 
 #[test]
 fn a_skinned_file_as_a_slot_rig_is_refused_naming_skinning() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = common::figure_shot(dir.path(), &common::five_walkers(), "kind = \"slots\"");
     let text = std::fs::read_to_string(&shot).unwrap().replace("cycles = { Walk = \"#0\" }\n", "");
     std::fs::write(&shot, text).unwrap();
@@ -259,7 +259,7 @@ fn a_skinned_file_as_a_slot_rig_is_refused_naming_skinning() {
 
 #[test]
 fn a_skinned_mesh_as_a_rigid_part_is_refused_naming_skinning() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let figure = common::shared_asset("gltf/RiggedFigure/RiggedFigure.gltf");
     let wardrobe = dir.path().join("w.toml");
     std::fs::write(
@@ -292,7 +292,7 @@ fn a_skinned_mesh_as_a_rigid_part_is_refused_naming_skinning() {
 
 #[test]
 fn a_clip_mapping_to_a_missing_clip_lists_the_clips() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
     let text =
         std::fs::read_to_string(&shot).unwrap().replace("cycles = { Walk = \"#0\" }", "cycles = { Walk = \"Run\" }");
@@ -305,7 +305,7 @@ fn a_clip_mapping_to_a_missing_clip_lists_the_clips() {
 /// SimpleSkin's JSON with `edit` applied, written beside a shot that uses it;
 /// the `throng cast` error.
 fn broken_simple_skin(edit: impl Fn(&mut serde_json::Value)) -> String {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let mut doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(simple_skin("SimpleSkin.gltf")).unwrap()).unwrap();
     edit(&mut doc);
@@ -405,7 +405,7 @@ fn cycles_and_strides_options_are_checked_in_the_shot() {
 
 #[test]
 fn mattes_name_skinned_agents_and_their_meshes() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
     let files = render_layers(&shot, &dir.path().join("r"), 0, &["full"]);
     let mattes = throng::render::cryptomatte::read(&files[0]).unwrap();
@@ -421,7 +421,7 @@ fn mattes_name_skinned_agents_and_their_meshes() {
 
 #[test]
 fn export_shares_posed_meshes_between_agents_on_one_pose() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     // Agents 1 and 2 on one pose, 3 on another.
     let rows = [(1020, 1, 0.0, 0.0, 0.0, 4.0), (1020, 2, 1.0, 0.0, 1.0, 4.1), (1020, 3, -1.0, 0.0, 0.0, 12.0)];
     let shot = common::figure_shot(dir.path(), &rows, "");

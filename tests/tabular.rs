@@ -117,7 +117,7 @@ fn foreign_csv_layout_by_column_names_quoted_and_gzipped() {
 
 #[test]
 fn convert_command_reads_each_preset() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     for (file, args) in [
         ("petrack_cm.txt", vec!["--preset", "petrack"]),
         ("eth_obsmat.txt", vec!["--preset", "eth"]),
@@ -286,7 +286,7 @@ fn units_axes_and_placement() {
 #[test]
 fn bounds_warning_for_the_wrong_units() {
     // Two people 30 m apart, written in centimetres.
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join("lab.txt");
     let mut text = String::from("# id frame x/cm y/cm\n");
     for f in 0..10 {
@@ -309,7 +309,7 @@ fn bounds_warning_for_the_wrong_units() {
 // --- bad input -------------------------------------------------------------------
 
 fn bad(body: &str, flags: &[&str]) -> String {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let p = dir.path().join("bad.csv");
     std::fs::write(&p, body).unwrap();
     let out = dir.path().join("out.crowd");
@@ -356,7 +356,7 @@ fn bad_tables_name_line_column_and_agent() {
 
 #[test]
 fn shot_reading_raw_data_walks_at_its_rigs_stride() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let rig = common::fixture("rig_small.gltf");
     let shot_path = dir.path().join("shot.toml");
     std::fs::write(
@@ -413,7 +413,7 @@ focal_length = 35.0
 fn shot_reading_raw_data_walks_at_a_skinned_rigs_stride() {
     // The demo walker: a skinned character whose Walk clip moves its `hips`
     // joint 1.4 m in 32 frames.
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot_path = dir.path().join("shot.toml");
     std::fs::write(
         &shot_path,

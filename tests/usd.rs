@@ -28,7 +28,7 @@ fn path(p: &str) -> sdf::Path {
 
 #[test]
 fn demo_exports_and_reads_back_through_openusd() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let out = dir.path().join("demo.usda");
     let line = export(&out, "1001-1003", &[]);
     assert!(line.contains("over 3 frames"), "{line}");
@@ -78,7 +78,7 @@ fn demo_exports_and_reads_back_through_openusd() {
 
 #[test]
 fn export_is_deterministic_and_round_trips_as_a_cache() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     // The same name in two folders: the layer names its texture folder after itself.
     std::fs::create_dir(dir.path().join("b")).unwrap();
     let a = dir.path().join("a.usda");
@@ -112,7 +112,7 @@ fn export_is_deterministic_and_round_trips_as_a_cache() {
 
 #[test]
 fn layers_split_into_sublayers_and_collections() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let manifest = dir.path().join("m.json");
     let shot = demo_shot();
     let (code, _, err) = run(&["layers", shot.to_str().unwrap(), "--out", manifest.to_str().unwrap()]);
@@ -160,7 +160,7 @@ fn shot_until(dir: &Path, cache: &Path, end: i32) -> PathBuf {
 
 #[test]
 fn a_usd_core_crowd_renders_through_throng() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let cache = fixture("usd/pointinstancer_crowd.usda");
     let c = throng::cache::read(&cache).unwrap();
     assert_eq!(c.frames.len(), 5);
@@ -201,7 +201,7 @@ fn a_usd_core_crowd_renders_through_throng() {
 fn shot_frames_beyond_the_usd_time_samples_name_file_prim_and_frame() {
     // The usd-core crowd holds frames 1-5; a shot over 1001-1008 (frame_offset
     // -1000) asks for 6-8.
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let cache = fixture("usd/pointinstancer_crowd.usda");
     let shot = shot_until(dir.path(), &cache, 1008);
     let (code, _, err) = run(&["botinfo", shot.to_str().unwrap(), "7", "--frame", "1002", "--json"]);
@@ -246,7 +246,7 @@ fn agent_prims_compose_ancestor_ops_and_every_rotate_order() {
     // Hand-written: /World/g translated, rotateXYZ (0, 90, 0), and the agent
     // under it with its own translate; a second agent under a
     // `!resetXformStack!` ignores /World/g.
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let text = "#usda 1.0\n(\n    startTimeCode = 1\n    endTimeCode = 2\n)\n\
         def Xform \"World\"\n{\n    def Xform \"g\"\n    {\n        \
         double3 xformOp:translate.timeSamples = { 1: (5, 0, 0), 2: (6, 0, 0) }\n        \
@@ -284,7 +284,7 @@ const HEAD: &str = "#usda 1.0\n(\n    startTimeCode = 1\n    endTimeCode = 4\n)\
 
 #[test]
 fn bad_usd_crowds_name_file_prim_and_frame() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     // No crowd.
     let (code, err) = bad(
         dir.path(),
@@ -336,7 +336,7 @@ fn bad_usd_crowds_name_file_prim_and_frame() {
 
 #[test]
 fn usd_export_refuses_bad_requests() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir().unwrap();
     let shot = demo_shot();
     let s = shot.to_str().unwrap();
     for (args, want) in [

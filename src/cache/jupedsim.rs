@@ -131,13 +131,13 @@ impl ImportOptions {
     }
 
     fn check(&self) -> Result<()> {
-        for (v, flag) in [(self.stride(), "--stride"), (self.cycle_length(), "--cycle-length")] {
+        for (v, option) in [(self.stride(), "stride"), (self.cycle_length(), "cycle_length")] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(Error::Usage(format!("{flag} must be a positive number, not {v}")));
+                return Err(Error::setting(option, format!("must be a positive number, not {v}")));
             }
         }
-        for (name, flag) in [(&self.rig, "--rig"), (&self.cycle, "--cycle")] {
-            super::check_name(name).map_err(|m| Error::Usage(format!("{flag}: {m}")))?;
+        for (name, option) in [(&self.rig, "rig"), (&self.cycle, "cycle")] {
+            super::check_name(name).map_err(|m| Error::setting(option, m))?;
         }
         Ok(())
     }

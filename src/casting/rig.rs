@@ -652,22 +652,22 @@ pub fn import_clip(file: &Path, rig: &str, cycle: &str) -> Result<RigClip> {
         if top.name != rig {
             return Err(Error::invalid(
                 file,
-                format!("this is rig `{}` but --rig is `{rig}`; pass --rig {}", top.name, top.name),
+                format!("this is rig `{}` but the import names rig `{rig}`; import it as rig `{}`", top.name, top.name),
             )
-            .field("--rig"));
+            .field("rig"));
         }
     }
-    let c = r.cycle(cycle).map_err(|e| e.field("--cycle"))?;
+    let c = r.cycle(cycle).map_err(|e| e.field("cycle"))?;
     let (stride, cycle_length) = (c.stride(), c.frames(SHOT_FPS));
     if !(stride.is_finite() && stride > 0.0) {
         return Err(Error::invalid(
             file,
-            format!("cycle `{cycle}` has stride {stride} m (its root does not walk forward); pick a walk cycle with --cycle or pass --stride"),
+            format!("cycle `{cycle}` has stride {stride} m (its root does not walk forward); pick a walk cycle or give the stride"),
         )
-        .field("--cycle"));
+        .field("cycle"));
     }
     if !(cycle_length.is_finite() && cycle_length > 0.0) {
-        return Err(Error::invalid(file, format!("cycle `{cycle}` is {cycle_length} frames long")).field("--cycle"));
+        return Err(Error::invalid(file, format!("cycle `{cycle}` is {cycle_length} frames long")).field("cycle"));
     }
     Ok(RigClip { file: file.to_path_buf(), stride, cycle_length })
 }

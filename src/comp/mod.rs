@@ -177,7 +177,7 @@ pub fn layer_files(dir: &Path, frame: i32, manifest: Option<&Manifest>) -> Resul
             let path = layer_path(dir, &m.shot, layer, frame);
             if !path.is_file() {
                 return Err(Error::Usage(format!(
-                    "layer `{layer}` of shot {} frame {frame} is missing: no {} (render it with `throng render SHOT --layer {layer} --frames {frame}`)",
+                    "layer `{layer}` of shot {} frame {frame} is missing: no {} (render that layer of frame {frame} first)",
                     m.shot,
                     path.display()
                 )));
@@ -221,11 +221,14 @@ pub fn layer_files(dir: &Path, frame: i32, manifest: Option<&Manifest>) -> Resul
         }
         1 => {}
         _ => {
-            return Err(Error::Usage(format!(
-                "{} holds layers of several shots ({}); pass --manifest to choose",
-                dir.display(),
-                shots.join(", ")
-            )))
+            return Err(Error::setting(
+                "manifest",
+                format!(
+                    "none given, and {} holds layers of several shots ({}); give the layer manifest to choose",
+                    dir.display(),
+                    shots.join(", ")
+                ),
+            ))
         }
     }
     let shot = shots[0].to_string();
@@ -237,10 +240,13 @@ pub fn layer_files(dir: &Path, frame: i32, manifest: Option<&Manifest>) -> Resul
         } else if let Some(i) = crowd_layer_index(&layer) {
             crowd.push((i, layer, path));
         } else {
-            return Err(Error::Usage(format!(
-                "cannot place layer `{layer}` ({}) in the comp order without a manifest; pass --manifest",
-                path.display()
-            )));
+            return Err(Error::setting(
+                "manifest",
+                format!(
+                    "none given, and layer `{layer}` ({}) has no place in the comp order without one; give the layer manifest",
+                    path.display()
+                ),
+            ));
         }
     }
     let Some(set) = set else {

@@ -1162,13 +1162,13 @@ mod tests {
 
     #[test]
     fn writes_file() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("x.glb");
+        let path = std::env::temp_dir().join(format!("throng-glb-{}.glb", std::process::id()));
         let mut b = GlbBuilder::new();
         let m = b.add_mesh("t", &tri(0.0), None).unwrap();
         b.add_node(NodeDesc::new("n").mesh(m)).unwrap();
         b.write(&path).unwrap();
         let (doc, _, _) = gltf::import(&path).unwrap();
+        std::fs::remove_file(&path).unwrap();
         assert_eq!(doc.meshes().count(), 1);
     }
 }

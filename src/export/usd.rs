@@ -268,10 +268,10 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     }
     if opts.split_layers {
         if encoding == UsdEncoding::Usdz {
-            return Err(Error::Usage("--split-layers writes several files; use .usda or .usdc, not .usdz".into()));
+            return Err(Error::setting("split_layers", "writes several files; use .usda or .usdc, not .usdz"));
         }
         if opts.manifest.is_none() {
-            return Err(Error::Usage("--split-layers needs the layer manifest (run `throng layers` first)".into()));
+            return Err(Error::setting("split_layers", "needs the layer manifest (run `throng layers` first)"));
         }
     }
     let g = gather(crowd, opts)?;

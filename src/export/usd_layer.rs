@@ -448,9 +448,10 @@ mod tests {
             l.encode(UsdEncoding::Usdc, "a.usdc").unwrap(),
             sample().encode(UsdEncoding::Usdc, "a.usdc").unwrap()
         );
-        let dir = tempfile::tempdir().unwrap();
+        let dir = std::env::temp_dir().join(format!("throng-usd-layer-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
         for (name, enc) in [("a.usda", UsdEncoding::Usda), ("a.usdc", UsdEncoding::Usdc)] {
-            let p = dir.path().join(name);
+            let p = dir.join(name);
             std::fs::write(&p, l.encode(enc, name).unwrap()).unwrap();
             let stage = openusd::usd::Stage::open(p.to_str().unwrap()).unwrap();
             let size = stage.attribute(sdf_path("/World/Cube.size").unwrap());
@@ -458,6 +459,7 @@ mod tests {
             let inst = stage.prim(sdf_path("/World/Inst").unwrap());
             assert!(inst.is_instanceable().unwrap());
         }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

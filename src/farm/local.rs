@@ -35,7 +35,7 @@ pub const MAX_WORKERS: usize = 256;
 /// receives one line per task started and finished (flushed by the caller).
 pub fn run_local(plan: &Plan, plan_path: &Path, exe: &Path, workers: usize, say: &dyn Fn(&str)) -> Result<LocalReport> {
     if workers == 0 || workers > MAX_WORKERS {
-        return Err(Error::Usage(format!("--workers must be 1 to {MAX_WORKERS}")));
+        return Err(Error::setting("workers", format!("must be 1 to {MAX_WORKERS}")));
     }
     let clock = Instant::now();
     let todo: Vec<&Task> = tasks_to_run(plan, &task_done);

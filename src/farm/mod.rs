@@ -287,7 +287,7 @@ pub fn check_fingerprint(plan_path: &Path, plan: &Plan, shot: Option<&Path>) -> 
             return Err(Error::invalid(
                 plan_path,
                 format!(
-                    "the {} {} changed since this plan was made (fingerprint {} != planned {}): run `throng farm plan` again into a new --out",
+                    "the {} {} changed since this plan was made (fingerprint {} != planned {}): plan the shot again into a new folder",
                     input.role,
                     input.path.display(),
                     hash,

@@ -83,7 +83,7 @@ pub fn write_new_plan(opts: &PlanOptions) -> Result<(PathBuf, Plan)> {
                     return Err(Error::invalid(
                         &plan_path,
                         format!(
-                            "{} holds the plan of shot `{}`, not `{}`: plan into another --out",
+                            "{} holds the plan of shot `{}`, not `{}`: plan into another folder",
                             out.display(),
                             old.shot,
                             crowd.shot.name
@@ -97,7 +97,7 @@ pub fn write_new_plan(opts: &PlanOptions) -> Result<(PathBuf, Plan)> {
                     return Err(Error::invalid(
                         &plan_path,
                         format!(
-                            "{} holds a plan of shot `{}` made from other inputs; its rendered frames would count as done: plan the edited shot into another --out (or remove it)",
+                            "{} holds a plan of shot `{}` made from other inputs; its rendered frames would count as done: plan the edited shot into another folder (or remove it)",
                             out.display(),
                             old.shot
                         ),
@@ -172,10 +172,10 @@ pub fn build_plan(
 ) -> Result<Plan> {
     let shot = &crowd.shot;
     if opts.chunk == 0 {
-        return Err(Error::Usage("--chunk must be at least 1 frame".into()));
+        return Err(Error::setting("chunk", "must be at least 1 frame"));
     }
     if opts.cores == 0 || opts.cores > MAX_CORES {
-        return Err(Error::Usage(format!("--cores must be 1 to {MAX_CORES}")));
+        return Err(Error::setting("cores", format!("must be 1 to {MAX_CORES}")));
     }
     let frames = match &opts.frames {
         Some(f) => f.clone(),
@@ -209,7 +209,7 @@ pub fn build_plan(
     let comps = if layers == all { frames.len() } else { 0 };
     let total = chunks.saturating_mul(layers.len()).saturating_add(comps);
     if total > MAX_TASKS {
-        return Err(Error::Usage(format!("{total} tasks is more than a plan holds ({MAX_TASKS}): raise --chunk")));
+        return Err(Error::setting("chunk", format!("{total} tasks is more than a plan holds ({MAX_TASKS}): raise it")));
     }
     let spp = opts.spp.unwrap_or(shot.render.spp).max(1);
     let resolution = opts.resolution.unwrap_or(shot.render.resolution);

@@ -50,9 +50,10 @@ pub fn read_marker<T: for<'de> Deserialize<'de>>(path: &Path) -> Option<T> {
     serde_json::from_str(&text).ok()
 }
 
-/// Runs task `id` of `plan` with the `throng` binary `exe`; its output goes
-/// to this process's stdout and stderr (the engine points them at the log).
-pub fn run_task(plan: &Plan, id: &str, exe: &Path) -> Result<()> {
+/// Runs task `id` of `plan` with the `throng` binary `exe`; the task's own
+/// output goes to this process's stdout and stderr (the engine points them
+/// at the log), and each attempt and outcome is told to `log`.
+pub fn run_task(plan: &Plan, id: &str, exe: &Path, log: &mut dyn FnMut(&str)) -> Result<()> {
     let task: &Task = plan.task(id).ok_or_else(|| {
         Error::Usage(format!(
             "no task `{id}` in the plan of shot {} (tasks: {}...)",
@@ -68,19 +69,19 @@ pub fn run_task(plan: &Plan, id: &str, exe: &Path) -> Result<()> {
     let attempts = plan.retries.saturating_add(1);
     let mut status = -1;
     for attempt in 1..=attempts {
-        eprintln!("throng farm: task {id} attempt {attempt} of {attempts}: {}", shell_line(&task.argv));
+        log(&format!("task {id} attempt {attempt} of {attempts}: {}", shell_line(&task.argv)));
         let run = Command::new(exe).args(&task.argv[1..]).status().at(exe)?;
         status = run.code().unwrap_or(-1);
         if run.success() && task_done(task) {
-            eprintln!("throng farm: task {id} done");
+            log(&format!("task {id} done"));
             return write_json(&exit_path, &Exited { status: 0, attempts: attempt });
         }
         if run.success() {
             // Exit 0 with an output that does not read back: count it failed.
             status = 1;
-            eprintln!("throng farm: task {id} exited 0 but its outputs do not read back whole");
+            log(&format!("task {id} exited 0 but its outputs do not read back whole"));
         } else {
-            eprintln!("throng farm: task {id} attempt {attempt} failed with exit status {status}");
+            log(&format!("task {id} attempt {attempt} failed with exit status {status}"));
         }
     }
     write_json(&exit_path, &Exited { status, attempts })?;

@@ -57,7 +57,7 @@ fn slurm_command(name: &str, args: &[String]) -> Result<String> {
     let out = Command::new(name).args(args).output().map_err(|e| {
         if e.kind() == std::io::ErrorKind::NotFound {
             Error::Usage(format!(
-                "`{name}` is not on PATH: the slurm engine needs Slurm's client commands (Debian: apt-get install slurm-client), or use --engine local"
+                "`{name}` is not on PATH: the slurm engine needs Slurm's client commands (Debian: apt-get install slurm-client), or use the local engine"
             ))
         } else {
             Error::Usage(format!("cannot run `{name}`: {e}"))

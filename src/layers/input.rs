@@ -47,7 +47,7 @@ pub fn settings_with_overrides(
         s.cutoffs = c.clone();
     }
     if let Some(b) = &overrides.budget {
-        parse_bytes(b).map_err(|m| Error::Usage(format!("--budget: {m}")))?;
+        parse_bytes(b).map_err(|m| Error::setting("budget", m))?;
         s.split = SplitMode::Budget;
         s.budget = Some(b.clone());
     }

@@ -6,7 +6,6 @@
 //! layer; only the TLAS is rebuilt per (frame, layer).
 
 use std::borrow::Cow;
-use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -42,8 +41,6 @@ pub struct RenderJob {
     pub resolution: Option<[u32; 2]>,
     /// Cryptomatte output (`CryptoAgent`, `CryptoPart`, `CryptoMaterial`).
     pub cryptomatte: CryptoOutput,
-    /// How progress is reported on stderr.
-    pub progress: ProgressStyle,
     /// EXR compression (lossless ZIP by default).
     pub compression: exr::LayerCompression,
     /// Motion blur: shutter `[open, close]` in frames relative to each frame
@@ -72,7 +69,6 @@ impl RenderJob {
             png: false,
             resolution: None,
             cryptomatte: CryptoOutput::Header,
-            progress: ProgressStyle::Auto,
             compression: exr::LayerCompression::Zip,
             shutter: None,
             colourspace: Colourspace::Rec709,
@@ -80,19 +76,52 @@ impl RenderJob {
     }
 }
 
-/// How a job reports progress on stderr.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub enum ProgressStyle {
-    /// `Bar` on a terminal, `Plain` otherwise (a farm log).
-    #[default]
-    Auto,
-    /// One line redrawn in place.
-    Bar,
-    /// One line per finished layer-frame, and per block of tiles on long
-    /// frames, each with percent done and ETA: for logs.
-    Plain,
-    /// Nothing.
-    Off,
+/// Where a running job is: the layer-frame at hand and how many of the
+/// job's layer-frames are finished.
+#[derive(Debug, Clone, Copy)]
+pub struct RenderProgress<'a> {
+    /// Shot frame.
+    pub frame: i32,
+    /// Layer name.
+    pub layer: &'a str,
+    /// Layer-frames finished before this one.
+    pub done: usize,
+    /// Layer-frames in the job.
+    pub total: usize,
+}
+
+/// What a render reports while it runs. The stage never prints: the
+/// command line implements this to draw a bar or write log lines, tests use
+/// [`Silent`]. Every method has a silent default; calls may come from
+/// render threads.
+pub trait RenderObserver: Sync {
+    /// Whether to report pixels done within a layer-frame (costs a callback per tile).
+    fn wants_pixels(&self) -> bool {
+        false
+    }
+    /// A layer-frame starts rendering.
+    fn layer_started(&self, _at: RenderProgress<'_>) {}
+    /// `fraction` (0-1) of the current layer-frame's pixels are done.
+    fn pixels(&self, _at: RenderProgress<'_>, _fraction: f64) {}
+    /// A layer-frame is finished: written, or `skipped` as already complete (resume).
+    fn layer_finished(&self, _at: RenderProgress<'_>, _skipped: bool) {}
+    /// Something legal but worth telling the lighter (also kept in [`RenderReport::warnings`]).
+    fn warning(&self, _text: &str) {}
+}
+
+/// An observer that reports nothing.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Silent;
+
+impl RenderObserver for Silent {}
+
+/// What a finished job gives back.
+#[derive(Debug, Clone, Default)]
+pub struct RenderReport {
+    /// Every layer-frame, in the order rendered.
+    pub layers: Vec<RenderedLayer>,
+    /// Warnings given on the way, in order.
+    pub warnings: Vec<String>,
 }
 
 /// Whether and how a job writes Cryptomatte mattes.
@@ -338,85 +367,6 @@ pub fn all_layers(manifest: &Manifest) -> Vec<String> {
     manifest.comp_order.clone()
 }
 
-/// Progress on stderr: a line redrawn on a terminal, or plain lines for a log.
-struct Progress {
-    style: ProgressStyle,
-    start: Instant,
-    total: usize,
-    /// When the last plain line mid-frame was printed.
-    last_line: std::sync::Mutex<Instant>,
-}
-
-/// Seconds between plain lines within one layer-frame.
-const PLAIN_EVERY_S: f64 = 10.0;
-
-impl Progress {
-    fn new(style: ProgressStyle, total: usize) -> Progress {
-        let style = match style {
-            ProgressStyle::Auto if std::io::stderr().is_terminal() => ProgressStyle::Bar,
-            ProgressStyle::Auto => ProgressStyle::Plain,
-            s => s,
-        };
-        Progress { style, start: Instant::now(), total, last_line: std::sync::Mutex::new(Instant::now()) }
-    }
-    fn on(&self) -> bool {
-        self.style != ProgressStyle::Off
-    }
-    fn figures(&self, done: usize, frac: f64) -> (f64, f64, f64) {
-        let progress = (done as f64 + frac) / self.total.max(1) as f64;
-        let elapsed = self.start.elapsed().as_secs_f64();
-        let eta = if progress > 0.0 { elapsed / progress - elapsed } else { 0.0 };
-        (progress, elapsed, eta)
-    }
-    fn show(&self, done: usize, frame: i32, layer: &str, frac: f64) {
-        let (progress, elapsed, eta) = self.figures(done, frac);
-        match self.style {
-            ProgressStyle::Bar => eprint!(
-                "\r\x1b[2Kframe {frame} layer {layer:<8} [{}/{}] {:>5.1}%  elapsed {:.0}s  ETA {:.0}s",
-                done + 1,
-                self.total,
-                progress * 100.0,
-                elapsed,
-                eta
-            ),
-            ProgressStyle::Plain if frac > 0.0 => {
-                // A block of tiles: at most one line per PLAIN_EVERY_S, so long frames show life in a log.
-                let Ok(mut last) = self.last_line.lock() else { return };
-                if last.elapsed().as_secs_f64() >= PLAIN_EVERY_S {
-                    *last = Instant::now();
-                    eprintln!(
-                        "render: frame {frame} layer {layer} {:.0}% of frame; {:.1}% done, elapsed {elapsed:.0}s, ETA {eta:.0}s",
-                        frac * 100.0,
-                        progress * 100.0
-                    );
-                }
-            }
-            _ => {}
-        }
-    }
-    /// A layer-frame finished (`done` counts it).
-    fn finished(&self, done: usize, frame: i32, layer: &str, skipped: bool) {
-        if self.style != ProgressStyle::Plain {
-            return;
-        }
-        let (progress, elapsed, eta) = self.figures(done, 0.0);
-        let what = if skipped { "complete, skipped" } else { "done" };
-        eprintln!(
-            "render: frame {frame} layer {layer} {what} [{done}/{}] {:.1}%, elapsed {elapsed:.0}s, ETA {eta:.0}s",
-            self.total,
-            progress * 100.0
-        );
-        if let Ok(mut last) = self.last_line.lock() {
-            *last = Instant::now();
-        }
-    }
-    fn finish(&self) {
-        if self.style == ProgressStyle::Bar {
-            eprintln!();
-        }
-    }
-}
-
 /// The render fingerprint of one layer (`throng/renderFingerprint`, 8 hex
 /// digits): CRC-32 over everything that changes the pixels or channels of a
 /// layer file: samples per pixel, resolution, seed, bounces, the camera and
@@ -490,8 +440,18 @@ pub fn remove_stale_temporaries(shot: &str, job: &RenderJob) -> Result<Vec<PathB
     Ok(removed)
 }
 
-/// Renders every (frame, layer) of the job.
-pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> Result<Vec<RenderedLayer>> {
+/// Renders every (frame, layer) of the job, reporting to `observer`.
+pub fn run(
+    crowd: &ShotCrowd,
+    manifest: Option<&Manifest>,
+    job: &RenderJob,
+    observer: &dyn RenderObserver,
+) -> Result<RenderReport> {
+    let mut warnings = Vec::new();
+    let mut warn = |text: String| {
+        observer.warning(&text);
+        warnings.push(text);
+    };
     let [w, h] = job.resolution.unwrap_or(crowd.shot.render.resolution);
     for layer in &job.layers {
         let known = layer == FULL_LAYER || manifest.is_some_and(|m| m.comp_order.contains(layer));
@@ -510,17 +470,17 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
     }
     let stale = remove_stale_temporaries(&crowd.shot.name, job)?;
     if !stale.is_empty() {
-        eprintln!(
-            "throng: warning: removed {} stale temporary file(s) a killed render left behind (first: {})",
+        warn(format!(
+            "removed {} stale temporary file(s) a killed render left behind (first: {})",
             stale.len(),
             stale[0].display()
-        );
+        ));
     }
     let fingerprints: std::collections::HashMap<&str, String> =
         job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
     // BLASes are built as layer-frames need them (and kept for later frames).
     let mut blas = BlasSet::lazy(crowd.library());
-    let progress = Progress::new(job.progress, job.frames.len() * job.layers.len());
+    let total = job.frames.len() * job.layers.len();
     let mut out = Vec::new();
     for &frame in &job.frames {
         // Read and pose lazily: a fully resumed frame needs neither.
@@ -533,12 +493,12 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                 && match exr::read_layer(&path) {
                     Ok((_, meta)) if meta.render_fingerprint == fingerprint => true,
                     Ok((_, meta)) => {
-                        eprintln!(
-                            "throng: warning: --resume: re-rendering {}: it was rendered with other settings \
+                        warn(format!(
+                            "resume: re-rendering {}: it was rendered with other settings \
                              (renderFingerprint {}, now {fingerprint}: spp, resolution, seed, camera, lights or manifest differ)",
                             path.display(),
                             if meta.render_fingerprint.is_empty() { "none" } else { &meta.render_fingerprint },
-                        );
+                        ));
                         false
                     }
                     Err(_) => false,
@@ -554,15 +514,14 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                     peak_rss_bytes: None,
                     tlas_build_s: 0.0,
                 });
-                progress.finished(out.len(), frame, layer, true);
+                observer.layer_finished(RenderProgress { frame, layer, done: out.len() - 1, total }, true);
                 continue;
             }
             let started = Instant::now();
             // Measure this layer-frame's own peak, not the run's so far.
             let measured = crate::bench::reset_peak_rss();
-            if progress.style == ProgressStyle::Bar {
-                progress.show(out.len(), frame, layer, 0.0);
-            }
+            let at = RenderProgress { frame, layer, done: out.len(), total };
+            observer.layer_started(at);
             let mut scene = match job.shutter {
                 Some(shutter) => {
                     if moving.is_none() {
@@ -606,8 +565,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                 ..RenderSettings::default()
             };
             let pixels = (w as usize * h as usize).max(1);
-            let done = out.len();
-            let report = |p: usize| progress.show(done, frame, layer, p as f64 / pixels as f64);
+            let report = |p: usize| observer.pixels(at, p as f64 / pixels as f64);
             blas.prepare(crowd.library(), scene.instances.iter().map(|i| i.mesh));
             let names = (job.cryptomatte != CryptoOutput::Off).then(|| crypto_names(crowd, &scene));
             let (film, stats) = render_frame_with_cryptomatte(
@@ -616,7 +574,7 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                 &scene,
                 &settings,
                 names.as_ref(),
-                if progress.on() { Some(&report) } else { None },
+                if observer.wants_pixels() { Some(&report) } else { None },
             )?;
             let (near, far) = film.depth_range().unwrap_or((0.1, 1000.0));
             let (world_to_camera, world_to_ndc) = exr::camera_matrices(&scene.camera, w, h, near, far);
@@ -654,9 +612,8 @@ pub fn run(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob) -> R
                 peak_rss_bytes: measured.then(crate::bench::peak_rss_bytes).flatten(),
                 tlas_build_s: stats.tlas_build.as_secs_f64(),
             });
-            progress.finished(out.len(), frame, layer, false);
+            observer.layer_finished(at, false);
         }
     }
-    progress.finish();
-    Ok(out)
+    Ok(RenderReport { layers: out, warnings })
 }

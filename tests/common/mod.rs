@@ -7,9 +7,25 @@ use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// The `throng` binary of the workspace's CLI crate (cli/). It lives beside
+/// the test executables' `deps/` folder; `cargo test` at the workspace root
+/// builds it (the CLI crate has integration tests of its own, which makes
+/// cargo build its binary), `cargo test -p throng` alone does not.
+pub fn bin() -> PathBuf {
+    let exe = std::env::current_exe().expect("the test executable's path");
+    let dir = exe.parent().and_then(Path::parent).expect("target/<profile>/deps");
+    let bin = dir.join(format!("throng{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        bin.is_file(),
+        "{} is missing: run the tests from the workspace root (`cargo test --locked`), which builds the CLI",
+        bin.display()
+    );
+    bin
+}
+
 /// Runs the built `throng` binary with `args`.
 pub fn throng<S: AsRef<OsStr>>(args: &[S]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_throng")).args(args).output().expect("run the throng binary")
+    Command::new(bin()).args(args).output().expect("run the throng binary")
 }
 
 /// Runs `throng` and gives (exit code, stdout, stderr); -1 when killed by a signal.
@@ -121,4 +137,34 @@ pub fn five_walkers() -> Vec<(i32, u32, f32, f32, f32, f32)> {
         }
     }
     rows
+}
+
+/// A fresh folder under the system's temporary folder, removed (with all it
+/// holds) when dropped: what the tests write goes here. Our own, so the tests
+/// need no dev-dependency whose features would unify differently from the
+/// normal build's and make `cargo test` recompile what `cargo build` built.
+pub struct TempDir(PathBuf);
+
+impl TempDir {
+    /// The folder.
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Makes a [`TempDir`]: unique by process id, a per-process counter and the clock.
+pub fn tempdir() -> std::io::Result<TempDir> {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
+    let name = format!("throng-test-{}-{}-{nanos}", std::process::id(), NEXT.fetch_add(1, Ordering::Relaxed));
+    let dir = std::env::temp_dir().join(name);
+    std::fs::create_dir(&dir)?;
+    Ok(TempDir(dir))
 }

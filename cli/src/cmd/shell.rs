@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::{Args, CommandFactory};
 
-use crate::error::{Error, Result};
+use throng::error::{Error, Result};
 
 /// `throng completions`.
 #[derive(Debug, Args)]

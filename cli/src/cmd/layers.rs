@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::values::budget;
-use crate::error::{Error, Result};
-use crate::layers::{self, build_layers, set_bounds, LayerOverrides, MapOptions};
+use throng::error::{Error, Result};
+use throng::layers::{self, build_layers, set_bounds, LayerOverrides, MapOptions};
 
 /// `throng layers`.
 #[derive(Debug, Args)]
@@ -49,7 +49,7 @@ pub struct LayersArgs {
 
 impl LayersArgs {
     /// The flags' own ranges, so an error names the flag (not the shot's key it overrides).
-    fn check(&self, shot: &crate::shot::Shot) -> Result<()> {
+    fn check(&self, shot: &throng::shot::Shot) -> Result<()> {
         if self.count == Some(0) {
             return Err(Error::Usage("--count 0: at least one crowd layer".into()));
         }
@@ -116,4 +116,37 @@ pub fn run(args: &LayersArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn command_line_flags_override_the_shot() {
+        use crate::cmd::{Cli, Verb};
+        use clap::Parser;
+        use throng::layers::settings_with_overrides;
+        use throng::shot::{LayerSettings, SplitMode};
+        let count = |n: usize| LayerSettings { split: SplitMode::Count, count: n, ..Default::default() };
+        let parse = |args: &[&str]| match Cli::try_parse_from(args).unwrap().verb {
+            Verb::Layers(a) => a,
+            _ => unreachable!(),
+        };
+        let shot = count(3);
+        let a = parse(&["throng", "layers", "shot.toml", "--cutoffs", "10,25,60", "--ref-frame", "1010", "--per-frame"]);
+        let (s, o) = settings_with_overrides(&shot, &a.overrides()).unwrap();
+        assert_eq!(
+            (s.split, s.cutoffs.clone(), s.ref_frame, o.per_frame),
+            (SplitMode::Cutoffs, vec![10.0, 25.0, 60.0], Some(1010), true)
+        );
+        let a = parse(&["throng", "layers", "shot.toml", "--budget", "2.8GB", "--lod-px", "25", "--lod-per-frame"]);
+        let (s, o) = settings_with_overrides(&shot, &a.overrides()).unwrap();
+        assert_eq!(
+            (s.split, s.budget.as_deref(), s.lod_full_min_px, o.lod_per_frame),
+            (SplitMode::Budget, Some("2.8GB"), 25.0, true)
+        );
+        // A bad budget is refused at parse time, naming the flag.
+        let e = Cli::try_parse_from(["throng", "layers", "shot.toml", "--budget", "lots"]).unwrap_err().to_string();
+        assert!(e.contains("--budget"), "{e}");
+        assert!(Cli::try_parse_from(["throng", "layers", "s.toml", "--count", "2", "--budget", "1GB"]).is_err());
+    }
 }

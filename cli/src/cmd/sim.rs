@@ -5,8 +5,8 @@ use std::time::Instant;
 
 use clap::Args;
 
-use crate::error::Result;
-use crate::sim::SimScene;
+use throng::error::Result;
+use throng::sim::SimScene;
 
 /// `throng sim`.
 #[derive(Debug, Args)]
@@ -26,8 +26,8 @@ pub fn run(args: &SimArgs) -> Result<()> {
     let clock = Instant::now();
     super::existing_folder_of(&args.out, "--out")?;
     let scene = SimScene::load(&args.scene)?;
-    let crowd = crate::sim::run(&scene);
-    crate::cache::write(&args.out, &crowd)?;
+    let crowd = throng::sim::run(&scene);
+    throng::cache::write(&args.out, &crowd)?;
     if args.json {
         return super::Summary::new("sim", clock, scene.agents.len() as u64, vec![args.out.clone()]).print();
     }

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use crate::error::Result;
-use crate::render::exr;
+use throng::error::Result;
+use throng::render::exr;
 
 /// `throng comp`.
 #[derive(Debug, Args)]
@@ -37,8 +37,8 @@ pub fn run(args: &CompArgs) -> Result<()> {
     if let Some(png) = &args.png {
         super::existing_folder_of(png, "--png")?;
     }
-    let manifest = args.manifest.as_deref().map(crate::layers::read_manifest).transpose()?;
-    let comped = crate::comp::comp_frame(&args.dir, args.frame, manifest.as_ref())?;
+    let manifest = args.manifest.as_deref().map(throng::layers::read_manifest).transpose()?;
+    let comped = throng::comp::comp_frame(&args.dir, args.frame, manifest.as_ref())?;
     exr::write_layer(&args.out, &comped.film, &comped.meta)?;
     if let Some(png) = &args.png {
         exr::write_preview_png_from(png, &comped.film, comped.meta.colourspace)?;

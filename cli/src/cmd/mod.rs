@@ -6,7 +6,7 @@
 
 use clap::{Parser, Subcommand};
 
-use crate::error::Result;
+use throng::error::Result;
 
 /// `print!` to stdout that ends the process quietly with status 0 when
 /// stdout is closed (`throng botinfo ... --json | head`), like ripgrep.
@@ -28,6 +28,7 @@ pub mod demo;
 pub mod export;
 pub mod farm;
 pub mod layers;
+mod progress;
 pub mod render;
 pub mod shell;
 pub mod sim;
@@ -91,6 +92,15 @@ pub fn run(cli: Cli) -> Result<()> {
     }
 }
 
+/// An error as the command line says it: a stage's option (`Error::Setting`)
+/// is named by its flag (`workers` -> `--workers`); the rest as the stage says.
+pub fn wording(e: &throng::error::Error) -> String {
+    match e {
+        throng::error::Error::Setting { option, msg } => format!("--{}: {msg}", option.replace('_', "-")),
+        e => e.to_string(),
+    }
+}
+
 /// Writes `text` to stdout and flushes. A closed pipe (EPIPE) ends the
 /// process with status 0 and no message: the reader has what it wanted.
 /// Any other write error ends it with status 2 and the reason.
@@ -112,7 +122,7 @@ pub(crate) fn emit(text: &str) {
 /// --out`, `demo --out`) is created.
 fn existing_folder_of(out: &std::path::Path, flag: &str) -> Result<()> {
     match out.parent().filter(|d| !d.as_os_str().is_empty() && !d.is_dir()) {
-        Some(dir) => Err(crate::error::Error::Usage(format!(
+        Some(dir) => Err(throng::error::Error::Usage(format!(
             "{flag} {}: the folder {} does not exist (create it first)",
             out.display(),
             dir.display()
@@ -123,8 +133,8 @@ fn existing_folder_of(out: &std::path::Path, flag: &str) -> Result<()> {
 
 /// Loads and casts a shot, printing what loading noticed but accepted
 /// (renormalised weights, ignored morph targets) to stderr, once.
-fn load_crowd(shot: &std::path::Path) -> Result<crate::casting::ShotCrowd> {
-    let crowd = crate::casting::ShotCrowd::load(shot)?;
+fn load_crowd(shot: &std::path::Path) -> Result<throng::casting::ShotCrowd> {
+    let crowd = throng::casting::ShotCrowd::load(shot)?;
     for w in &crowd.warnings {
         eprintln!("throng: warning: {w}");
     }
@@ -133,7 +143,7 @@ fn load_crowd(shot: &std::path::Path) -> Result<crate::casting::ShotCrowd> {
 
 /// Pretty JSON of a summary, for `--json` outputs.
 fn to_json(value: &impl serde::Serialize) -> Result<String> {
-    serde_json::to_string_pretty(value).map_err(|e| crate::error::Error::Usage(format!("cannot print JSON: {e}")))
+    serde_json::to_string_pretty(value).map_err(|e| throng::error::Error::Usage(format!("cannot print JSON: {e}")))
 }
 
 /// The `--json` summary of `render`, `comp`, `export` and `sim`
@@ -183,7 +193,7 @@ impl Summary {
             files_skipped: Vec::new(),
             seconds: clock.elapsed().as_secs_f64(),
             instances,
-            peak_rss_bytes: crate::bench::peak_rss_bytes(),
+            peak_rss_bytes: throng::bench::peak_rss_bytes(),
             layer_frames: Vec::new(),
         }
     }

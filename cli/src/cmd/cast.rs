@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use clap::Args;
 use serde::Serialize;
 
-use crate::casting::table::{cast_row, cast_stats, format_stats, CastStats};
-use crate::casting::ShotCrowd;
-use crate::error::Result;
+use throng::casting::table::{cast_row, cast_stats, format_stats, CastStats};
+use throng::casting::ShotCrowd;
+use throng::error::Result;
 
 /// `throng cast`.
 #[derive(Debug, Args)]

@@ -6,7 +6,7 @@ pub struct FrameList(pub Vec<i32>);
 
 /// Parses a frame list.
 pub fn frame_list(s: &str) -> Result<FrameList, String> {
-    crate::shot::parse_frame_list(s).map(FrameList)
+    throng::shot::parse_frame_list(s).map(FrameList)
 }
 
 /// `--pixel X,Y`: 0,0 is the top-left pixel.
@@ -29,7 +29,7 @@ pub fn pixel(s: &str) -> Result<Pixel, String> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Resolution(pub [u32; 2]);
 
-use crate::shot::{MAX_PIXELS, MAX_RESOLUTION, MAX_SPP};
+use throng::shot::{MAX_PIXELS, MAX_RESOLUTION, MAX_SPP};
 
 /// Parses `WIDTHxHEIGHT`.
 pub fn resolution(s: &str) -> Result<Resolution, String> {
@@ -37,7 +37,7 @@ pub fn resolution(s: &str) -> Result<Resolution, String> {
         || format!("bad resolution `{s}` (use e.g. 480x270; at most {MAX_RESOLUTION} a side and {MAX_PIXELS} pixels)");
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
     let (w, h): (u32, u32) = (w.trim().parse().map_err(|_| bad())?, h.trim().parse().map_err(|_| bad())?);
-    crate::shot::check_resolution(w, h).map_err(|_| bad())?;
+    throng::shot::check_resolution(w, h).map_err(|_| bad())?;
     Ok(Resolution([w, h]))
 }
 
@@ -45,7 +45,7 @@ pub fn resolution(s: &str) -> Result<Resolution, String> {
 pub fn spp(s: &str) -> Result<u32, String> {
     let bad = || format!("bad --spp `{s}` (a whole number from 1 to {MAX_SPP})");
     let n: u32 = s.trim().parse().map_err(|_| bad())?;
-    crate::shot::check_spp(n).map_err(|_| bad())?;
+    throng::shot::check_spp(n).map_err(|_| bad())?;
     Ok(n)
 }
 
@@ -74,7 +74,7 @@ pub fn threads(s: &str) -> Result<usize, String> {
 
 /// `--budget`: a byte size such as `2.8GB` (checked here, kept as written for the manifest).
 pub fn budget(s: &str) -> Result<String, String> {
-    crate::shot::parse_bytes(s)?;
+    throng::shot::parse_bytes(s)?;
     Ok(s.to_string())
 }
 
@@ -92,6 +92,6 @@ pub fn shutter(s: &str) -> Result<ShutterFlag, String> {
     let (a, b) = s.split_once(',').ok_or_else(|| bad("expected two numbers".into()))?;
     let open: f32 = a.trim().parse().map_err(|_| bad(format!("`{}` is not a number", a.trim())))?;
     let close: f32 = b.trim().parse().map_err(|_| bad(format!("`{}` is not a number", b.trim())))?;
-    crate::shot::check_shutter([open, close]).map_err(bad)?;
+    throng::shot::check_shutter([open, close]).map_err(bad)?;
     Ok(ShutterFlag(Some([open, close])))
 }

@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use clap::{Args, Subcommand, ValueEnum};
 
 use super::values::{frame_list, resolution, FrameList, Resolution};
-use crate::error::{Error, Result};
-use crate::farm::{self, PlanOptions, TaskState};
+use throng::error::{Error, Result};
+use throng::farm::{self, PlanOptions, TaskState};
 
 /// `throng farm ...`.
 #[derive(Debug, Subcommand)]
@@ -121,7 +121,7 @@ pub fn run(verb: &FarmVerb) -> Result<()> {
                 return Err(Error::invalid(&a.plan, format!("no task `{}` (tasks: {}...)", a.task, some.join(", ")))
                     .field("tasks"));
             }
-            farm::run_task(&plan, &a.task, &exe()?)
+            farm::run_task(&plan, &a.task, &exe()?, &mut |line| eprintln!("throng farm: {line}"))
         }
     }
 }

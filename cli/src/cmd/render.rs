@@ -5,10 +5,11 @@ use std::path::PathBuf;
 use clap::{Args, ValueEnum};
 
 use super::values::{frame_list, resolution, shutter, spp, threads, FrameList, Resolution, ShutterFlag};
-use crate::error::{Error, Result};
-use crate::output::FULL_LAYER;
-use crate::render::exr;
-use crate::render::job::{self, CryptoOutput, ProgressStyle, RenderJob};
+use throng::error::{Error, Result};
+use throng::output::FULL_LAYER;
+use throng::render::exr;
+use super::progress::{Progress, ProgressStyle};
+use throng::render::job::{self, CryptoOutput, RenderJob};
 
 /// `--cryptomatte`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -67,11 +68,11 @@ pub enum ColourspaceFlag {
     Acescg,
 }
 
-impl From<ColourspaceFlag> for crate::shot::Colourspace {
-    fn from(f: ColourspaceFlag) -> crate::shot::Colourspace {
+impl From<ColourspaceFlag> for throng::shot::Colourspace {
+    fn from(f: ColourspaceFlag) -> throng::shot::Colourspace {
         match f {
-            ColourspaceFlag::Rec709 => crate::shot::Colourspace::Rec709,
-            ColourspaceFlag::Acescg => crate::shot::Colourspace::Acescg,
+            ColourspaceFlag::Rec709 => throng::shot::Colourspace::Rec709,
+            ColourspaceFlag::Acescg => throng::shot::Colourspace::Acescg,
         }
     }
 }
@@ -162,17 +163,17 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let mut crowd = super::load_crowd(&args.shot)?;
     let shutter = args.shutter.map_or(crowd.shot.render.shutter, |ShutterFlag(s)| s);
     if let Some(s) = shutter {
-        crate::casting::motion::prepare_shutter(&mut crowd, s)?;
+        throng::casting::motion::prepare_shutter(&mut crowd, s)?;
     }
     let colourspace = args.colourspace.map_or(crowd.shot.render.working_colourspace, Into::into);
-    crate::render::colour::prepare(&mut crowd, colourspace);
+    throng::render::colour::prepare(&mut crowd, colourspace);
     let crowd = crowd;
     let manifest_path = args
         .manifest
         .clone()
-        .unwrap_or_else(|| crate::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
+        .unwrap_or_else(|| throng::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
     let manifest = if manifest_path.exists() {
-        Some(crate::layers::read_manifest(&manifest_path)?)
+        Some(throng::layers::read_manifest(&manifest_path)?)
     } else if args.layer == FULL_LAYER {
         None
     } else {
@@ -189,7 +190,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 format!("manifest is for shot `{}`, not `{}`", m.shot, crowd.shot.name),
             ));
         }
-        if let Some(warning) = crate::layers::check_current(&manifest_path, m, &crowd.shot)? {
+        if let Some(warning) = throng::layers::check_current(&manifest_path, m, &crowd.shot)? {
             eprintln!("throng: warning: {warning}");
         }
     }
@@ -208,13 +209,15 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         png: args.png,
         resolution: args.resolution.map(|Resolution(r)| r),
         cryptomatte: args.cryptomatte.into(),
-        progress: args.progress.into(),
         compression: args.compression.into(),
         shutter,
         colourspace,
         ..RenderJob::new(layers, frames, spp, args.out.clone())
     };
-    let done = job::run(&crowd, manifest.as_ref(), &job)?;
+    let progress = Progress::new(args.progress.into());
+    let report = job::run(&crowd, manifest.as_ref(), &job, &progress);
+    progress.finish();
+    let done = report?.layers;
     if args.json {
         let written = done.iter().filter(|d| !d.skipped).map(|d| d.path.clone()).collect();
         let instances = done.iter().map(|d| d.instances as u64).sum();

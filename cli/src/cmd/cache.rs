@@ -6,16 +6,16 @@ use std::path::{Path, PathBuf};
 use clap::{Args, Subcommand};
 use glam::Vec3;
 
-use crate::cache::tabular::{
+use throng::cache::tabular::{
     self, AngleUnits, Column, Delimiter, Gait, Handedness, HeadingFrom, Preset, Units, UpAxis,
 };
-use crate::cache::{
+use throng::cache::{
     import, info, write, CacheReader, Format, Import, ImportInfo, ImportOptions, Placement, TabularOptions,
     TabularReport, TabularSpec,
 };
-use crate::casting::rig::import_clip;
-use crate::casting::shot_cache::gait;
-use crate::error::{Error, Result};
+use throng::casting::rig::import_clip;
+use throng::casting::shot_cache::gait;
+use throng::error::{Error, Result};
 
 /// `throng cache ...`.
 #[derive(Debug, Subcommand)]
@@ -205,7 +205,7 @@ impl ImportArgs {
             return Ok(Import { jupedsim, tabular: None, placement: spec.placement });
         }
         if !spec.describes_layout() {
-            return Err(crate::cache::needs_layout(input));
+            return Err(throng::cache::needs_layout(input));
         }
         let mut o = TabularOptions::resolve(&spec, self.fps).map_err(flag)?;
         let jp = self.options()?;
@@ -331,7 +331,7 @@ fn run_convert(args: &CacheConvertArgs) -> Result<()> {
     if let (Some(o), Some(r)) = (&how.tabular, &report) {
         outln!("import: {}", describe_table(o, r));
     }
-    for w in crate::cache::bounds_warnings(&crowd) {
+    for w in throng::cache::bounds_warnings(&crowd) {
         eprintln!("throng: warning: {w}");
     }
     Ok(())

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::values::{frame_list, FrameList};
-use crate::error::{Error, Result};
+use throng::error::{Error, Result};
 
 /// `--format`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -78,7 +78,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     }
     // --layer: only that crowd layer's agents, from the manifest beside the shot.
     let only = layer_agents(args, &crowd)?;
-    let s = crate::export::export_frame(&crowd, frame, only.as_ref(), &args.out)?;
+    let s = throng::export::export_frame(&crowd, frame, only.as_ref(), &args.out)?;
     if args.json {
         return super::Summary::new("export", clock, s.mesh_nodes as u64, vec![args.out.clone()]).print();
     }
@@ -94,18 +94,18 @@ pub fn run(args: &ExportArgs) -> Result<()> {
 }
 
 /// The manifest beside the shot, when `throng layers` wrote one for it.
-fn beside_manifest(crowd: &crate::casting::ShotCrowd) -> Result<Option<crate::layers::Manifest>> {
-    let path = crate::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name);
+fn beside_manifest(crowd: &throng::casting::ShotCrowd) -> Result<Option<throng::layers::Manifest>> {
+    let path = throng::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name);
     if !path.exists() {
         return Ok(None);
     }
-    let m = crate::layers::read_manifest(&path)?;
+    let m = throng::layers::read_manifest(&path)?;
     Ok((m.shot == crowd.shot.name).then_some(m))
 }
 
 /// `--format usd`.
 fn run_usd(args: &ExportArgs, clock: std::time::Instant) -> Result<()> {
-    use crate::export::usd::{export_usd, Instancing, UsdExportOptions};
+    use throng::export::usd::{export_usd, Instancing, UsdExportOptions};
     if args.frame.is_some() {
         return Err(Error::Usage("a USD export takes --frames A-B, not --frame".into()));
     }
@@ -122,7 +122,7 @@ fn run_usd(args: &ExportArgs, clock: std::time::Instant) -> Result<()> {
     };
     let only = layer_agents(args, &crowd)?;
     let manifest = match &args.manifest {
-        Some(p) => Some(crate::layers::read_manifest(p)?),
+        Some(p) => Some(throng::layers::read_manifest(p)?),
         None => beside_manifest(&crowd)?,
     };
     let opts = UsdExportOptions {
@@ -157,13 +157,13 @@ fn run_usd(args: &ExportArgs, clock: std::time::Instant) -> Result<()> {
 /// `--layer`: only that crowd layer's agents, from the manifest beside the shot.
 fn layer_agents(
     args: &ExportArgs,
-    crowd: &crate::casting::ShotCrowd,
+    crowd: &throng::casting::ShotCrowd,
 ) -> Result<Option<std::collections::BTreeSet<u32>>> {
     Ok(match &args.layer {
         None => None,
         Some(layer) => {
             let path = (args.manifest.clone())
-                .unwrap_or_else(|| crate::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
+                .unwrap_or_else(|| throng::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
             if !path.exists() {
                 return Err(Error::Usage(format!(
                     "--layer needs the layer manifest {}: run `throng layers {}` first",
@@ -171,7 +171,7 @@ fn layer_agents(
                     args.shot.display()
                 )));
             }
-            let m = crate::layers::read_manifest(&path)?;
+            let m = throng::layers::read_manifest(&path)?;
             Some(m.layer_agents(layer).map_err(|names| {
                 Error::Usage(format!("no crowd layer `{layer}` in {} (layers: {})", path.display(), names.join(", ")))
             })?)

@@ -6,11 +6,11 @@ use std::time::Instant;
 
 use clap::Args;
 
-use crate::casting::table::{cast_stats, mib};
-use crate::error::{Error, Result};
-use crate::layers::{build_layers, set_bounds, LayerOverrides, MapOptions};
-use crate::output::FULL_LAYER;
-use crate::render::job::{self, RenderJob};
+use throng::casting::table::{cast_stats, mib};
+use throng::error::{Error, Result};
+use throng::layers::{build_layers, set_bounds, LayerOverrides, MapOptions};
+use throng::output::FULL_LAYER;
+use throng::render::job::{self, RenderJob};
 
 /// `throng demo`.
 #[derive(Debug, Args)]
@@ -53,10 +53,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let mut crowd = super::load_crowd(&shot_path)?;
     let shutter = args.shutter.0;
     if let Some(s) = shutter {
-        crate::casting::motion::prepare_shutter(&mut crowd, s)?;
+        throng::casting::motion::prepare_shutter(&mut crowd, s)?;
     }
     let crowd = crowd;
-    let info = crate::cache::info(&crowd.cache)?;
+    let info = throng::cache::info(&crowd.cache)?;
     outln!(
         "  cache    {} agents over cache frames {}-{}, {} rigs, {} cycles",
         info.agents,
@@ -80,9 +80,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let t = Instant::now();
     let manifest = build_layers(&crowd, &LayerOverrides { per_frame: true, ..Default::default() })?;
     let manifest_path = out.join(format!("{}.layers.json", crowd.shot.name));
-    crate::layers::write_manifest(&manifest_path, &manifest)?;
+    throng::layers::write_manifest(&manifest_path, &manifest)?;
     let map = out.join("layers_map.png");
-    crate::layers::draw_map(&manifest, &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, &map)?;
+    throng::layers::draw_map(&manifest, &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, &map)?;
     outln!(
         "  layers   {} crowd layers + set, ranked at frame {}: 0 pops fixed (per-frame ranking would pop {} agents)  [{:.2} s]",
         manifest.layers.len(),
@@ -93,7 +93,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 
     let t = Instant::now();
     let glb = out.join(format!("{}.{}.glb", crowd.shot.name, manifest.ref_frame));
-    let s = crate::export::export_frame(&crowd, manifest.ref_frame, None, &glb)?;
+    let s = throng::export::export_frame(&crowd, manifest.ref_frame, None, &glb)?;
     outln!(
         "  export   {} agents, {} mesh nodes sharing {} meshes  [{:.2} s]",
         s.agents,
@@ -107,7 +107,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     // after the glTF export (which writes them as authored, linear Rec.709).
     let colourspace = crowd.shot.render.working_colourspace;
     let mut crowd = crowd;
-    crate::render::colour::prepare(&mut crowd, colourspace);
+    throng::render::colour::prepare(&mut crowd, colourspace);
     let crowd = crowd;
     let f = crowd.shot.frames;
     let mut layers = job::all_layers(&manifest);
@@ -118,7 +118,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         colourspace,
         ..RenderJob::new(layers, vec![f.start, manifest.ref_frame, f.end], args.spp, out.join("render"))
     };
-    let done = job::run(&crowd, Some(&manifest), &render)?;
+    let progress = super::progress::Progress::new(super::progress::ProgressStyle::Auto);
+    let report = job::run(&crowd, Some(&manifest), &render, &progress);
+    progress.finish();
+    let done = report?.layers;
     let [w, h] = crowd.shot.render.resolution;
     let blur = match shutter {
         Some([open, close]) => format!("motion blur, shutter {open}..{close} frames"),

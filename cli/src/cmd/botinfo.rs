@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::values::{pixel, Pixel};
-use crate::botinfo::{add_layers, bot_info, format_bot_info};
-use crate::error::{Error, Result};
+use throng::botinfo::{add_layers, bot_info, format_bot_info};
+use throng::error::{Error, Result};
 
 /// `throng botinfo`.
 #[derive(Debug, Args)]
@@ -40,7 +40,7 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
             if !args.ids.is_empty() {
                 return Err(Error::Usage("give agent ids or --pixel, not both".into()));
             }
-            let (film, meta) = crate::render::exr::read_layer(exr_path)?;
+            let (film, meta) = throng::render::exr::read_layer(exr_path)?;
             let Some(shot) = &args.shot else {
                 return Err(Error::Usage(format!(
                     "botinfo --exr needs the shot file too: {} is from shot `{}` (throng botinfo SHOT --exr FILE --pixel X,Y)",
@@ -100,9 +100,9 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
         )));
     }
     let mut infos = bot_info(&crowd, &ids, frame)?;
-    let manifest_path = crate::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name);
+    let manifest_path = throng::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name);
     if manifest_path.exists() {
-        let manifest = crate::layers::read_manifest(&manifest_path)?;
+        let manifest = throng::layers::read_manifest(&manifest_path)?;
         if manifest.shot == crowd.shot.name {
             add_layers(&mut infos, &manifest);
         }
