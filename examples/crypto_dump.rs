@@ -13,7 +13,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let out = PathBuf::from(out);
     std::fs::create_dir_all(&out)?;
-    for m in throng::render::cryptomatte::read(input.as_ref())? {
+    for m in throng::render::exr::mattes::read(input.as_ref())? {
         for name in m.manifest.keys() {
             let bytes: Vec<u8> = m.matte(name).iter().flat_map(|v| v.to_le_bytes()).collect();
             std::fs::write(out.join(format!("{}__{}.f32", m.name, name.replace('/', "__"))), bytes)?;

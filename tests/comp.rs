@@ -490,7 +490,7 @@ fn comp_mattes_match_the_full_render() {
     let out = r.dir.join("comp.mattes.exr");
     let comped = comp::comp_frame(&r.a, FRAME, Some(&r.manifest)).unwrap();
     exr::write_layer(&out, &comped.film, &comped.meta).unwrap();
-    let back = throng::render::cryptomatte::read(&out).unwrap();
+    let back = throng::render::exr::mattes::read(&out).unwrap();
     assert_eq!(back.len(), 3);
     assert_eq!(back.len(), comped.film.cryptomatte.len());
     for (a, b) in back.iter().zip(&comped.film.cryptomatte) {

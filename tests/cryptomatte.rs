@@ -15,8 +15,8 @@ use throng::render::cryptomatte::{
     AGENT_MATTE, MATERIAL_MATTE, PART_MATTE, RANKS, SET_NAME,
 };
 use throng::render::exr::{
-    camera_matrices, read_layer, read_parts, write_layer, write_layer_with, LayerMeta, ManifestMode, WriteOptions,
-    ID_MAPPING,
+    camera_matrices, mattes, read_layer, read_parts, write_layer, write_layer_with, LayerMeta, ManifestMode,
+    WriteOptions, ID_MAPPING,
 };
 use throng::render::film::{render_frame_with_cryptomatte, Film};
 use throng::render::RenderSettings;
@@ -47,13 +47,13 @@ fn a_data_window_larger_than_the_file_can_hold_is_refused() {
     let dir = common::tempdir().unwrap();
     let path = dir.path().join("huge.exr");
     std::fs::write(&path, &huge).unwrap();
-    let errors = [read_layer(&path).err(), read_parts(&path, |_| true).err(), cryptomatte::read(&path).err()];
+    let errors = [read_layer(&path).err(), read_parts(&path, |_| true).err(), mattes::read(&path).err()];
     for err in errors.map(|e| e.map(|e| e.to_string()).unwrap_or_default()) {
         assert!(err.contains("huge.exr") && err.contains("more than a"), "{err}");
     }
     // The file as it was reads.
     std::fs::write(&path, &bytes).unwrap();
-    assert_eq!(cryptomatte::read(&path).unwrap().len(), 1);
+    assert_eq!(mattes::read(&path).unwrap().len(), 1);
 }
 
 // ------------------------------------------------------------ ids
@@ -95,7 +95,7 @@ fn check_plausible(m: &Cryptomatte, sorted: bool) {
 #[test]
 fn special_chars_sample() {
     let path = fixtures().join("special_chars.exr");
-    let mattes = cryptomatte::read(&path).unwrap();
+    let mattes = mattes::read(&path).unwrap();
     assert_eq!(mattes.len(), 1);
     let m = &mattes[0];
     assert_eq!(m.name, "special_chars");
@@ -116,7 +116,7 @@ fn special_chars_sample() {
 #[test]
 fn sidecar_manifest_sample() {
     let path = fixtures().join("sidecar_manifest.exr");
-    let mattes = cryptomatte::read(&path).unwrap();
+    let mattes = mattes::read(&path).unwrap();
     assert_eq!(mattes.len(), 1);
     let m = &mattes[0];
     assert_eq!(m.name, "crypto_asset");
@@ -130,7 +130,7 @@ fn sidecar_manifest_sample() {
 #[test]
 fn multichannel_and_cornell_samples() {
     let path = shared_sample("multichannel.exr");
-    let mattes = cryptomatte::read(&path).unwrap();
+    let mattes = mattes::read(&path).unwrap();
     let names: Vec<&str> = mattes.iter().map(|m| m.name.as_str()).collect();
     assert_eq!(names.len(), 3, "{names:?}");
     for m in &mattes {
@@ -149,7 +149,7 @@ fn multichannel_and_cornell_samples() {
     assert!(a.iter().zip(&b).all(|(x, y)| x + y <= 1.0 + 1e-3));
 
     let path = shared_sample("cornellBox_CryptoWildcard.0001.exr");
-    let mattes = cryptomatte::read(&path).unwrap();
+    let mattes = mattes::read(&path).unwrap();
     assert_eq!(mattes.len(), 1);
     let m = &mattes[0];
     assert_eq!(m.name, "uCryptoWildcard");
@@ -383,8 +383,7 @@ fn exr_round_trip_and_header() {
         assert_eq!(p.attributes[&format!("cryptomatte/{key}/name")], m.name);
         assert_eq!(p.attributes[&format!("cryptomatte/{key}/hash")], "MurmurHash3_32");
         assert_eq!(p.attributes[&format!("cryptomatte/{key}/conversion")], "uint32_to_float32");
-        let manifest =
-            cryptomatte::parse_manifest(&p.attributes[&format!("cryptomatte/{key}/manifest")], &path).unwrap();
+        let manifest = mattes::parse_manifest(&p.attributes[&format!("cryptomatte/{key}/manifest")], &path).unwrap();
         assert_eq!(manifest, m.manifest);
         for level in ["00", "01", "02"] {
             for c in ["R", "G", "B", "A"] {
@@ -396,7 +395,7 @@ fn exr_round_trip_and_header() {
         let r0: Vec<f32> = m.pairs.chunks(RANKS).map(|px| px[0][0]).collect();
         assert!(p.channels[&format!("{}00.R", m.name)] == r0, "matte {i}: R is not rank 0's id");
     }
-    let decoded = cryptomatte::read(&path).unwrap();
+    let decoded = mattes::read(&path).unwrap();
     assert!(decoded == film.cryptomatte, "decoder round trip differs");
 }
 
@@ -419,10 +418,10 @@ fn sidecar_manifest_option() {
     let key = layer_key(AGENT_MATTE);
     assert_eq!(p.attributes[&format!("cryptomatte/{key}/manif_file")], "demo.crowd_0.1001.CryptoAgent.json");
     assert!(!p.attributes.contains_key(&format!("cryptomatte/{key}/manifest")));
-    assert!(cryptomatte::read(&path).unwrap() == film.cryptomatte, "sidecar round trip differs");
+    assert!(mattes::read(&path).unwrap() == film.cryptomatte, "sidecar round trip differs");
     // A missing sidecar is an error naming it.
     std::fs::remove_file(&side).unwrap();
-    let err = cryptomatte::read(&path).unwrap_err().to_string();
+    let err = mattes::read(&path).unwrap_err().to_string();
     assert!(err.contains("CryptoAgent.json"), "{err}");
 }
 

@@ -196,7 +196,12 @@ fn render_layers(shot: &Path, out: &Path, threads: usize, layers: &[&str]) -> Ve
             out.to_path_buf(),
         )
     };
-    throng::render::job::run(&crowd, Some(&manifest), &job, &throng::render::job::Silent).unwrap().layers.into_iter().map(|r| r.path).collect()
+    throng::render::job::run(&crowd, Some(&manifest), &job, &throng::render::job::Silent)
+        .unwrap()
+        .layers
+        .into_iter()
+        .map(|r| r.path)
+        .collect()
 }
 
 #[test]
@@ -408,7 +413,7 @@ fn mattes_name_skinned_agents_and_their_meshes() {
     let dir = common::tempdir().unwrap();
     let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
     let files = render_layers(&shot, &dir.path().join("r"), 0, &["full"]);
-    let mattes = throng::render::cryptomatte::read(&files[0]).unwrap();
+    let mattes = throng::render::exr::mattes::read(&files[0]).unwrap();
     let names: Vec<&str> = mattes.iter().map(|m| m.name.as_str()).collect();
     let agent = mattes.iter().find(|m| m.name == "CryptoAgent").unwrap_or_else(|| panic!("{names:?}"));
     let part = mattes.iter().find(|m| m.name == "CryptoPart").unwrap_or_else(|| panic!("{names:?}"));

@@ -37,3 +37,31 @@ fn an_unknown_flag_is_a_usage_error_naming_it() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("--no-such-flag"), "{err}");
 }
+
+#[test]
+fn completions_offer_no_hidden_verb() {
+    for shell in ["bash", "zsh", "fish"] {
+        let (code, out, err) = throng(&["completions", shell]);
+        assert_eq!(code, 0, "{err}");
+        assert!(out.contains("botinfo") && out.contains("plan"), "{shell}: no verbs in the script");
+        assert!(!out.contains("run-task"), "{shell} completions offer the hidden `farm run-task`");
+    }
+}
+
+#[test]
+fn man_pages_are_written_whole_with_no_temporary_left() {
+    let dir = std::env::temp_dir().join(format!("throng-man-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (code, out, err) = throng(&["man", "--out", dir.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let mut names: Vec<String> =
+        std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    names.sort();
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(out.contains(&format!("wrote {} man pages", names.len())), "{out}");
+    for page in ["throng.1", "throng-render.1", "throng-farm.1", "throng-farm-plan.1", "throng-cache-convert.1"] {
+        assert!(names.iter().any(|n| n == page), "no {page} in {names:?}");
+    }
+    assert!(names.iter().all(|n| n.ends_with(".1") && !n.starts_with('.')), "a temporary is left: {names:?}");
+    assert!(!names.iter().any(|n| n.contains("run-task")), "the hidden verb has a page: {names:?}");
+}

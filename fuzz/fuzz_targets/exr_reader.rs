@@ -1,5 +1,5 @@
 //! Fuzzes the EXR readers: `render::exr::read_layer` (what botinfo, comp and
-//! `render --resume` read back) and `render::cryptomatte::read` (every part,
+//! `render --resume` read back) and `render::exr::mattes::read` (every part,
 //! every Cryptomatte type, as botinfo reads any EXR's mattes).
 //! Run: `cargo +nightly fuzz run exr_reader` (docs/fuzzing.md).
 #![no_main]
@@ -19,5 +19,5 @@ fuzz_target!(|data: &[u8]| {
         return;
     }
     let _ = throng::render::exr::read_layer(path);
-    let _ = throng::render::cryptomatte::read(path);
+    let _ = throng::render::exr::mattes::read(path);
 });

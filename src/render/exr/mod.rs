@@ -25,6 +25,8 @@ use super::film::Film;
 use crate::error::{write_atomic, Error, Result};
 use crate::scene::Camera;
 
+pub mod mattes;
+
 /// What `agent.id` means, written to `throng/idMapping`.
 pub const ID_MAPPING: &str = "agent.id = cache agent id + 1; 0 = no agent (sky, set or holdout)";
 
@@ -473,7 +475,7 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
         normal: (0..n).map(|i| [nx[i], ny[i], nz[i]]).collect(),
         albedo: (0..n).map(|i| [ar[i], ag[i], ab[i]]).collect(),
         agent_id,
-        cryptomatte: cryptomatte::decode_part(&raw_part(layer, &image.attributes, |n| n.starts_with("Crypto")), path)?,
+        cryptomatte: mattes::decode_part(&raw_part(layer, &image.attributes, |n| n.starts_with("Crypto")), path)?,
         motion: match (floats(MOTION_CHANNELS[0]), floats(MOTION_CHANNELS[1])) {
             (Ok(u), Ok(v)) => u.iter().zip(&v).map(|(&u, &v)| [u, v]).collect(),
             _ => Vec::new(),
