@@ -456,7 +456,7 @@ fn usage_errors() {
     assert_eq!(out.status.code(), Some(2));
     assert_has(&String::from_utf8(out.stderr).unwrap(), &["rig.glb"]);
     let out = throng(&["cache", "info", s(&fixture()), "--stride", "0"]);
-    assert_has(&String::from_utf8(out.stderr).unwrap(), &["--stride must be a positive number"]);
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["--stride: must be a positive number"]);
     // Writing a NaN is refused before any file appears.
     let mut bad = sample();
     bad.frames[1].agents[0].position.y = f32::NAN;
@@ -616,11 +616,11 @@ fn jupedsim_rig_file_gives_stride_and_length() {
 
     // Errors name the rig file and what is wrong.
     let e = err_text(options(&import_args("bipedThinA", "IdleA", Some("demo/rigs/bipedThinA.glb"))));
-    assert_has(&e, &["bipedThinA.glb", "IdleA", "stride 0", "--stride"]);
+    assert_has(&e, &["bipedThinA.glb", "IdleA", "stride 0", "give the stride"]);
     let e = err_text(options(&import_args("bipedThinA", "RunZ", Some("demo/rigs/bipedThinA.glb"))));
     assert_has(&e, &["bipedThinA.glb", "RunZ", "WalkA"]);
     let e = err_text(options(&import_args("bipedTallB", "WalkA", Some("demo/rigs/bipedThinA.glb"))));
-    assert_has(&e, &["bipedThinA.glb", "--rig bipedThinA"]);
+    assert_has(&e, &["bipedThinA.glb", "import it as rig `bipedThinA`"]);
 
     // The command line: settings and their source are reported.
     let rig = Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/rigs/bipedTallB.glb");

@@ -322,7 +322,7 @@ fn engine_errors_are_one_message_and_exit_2() {
         err.contains("submitting render.set") && err.contains("Requested node configuration is not available"),
         "{err}"
     );
-    refused(&["farm", "submit", s(&plan), "--engine", "local", "--workers", "0"], &["--workers must be 1 to"]);
+    refused(&["farm", "submit", s(&plan), "--engine", "local", "--workers", "0"], &["--workers: must be 1 to"]);
     refused(&["farm", "plan", s(&demo_shot()), "--chunk", "0", "--out", s(&tmp.path().join("x"))], &["--chunk"]);
     refused(
         &["farm", "plan", s(&demo_shot()), "--frames", "1-5", "--out", s(&tmp.path().join("y"))],
