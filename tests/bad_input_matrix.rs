@@ -1108,8 +1108,8 @@ struct Outcome {
 /// Runs `case` in `dir` (made here, it must not exist yet).
 fn run_case(case: &Case, dir: &Path) -> Outcome {
     std::fs::create_dir_all(dir).unwrap();
-    base(&dir);
-    (case.setup)(&dir);
+    base(dir);
+    (case.setup)(dir);
     let args: Vec<String> = case
         .args
         .iter()
@@ -1121,7 +1121,7 @@ fn run_case(case: &Case, dir: &Path) -> Outcome {
         .arg("ulimit -v 4000000; ulimit -t 120; exec \"$0\" \"$@\"")
         .arg(common::bin())
         .args(&args)
-        .current_dir(&dir)
+        .current_dir(dir)
         .output()
         .unwrap();
     let code = out.status.code().unwrap_or(-1);
@@ -1146,7 +1146,7 @@ fn run_case(case: &Case, dir: &Path) -> Outcome {
     // No output under a final name from a failed run: nothing named *.exr,
     // *.crowd, *.json or *.glb appeared beyond what setup made is checked
     // by `absent`; temporaries must be gone too.
-    for e in walk(&dir) {
+    for e in walk(dir) {
         let name = e.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         if name.ends_with(".tmp") {
             problems.push(format!("temporary {} left behind", e.display()));
