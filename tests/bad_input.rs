@@ -11,88 +11,25 @@ use exr::prelude::{ReadChannels, ReadLayers};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-use common::{repo_path, run, throng};
+use common::{heads_wardrobe, repo_path, run, throng, two_robots, wear_heads, DemoShot};
 
 fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 temp path")
 }
 
-/// A small shot in `dir`: cache rows `(frame, id, x, z)` on the demo's rigs,
-/// shot frames `start..=end` (cache frame = shot frame - 1000), `extra`
-/// appended to the file (more tables), `frames_extra` inside `[frames]`.
-fn shot_with(
-    dir: &Path,
-    rows: &[(i32, u64, f32, f32)],
-    frames: (i64, i64),
-    frames_extra: &str,
-    extra: &str,
-) -> PathBuf {
-    let mut csv = String::from("frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags\n");
-    for &(f, id, x, z) in rows {
-        csv.push_str(&format!("{f},{id},{x:?},0,{z:?},0,bipedThinA,IdleA,3,\n"));
-    }
-    std::fs::write(dir.join("c.csv"), csv).unwrap();
-    let demo = repo_path("demo");
-    let wardrobe = repo_path("wardrobes/robots.toml");
-    let text = format!(
-        r#"version = 1
-name = "bad"
-seed = 5
-wardrobes = ["{wardrobe}"]
-
-[frames]
-start = {}
-end = {}
-fps = 24.0
-{frames_extra}
-
-[cache]
-path = "c.csv"
-frame_offset = -1000
-
-[rigs.bipedThinA]
-file = "{demo}/rigs/bipedThinA.glb"
-schemes = {{ HighEnd = 1.0 }}
-
-[set]
-file = "{demo}/set/set.glb"
-
-[camera]
-[[camera.keys]]
-frame = 1001
-position = [0.0, 1.6, 9.0]
-aim = [0.0, 0.9, 0.0]
-focal_length = 35.0
-
-[layers]
-count = 2
-
-[render]
-resolution = [48, 27]
-spp = 1
-{extra}
-"#,
-        frames.0,
-        frames.1,
-        wardrobe = wardrobe.display(),
-        demo = demo.display(),
-    );
-    let path = dir.join("shot.toml");
-    std::fs::write(&path, text).unwrap();
-    path
+/// The base shot in `dir` ([`DemoShot`]): cache rows `(frame, id, x, z)`,
+/// shot frames `start..=end` (cache frame = shot frame - 1000),
+/// `frames_extra` inside `[frames]`.
+fn shot_with(dir: &Path, rows: &[(i32, u64, f32, f32)], frames: (i64, i64), frames_extra: &str) -> PathBuf {
+    DemoShot { frames, frames_extra, ..DemoShot::default() }.write(dir, rows)
 }
 
 fn rows() -> Vec<(i32, u64, f32, f32)> {
-    let mut r = Vec::new();
-    for f in 1..=3 {
-        r.push((f, 1, -0.8, 1.0));
-        r.push((f, 2, 0.9, -1.0));
-    }
-    r
+    two_robots(1..=3)
 }
 
 fn shot(dir: &Path) -> PathBuf {
-    shot_with(dir, &rows(), (1001, 1003), "", "")
+    shot_with(dir, &rows(), (1001, 1003), "")
 }
 
 /// Runs throng; asserts exit 2 and no panic; returns stderr.
@@ -123,7 +60,7 @@ fn render_refuses_a_manifest_made_before_the_cache_changed() {
     // The cache changes: an agent moves.
     let mut r = rows();
     r[0].2 += 1.0;
-    shot_with(dir.path(), &r, (1001, 1003), "", "");
+    shot_with(dir.path(), &r, (1001, 1003), "");
     let err = fails(&["render", s(&shot), "--manifest", s(&m), "--frames", "1001", "--out", s(&dir.path().join("o"))]);
     assert!(err.contains("bad.layers.json") && err.contains("stale") && err.contains("cache"), "{err}");
     assert!(err.contains("made_from"), "{err}");
@@ -148,12 +85,12 @@ fn render_refuses_a_manifest_made_for_other_frames_or_casting() {
 fn shot_frames_past_the_cache_or_in_a_gap_are_an_error() {
     let dir = common::tempdir().unwrap();
     // Past the end: the cache holds 1-3, the shot asks for 1001-1005.
-    let shot = shot_with(dir.path(), &rows(), (1001, 1005), "", "");
+    let shot = shot_with(dir.path(), &rows(), (1001, 1005), "");
     let err = fails(&["layers", s(&shot), "--out", s(&dir.path().join("m.json"))]);
     assert!(err.contains("shot.toml") && err.contains("frame 1004") && err.contains("outside_cache"), "{err}");
     // A gap: cache frame 2 missing.
     let gap: Vec<_> = rows().into_iter().filter(|r| r.0 != 2).collect();
-    let shot = shot_with(dir.path(), &gap, (1001, 1003), "", "");
+    let shot = shot_with(dir.path(), &gap, (1001, 1003), "");
     let err = fails(&["cast", s(&shot)]);
     assert!(err.contains("frame 1002") && err.contains("c.csv"), "{err}");
 }
@@ -161,7 +98,7 @@ fn shot_frames_past_the_cache_or_in_a_gap_are_an_error() {
 #[test]
 fn frames_outside_the_cache_render_empty_when_the_shot_asks_with_a_warning() {
     let dir = common::tempdir().unwrap();
-    let shot = shot_with(dir.path(), &rows(), (1001, 1004), "outside_cache = \"empty\"", "");
+    let shot = shot_with(dir.path(), &rows(), (1001, 1004), "outside_cache = \"empty\"");
     let (_, err) = succeeds(&["layers", s(&shot), "--out", s(&dir.path().join("bad.layers.json"))]);
     assert!(err.contains("warning") && err.contains("1004") && err.contains("no agents"), "{err}");
 }
@@ -173,7 +110,7 @@ fn an_agent_id_that_agent_id_channels_cannot_hold_is_refused_at_load() {
     let dir = common::tempdir().unwrap();
     let mut r = rows();
     r.insert(2, (1, u32::MAX as u64, 0.0, 0.0));
-    let shot = shot_with(dir.path(), &r, (1001, 1003), "", "");
+    let shot = shot_with(dir.path(), &r, (1001, 1003), "");
     let err = fails(&["cast", s(&shot)]);
     assert!(err.contains("c.csv") && err.contains("agent 4294967295") && err.contains("field `id`"), "{err}");
 }
@@ -181,7 +118,7 @@ fn an_agent_id_that_agent_id_channels_cannot_hold_is_refused_at_load() {
 #[test]
 fn a_pin_to_layer_7_of_2_is_refused() {
     let dir = common::tempdir().unwrap();
-    let shot = shot_with(dir.path(), &rows(), (1001, 1003), "", "");
+    let shot = shot_with(dir.path(), &rows(), (1001, 1003), "");
     let text =
         std::fs::read_to_string(&shot).unwrap().replace("count = 2", "count = 2\npins = [{ agent = 1, layer = 7 }]");
     std::fs::write(&shot, text).unwrap();
@@ -190,31 +127,12 @@ fn a_pin_to_layer_7_of_2_is_refused() {
 }
 
 fn wardrobe_shot(dir: &Path, part: &str) -> PathBuf {
-    let demo = repo_path("demo");
     let w = dir.join("w.toml");
-    std::fs::write(
-        &w,
-        format!(
-            r#"version = 1
-name = "w"
-[materials.red]
-base_color = [0.6, 0.05, 0.04]
-[materials.blue]
-base_color = [0.05, 0.15, 0.55]
-[schemes.Only]
-[[schemes.Only.parts]]
-file = "{demo}/parts/heads.glb"
-mesh = "head_sphere"
-{part}
-"#,
-            demo = demo.display()
-        ),
-    )
-    .unwrap();
+    let materials =
+        "[materials.red]\nbase_color = [0.6, 0.05, 0.04]\n[materials.blue]\nbase_color = [0.05, 0.15, 0.55]";
+    std::fs::write(&w, heads_wardrobe(materials, part)).unwrap();
     let shot = shot(dir);
-    let text = std::fs::read_to_string(&shot).unwrap();
-    let text = text.replace(&repo_path("wardrobes/robots.toml").display().to_string(), &w.display().to_string());
-    std::fs::write(&shot, text.replace("HighEnd = 1.0", "Only = 1.0")).unwrap();
+    wear_heads(&shot, &w.display().to_string());
     shot
 }
 
@@ -294,7 +212,7 @@ fn a_four_billion_frame_list_is_refused_before_allocating() {
     let err = fails(&["render", s(&shot), "--frames=-2147483648-2147483647", "--out", s(&dir.path().join("o"))]);
     assert!(err.contains("more than 100000 frames"), "{err}");
     // And a shot that long.
-    let shot = shot_with(dir.path(), &rows(), (-2147483648, 2147483647), "", "");
+    let shot = shot_with(dir.path(), &rows(), (-2147483648, 2147483647), "");
     let err = fails(&["cast", s(&shot)]);
     assert!(err.contains("frames") && err.contains("more than a shot may hold"), "{err}");
 }
@@ -302,7 +220,7 @@ fn a_four_billion_frame_list_is_refused_before_allocating() {
 #[test]
 fn frame_plus_frame_offset_overflow_is_an_error() {
     let dir = common::tempdir().unwrap();
-    let shot = shot_with(dir.path(), &rows(), (1001, 1003), "", "");
+    let shot = shot_with(dir.path(), &rows(), (1001, 1003), "");
     let text = std::fs::read_to_string(&shot).unwrap().replace("frame_offset = -1000", "frame_offset = -2147483000");
     std::fs::write(&shot, text.replace("start = 1001", "start = -1001")).unwrap();
     let err = fails(&["cast", s(&shot)]);

@@ -14,7 +14,7 @@ use throng::render::colour::{self, Colourspace};
 use throng::render::{render_frame, BlasSet, RenderSettings};
 use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun, Texture};
 
-use common::{repo_path, run};
+use common::run;
 
 fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 temp path")
@@ -210,48 +210,12 @@ fn previews_of_acescg_films_convert_back_to_rec709() {
 
 // ------------------------------------------------ the command line
 
+/// The demo's small shot ([`common::DemoShot`]) "col" on frames 1001-1002
+/// at 2 spp, `extra_render` added to `[render]`.
 fn small_shot(dir: &Path, extra_render: &str) -> PathBuf {
-    let demo = repo_path("demo");
-    let mut csv = String::from("frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags\n");
-    for f in 1..=2 {
-        csv.push_str(&format!("{f},1,-0.8,0,1.0,0,bipedThinA,IdleA,3,\n{f},2,0.9,0,-1.0,0,bipedThinA,IdleA,3,\n"));
-    }
-    std::fs::write(dir.join("c.csv"), csv).unwrap();
-    let text = format!(
-        r#"version = 1
-name = "col"
-seed = 5
-wardrobes = ["{wardrobe}"]
-[frames]
-start = 1001
-end = 1002
-[cache]
-path = "c.csv"
-frame_offset = -1000
-[rigs.bipedThinA]
-file = "{demo}/rigs/bipedThinA.glb"
-schemes = {{ HighEnd = 1.0 }}
-[set]
-file = "{demo}/set/set.glb"
-[camera]
-[[camera.keys]]
-frame = 1001
-position = [0.0, 1.6, 9.0]
-aim = [0.0, 0.9, 0.0]
-focal_length = 35.0
-[layers]
-count = 2
-[render]
-resolution = [48, 27]
-spp = 2
-{extra_render}
-"#,
-        wardrobe = repo_path("wardrobes/robots.toml").display(),
-        demo = demo.display(),
-    );
-    let path = dir.join("shot.toml");
-    std::fs::write(&path, text).unwrap();
-    path
+    let shot =
+        common::DemoShot { name: "col", frames: (1001, 1002), spp: 2, extra: extra_render, ..Default::default() };
+    shot.write(dir, &common::two_robots(1..=2))
 }
 
 fn render(shot: &Path, out: &Path, extra: &[&str]) -> (i32, String) {

@@ -126,6 +126,132 @@ max_bounces = 3
     path
 }
 
+/// A small shot of the demo's assets, the base of the bad-input and colour
+/// tests: `shot.toml` on the demo's `bipedThinA` rig (scheme `HighEnd` of the
+/// robots wardrobe) and set, cache `c.csv` read at shot frame - 1000, one
+/// camera key, two crowd layers, a 48x27 render. What differs between its
+/// users are the fields.
+pub struct DemoShot<'a> {
+    /// The shot's name (the stem of every output file).
+    pub name: &'a str,
+    /// The shot's first and last frame.
+    pub frames: (i64, i64),
+    /// More keys of `[frames]`.
+    pub frames_extra: &'a str,
+    /// `[lights.*]` tables (none: the render's default light).
+    pub lights: &'a str,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Appended at the end: more `[render]` keys, or more tables.
+    pub extra: &'a str,
+}
+
+impl Default for DemoShot<'_> {
+    fn default() -> Self {
+        DemoShot { name: "bad", frames: (1001, 1003), frames_extra: "", lights: "", spp: 1, extra: "" }
+    }
+}
+
+impl DemoShot<'_> {
+    /// The shot file's text.
+    pub fn text(&self) -> String {
+        let demo = repo_path("demo");
+        format!(
+            r#"version = 1
+name = "{name}"
+seed = 5
+wardrobes = ["{wardrobe}"]
+
+[frames]
+start = {start}
+end = {end}
+fps = 24.0
+{frames_extra}
+
+[cache]
+path = "c.csv"
+frame_offset = -1000
+
+[rigs.bipedThinA]
+file = "{demo}/rigs/bipedThinA.glb"
+schemes = {{ HighEnd = 1.0 }}
+
+[set]
+file = "{demo}/set/set.glb"
+
+[camera]
+[[camera.keys]]
+frame = 1001
+position = [0.0, 1.6, 9.0]
+aim = [0.0, 0.9, 0.0]
+focal_length = 35.0
+{lights}
+[layers]
+count = 2
+
+[render]
+resolution = [48, 27]
+spp = {spp}
+{extra}
+"#,
+            name = self.name,
+            wardrobe = repo_path("wardrobes/robots.toml").display(),
+            start = self.frames.0,
+            end = self.frames.1,
+            frames_extra = self.frames_extra,
+            demo = demo.display(),
+            lights = self.lights,
+            spp = self.spp,
+            extra = self.extra,
+        )
+    }
+
+    /// Writes `dir/shot.toml` and its cache `dir/c.csv` of idle robots at
+    /// `rows` (cache frame, id, x, z); gives the shot's path.
+    pub fn write(&self, dir: &Path, rows: &[(i32, u64, f32, f32)]) -> PathBuf {
+        let mut csv = String::from("frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags\n");
+        for &(f, id, x, z) in rows {
+            csv.push_str(&format!("{f},{id},{x:?},0,{z:?},0,bipedThinA,IdleA,3,\n"));
+        }
+        std::fs::write(dir.join("c.csv"), csv).unwrap();
+        let path = dir.join("shot.toml");
+        std::fs::write(&path, self.text()).unwrap();
+        path
+    }
+}
+
+/// Two idle robots, at (-0.8, 1.0) and (0.9, -1.0), on every cache frame of
+/// `frames`: the crowd of a [`DemoShot`].
+pub fn two_robots(frames: std::ops::RangeInclusive<i32>) -> Vec<(i32, u64, f32, f32)> {
+    frames.flat_map(|f| [(f, 1, -0.8, 1.0), (f, 2, 0.9, -1.0)]).collect()
+}
+
+/// A one-scheme wardrobe (`Only`) of one part from the demo's heads, for the
+/// bad-input tests: `materials` (TOML tables), then the part's `part` keys.
+pub fn heads_wardrobe(materials: &str, part: &str) -> String {
+    format!(
+        r#"version = 1
+name = "w"
+{materials}
+[schemes.Only]
+[[schemes.Only.parts]]
+file = "{heads}"
+mesh = "head_sphere"
+{part}
+"#,
+        heads = repo_path("demo/parts/heads.glb").display()
+    )
+}
+
+/// Makes the [`DemoShot`] at `shot` wear `wardrobe` (a path, as the shot
+/// names it) and its scheme `Only` (a [`heads_wardrobe`]) instead of the robots.
+pub fn wear_heads(shot: &Path, wardrobe: &str) {
+    let text = std::fs::read_to_string(shot).unwrap();
+    let robots = repo_path("wardrobes/robots.toml").display().to_string();
+    assert!(text.contains(&robots) && text.contains("HighEnd = 1.0"), "{} wears no robots", shot.display());
+    std::fs::write(shot, text.replacen(&robots, wardrobe, 1).replacen("HighEnd = 1.0", "Only = 1.0", 1)).unwrap();
+}
+
 /// Five agents on every frame 1020-1026, spread across the frame, at
 /// different phases of the walk.
 pub fn five_walkers() -> Vec<(i32, u32, f32, f32, f32, f32)> {
