@@ -267,11 +267,8 @@ fn skinned_agents_deformation_blur() {
     let m = MotionFrame::new(&crowd, 1023, [-0.25, 0.25]).unwrap();
     assert!(m.agents.iter().any(|(_, a)| a.deform.is_some()));
     let run = |threads: usize, shutter: Option<[f32; 2]>, out: &Path| {
-        let job = RenderJob {
-            threads,
-            shutter,
-            ..RenderJob::new(vec!["full".into()], vec![1023], 8, out.to_path_buf())
-        };
+        let job =
+            RenderJob { threads, shutter, ..RenderJob::new(vec!["full".into()], vec![1023], 8, out.to_path_buf()) };
         let done = job::run(&crowd, Some(&manifest), &job, &job::Silent).unwrap().layers;
         throng::render::exr::read_layer(&done[0].path).unwrap().0
     };
@@ -354,8 +351,7 @@ fn blurred_stack_matches_blurred_full_render() {
 
 // ---------------------------------------------------------------- input
 
-/// `--resume` re-renders when the shutter changes; a still job's fingerprint
-/// is the one renders made before motion blur existed (no shutter term).
+/// `--resume` re-renders when the shutter changes, or when blur is turned on.
 #[test]
 fn the_shutter_is_in_the_render_fingerprint() {
     let crowd = demo();
