@@ -162,7 +162,7 @@ pub fn fingerprint(inputs: &[(String, PathBuf)]) -> Result<Fingerprint> {
     for (role, path) in inputs {
         let h = hash_file(path)?;
         let hash = hex(h.hash);
-        all.text("role", role).value("path", path).text("hash", &hash);
+        all.text("role", role).bytes("path", path.as_os_str().as_encoded_bytes()).text("hash", &hash);
         files.push(FingerprintInput { role: role.clone(), path: path.clone(), bytes: h.bytes, fnv1a64: hash });
     }
     Ok(Fingerprint { algorithm: ALGORITHM.into(), value: all.hex(), inputs: files })
