@@ -31,6 +31,8 @@ struct Case {
     absent: &'static [&'static str],
 }
 
+
+
 fn demo(rel: &str) -> String {
     repo_path("demo").join(rel).display().to_string()
 }

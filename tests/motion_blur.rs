@@ -267,8 +267,11 @@ fn skinned_agents_deformation_blur() {
     let m = MotionFrame::new(&crowd, 1023, [-0.25, 0.25]).unwrap();
     assert!(m.agents.iter().any(|(_, a)| a.deform.is_some()));
     let run = |threads: usize, shutter: Option<[f32; 2]>, out: &Path| {
-        let job =
-            RenderJob { threads, shutter, ..RenderJob::new(vec!["full".into()], vec![1023], 8, out.to_path_buf()) };
+        let job = RenderJob {
+            threads,
+            shutter,
+            ..RenderJob::new(vec!["full".into()], vec![1023], 8, out.to_path_buf())
+        };
         let done = job::run(&crowd, Some(&manifest), &job, &job::Silent).unwrap().layers;
         throng::render::exr::read_layer(&done[0].path).unwrap().0
     };

@@ -196,12 +196,7 @@ fn render_layers(shot: &Path, out: &Path, threads: usize, layers: &[&str]) -> Ve
             out.to_path_buf(),
         )
     };
-    throng::render::job::run(&crowd, Some(&manifest), &job, &throng::render::job::Silent)
-        .unwrap()
-        .layers
-        .into_iter()
-        .map(|r| r.path)
-        .collect()
+    throng::render::job::run(&crowd, Some(&manifest), &job, &throng::render::job::Silent).unwrap().layers.into_iter().map(|r| r.path).collect()
 }
 
 #[test]

@@ -209,10 +209,7 @@ pub fn build_plan(
     let comps = if layers == all { frames.len() } else { 0 };
     let total = chunks.saturating_mul(layers.len()).saturating_add(comps);
     if total > MAX_TASKS {
-        return Err(Error::setting(
-            "chunk",
-            format!("{total} tasks is more than a plan holds ({MAX_TASKS}): raise it"),
-        ));
+        return Err(Error::setting("chunk", format!("{total} tasks is more than a plan holds ({MAX_TASKS}): raise it")));
     }
     let spp = opts.spp.unwrap_or(shot.render.spp).max(1);
     let resolution = opts.resolution.unwrap_or(shot.render.resolution);

@@ -132,8 +132,7 @@ mod tests {
             _ => unreachable!(),
         };
         let shot = count(3);
-        let a =
-            parse(&["throng", "layers", "shot.toml", "--cutoffs", "10,25,60", "--ref-frame", "1010", "--per-frame"]);
+        let a = parse(&["throng", "layers", "shot.toml", "--cutoffs", "10,25,60", "--ref-frame", "1010", "--per-frame"]);
         let (s, o) = settings_with_overrides(&shot, &a.overrides()).unwrap();
         assert_eq!(
             (s.split, s.cutoffs.clone(), s.ref_frame, o.per_frame),

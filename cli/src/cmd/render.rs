@@ -4,11 +4,11 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 
-use super::progress::{Progress, ProgressStyle};
 use super::values::{frame_list, resolution, shutter, spp, threads, FrameList, Resolution, ShutterFlag};
 use throng::error::{Error, Result};
 use throng::output::FULL_LAYER;
 use throng::render::exr;
+use super::progress::{Progress, ProgressStyle};
 use throng::render::job::{self, CryptoOutput, RenderJob};
 
 /// `--cryptomatte`.
