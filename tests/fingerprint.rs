@@ -157,7 +157,7 @@ fn a_manifest_is_refused_after_any_change_that_moves_times_or_picks_agents() {
         refusals.push((format!("[cache] {from} -> {to}"), render_with(&shot, &manifest, &out), *names));
     }
     // A column chosen differently.
-    let text = std::fs::read_to_string(&base()).unwrap().replace("heading = \"yaw\"", "heading = \"yaw2\"");
+    let text = std::fs::read_to_string(base()).unwrap().replace("heading = \"yaw\"", "heading = \"yaw2\"");
     std::fs::write(&shot, text).unwrap();
     refusals.push(("[cache.columns] heading".into(), render_with(&shot, &manifest, &out), "`columns`"));
     // The shot's frame rate, and the frame offset.
