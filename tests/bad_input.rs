@@ -245,7 +245,7 @@ fn resume_rerenders_frames_made_with_other_settings_and_removes_stale_temporarie
     with(&["--spp", "1"]);
     let exr = out.join("full/bad.full.1001.exr");
     let fp1 = throng::render::exr::read_layer(&exr).unwrap().1.render_fingerprint;
-    assert_eq!(fp1.len(), 8);
+    assert_eq!(fp1.len(), 16);
     // Same settings: both skipped.
     let (j, _) = with(&["--spp", "1", "--resume"]);
     assert_eq!(j["files_skipped"].as_array().unwrap().len(), 2, "{j}");

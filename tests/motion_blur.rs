@@ -351,8 +351,7 @@ fn blurred_stack_matches_blurred_full_render() {
 
 // ---------------------------------------------------------------- input
 
-/// `--resume` re-renders when the shutter changes; a still job's fingerprint
-/// is the one renders made before motion blur existed (no shutter term).
+/// `--resume` re-renders when the shutter changes, or when blur is turned on.
 #[test]
 fn the_shutter_is_in_the_render_fingerprint() {
     let crowd = demo();

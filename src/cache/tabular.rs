@@ -24,7 +24,7 @@ use std::path::Path;
 use std::str::FromStr;
 
 use glam::{DQuat, DVec3, Vec3};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use super::jupedsim::{DEFAULT_CYCLE_LENGTH, DEFAULT_STRIDE};
 use super::{check_name, validate, AgentSample, CrowdCache, FrameBlock};
@@ -49,7 +49,7 @@ pub const DEFAULT_HOLD_SPEED: f32 = 0.25;
 macro_rules! named_enum {
     ($(#[$m:meta])* $name:ident { $($(#[$vm:meta])* $v:ident = [$($s:literal),+]),+ $(,)? }) => {
         $(#[$m])*
-        #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
         #[serde(try_from = "String")]
         pub enum $name { $($(#[$vm])* $v),+ }
         impl FromStr for $name {
@@ -156,7 +156,7 @@ named_enum!(
 );
 
 /// The field delimiter.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub enum Delimiter {
     /// One byte, e.g. `,` `;` or tab.
     Byte(u8),
@@ -196,7 +196,7 @@ impl<'de> Deserialize<'de> for Delimiter {
 }
 
 /// A column, by header name (case-insensitive) or 1-based position.
-#[derive(Clone, Debug, PartialEq, Eq, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(untagged)]
 pub enum Column {
     /// 1-based position.
@@ -313,7 +313,7 @@ impl Columns {
 
 /// Where the crowd stands in the set: world = translate + rotate_y(rotate)
 /// x (scale x position). Applied before layering, headings turn with it.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Placement {
     /// Metres added after rotation.
     pub translate: Vec3,
@@ -394,7 +394,7 @@ impl Default for Gait {
 /// What a user asks of an import, every field optional: a shot's `[cache]`
 /// keys or `throng cache` flags. [`TabularOptions::resolve`] lays it over
 /// the preset's defaults.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct TabularSpec {
     /// Layout preset.
     pub preset: Option<Preset>,

@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{write_atomic, Error, IoContext, Result};
+use crate::fingerprint::{hash_file, hex, Fingerprinter, ALGORITHM};
 
 pub mod local;
 pub mod plan;
@@ -78,16 +79,16 @@ pub struct FingerprintInput {
     pub path: PathBuf,
     /// Its size.
     pub bytes: u64,
-    /// FNV-1a 64 of its bytes, 16 hex digits.
+    /// Its bytes' hash ([`crate::fingerprint`]), 16 hex digits.
     pub fnv1a64: String,
 }
 
 /// What the plan was made from, so a plan for an edited shot is refused.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Fingerprint {
-    /// Always `fnv1a64`.
+    /// Always `fnv1a64` ([`crate::fingerprint`]).
     pub algorithm: String,
-    /// FNV-1a 64 over every input's role, path and hash, 16 hex digits.
+    /// The hash of every input's role, path and hash, 16 hex digits.
     pub value: String,
     /// The inputs, in a fixed order.
     pub inputs: Vec<FingerprintInput>,
@@ -152,33 +153,19 @@ impl Plan {
     }
 }
 
-/// FNV-1a 64: small, dependency-free and stable across platforms, which is
-/// all a change detector needs (it is not a defence against tampering).
-pub fn fnv1a64(bytes: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in bytes {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    h
-}
-
-/// Fingerprints `inputs` (role, path), reading each file.
+/// Fingerprints `inputs` (role, path): each file's content hash
+/// ([`crate::fingerprint`], read in blocks), and one value over every
+/// input's role, path and hash.
 pub fn fingerprint(inputs: &[(String, PathBuf)]) -> Result<Fingerprint> {
     let mut files = Vec::with_capacity(inputs.len());
-    let mut all = Vec::new();
+    let mut all = Fingerprinter::new();
     for (role, path) in inputs {
-        let bytes = std::fs::read(path).at(path)?;
-        let hash = format!("{:016x}", fnv1a64(&bytes));
-        all.extend_from_slice(format!("{role}\0{}\0{hash}\n", path.display()).as_bytes());
-        files.push(FingerprintInput {
-            role: role.clone(),
-            path: path.clone(),
-            bytes: bytes.len() as u64,
-            fnv1a64: hash,
-        });
+        let h = hash_file(path)?;
+        let hash = hex(h.hash);
+        all.text("role", role).bytes("path", path.as_os_str().as_encoded_bytes()).text("hash", &hash);
+        files.push(FingerprintInput { role: role.clone(), path: path.clone(), bytes: h.bytes, fnv1a64: hash });
     }
-    Ok(Fingerprint { algorithm: "fnv1a64".into(), value: format!("{:016x}", fnv1a64(&all)), inputs: files })
+    Ok(Fingerprint { algorithm: ALGORITHM.into(), value: all.hex(), inputs: files })
 }
 
 /// Writes a plan atomically (pretty JSON, a final newline).
@@ -275,14 +262,10 @@ pub fn check_fingerprint(plan_path: &Path, plan: &Plan, shot: Option<&Path>) -> 
         }
     }
     for input in &plan.fingerprint.inputs {
-        let bytes = std::fs::read(&input.path).map_err(|e| {
-            Error::invalid(
-                plan_path,
-                format!("planned {} {} cannot be read now: {e}", input.role, input.path.display()),
-            )
-            .field("fingerprint")
+        let now = hash_file(&input.path).map_err(|e| {
+            Error::invalid(plan_path, format!("planned {} cannot be read now: {e}", input.role)).field("fingerprint")
         })?;
-        let hash = format!("{:016x}", fnv1a64(&bytes));
+        let hash = hex(now.hash);
         if hash != input.fnv1a64 {
             return Err(Error::invalid(
                 plan_path,

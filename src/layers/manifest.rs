@@ -311,9 +311,9 @@ pub struct Manifest {
     #[serde(default)]
     pub absent: Vec<u32>,
     /// What the manifest was made from; `render` refuses it when stale
-    /// ([`super::fingerprint`]). Absent in manifests of older throngs.
+    /// ([`super::made_from`]). Absent in manifests of older throngs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub made_from: Option<super::fingerprint::MadeFrom>,
+    pub made_from: Option<super::made_from::MadeFrom>,
 }
 
 impl Manifest {

@@ -14,9 +14,9 @@
 //! types; [`input`] builds that input from a cast shot.
 
 pub mod checks;
-pub mod fingerprint;
 mod font;
 pub mod input;
+pub mod made_from;
 pub mod manifest;
 pub mod map;
 
@@ -29,8 +29,8 @@ use crate::error::{Error, Result};
 use crate::scene::Camera;
 use crate::shot::{parse_bytes, LayerSettings, SplitMode};
 
-pub use fingerprint::{check_current, MadeFrom};
 pub use input::{build_layers, set_bounds, settings_with_overrides, LayerOverrides};
+pub use made_from::{check_current, MadeFrom};
 pub use manifest::{
     estimate_agent_memory, estimate_proxy_memory, estimate_render_floor, format_bytes, read_manifest, summary,
     write_manifest, CameraRecord, LayerAgent, LayerRecord, Lod, LodChange, Manifest, Pops, Ranking, RayKind,

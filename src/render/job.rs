@@ -13,6 +13,7 @@ use crate::cache::AgentSample;
 use crate::casting::motion::MotionFrame;
 use crate::casting::{AgentPose, Lod, ShotCrowd};
 use crate::error::{Error, Result};
+use crate::fingerprint::Fingerprinter;
 use crate::layers::Manifest;
 use crate::output::{layer_path, FULL_LAYER};
 use crate::render::colour::{self, Colourspace};
@@ -367,48 +368,34 @@ pub fn all_layers(manifest: &Manifest) -> Vec<String> {
     manifest.comp_order.clone()
 }
 
-/// The render fingerprint of one layer (`throng/renderFingerprint`, 8 hex
-/// digits): CRC-32 over everything that changes the pixels or channels of a
-/// layer file: samples per pixel, resolution, seed, bounces, the camera and
-/// lights of the shot, Cryptomatte and compression choices, the layer name
-/// and the manifest (whose `made_from` covers the cache and casting), and the
-/// shutter when motion blur is on (a still render's text is unchanged, so
-/// files rendered before motion blur existed still resume), and with
-/// Cryptomatte on the matte types and set object naming (files from before
-/// `CryptoMaterial` and named set objects render again), and the working
-/// colourspace when it is not Rec.709. `--resume` skips a
-/// file only when its fingerprint matches.
+/// The render fingerprint of one layer (`throng/renderFingerprint`, 16 hex
+/// digits, [`crate::fingerprint`]): everything that changes the pixels or
+/// channels of a layer file: samples per pixel, resolution, seed, bounces,
+/// the camera and lights of the shot, the shutter, the working colourspace,
+/// Cryptomatte (with its matte types and set object naming) and compression
+/// choices, the layer name, the manifest (whose `made_from` covers the
+/// cache, its import keys and the casting) and the throng version.
+/// `--resume` skips a file only when its fingerprint matches.
 pub fn render_fingerprint(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob, layer: &str) -> String {
     let shot = &crowd.shot;
-    let [w, h] = job.resolution.unwrap_or(shot.render.resolution);
-    let manifest_hash = manifest.map_or(0, |m| crc32fast::hash(&serde_json::to_vec(m).unwrap_or_default()));
-    let text = format!(
-        "v1 spp {} res {w}x{h} seed {} bounces {} camera {:?} {:?} {:?} lights {:?} crypto {:?} compression {:?} layer {layer} manifest {manifest_hash:08x} throng {}",
-        job.spp,
-        shot.seed,
-        shot.render.max_bounces,
-        shot.camera.sensor_width,
-        shot.camera.keys,
-        shot.camera.gltf.as_ref().map(|(_, node)| node),
-        shot.lights,
-        job.cryptomatte,
-        job.compression,
-        env!("CARGO_PKG_VERSION"),
-    );
-    let text = match job.shutter {
-        Some([open, close]) => format!("{text} shutter {:08x} {:08x}", open.to_bits(), close.to_bits()),
-        None => text,
-    };
-    // Rec.709 adds nothing: files rendered before the option still resume.
-    let text = match job.colourspace {
-        Colourspace::Rec709 => text,
-        space => format!("{text} colourspace {}", colour::header_name(space)),
-    };
-    let text = match job.cryptomatte {
-        CryptoOutput::Off => text,
-        _ => format!("{text} mattes {} set-objects", crate::render::cryptomatte::MATTES.join(",")),
-    };
-    format!("{:08x}", crc32fast::hash(text.as_bytes()))
+    let mut f = Fingerprinter::new();
+    f.value("spp", &job.spp)
+        .value("resolution", &job.resolution.unwrap_or(shot.render.resolution))
+        .value("seed", &shot.seed)
+        .value("max_bounces", &shot.render.max_bounces)
+        .value("sensor_width", &shot.camera.sensor_width)
+        .debug("camera keys", &shot.camera.keys)
+        .debug("camera node", &shot.camera.gltf.as_ref().map(|(_, node)| node))
+        .debug("lights", &shot.lights)
+        .value("shutter", &job.shutter)
+        .text("colourspace", colour::header_name(job.colourspace))
+        .debug("cryptomatte", &job.cryptomatte)
+        .value("mattes", &crate::render::cryptomatte::MATTES)
+        .debug("compression", &job.compression)
+        .text("layer", layer)
+        .value("manifest", &manifest)
+        .text("throng", env!("CARGO_PKG_VERSION"));
+    f.hex()
 }
 
 /// Removes the temporaries that a killed run left beside this job's targets
@@ -495,7 +482,7 @@ pub fn run(
                     Ok((_, meta)) => {
                         warn(format!(
                             "resume: re-rendering {}: it was rendered with other settings \
-                             (renderFingerprint {}, now {fingerprint}: spp, resolution, seed, camera, lights or manifest differ)",
+                             (renderFingerprint {}, now {fingerprint}: spp, resolution, seed, camera, lights, shutter, colourspace, Cryptomatte, compression or manifest differ)",
                             path.display(),
                             if meta.render_fingerprint.is_empty() { "none" } else { &meta.render_fingerprint },
                         ));
