@@ -7,11 +7,11 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use glam::{Affine3A, Vec3};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use toml::Spanned;
 
-use crate::cache::tabular::{AngleUnits, Column, Delimiter, Handedness, HeadingFrom, Preset, Units, UpAxis};
-use crate::cache::{Placement, TabularOptions, TabularSpec};
+use crate::cache::keys::CacheTable;
+use crate::cache::{TabularOptions, TabularSpec};
 use crate::error::{line_of, Error, IoContext, Result};
 use crate::scene::{Camera, Sky, Sun};
 
@@ -163,7 +163,7 @@ impl Frames {
 }
 
 /// `[cache]`.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize)]
 pub struct CacheRef {
     /// The cache file.
     pub path: PathBuf,
@@ -540,7 +540,7 @@ struct ShotFile {
     #[serde(default)]
     exclude_parts: Vec<String>,
     frames: Spanned<Frames>,
-    cache: CacheFile,
+    cache: CacheTable,
     #[serde(default)]
     rigs: BTreeMap<String, RigFile>,
     set: Option<SetFile>,
@@ -551,64 +551,6 @@ struct ShotFile {
     layers: LayerSettings,
     #[serde(default)]
     render: RenderSettings,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct CacheFile {
-    path: Spanned<PathBuf>,
-    #[serde(default)]
-    frame_offset: i32,
-    preset: Option<Preset>,
-    delimiter: Option<Delimiter>,
-    comment: Option<String>,
-    header: Option<bool>,
-    #[serde(default)]
-    columns: BTreeMap<String, Column>,
-    units: Option<Units>,
-    up: Option<UpAxis>,
-    handedness: Option<Handedness>,
-    heading_units: Option<AngleUnits>,
-    source_fps: Option<f32>,
-    max_gap: Option<f32>,
-    heading: Option<HeadingFrom>,
-    heading_window: Option<f32>,
-    hold_speed: Option<f32>,
-    rig: Option<String>,
-    cycle: Option<String>,
-    idle_cycle: Option<String>,
-    #[serde(default)]
-    translate: [f32; 3],
-    #[serde(default)]
-    rotate: f32,
-    #[serde(default = "one")]
-    scale: f32,
-}
-
-impl CacheFile {
-    /// The import keys as a [`TabularSpec`] (checked when the cache is opened).
-    fn spec(&self) -> TabularSpec {
-        TabularSpec {
-            preset: self.preset,
-            delimiter: self.delimiter,
-            comment: self.comment.clone(),
-            header: self.header,
-            columns: self.columns.iter().map(|(k, v)| (k.clone(), Some(v.clone()))).collect(),
-            units: self.units,
-            up: self.up,
-            handedness: self.handedness,
-            heading_units: self.heading_units,
-            source_fps: self.source_fps,
-            max_gap: self.max_gap,
-            heading: self.heading,
-            heading_window: self.heading_window,
-            hold_speed: self.hold_speed,
-            rig: self.rig.clone(),
-            cycle: self.cycle.clone(),
-            idle_cycle: self.idle_cycle.clone(),
-            placement: Placement { translate: Vec3::from(self.translate), rotate: self.rotate, scale: self.scale },
-        }
-    }
 }
 
 #[derive(Deserialize)]
@@ -670,165 +612,161 @@ struct LightsFile {
     sky: SkySpec,
 }
 
-impl Shot {
-    /// Reads and validates a shot file.
-    pub fn load(path: &Path) -> Result<Shot> {
-        let text = std::fs::read_to_string(path).at(path)?;
-        Shot::parse(&text, path)
+// ---- the file as written -> checked, one section at a time ----
+
+/// What every section's check needs: the file (for messages and lines) and
+/// the folder relative paths start from.
+struct Context<'a> {
+    path: &'a Path,
+    text: &'a str,
+    base: PathBuf,
+}
+
+impl Context<'_> {
+    /// An error at a span of the text, naming its key.
+    fn at(&self, span: std::ops::Range<usize>, key: &str, msg: String) -> Error {
+        Error::invalid(self.path, msg).line(line_of(self.text, span.start)).field(key)
     }
 
-    /// Parses shot text; `path` names the file in errors and anchors relative paths.
-    pub fn parse(text: &str, path: &Path) -> Result<Shot> {
-        let file: ShotFile = toml::from_str(text).map_err(|e| Error::toml(path, text, e))?;
-        let base = path.parent().unwrap_or(Path::new("")).to_path_buf();
-        let at = |span: std::ops::Range<usize>, key: &str, msg: String| {
-            Error::invalid(path, msg).line(line_of(text, span.start)).field(key)
-        };
-        // A referenced file that does not exist is an error naming its key.
-        let existing = |p: &Spanned<PathBuf>, key: &str| -> Result<PathBuf> {
-            let full = base.join(p.get_ref());
-            if full.exists() {
-                Ok(full)
-            } else {
-                Err(at(p.span(), key, format!("file not found: {}", full.display())))
-            }
-        };
+    /// A referenced file: a path that does not exist is an error naming its key.
+    fn existing(&self, p: &Spanned<PathBuf>, key: &str) -> Result<PathBuf> {
+        let full = self.base.join(p.get_ref());
+        if full.exists() {
+            Ok(full)
+        } else {
+            Err(self.at(p.span(), key, format!("file not found: {}", full.display())))
+        }
+    }
+}
 
-        check_shot_name(&file.name).map_err(|m| Error::invalid(path, m).field("name"))?;
-        if *file.version.get_ref() != SHOT_VERSION {
-            return Err(at(
-                file.version.span(),
-                "version",
-                format!(
-                    "unsupported shot version {} (this throng reads version {SHOT_VERSION})",
-                    file.version.get_ref()
-                ),
-            ));
-        }
-        let frames = *file.frames.get_ref();
-        if frames.end < frames.start {
-            return Err(at(
-                file.frames.span(),
-                "frames",
-                format!("end {} is before start {}", frames.end, frames.start),
-            ));
-        }
-        if !(frames.fps > 0.0 && frames.fps.is_finite()) {
-            return Err(at(file.frames.span(), "frames.fps", format!("fps must be positive, got {}", frames.fps)));
-        }
-        if frames.len() > MAX_FRAMES {
-            return Err(at(
-                file.frames.span(),
-                "frames",
-                format!("{} frames is more than a shot may hold ({MAX_FRAMES})", frames.len()),
-            ));
-        }
-        let offset = file.cache.frame_offset;
-        for f in [frames.start, frames.end] {
-            if f.checked_add(offset).is_none() {
-                return Err(Error::invalid(
-                    path,
-                    format!("shot frame {f} + frame_offset {offset} is not a representable frame number (32-bit)"),
-                )
-                .field("cache.frame_offset"));
-            }
-        }
+/// `[frames]`: a forward range of at most [`MAX_FRAMES`] at a positive rate.
+fn check_frames(raw: &Spanned<Frames>, cx: &Context) -> Result<Frames> {
+    let frames = *raw.get_ref();
+    if frames.end < frames.start {
+        return Err(cx.at(raw.span(), "frames", format!("end {} is before start {}", frames.end, frames.start)));
+    }
+    if !(frames.fps > 0.0 && frames.fps.is_finite()) {
+        return Err(cx.at(raw.span(), "frames.fps", format!("fps must be positive, got {}", frames.fps)));
+    }
+    if frames.len() > MAX_FRAMES {
+        return Err(cx.at(
+            raw.span(),
+            "frames",
+            format!("{} frames is more than a shot may hold ({MAX_FRAMES})", frames.len()),
+        ));
+    }
+    Ok(frames)
+}
 
-        let import = file.cache.spec();
-        // Layout and numbers are checked here, so a bad key names its line
-        // in the shot; gaits come when the cache is opened (casting).
-        if import.describes_layout() {
-            TabularOptions::resolve(&import, frames.fps)
-                .map_err(|(k, m)| Error::invalid(path, m).field(format!("cache.{k}")))?;
+/// `[cache]`: the offset fits every shot frame; a layout's keys and the
+/// placement are checked here, so a bad key names its line in the shot
+/// (gaits come when the cache is opened, in casting).
+fn check_cache(raw: &CacheTable, frames: &Frames, cx: &Context) -> Result<CacheRef> {
+    let path = cx.path;
+    let offset = raw.frame_offset;
+    for f in [frames.start, frames.end] {
+        if f.checked_add(offset).is_none() {
+            return Err(Error::invalid(
+                path,
+                format!("shot frame {f} + frame_offset {offset} is not a representable frame number (32-bit)"),
+            )
+            .field("cache.frame_offset"));
         }
-        import.placement.check_key().map_err(|(k, m)| Error::invalid(path, m).field(format!("cache.{k}")))?;
-        let cache = CacheRef { path: existing(&file.cache.path, "cache.path")?, frame_offset: offset, import };
-        let wardrobes = file.wardrobes.iter().map(|w| existing(w, "wardrobes")).collect::<Result<Vec<_>>>()?;
-        let mut rigs = BTreeMap::new();
-        for (name, rig) in &file.rigs {
-            let jitter = rig.height_jitter.as_ref().map_or(default_jitter(), |j| *j.get_ref());
-            if !(0.0..1.0).contains(&jitter) {
-                return Err(at(
-                    rig.height_jitter.as_ref().map_or(rig.file.span(), |j| j.span()),
-                    &format!("rigs.{name}.height_jitter"),
-                    format!("must be in [0, 1), got {jitter}"),
-                ));
-            }
-            for (scheme, w) in &rig.schemes {
-                if !(*w >= 0.0 && w.is_finite()) {
-                    return Err(at(
-                        rig.file.span(),
-                        &format!("rigs.{name}.schemes.{scheme}"),
-                        format!("scheme weight must be >= 0, got {w}"),
-                    ));
-                }
-            }
-            if rig.kind == Some(RigKind::Slots) && rig.has_skin_keys() {
-                return Err(at(
+    }
+    let import = raw.keys();
+    let key_err = |(k, m): (String, String)| Error::invalid(path, m).field(format!("cache.{k}"));
+    if import.describes_layout() {
+        TabularOptions::resolve(&import, frames.fps).map_err(key_err)?;
+    }
+    import.placement().check_key().map_err(key_err)?;
+    Ok(CacheRef { path: cx.existing(&raw.path, "cache.path")?, frame_offset: offset, import })
+}
+
+impl RigFile {
+    /// `[rigs.NAME]` -> a checked rig.
+    fn check(&self, name: &str, cx: &Context) -> Result<RigRef> {
+        let rig = self;
+        let jitter = rig.height_jitter.as_ref().map_or(default_jitter(), |j| *j.get_ref());
+        if !(0.0..1.0).contains(&jitter) {
+            return Err(cx.at(
+                rig.height_jitter.as_ref().map_or(rig.file.span(), |j| j.span()),
+                &format!("rigs.{name}.height_jitter"),
+                format!("must be in [0, 1), got {jitter}"),
+            ));
+        }
+        for (scheme, w) in &rig.schemes {
+            if !(*w >= 0.0 && w.is_finite()) {
+                return Err(cx.at(
                     rig.file.span(),
-                    &format!("rigs.{name}.kind"),
-                    "cycles, up, forward, scale, root, strides, pose_step and slots are for `kind = \"skinned\"` rigs"
-                        .into(),
+                    &format!("rigs.{name}.schemes.{scheme}"),
+                    format!("scheme weight must be >= 0, got {w}"),
                 ));
             }
-            let defaults = SkinOptions::default();
-            let scale = rig.scale.as_ref().map_or(defaults.scale, |s| *s.get_ref());
-            if !(scale > 0.0 && scale.is_finite()) {
-                let span = rig.scale.as_ref().map_or(rig.file.span(), |s| s.span());
-                return Err(at(span, &format!("rigs.{name}.scale"), format!("must be a positive number, got {scale}")));
-            }
-            let pose_step = rig.pose_step.as_ref().map(|s| *s.get_ref());
-            if let (Some(s), Some(spanned)) = (pose_step, &rig.pose_step) {
-                if !(s > 0.0 && s.is_finite()) {
-                    return Err(at(
-                        spanned.span(),
-                        &format!("rigs.{name}.pose_step"),
-                        format!("must be a positive number of frames, got {s}"),
-                    ));
-                }
-            }
-            for (cycle, s) in &rig.strides {
-                if !(*s >= 0.0 && s.is_finite()) {
-                    return Err(at(
-                        rig.file.span(),
-                        &format!("rigs.{name}.strides.{cycle}"),
-                        format!("stride must be >= 0 metres, got {s}"),
-                    ));
-                }
-            }
-            if rig.slots.as_ref().is_some_and(|s| s.is_empty()) {
-                return Err(at(rig.file.span(), &format!("rigs.{name}.slots"), "give at least one slot".into()));
-            }
-            rigs.insert(
-                name.clone(),
-                RigRef {
-                    file: existing(&rig.file, &format!("rigs.{name}.file"))?,
-                    schemes: rig.schemes.clone(),
-                    height_jitter: jitter,
-                    kind: rig.kind,
-                    skin: SkinOptions {
-                        cycles: rig.cycles.clone(),
-                        up: rig.up.unwrap_or(defaults.up),
-                        forward: rig.forward.unwrap_or(defaults.forward),
-                        scale,
-                        root: rig.root.clone(),
-                        strides: rig.strides.clone(),
-                        pose_step,
-                        slots: rig.slots.clone(),
-                    },
-                },
-            );
         }
-        let set = match &file.set {
-            Some(s) => Some(SetRef { file: existing(&s.file, "set.file")? }),
-            None => None,
-        };
+        if rig.kind == Some(RigKind::Slots) && rig.has_skin_keys() {
+            return Err(cx.at(
+                rig.file.span(),
+                &format!("rigs.{name}.kind"),
+                "cycles, up, forward, scale, root, strides, pose_step and slots are for `kind = \"skinned\"` rigs"
+                    .into(),
+            ));
+        }
+        let defaults = SkinOptions::default();
+        let scale = rig.scale.as_ref().map_or(defaults.scale, |s| *s.get_ref());
+        if !(scale > 0.0 && scale.is_finite()) {
+            let span = rig.scale.as_ref().map_or(rig.file.span(), |s| s.span());
+            return Err(cx.at(span, &format!("rigs.{name}.scale"), format!("must be a positive number, got {scale}")));
+        }
+        let pose_step = rig.pose_step.as_ref().map(|s| *s.get_ref());
+        if let (Some(s), Some(spanned)) = (pose_step, &rig.pose_step) {
+            if !(s > 0.0 && s.is_finite()) {
+                return Err(cx.at(
+                    spanned.span(),
+                    &format!("rigs.{name}.pose_step"),
+                    format!("must be a positive number of frames, got {s}"),
+                ));
+            }
+        }
+        for (cycle, s) in &rig.strides {
+            if !(*s >= 0.0 && s.is_finite()) {
+                return Err(cx.at(
+                    rig.file.span(),
+                    &format!("rigs.{name}.strides.{cycle}"),
+                    format!("stride must be >= 0 metres, got {s}"),
+                ));
+            }
+        }
+        if rig.slots.as_ref().is_some_and(|s| s.is_empty()) {
+            return Err(cx.at(rig.file.span(), &format!("rigs.{name}.slots"), "give at least one slot".into()));
+        }
+        Ok(RigRef {
+            file: cx.existing(&rig.file, &format!("rigs.{name}.file"))?,
+            schemes: rig.schemes.clone(),
+            height_jitter: jitter,
+            kind: rig.kind,
+            skin: SkinOptions {
+                cycles: rig.cycles.clone(),
+                up: rig.up.unwrap_or(defaults.up),
+                forward: rig.forward.unwrap_or(defaults.forward),
+                scale,
+                root: rig.root.clone(),
+                strides: rig.strides.clone(),
+                pose_step,
+                slots: rig.slots.clone(),
+            },
+        })
+    }
+}
 
-        let mut keys = file.camera.keys.clone();
+impl CameraFile {
+    /// `[camera]` -> keys sorted by frame (each finite, one per frame), or a glTF node.
+    fn check(&self, cx: &Context) -> Result<CameraSpec> {
+        let path = cx.path;
+        let mut keys = self.keys.clone();
         keys.sort_by(|a, b| a.frame.total_cmp(&b.frame));
-        let gltf = match (&file.camera.gltf, &file.camera.node) {
-            (Some(g), Some(node)) => Some((existing(g, "camera.gltf")?, node.clone())),
-            (Some(g), None) => return Err(at(g.span(), "camera.node", "`camera.gltf` needs `camera.node`".into())),
+        let gltf = match (&self.gltf, &self.node) {
+            (Some(g), Some(node)) => Some((cx.existing(g, "camera.gltf")?, node.clone())),
+            (Some(g), None) => return Err(cx.at(g.span(), "camera.node", "`camera.gltf` needs `camera.node`".into())),
             (None, Some(_)) => {
                 return Err(Error::invalid(path, "`camera.node` needs `camera.gltf`").field("camera.node"))
             }
@@ -857,11 +795,17 @@ impl Shot {
                 .field("camera.keys"));
             }
         }
-        if !(file.camera.sensor_width > 0.0) {
+        if !(self.sensor_width > 0.0) {
             return Err(Error::invalid(path, "must be > 0").field("camera.sensor_width"));
         }
+        Ok(CameraSpec { sensor_width: self.sensor_width, keys, gltf })
+    }
+}
 
-        if let Some(sun) = &file.lights.sun {
+impl LightsFile {
+    /// `[lights]` -> a checked sun (direction, size, light) and sky.
+    fn check(&self, path: &Path) -> Result<Lights> {
+        if let Some(sun) = &self.sun {
             let direction = Vec3::from(sun.direction);
             if !direction.is_finite() || direction.length_squared() == 0.0 {
                 return Err(Error::invalid(path, "sun direction is zero or not finite").field("lights.sun.direction"));
@@ -876,38 +820,86 @@ impl Shot {
             check_light(sun.intensity, sun.color)
                 .map_err(|(k, m)| Error::invalid(path, m).field(format!("lights.sun.{k}")))?;
         }
-        let sky = &file.lights.sky;
+        let sky = &self.sky;
         check_light(sky.intensity, sky.color)
             .map_err(|(k, m)| Error::invalid(path, m).field(format!("lights.sky.{k}")))?;
-        let layers = file.layers;
-        if layers.split == SplitMode::Count && layers.count == 0 {
-            return Err(Error::invalid(path, "must be at least 1").field("layers.count"));
-        }
-        if layers.cutoffs.windows(2).any(|w| !(w[0] < w[1])) {
-            return Err(Error::invalid(path, "cut-offs must increase").field("layers.cutoffs"));
-        }
-        if let Some(b) = &layers.budget {
-            parse_bytes(b).map_err(|m| Error::invalid(path, m).field("layers.budget"))?;
-        }
-        if !(layers.lod_full_min_px >= 0.0 && layers.lod_full_min_px.is_finite()) {
-            return Err(Error::invalid(
-                path,
-                format!("must be a finite number of pixels >= 0, got {}", layers.lod_full_min_px),
-            )
-            .field("layers.lod_full_min_px"));
-        }
-        let render = file.render;
-        if render.max_bounces > MAX_BOUNCES {
-            return Err(Error::invalid(path, format!("at most {MAX_BOUNCES} bounces, got {}", render.max_bounces))
-                .field("render.max_bounces"));
-        }
-        check_resolution(render.resolution[0], render.resolution[1])
-            .map_err(|m| Error::invalid(path, m).field("render.resolution"))?;
-        check_spp(render.spp).map_err(|m| Error::invalid(path, m).field("render.spp"))?;
-        if let Some(shutter) = render.shutter {
-            check_shutter(shutter).map_err(|m| Error::invalid(path, m).field("render.shutter"))?;
-        }
+        Ok(Lights { sun: self.sun, sky: self.sky })
+    }
+}
 
+/// `[layers]`: a count of at least 1, increasing cut-offs, a readable budget.
+fn check_layers(layers: &LayerSettings, path: &Path) -> Result<()> {
+    if layers.split == SplitMode::Count && layers.count == 0 {
+        return Err(Error::invalid(path, "must be at least 1").field("layers.count"));
+    }
+    if layers.cutoffs.windows(2).any(|w| !(w[0] < w[1])) {
+        return Err(Error::invalid(path, "cut-offs must increase").field("layers.cutoffs"));
+    }
+    if let Some(b) = &layers.budget {
+        parse_bytes(b).map_err(|m| Error::invalid(path, m).field("layers.budget"))?;
+    }
+    if !(layers.lod_full_min_px >= 0.0 && layers.lod_full_min_px.is_finite()) {
+        return Err(Error::invalid(
+            path,
+            format!("must be a finite number of pixels >= 0, got {}", layers.lod_full_min_px),
+        )
+        .field("layers.lod_full_min_px"));
+    }
+    Ok(())
+}
+
+/// `[render]`: bounces, resolution, samples and shutter in range.
+fn check_render(render: &RenderSettings, path: &Path) -> Result<()> {
+    if render.max_bounces > MAX_BOUNCES {
+        return Err(Error::invalid(path, format!("at most {MAX_BOUNCES} bounces, got {}", render.max_bounces))
+            .field("render.max_bounces"));
+    }
+    check_resolution(render.resolution[0], render.resolution[1])
+        .map_err(|m| Error::invalid(path, m).field("render.resolution"))?;
+    check_spp(render.spp).map_err(|m| Error::invalid(path, m).field("render.spp"))?;
+    if let Some(shutter) = render.shutter {
+        check_shutter(shutter).map_err(|m| Error::invalid(path, m).field("render.shutter"))?;
+    }
+    Ok(())
+}
+
+impl Shot {
+    /// Reads and validates a shot file.
+    pub fn load(path: &Path) -> Result<Shot> {
+        let text = std::fs::read_to_string(path).at(path)?;
+        Shot::parse(&text, path)
+    }
+
+    /// Parses shot text; `path` names the file in errors and anchors relative paths.
+    pub fn parse(text: &str, path: &Path) -> Result<Shot> {
+        let file: ShotFile = toml::from_str(text).map_err(|e| Error::toml(path, text, e))?;
+        let cx = Context { path, text, base: path.parent().unwrap_or(Path::new("")).to_path_buf() };
+        check_shot_name(&file.name).map_err(|m| Error::invalid(path, m).field("name"))?;
+        if *file.version.get_ref() != SHOT_VERSION {
+            return Err(cx.at(
+                file.version.span(),
+                "version",
+                format!(
+                    "unsupported shot version {} (this throng reads version {SHOT_VERSION})",
+                    file.version.get_ref()
+                ),
+            ));
+        }
+        let frames = check_frames(&file.frames, &cx)?;
+        let cache = check_cache(&file.cache, &frames, &cx)?;
+        let wardrobes = file.wardrobes.iter().map(|w| cx.existing(w, "wardrobes")).collect::<Result<Vec<_>>>()?;
+        let mut rigs = BTreeMap::new();
+        for (name, rig) in &file.rigs {
+            rigs.insert(name.clone(), rig.check(name, &cx)?);
+        }
+        let set = match &file.set {
+            Some(s) => Some(SetRef { file: cx.existing(&s.file, "set.file")? }),
+            None => None,
+        };
+        let camera = file.camera.check(&cx)?;
+        let lights = file.lights.check(path)?;
+        check_layers(&file.layers, path)?;
+        check_render(&file.render, path)?;
         Ok(Shot {
             path: path.to_path_buf(),
             name: file.name,
@@ -917,10 +909,10 @@ impl Shot {
             wardrobes,
             rigs,
             set,
-            camera: CameraSpec { sensor_width: file.camera.sensor_width, keys, gltf },
-            lights: Lights { sun: file.lights.sun, sky: file.lights.sky },
-            layers,
-            render,
+            camera,
+            lights,
+            layers: file.layers,
+            render: file.render,
             removed: file.removed,
             culled_cycles: file.culled_cycles,
             no_scale_cycles: file.no_scale_cycles,
@@ -1058,6 +1050,7 @@ pub fn parse_frame_list(s: &str) -> std::result::Result<Vec<i32>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cache::tabular::Preset;
 
     #[test]
     fn frame_lists() {
@@ -1077,6 +1070,90 @@ mod tests {
         assert_eq!(parse_bytes("2.8GB").unwrap(), 2_800_000_000);
         assert_eq!(parse_bytes("1MiB").unwrap(), 1 << 20);
         assert!(parse_bytes("3 parsecs").is_err());
+    }
+
+    fn cx(text: &str) -> Context<'_> {
+        Context { path: Path::new("s.toml"), text, base: PathBuf::from(env!("CARGO_MANIFEST_DIR")) }
+    }
+
+    fn err<T: std::fmt::Debug>(r: Result<T>) -> String {
+        r.unwrap_err().to_string()
+    }
+
+    #[derive(Deserialize)]
+    struct FramesOnly {
+        frames: Spanned<Frames>,
+    }
+
+    #[test]
+    fn frames_section_is_a_forward_range_at_a_positive_rate() {
+        let text = "[frames]\nstart = 5\nend = 1\n";
+        let f: FramesOnly = toml::from_str(text).unwrap();
+        assert!(err(check_frames(&f.frames, &cx(text))).contains("end 1 is before start 5"));
+        let text = "[frames]\nstart = 1\nend = 5\nfps = 0.0\n";
+        let f: FramesOnly = toml::from_str(text).unwrap();
+        assert!(err(check_frames(&f.frames, &cx(text))).contains("frames.fps"));
+        let text = "[frames]\nstart = 1\nend = 5\n";
+        let f: FramesOnly = toml::from_str(text).unwrap();
+        assert_eq!(check_frames(&f.frames, &cx(text)).unwrap().len(), 5);
+    }
+
+    #[test]
+    fn cache_section_checks_offset_layout_and_placement() {
+        let frames = Frames { start: 1, end: 10, fps: 24.0, outside_cache: OutsideCache::Error };
+        let check = |text: &str| {
+            let raw: CacheTable = toml::from_str(text).unwrap();
+            check_cache(&raw, &frames, &cx(text))
+        };
+        assert!(err(check("path = \"Cargo.toml\"\nframe_offset = 2147483647")).contains("cache.frame_offset"));
+        let e = err(check("path = \"Cargo.toml\"\nunits = \"cm\""));
+        assert!(e.contains("cache.columns") && e.contains("no `id` column"), "{e}");
+        assert!(err(check("path = \"Cargo.toml\"\nscale = 0.0")).contains("cache.scale"));
+        assert!(err(check("path = \"nope.crowd\"")).contains("file not found"));
+        let ok = check("path = \"Cargo.toml\"\nframe_offset = -1\npreset = \"eth\"\nrotate = 90.0").unwrap();
+        assert_eq!((ok.cache_frame(1), ok.import.preset), (0, Some(Preset::Eth)));
+        assert_eq!(ok.import.placement().rotate, 90.0);
+    }
+
+    #[test]
+    fn rig_section_checks_jitter_kind_and_skin_keys() {
+        let check = |text: &str| toml::from_str::<RigFile>(text).unwrap().check("r", &cx(text));
+        let e = err(check("file = \"Cargo.toml\"\nheight_jitter = 1.5"));
+        assert!(e.contains("s.toml:2") && e.contains("rigs.r.height_jitter"), "{e}");
+        assert!(err(check("file = \"Cargo.toml\"\nkind = \"slots\"\nroot = \"hips\"")).contains("rigs.r.kind"));
+        assert!(err(check("file = \"Cargo.toml\"\nslots = []")).contains("at least one slot"));
+        let rig = check("file = \"Cargo.toml\"\nscale = 0.01").unwrap();
+        assert_eq!((rig.height_jitter, rig.skin.scale), (0.1, 0.01));
+    }
+
+    #[test]
+    fn camera_section_needs_distinct_finite_keys_or_a_node() {
+        let check = |text: &str| toml::from_str::<CameraFile>(text).unwrap().check(&cx(text));
+        let key = |f: f32| {
+            format!("{{ frame = {f:?}, position = [0.0, 1.0, 5.0], aim = [0.0, 1.0, 0.0], focal_length = 35.0 }}")
+        };
+        assert!(err(check("")).contains("needs `keys` or `gltf`"));
+        assert!(err(check("node = \"cam\"")).contains("`camera.node` needs `camera.gltf`"));
+        assert!(err(check(&format!("keys = [{}, {}]", key(2.0), key(2.0)))).contains("two camera keys at frame 2"));
+        let cam = check(&format!("keys = [{}, {}]", key(9.0), key(1.0))).unwrap();
+        assert_eq!(cam.keys.iter().map(|k| k.frame).collect::<Vec<_>>(), [1.0, 9.0], "sorted by frame");
+    }
+
+    #[test]
+    fn lights_layers_and_render_sections_are_range_checked() {
+        let lights: LightsFile = toml::from_str("sun = { direction = [0.0, 0.0, 0.0] }").unwrap();
+        assert!(err(lights.check(Path::new("s.toml"))).contains("lights.sun.direction"));
+        let lights: LightsFile = toml::from_str("sky = { intensity = -1.0 }").unwrap();
+        assert!(err(lights.check(Path::new("s.toml"))).contains("lights.sky.intensity"));
+        let layers: LayerSettings = toml::from_str("count = 0").unwrap();
+        assert!(err(check_layers(&layers, Path::new("s.toml"))).contains("layers.count"));
+        let layers: LayerSettings = toml::from_str("cutoffs = [9.0, 3.0]").unwrap();
+        assert!(err(check_layers(&layers, Path::new("s.toml"))).contains("cut-offs must increase"));
+        let render: RenderSettings = toml::from_str("spp = 0").unwrap();
+        assert!(err(check_render(&render, Path::new("s.toml"))).contains("render.spp"));
+        let render: RenderSettings = toml::from_str("shutter = [0.5, -0.5]").unwrap();
+        assert!(err(check_render(&render, Path::new("s.toml"))).contains("render.shutter"));
+        assert!(check_render(&RenderSettings::default(), Path::new("s.toml")).is_ok());
     }
 
     #[test]

@@ -9,7 +9,9 @@ use std::f32::consts::PI;
 use std::path::{Path, PathBuf};
 
 use common::{fixture, run};
-use throng::cache::tabular::{self, Column, Columns, Delimiter, HeadingFrom, Preset, TabularOptions, Units};
+use throng::cache::tabular::{
+    self, Column, ColumnChoices, Columns, Delimiter, HeadingFrom, Preset, TabularOptions, Units,
+};
 use throng::cache::{AgentSample, CrowdCache, Placement, TabularSpec};
 
 fn table(name: &str) -> PathBuf {
@@ -41,14 +43,14 @@ fn angle_deg(a: f32, b: f32) -> f32 {
 
 fn foreign_csv() -> TabularOptions {
     let spec = TabularSpec {
-        columns: vec![
+        columns: ColumnChoices(vec![
             ("frame".into(), Some(Column::Name("frame".into()))),
             ("id".into(), Some(Column::Name("agent_id".into()))),
             ("x".into(), Some(Column::Name("x".into()))),
             ("y".into(), Some(Column::Name("y".into()))),
             ("z".into(), Some(Column::Name("z".into()))),
             ("heading".into(), Some(Column::Name("heading_radians".into()))),
-        ],
+        ]),
         source_fps: Some(25.0),
         ..Default::default()
     };

@@ -72,6 +72,7 @@ pub mod binary;
 pub mod csv;
 mod info;
 pub mod jupedsim;
+pub mod keys;
 pub mod tabular;
 pub mod usd;
 

@@ -27,6 +27,7 @@ use glam::{DQuat, DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
 use super::jupedsim::{DEFAULT_CYCLE_LENGTH, DEFAULT_STRIDE};
+pub use super::keys::{ColumnChoices, TabularSpec};
 use super::{check_name, validate, AgentSample, CrowdCache, FrameBlock};
 use crate::error::{Error, IoContext, Result};
 
@@ -49,9 +50,20 @@ pub const DEFAULT_HOLD_SPEED: f32 = 0.25;
 macro_rules! named_enum {
     ($(#[$m:meta])* $name:ident { $($(#[$vm:meta])* $v:ident = [$($s:literal),+]),+ $(,)? }) => {
         $(#[$m])*
-        #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
         #[serde(try_from = "String")]
         pub enum $name { $($(#[$vm])* $v),+ }
+        impl $name {
+            /// The value's name as written in a shot (the first of its names).
+            pub fn name(self) -> &'static str {
+                match self { $($name::$v => [$($s),+][0],)+ }
+            }
+        }
+        impl Serialize for $name {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+                s.serialize_str(self.name())
+            }
+        }
         impl FromStr for $name {
             type Err = String;
             fn from_str(s: &str) -> std::result::Result<Self, String> {
@@ -189,6 +201,16 @@ impl TryFrom<String> for Delimiter {
     }
 }
 
+impl Serialize for Delimiter {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        match self {
+            Delimiter::Whitespace => s.serialize_str("whitespace"),
+            Delimiter::Byte(b'\t') => s.serialize_str("tab"),
+            Delimiter::Byte(b) => s.serialize_str(&char::from(*b).to_string()),
+        }
+    }
+}
+
 impl<'de> Deserialize<'de> for Delimiter {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
         String::deserialize(d)?.parse().map_err(serde::de::Error::custom)
@@ -196,7 +218,7 @@ impl<'de> Deserialize<'de> for Delimiter {
 }
 
 /// A column, by header name (case-insensitive) or 1-based position.
-#[derive(Clone, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum Column {
     /// 1-based position.
@@ -391,66 +413,6 @@ impl Default for Gait {
     }
 }
 
-/// What a user asks of an import, every field optional: a shot's `[cache]`
-/// keys or `throng cache` flags. [`TabularOptions::resolve`] lays it over
-/// the preset's defaults.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct TabularSpec {
-    /// Layout preset.
-    pub preset: Option<Preset>,
-    /// Field delimiter.
-    pub delimiter: Option<Delimiter>,
-    /// Comment prefix (one character; empty: no comments).
-    pub comment: Option<String>,
-    /// Whether the first row names the columns.
-    pub header: Option<bool>,
-    /// Column choices over the preset's (`None` clears one).
-    pub columns: Vec<(String, Option<Column>)>,
-    /// Source length unit.
-    pub units: Option<Units>,
-    /// Source up axis.
-    pub up: Option<UpAxis>,
-    /// Source handedness.
-    pub handedness: Option<Handedness>,
-    /// Heading column unit.
-    pub heading_units: Option<AngleUnits>,
-    /// Source frames per second (for a frame column).
-    pub source_fps: Option<f32>,
-    /// Longest interval, seconds, interpolated across.
-    pub max_gap: Option<f32>,
-    /// Where headings come from.
-    pub heading: Option<HeadingFrom>,
-    /// Heading smoothing window, seconds.
-    pub heading_window: Option<f32>,
-    /// Speed (m/s) below which the heading is held (and the idle cycle plays).
-    pub hold_speed: Option<f32>,
-    /// Rig for every agent (without a rig column).
-    pub rig: Option<String>,
-    /// Walk cycle for every agent (without a cycle column).
-    pub cycle: Option<String>,
-    /// Cycle for standing agents.
-    pub idle_cycle: Option<String>,
-    /// Where the crowd stands.
-    pub placement: Placement,
-}
-
-impl TabularSpec {
-    /// Whether this spec describes a file layout (so a `.csv` is a foreign
-    /// table, not throng's own CSV).
-    pub fn describes_layout(&self) -> bool {
-        matches!(self.preset, Some(Preset::PeTrack | Preset::Eth | Preset::EthUcy))
-            || self.delimiter.is_some()
-            || self.comment.is_some()
-            || self.header.is_some()
-            || !self.columns.is_empty()
-            || self.units.is_some()
-            || self.up.is_some()
-            || self.handedness.is_some()
-            || self.heading_units.is_some()
-            || self.source_fps.is_some()
-    }
-}
-
 /// A resolved, checked tabular import.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TabularOptions {
@@ -526,96 +488,55 @@ impl Default for TabularOptions {
     }
 }
 
+#[cfg(test)]
 fn pos(n: usize) -> Option<Column> {
     Some(Column::Position(n))
 }
 
 impl TabularOptions {
-    /// A preset's layout (`Throng` and `JuPedSim` are not tables: `None`).
-    pub fn preset(preset: Preset) -> Option<TabularOptions> {
-        let base = TabularOptions { preset: Some(preset), ..Default::default() };
-        match preset {
-            Preset::Throng | Preset::JuPedSim => None,
-            // `# id frame x/cm y/cm z/cm`; z is the head's height, not the feet's.
-            Preset::PeTrack => Some(TabularOptions {
-                delimiter: Delimiter::Whitespace,
-                header: false,
-                columns: Columns { id: pos(1), frame: pos(2), x: pos(3), y: pos(4), ..Default::default() },
-                ..base
-            }),
-            // [frame id pos_x pos_z pos_y v_x v_z v_y]; frame numbers step 6
-            // per 0.4 s annotation in seq_eth, so 15 frames per second.
-            Preset::Eth => Some(TabularOptions {
-                delimiter: Delimiter::Whitespace,
-                header: false,
-                columns: Columns {
-                    frame: pos(1),
-                    id: pos(2),
-                    x: pos(3),
-                    y: pos(5),
-                    vx: pos(6),
-                    vy: pos(8),
-                    ..Default::default()
-                },
-                units: Some(Units::M),
-                source_fps: Some(15.0),
-                ..base
-            }),
-            // frame id x y; frame numbers step 10 per 0.4 s sample (25 fps video).
-            Preset::EthUcy => Some(TabularOptions {
-                delimiter: Delimiter::Whitespace,
-                header: false,
-                columns: Columns { frame: pos(1), id: pos(2), x: pos(3), y: pos(4), ..Default::default() },
-                units: Some(Units::M),
-                source_fps: Some(25.0),
-                ..base
-            }),
-        }
-    }
-
     /// `spec` laid over its preset's layout (or a headed CSV with z up), for
     /// a target of `fps` frames per second. Errors give the key and message.
     pub fn resolve(spec: &TabularSpec, fps: f32) -> std::result::Result<TabularOptions, (String, String)> {
-        let mut o = match spec.preset {
-            Some(p) => TabularOptions::preset(p).ok_or_else(|| {
+        let preset = match spec.preset {
+            Some(p) => p.keys().ok_or_else(|| {
                 ("preset".to_string(), format!("preset `{p:?}` is not a table; only petrack, eth and eth-ucy are"))
             })?,
-            None => TabularOptions::default(),
+            None => TabularSpec::default(),
         };
-        o.fps = fps;
-        if let Some(d) = spec.delimiter {
-            o.delimiter = d;
-        }
-        if let Some(c) = &spec.comment {
-            o.comment = match c.as_bytes() {
+        let keys = spec.clone().over(preset);
+        let d = TabularOptions::default();
+        let comment = match &keys.comment {
+            None => d.comment,
+            Some(c) => match c.as_bytes() {
                 [] => None,
                 [b] if b.is_ascii() && !b.is_ascii_alphanumeric() => Some(*b),
                 _ => return Err(("comment".into(), format!("`{c}`: a comment prefix is one punctuation character"))),
-            };
-        }
-        if let Some(h) = spec.header {
-            o.header = h;
-        }
-        for (role, col) in &spec.columns {
-            o.columns.set(role, col.clone()).map_err(|m| ("columns".to_string(), m))?;
-        }
-        o.units = spec.units.or(o.units);
-        o.up = spec.up.unwrap_or(o.up);
-        o.handedness = spec.handedness.unwrap_or(o.handedness);
-        o.heading_units = spec.heading_units.unwrap_or(o.heading_units);
-        o.source_fps = spec.source_fps.or(o.source_fps);
-        o.max_gap = spec.max_gap.unwrap_or(o.max_gap);
-        o.heading = spec.heading.unwrap_or(o.heading);
-        o.heading_window = spec.heading_window.unwrap_or(o.heading_window);
-        o.hold_speed = spec.hold_speed.unwrap_or(o.hold_speed);
-        if let Some(r) = &spec.rig {
-            o.rig = r.clone();
-        }
-        if let Some(c) = &spec.cycle {
-            o.cycle = c.clone();
-        }
-        o.idle_cycle = spec.idle_cycle.clone().or(o.idle_cycle);
-        o.placement = spec.placement;
+            },
+        };
+        let columns = keys.roles().map_err(|m| ("columns".to_string(), m))?;
+        let o = TabularOptions {
+            preset: spec.preset,
+            delimiter: keys.delimiter.unwrap_or(d.delimiter),
+            comment,
+            header: keys.header.unwrap_or(d.header),
+            columns,
+            units: keys.units,
+            up: keys.up.unwrap_or(d.up),
+            handedness: keys.handedness.unwrap_or(d.handedness),
+            heading_units: keys.heading_units.unwrap_or(d.heading_units),
+            source_fps: keys.source_fps,
+            fps,
+            max_gap: keys.max_gap.unwrap_or(d.max_gap),
+            heading: keys.heading.unwrap_or(d.heading),
+            heading_window: keys.heading_window.unwrap_or(d.heading_window),
+            hold_speed: keys.hold_speed.unwrap_or(d.hold_speed),
+            placement: keys.placement(),
+            rig: keys.rig.unwrap_or(d.rig),
+            cycle: keys.cycle.unwrap_or(d.cycle),
+            idle_cycle: keys.idle_cycle,
+            gaits: d.gaits,
+            default_gait: d.default_gait,
+        };
         o.check()?;
         Ok(o)
     }
@@ -825,8 +746,53 @@ pub fn read(path: &Path, o: &TabularOptions) -> Result<(CrowdCache, TabularRepor
 }
 
 /// Parses table text (already decompressed); `path` names it in errors.
+/// The stages of the module's documentation, in order.
 pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCache, TabularReport)> {
     o.check().map_err(|(k, m)| Error::invalid(path, m).field(k))?;
+    let (units, source_fps) = units_and_rate(path, text, o)?;
+    let table = Table::new(text, o);
+    let tracks = read_rows(path, &table, o, units, source_fps)?;
+    let fps = f64::from(o.fps);
+    let max_gap = f64::from(o.max_gap);
+    check_output_size(path, &tracks.agents, fps, max_gap)?;
+
+    let window_half = ((f64::from(o.heading_window) * fps / 2.0).round() as usize).max(1);
+    let heading_from = match o.heading {
+        HeadingFrom::Auto if o.columns.heading.is_some() => HeadingFrom::Column,
+        HeadingFrom::Auto if o.columns.vx.is_some() => HeadingFrom::Velocity,
+        HeadingFrom::Auto => HeadingFrom::Motion,
+        h => h,
+    };
+    let mut report = TabularReport {
+        rows: tracks.rows,
+        agents: tracks.agents.len(),
+        source_fps: source_fps.map(|f| f as f32),
+        fps: o.fps,
+        units: Some(units),
+        ..Default::default()
+    };
+    let mut frames: BTreeMap<i32, Vec<AgentSample>> = BTreeMap::new();
+    for (&id, track) in &tracks.agents {
+        let runs = resample(track, fps, max_gap);
+        report.gaps += track.windows(2).filter(|w| w[1].t - w[0].t > max_gap).count();
+        let (headings, moving) = headings(&runs, heading_from, window_half, f64::from(o.hold_speed), fps);
+        for (k, a) in walk_cycles(id, &runs, &headings, &moving, o, &tracks) {
+            frames.entry(k).or_default().push(a);
+            report.agent_frames += 1;
+        }
+    }
+    let crowd = CrowdCache {
+        rigs: tracks.rigs.names,
+        cycles: tracks.cycles.names,
+        frames: frames.into_iter().map(|(frame, agents)| FrameBlock { frame, agents }).collect(),
+    };
+    validate(path, &crowd)?;
+    Ok((super::canonical(&crowd), report))
+}
+
+/// The source's units and frame rate (`None` with a time column): the
+/// options', else what the file's comments say (PeTrack), else metres.
+fn units_and_rate(path: &Path, text: &str, o: &TabularOptions) -> Result<(Units, Option<f64>)> {
     let (sniffed_fps, sniffed_units) = o.comment.map(|c| sniff_comments(text, c)).unwrap_or_default();
     let units = o.units.or(sniffed_units).unwrap_or(Units::M);
     let source_fps =
@@ -846,122 +812,183 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
             .field("source_fps")),
             (None, _) => None,
         };
+    Ok((units, source_fps))
+}
 
-    // Comment lines are blanked and whitespace tables become tab-separated,
-    // line by line, so line numbers stay (the csv crate's own comment
-    // handling loses count of the lines it skips).
-    let comment = o.comment.map(char::from);
-    let data = text
-        .lines()
-        .map(|l| match (comment, o.delimiter) {
-            (Some(c), _) if l.trim_start().starts_with(c) => String::new(),
-            (_, Delimiter::Whitespace) => l.split_whitespace().collect::<Vec<_>>().join("\t"),
-            _ => l.to_string(),
-        })
-        .collect::<Vec<_>>()
-        .join("\n");
-    let delimiter = match o.delimiter {
-        Delimiter::Byte(b) => b,
-        Delimiter::Whitespace => b'\t',
-    };
-    let mut reader = csv::ReaderBuilder::new()
-        .has_headers(false)
-        .flexible(true)
-        .delimiter(delimiter)
-        .trim(csv::Trim::All)
-        .from_reader(data.as_bytes());
-    // Lines from byte offsets: the csv crate's own line count skips comment lines.
-    let starts: Vec<usize> = std::iter::once(0).chain(data.match_indices('\n').map(|(i, _)| i + 1)).collect();
-    // A record's position is where reading began, before any blank lines it skipped.
-    let line_at = |byte: u64| {
-        let bytes = data.as_bytes();
+/// Stage 1: the text as the csv crate reads it. Comment lines are blanked
+/// and whitespace tables become tab-separated, line by line, so line
+/// numbers stay (the csv crate's own comment handling loses count of the
+/// lines it skips).
+struct Table {
+    data: String,
+    /// Byte offset of each line's start.
+    starts: Vec<usize>,
+    delimiter: u8,
+}
+
+impl Table {
+    fn new(text: &str, o: &TabularOptions) -> Table {
+        let comment = o.comment.map(char::from);
+        let data = text
+            .lines()
+            .map(|l| match (comment, o.delimiter) {
+                (Some(c), _) if l.trim_start().starts_with(c) => String::new(),
+                (_, Delimiter::Whitespace) => l.split_whitespace().collect::<Vec<_>>().join("\t"),
+                _ => l.to_string(),
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
+        let delimiter = match o.delimiter {
+            Delimiter::Byte(b) => b,
+            Delimiter::Whitespace => b'\t',
+        };
+        // Lines from byte offsets: the csv crate's own line count skips comment lines.
+        let starts = std::iter::once(0).chain(data.match_indices('\n').map(|(i, _)| i + 1)).collect();
+        Table { data, starts, delimiter }
+    }
+
+    fn reader(&self) -> csv::Reader<&[u8]> {
+        csv::ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .delimiter(self.delimiter)
+            .trim(csv::Trim::All)
+            .from_reader(self.data.as_bytes())
+    }
+
+    /// The 1-based line of the record read from `byte`: a record's position
+    /// is where reading began, before any blank lines it skipped.
+    fn line_at(&self, byte: u64) -> usize {
+        let bytes = self.data.as_bytes();
         let mut i = usize::try_from(byte).unwrap_or(usize::MAX).min(bytes.len());
         while bytes.get(i).is_some_and(|c| *c == b'\n' || *c == b'\r') {
             i += 1;
         }
-        starts.partition_point(|&s| s <= i)
-    };
-    let csv_err = |e: csv::Error| {
-        let line = e.position().map(|p| line_at(p.byte()));
+        self.starts.partition_point(|&s| s <= i)
+    }
+
+    fn error(&self, path: &Path, e: csv::Error) -> Error {
+        let line = e.position().map(|p| self.line_at(p.byte()));
         let err = Error::invalid(path, format!("cannot read the table: {e}"));
         match line {
             Some(l) => err.line(l),
             None => err,
         }
-    };
+    }
+}
 
+/// Stage 2's column map: role -> 0-based index, and the header line for messages.
+struct ColumnIndex {
+    index: HashMap<&'static str, usize>,
+    header: Option<Vec<String>>,
+}
+
+impl ColumnIndex {
+    fn new(path: &Path, columns: &Columns, header: Option<Vec<String>>) -> Result<ColumnIndex> {
+        let mut index = HashMap::new();
+        for role in ROLES {
+            let Some(col) = columns.pick(role) else { continue };
+            let i = match (col, &header) {
+                (Column::Position(n), _) => n - 1,
+                (Column::Name(name), Some(h)) => {
+                    h.iter().position(|c| c.eq_ignore_ascii_case(name.trim())).ok_or_else(|| {
+                        Error::invalid(
+                            path,
+                            format!("no column `{name}` for {role}; the columns found are: {}", h.join(", ")),
+                        )
+                        .line(1)
+                        .field(role)
+                    })?
+                }
+                (Column::Name(name), None) => {
+                    return Err(Error::invalid(
+                        path,
+                        format!("column `{name}` chosen by name, but the file has no header"),
+                    )
+                    .field(role))
+                }
+            };
+            index.insert(role, i);
+        }
+        Ok(ColumnIndex { index, header })
+    }
+
+    /// `column 3 (x)`, or `column 3 (pos_x, x)` when the header names it otherwise.
+    fn label(&self, role: &str) -> String {
+        let i = self.index[role];
+        match self.header.as_ref().and_then(|h| h.get(i)) {
+            Some(h) if !h.eq_ignore_ascii_case(role) => format!("column {} ({h}, {role})", i + 1),
+            _ => format!("column {} ({role})", i + 1),
+        }
+    }
+}
+
+/// Rig or cycle names, numbered in order of first use.
+#[derive(Default)]
+struct Names {
+    names: Vec<String>,
+    ids: HashMap<String, u16>,
+}
+
+impl Names {
+    fn of(names: impl IntoIterator<Item = String>) -> Names {
+        let mut out = Names::default();
+        for n in names {
+            if !out.ids.contains_key(&n) {
+                out.ids.insert(n.clone(), out.names.len() as u16);
+                out.names.push(n);
+            }
+        }
+        out
+    }
+
+    fn intern(&mut self, n: &str) -> std::result::Result<u16, String> {
+        if let Some(&i) = self.ids.get(n) {
+            return Ok(i);
+        }
+        check_name(n)?;
+        let i = u16::try_from(self.names.len()).map_err(|_| "more than 65536 distinct names".to_string())?;
+        self.names.push(n.to_string());
+        self.ids.insert(n.to_string(), i);
+        Ok(i)
+    }
+}
+
+/// Stage 2's output: each agent's samples in time order, and the names they use.
+struct Tracks {
+    agents: BTreeMap<u32, Vec<Sample>>,
+    rigs: Names,
+    cycles: Names,
+    rows: usize,
+}
+
+/// Stage 2: rows -> placed samples per agent, each agent's going forward in time.
+fn read_rows(path: &Path, table: &Table, o: &TabularOptions, units: Units, source_fps: Option<f64>) -> Result<Tracks> {
+    let mut reader = table.reader();
     let mut records = reader.records();
     let mut header: Option<Vec<String>> = None;
     if o.header {
         match records.next() {
-            Some(r) => header = Some(r.map_err(csv_err)?.iter().map(str::to_string).collect()),
+            Some(r) => header = Some(r.map_err(|e| table.error(path, e))?.iter().map(str::to_string).collect()),
             None => return Err(Error::invalid(path, "empty file: expected a header line naming the columns").line(1)),
         }
     }
-    // Role -> 0-based index.
-    let mut index: HashMap<&'static str, usize> = HashMap::new();
-    for role in ROLES {
-        let Some(col) = o.columns.pick(role) else { continue };
-        let i = match (col, &header) {
-            (Column::Position(n), _) => n - 1,
-            (Column::Name(name), Some(h)) => {
-                h.iter().position(|c| c.eq_ignore_ascii_case(name.trim())).ok_or_else(|| {
-                    Error::invalid(
-                        path,
-                        format!("no column `{name}` for {role}; the columns found are: {}", h.join(", ")),
-                    )
-                    .line(1)
-                    .field(role)
-                })?
-            }
-            (Column::Name(name), None) => {
-                return Err(Error::invalid(path, format!("column `{name}` chosen by name, but the file has no header"))
-                    .field(role))
-            }
-        };
-        index.insert(role, i);
-    }
-    let index = &index;
-    let label = |role: &str, i: usize| match header.as_ref().and_then(|h| h.get(i)) {
-        Some(h) if !h.eq_ignore_ascii_case(role) => format!("column {} ({h}, {role})", i + 1),
-        _ => format!("column {} ({role})", i + 1),
-    };
+    let columns = ColumnIndex::new(path, &o.columns, header)?;
+    let index = &columns.index;
+    let label = |role: &str| columns.label(role);
 
-    let mut rigs: Vec<String> = Vec::new();
-    let mut cycles: Vec<String> = vec![o.cycle.clone()];
-    if let Some(idle) = &o.idle_cycle {
-        if *idle != o.cycle {
-            cycles.push(idle.clone());
-        }
-    }
-    let (mut rig_ids, mut cycle_ids) = (HashMap::new(), HashMap::new());
-    for (i, c) in cycles.iter().enumerate() {
-        cycle_ids.insert(c.clone(), i as u16);
-    }
-    if o.columns.rig.is_none() {
-        rigs.push(o.rig.clone());
-    }
-    let intern =
-        |names: &mut Vec<String>, ids: &mut HashMap<String, u16>, n: &str| -> std::result::Result<u16, String> {
-            if let Some(&i) = ids.get(n) {
-                return Ok(i);
-            }
-            check_name(n)?;
-            let i = u16::try_from(names.len()).map_err(|_| "more than 65536 distinct names".to_string())?;
-            names.push(n.to_string());
-            ids.insert(n.to_string(), i);
-            Ok(i)
-        };
-
+    // The walk cycle is cycle 0 and the idle cycle next; without a rig column every agent has rig 0.
+    let mut cycles = Names::of(std::iter::once(o.cycle.clone()).chain(o.idle_cycle.clone()));
+    let mut rigs = Names::of(o.columns.rig.is_none().then(|| o.rig.clone()));
     let mut agents: BTreeMap<u32, Vec<Sample>> = BTreeMap::new();
     let mut rows = 0usize;
     let rotation = o.placement.rotation();
     for record in records {
-        let record = record.map_err(csv_err)?;
+        let record = record.map_err(|e| table.error(path, e))?;
         if record.iter().all(str::is_empty) {
             continue;
         }
-        let line = record.position().map_or(0, |p| line_at(p.byte()));
+        let line = record.position().map_or(0, |p| table.line_at(p.byte()));
         rows += 1;
         if rows > MAX_ROWS {
             return Err(Error::invalid(path, format!("more than {MAX_ROWS} rows; split the file")).line(line));
@@ -972,7 +999,7 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
                 Some(c) => Ok(Some(c)),
                 None => Err(Error::invalid(
                     path,
-                    format!("{}: missing; this row has {} columns", label(role, i), record.len()),
+                    format!("{}: missing; this row has {} columns", label(role), record.len()),
                 )
                 .line(line)
                 .field(role)),
@@ -984,7 +1011,7 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
                 Ok(v) if v.is_finite() => Ok(Some(v)),
                 _ => Err(Error::invalid(
                     path,
-                    format!("{}: cannot read `{}` as a number", label(role, index[role]), c.escape_debug()),
+                    format!("{}: cannot read `{}` as a number", label(role), c.escape_debug()),
                 )
                 .line(line)
                 .field(role)),
@@ -1001,7 +1028,7 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
                     path,
                     format!(
                         "{}: agent id `{}` is not an integer from 0 to {}",
-                        label("id", index["id"]),
+                        label("id"),
                         id_cell.escape_debug(),
                         u32::MAX
                     ),
@@ -1027,16 +1054,14 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
             ),
         };
         let name_err = |role: &'static str| {
-            move |m: String| {
-                Error::invalid(path, format!("{}: {m}", label(role, index[role]))).line(line).agent(id).field(role)
-            }
+            move |m: String| Error::invalid(path, format!("{}: {m}", label(role))).line(line).agent(id).field(role)
         };
         let rig = match cell("rig")? {
-            Some(n) => intern(&mut rigs, &mut rig_ids, n).map_err(name_err("rig"))?,
+            Some(n) => rigs.intern(n).map_err(name_err("rig"))?,
             None => 0,
         };
         let cycle = match cell("cycle")? {
-            Some(n) => Some(intern(&mut cycles, &mut cycle_ids, n).map_err(name_err("cycle"))?),
+            Some(n) => Some(cycles.intern(n).map_err(name_err("cycle"))?),
             None => None,
         };
         let s = Sample { line, t, label: lab, p, heading, velocity, rig, cycle };
@@ -1065,12 +1090,13 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
         }
         track.push(s);
     }
+    Ok(Tracks { agents, rigs, cycles, rows })
+}
 
-    let fps = f64::from(o.fps);
-    let max_gap = f64::from(o.max_gap);
-    // Bound the output before allocating any per-frame array.
+/// Bounds the output before any per-frame array is allocated.
+fn check_output_size(path: &Path, agents: &BTreeMap<u32, Vec<Sample>>, fps: f64, max_gap: f64) -> Result<()> {
     let mut total = 0u64;
-    for (id, track) in &agents {
+    for (id, track) in agents {
         for s in track {
             if (s.t * fps).abs() > 2.0e9 {
                 return Err(Error::invalid(path, format!("time {} s is out of range at {fps} fps", s.t))
@@ -1086,135 +1112,143 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
             ));
         }
     }
+    Ok(())
+}
 
-    let window_half = ((f64::from(o.heading_window) * fps / 2.0).round() as usize).max(1);
-    let hold = f64::from(o.hold_speed);
-    let idle = o.idle_cycle.as_ref().and_then(|c| cycle_ids.get(c).copied());
-    let heading_from = match o.heading {
-        HeadingFrom::Auto if o.columns.heading.is_some() => HeadingFrom::Column,
-        HeadingFrom::Auto if o.columns.vx.is_some() => HeadingFrom::Velocity,
-        HeadingFrom::Auto => HeadingFrom::Motion,
-        h => h,
-    };
-    let mut report = TabularReport {
-        rows,
-        agents: agents.len(),
-        source_fps: source_fps.map(|f| f as f32),
-        fps: o.fps,
-        units: Some(units),
-        ..Default::default()
-    };
-    let mut frames: BTreeMap<i32, Vec<AgentSample>> = BTreeMap::new();
-    for (&id, track) in &agents {
-        // Resample into runs of consecutive frames, split at gaps.
-        let mut runs: Vec<Vec<Pose>> = Vec::new();
-        resample_frames(track, fps, max_gap, |k, i, u, gap| {
-            let (a, b) = (&track[i], track.get(i + 1).unwrap_or(&track[i]));
-            let lerp = |x: DVec3, y: DVec3| x + (y - x) * u;
-            let pose = Pose {
-                k: k as i32,
-                p: lerp(a.p, b.p),
-                heading: a.heading.zip(b.heading).map(|(x, y)| lerp(x, y)),
-                velocity: a.velocity.zip(b.velocity).map(|(x, y)| lerp(x, y)),
-                rig: if u < 0.5 { a.rig } else { b.rig },
-                cycle: if u < 0.5 { a.cycle } else { b.cycle },
-            };
-            match runs.last_mut() {
-                Some(run) if !gap && run.last().is_some_and(|q| i64::from(q.k) + 1 == k) => run.push(pose),
-                _ => runs.push(vec![pose]),
-            }
-        });
-        report.gaps += track.windows(2).filter(|w| w[1].t - w[0].t > max_gap).count();
+/// Stage 3: one agent's samples resampled to the target rate, in runs of
+/// consecutive frames split at gaps.
+fn resample(track: &[Sample], fps: f64, max_gap: f64) -> Vec<Vec<Pose>> {
+    let mut runs: Vec<Vec<Pose>> = Vec::new();
+    resample_frames(track, fps, max_gap, |k, i, u, gap| {
+        let (a, b) = (&track[i], track.get(i + 1).unwrap_or(&track[i]));
+        let lerp = |x: DVec3, y: DVec3| x + (y - x) * u;
+        let pose = Pose {
+            k: k as i32,
+            p: lerp(a.p, b.p),
+            heading: a.heading.zip(b.heading).map(|(x, y)| lerp(x, y)),
+            velocity: a.velocity.zip(b.velocity).map(|(x, y)| lerp(x, y)),
+            rig: if u < 0.5 { a.rig } else { b.rig },
+            cycle: if u < 0.5 { a.cycle } else { b.cycle },
+        };
+        match runs.last_mut() {
+            Some(run) if !gap && run.last().is_some_and(|q| i64::from(q.k) + 1 == k) => run.push(pose),
+            _ => runs.push(vec![pose]),
+        }
+    });
+    runs
+}
 
-        // Headings and the moving/standing state, per run.
-        let mut headings: Vec<Option<f64>> = Vec::new();
-        let mut moving: Vec<bool> = Vec::new();
-        for run in &runs {
-            let n = run.len();
-            let mut state = false;
-            // Ground-plane travel direction over the window (length ~ speed),
-            // kept only where the agent moves at full hold speed.
-            let mut travel: Vec<Option<DVec3>> = Vec::with_capacity(n);
-            for i in 0..n {
-                let (j0, j1) = (i.saturating_sub(window_half), (i + window_half).min(n - 1));
-                let span = (j1 - j0) as f64 / fps;
-                let (speed, mut dir) = match heading_from {
-                    HeadingFrom::Velocity => {
-                        let v: DVec3 =
-                            run[j0..=j1].iter().filter_map(|q| q.velocity).sum::<DVec3>() / (j1 - j0 + 1) as f64;
-                        (v.x.hypot(v.z), v)
-                    }
-                    _ => {
-                        let d = run[j1].p - run[j0].p;
-                        (if span > 0.0 { d.x.hypot(d.z) / span } else { 0.0 }, d / span.max(1e-9))
-                    }
-                };
-                dir.y = 0.0;
-                // Hysteresis: start moving at hold_speed, stop below half of it,
-                // so a dawdler does not flicker between walk and idle.
-                state = if state { speed >= hold * 0.5 } else { speed >= hold && speed > 0.0 };
-                moving.push(state);
-                travel.push((speed >= hold && speed > 1e-9).then_some(dir));
-            }
-            for i in 0..n {
-                let (j0, j1) = (i.saturating_sub(window_half), (i + window_half).min(n - 1));
-                let h = match heading_from {
-                    HeadingFrom::Column => {
-                        let v: DVec3 =
-                            run[j0..=j1].iter().filter_map(|q| q.heading.map(|h| h.normalize_or_zero())).sum();
-                        (v.x.hypot(v.z) > 1e-9).then(|| v.x.atan2(v.z))
-                    }
-                    // Turn only at full hold speed, and average the window's travel
-                    // weighted by speed, so the slow frames of a stop (where
-                    // tracking noise is a large share of the motion) barely count.
-                    _ => travel[i].map(|_| {
-                        let v: DVec3 = travel[j0..=j1].iter().flatten().sum();
-                        v.x.atan2(v.z)
-                    }),
-                };
-                headings.push(h);
-            }
-        }
-        // Held headings: the last known one, else the first one ahead, else 0.
-        let mut last = None;
-        for h in headings.iter_mut() {
-            *h = h.or(last);
-            last = *h;
-        }
-        let mut next = None;
-        for h in headings.iter_mut().rev() {
-            *h = h.or(next);
-            next = *h;
-        }
-
-        // Golden-ratio spread: neighbouring ids step out of phase.
-        let phase = (f64::from(id) * 0.618_033_988_749_895).fract();
-        let mut i = 0;
-        for run in &runs {
-            let mut walked = 0.0;
-            let mut prev: Option<DVec3> = None;
-            for pose in run {
-                if let Some(q) = prev {
-                    walked += (pose.p.x - q.x).hypot(pose.p.z - q.z);
+/// Stage 4: each pose's heading (radians about +Y; held where unknown) and
+/// whether the agent is moving, over all runs in order.
+fn headings(
+    runs: &[Vec<Pose>],
+    heading_from: HeadingFrom,
+    window_half: usize,
+    hold: f64,
+    fps: f64,
+) -> (Vec<Option<f64>>, Vec<bool>) {
+    let mut headings: Vec<Option<f64>> = Vec::new();
+    let mut moving: Vec<bool> = Vec::new();
+    for run in runs {
+        let n = run.len();
+        let mut state = false;
+        // Ground-plane travel direction over the window (length ~ speed),
+        // kept only where the agent moves at full hold speed.
+        let mut travel: Vec<Option<DVec3>> = Vec::with_capacity(n);
+        for i in 0..n {
+            let (j0, j1) = (i.saturating_sub(window_half), (i + window_half).min(n - 1));
+            let span = (j1 - j0) as f64 / fps;
+            let (speed, mut dir) = match heading_from {
+                HeadingFrom::Velocity => {
+                    let v: DVec3 = run[j0..=j1].iter().filter_map(|q| q.velocity).sum::<DVec3>() / (j1 - j0 + 1) as f64;
+                    (v.x.hypot(v.z), v)
                 }
-                prev = Some(pose.p);
-                let rig_name = rigs.get(usize::from(pose.rig)).map(String::as_str).unwrap_or_default();
-                let gait = o.gait(rig_name);
-                let standing = !moving.get(i).copied().unwrap_or(true);
-                let (cycle, cycle_frame) = match (idle, pose.cycle) {
-                    (Some(idle), None) if standing => {
-                        let len = f64::from(gait.idle_length);
-                        (idle, (f64::from(pose.k) + phase * len).rem_euclid(len))
-                    }
-                    (_, c) => {
-                        let (stride, len) = (f64::from(gait.stride), f64::from(gait.cycle_length));
-                        (c.unwrap_or(0), ((walked / stride + phase) * len).rem_euclid(len))
-                    }
-                };
-                let len =
-                    if Some(cycle) == idle && pose.cycle.is_none() { gait.idle_length } else { gait.cycle_length };
-                let cf = cycle_frame as f32;
-                frames.entry(pose.k).or_default().push(AgentSample {
+                _ => {
+                    let d = run[j1].p - run[j0].p;
+                    (if span > 0.0 { d.x.hypot(d.z) / span } else { 0.0 }, d / span.max(1e-9))
+                }
+            };
+            dir.y = 0.0;
+            // Hysteresis: start moving at hold_speed, stop below half of it,
+            // so a dawdler does not flicker between walk and idle.
+            state = if state { speed >= hold * 0.5 } else { speed >= hold && speed > 0.0 };
+            moving.push(state);
+            travel.push((speed >= hold && speed > 1e-9).then_some(dir));
+        }
+        for i in 0..n {
+            let (j0, j1) = (i.saturating_sub(window_half), (i + window_half).min(n - 1));
+            let h = match heading_from {
+                HeadingFrom::Column => {
+                    let v: DVec3 = run[j0..=j1].iter().filter_map(|q| q.heading.map(|h| h.normalize_or_zero())).sum();
+                    (v.x.hypot(v.z) > 1e-9).then(|| v.x.atan2(v.z))
+                }
+                // Turn only at full hold speed, and average the window's travel
+                // weighted by speed, so the slow frames of a stop (where
+                // tracking noise is a large share of the motion) barely count.
+                _ => travel[i].map(|_| {
+                    let v: DVec3 = travel[j0..=j1].iter().flatten().sum();
+                    v.x.atan2(v.z)
+                }),
+            };
+            headings.push(h);
+        }
+    }
+    // Held headings: the last known one, else the first one ahead, else 0.
+    let mut last = None;
+    for h in headings.iter_mut() {
+        *h = h.or(last);
+        last = *h;
+    }
+    let mut next = None;
+    for h in headings.iter_mut().rev() {
+        *h = h.or(next);
+        next = *h;
+    }
+    (headings, moving)
+}
+
+/// Stage 5: one agent's records, (cache frame, sample): the walk cycle frame
+/// follows distance walked / the rig's stride; standing agents play the
+/// idle cycle when one is named.
+fn walk_cycles(
+    id: u32,
+    runs: &[Vec<Pose>],
+    headings: &[Option<f64>],
+    moving: &[bool],
+    o: &TabularOptions,
+    tracks: &Tracks,
+) -> Vec<(i32, AgentSample)> {
+    let idle = o.idle_cycle.as_ref().and_then(|c| tracks.cycles.ids.get(c).copied());
+    // Golden-ratio spread: neighbouring ids step out of phase.
+    let phase = (f64::from(id) * 0.618_033_988_749_895).fract();
+    let mut out = Vec::new();
+    let mut i = 0;
+    for run in runs {
+        let mut walked = 0.0;
+        let mut prev: Option<DVec3> = None;
+        for pose in run {
+            if let Some(q) = prev {
+                walked += (pose.p.x - q.x).hypot(pose.p.z - q.z);
+            }
+            prev = Some(pose.p);
+            let rig_name = tracks.rigs.names.get(usize::from(pose.rig)).map(String::as_str).unwrap_or_default();
+            let gait = o.gait(rig_name);
+            let standing = !moving.get(i).copied().unwrap_or(true);
+            let (cycle, cycle_frame) = match (idle, pose.cycle) {
+                (Some(idle), None) if standing => {
+                    let len = f64::from(gait.idle_length);
+                    (idle, (f64::from(pose.k) + phase * len).rem_euclid(len))
+                }
+                (_, c) => {
+                    let (stride, len) = (f64::from(gait.stride), f64::from(gait.cycle_length));
+                    (c.unwrap_or(0), ((walked / stride + phase) * len).rem_euclid(len))
+                }
+            };
+            let len = if Some(cycle) == idle && pose.cycle.is_none() { gait.idle_length } else { gait.cycle_length };
+            let cf = cycle_frame as f32;
+            out.push((
+                pose.k,
+                AgentSample {
                     id,
                     position: pose.p.as_vec3(),
                     heading: wrap(headings.get(i).copied().flatten().unwrap_or(0.0)) as f32,
@@ -1223,19 +1257,12 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
                     // Rounding to f32 can land exactly on the length; that is frame 0.
                     cycle_frame: if cf >= len { 0.0 } else { cf },
                     flags: 0,
-                });
-                report.agent_frames += 1;
-                i += 1;
-            }
+                },
+            ));
+            i += 1;
         }
     }
-    let crowd = CrowdCache {
-        rigs,
-        cycles,
-        frames: frames.into_iter().map(|(frame, agents)| FrameBlock { frame, agents }).collect(),
-    };
-    validate(path, &crowd)?;
-    Ok((super::canonical(&crowd), report))
+    out
 }
 
 fn unreachable_time<T>(path: &Path, line: usize) -> Result<T> {
@@ -1295,6 +1322,80 @@ mod tests {
         let text = "# a\n# b\n1,2,0,0\n\n# c\n2,2,zz,0\n";
         let e = parse_str(Path::new("t.csv"), text, &o).unwrap_err().to_string();
         assert!(e.starts_with("t.csv:6:"), "{e}");
+    }
+
+    fn sample(t: f64, x: f64) -> Sample {
+        Sample { line: 0, t, label: t, p: DVec3::new(x, 0.0, 0.0), heading: None, velocity: None, rig: 0, cycle: None }
+    }
+
+    #[test]
+    fn text_stage_blanks_comments_and_keeps_line_numbers() {
+        let o = TabularOptions { delimiter: Delimiter::Whitespace, ..Default::default() };
+        let t = Table::new("# c\n1  2\t3\n\n# d\n4 5 6\n", &o);
+        assert_eq!(t.data, "\n1\t2\t3\n\n\n4\t5\t6");
+        let lines: Vec<usize> =
+            t.reader().records().map(|r| t.line_at(r.unwrap().position().unwrap().byte())).collect();
+        assert_eq!(lines, [2, 5]);
+    }
+
+    #[test]
+    fn columns_are_found_by_header_name_or_position() {
+        let cols = Columns { id: Some(Column::Name("Agent".into())), x: pos(3), ..Default::default() };
+        let header = Some(vec!["frame".to_string(), "agent".into(), "pos_x".into()]);
+        let c = ColumnIndex::new(Path::new("t.csv"), &cols, header).unwrap();
+        assert_eq!((c.index["id"], c.index["x"]), (1, 2));
+        assert_eq!(c.label("id"), "column 2 (agent, id)");
+        assert_eq!(c.label("x"), "column 3 (pos_x, x)");
+        let missing = Columns { id: Some(Column::Name("who".into())), ..Default::default() };
+        let e = ColumnIndex::new(Path::new("t.csv"), &missing, Some(vec!["a".into()])).err().unwrap().to_string();
+        assert!(e.contains("no column `who` for id; the columns found are: a"), "{e}");
+    }
+
+    #[test]
+    fn names_number_in_order_of_first_use() {
+        let mut n = Names::of(["WalkA".to_string(), "WalkA".into(), "IdleA".into()]);
+        assert_eq!(n.names, ["WalkA", "IdleA"]);
+        assert_eq!((n.intern("RunA"), n.intern("WalkA")), (Ok(2), Ok(0)));
+        assert!(n.intern("").is_err());
+    }
+
+    #[test]
+    fn resampling_splits_runs_at_gaps() {
+        // 0..1 s walked, a 3 s gap, then 4..5 s: two runs at 2 fps, none across the gap.
+        let track = [sample(0.0, 0.0), sample(1.0, 1.0), sample(4.0, 4.0), sample(5.0, 5.0)];
+        let runs = resample(&track, 2.0, 1.0);
+        let ks: Vec<Vec<i32>> = runs.iter().map(|r| r.iter().map(|p| p.k).collect()).collect();
+        assert_eq!(ks, [vec![0, 1, 2], vec![8, 9, 10]]);
+        assert!((runs[0][1].p.x - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn headings_are_held_while_standing() {
+        // Walks +x for 1 s at 1 m/s, then stands: it keeps facing +x (90 degrees).
+        let track = [sample(0.0, 0.0), sample(1.0, 1.0), sample(3.0, 1.0)];
+        let runs = resample(&track, 4.0, 5.0);
+        let (h, moving) = headings(&runs, HeadingFrom::Motion, 1, 0.25, 4.0);
+        assert_eq!(h.len(), 13);
+        assert!(h.iter().all(|h| (h.unwrap() - std::f64::consts::FRAC_PI_2).abs() < 1e-9), "{h:?}");
+        assert!(moving[1] && !moving[12]);
+    }
+
+    #[test]
+    fn standing_agents_play_the_idle_cycle() {
+        let o = TabularOptions { idle_cycle: Some("IdleA".into()), ..Default::default() };
+        let track = [sample(0.0, 0.0), sample(1.0, 1.0), sample(3.0, 1.0)];
+        let runs = resample(&track, 4.0, 5.0);
+        let (h, moving) = headings(&runs, HeadingFrom::Motion, 1, 0.25, 4.0);
+        let tracks = Tracks {
+            agents: BTreeMap::new(),
+            rigs: Names::of([o.rig.clone()]),
+            cycles: Names::of([o.cycle.clone(), "IdleA".into()]),
+            rows: 3,
+        };
+        let out = walk_cycles(7, &runs, &h, &moving, &o, &tracks);
+        assert_eq!(out.len(), 13);
+        assert_eq!((out[1].1.cycle, out[12].1.cycle), (0, 1), "walks, then idles");
+        assert!(out.iter().all(|(_, a)| a.cycle_frame >= 0.0 && a.cycle_frame < o.default_gait.cycle_length));
     }
 
     #[test]

@@ -109,7 +109,7 @@ pub fn shot_import(shot: &Shot) -> Result<Import> {
                 g.map(|g| RigClip { file: r.file.clone(), stride: g.stride, cycle_length: g.cycle_length });
         }
     }
-    Ok(Import { jupedsim, tabular: None, placement: spec.placement })
+    Ok(Import { jupedsim, tabular: None, placement: spec.placement() })
 }
 
 /// Opens the shot's cache (see [`shot_import`]).

@@ -3,15 +3,14 @@
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
-use clap::{Args, Subcommand};
-use glam::Vec3;
+use clap::error::ErrorKind;
+use clap::{Arg, ArgMatches, Args, Command, FromArgMatches, Subcommand};
 
-use throng::cache::tabular::{
-    self, AngleUnits, Column, Delimiter, Gait, Handedness, HeadingFrom, Preset, Units, UpAxis,
-};
+use throng::cache::keys::{Key, KeyKind, KeyValue, KEYS};
+use throng::cache::tabular::{Gait, Preset};
 use throng::cache::{
-    import, info, write, CacheReader, Format, Import, ImportInfo, ImportOptions, Placement, TabularOptions,
-    TabularReport, TabularSpec,
+    import, info, write, CacheReader, Format, Import, ImportInfo, ImportOptions, TabularOptions, TabularReport,
+    TabularSpec,
 };
 use throng::casting::rig::import_clip;
 use throng::casting::shot_cache::gait;
@@ -52,15 +51,20 @@ pub struct CacheConvertArgs {
 }
 
 /// How to turn a foreign simulator's trajectories or a trajectory table
-/// into agents (the same choices as a shot's `[cache]` keys, docs/shot.md).
-#[derive(Debug, Args, Clone)]
+/// into agents: the gait flags, then one flag per import key of the
+/// library's table ([`KEYS`]: the same keys as a shot's `[cache]` table,
+/// docs/shot.md), read into a [`TabularSpec`] as the shot's keys are.
+#[derive(Debug, Clone)]
 pub struct ImportArgs {
-    /// Rig given to every imported agent.
-    #[arg(long, default_value = "bipedThinA")]
-    pub rig: String,
-    /// Walk cycle given to every imported agent.
-    #[arg(long, default_value = "WalkA")]
-    pub cycle: String,
+    /// Flags of the command line only: gait overrides and the target rate.
+    pub gait: GaitArgs,
+    /// The import keys given as flags.
+    pub keys: TabularSpec,
+}
+
+/// The import flags that are not shot keys.
+#[derive(Debug, Args, Clone)]
+pub struct GaitArgs {
     /// Cycle length in frames (the walk cycle loops at this length).
     #[arg(long)]
     pub cycle_length: Option<f32>,
@@ -71,150 +75,88 @@ pub struct ImportArgs {
     /// travel) from; its rig name must match --rig. --stride and --cycle-length override it.
     #[arg(long)]
     pub rig_file: Option<PathBuf>,
-    /// Table layout preset: petrack, eth (obsmat), eth-ucy (frame id x y).
-    #[arg(long, value_parser = parse::<Preset>)]
-    pub preset: Option<Preset>,
-    /// Field delimiter: `,` `;` `tab` or `whitespace`.
-    #[arg(long, value_parser = parse::<Delimiter>)]
-    pub delimiter: Option<Delimiter>,
-    /// Comment prefix character (empty: none).
-    #[arg(long)]
-    pub comment: Option<String>,
-    /// Whether the first row names the columns (true or false).
-    #[arg(long)]
-    pub header: Option<bool>,
-    /// Columns by role: frame|time, id, x, y, z, heading, vx, vy, vz, rig,
-    /// cycle = header name or 1-based position, e.g. frame=frame,id=agent_id,x=3.
-    #[arg(long, value_parser = parse_columns)]
-    pub columns: Option<Columns>,
-    /// Source units: m, cm, mm, ft.
-    #[arg(long, value_parser = parse::<Units>)]
-    pub units: Option<Units>,
-    /// Source up axis: y or z.
-    #[arg(long, value_parser = parse::<UpAxis>)]
-    pub up: Option<UpAxis>,
-    /// Source handedness: right or left.
-    #[arg(long, value_parser = parse::<Handedness>)]
-    pub handedness: Option<Handedness>,
-    /// Unit of the heading column: radians or degrees.
-    #[arg(long, value_parser = parse::<AngleUnits>)]
-    pub heading_units: Option<AngleUnits>,
-    /// Frames per second of the source's frame column.
-    #[arg(long, value_parser = super::values::fps)]
-    pub source_fps: Option<f32>,
     /// Frames per second of the cache written (the shot's rate).
     #[arg(long, default_value_t = 24.0, value_parser = super::values::fps)]
     pub fps: f32,
-    /// Longest interval between samples, seconds, interpolated across; longer is a gap.
-    #[arg(long)]
-    pub max_gap: Option<f32>,
-    /// Heading from: auto, column, velocity, motion.
-    #[arg(long, value_parser = parse::<HeadingFrom>)]
-    pub heading: Option<HeadingFrom>,
-    /// Heading smoothing window, seconds.
-    #[arg(long)]
-    pub heading_window: Option<f32>,
-    /// Speed (m/s) below which the heading is held and the idle cycle plays.
-    #[arg(long)]
-    pub hold_speed: Option<f32>,
-    /// Cycle for standing agents (with --rig-file, its length comes from the rig).
-    #[arg(long)]
-    pub idle_cycle: Option<String>,
-    /// Move the crowd by X,Y,Z metres (after rotate and scale).
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
-    pub translate: Option<[f32; 3]>,
-    /// Turn the crowd by this many degrees about +Y (up).
-    #[arg(long, allow_hyphen_values = true)]
-    pub rotate: Option<f32>,
-    /// Scale the crowd about the origin.
-    #[arg(long)]
-    pub scale: Option<f32>,
 }
 
-/// `--columns` value: the role list, in order.
-#[derive(Debug, Clone)]
-pub struct Columns(pub Vec<(String, Option<Column>)>);
-
-fn parse<T: std::str::FromStr<Err = String>>(s: &str) -> std::result::Result<T, String> {
-    s.parse()
+/// The flag of an import key: `--source-fps` for `source_fps`, its value
+/// read by [`Key::parse`].
+fn key_arg(key: &'static Key) -> Arg {
+    Arg::new(key.name)
+        .long(key.name.replace('_', "-"))
+        .value_name(key.name.to_uppercase())
+        .help(key.help())
+        .allow_hyphen_values(matches!(key.kind, KeyKind::Number | KeyKind::Vector))
+        .value_parser(move |text: &str| key.parse(text))
 }
 
-fn parse_columns(s: &str) -> std::result::Result<Columns, String> {
-    tabular::Columns::parse_list(s).map(Columns)
+impl Args for ImportArgs {
+    fn augment_args(cmd: Command) -> Command {
+        KEYS.iter().fold(GaitArgs::augment_args(cmd), |cmd, key| cmd.arg(key_arg(key)))
+    }
+    fn augment_args_for_update(cmd: Command) -> Command {
+        ImportArgs::augment_args(cmd)
+    }
 }
 
-fn parse_vec3(s: &str) -> std::result::Result<[f32; 3], String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f32>())
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|_| format!("`{s}`: expected X,Y,Z"))?;
-    v.try_into().map_err(|_| format!("`{s}`: expected three numbers X,Y,Z"))
+impl FromArgMatches for ImportArgs {
+    fn from_arg_matches(m: &ArgMatches) -> std::result::Result<Self, clap::Error> {
+        let gait = GaitArgs::from_arg_matches(m)?;
+        let values = KEYS.iter().filter_map(|k| m.get_one::<KeyValue>(k.name).map(|v| (k.name, v.clone())));
+        let keys = TabularSpec::from_values(values).map_err(|e| clap::Error::raw(ErrorKind::ValueValidation, e))?;
+        Ok(ImportArgs { gait, keys })
+    }
+    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> std::result::Result<(), clap::Error> {
+        *self = ImportArgs::from_arg_matches(m)?;
+        Ok(())
+    }
 }
 
 impl ImportArgs {
-    /// The import options these flags ask for (reads `--rig-file`).
-    fn options(&self) -> Result<ImportOptions> {
-        // The flags are checked before the rig file is read.
-        ImportOptions::new(&self.rig, &self.cycle, self.stride, self.cycle_length, None)?;
-        let clip = self.rig_file.as_deref().map(|f| import_clip(f, &self.rig, &self.cycle)).transpose()?;
-        ImportOptions::new(&self.rig, &self.cycle, self.stride, self.cycle_length, clip)
+    /// The rig and walk cycle every agent gets (flags or their defaults).
+    fn names(&self) -> (String, String) {
+        let d = ImportOptions::default();
+        (self.keys.rig.clone().unwrap_or(d.rig), self.keys.cycle.clone().unwrap_or(d.cycle))
     }
 
-    fn spec(&self) -> TabularSpec {
-        let d = Placement::default();
-        TabularSpec {
-            preset: self.preset,
-            delimiter: self.delimiter,
-            comment: self.comment.clone(),
-            header: self.header,
-            columns: self.columns.clone().map(|c| c.0).unwrap_or_default(),
-            units: self.units,
-            up: self.up,
-            handedness: self.handedness,
-            heading_units: self.heading_units,
-            source_fps: self.source_fps,
-            max_gap: self.max_gap,
-            heading: self.heading,
-            heading_window: self.heading_window,
-            hold_speed: self.hold_speed,
-            rig: Some(self.rig.clone()),
-            cycle: Some(self.cycle.clone()),
-            idle_cycle: self.idle_cycle.clone(),
-            placement: Placement {
-                translate: self.translate.map_or(d.translate, Vec3::from),
-                rotate: self.rotate.unwrap_or(d.rotate),
-                scale: self.scale.unwrap_or(d.scale),
-            },
-        }
+    /// The import options these flags ask for (reads `--rig-file`).
+    fn options(&self) -> Result<ImportOptions> {
+        let (rig, cycle) = self.names();
+        let g = &self.gait;
+        // The flags are checked before the rig file is read.
+        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, None)?;
+        let clip = g.rig_file.as_deref().map(|f| import_clip(f, &rig, &cycle)).transpose()?;
+        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, clip)
     }
 
     /// How to read `input`: a table when its extension or the layout flags
     /// say so, else by extension; the placement flags apply to every format.
     fn import(&self, input: &Path) -> Result<Import> {
         let format = Format::of(input)?;
-        let spec = self.spec();
+        let spec = &self.keys;
+        let placement = spec.placement();
         let flag = |(k, m): (String, String)| Error::Usage(format!("--{}: {m}", k.replace('_', "-")));
-        spec.placement.check_key().map_err(flag)?;
-        if matches!(self.preset, Some(Preset::JuPedSim)) && format != Format::JuPedSim {
+        placement.check_key().map_err(flag)?;
+        if matches!(spec.preset, Some(Preset::JuPedSim)) && format != Format::JuPedSim {
             return Err(Error::Usage(format!("{}: --preset jupedsim reads .sqlite files", input.display())));
         }
         let table = format == Format::Tabular || (format == Format::Csv && spec.describes_layout());
         if !table {
             let jupedsim = if format == Format::JuPedSim { self.options()? } else { ImportOptions::default() };
-            return Ok(Import { jupedsim, tabular: None, placement: spec.placement });
+            return Ok(Import { jupedsim, tabular: None, placement });
         }
         if !spec.describes_layout() {
             return Err(throng::cache::needs_layout(input));
         }
-        let mut o = TabularOptions::resolve(&spec, self.fps).map_err(flag)?;
+        let mut o = TabularOptions::resolve(spec, self.gait.fps).map_err(flag)?;
         let jp = self.options()?;
-        let idle_length = match (&self.rig_file, &self.idle_cycle) {
-            (Some(f), Some(_)) => gait(f, &self.cycle, self.idle_cycle.as_deref())?.idle_length,
+        let idle_length = match (&self.gait.rig_file, &spec.idle_cycle) {
+            (Some(f), Some(_)) => gait(f, &self.names().1, spec.idle_cycle.as_deref())?.idle_length,
             _ => Gait::default().idle_length,
         };
         o.default_gait = Gait { stride: jp.stride(), cycle_length: jp.cycle_length(), idle_length };
-        Ok(Import { jupedsim: jp, tabular: Some(o), placement: spec.placement })
+        Ok(Import { jupedsim: jp, tabular: Some(o), placement })
     }
 }
 
@@ -280,7 +222,7 @@ fn run_info(args: &CacheInfoArgs) -> Result<()> {
             cycle: o.cycle.clone(),
             stride: o.default_gait.stride,
             cycle_length: o.default_gait.cycle_length,
-            rig_file: args.import.rig_file.as_ref().map(|f| f.display().to_string()),
+            rig_file: args.import.gait.rig_file.as_ref().map(|f| f.display().to_string()),
         });
     }
     for w in &info.warnings {
@@ -335,4 +277,85 @@ fn run_convert(args: &CacheConvertArgs) -> Result<()> {
         eprintln!("throng: warning: {w}");
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use throng::shot::Shot;
+
+    /// Each import key with a flag value and the same value as a shot writes
+    /// it, over a base that every sample fits (a table preset).
+    const SAMPLES: &[(&str, &str, &str)] = &[
+        ("preset", "petrack", r#""petrack""#),
+        ("delimiter", ";", r#"";""#),
+        ("comment", "%", r#""%""#),
+        ("header", "true", "true"),
+        ("columns", "z=5,vx=", r#"{ z = 5, vx = "" }"#),
+        ("units", "cm", r#""cm""#),
+        ("up", "y", r#""y""#),
+        ("handedness", "left", r#""left""#),
+        ("heading_units", "degrees", r#""degrees""#),
+        ("source_fps", "30", "30"),
+        ("max_gap", "2.5", "2.5"),
+        ("heading", "motion", r#""motion""#),
+        ("heading_window", "1.5", "1.5"),
+        ("hold_speed", "0.5", "0.5"),
+        ("rig", "bipedTallB", r#""bipedTallB""#),
+        ("cycle", "RunA", r#""RunA""#),
+        ("idle_cycle", "IdleA", r#""IdleA""#),
+        ("translate", "1,2,-3", "[1.0, 2.0, -3.0]"),
+        ("rotate", "-90", "-90.0"),
+        ("scale", "2", "2"),
+    ];
+
+    fn from_flags(flags: &[&str]) -> TabularSpec {
+        let cmd = ImportArgs::augment_args(Command::new("t").no_binary_name(true));
+        let m = cmd.try_get_matches_from(flags).unwrap_or_else(|e| panic!("{flags:?}: {e}"));
+        ImportArgs::from_arg_matches(&m).unwrap().keys
+    }
+
+    fn from_shot(cache_keys: &str) -> TabularSpec {
+        // Cargo.toml stands in for the cache file (only its existence is checked here).
+        let text = format!(
+            "version = 1\nname = \"k\"\n[frames]\nstart = 1\nend = 2\n[cache]\npath = \"Cargo.toml\"\n{cache_keys}\n\
+             [camera]\nkeys = [{{ frame = 1.0, position = [0.0, 1.0, 5.0], aim = [0.0, 1.0, 0.0], focal_length = 35.0 }}]\n"
+        );
+        let shot_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("shot.toml");
+        Shot::parse(&text, &shot_path).unwrap_or_else(|e| panic!("{cache_keys}: {e}")).cache.import
+    }
+
+    #[test]
+    fn every_shot_key_and_its_flag_reach_the_same_field() {
+        let names: Vec<&str> = SAMPLES.iter().map(|s| s.0).collect();
+        assert_eq!(names, KEYS.iter().map(|k| k.name).collect::<Vec<_>>(), "a sample per key, in table order");
+        for &(name, flag_value, toml_value) in SAMPLES {
+            let flag = format!("--{}", name.replace('_', "-"));
+            let (flag_base, shot_base) = if name == "preset" {
+                (vec![], String::new())
+            } else {
+                (vec!["--preset", "eth-ucy"], "preset = \"eth-ucy\"\n".into())
+            };
+            let mut flags = flag_base.clone();
+            flags.extend([flag.as_str(), flag_value]);
+            let by_flag = from_flags(&flags);
+            let by_shot = from_shot(&format!("{shot_base}{name} = {toml_value}"));
+            assert_eq!(by_flag, by_shot, "{name}");
+            // The key reached its own field and no other.
+            let base = from_flags(&flag_base);
+            assert_ne!(by_flag, base, "{name} changes the spec");
+            let changed: Vec<&str> =
+                by_flag.set_keys().filter(|k| !base.set_keys().any(|b| b.name == k.name)).map(|k| k.name).collect();
+            if name != "preset" {
+                assert_eq!(changed, [name], "{name}");
+            }
+        }
+    }
+
+    #[test]
+    fn key_flags_refuse_bad_values_at_parse_time() {
+        let cmd = ImportArgs::augment_args(Command::new("t").no_binary_name(true));
+        let e = cmd.try_get_matches_from(["--units", "parsecs"]).unwrap_err().to_string();
+        assert!(e.contains("--units") && e.contains("unknown value `parsecs`; expected one of: m, cm, mm, ft"), "{e}");
+    }
 }
