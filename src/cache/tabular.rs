@@ -168,7 +168,7 @@ named_enum!(
 );
 
 /// The field delimiter.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Delimiter {
     /// One byte, e.g. `,` `;` or tab.
     Byte(u8),
