@@ -31,8 +31,6 @@ struct Case {
     absent: &'static [&'static str],
 }
 
-
-
 fn demo(rel: &str) -> String {
     repo_path("demo").join(rel).display().to_string()
 }

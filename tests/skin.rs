@@ -148,7 +148,7 @@ fn agents_on_one_quantised_pose_share_one_mesh_and_others_do_not() {
     assert_ne!(mesh_of(&crowd, 1020, 1), mesh_of(&crowd, 1020, 3), "another pose");
     assert_ne!(mesh_of(&crowd, 1020, 1), mesh_of(&crowd, 1021, 1), "the next frame is another pose");
     // Three poses in all (frames 4, 5, 10 of the walk): posed once each.
-    assert_eq!(crowd.posed.meshes.len(), 3);
+    assert_eq!(crowd.poses().skins().mesh_count(), 3);
     let stats = throng::casting::table::cast_stats(&crowd);
     let skin = stats.skinned.expect("skinned figures");
     assert_eq!((skin.agents, skin.unique_poses, skin.posed_meshes), (3, 3, 3));
@@ -196,7 +196,12 @@ fn render_layers(shot: &Path, out: &Path, threads: usize, layers: &[&str]) -> Ve
             out.to_path_buf(),
         )
     };
-    throng::render::job::run(&crowd, Some(&manifest), &job, &throng::render::job::Silent).unwrap().layers.into_iter().map(|r| r.path).collect()
+    throng::render::job::run(&crowd, Some(&manifest), &job, &throng::render::job::Silent)
+        .unwrap()
+        .layers
+        .into_iter()
+        .map(|r| r.path)
+        .collect()
 }
 
 #[test]
