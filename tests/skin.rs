@@ -164,7 +164,7 @@ fn removing_an_agent_changes_no_other_agents_cast_or_pose() {
     let dir2 = common::tempdir().unwrap();
     let b = ShotCrowd::load(&common::figure_shot(dir2.path(), &without, "")).unwrap();
     for id in [1u32, 2, 4, 5] {
-        assert_eq!(a.casting[&id], b.casting[&id], "agent {id}'s casting");
+        assert_eq!(a.cast(id).unwrap(), b.cast(id).unwrap(), "agent {id}'s casting");
         for f in [1020, 1023, 1026] {
             let pose = |c: &ShotCrowd| {
                 let block = c.agents_at(f).unwrap();
