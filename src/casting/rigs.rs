@@ -11,6 +11,7 @@ use crate::shot::Shot;
 
 /// One rig of the shot.
 #[derive(Debug, Clone)]
+#[allow(clippy::large_enum_variant, reason = "a shot holds a handful of rigs, each once")]
 pub enum ShotRig {
     /// Rigid nodes with part slots (the frankenbot).
     Slots(Rig),
