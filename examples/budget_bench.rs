@@ -96,13 +96,13 @@ fn bench() -> Result<bool, String> {
     } else {
         separate(&manifest, &job, &shot)?
     };
-    let [w, h] = crowd.shot.render.resolution;
+    let [w, h] = crowd.shot().render.resolution;
     println!(
         "shot {} ({} agents, {w}x{h}, frame {frame}, {spp} spp), budget {}, proxy casters {}: {} layers",
-        crowd.shot.name,
-        crowd.casting.len(),
+        crowd.shot().name,
+        crowd.casting().len(),
         throng::layers::format_bytes(budget_bytes),
-        crowd.shot.layers.proxy_shadow_casters,
+        crowd.shot().layers.proxy_shadow_casters,
         manifest.layers.len()
     );
     println!(

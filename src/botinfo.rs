@@ -64,13 +64,13 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
     let camera = crowd.camera(frame)?;
     let mut out = Vec::new();
     for &id in ids {
-        let Some(cast) = crowd.casting.get(&id) else {
-            let near = nearest_ids(crowd.casting.keys().copied(), id, 5);
+        let Some(cast) = crowd.cast(id) else {
+            let near = nearest_ids(crowd.casting().ids(), id, 5);
             return Err(Error::Usage(format!(
                 "agent {id} is not in shot {} (frames {}-{}); nearest ids: {}",
-                crowd.shot.name,
-                crowd.shot.frames.start,
-                crowd.shot.frames.end,
+                crowd.shot().name,
+                crowd.shot().frames.start,
+                crowd.shot().frames.end,
                 near.iter().map(u32::to_string).collect::<Vec<_>>().join(", ")
             )));
         };
@@ -78,11 +78,11 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
         let Some(a) = rec else {
             return Err(Error::setting(
                 "frame",
-                format!("agent {id} is in shot {} but not at frame {frame}; try another frame", crowd.shot.name),
+                format!("agent {id} is in shot {} but not at frame {frame}; try another frame", crowd.shot().name),
             ));
         };
         let height = crowd.agent_height(id).unwrap_or(1.8);
-        let (distance, _, _) = crate::layers::measure(&camera, crowd.shot.render.resolution[1], a.position, height);
+        let (distance, _, _) = crate::layers::measure(&camera, crowd.shot().render.resolution[1], a.position, height);
         out.push(BotInfo {
             id,
             rig: cast.rig.to_string(),
@@ -95,7 +95,7 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
             heading_deg: a.heading.to_degrees(),
             distance,
             seated: a.seated(),
-            removed: crowd.shot.removed.contains(&id),
+            removed: crowd.shot().removed.contains(&id),
             layer: None,
             lod: None,
             parts: cast_row(crowd, cast).parts,

@@ -8,7 +8,7 @@ use std::collections::BTreeSet;
 use throng::cache::{self, CacheReader};
 use throng::casting::wardrobe::Wardrobes;
 use throng::casting::{cast_agent, RigCasting};
-use throng::casting::{Lod, ShotCrowd};
+use throng::casting::{AgentDress, Lod, ShotCrowd, ShotRig};
 use throng::shot::Shot;
 
 use common::demo_shot;
@@ -18,23 +18,24 @@ fn load_with(edit: impl FnOnce(&mut Shot, &mut cache::CrowdCache)) -> ShotCrowd 
     let mut crowd = cache::read(&shot.cache.path).unwrap();
     edit(&mut shot, &mut crowd);
     let path = shot.cache.path.clone();
-    ShotCrowd::new(shot, CacheReader::from_crowd(path, crowd)).unwrap()
+    ShotCrowd::new(shot, CacheReader::from_crowd(path, crowd), None).unwrap()
 }
 
 #[test]
 fn heads_are_uniform_and_inside_their_box() {
     let crowd = ShotCrowd::load(&demo_shot()).unwrap();
     let mut heads = 0;
-    for (id, parts) in &crowd.dressed {
-        let cast = &crowd.casting[id];
-        let rig = &crowd.rigs[&*cast.rig];
+    for (id, dress) in crowd.dressing().iter() {
+        let AgentDress::Slots(parts) = dress else { continue };
+        let cast = crowd.cast(id).unwrap();
+        let Some(ShotRig::Slots(rig)) = crowd.rigs().get(&cast.rig) else { panic!("agent {id} dressed in slots") };
         // A part may be several pieces (one per glTF material): check the
         // union of its pieces, as fitted.
         let mut by_slot: std::collections::BTreeMap<usize, (glam::Vec3, glam::Vec3, glam::Affine3A)> =
             Default::default();
         for p in parts {
             let (lo, hi) = crowd.library().meshes[p.mesh as usize].bounds();
-            let fit = crowd.fits[p.fit as usize].slot_from_part;
+            let fit = crowd.dressing().fit(p.fit).slot_from_part;
             let (a, b) = (fit.transform_point3(lo), fit.transform_point3(hi));
             let e = by_slot.entry(p.slot as usize).or_insert((a, b, fit));
             e.0 = e.0.min(a);
@@ -94,18 +95,18 @@ fn height_scales_are_uniform_within_range() {
 #[test]
 fn seated_agents_are_never_scaled() {
     let crowd = ShotCrowd::load(&demo_shot()).unwrap();
-    let block = crowd.agents_at(crowd.shot.frames.start).unwrap();
+    let block = crowd.agents_at(crowd.shot().frames.start).unwrap();
     let seated: Vec<_> = block.agents.iter().filter(|a| a.seated()).collect();
     assert!(!seated.is_empty());
     for a in seated {
-        assert_eq!(crowd.casting[&a.id].height_scale, 1.0, "agent {}", a.id);
+        assert_eq!(crowd.cast(a.id).unwrap().height_scale, 1.0, "agent {}", a.id);
     }
 }
 
 #[test]
 fn removal_and_reordering_change_no_other_agent() {
     let base = ShotCrowd::load(&demo_shot()).unwrap();
-    let victim = *base.casting.keys().nth(7).unwrap();
+    let victim = base.casting().ids().nth(7).unwrap();
     let removed = load_with(|_, c| {
         for f in &mut c.frames {
             f.agents.retain(|a| a.id != victim);
@@ -116,12 +117,13 @@ fn removal_and_reordering_change_no_other_agent() {
             f.agents.reverse();
         }
     });
-    assert!(!removed.casting.contains_key(&victim));
-    for (id, cast) in &base.casting {
-        if *id != victim {
-            assert_eq!(&removed.casting[id], cast, "agent {id} changed when {victim} was removed");
+    assert!(removed.cast(victim).is_none());
+    for cast in base.casting().iter() {
+        let id = cast.id;
+        if id != victim {
+            assert_eq!(removed.cast(id), Some(cast), "agent {id} changed when {victim} was removed");
         }
-        assert_eq!(&reordered.casting[id], cast, "agent {id} changed on reordering");
+        assert_eq!(reordered.cast(id), Some(cast), "agent {id} changed on reordering");
     }
 }
 
@@ -129,10 +131,10 @@ fn removal_and_reordering_change_no_other_agent() {
 fn same_seed_same_cast_other_seed_differs() {
     let a = ShotCrowd::load(&demo_shot()).unwrap();
     let b = ShotCrowd::load(&demo_shot()).unwrap();
-    assert_eq!(a.casting, b.casting);
+    assert_eq!(a.casting(), b.casting());
     let c = load_with(|s, _| s.seed += 1);
-    let differ = a.casting.iter().filter(|(id, cast)| c.casting[*id] != **cast).count();
-    assert!(differ > a.casting.len() / 2, "only {differ} agents changed with another seed");
+    let differ = a.casting().iter().filter(|cast| c.cast(cast.id) != Some(*cast)).count();
+    assert!(differ > a.casting().len() / 2, "only {differ} agents changed with another seed");
 }
 
 #[test]
@@ -140,7 +142,7 @@ fn excluded_parts_and_culled_cycles_never_appear() {
     let base = ShotCrowd::load(&demo_shot()).unwrap();
     // Exclude the most used head.
     let mut counts = std::collections::BTreeMap::new();
-    for c in base.casting.values() {
+    for c in base.casting().iter() {
         for s in &c.slots {
             if let Some(p) = s.part.as_ref().filter(|p| p.uniform) {
                 *counts.entry(p.mesh.clone()).or_insert(0) += 1;
@@ -154,10 +156,10 @@ fn excluded_parts_and_culled_cycles_never_appear() {
         s.exclude_parts.push(top.to_string());
         s.culled_cycles.push(culled.clone());
     });
-    for c in edited.casting.values() {
+    for c in edited.casting().iter() {
         assert!(c.slots.iter().all(|s| s.part.as_ref().is_none_or(|p| p.mesh != top)), "agent {} wears {top}", c.id);
     }
-    for f in edited.shot.frames.iter() {
+    for f in edited.shot().frames.iter() {
         let block = edited.agents_at(f).unwrap();
         let instances = edited.frame_instances(f, |_| Lod::Full).unwrap();
         let ids: BTreeSet<u32> = instances.iter().filter_map(|i| i.agent.get()).collect();
@@ -172,7 +174,7 @@ fn excluded_parts_and_culled_cycles_never_appear() {
 #[test]
 fn posed_agents_stand_on_the_floor() {
     let crowd = ShotCrowd::load(&demo_shot()).unwrap();
-    let f = crowd.shot.frames.start;
+    let f = crowd.shot().frames.start;
     let block = crowd.agents_at(f).unwrap();
     for a in block.agents.iter().filter(|a| !a.seated()) {
         let mut insts = Vec::new();
@@ -195,7 +197,7 @@ fn export_reopens_with_shared_meshes() {
     let crowd = ShotCrowd::load(&demo_shot()).unwrap();
     let dir = common::tempdir().unwrap();
     let out = dir.path().join("frame.glb");
-    let frame = crowd.shot.frames.middle();
+    let frame = crowd.shot().frames.middle();
     let s = throng::export::export_frame(&crowd, frame, None, &out).unwrap();
     let (doc, _, _) = gltf::import(&out).unwrap();
     let rendered = crowd.agents_at(frame).unwrap().agents.iter().filter(|a| crowd.renders(a)).count();
@@ -251,4 +253,29 @@ fn streamed_scene_equals_the_shared_poses_scene() {
             assert_eq!(a.world_from_object, b.world_from_object);
         }
     }
+}
+
+/// `instance_count` (what layer budgets and the render's instance lists are
+/// sized by) is what posing places, for every agent of the demo (slot rigs
+/// and skinned characters) at both LODs, and each agent is dressed in the
+/// kind of its rig.
+#[test]
+fn instance_counts_are_what_posing_places() {
+    let crowd = ShotCrowd::load(&demo_shot()).unwrap();
+    let frame = crowd.shot().frames.middle();
+    let (mut slots, mut skinned) = (0, 0);
+    for a in crowd.agents_at(frame).unwrap().agents.iter().filter(|a| crowd.renders(a)) {
+        match (crowd.dressing().get(a.id), crowd.rigs().get(&crowd.cast(a.id).unwrap().rig)) {
+            (Some(AgentDress::Slots(_)), Some(ShotRig::Slots(_))) => slots += 1,
+            (Some(AgentDress::Skinned(_)), Some(ShotRig::Skinned(_))) => skinned += 1,
+            (dress, _) => panic!("agent {} is dressed as {dress:?} for its rig", a.id),
+        }
+        for lod in [Lod::Full, Lod::Proxy] {
+            let mut insts = Vec::new();
+            crowd.agent_instances(a, lod, throng::scene::vis::ALL, &mut insts).unwrap();
+            assert_eq!(insts.len(), crowd.instance_count(a.id, lod), "agent {} at {lod:?}", a.id);
+            assert!(!insts.is_empty(), "agent {} places nothing at {lod:?}", a.id);
+        }
+    }
+    assert!(slots > 0 && skinned > 0, "{slots} slot-rig and {skinned} skinned agents");
 }

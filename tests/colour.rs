@@ -332,3 +332,32 @@ fn the_comp_refuses_layers_of_two_colourspaces() {
     assert!(err.contains("throng/colorspace") && err.contains("ACEScg") && err.contains("crowd"), "{err}");
     assert!(!dir.path().join("c.exr").exists());
 }
+
+/// The crowd's colours are converted by type: `into_acescg` takes the
+/// Rec.709 crowd and gives an ACEScg one (converting twice, or exporting
+/// the converted crowd, does not compile: the doctests of `into_acescg`),
+/// and a render refuses a crowd whose colourspace is not its job's.
+#[test]
+fn the_render_takes_a_crowd_in_its_colourspace() {
+    let crowd = throng::casting::ShotCrowd::load(&common::demo_shot()).unwrap();
+    assert_eq!(crowd.poses().colourspace(), Colourspace::Rec709);
+    let authored = crowd.library().materials.clone();
+    let dir = common::tempdir().unwrap();
+    let frame = crowd.shot().frames.start;
+    let job = throng::render::job::RenderJob {
+        colourspace: Colourspace::Acescg,
+        resolution: Some([16, 9]),
+        ..throng::render::job::RenderJob::new(vec!["full".into()], vec![frame], 1, dir.path().to_path_buf())
+    };
+    let err = throng::render::job::run(&crowd, None, &job, &throng::render::job::Silent).unwrap_err().to_string();
+    assert!(err.contains("ACEScg") && err.contains("lin_rec709"), "{err}");
+    assert!(!dir.path().join("full").exists(), "a refused job writes nothing");
+    let converted = colour::into_acescg(crowd);
+    assert_eq!(converted.poses().colourspace(), Colourspace::Acescg);
+    assert_eq!(converted.library().materials.len(), authored.len());
+    for (a, b) in authored.iter().zip(&converted.library().materials) {
+        assert!((colour::rec709_to_acescg(a.base_color) - b.base_color).abs().max_element() < 1e-6, "{}", a.name);
+    }
+    let done = throng::render::job::run(&converted, None, &job, &throng::render::job::Silent).unwrap();
+    assert_eq!(done.layers.len(), 1);
+}

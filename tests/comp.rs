@@ -90,20 +90,22 @@ fn renders() -> &'static Renders {
     R.get_or_init(|| {
         let dir = out_dir();
         let _ = std::fs::remove_dir_all(&dir);
-        let mut crowd = ShotCrowd::load(Path::new(SHOT)).unwrap();
+        let crowd = ShotCrowd::load(Path::new(SHOT)).unwrap();
         let manifest = throng::layers::build_layers(&crowd, &layers_args()).unwrap();
         throng::layers::write_manifest(&dir.join("stack.layers.json"), &manifest).unwrap();
         let a = dir.join("a");
         render(&crowd, &manifest, &["set", "crowd2", "crowd1", "crowd0", "full"], &a);
         // Another seed: an independent sample of the same full render.
-        let seed = crowd.shot.seed;
-        crowd.shot.seed = seed + 1;
+        let seed = crowd.shot().seed;
+        let crowd = crowd.with_shot(|shot| shot.seed = seed + 1);
         render(&crowd, &manifest, &["full"], &dir.join("b"));
-        crowd.shot.seed = seed;
         // Removal keeps casting and layers, so only these agents go.
-        crowd.shot.removed = manifest.agents.iter().map(|a| a.id).collect();
+        let crowd = crowd.with_shot(|shot| {
+            shot.seed = seed;
+            shot.removed = manifest.agents.iter().map(|a| a.id).collect();
+        });
         render(&crowd, &manifest, &["set"], &dir.join("bare"));
-        crowd.shot.removed = vec![1];
+        let crowd = crowd.with_shot(|shot| shot.removed = vec![1]);
         render(&crowd, &manifest, &["crowd1"], &dir.join("without1"));
         Renders {
             full_b: read(&dir.join("b"), "full"),

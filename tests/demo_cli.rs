@@ -22,7 +22,7 @@ fn fixed_layers_do_not_pop_and_per_frame_ranking_does() {
     let crowd = ShotCrowd::load(&demo_shot()).unwrap();
     let fixed = build_layers(&crowd, &layer_args(false)).unwrap();
     assert_eq!(fixed.pops.agents_changed, 0);
-    assert_eq!(fixed.ref_frame, crowd.shot.frames.middle());
+    assert_eq!(fixed.ref_frame, crowd.shot().frames.middle());
     let per_frame = build_layers(&crowd, &layer_args(true)).unwrap();
     assert!(per_frame.pops.agents_changed > 0, "the demo's walkers cross layer boundaries");
     // Layers are ordered by distance, nearest first.
@@ -46,7 +46,7 @@ fn removing_an_agent_moves_no_other_agent_between_layers() {
     let mut shot = Shot::load(&demo_shot()).unwrap();
     shot.removed.push(victim);
     let cache = CacheReader::open(&shot.cache.path).unwrap();
-    let removed = ShotCrowd::new(shot, cache).unwrap();
+    let removed = ShotCrowd::new(shot, cache, None).unwrap();
     let after = build_layers(&removed, &layer_args(false)).unwrap();
     for a in &before.agents {
         let b = after.agent(a.id).unwrap();
@@ -106,7 +106,7 @@ fn a_cycle_the_rig_lacks_is_named_with_frame_and_agent() {
     let last = (crowd.cycles.len() - 1) as u16;
     let victim = crowd.frames[3].agents[5].id;
     crowd.frames[3].agents[5].cycle = last;
-    let err = match ShotCrowd::new(shot.clone(), CacheReader::from_crowd(shot.cache.path.clone(), crowd)) {
+    let err = match ShotCrowd::new(shot.clone(), CacheReader::from_crowd(shot.cache.path.clone(), crowd), None) {
         Ok(_) => panic!("an unknown cycle was accepted"),
         Err(e) => e.to_string(),
     };
@@ -137,7 +137,7 @@ fn an_unknown_scheme_names_file_agent_and_key_once() {
     let mut shot = Shot::load(&demo_shot()).unwrap();
     shot.rigs.get_mut("bipedTallB").unwrap().schemes = [("NoSuchScheme".to_string(), 1.0)].into();
     let cache = CacheReader::open(&shot.cache.path).unwrap();
-    let err = match ShotCrowd::new(shot, cache) {
+    let err = match ShotCrowd::new(shot, cache, None) {
         Ok(_) => panic!("an unknown scheme was accepted"),
         Err(e) => e.to_string(),
     };

@@ -100,7 +100,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[String], out: &Path)
 }
 
 /// As [`render`], with motion blur over `shutter` (the crowd must have been
-/// prepared for it).
+/// built for it).
 fn render_with_shutter(
     crowd: &ShotCrowd,
     manifest: &Manifest,
@@ -522,7 +522,7 @@ fn rigged_figure_matches_golden() {
     if update_goldens(&rendered) {
         return;
     }
-    let (lines, failures) = check_against_golden(&rendered, &crowd.shot.name, GOLDEN_POINTS, true);
+    let (lines, failures) = check_against_golden(&rendered, &crowd.shot().name, GOLDEN_POINTS, true);
     for l in &lines {
         println!("{l}");
     }
@@ -554,7 +554,7 @@ fn demo_layers_match_golden() {
 
     // Evidence of an earlier failure must not outlive it.
     let _ = std::fs::remove_dir_all(diff_dir());
-    let (lines, failures) = check_against_golden(&rendered, &crowd.shot.name, GOLDEN_POINTS, true);
+    let (lines, failures) = check_against_golden(&rendered, &crowd.shot().name, GOLDEN_POINTS, true);
     for l in &lines {
         println!("{l}");
     }
@@ -571,9 +571,10 @@ fn demo_layers_match_golden() {
 /// the same size, samples and metric as the still goldens.
 #[test]
 fn blurred_demo_matches_golden() {
-    let (mut crowd, manifest) = demo();
+    let (_, manifest) = demo();
     let shutter = [-0.25, 0.25];
-    throng::casting::motion::prepare_shutter(&mut crowd, shutter).expect("shutter poses");
+    let shot = throng::shot::Shot::load(&repo().join("demo/shot.toml")).expect("demo shot loads");
+    let crowd = ShotCrowd::open(shot, Some(shutter)).expect("demo casts for the shutter");
     let tmp = common::tempdir().expect("temp dir");
     let rendered = render_with_shutter(&crowd, &manifest, &[FULL_LAYER.to_string()], tmp.path(), Some(shutter));
     // Golden names carry `demo_blur` so they sit beside the still goldens.
@@ -609,13 +610,13 @@ fn metric_accepts_another_seed() {
     if std::env::var_os("UPDATE_GOLDEN").is_some() {
         return;
     }
-    let (mut crowd, manifest) = demo();
+    let (crowd, manifest) = demo();
     // Casting already happened at load: this changes only the render's samples.
-    crowd.shot.seed = crowd.shot.seed.wrapping_add(7919);
+    let crowd = crowd.with_shot(|shot| shot.seed = shot.seed.wrapping_add(7919));
     let layers = golden_layers(&manifest);
     let tmp = common::tempdir().expect("temp dir");
     let rendered = render(&crowd, &manifest, &layers, tmp.path());
-    let (lines, failures) = check_against_golden(&rendered, &crowd.shot.name, RESEED_POINTS, false);
+    let (lines, failures) = check_against_golden(&rendered, &crowd.shot().name, RESEED_POINTS, false);
     for l in &lines {
         println!("{l}");
     }
@@ -632,18 +633,20 @@ fn metric_rejects_a_moved_sun() {
     if std::env::var_os("UPDATE_GOLDEN").is_some() {
         return;
     }
-    let (mut crowd, manifest) = demo();
-    let sun = crowd.shot.lights.sun.as_mut().expect("the demo has a sun");
-    let [x, y, z] = sun.direction;
-    let (s, c) = 4.0f32.to_radians().sin_cos();
-    sun.direction = [c * x + s * z, y, -s * x + c * z];
+    let (crowd, manifest) = demo();
+    let crowd = crowd.with_shot(|shot| {
+        let sun = shot.lights.sun.as_mut().expect("the demo has a sun");
+        let [x, y, z] = sun.direction;
+        let (s, c) = 4.0f32.to_radians().sin_cos();
+        sun.direction = [c * x + s * z, y, -s * x + c * z];
+    });
     // The crowd layers barely change at this size (their shading turns a
     // little); the set's shadows move, and `full` has both.
     let layers = vec![manifest.set.name.clone(), FULL_LAYER.to_string()];
     let tmp = common::tempdir().expect("temp dir");
     let rendered = render(&crowd, &manifest, &layers, tmp.path());
     // Same seed as the golden: only the sun differs.
-    let (lines, failures) = check_against_golden(&rendered, &crowd.shot.name, GOLDEN_POINTS, false);
+    let (lines, failures) = check_against_golden(&rendered, &crowd.shot().name, GOLDEN_POINTS, false);
     for l in &lines {
         println!("{l}");
     }

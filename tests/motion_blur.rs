@@ -10,7 +10,7 @@ mod common;
 use std::path::Path;
 
 use glam::{Affine3A, Vec2, Vec3};
-use throng::casting::motion::{prepare_shutter, MotionFrame};
+use throng::casting::motion::MotionFrame;
 use throng::casting::ShotCrowd;
 use throng::render::accel::BlasSet;
 use throng::render::film::{render_frame, Film};
@@ -221,16 +221,17 @@ fn blurred_renders_are_bit_identical_for_any_thread_count() {
 
 // ---------------------------------------------------------------- casting
 
-fn demo() -> ShotCrowd {
-    ShotCrowd::load(&common::demo_shot()).expect("demo loads")
+/// The demo cast and posed for `shutter`.
+fn demo(shutter: [f32; 2]) -> ShotCrowd {
+    let shot = throng::shot::Shot::load(&common::demo_shot()).expect("demo loads");
+    ShotCrowd::open(shot, Some(shutter)).expect("demo casts")
 }
 
 /// The demo's agents move over the shutter; those walking keep their feet:
 /// the frame-centre sample of a sub-frame sampled agent is its cache record.
 #[test]
 fn demo_agents_move_over_the_shutter() {
-    let mut crowd = demo();
-    prepare_shutter(&mut crowd, [-0.25, 0.25]).expect("poses");
+    let crowd = demo([-0.25, 0.25]);
     let m = MotionFrame::new(&crowd, 1024, [-0.25, 0.25]).expect("motion frame");
     assert!(throng::casting::motion::moves(&m));
     let skinned_deforming = m.agents.iter().filter(|(_, a)| a.deform.is_some()).count();
@@ -261,8 +262,7 @@ fn demo_agents_move_over_the_shutter() {
 fn skinned_agents_deformation_blur() {
     let dir = common::tempdir().unwrap();
     let shot = common::figure_shot(dir.path(), &common::five_walkers(), "pose_step = 1.0");
-    let mut crowd = ShotCrowd::load(&shot).unwrap();
-    prepare_shutter(&mut crowd, [-0.25, 0.25]).unwrap();
+    let crowd = ShotCrowd::open(throng::shot::Shot::load(&shot).unwrap(), Some([-0.25, 0.25])).unwrap();
     let manifest = throng::layers::build_layers(&crowd, &Default::default()).unwrap();
     let m = MotionFrame::new(&crowd, 1023, [-0.25, 0.25]).unwrap();
     assert!(m.agents.iter().any(|(_, a)| a.deform.is_some()));
@@ -294,9 +294,8 @@ fn lum(p: &[f32; 4]) -> f64 {
 #[test]
 fn blurred_stack_matches_blurred_full_render() {
     let dir = common::tempdir().unwrap();
-    let mut crowd = demo();
     let shutter = [-0.25, 0.25];
-    prepare_shutter(&mut crowd, shutter).unwrap();
+    let crowd = demo(shutter);
     let manifest = throng::layers::build_layers(&crowd, &Default::default()).unwrap();
     let frame = 1024;
     let render = |crowd: &ShotCrowd, layers: Vec<String>, out: &Path| {
@@ -310,7 +309,7 @@ fn blurred_stack_matches_blurred_full_render() {
     let mut layers = job::all_layers(&manifest);
     layers.push("full".into());
     render(&crowd, layers, &dir.path().join("a"));
-    crowd.shot.seed += 1;
+    let crowd = crowd.with_shot(|shot| shot.seed += 1);
     render(&crowd, vec!["full".into()], &dir.path().join("b"));
     let read = |d: &str, l: &str| {
         throng::render::exr::read_layer(&throng::output::layer_path(&dir.path().join(d), "demo", l, frame)).unwrap().0
@@ -351,10 +350,42 @@ fn blurred_stack_matches_blurred_full_render() {
 
 // ---------------------------------------------------------------- input
 
+/// The pose library is built for its shutter: the shutter's steps are posed
+/// after every still mesh (which keeps its id and geometry), and a render
+/// refuses to blur a crowd posed for no shutter or another one.
+#[test]
+fn the_render_takes_a_crowd_posed_for_its_shutter() {
+    let still = ShotCrowd::load(&common::demo_shot()).expect("demo loads");
+    let shutter = [-0.25, 0.25];
+    let blurred = demo(shutter);
+    assert_eq!((still.poses().shutter(), blurred.poses().shutter()), (None, Some(shutter)));
+    let (s, b) = (still.library(), blurred.library());
+    // (The demo's still frames already take most steps its shutter keys need.)
+    assert!(b.meshes.len() >= s.meshes.len());
+    for (x, y) in s.meshes.iter().zip(&b.meshes) {
+        assert_eq!((&x.name, &x.positions, &x.indices), (&y.name, &y.positions, &y.indices));
+    }
+    assert!(blurred.poses().skins().step_count() >= still.poses().skins().step_count());
+    let dir = common::tempdir().unwrap();
+    let job = RenderJob {
+        shutter: Some(shutter),
+        resolution: Some([16, 9]),
+        ..RenderJob::new(vec!["full".into()], vec![1024], 1, dir.path().to_path_buf())
+    };
+    let err = job::run(&still, None, &job, &job::Silent).unwrap_err().to_string();
+    assert!(err.contains("shutter"), "{err}");
+    let other = RenderJob { shutter: Some([0.0, 0.5]), ..job.clone() };
+    assert!(job::run(&blurred, None, &other, &job::Silent).is_err());
+    assert!(!dir.path().join("full").exists(), "a refused job writes nothing");
+    // A still job renders from either crowd.
+    let still_job = RenderJob { shutter: None, ..job };
+    assert_eq!(job::run(&blurred, None, &still_job, &job::Silent).unwrap().layers.len(), 1);
+}
+
 /// `--resume` re-renders when the shutter changes, or when blur is turned on.
 #[test]
 fn the_shutter_is_in_the_render_fingerprint() {
-    let crowd = demo();
+    let crowd = ShotCrowd::load(&common::demo_shot()).expect("demo loads");
     let still = RenderJob::new(vec!["full".into()], vec![1024], 4, "/tmp/x".into());
     let blur = RenderJob { shutter: Some([-0.25, 0.25]), ..still.clone() };
     let other = RenderJob { shutter: Some([0.0, 0.5]), ..still.clone() };

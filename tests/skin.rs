@@ -148,7 +148,7 @@ fn agents_on_one_quantised_pose_share_one_mesh_and_others_do_not() {
     assert_ne!(mesh_of(&crowd, 1020, 1), mesh_of(&crowd, 1020, 3), "another pose");
     assert_ne!(mesh_of(&crowd, 1020, 1), mesh_of(&crowd, 1021, 1), "the next frame is another pose");
     // Three poses in all (frames 4, 5, 10 of the walk): posed once each.
-    assert_eq!(crowd.posed.meshes.len(), 3);
+    assert_eq!(crowd.poses().skins().mesh_count(), 3);
     let stats = throng::casting::table::cast_stats(&crowd);
     let skin = stats.skinned.expect("skinned figures");
     assert_eq!((skin.agents, skin.unique_poses, skin.posed_meshes), (3, 3, 3));
@@ -164,7 +164,7 @@ fn removing_an_agent_changes_no_other_agents_cast_or_pose() {
     let dir2 = common::tempdir().unwrap();
     let b = ShotCrowd::load(&common::figure_shot(dir2.path(), &without, "")).unwrap();
     for id in [1u32, 2, 4, 5] {
-        assert_eq!(a.casting[&id], b.casting[&id], "agent {id}'s casting");
+        assert_eq!(a.cast(id).unwrap(), b.cast(id).unwrap(), "agent {id}'s casting");
         for f in [1020, 1023, 1026] {
             let pose = |c: &ShotCrowd| {
                 let block = c.agents_at(f).unwrap();

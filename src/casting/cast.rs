@@ -6,12 +6,18 @@
 //! hash(seed, agent id, purpose), never from a shared sequence, so adding,
 //! removing or reordering agents changes no other agent.
 
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::Path;
 use std::sync::Arc;
 
 use glam::{Affine3A, Quat, Vec3};
+use rayon::prelude::*;
 
-use crate::casting::wardrobe::{Scheme, Wardrobes};
+use crate::cache::CacheReader;
+use crate::casting::rigs::{ShotRig, ShotRigs};
+use crate::casting::wardrobe::{CastPart, Scheme, Wardrobes, GLTF_MATERIAL};
+use crate::error::{Error, Result};
+use crate::shot::Shot;
 
 /// A 64-bit mix (splitmix64's finaliser): a bijection with good avalanche.
 pub fn mix64(mut z: u64) -> u64 {
@@ -63,19 +69,6 @@ pub fn weighted_pick(weights: &[f32], u: f64) -> Option<usize> {
         }
     }
     last // rounding at the very top of the range
-}
-
-/// The part chosen for one slot.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CastPart {
-    /// glTF file.
-    pub file: Arc<Path>,
-    /// Mesh name in the file.
-    pub mesh: Arc<str>,
-    /// Qualified wardrobe material (`wardrobe/name`) or `gltf` for the mesh's own.
-    pub material: Arc<str>,
-    /// Scaled uniformly (heads) rather than per axis.
-    pub uniform: bool,
 }
 
 /// One slot of a cast agent.
@@ -217,6 +210,187 @@ pub fn fit_part(mesh_lo: Vec3, mesh_hi: Vec3, box_lo: Vec3, box_hi: Vec3, unifor
         Affine3A::from_scale_rotation_translation(Vec3::splat(s), Quat::IDENTITY, t)
     } else {
         Affine3A::from_scale_rotation_translation(ratio, Quat::IDENTITY, box_lo - ratio * mesh_lo)
+    }
+}
+
+/// The casting stage: who wears what. Every agent that appears in the
+/// shot's frames, cast once, by id; built by [`Casting::cast`] and not
+/// changed afterwards.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Casting {
+    agents: BTreeMap<u32, AgentCast>,
+}
+
+/// A skinned pose step an agent takes: (rig, cycle index, pose step).
+pub type PoseStep = (Arc<str>, usize, u32);
+
+/// What [`Casting::cast`] gives besides the casting.
+pub struct CastOutcome {
+    /// Every agent cast.
+    pub casting: Casting,
+    /// Every pose step a visible skinned agent takes in the shot's frames.
+    pub still_steps: BTreeSet<PoseStep>,
+    /// What casting noticed but accepted (shot frames outside the cache).
+    pub warnings: Vec<String>,
+}
+
+impl Casting {
+    /// Casts every agent that appears in the shot's frames: reads the
+    /// frames once (each agent's rig at its first appearance, whether it is
+    /// ever seated or on a no-scale cycle, the pose steps skinned agents
+    /// take), refuses a cycle an agent's rig lacks, then casts every agent.
+    pub fn cast(shot: &Shot, cache: &CacheReader, rigs: &ShotRigs, wardrobes: &Wardrobes) -> Result<CastOutcome> {
+        struct Seen {
+            rig: u16,
+            never_scale: bool,
+        }
+        let mut seen: BTreeMap<u32, Seen> = BTreeMap::new();
+        // Poses by (rig, cycle, step): bounded by the rigs' cycles and steps, whatever the agent count.
+        let mut still_steps: BTreeSet<PoseStep> = BTreeSet::new();
+        let mut outside: Vec<i32> = Vec::new();
+        for f in shot.frames.iter() {
+            let cf = shot.cache.cache_frame(f);
+            if cache.frames().binary_search(&cf).is_err() {
+                outside.push(f);
+                continue;
+            }
+            let block = cache.read_frame(cf)?;
+            for a in &block.agents {
+                crate::casting::check_agent_id(cache.path(), cf, a.id)?;
+                let cycle = cache.cycles().get(a.cycle as usize).map(String::as_str).unwrap_or("");
+                let rig_name = cache.rigs().get(a.rig as usize).map(String::as_str).unwrap_or("");
+                // A cycle the agent's rig lacks would only fail when posed; say so now.
+                let missing = match rigs.get(rig_name) {
+                    Some(ShotRig::Skinned(rig)) => match rig.cycle_index(cycle) {
+                        Ok(c) => {
+                            if !a.hidden() {
+                                still_steps.insert((rig_name.into(), c, rig.step_of(c, a.cycle_frame)));
+                            }
+                            None
+                        }
+                        Err(e) => Some(e),
+                    },
+                    Some(rig) => rig.lacks_cycle(cycle),
+                    None => None,
+                };
+                if let Some(e) = missing {
+                    return Err(Error::invalid(cache.path(), format!("rig `{rig_name}`: {e}"))
+                        .frame(f as i64)
+                        .agent(a.id)
+                        .field("cycle"));
+                }
+                let no_scale = a.seated() || shot.is_no_scale_cycle(cycle);
+                let e = seen.entry(a.id).or_insert(Seen { rig: a.rig, never_scale: false });
+                e.never_scale |= no_scale;
+            }
+        }
+        let warnings = crate::casting::check_outside_cache(shot, cache.frames(), cache.path(), &outside)?;
+        if seen.is_empty() {
+            return Err(Error::invalid(
+                &shot.cache.path,
+                format!(
+                    "no agents in cache frames {}-{} (shot frames {}-{} with frame_offset {})",
+                    shot.cache.cache_frame(shot.frames.start),
+                    shot.cache.cache_frame(shot.frames.end),
+                    shot.frames.start,
+                    shot.frames.end,
+                    shot.cache.frame_offset
+                ),
+            ));
+        }
+
+        // Rig and slot names shared (Arc) by every agent cast on the rig.
+        let rig_names: HashMap<&str, (Arc<str>, Vec<Arc<str>>)> = rigs
+            .iter()
+            .map(|(name, rig)| (name, (name.into(), rig.slot_names().into_iter().map(Arc::from).collect())))
+            .collect();
+        // Skinned rigs without schemes: the character as delivered, in its
+        // own materials; the slot list is made once per rig and shared.
+        let delivered: HashMap<&str, Vec<SlotCast>> = (rigs.iter())
+            .filter(|(name, _)| shot.rigs.get(*name).is_some_and(|r| r.schemes.is_empty()))
+            .filter_map(|(name, rig)| Some((name, rig.skinned()?)))
+            .map(|(name, rig)| {
+                let rig_file: Arc<Path> = rig.path().into();
+                let parts = (rig.delivered().iter())
+                    .map(|(slot, mesh, _)| SlotCast {
+                        slot: slot.as_str().into(),
+                        part: Some(Arc::new(CastPart {
+                            file: rig_file.clone(),
+                            mesh: mesh.as_str().into(),
+                            material: GLTF_MATERIAL.into(),
+                            uniform: false,
+                        })),
+                    })
+                    .collect();
+                (name, parts)
+            })
+            .collect();
+        // Casting is a pure function of (seed, agent): cast every agent in
+        // parallel, kept in id order (so the first error is as if cast one by one).
+        let cache_rigs = cache.rigs();
+        let seen_list: Vec<(u32, &Seen)> = seen.iter().map(|(&id, s)| (id, s)).collect();
+        let casts: Vec<Option<Result<AgentCast>>> =
+            seen_list
+                .par_iter()
+                .map(|&(id, s)| {
+                    let rig_name = cache_rigs.get(s.rig as usize).map_or("", String::as_str);
+                    let Some(rig_ref) = shot.rigs.get(rig_name) else {
+                        return Some(Err(Error::invalid(
+                            &shot.path,
+                            format!(
+                            "agent {id} uses rig `{rig_name}`, which the shot's [rigs] does not define (defined: {})",
+                            shot.rigs.keys().cloned().collect::<Vec<_>>().join(", ")
+                        ),
+                        )
+                        .agent(id)
+                        .field("rigs")));
+                    };
+                    let (shared_name, slot_names) = rig_names.get(rig_name)?;
+                    let rc = RigCasting {
+                        name: shared_name.clone(),
+                        slots: slot_names,
+                        schemes: &rig_ref.schemes,
+                        height_jitter: rig_ref.height_jitter,
+                    };
+                    Some(match delivered.get(rig_name) {
+                        Some(parts) => Ok(cast_delivered(shot.seed, id, &rc, parts.clone(), s.never_scale)),
+                        None => cast_agent(shot.seed, id, &rc, wardrobes, &shot.exclude_parts, s.never_scale).map_err(
+                            |msg| Error::invalid(&shot.path, msg).agent(id).field(format!("rigs.{rig_name}.schemes")),
+                        ),
+                    })
+                })
+                .collect();
+        let mut agents = BTreeMap::new();
+        for cast in casts.into_iter().flatten() {
+            let cast = cast?;
+            agents.insert(cast.id, cast);
+        }
+        Ok(CastOutcome { casting: Casting { agents }, still_steps, warnings })
+    }
+
+    /// Agent `id`'s cast (`None`: it is not in the shot's frames).
+    pub fn get(&self, id: u32) -> Option<&AgentCast> {
+        self.agents.get(&id)
+    }
+
+    /// Every cast agent, in id order.
+    pub fn iter(&self) -> impl Iterator<Item = &AgentCast> {
+        self.agents.values()
+    }
+
+    /// Every cast agent's id, in order.
+    pub fn ids(&self) -> impl Iterator<Item = u32> + '_ {
+        self.agents.keys().copied()
+    }
+
+    /// How many agents are cast.
+    pub fn len(&self) -> usize {
+        self.agents.len()
+    }
+
+    /// Whether no agent is cast.
+    pub fn is_empty(&self) -> bool {
+        self.agents.is_empty()
     }
 }
 

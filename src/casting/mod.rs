@@ -1,18 +1,28 @@
 //! Casting: the shot loaded and every agent dressed. Takes the shot file,
-//! the cache, rigs and wardrobes; gives a [`ShotCrowd`]: each agent's scheme,
-//! parts, materials and height, and any frame's posed instances.
+//! the cache, rigs and wardrobes; gives a [`ShotCrowd`] built in three
+//! stages: the [`Casting`] (each agent's scheme, parts and height), the
+//! [`Dressing`] (the rigid parts or skinned pieces each wears) and the
+//! [`PoseLibrary`] (every mesh, and every skinned pose step still frames and
+//! the shutter take); and from them any frame's posed instances.
 
 pub mod cast;
 pub mod crowd;
+pub mod dressing;
 pub mod motion;
+pub mod poses;
 pub mod rig;
+pub mod rigs;
 pub mod shot_cache;
 pub mod skin;
 pub mod table;
 pub mod wardrobe;
 
-pub use cast::{cast_agent, cast_delivered, fit_part, mix64, uniform, AgentCast, CastPart, RigCasting, SlotCast};
-pub use crowd::{AgentPose, DressedPart, Lod, PosedSkins, ShotCrowd, SkinDress};
+pub use cast::{cast_agent, cast_delivered, fit_part, mix64, uniform, AgentCast, Casting, RigCasting, SlotCast};
+pub use crowd::{AgentPose, Lod, ShotCrowd};
+pub use dressing::{AgentDress, DressedPart, Dressing, SkinDress};
+pub use poses::{PoseLibrary, PosedSkins};
+pub use rigs::{ShotRig, ShotRigs};
+pub use wardrobe::CastPart;
 
 /// Refuses an agent id that cannot be represented downstream: `agent.id` in
 /// the EXRs is id + 1 (0 = no agent), so `u32::MAX` would write as "no agent".

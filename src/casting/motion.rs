@@ -31,16 +31,21 @@
 //! linearly over the shutter (exact piecewise-linear pose interpolation when
 //! the shutter stays within one step, which a 180-degree shutter does for a
 //! `pose_step` of at least half a frame). Agents at the same keys share the
-//! same posed meshes, as pose instancing does for still frames.
-//! [`prepare_shutter`] poses every step a shutter needs, once, before rendering.
+//! same posed meshes, as pose instancing does for still frames. A crowd
+//! built for a shutter ([`ShotCrowd::open`] with it) has every step that
+//! shutter needs posed, once, in its pose library ([`shutter_steps`]).
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeSet, HashMap};
 use std::sync::Arc;
 
-use crate::cache::{AgentSample, FrameBlock};
-use crate::casting::crowd::{AgentPose, ShotCrowd};
+use crate::cache::{AgentSample, CacheReader, FrameBlock};
+use crate::casting::cast::{Casting, PoseStep};
+use crate::casting::crowd::{cycle_name, AgentPose, ShotCrowd};
+use crate::casting::rigs::ShotRigs;
+use crate::casting::skin::SkinnedRig;
 use crate::error::Result;
 use crate::scene::Camera;
+use crate::shot::Shot;
 
 /// An agent posed at shutter open and at close.
 #[derive(Debug, Clone)]
@@ -79,11 +84,11 @@ fn block_map(block: Option<FrameBlock>) -> HashMap<u32, AgentSample> {
 }
 
 impl Neighbours {
-    fn read(crowd: &ShotCrowd, shot_frame: i32) -> Result<Neighbours> {
-        let cf = crowd.shot.cache.cache_frame(shot_frame);
+    fn read(shot: &Shot, cache: &CacheReader, shot_frame: i32) -> Result<Neighbours> {
+        let cf = shot.cache.cache_frame(shot_frame);
         let read = |f: Option<i32>| -> Result<Option<FrameBlock>> {
             match f {
-                Some(f) if crowd.cache.frames().binary_search(&f).is_ok() => Ok(Some(crowd.cache.read_frame(f)?)),
+                Some(f) if cache.frames().binary_search(&f).is_ok() => Ok(Some(cache.read_frame(f)?)),
                 _ => Ok(None),
             }
         };
@@ -114,13 +119,14 @@ pub fn cycle_delta(from: f32, to: f32, length: Option<f32>) -> f32 {
 }
 
 /// Length in frames of the cycle an agent record plays (`None` if unknown).
-pub fn cycle_length(crowd: &ShotCrowd, a: &AgentSample) -> Option<f32> {
-    let rig_name = &crowd.casting.get(&a.id)?.rig;
-    let cycle = crowd.cycle_name(a);
-    if let Some(rig) = crowd.skinned.get(&**rig_name) {
-        return rig.cycle_index(cycle).ok().map(|c| rig.cycle_frames(c));
-    }
-    crowd.rigs.get(&**rig_name)?.cycle(cycle).ok().map(|c| c.frames(crowd.shot.frames.fps))
+pub fn cycle_length<C>(crowd: &ShotCrowd<C>, a: &AgentSample) -> Option<f32> {
+    length_of(crowd.shot(), crowd.cache(), crowd.casting(), crowd.rigs(), a)
+}
+
+/// [`cycle_length`] from the stages it reads.
+fn length_of(shot: &Shot, cache: &CacheReader, casting: &Casting, rigs: &ShotRigs, a: &AgentSample) -> Option<f32> {
+    let rig = rigs.get(&casting.get(a.id)?.rig)?;
+    rig.cycle_frames(cycle_name(cache, a), shot.frames.fps)
 }
 
 /// The agent record `a` (at the frame's cache frame) moved to sub-frame
@@ -160,13 +166,18 @@ pub fn sample_at(
 /// (rig, cycle, step at open, step at close, blend weights): see [`skin_keys`].
 type SkinKeys = (Arc<str>, usize, u32, u32, [f32; 2]);
 
+/// The skinned character an agent plays, with its shared rig name.
+fn skinned_of<'a>(casting: &'a Casting, rigs: &'a ShotRigs, id: u32) -> Option<(&'a Arc<str>, &'a SkinnedRig)> {
+    let rig_name = &casting.get(id)?.rig;
+    Some((rig_name, rigs.skinned(rig_name)?))
+}
+
 /// A skinned agent's shutter keys: (cycle, step at open, step at close, the
 /// close step's blend weight at open and close), for cycle frames `c0` at
-/// open and `c1` at close.
-fn skin_keys(crowd: &ShotCrowd, a: &AgentSample, c0: f32, c1: f32) -> Option<SkinKeys> {
-    let rig_name = &crowd.casting.get(&a.id)?.rig;
-    let rig = crowd.skinned.get(&**rig_name)?;
-    let cycle = rig.cycle_index(crowd.cycle_name(a)).ok()?;
+/// open and `c1` at close of cycle `cycle_name`.
+fn skin_keys(skinned: (&Arc<str>, &SkinnedRig), cycle_name: &str, c0: f32, c1: f32) -> Option<SkinKeys> {
+    let (rig_name, rig) = skinned;
+    let cycle = rig.cycle_index(cycle_name).ok()?;
     let length = rig.cycle_frames(cycle);
     let steps = rig.cycle_steps(cycle);
     // A cycle that does not advance over the shutter keeps the still frame's
@@ -200,8 +211,8 @@ fn skin_keys(crowd: &ShotCrowd, a: &AgentSample, c0: f32, c1: f32) -> Option<Ski
 }
 
 /// The camera at a fractional shot frame (keys interpolated; a glTF camera does not move).
-pub fn camera_at(crowd: &ShotCrowd, shot_frame: i32, offset: f32) -> Result<Camera> {
-    match crowd.shot.keyed_camera(shot_frame as f32 + offset) {
+pub fn camera_at<C>(crowd: &ShotCrowd<C>, shot_frame: i32, offset: f32) -> Result<Camera> {
+    match crowd.shot().keyed_camera(shot_frame as f32 + offset) {
         Some(c) => Ok(c),
         None => crowd.camera(shot_frame),
     }
@@ -210,15 +221,17 @@ pub fn camera_at(crowd: &ShotCrowd, shot_frame: i32, offset: f32) -> Result<Came
 impl MotionFrame {
     /// Reads the frame and its neighbouring cache frames once and poses
     /// every rendered agent at shutter open and close.
-    pub fn new(crowd: &ShotCrowd, frame: i32, shutter: [f32; 2]) -> Result<MotionFrame> {
+    pub fn new<C>(crowd: &ShotCrowd<C>, frame: i32, shutter: [f32; 2]) -> Result<MotionFrame> {
         let block = crowd.agents_at(frame)?;
-        let near = Neighbours::read(crowd, frame)?;
+        let near = Neighbours::read(crowd.shot(), crowd.cache(), frame)?;
         let mut agents = Vec::with_capacity(block.agents.len());
         for a in block.agents.iter().filter(|a| crowd.renders(a)) {
             let length = cycle_length(crowd, a);
             let (prev, next) = (near.prev.get(&a.id), near.next.get(&a.id));
             let [s0, s1] = shutter.map(|s| sample_at(a, prev, next, s, length));
-            let motion = match skin_keys(crowd, a, s0.cycle_frame, s1.cycle_frame) {
+            let keys = skinned_of(crowd.casting(), crowd.rigs(), a.id)
+                .and_then(|skinned| skin_keys(skinned, crowd.cycle_name(a), s0.cycle_frame, s1.cycle_frame));
+            let motion = match keys {
                 Some((_, cycle, k0, k1, weight)) => AgentMotion {
                     open: AgentPose::Skinned { world_from_rig: crowd.world_from_agent(&s0), cycle, step: k0 },
                     close: AgentPose::Skinned { world_from_rig: crowd.world_from_agent(&s1), cycle, step: k1 },
@@ -233,56 +246,38 @@ impl MotionFrame {
     }
 }
 
-/// Poses, once, every skinned pose step that a shutter needs over the shot's
-/// frames and that loading (which poses the steps still frames take) did
-/// not: call it before rendering with that shutter. Idempotent; does nothing
-/// for a shot without skinned agents.
-pub fn prepare_shutter(crowd: &mut ShotCrowd, shutter: [f32; 2]) -> Result<()> {
-    if crowd.skinned.is_empty() {
-        return Ok(());
-    }
-    let mut needed: BTreeSet<(Arc<str>, usize, u32)> = BTreeSet::new();
-    for f in crowd.shot.frames.iter() {
-        let block = crowd.agents_at(f)?;
-        let near = Neighbours::read(crowd, f)?;
+/// Every skinned pose step that `shutter` needs over the shot's frames
+/// (its open and close keys for every visible skinned agent): what a crowd
+/// built for that shutter poses beside the still steps.
+pub(crate) fn shutter_steps(
+    shot: &Shot,
+    cache: &CacheReader,
+    casting: &Casting,
+    rigs: &ShotRigs,
+    shutter: [f32; 2],
+) -> Result<BTreeSet<PoseStep>> {
+    let mut needed: BTreeSet<PoseStep> = BTreeSet::new();
+    for f in shot.frames.iter() {
+        let cf = shot.cache.cache_frame(f);
+        if cache.frames().binary_search(&cf).is_err() {
+            continue;
+        }
+        let block = cache.read_frame(cf)?;
+        let near = Neighbours::read(shot, cache, f)?;
         for a in block.agents.iter().filter(|a| !a.hidden()) {
-            let Some(cast) = crowd.casting.get(&a.id) else { continue };
-            if !crowd.skinned.contains_key(&*cast.rig) {
-                continue;
-            }
-            let length = cycle_length(crowd, a);
+            let Some(skinned) = skinned_of(casting, rigs, a.id) else { continue };
+            let length = length_of(shot, cache, casting, rigs, a);
             let (prev, next) = (near.prev.get(&a.id), near.next.get(&a.id));
             let [s0, s1] = shutter.map(|s| sample_at(a, prev, next, s, length));
-            if let Some((rig, cycle, k0, k1, _)) = skin_keys(crowd, a, s0.cycle_frame, s1.cycle_frame) {
+            if let Some((rig, cycle, k0, k1, _)) =
+                skin_keys(skinned, cycle_name(cache, a), s0.cycle_frame, s1.cycle_frame)
+            {
                 needed.insert((rig.clone(), cycle, k0));
                 needed.insert((rig, cycle, k1));
             }
         }
     }
-    // The pieces worn on each rig (as loading poses them: every worn piece at every used step).
-    let mut worn: BTreeMap<Arc<str>, BTreeSet<usize>> = BTreeMap::new();
-    for (id, pieces) in &crowd.skin_dressed {
-        if let Some(cast) = crowd.casting.get(id) {
-            worn.entry(cast.rig.clone()).or_default().extend(pieces.iter().map(|d| d.piece));
-        }
-    }
-    for (rig_name, cycle, step) in needed {
-        let key = (rig_name.clone(), cycle, step);
-        if crowd.posed.joints.contains_key(&key) {
-            continue;
-        }
-        let Some(pieces) = worn.get(&rig_name) else { continue };
-        let Some(rig) = crowd.skinned.get(&*rig_name) else { continue };
-        let joints = rig.step_joints(cycle, step);
-        let meshes: Vec<_> =
-            pieces.iter().map(|&p| (p, rig.pose_piece(p, &joints, &rig.pose_name(cycle, step)))).collect();
-        for (piece, mesh) in meshes {
-            let id = crowd.assets.add_mesh(mesh);
-            crowd.posed.meshes.insert((rig_name.clone(), piece, cycle, step), id);
-        }
-        crowd.posed.joints.insert(key, joints);
-    }
-    Ok(())
+    Ok(needed)
 }
 
 /// Whether a shot's agents move at all over a shutter (tests and benchmarks).

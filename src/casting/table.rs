@@ -3,11 +3,10 @@
 
 use std::collections::BTreeSet;
 use std::fmt::Write as _;
-use std::sync::Arc;
 
 use serde::Serialize;
 
-use super::{AgentCast, ShotCrowd};
+use super::{AgentCast, AgentDress, ShotCrowd};
 
 /// One part row of the casting table.
 #[derive(Debug, Clone, Serialize)]
@@ -87,10 +86,7 @@ pub fn cast_row(crowd: &ShotCrowd, c: &AgentCast) -> CastRow {
         .iter()
         .enumerate()
         .map(|(i, s)| {
-            let material = match crowd.dressed.get(&c.id) {
-                Some(d) => d.iter().find(|p| p.slot as usize == i).map(|d| d.material),
-                None => crowd.skin_dressed.get(&c.id).and_then(|d| d.iter().find(|p| p.slot == i)).map(|d| d.material),
-            };
+            let material = crowd.dressing().get(c.id).and_then(|d| d.material_in_slot(i));
             PartRow {
                 slot: s.slot.to_string(),
                 mesh: s.part.as_ref().map(|p| p.mesh.to_string()),
@@ -116,23 +112,25 @@ pub fn cast_stats(crowd: &ShotCrowd) -> CastStats {
     let mut materials = BTreeSet::new();
     let mut copied = 0;
     let mut instances = 0;
-    for parts in crowd.dressed.values() {
-        for p in parts {
-            meshes.insert(p.mesh);
-            materials.insert(p.material);
-            copied += lib.meshes[p.mesh as usize].bytes();
-            instances += 1;
-        }
-    }
-    for parts in crowd.skin_dressed.values() {
-        for p in parts {
-            materials.insert(p.material);
-            instances += 1;
+    for (_, dress) in crowd.dressing().iter() {
+        match dress {
+            AgentDress::Slots(parts) => {
+                for p in parts {
+                    meshes.insert(p.mesh);
+                    materials.insert(p.material);
+                    copied += lib.meshes[p.mesh as usize].bytes();
+                    instances += 1;
+                }
+            }
+            AgentDress::Skinned(pieces) => {
+                materials.extend(pieces.iter().map(|p| p.material));
+                instances += pieces.len();
+            }
         }
     }
     CastStats {
         skinned: skin_stats(crowd),
-        agents: crowd.casting.len(),
+        agents: crowd.casting().len(),
         part_instances: instances,
         unique_parts: meshes.len(),
         unique_materials: materials.len(),
@@ -143,36 +141,37 @@ pub fn cast_stats(crowd: &ShotCrowd) -> CastStats {
 
 /// Pose instancing figures, `None` without skinned agents.
 fn skin_stats(crowd: &ShotCrowd) -> Option<SkinStats> {
-    if crowd.skin_dressed.is_empty() {
+    let skinned: Vec<(u32, &[crate::casting::SkinDress])> = (crowd.dressing().iter())
+        .filter_map(|(id, d)| match d {
+            AgentDress::Skinned(pieces) => Some((id, pieces.as_slice())),
+            AgentDress::Slots(_) => None,
+        })
+        .collect();
+    if skinned.is_empty() {
         return None;
     }
     let lib = crowd.library();
-    let posed_bytes = |rig: &str, piece: usize| {
-        crowd
-            .posed
-            .meshes
-            .range((Arc::<str>::from(rig), piece, 0, 0)..)
-            .find(|(k, _)| *k.0 == *rig && k.1 == piece)
-            .map_or(0, |(_, &m)| lib.meshes[m as usize].bytes())
-    };
+    let skins = crowd.poses().skins();
+    let posed_bytes =
+        |rig: &str, piece: usize| skins.first_mesh(rig, piece).map_or(0, |m| lib.meshes[m as usize].bytes());
     let mut per_agent = 0;
     let mut used: BTreeSet<(String, usize, usize)> = BTreeSet::new();
-    for (rig, piece, cycle, _) in crowd.posed.meshes.keys() {
+    for ((rig, piece, cycle, _), _) in skins.meshes() {
         used.insert((rig.to_string(), *piece, *cycle));
     }
-    for (id, parts) in &crowd.skin_dressed {
-        let rig = &crowd.casting[id].rig;
-        per_agent += parts.iter().map(|p| posed_bytes(rig, p.piece)).sum::<usize>();
+    for &(id, parts) in &skinned {
+        let Some(cast) = crowd.cast(id) else { continue };
+        per_agent += parts.iter().map(|p| posed_bytes(&cast.rig, p.piece)).sum::<usize>();
     }
     let worst = used
         .iter()
-        .map(|(rig, piece, cycle)| crowd.skinned[rig].quantisation_error(*piece, *cycle))
+        .filter_map(|(rig, piece, cycle)| Some(crowd.rigs().skinned(rig)?.quantisation_error(*piece, *cycle)))
         .fold(0.0f32, f32::max);
     Some(SkinStats {
-        agents: crowd.skin_dressed.len(),
-        unique_poses: crowd.posed.joints.len(),
-        posed_meshes: crowd.posed.meshes.len(),
-        posed_geometry_bytes: crowd.posed.meshes.values().map(|&m| lib.meshes[m as usize].bytes()).sum(),
+        agents: skinned.len(),
+        unique_poses: skins.step_count(),
+        posed_meshes: skins.mesh_count(),
+        posed_geometry_bytes: skins.meshes().map(|(_, m)| lib.meshes[m as usize].bytes()).sum(),
         posed_per_agent_bytes: per_agent,
         worst_quantisation_error_m: worst,
     })

@@ -28,6 +28,19 @@ use serde::Deserialize;
 
 use crate::error::{Error, IoContext, Result};
 
+/// The part chosen for one slot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CastPart {
+    /// glTF file.
+    pub file: Arc<Path>,
+    /// Mesh name in the file.
+    pub mesh: Arc<str>,
+    /// Qualified wardrobe material (`wardrobe/name`) or `gltf` for the mesh's own.
+    pub material: Arc<str>,
+    /// Scaled uniformly (heads) rather than per axis.
+    pub uniform: bool,
+}
+
 /// The wardrobe file version this build reads.
 pub const WARDROBE_VERSION: u32 = 1;
 
@@ -85,7 +98,7 @@ pub struct PartSpec {
     /// The cast part for each material, made once on load and shared by
     /// every agent that draws it.
     #[serde(skip)]
-    pub cast: Vec<Arc<crate::casting::cast::CastPart>>,
+    pub cast: Vec<Arc<CastPart>>,
 }
 
 fn gltf_only() -> Vec<Arc<str>> {
@@ -95,9 +108,9 @@ fn gltf_only() -> Vec<Arc<str>> {
 impl PartSpec {
     /// The cast part for material variant `m`: the shared one a loaded
     /// wardrobe made (see [`PartSpec::cast`]), else a new one.
-    pub fn cast_part(&self, m: usize, uniform: bool) -> Arc<crate::casting::cast::CastPart> {
+    pub fn cast_part(&self, m: usize, uniform: bool) -> Arc<CastPart> {
         self.cast.get(m).cloned().unwrap_or_else(|| {
-            Arc::new(crate::casting::cast::CastPart {
+            Arc::new(CastPart {
                 file: self.file.clone(),
                 mesh: self.mesh.clone(),
                 material: self.materials.get(m).cloned().unwrap_or_else(|| GLTF_MATERIAL.into()),

@@ -116,7 +116,7 @@ pub fn export_frame(crowd: &ShotCrowd, frame: i32, only: Option<&BTreeSet<u32>>,
                 &(agent_from_world * inst.world_from_object),
             )?);
         }
-        let cast = &crowd.casting[&a.id];
+        let Some(cast) = crowd.cast(a.id) else { continue };
         let mut node = NodeDesc::new(format!("agent_{}", a.id)).children(children).extras(serde_json::json!({
             "throng_agent": a.id,
             "rig": cast.rig,
@@ -132,7 +132,7 @@ pub fn export_frame(crowd: &ShotCrowd, frame: i32, only: Option<&BTreeSet<u32>>,
 
     // The set.
     let mut children = Vec::new();
-    for (i, inst) in crowd.set.iter().enumerate() {
+    for (i, inst) in crowd.set().iter().enumerate() {
         children.push(w.instance_node(format!("set/{i}"), inst, &inst.world_from_object)?);
     }
     if !children.is_empty() {
@@ -146,9 +146,9 @@ pub fn export_frame(crowd: &ShotCrowd, frame: i32, only: Option<&BTreeSet<u32>>,
     cam_node.transform = Transform::Trs { translation: pos.to_array(), rotation: rot.to_array(), scale: [1.0; 3] };
     w.glb.add_camera(
         cam_node,
-        Perspective { yfov: camera.yfov, aspect_ratio: Some(crowd.shot.aspect()), znear: 0.05, zfar: None },
+        Perspective { yfov: camera.yfov, aspect_ratio: Some(crowd.shot().aspect()), znear: 0.05, zfar: None },
     )?;
-    if let Some(sun) = crowd.shot.sun() {
+    if let Some(sun) = crowd.shot().sun() {
         let peak = sun.irradiance.max_element().max(1e-6);
         let colour = (sun.irradiance / peak).to_array();
         let mut node = NodeDesc::new("sun");

@@ -237,7 +237,7 @@ fn gather(crowd: &ShotCrowd, opts: &UsdExportOptions) -> Result<Gathered> {
             }
         }
     }
-    for inst in &crowd.set {
+    for inst in crowd.set() {
         meshes.insert(inst.mesh);
         materials.insert(inst.material);
         pairs.insert((inst.mesh, inst.material));
@@ -259,7 +259,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
         )));
     }
     let (a, b) = opts.frames;
-    let shot = &crowd.shot;
+    let shot = crowd.shot();
     if a > b || !shot.frames.contains(a) || !shot.frames.contains(b) {
         return Err(Error::Usage(format!(
             "frames {a}-{b} are not within shot {} ({}-{})",
@@ -377,10 +377,10 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
 
     // The set.
     let mut instances = 0;
-    if !crowd.set.is_empty() {
+    if !crowd.set().is_empty() {
         let set = root.def("/World/Set", "Xform");
         root.primvar(set, "throng:name", "string", string("set"));
-        for (i, inst) in crowd.set.iter().enumerate() {
+        for (i, inst) in crowd.set().iter().enumerate() {
             let p = root.def(&format!("/World/Set/set_{i}"), "Xform");
             root.meta(p, "instanceable", Value::Bool(true));
             root.reference(p, &format!("/World/Prototypes/{}", proto_names[&(inst.mesh, inst.material)]))?;
@@ -620,8 +620,8 @@ fn write_agent(
         };
         l.samples(p, "visibility", "token", times.iter().map(vis).collect());
     }
-    let cast = crowd.casting.get(&id).ok_or_else(|| {
-        Error::invalid(&crowd.shot.cache.path, "agent was not cast (not in the shot's frames)").agent(id)
+    let cast = crowd.cast(id).ok_or_else(|| {
+        Error::invalid(&crowd.shot().cache.path, "agent was not cast (not in the shot's frames)").agent(id)
     })?;
     l.primvar(p, "throng:agentId", "int", Value::Int(i32::try_from(id).unwrap_or(i32::MAX)));
     l.primvar(p, "throng:name", "string", string(&agent_name(id)));
@@ -744,7 +744,7 @@ fn write_point_instancers(
 }
 
 fn write_camera(l: &mut LayerBuilder, crowd: &ShotCrowd, times: &[i32]) -> Result<()> {
-    let shot = &crowd.shot;
+    let shot = crowd.shot();
     let width = shot.camera.sensor_width;
     let height = width / shot.aspect();
     let cam = l.def("/World/shotcam", "Camera");
@@ -787,7 +787,7 @@ fn keyed_focal(shot: &crate::shot::Shot, frame: f32) -> f32 {
 
 fn write_lights(l: &mut LayerBuilder, crowd: &ShotCrowd) {
     l.def("/World/Lights", "Scope");
-    if let Some(sun) = crowd.shot.sun() {
+    if let Some(sun) = crowd.shot().sun() {
         let peak = sun.irradiance.max_element().max(1e-6);
         let p = l.def("/World/Lights/sun", "DistantLight");
         // A DistantLight shines down its local -Z: from the sun towards the scene.
@@ -797,7 +797,7 @@ fn write_lights(l: &mut LayerBuilder, crowd: &ShotCrowd) {
         l.attr(p, "inputs:color", "color3f", Value::Vec3f(vec3(sun.irradiance / peak)));
         l.attr(p, "inputs:angle", "float", Value::Float(sun.angular_diameter.to_degrees()));
     }
-    let sky = crowd.shot.sky();
+    let sky = crowd.shot().sky();
     let peak = sky.radiance.max_element().max(1e-6);
     let p = l.def("/World/Lights/sky", "DomeLight");
     l.attr(p, "inputs:intensity", "float", Value::Float(peak));

@@ -73,20 +73,20 @@ pub fn write_new_plan(opts: &PlanOptions) -> Result<(PathBuf, Plan)> {
     let plan_path = out.join(PLAN_FILE);
     let crowd = ShotCrowd::load(&opts.shot)?;
     let manifest = build_layers(&crowd, &LayerOverrides::default())?;
-    let manifest_path = out.join(format!("{}.layers.json", crowd.shot.name));
+    let manifest_path = out.join(format!("{}.layers.json", crowd.shot().name));
     let plan = build_plan(&crowd, &manifest, &manifest_path, &out, opts, &|inputs| {
         // The manifest is fingerprinted as written, so write it first; a
         // directory of another plan must not be overwritten, so check first.
         if plan_path.exists() {
             if let Ok(old) = super::read_plan(&plan_path) {
-                if old.shot != crowd.shot.name {
+                if old.shot != crowd.shot().name {
                     return Err(Error::invalid(
                         &plan_path,
                         format!(
                             "{} holds the plan of shot `{}`, not `{}`: plan into another folder",
                             out.display(),
                             old.shot,
-                            crowd.shot.name
+                            crowd.shot().name
                         ),
                     )
                     .field("shot"));
@@ -122,7 +122,7 @@ pub fn write_new_plan(opts: &PlanOptions) -> Result<(PathBuf, Plan)> {
 
 /// The shot's input files, in a fixed order, with the manifest last.
 fn inputs(crowd: &ShotCrowd, manifest_path: &Path) -> Result<Vec<(String, PathBuf)>> {
-    let shot = &crowd.shot;
+    let shot = crowd.shot();
     let abs = |p: &Path| std::fs::canonicalize(p).at(p);
     let mut v = vec![("shot".to_string(), abs(&shot.path)?), ("cache".to_string(), abs(&shot.cache.path)?)];
     for rig in shot.rigs.values() {
@@ -170,7 +170,7 @@ pub fn build_plan(
     opts: &PlanOptions,
     fingerprint_inputs: &FingerprintInputs<'_>,
 ) -> Result<Plan> {
-    let shot = &crowd.shot;
+    let shot = crowd.shot();
     if opts.chunk == 0 {
         return Err(Error::setting("chunk", "must be at least 1 frame"));
     }

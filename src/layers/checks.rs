@@ -79,7 +79,7 @@ fn crosses(p: Vec3, dir: Vec3, [a, b, c]: [Vec3; 3]) -> bool {
 pub fn check_placement(crowd: &ShotCrowd) -> Result<PlacementReport> {
     let lib = crowd.library();
     let solids: Vec<Solid> = crowd
-        .set
+        .set()
         .iter()
         .filter_map(|inst| {
             let mesh = lib.meshes.get(inst.mesh as usize)?;
@@ -96,7 +96,7 @@ pub fn check_placement(crowd: &ShotCrowd) -> Result<PlacementReport> {
             Some(Solid { lo, hi, triangles })
         })
         .collect();
-    let frames: Vec<i32> = crowd.shot.frames.iter().collect();
+    let frames: Vec<i32> = crowd.shot().frames.iter().collect();
     let step = frames.len().div_ceil(CHECK_FRAMES).max(1);
     let dir = Vec3::new(1.0, 0.001_37, 0.000_71).normalize();
     let mut inside = BTreeSet::new();

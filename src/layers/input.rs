@@ -9,7 +9,7 @@ use super::{
     build_manifest, estimate_agent_memory, estimate_proxy_memory, estimate_render_floor, shot_input, LayerOptions,
     Manifest, RenderFloor,
 };
-use crate::casting::ShotCrowd;
+use crate::casting::{Lod, ShotCrowd};
 use crate::error::{Error, Result};
 use crate::shot::{parse_bytes, LayerSettings, SplitMode};
 
@@ -64,39 +64,30 @@ pub fn settings_with_overrides(
 
 /// Builds the layer manifest of a cast shot with `overrides` over the shot's `[layers]`.
 pub fn build_layers(crowd: &ShotCrowd, overrides: &LayerOverrides) -> Result<Manifest> {
-    let (settings, mut options) = settings_with_overrides(&crowd.shot.layers, overrides)?;
+    let (settings, mut options) = settings_with_overrides(&crowd.shot().layers, overrides)?;
     let lib = crowd.library();
     let all = crowd.shot_crowd()?;
-    let [w, h] = crowd.shot.render.resolution;
+    let [w, h] = crowd.shot().render.resolution;
     options.shared_bytes = estimate_render_floor(&RenderFloor {
-        agents: crowd.casting.len() as u64,
+        agents: crowd.casting().len() as u64,
         mesh_bytes: lib.meshes.iter().map(|m| m.bytes() as u64).sum(),
         triangles: lib.meshes.iter().map(|m| m.triangle_count() as u64).sum(),
         texture_bytes: lib.textures.iter().map(|t| t.texels.len() as u64 * 16).sum(),
-        set_instances: crowd.set.len() as u64,
+        set_instances: crowd.set().len() as u64,
         pixels: w as u64 * h as u64,
     });
-    let cameras = match crowd.shot.keyed_camera(crowd.shot.frames.start as f32) {
+    let cameras = match crowd.shot().keyed_camera(crowd.shot().frames.start as f32) {
         Some(_) => None,
-        None => Some(crowd.shot.frames.iter().map(|f| crowd.camera(f)).collect::<Result<Vec<_>>>()?),
+        None => Some(crowd.shot().frames.iter().map(|f| crowd.camera(f)).collect::<Result<Vec<_>>>()?),
     };
-    let input = shot_input(&crowd.shot, &all, cameras, settings, options, |id| {
+    let input = shot_input(crowd.shot(), &all, cameras, settings, options, |id| {
         // Every agent of the shot's frames was cast; others never reach here.
         let Some(height) = crowd.agent_height(id) else { return (1.8, 0, 0) };
-        if let (Some(pieces), Some(cast)) = (crowd.skin_dressed.get(&id), crowd.casting.get(&id)) {
-            // One instance per posed piece; as proxies, one per joint box.
-            let boxes: usize = pieces
-                .iter()
-                .map(|p| crowd.skinned[&*cast.rig].piece(p.piece).joint_boxes.iter().filter(|b| b.is_some()).count())
-                .sum();
-            return (height, estimate_agent_memory(pieces.len()), estimate_proxy_memory(boxes));
-        }
-        let parts = crowd.dressed.get(&id).map(Vec::as_slice).unwrap_or(&[]);
-        let proxies = parts.iter().filter(|p| p.proxy).count();
-        (height, estimate_agent_memory(parts.len()), estimate_proxy_memory(proxies))
+        let (full, proxies) = (crowd.instance_count(id, Lod::Full), crowd.instance_count(id, Lod::Proxy));
+        (height, estimate_agent_memory(full), estimate_proxy_memory(proxies))
     })?;
     let mut manifest = build_manifest(&input)?;
-    manifest.made_from = Some(super::MadeFrom::of(&crowd.shot)?);
+    manifest.made_from = Some(super::MadeFrom::of(crowd.shot())?);
     Ok(manifest)
 }
 
@@ -104,7 +95,7 @@ pub fn build_layers(crowd: &ShotCrowd, overrides: &LayerOverrides) -> Result<Man
 pub fn set_bounds(crowd: &ShotCrowd) -> Option<(Vec3, Vec3)> {
     let lib = crowd.library();
     crowd
-        .set
+        .set()
         .iter()
         .flat_map(|i| {
             let (lo, hi) = lib.meshes[i.mesh as usize].bounds();

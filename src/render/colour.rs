@@ -4,7 +4,7 @@
 //! material base colours, base-colour texture texels (decoded from sRGB by the
 //! glTF loader), the sun's and sky's colours. With [`Colourspace::Acescg`]
 //! they are converted to ACEScg (AP1 primaries, the ACES white) as the render
-//! loads them ([`prepare`] for the library, [`scene_lights`] for each frame
+//! loads them ([`into_acescg`] for the library, [`scene_lights`] for each frame
 //! scene's lights), so the path tracer multiplies and sums AP1 values, and the
 //! EXR header says AP1 ([`chromaticities`], [`header_name`]). The PNG preview
 //! converts back to Rec.709 before the sRGB transfer ([`to_rec709`]).
@@ -18,6 +18,7 @@
 use glam::{Mat3, Vec3};
 
 use crate::casting::ShotCrowd;
+pub use crate::scene::{Acescg, Rec709, Space};
 use crate::scene::{FrameScene, Material, Texture};
 pub use crate::shot::Colourspace;
 
@@ -92,19 +93,45 @@ pub fn from_header_name(name: &str) -> Option<Colourspace> {
     [Colourspace::Rec709, Colourspace::Acescg].into_iter().find(|&s| header_name(s) == name)
 }
 
-/// Converts the crowd's loaded material base colours and texture texels
-/// (RGB; alpha kept) from Rec.709 into `space`, in place. Call once, before
-/// rendering with a [`super::job::RenderJob`] whose `colourspace` is `space`;
-/// a no-op for Rec.709. The exporters write the library's colours as they
-/// find them, so export (glTF, USD: linear Rec.709) before this, as `throng
-/// demo` does.
-pub fn prepare(crowd: &mut ShotCrowd, space: Colourspace) {
-    let (materials, textures) = crowd.assets.colours_mut();
-    convert_library(materials, textures, space);
+/// The crowd with its library's material base colours and texture texels
+/// (RGB; alpha kept) converted from Rec.709 into ACEScg, for a
+/// [`super::job::RenderJob`] whose `colourspace` is ACEScg. It takes the
+/// crowd: a converted crowd cannot be converted again nor exported (the
+/// exporters write linear Rec.709 and take a Rec.709 crowd), which is a type
+/// error, not a rule to remember:
+///
+/// ```no_run
+/// # fn demo() -> throng::error::Result<()> {
+/// let crowd = throng::casting::ShotCrowd::load(std::path::Path::new("demo/shot.toml"))?;
+/// throng::export::export_frame(&crowd, 1024, None, std::path::Path::new("frame.glb"))?;
+/// let _for_render = throng::render::colour::into_acescg(crowd);
+/// # Ok(())
+/// # }
+/// ```
+///
+/// ```compile_fail
+/// # fn demo() -> throng::error::Result<()> {
+/// let crowd = throng::casting::ShotCrowd::load(std::path::Path::new("demo/shot.toml"))?;
+/// let once = throng::render::colour::into_acescg(crowd);
+/// let _twice = throng::render::colour::into_acescg(once); // ShotCrowd<Acescg> is not ShotCrowd<Rec709>
+/// # Ok(())
+/// # }
+/// ```
+///
+/// ```compile_fail
+/// # fn demo() -> throng::error::Result<()> {
+/// let crowd = throng::casting::ShotCrowd::load(std::path::Path::new("demo/shot.toml"))?;
+/// let converted = throng::render::colour::into_acescg(crowd);
+/// throng::export::export_frame(&converted, 1024, None, std::path::Path::new("frame.glb"))?; // exports Rec.709 only
+/// # Ok(())
+/// # }
+/// ```
+pub fn into_acescg(crowd: ShotCrowd<Rec709>) -> ShotCrowd<Acescg> {
+    crowd.convert_colours(|materials, textures| convert_library(materials, textures, Colourspace::Acescg))
 }
 
 /// Converts material base colours and texture texels (RGB; alpha kept) from
-/// Rec.709 into `space`, in place (what [`prepare`] does to a crowd's library).
+/// Rec.709 into `space`, in place (what [`into_acescg`] does to a crowd's library).
 pub fn convert_library(materials: &mut [Material], textures: &mut [Texture], space: Colourspace) {
     if space == Colourspace::Rec709 {
         return;

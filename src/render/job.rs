@@ -19,7 +19,7 @@ use crate::output::{layer_path, FULL_LAYER};
 use crate::render::colour::{self, Colourspace};
 use crate::render::cryptomatte::{CryptoNames, NameTables};
 use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, RenderSettings};
-use crate::scene::{vis, Deform, FrameScene, Instance, InstanceMotion, SceneMotion};
+use crate::scene::{vis, Deform, FrameScene, Instance, InstanceMotion, SceneMotion, Space};
 
 /// What to render.
 #[derive(Debug, Clone)]
@@ -45,13 +45,13 @@ pub struct RenderJob {
     /// EXR compression (lossless ZIP by default).
     pub compression: exr::LayerCompression,
     /// Motion blur: shutter `[open, close]` in frames relative to each frame
-    /// (`None`: no blur, no motion-vector pass). Skinned agents need their
-    /// shutter poses, so call [`crate::casting::motion::prepare_shutter`] on
-    /// the crowd first (without it they blur rigidly only).
+    /// (`None`: no blur, no motion-vector pass). Skinned agents blur through
+    /// their shutter's pose steps, so the crowd must be built for this
+    /// shutter ([`ShotCrowd::open`]); [`run`] refuses one that is not.
     pub shutter: Option<[f32; 2]>,
-    /// The working colourspace (`render.working_colourspace`). For ACEScg,
-    /// convert the crowd's library first with [`crate::render::colour::prepare`]
-    /// (the job converts each frame's lights itself).
+    /// The working colourspace (`render.working_colourspace`): the crowd's
+    /// library must be in it (for ACEScg, [`crate::render::colour::into_acescg`]);
+    /// [`run`] refuses one that is not. The job converts each frame's lights itself.
     pub colourspace: Colourspace,
 }
 
@@ -140,10 +140,10 @@ pub enum CryptoOutput {
 /// The Cryptomatte names of a frame scene's instances: slot names from each
 /// agent's rig, set objects from the set file's nodes
 /// ([`ShotCrowd::set_names`]), materials from the library.
-pub fn crypto_names<'a>(crowd: &'a ShotCrowd, scene: &'a FrameScene) -> CryptoNames<'a> {
-    let tables = NameTables { materials: &crowd.library().materials, set_objects: &crowd.set_names };
+pub fn crypto_names<'a, C>(crowd: &'a ShotCrowd<C>, scene: &'a FrameScene) -> CryptoNames<'a> {
+    let tables = NameTables { materials: &crowd.library().materials, set_objects: crowd.set_names() };
     CryptoNames::new(&scene.instances, &tables, |agent| {
-        let slots = &crowd.casting.get(&agent)?.slots;
+        let slots = &crowd.cast(agent)?.slots;
         Some(move |part: u16| slots.get(part as usize).map(|s| &*s.slot))
     })
 }
@@ -182,7 +182,7 @@ pub struct PosedFrame {
 
 impl PosedFrame {
     /// Reads the frame from the cache once and poses every rendered agent.
-    pub fn new(crowd: &ShotCrowd, frame: i32) -> Result<PosedFrame> {
+    pub fn new<C>(crowd: &ShotCrowd<C>, frame: i32) -> Result<PosedFrame> {
         use rayon::prelude::*;
         let block = crowd.agents_at(frame)?;
         // Pure per agent: posed in parallel, kept in order (and the first
@@ -218,8 +218,8 @@ fn agent_bits(manifest: Option<&Manifest>, layer: &str, id: u32, frame: i32) -> 
 }
 
 /// The instances of one (frame, layer) render, from the frame's shared poses.
-pub fn frame_scene(
-    crowd: &ShotCrowd,
+pub fn frame_scene<C>(
+    crowd: &ShotCrowd<C>,
     manifest: Option<&Manifest>,
     layer: &str,
     posed: &PosedFrame,
@@ -238,8 +238,8 @@ pub fn frame_scene(
 /// The same scene as [`frame_scene`], posing each agent as it is placed:
 /// for a frame's last layer, so a million agents' slot poses are never
 /// held beside their instances.
-pub fn streamed_frame_scene(
-    crowd: &ShotCrowd,
+pub fn streamed_frame_scene<C>(
+    crowd: &ShotCrowd<C>,
     manifest: Option<&Manifest>,
     layer: &str,
     frame: i32,
@@ -258,8 +258,8 @@ const PLACING_WAVE: usize = 16;
 /// A frame scene from its agents (`id` and `pose` of each). Posing and
 /// placing are pure per agent: done in parallel, appended in agent order,
 /// so the scene is the same for any thread count.
-fn scene_from_poses<'p, T: Sync>(
-    crowd: &ShotCrowd,
+fn scene_from_poses<'p, T: Sync, C>(
+    crowd: &ShotCrowd<C>,
     manifest: Option<&Manifest>,
     layer: &str,
     frame: i32,
@@ -292,37 +292,37 @@ fn scene_from_poses<'p, T: Sync>(
         }
     }
     if let Some(bits) = set_bits {
-        instances.extend(crowd.set.iter().map(|i| Instance { visibility: bits, ..*i }));
+        instances.extend(crowd.set().iter().map(|i| Instance { visibility: bits, ..*i }));
     }
     Ok(FrameScene {
         instances,
         camera: crowd.camera(frame)?,
-        sun: crowd.shot.sun(),
-        sky: crowd.shot.sky(),
+        sun: crowd.shot().sun(),
+        sky: crowd.shot().sky(),
         motion: None,
     })
 }
 
 /// At most how many instances a (frame, layer) scene of agents `ids` holds
 /// (the set's too when it is in the layer), so its list is allocated once.
-fn instance_bound(
-    crowd: &ShotCrowd,
+fn instance_bound<C>(
+    crowd: &ShotCrowd<C>,
     manifest: Option<&Manifest>,
     layer: &str,
     frame: i32,
     ids: impl Iterator<Item = u32>,
     set_bits: Option<u8>,
 ) -> usize {
-    ids.filter_map(|id| Some(crowd.posed_instance_bound(id, agent_bits(manifest, layer, id, frame)?.1))).sum::<usize>()
-        + set_bits.map_or(0, |_| crowd.set.len())
+    ids.filter_map(|id| Some(crowd.instance_count(id, agent_bits(manifest, layer, id, frame)?.1))).sum::<usize>()
+        + set_bits.map_or(0, |_| crowd.set().len())
 }
 
 /// The instances of one (frame, layer) render moving over the shutter: each
 /// agent's instances at shutter open, and in the scene's motion their close
 /// keys (the set stands still). An agent whose open and close instances do
 /// not pair up (a pose missing at one key) is rendered still at open.
-pub fn motion_scene(
-    crowd: &ShotCrowd,
+pub fn motion_scene<C>(
+    crowd: &ShotCrowd<C>,
     manifest: Option<&Manifest>,
     layer: &str,
     motion: &MotionFrame,
@@ -351,14 +351,14 @@ pub fn motion_scene(
     }
     if let Some(bits) = set_bits {
         let from = instances.len();
-        instances.extend(crowd.set.iter().map(|i| Instance { visibility: bits, ..*i }));
+        instances.extend(crowd.set().iter().map(|i| Instance { visibility: bits, ..*i }));
         keys.extend(instances[from..].iter().map(InstanceMotion::still));
     }
     Ok(FrameScene {
         instances,
         camera: crowd.camera(frame)?,
-        sun: crowd.shot.sun(),
-        sky: crowd.shot.sky(),
+        sun: crowd.shot().sun(),
+        sky: crowd.shot().sky(),
         motion: Some(SceneMotion { shutter: motion.shutter, instances: keys, camera: motion.camera }),
     })
 }
@@ -376,8 +376,13 @@ pub fn all_layers(manifest: &Manifest) -> Vec<String> {
 /// choices, the layer name, the manifest (whose `made_from` covers the
 /// cache, its import keys and the casting) and the throng version.
 /// `--resume` skips a file only when its fingerprint matches.
-pub fn render_fingerprint(crowd: &ShotCrowd, manifest: Option<&Manifest>, job: &RenderJob, layer: &str) -> String {
-    let shot = &crowd.shot;
+pub fn render_fingerprint<C>(
+    crowd: &ShotCrowd<C>,
+    manifest: Option<&Manifest>,
+    job: &RenderJob,
+    layer: &str,
+) -> String {
+    let shot = crowd.shot();
     let mut f = Fingerprinter::new();
     f.value("spp", &job.spp)
         .value("resolution", &job.resolution.unwrap_or(shot.render.resolution))
@@ -427,19 +432,34 @@ pub fn remove_stale_temporaries(shot: &str, job: &RenderJob) -> Result<Vec<PathB
     Ok(removed)
 }
 
-/// Renders every (frame, layer) of the job, reporting to `observer`.
-pub fn run(
-    crowd: &ShotCrowd,
+/// Renders every (frame, layer) of the job, reporting to `observer`. The
+/// crowd's library is in the job's colourspace and posed for its shutter.
+pub fn run<C: Space>(
+    crowd: &ShotCrowd<C>,
     manifest: Option<&Manifest>,
     job: &RenderJob,
     observer: &dyn RenderObserver,
 ) -> Result<RenderReport> {
+    if C::COLOURSPACE != job.colourspace {
+        return Err(Error::Usage(format!(
+            "the job renders in {} but the crowd's library is in {}: convert the crowd (render::colour::into_acescg)",
+            colour::header_name(job.colourspace),
+            colour::header_name(C::COLOURSPACE)
+        )));
+    }
+    if job.shutter.is_some() && crowd.poses().shutter() != job.shutter {
+        return Err(Error::Usage(format!(
+            "the job blurs over shutter {:?} but the crowd is posed for {:?}: build it for that shutter (ShotCrowd::open)",
+            job.shutter,
+            crowd.poses().shutter()
+        )));
+    }
     let mut warnings = Vec::new();
     let mut warn = |text: String| {
         observer.warning(&text);
         warnings.push(text);
     };
-    let [w, h] = job.resolution.unwrap_or(crowd.shot.render.resolution);
+    let [w, h] = job.resolution.unwrap_or(crowd.shot().render.resolution);
     for layer in &job.layers {
         let known = layer == FULL_LAYER || manifest.is_some_and(|m| m.comp_order.contains(layer));
         if !known {
@@ -448,14 +468,16 @@ pub fn run(
         }
     }
     for &f in &job.frames {
-        if !crowd.shot.frames.contains(f) {
+        if !crowd.shot().frames.contains(f) {
             return Err(Error::Usage(format!(
                 "frame {f} is outside shot {} ({}-{})",
-                crowd.shot.name, crowd.shot.frames.start, crowd.shot.frames.end
+                crowd.shot().name,
+                crowd.shot().frames.start,
+                crowd.shot().frames.end
             )));
         }
     }
-    let stale = remove_stale_temporaries(&crowd.shot.name, job)?;
+    let stale = remove_stale_temporaries(&crowd.shot().name, job)?;
     if !stale.is_empty() {
         warn(format!(
             "removed {} stale temporary file(s) a killed render left behind (first: {})",
@@ -474,7 +496,7 @@ pub fn run(
         let mut posed: Option<PosedFrame> = None;
         let mut moving: Option<MotionFrame> = None;
         for layer in &job.layers {
-            let path = layer_path(&job.out, &crowd.shot.name, layer, frame);
+            let path = layer_path(&job.out, &crowd.shot().name, layer, frame);
             let fingerprint = fingerprints.get(layer.as_str()).cloned().unwrap_or_default();
             let complete = job.resume
                 && match exr::read_layer(&path) {
@@ -543,8 +565,8 @@ pub fn run(
                 width: w,
                 height: h,
                 spp: job.spp,
-                max_bounces: crowd.shot.render.max_bounces,
-                seed: crowd.shot.seed,
+                max_bounces: crowd.shot().render.max_bounces,
+                seed: crowd.shot().seed,
                 frame: frame as i64,
                 layer: index,
                 sky_visible: layer == FULL_LAYER || manifest.is_some_and(|m| *layer == m.set.name),
@@ -566,17 +588,17 @@ pub fn run(
             let (near, far) = film.depth_range().unwrap_or((0.1, 1000.0));
             let (world_to_camera, world_to_ndc) = exr::camera_matrices(&scene.camera, w, h, near, far);
             let meta = exr::LayerMeta {
-                shot: crowd.shot.name.clone(),
+                shot: crowd.shot().name.clone(),
                 layer: layer.clone(),
                 frame,
-                seed: crowd.shot.seed,
+                seed: crowd.shot().seed,
                 spp: job.spp,
                 id_mapping: exr::ID_MAPPING.to_string(),
                 world_to_camera,
                 world_to_ndc,
                 near,
                 far,
-                fps: crowd.shot.frames.fps,
+                fps: crowd.shot().frames.fps,
                 render_fingerprint: fingerprint,
                 shutter: job.shutter,
                 colourspace: job.colourspace,

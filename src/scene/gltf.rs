@@ -491,7 +491,7 @@ impl AssetCache {
     }
 
     /// The loaded materials and textures, to change their colours in place
-    /// (the render's working colourspace, `render::colour::prepare`); what
+    /// (the render's working colourspace, `render::colour::into_acescg`); what
     /// is loaded and every id stay as they are.
     pub fn colours_mut(&mut self) -> (&mut [Material], &mut [Texture]) {
         (&mut self.library.materials, &mut self.library.textures)

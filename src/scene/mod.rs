@@ -131,6 +131,30 @@ impl Default for Material {
     }
 }
 
+/// The colourspace a library's colours are in, as a type: a cast shot's
+/// library is [`Rec709`] as authored, and converting it for an ACEScg render
+/// gives an [`Acescg`] one, which has no conversion left to apply twice.
+pub trait Space {
+    /// The colourspace this marker names.
+    const COLOURSPACE: crate::shot::Colourspace;
+}
+
+/// Linear Rec.709 (D65): every input colour as authored.
+#[derive(Debug, Clone, Copy)]
+pub enum Rec709 {}
+
+/// ACEScg (AP1 primaries, the ACES white): the render's working space when asked.
+#[derive(Debug, Clone, Copy)]
+pub enum Acescg {}
+
+impl Space for Rec709 {
+    const COLOURSPACE: crate::shot::Colourspace = crate::shot::Colourspace::Rec709;
+}
+
+impl Space for Acescg {
+    const COLOURSPACE: crate::shot::Colourspace = crate::shot::Colourspace::Acescg;
+}
+
 /// Meshes, materials and textures, each loaded once and shared by every
 /// instance that uses it.
 #[derive(Clone, Debug, Default)]
@@ -171,7 +195,7 @@ pub struct Instance {
     pub agent: InstanceAgent,
     /// Slot index within the agent's rig; for the set, the index of the set
     /// object (the glTF node placing it) in the shot's set object names
-    /// (`ShotCrowd::set_names`, what Cryptomatte calls it).
+    /// (`ShotCrowd::set_names()`, what Cryptomatte calls it).
     pub part: u16,
     /// [`vis`] bits.
     pub visibility: u8,

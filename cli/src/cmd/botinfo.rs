@@ -82,28 +82,30 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
     let crowd = super::load_crowd(shot)?;
     let (ids, frame) = match &picked {
         Some((_, id, meta, exr_path, _)) => {
-            if meta.shot != crowd.shot.name {
+            if meta.shot != crowd.shot().name {
                 return Err(Error::invalid(
                     exr_path,
-                    format!("EXR is from shot `{}` but {} is shot `{}`", meta.shot, shot.display(), crowd.shot.name),
+                    format!("EXR is from shot `{}` but {} is shot `{}`", meta.shot, shot.display(), crowd.shot().name),
                 )
                 .field("throng/shot"));
             }
             (vec![*id], meta.frame)
         }
-        None => (args.ids.clone(), args.frame.unwrap_or(crowd.shot.frames.start)),
+        None => (args.ids.clone(), args.frame.unwrap_or(crowd.shot().frames.start)),
     };
-    if !crowd.shot.frames.contains(frame) {
+    if !crowd.shot().frames.contains(frame) {
         return Err(Error::Usage(format!(
             "frame {frame} is outside shot {} ({}-{})",
-            crowd.shot.name, crowd.shot.frames.start, crowd.shot.frames.end
+            crowd.shot().name,
+            crowd.shot().frames.start,
+            crowd.shot().frames.end
         )));
     }
     let mut infos = bot_info(&crowd, &ids, frame)?;
-    let manifest_path = throng::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name);
+    let manifest_path = throng::layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name);
     if manifest_path.exists() {
         let manifest = throng::layers::read_manifest(&manifest_path)?;
-        if manifest.shot == crowd.shot.name {
+        if manifest.shot == crowd.shot().name {
             add_layers(&mut infos, &manifest);
         }
     }

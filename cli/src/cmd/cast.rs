@@ -30,7 +30,7 @@ pub fn run(args: &CastArgs) -> Result<()> {
         struct Rows<'a>(&'a ShotCrowd);
         impl Serialize for Rows<'_> {
             fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
-                s.collect_seq(self.0.casting.values().map(|c| cast_row(self.0, c)))
+                s.collect_seq(self.0.casting().iter().map(|c| cast_row(self.0, c)))
             }
         }
         #[derive(Serialize)]
@@ -44,8 +44,8 @@ pub fn run(args: &CastArgs) -> Result<()> {
         }
         let out = Out {
             version: 1,
-            shot: &crowd.shot.name,
-            seed: crowd.shot.seed,
+            shot: &crowd.shot().name,
+            seed: crowd.shot().seed,
             agents: Rows(&crowd),
             stats: args.stats.then(|| cast_stats(&crowd)),
         };
@@ -58,7 +58,7 @@ pub fn run(args: &CastArgs) -> Result<()> {
     }
     outln!("{:>6}  {:<12} {:<20} {:>6}  {:<16} parts", "id", "rig", "scheme", "height", "head");
     // Straight from the casting: the table row's paths and names are for --json.
-    for cast in crowd.casting.values() {
+    for cast in crowd.casting().iter() {
         let head = cast
             .slots
             .iter()

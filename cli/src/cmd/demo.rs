@@ -10,6 +10,7 @@ use throng::casting::table::{cast_stats, mib};
 use throng::error::{Error, Result};
 use throng::layers::{build_layers, set_bounds, LayerOverrides, MapOptions};
 use throng::output::FULL_LAYER;
+use throng::render::colour::{self, Colourspace};
 use throng::render::job::{self, RenderJob};
 
 /// `throng demo`.
@@ -50,13 +51,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     outln!("throng demo: {}", shot_path.display());
 
     let t = Instant::now();
-    let mut crowd = super::load_crowd(&shot_path)?;
     let shutter = args.shutter.0;
-    if let Some(s) = shutter {
-        throng::casting::motion::prepare_shutter(&mut crowd, s)?;
-    }
-    let crowd = crowd;
-    let info = throng::cache::info(&crowd.cache)?;
+    let crowd = super::cast_shot(throng::shot::Shot::load(&shot_path)?, shutter)?;
+    let info = throng::cache::info(crowd.cache())?;
     outln!(
         "  cache    {} agents over cache frames {}-{}, {} rigs, {} cycles",
         info.agents,
@@ -79,7 +76,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 
     let t = Instant::now();
     let manifest = build_layers(&crowd, &LayerOverrides { per_frame: true, ..Default::default() })?;
-    let manifest_path = out.join(format!("{}.layers.json", crowd.shot.name));
+    let manifest_path = out.join(format!("{}.layers.json", crowd.shot().name));
     throng::layers::write_manifest(&manifest_path, &manifest)?;
     let map = out.join("layers_map.png");
     throng::layers::draw_map(&manifest, &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, &map)?;
@@ -92,7 +89,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     );
 
     let t = Instant::now();
-    let glb = out.join(format!("{}.{}.glb", crowd.shot.name, manifest.ref_frame));
+    let glb = out.join(format!("{}.{}.glb", crowd.shot().name, manifest.ref_frame));
     let s = throng::export::export_frame(&crowd, manifest.ref_frame, None, &glb)?;
     outln!(
         "  export   {} agents, {} mesh nodes sharing {} meshes  [{:.2} s]",
@@ -103,13 +100,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     );
 
     let t = Instant::now();
-    // The render's working colourspace converts the library's colours, so
-    // after the glTF export (which writes them as authored, linear Rec.709).
-    let colourspace = crowd.shot.render.working_colourspace;
-    let mut crowd = crowd;
-    throng::render::colour::prepare(&mut crowd, colourspace);
-    let crowd = crowd;
-    let f = crowd.shot.frames;
+    let (shot_name, [w, h]) = (crowd.shot().name.clone(), crowd.shot().render.resolution);
+    let colourspace = crowd.shot().render.working_colourspace;
+    let f = crowd.shot().frames;
     let mut layers = job::all_layers(&manifest);
     layers.push(FULL_LAYER.to_string());
     let render = RenderJob {
@@ -119,10 +112,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         ..RenderJob::new(layers, vec![f.start, manifest.ref_frame, f.end], args.spp, out.join("render"))
     };
     let progress = super::progress::Progress::new(super::progress::ProgressStyle::Auto);
-    let report = job::run(&crowd, Some(&manifest), &render, &progress);
+    // The render's working colourspace converts the library's colours (the
+    // glTF export above wrote them as authored, linear Rec.709).
+    let report = match colourspace {
+        Colourspace::Rec709 => job::run(&crowd, Some(&manifest), &render, &progress),
+        Colourspace::Acescg => job::run(&colour::into_acescg(crowd), Some(&manifest), &render, &progress),
+    };
     progress.finish();
     let done = report?.layers;
-    let [w, h] = crowd.shot.render.resolution;
     let blur = match shutter {
         Some([open, close]) => format!("motion blur, shutter {open}..{close} frames"),
         None => "no motion blur".to_string(),
@@ -140,7 +137,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         (map.display().to_string(), "the layer map: who is in which layer".to_string()),
         (glb.display().to_string(), format!("frame {} as glTF (open in Blender)", manifest.ref_frame)),
         (
-            format!("{}/<layer>/{}.<layer>.<frame>.exr", render.out.display(), crowd.shot.name),
+            format!("{}/<layer>/{shot_name}.<layer>.<frame>.exr", render.out.display()),
             "EXR layers (docs/render.md), PNG previews beside them".to_string(),
         ),
     ];

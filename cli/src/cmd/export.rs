@@ -70,10 +70,13 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         return Err(Error::Usage("a glTF export needs --frame F (or --format usd --frames A-B)".into()));
     };
     let crowd = super::load_crowd(&args.shot)?;
-    if !crowd.shot.frames.contains(frame) {
+    if !crowd.shot().frames.contains(frame) {
         return Err(Error::Usage(format!(
             "frame {} is outside shot {} ({}-{})",
-            frame, crowd.shot.name, crowd.shot.frames.start, crowd.shot.frames.end
+            frame,
+            crowd.shot().name,
+            crowd.shot().frames.start,
+            crowd.shot().frames.end
         )));
     }
     // --layer: only that crowd layer's agents, from the manifest beside the shot.
@@ -95,12 +98,12 @@ pub fn run(args: &ExportArgs) -> Result<()> {
 
 /// The manifest beside the shot, when `throng layers` wrote one for it.
 fn beside_manifest(crowd: &throng::casting::ShotCrowd) -> Result<Option<throng::layers::Manifest>> {
-    let path = throng::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name);
+    let path = throng::layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name);
     if !path.exists() {
         return Ok(None);
     }
     let m = throng::layers::read_manifest(&path)?;
-    Ok((m.shot == crowd.shot.name).then_some(m))
+    Ok((m.shot == crowd.shot().name).then_some(m))
 }
 
 /// `--format usd`.
@@ -111,7 +114,7 @@ fn run_usd(args: &ExportArgs, clock: std::time::Instant) -> Result<()> {
     }
     let crowd = super::load_crowd(&args.shot)?;
     let frames = match &args.frames {
-        None => (crowd.shot.frames.start, crowd.shot.frames.end),
+        None => (crowd.shot().frames.start, crowd.shot().frames.end),
         Some(FrameList(list)) => {
             let (a, b) = (list.iter().min().copied().unwrap_or(0), list.iter().max().copied().unwrap_or(0));
             if list.len() != (b - a + 1) as usize {
@@ -163,7 +166,7 @@ fn layer_agents(
         None => None,
         Some(layer) => {
             let path = (args.manifest.clone())
-                .unwrap_or_else(|| throng::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
+                .unwrap_or_else(|| throng::layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name));
             if !path.exists() {
                 return Err(Error::Usage(format!(
                     "--layer needs the layer manifest {}: run `throng layers {}` first",

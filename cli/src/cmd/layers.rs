@@ -96,12 +96,12 @@ pub fn run(args: &LayersArgs) -> Result<()> {
         super::existing_folder_of(out, "--out")?;
     }
     let crowd = super::load_crowd(&args.shot)?;
-    args.check(&crowd.shot)?;
+    args.check(crowd.shot())?;
     for w in layers::checks::check_placement(&crowd)?.warnings() {
         eprintln!("throng: warning: {w}");
     }
     let manifest = build_layers(&crowd, &args.overrides())?;
-    let out = args.out.clone().unwrap_or_else(|| layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
+    let out = args.out.clone().unwrap_or_else(|| layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name));
     layers::write_manifest(&out, &manifest)?;
     if let Some(map) = &args.map {
         layers::draw_map(&manifest, &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, map)?;

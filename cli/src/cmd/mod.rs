@@ -131,11 +131,17 @@ fn existing_folder_of(out: &std::path::Path, flag: &str) -> Result<()> {
     }
 }
 
-/// Loads and casts a shot, printing what loading noticed but accepted
-/// (renormalised weights, ignored morph targets) to stderr, once.
+/// Loads and casts a shot for still frames, printing what loading noticed
+/// but accepted (renormalised weights, ignored morph targets) to stderr, once.
 fn load_crowd(shot: &std::path::Path) -> Result<throng::casting::ShotCrowd> {
-    let crowd = throng::casting::ShotCrowd::load(shot)?;
-    for w in &crowd.warnings {
+    cast_shot(throng::shot::Shot::load(shot)?, None)
+}
+
+/// Casts a loaded shot, posed for still frames and `shutter`, printing what
+/// loading noticed but accepted to stderr, once.
+fn cast_shot(shot: throng::shot::Shot, shutter: Option<[f32; 2]>) -> Result<throng::casting::ShotCrowd> {
+    let crowd = throng::casting::ShotCrowd::open(shot, shutter)?;
+    for w in crowd.warnings() {
         eprintln!("throng: warning: {w}");
     }
     Ok(crowd)

@@ -8,6 +8,7 @@ use super::progress::{Progress, ProgressStyle};
 use super::values::{frame_list, resolution, shutter, spp, threads, FrameList, Resolution, ShutterFlag};
 use throng::error::{Error, Result};
 use throng::output::FULL_LAYER;
+use throng::render::colour::{self, Colourspace};
 use throng::render::exr;
 use throng::render::job::{self, CryptoOutput, RenderJob};
 
@@ -160,18 +161,15 @@ pub struct RenderArgs {
 /// `throng render SHOT ...`: renders the asked layers and frames.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let clock = std::time::Instant::now();
-    let mut crowd = super::load_crowd(&args.shot)?;
-    let shutter = args.shutter.map_or(crowd.shot.render.shutter, |ShutterFlag(s)| s);
-    if let Some(s) = shutter {
-        throng::casting::motion::prepare_shutter(&mut crowd, s)?;
-    }
-    let colourspace = args.colourspace.map_or(crowd.shot.render.working_colourspace, Into::into);
-    throng::render::colour::prepare(&mut crowd, colourspace);
-    let crowd = crowd;
+    let shot = throng::shot::Shot::load(&args.shot)?;
+    // The crowd is posed for the shutter it renders with.
+    let shutter = args.shutter.map_or(shot.render.shutter, |ShutterFlag(s)| s);
+    let colourspace = args.colourspace.map_or(shot.render.working_colourspace, Into::into);
+    let crowd = super::cast_shot(shot, shutter)?;
     let manifest_path = args
         .manifest
         .clone()
-        .unwrap_or_else(|| throng::layers::default_manifest_path(&crowd.shot.path, &crowd.shot.name));
+        .unwrap_or_else(|| throng::layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name));
     let manifest = if manifest_path.exists() {
         Some(throng::layers::read_manifest(&manifest_path)?)
     } else if args.layer == FULL_LAYER {
@@ -184,13 +182,13 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         )));
     };
     if let Some(m) = &manifest {
-        if m.shot != crowd.shot.name {
+        if m.shot != crowd.shot().name {
             return Err(Error::invalid(
                 &manifest_path,
-                format!("manifest is for shot `{}`, not `{}`", m.shot, crowd.shot.name),
+                format!("manifest is for shot `{}`, not `{}`", m.shot, crowd.shot().name),
             ));
         }
-        if let Some(warning) = throng::layers::check_current(&manifest_path, m, &crowd.shot)? {
+        if let Some(warning) = throng::layers::check_current(&manifest_path, m, crowd.shot())? {
             eprintln!("throng: warning: {warning}");
         }
     }
@@ -200,9 +198,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     };
     let frames = match &args.frames {
         Some(FrameList(f)) => f.clone(),
-        None => crowd.shot.frames.iter().collect(),
+        None => crowd.shot().frames.iter().collect(),
     };
-    let spp = args.spp.unwrap_or(crowd.shot.render.spp);
+    let spp = args.spp.unwrap_or(crowd.shot().render.spp);
     let job = RenderJob {
         threads: args.threads.unwrap_or(0),
         resume: args.resume,
@@ -215,7 +213,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         ..RenderJob::new(layers, frames, spp, args.out.clone())
     };
     let progress = Progress::new(args.progress.into());
-    let report = job::run(&crowd, manifest.as_ref(), &job, &progress);
+    let report = match colourspace {
+        Colourspace::Rec709 => job::run(&crowd, manifest.as_ref(), &job, &progress),
+        Colourspace::Acescg => job::run(&colour::into_acescg(crowd), manifest.as_ref(), &job, &progress),
+    };
     progress.finish();
     let done = report?.layers;
     if args.json {

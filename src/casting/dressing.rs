@@ -1,0 +1,337 @@
+//! The dressing stage: the geometry each cast agent wears. A slot-rig agent
+//! wears rigid parts fitted to its slots' proxy boxes; a skinned agent wears
+//! pieces of its character's skinned meshes. Meshes and materials are loaded
+//! once into the shared [`AssetCache`]; every agent references them by id.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::sync::Arc;
+
+use glam::{Affine3A, Quat, Vec3};
+
+use crate::casting::cast::{fit_part, AgentCast, Casting};
+use crate::casting::rigs::{ShotRig, ShotRigs};
+use crate::casting::skin::skinned_refusal;
+use crate::casting::wardrobe::{Wardrobes, GLTF_MATERIAL};
+use crate::casting::Lod;
+use crate::error::{Error, Result};
+use crate::scene::gltf::AssetCache;
+use crate::scene::{Material, MaterialId, Mesh, MeshId};
+
+/// One resolved part of a slot-rig agent: geometry and material ids plus
+/// which shared fit places it in its slot. 20 bytes: a million agents keep eleven each.
+#[derive(Debug, Clone, Copy)]
+pub struct DressedPart {
+    /// Index into the rig's slots.
+    pub slot: u32,
+    /// The part mesh.
+    pub mesh: MeshId,
+    /// The part's material.
+    pub material: MaterialId,
+    /// Index of its fit ([`Dressing::fit`]): fits depend only on (rig, slot, mesh).
+    pub fit: u32,
+    /// Whether this piece stands for its slot at proxy LOD (one per slot,
+    /// wearing the part's first material).
+    pub proxy: bool,
+}
+
+/// How a part mesh and the proxy cube sit in a slot.
+#[derive(Debug, Clone, Copy)]
+pub struct PartFit {
+    /// Fit of the part mesh to the slot's proxy box.
+    pub slot_from_part: Affine3A,
+    /// The unit proxy cube mapped onto the slot's proxy box.
+    pub slot_from_proxy: Affine3A,
+}
+
+/// One skinned piece a skinned agent wears.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SkinDress {
+    /// Index into the agent's cast slots.
+    pub slot: usize,
+    /// Index into the rig's pieces ([`crate::casting::skin::SkinnedRig::piece`]).
+    pub piece: usize,
+    /// The piece's material.
+    pub material: MaterialId,
+}
+
+/// What one agent wears, by its rig's kind.
+#[derive(Debug, Clone)]
+pub enum AgentDress {
+    /// Rigid parts in the slots of a slot rig.
+    Slots(Vec<DressedPart>),
+    /// Skinned pieces of a skinned character.
+    Skinned(Vec<SkinDress>),
+}
+
+impl AgentDress {
+    /// The material worn in cast slot `slot` (its first piece's), if any.
+    pub fn material_in_slot(&self, slot: usize) -> Option<MaterialId> {
+        match self {
+            AgentDress::Slots(parts) => parts.iter().find(|p| p.slot as usize == slot).map(|p| p.material),
+            AgentDress::Skinned(pieces) => pieces.iter().find(|p| p.slot == slot).map(|p| p.material),
+        }
+    }
+}
+
+/// The dressing of every cast agent; built by [`Dressing::dress`] and not
+/// changed afterwards.
+#[derive(Debug, Clone, Default)]
+pub struct Dressing {
+    agents: BTreeMap<u32, AgentDress>,
+    fits: Vec<PartFit>,
+    proxy_mesh: MeshId,
+}
+
+/// A memo key made of the addresses of shared (`Arc`) names: (rig, file,
+/// mesh, material). The wardrobes and casting keep them alive for the whole
+/// dressing, so equal addresses are the same part.
+type SharedKey = (usize, usize, usize, usize);
+
+/// The address of a shared name, for memo keys.
+fn address<T: ?Sized>(shared: &Arc<T>) -> usize {
+    Arc::as_ptr(shared) as *const u8 as usize
+}
+
+/// Unit cube [0,1]^3 with flat normals: the proxy box of every slot.
+fn unit_cube() -> Mesh {
+    let mut m = Mesh { name: "throng/proxy_box".into(), ..Default::default() };
+    let faces: [(Vec3, Vec3, Vec3); 6] = [
+        (Vec3::X, Vec3::Y, Vec3::Z),
+        (Vec3::NEG_X, Vec3::Z, Vec3::Y),
+        (Vec3::Y, Vec3::Z, Vec3::X),
+        (Vec3::NEG_Y, Vec3::X, Vec3::Z),
+        (Vec3::Z, Vec3::X, Vec3::Y),
+        (Vec3::NEG_Z, Vec3::Y, Vec3::X),
+    ];
+    for (n, u, v) in faces {
+        let base = m.positions.len() as u32;
+        let centre = Vec3::splat(0.5) + n * 0.5;
+        for (a, b) in [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)] {
+            m.positions.push(centre + u * a + v * b);
+            m.normals.push(n);
+            m.uvs.push(glam::Vec2::new(a + 0.5, b + 0.5));
+        }
+        m.indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+    }
+    m
+}
+
+/// The library material for a wardrobe material, made once per name.
+fn wardrobe_material(
+    assets: &mut AssetCache,
+    made: &mut HashMap<String, MaterialId>,
+    wardrobes: &Wardrobes,
+    name: &str,
+) -> Result<MaterialId> {
+    if let Some(&m) = made.get(name) {
+        return Ok(m);
+    }
+    let spec = &wardrobes.materials[name];
+    let texture = match &spec.base_color_texture {
+        Some(t) => Some(assets.texture_png(t)?),
+        None => None,
+    };
+    let m = assets.add_material(Material {
+        name: name.to_string(),
+        base_color: Vec3::from(spec.base_color),
+        base_color_texture: texture,
+        roughness: spec.roughness,
+        metallic: spec.metallic,
+    });
+    made.insert(name.to_string(), m);
+    Ok(m)
+}
+
+/// The memos of one dressing run: each wardrobe part resolved, each fit
+/// computed and each material made once, however many agents wear them.
+#[derive(Default)]
+struct Memo {
+    /// Library materials by wardrobe material name.
+    materials: HashMap<String, MaterialId>,
+    /// Each rigid part (and material) resolved to its (mesh, material) pieces.
+    parts: HashMap<SharedKey, Vec<(MeshId, MaterialId)>>,
+    /// Each skinned part (and material) resolved to its (piece, material) list.
+    skin_parts: HashMap<SharedKey, Vec<(usize, MaterialId)>>,
+    /// Fit index by (rig, slot, first mesh).
+    fit_index: HashMap<(usize, usize, MeshId), u32>,
+}
+
+impl Dressing {
+    /// Dresses every cast agent in id order, loading the parts it wears into
+    /// `assets` (the proxy cube first) and, for skinned characters, into
+    /// their rigs.
+    pub fn dress(
+        casting: &Casting,
+        rigs: &mut ShotRigs,
+        wardrobes: &Wardrobes,
+        assets: &mut AssetCache,
+    ) -> Result<Dressing> {
+        let proxy_mesh = assets.add_mesh(unit_cube());
+        let mut dressing = Dressing { agents: BTreeMap::new(), fits: Vec::new(), proxy_mesh };
+        let mut memo = Memo::default();
+        for cast in casting.iter() {
+            let dress = if rigs.skinned_mut(&cast.rig).is_some() {
+                AgentDress::Skinned(dress_skinned(cast, rigs, wardrobes, assets, &mut memo)?)
+            } else if let Some(ShotRig::Slots(_)) = rigs.get(&cast.rig) {
+                AgentDress::Slots(dressing.dress_slots(cast, rigs, wardrobes, assets, &mut memo)?)
+            } else {
+                continue;
+            };
+            dressing.agents.insert(cast.id, dress);
+        }
+        Ok(dressing)
+    }
+
+    /// A slot-rig agent's parts, each fitted to its slot.
+    fn dress_slots(
+        &mut self,
+        cast: &AgentCast,
+        rigs: &ShotRigs,
+        wardrobes: &Wardrobes,
+        assets: &mut AssetCache,
+        memo: &mut Memo,
+    ) -> Result<Vec<DressedPart>> {
+        let Some(ShotRig::Slots(rig)) = rigs.get(&cast.rig) else { return Ok(Vec::new()) };
+        let id = cast.id;
+        // A part's mesh missing from its glTF: say which scheme asked for it.
+        let part_err = |e: Error, scheme: &str| e.agent(id).or_field(format!("schemes.{scheme}.parts"));
+        let mut parts = Vec::new();
+        for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
+            let Some(part) = &slot_cast.part else { continue };
+            // Resolved once per wardrobe part and material (keyed by the
+            // wardrobe's shared strings, so a lookup hashes three words,
+            // not a path): whether it is skinned, and its (mesh, material) pieces.
+            let key = (0, address(&part.file), address(&part.mesh), address(&part.material));
+            let pieces = match memo.parts.get(&key) {
+                Some(p) => p,
+                None => {
+                    if assets.is_skinned_mesh(&part.file, &part.mesh).map_err(|e| part_err(e, &cast.scheme))? {
+                        return Err(skinned_refusal(
+                            &part.file,
+                            &format!("wardrobe part `{}` (slot `{}`)", part.mesh, slot_cast.slot),
+                        )
+                        .agent(id)
+                        .field(format!("schemes.{}.parts", cast.scheme)));
+                    }
+                    // A part wearing its own glTF materials keeps one piece per
+                    // primitive (a multi-material mesh); otherwise one mesh, one material.
+                    let pieces: Vec<(MeshId, MaterialId)> = if *part.material == *GLTF_MATERIAL {
+                        assets.mesh_primitives(&part.file, &part.mesh).map_err(|e| part_err(e, &cast.scheme))?
+                    } else {
+                        let mesh = assets.mesh(&part.file, &part.mesh).map_err(|e| part_err(e, &cast.scheme))?;
+                        vec![(mesh, wardrobe_material(assets, &mut memo.materials, wardrobes, &part.material)?)]
+                    };
+                    memo.parts.entry(key).or_insert(pieces)
+                }
+            };
+            let Some(&(first_mesh, _)) = pieces.first() else { continue };
+            let slot = &rig.slots()[slot_index];
+            let fit = *memo.fit_index.entry((address(&cast.rig), slot_index, first_mesh)).or_insert_with(|| {
+                // Fit the whole part (all its pieces) to the box.
+                let lib = assets.library();
+                let (lo, hi) = pieces
+                    .iter()
+                    .map(|&(m, _)| lib.meshes[m as usize].bounds())
+                    .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+                    .unwrap_or((Vec3::ZERO, Vec3::ZERO));
+                let size = (slot.proxy_max - slot.proxy_min).max(Vec3::splat(1e-4));
+                self.fits.push(PartFit {
+                    slot_from_part: fit_part(lo, hi, slot.proxy_min, slot.proxy_max, part.uniform),
+                    slot_from_proxy: Affine3A::from_scale_rotation_translation(size, Quat::IDENTITY, slot.proxy_min),
+                });
+                self.fits.len() as u32 - 1
+            });
+            for (i, &(mesh, material)) in pieces.iter().enumerate() {
+                parts.push(DressedPart { slot: slot_index as u32, mesh, material, fit, proxy: i == 0 });
+            }
+        }
+        parts.shrink_to_fit();
+        Ok(parts)
+    }
+
+    /// What agent `id` wears (`None`: it was not cast).
+    pub fn get(&self, id: u32) -> Option<&AgentDress> {
+        self.agents.get(&id)
+    }
+
+    /// Every dressed agent by id, in order.
+    pub fn iter(&self) -> impl Iterator<Item = (u32, &AgentDress)> {
+        self.agents.iter().map(|(&id, d)| (id, d))
+    }
+
+    /// The fit a [`DressedPart::fit`] indexes.
+    pub fn fit(&self, index: u32) -> &PartFit {
+        &self.fits[index as usize]
+    }
+
+    /// The unit cube every proxy box instances.
+    pub fn proxy_mesh(&self) -> MeshId {
+        self.proxy_mesh
+    }
+
+    /// The skinned pieces worn on each skinned rig, over all its agents.
+    pub fn worn_pieces(&self, casting: &Casting) -> BTreeMap<Arc<str>, BTreeSet<usize>> {
+        let mut worn: BTreeMap<Arc<str>, BTreeSet<usize>> = BTreeMap::new();
+        for (id, dress) in self.iter() {
+            let (AgentDress::Skinned(pieces), Some(cast)) = (dress, casting.get(id)) else { continue };
+            worn.entry(cast.rig.clone()).or_default().extend(pieces.iter().map(|d| d.piece));
+        }
+        worn
+    }
+
+    /// How many instances agent `id` places at `lod` in any pose: its parts,
+    /// one proxy box per slot, its skinned pieces, or one box per joint of
+    /// its pieces (0 for an agent not dressed).
+    pub fn instance_count(&self, id: u32, lod: Lod, rigs: &ShotRigs, casting: &Casting) -> usize {
+        match (self.get(id), lod) {
+            (None, _) => 0,
+            (Some(AgentDress::Slots(parts)), Lod::Full) => parts.len(),
+            (Some(AgentDress::Slots(parts)), Lod::Proxy) => parts.iter().filter(|p| p.proxy).count(),
+            (Some(AgentDress::Skinned(pieces)), Lod::Full) => pieces.len(),
+            (Some(AgentDress::Skinned(pieces)), Lod::Proxy) => {
+                let rig = casting.get(id).and_then(|cast| rigs.skinned(&cast.rig));
+                rig.map_or(0, |rig| {
+                    pieces.iter().map(|d| rig.piece(d.piece).joint_boxes.iter().filter(|b| b.is_some()).count()).sum()
+                })
+            }
+        }
+    }
+}
+
+/// A skinned agent's pieces: each worn part's pieces of the character, in
+/// its own glTF materials or the wardrobe's.
+fn dress_skinned(
+    cast: &AgentCast,
+    rigs: &mut ShotRigs,
+    wardrobes: &Wardrobes,
+    assets: &mut AssetCache,
+    memo: &mut Memo,
+) -> Result<Vec<SkinDress>> {
+    let Some(rig) = rigs.skinned_mut(&cast.rig) else { return Ok(Vec::new()) };
+    let mut pieces = Vec::new();
+    for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
+        let Some(part) = &slot_cast.part else { continue };
+        // Resolved once per (rig, part, material): rig part lookups
+        // and glTF materials touch the file system.
+        let key = (address(&cast.rig), address(&part.file), address(&part.mesh), address(&part.material));
+        if let std::collections::hash_map::Entry::Vacant(slot) = memo.skin_parts.entry(key) {
+            let part_index = rig.part(&part.file, &part.mesh).map_err(|e| e.agent(cast.id))?;
+            let mut list = Vec::new();
+            for &piece in &rig.part_at(part_index).pieces.clone() {
+                let material = if *part.material == *GLTF_MATERIAL {
+                    let p = rig.piece(piece);
+                    assets.gltf_material_at(&p.file, p.material)?
+                } else {
+                    wardrobe_material(assets, &mut memo.materials, wardrobes, &part.material)?
+                };
+                list.push((piece, material));
+            }
+            slot.insert(list);
+        }
+        for &(piece, material) in &memo.skin_parts[&key] {
+            pieces.push(SkinDress { slot: slot_index, piece, material });
+        }
+    }
+    pieces.shrink_to_fit();
+    Ok(pieces)
+}

@@ -1,0 +1,123 @@
+//! The shot's rigs, loaded once: each a slot rig (rigid parts on nodes) or a
+//! skinned character, one closed kind per rig so every stage matches on it.
+
+use std::collections::BTreeMap;
+
+use crate::casting::rig::Rig;
+use crate::casting::skin::{is_skinned_rig, SkinnedRig};
+use crate::casting::wardrobe::Wardrobes;
+use crate::error::{Error, Result};
+use crate::shot::Shot;
+
+/// One rig of the shot.
+#[derive(Debug, Clone)]
+#[allow(clippy::large_enum_variant, reason = "a shot holds a handful of rigs, each once")]
+pub enum ShotRig {
+    /// Rigid nodes with part slots (the frankenbot).
+    Slots(Rig),
+    /// A skinned character: skinned meshes on a skeleton, posed at shared steps.
+    Skinned(SkinnedRig),
+}
+
+impl ShotRig {
+    /// Slot names casting fills, in rig order.
+    pub fn slot_names(&self) -> Vec<&str> {
+        match self {
+            ShotRig::Slots(rig) => rig.slots().iter().map(|s| s.name.as_str()).collect(),
+            ShotRig::Skinned(rig) => rig.slots().iter().map(String::as_str).collect(),
+        }
+    }
+
+    /// Why the rig cannot play cycle `name` (`None`: it can).
+    pub fn lacks_cycle(&self, name: &str) -> Option<Error> {
+        match self {
+            ShotRig::Slots(rig) => rig.cycle(name).err(),
+            ShotRig::Skinned(rig) => rig.cycle_index(name).err(),
+        }
+    }
+
+    /// Length in frames of cycle `name` (`None` if the rig lacks it).
+    pub fn cycle_frames(&self, name: &str, fps: f32) -> Option<f32> {
+        match self {
+            ShotRig::Slots(rig) => rig.cycle(name).ok().map(|c| c.frames(fps)),
+            ShotRig::Skinned(rig) => rig.cycle_index(name).ok().map(|c| rig.cycle_frames(c)),
+        }
+    }
+
+    /// The skinned character, for a skinned rig.
+    pub fn skinned(&self) -> Option<&SkinnedRig> {
+        match self {
+            ShotRig::Skinned(rig) => Some(rig),
+            ShotRig::Slots(_) => None,
+        }
+    }
+}
+
+/// Every rig the shot's `[rigs]` names, by name, with its standing height.
+#[derive(Debug, Clone, Default)]
+pub struct ShotRigs {
+    rigs: BTreeMap<String, (ShotRig, f32)>,
+}
+
+impl ShotRigs {
+    /// Loads every rig of the shot and checks its schemes fill slots it has.
+    pub fn load(shot: &Shot, wardrobes: &Wardrobes) -> Result<ShotRigs> {
+        let mut rigs = BTreeMap::new();
+        for (name, r) in &shot.rigs {
+            let rig = if is_skinned_rig(r)? {
+                ShotRig::Skinned(
+                    SkinnedRig::load(&r.file, &r.skin, shot.frames.fps)
+                        .map_err(|e| e.field_prefix(&format!("rigs.{name}")).or_field(format!("rigs.{name}.file")))?,
+                )
+            } else {
+                ShotRig::Slots(Rig::load(&r.file).map_err(|e| e.or_field(format!("rigs.{name}.file")))?)
+            };
+            wardrobes.check_slots(name, &r.schemes, &rig.slot_names())?;
+            // Measured once: a slot rig's height poses its rest pose.
+            let height = match &rig {
+                ShotRig::Slots(rig) => rig.height(),
+                ShotRig::Skinned(rig) => rig.height(),
+            };
+            rigs.insert(name.clone(), (rig, height));
+        }
+        Ok(ShotRigs { rigs })
+    }
+
+    /// The rig named `name`.
+    pub fn get(&self, name: &str) -> Option<&ShotRig> {
+        self.rigs.get(name).map(|(rig, _)| rig)
+    }
+
+    /// The skinned character named `name` (`None` for a slot rig or no such rig).
+    pub fn skinned(&self, name: &str) -> Option<&SkinnedRig> {
+        self.get(name)?.skinned()
+    }
+
+    /// Standing height of rig `name` in metres (rest pose, before height jitter).
+    pub fn height(&self, name: &str) -> Option<f32> {
+        self.rigs.get(name).map(|&(_, h)| h)
+    }
+
+    /// Every rig by name, in name order.
+    pub fn iter(&self) -> impl Iterator<Item = (&str, &ShotRig)> {
+        self.rigs.iter().map(|(name, (rig, _))| (name.as_str(), rig))
+    }
+
+    /// Whether any rig is a skinned character.
+    pub fn any_skinned(&self) -> bool {
+        self.iter().any(|(_, rig)| rig.skinned().is_some())
+    }
+
+    /// A skinned character to load worn parts into (dressing only).
+    pub(crate) fn skinned_mut(&mut self, name: &str) -> Option<&mut SkinnedRig> {
+        match self.rigs.get_mut(name) {
+            Some((ShotRig::Skinned(rig), _)) => Some(rig),
+            _ => None,
+        }
+    }
+
+    /// What loading the skinned characters noticed but accepted, in rig order.
+    pub fn warnings(&self) -> impl Iterator<Item = &String> {
+        self.iter().filter_map(|(_, rig)| rig.skinned()).flat_map(|r| r.warnings().iter())
+    }
+}
