@@ -449,19 +449,7 @@ impl Default for RenderSettings {
     }
 }
 
-/// `render.working_colourspace`: the RGB space light is computed in. Every
-/// input colour (materials, textures, lights) is authored in linear Rec.709;
-/// with `Acescg` the renderer converts them to ACEScg (AP1) as it loads them
-/// (`render::colour`) and the EXRs say so.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Colourspace {
-    /// Linear Rec.709 / sRGB primaries, D65 white.
-    #[default]
-    Rec709,
-    /// ACEScg: linear AP1 primaries, the ACES white (about D60).
-    Acescg,
-}
+pub use crate::scene::Colourspace;
 
 /// Checks a shutter `[open, close]` (frames relative to the frame): both
 /// finite, within one frame of it (`-1..=1`), open before close, and at most

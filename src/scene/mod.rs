@@ -8,6 +8,21 @@ pub mod gltf;
 
 use glam::{Affine3A, Vec2, Vec3};
 
+/// `render.working_colourspace` (read by `shot`): the RGB space light is computed in. Every
+/// input colour (materials, textures, lights) is authored in linear Rec.709;
+/// with `Acescg` the renderer converts them to ACEScg (AP1) as it loads them
+/// (`render::colour`) and the EXRs say so.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Colourspace {
+    /// Linear Rec.709 / sRGB primaries, D65 white.
+    #[default]
+    Rec709,
+    /// ACEScg: linear AP1 primaries, the ACES white (about D60).
+    Acescg,
+}
+
+
 /// Index into [`Library::meshes`].
 pub type MeshId = u32;
 /// Index into [`Library::materials`].
@@ -136,7 +151,7 @@ impl Default for Material {
 /// gives an [`Acescg`] one, which has no conversion left to apply twice.
 pub trait Space {
     /// The colourspace this marker names.
-    const COLOURSPACE: crate::shot::Colourspace;
+    const COLOURSPACE: Colourspace;
 }
 
 /// Linear Rec.709 (D65): every input colour as authored.
@@ -148,11 +163,11 @@ pub enum Rec709 {}
 pub enum Acescg {}
 
 impl Space for Rec709 {
-    const COLOURSPACE: crate::shot::Colourspace = crate::shot::Colourspace::Rec709;
+    const COLOURSPACE: Colourspace = Colourspace::Rec709;
 }
 
 impl Space for Acescg {
-    const COLOURSPACE: crate::shot::Colourspace = crate::shot::Colourspace::Acescg;
+    const COLOURSPACE: Colourspace = Colourspace::Acescg;
 }
 
 /// Meshes, materials and textures, each loaded once and shared by every
