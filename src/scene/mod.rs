@@ -22,7 +22,6 @@ pub enum Colourspace {
     Acescg,
 }
 
-
 /// Index into [`Library::meshes`].
 pub type MeshId = u32;
 /// Index into [`Library::materials`].
