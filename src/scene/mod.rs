@@ -5,6 +5,7 @@
 //! INTERFACE (shared by casting, export and the renderer; keep stable).
 
 pub mod gltf;
+pub mod lights;
 
 use glam::{Affine3A, Vec2, Vec3};
 
@@ -259,7 +260,7 @@ pub struct Sun {
 }
 
 /// A uniform sky dome.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub struct Sky {
     /// Radiance, linear RGB.
     pub radiance: Vec3,
