@@ -14,6 +14,7 @@ pub mod accel;
 pub mod bsdf;
 pub mod colour;
 pub mod cryptomatte;
+pub mod dome;
 pub mod exr;
 pub mod film;
 pub mod integrator;

@@ -1,4 +1,4 @@
-//! OpenEXR output (the only file that names the exr crate) and PNG previews.
+//! OpenEXR output and reading (with `scene::dome`, the only files that name the exr crate) and PNG previews.
 //!
 //! One single-part scanline file per (layer, frame), ZIP16 unless asked
 //! otherwise ([`LayerCompression`]), increasing lines, Rec.709 `chromaticities`,
@@ -402,7 +402,7 @@ pub const MAX_EXR_EXPANSION: u64 = 4096;
 /// hold ([`MAX_EXR_EXPANSION`]). The exr crate allocates every channel of
 /// every part from the header before it reads a pixel, so a corrupt data
 /// window or channel list would otherwise ask for gigabytes.
-fn check_decoded_size(path: &Path) -> Result<()> {
+pub(crate) fn check_decoded_size(path: &Path) -> Result<()> {
     let file_len = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
     let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| exr_error(path, e))?;
     let mut bytes = 0u64;

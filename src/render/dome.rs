@@ -1,0 +1,391 @@
+//! Looking up and importance-sampling an HDRI dome ([`Dome`]).
+//!
+//! Orientation (docs/lights.md, "The dome"; Blender's world and the peer
+//! harness): for a world direction d, let d' be d turned by `-rotate` about
+//! +Y; then u = (pi - atan2(-d'.z, d'.x)) / (2 pi), v = acos(d'.y) / pi, with
+//! v = 0 the top row. At `rotate` 0 the image centre faces +X.
+//!
+//! Radiance is bilinear between texel centres (wrapping in u, clamped in v).
+//! Sampling is piecewise constant over the texel cells: a cell is picked with
+//! probability proportional to the mean luminance of the bilinear radiance
+//! over it times its solid angle (a marginal distribution over rows, a
+//! conditional one along each row), then a direction uniformly in solid angle
+//! within it. So the density is constant over each cell, exactly 1 / (4 pi)
+//! everywhere for a constant map, and positive wherever the radiance is (the
+//! cell mean sees every texel the bilinear lookup reads), as multiple
+//! importance sampling needs.
+
+use std::f32::consts::PI;
+use std::f64::consts::PI as PI64;
+use std::sync::Arc;
+
+use glam::{Vec2, Vec3};
+
+use super::bsdf::luminance;
+use crate::scene::lights::Dome;
+
+/// A dome ready to be looked up and sampled. Building it costs a pass over
+/// the texels and 8 bytes per texel: build one per loaded dome and share it.
+#[derive(Clone, Debug)]
+pub struct DomeSampler {
+    dome: Arc<Dome>,
+    cos_rotate: f32,
+    sin_rotate: f32,
+    /// Running sums (inclusive) of the cell weights along each row, row-major.
+    row_cdf: Vec<f64>,
+    /// Running sums (inclusive) of the row totals, top row first.
+    marginal_cdf: Vec<f64>,
+    /// cos(theta) at each row boundary, `height + 1` values from +1 (zenith).
+    cos_theta: Vec<f64>,
+    /// Solid angle of one cell of each row.
+    cell_solid_angle: Vec<f64>,
+    /// Sum of all cell weights: the integral of luminance over the sphere.
+    total: f64,
+}
+
+impl DomeSampler {
+    /// Builds the lookup and the sampling distribution of `dome`.
+    pub fn new(dome: Arc<Dome>) -> DomeSampler {
+        let (w, h) = (dome.width as usize, dome.height as usize);
+        let texel_luminance = |i: usize, j: usize| luminance(dome.texels[j * w + i] * dome.scale).max(0.0);
+        // The mean of a bilinear interpolant over a texel's cell weighs the
+        // texel and its neighbours 1/8, 3/4, 1/8 along each axis.
+        let mut across = vec![0f32; w * h];
+        for j in 0..h {
+            for i in 0..w {
+                let (left, right) = ((i + w - 1) % w, (i + 1) % w);
+                across[j * w + i] =
+                    (texel_luminance(left, j) + 6.0 * texel_luminance(i, j) + texel_luminance(right, j)) / 8.0;
+            }
+        }
+        let cos_theta: Vec<f64> = (0..=h).map(|j| (PI64 * j as f64 / h as f64).cos()).collect();
+        let cell_solid_angle: Vec<f64> = (0..h)
+            .map(|j| {
+                // cos a - cos b = 2 sin((a + b) / 2) sin((b - a) / 2), exact near the poles.
+                let (a, b) = (PI64 * j as f64 / h as f64, PI64 * (j + 1) as f64 / h as f64);
+                2.0 * ((a + b) / 2.0).sin() * ((b - a) / 2.0).sin() * 2.0 * PI64 / w as f64
+            })
+            .collect();
+        let mut row_cdf = vec![0f64; w * h];
+        let mut marginal_cdf = vec![0f64; h];
+        let mut total = 0f64;
+        for j in 0..h {
+            let (up, down) = (j.saturating_sub(1), (j + 1).min(h - 1));
+            let mut sum = 0f64;
+            for i in 0..w {
+                let mean = (across[up * w + i] + 6.0 * across[j * w + i] + across[down * w + i]) as f64 / 8.0;
+                sum += mean * cell_solid_angle[j];
+                row_cdf[j * w + i] = sum;
+            }
+            total += sum;
+            marginal_cdf[j] = total;
+        }
+        let (sin_rotate, cos_rotate) = dome.rotate.sin_cos();
+        DomeSampler { dome, cos_rotate, sin_rotate, row_cdf, marginal_cdf, cos_theta, cell_solid_angle, total }
+    }
+
+    /// The dome it samples.
+    pub fn dome(&self) -> &Dome {
+        &self.dome
+    }
+
+    /// World direction of map coordinates `uv` (u right, v down, in [0, 1]).
+    pub fn direction(&self, uv: Vec2) -> Vec3 {
+        let (sin_theta, cos_theta) = (PI * uv.y).sin_cos();
+        self.world_from_dome(sin_theta, cos_theta, uv.x)
+    }
+
+    /// Map coordinates of a world direction (need not be unit length).
+    pub fn uv(&self, dir: Vec3) -> Vec2 {
+        let d = self.dome_from_world(dir.normalize_or_zero());
+        let u = (PI - (-d.z).atan2(d.x)) / (2.0 * PI);
+        Vec2::new(u, d.y.clamp(-1.0, 1.0).acos() / PI)
+    }
+
+    /// Radiance arriving from direction `dir` (W/(m^2 sr)): the bilinear
+    /// lookup times the dome's scale.
+    pub fn radiance(&self, dir: Vec3) -> Vec3 {
+        self.lookup(self.uv(dir))
+    }
+
+    /// Samples a direction towards the dome from two uniform numbers in
+    /// [0, 1): (direction, its radiance, its solid-angle pdf). None for a
+    /// black dome.
+    pub fn sample(&self, u: Vec2) -> Option<(Vec3, Vec3, f32)> {
+        if self.total <= 0.0 {
+            return None;
+        }
+        let u = u.clamp(Vec2::ZERO, Vec2::splat(1.0 - f32::EPSILON));
+        let w = self.dome.width as usize;
+        let (row, along_row) = pick(&self.marginal_cdf, u.y as f64 * self.total);
+        let cdf = &self.row_cdf[row * w..(row + 1) * w];
+        let (column, along_column) = pick(cdf, u.x as f64 * cdf[w - 1]);
+        // Uniform in solid angle within the cell: uniform in u and in cos(theta).
+        let map_u = ((column as f64 + along_column) / w as f64) as f32;
+        let (top, bottom) = (self.cos_theta[row], self.cos_theta[row + 1]);
+        let cos_theta = top + along_row * (bottom - top);
+        let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+        let dir = self.world_from_dome(sin_theta as f32, cos_theta as f32, map_u);
+        // The pdf and radiance a ray leaving in `dir` would find, so that the
+        // two strategies of multiple importance sampling agree exactly.
+        let pdf = self.pdf(dir);
+        (pdf > 0.0).then(|| (dir, self.radiance(dir), pdf))
+    }
+
+    /// Solid-angle density with which [`DomeSampler::sample`] picks `dir`.
+    pub fn pdf(&self, dir: Vec3) -> f32 {
+        if self.total <= 0.0 {
+            return 0.0;
+        }
+        let (w, h) = (self.dome.width as usize, self.dome.height as usize);
+        let uv = self.uv(dir);
+        let column = ((uv.x * w as f32) as usize).min(w - 1);
+        let row = ((uv.y * h as f32) as usize).min(h - 1);
+        let i = row * w + column;
+        let weight = self.row_cdf[i] - if column == 0 { 0.0 } else { self.row_cdf[i - 1] };
+        (weight / (self.total * self.cell_solid_angle[row])) as f32
+    }
+
+    /// Mean luminance of the radiance over the sphere (W/(m^2 sr)): the
+    /// dome's share of light when choosing between lights by power (a
+    /// constant dome of radiance L gives an open horizontal plane pi L).
+    pub fn mean_radiance(&self) -> f32 {
+        (self.total / (4.0 * PI64)) as f32
+    }
+
+    /// Dome (map) frame to world: turned by `rotate` about +Y.
+    fn world_from_dome(&self, sin_theta: f32, cos_theta: f32, map_u: f32) -> Vec3 {
+        let (sin_phi, cos_phi) = (PI - 2.0 * PI * map_u).sin_cos();
+        let d = Vec3::new(sin_theta * cos_phi, cos_theta, -sin_theta * sin_phi);
+        let (c, s) = (self.cos_rotate, self.sin_rotate);
+        Vec3::new(c * d.x + s * d.z, d.y, c * d.z - s * d.x)
+    }
+
+    /// World to the dome (map) frame: turned by `-rotate` about +Y.
+    fn dome_from_world(&self, d: Vec3) -> Vec3 {
+        let (c, s) = (self.cos_rotate, self.sin_rotate);
+        Vec3::new(c * d.x - s * d.z, d.y, c * d.z + s * d.x)
+    }
+
+    /// Bilinear radiance at map coordinates, texel centres at half-integers.
+    fn lookup(&self, uv: Vec2) -> Vec3 {
+        let (w, h) = (self.dome.width as i64, self.dome.height as i64);
+        let (x, y) = (uv.x * w as f32 - 0.5, uv.y * h as f32 - 0.5);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let left = (x0 as i64).rem_euclid(w);
+        let right = (left + 1) % w;
+        let (up, down) = ((y0 as i64).clamp(0, h - 1), (y0 as i64 + 1).clamp(0, h - 1));
+        let texel = |i: i64, j: i64| self.dome.texels[(j * w + i) as usize];
+        let upper = texel(left, up).lerp(texel(right, up), fx);
+        let lower = texel(left, down).lerp(texel(right, down), fx);
+        upper.lerp(lower, fy) * self.dome.scale
+    }
+}
+
+/// The bin of an inclusive running sum `cdf` that holds `target` (in [0,
+/// total)), and where in it `target` falls (0..1). Never a bin of weight 0.
+fn pick(cdf: &[f64], target: f64) -> (usize, f64) {
+    let i = cdf.partition_point(|&c| c <= target).min(cdf.len() - 1);
+    let low = if i == 0 { 0.0 } else { cdf[i - 1] };
+    let weight = cdf[i] - low;
+    let along = if weight > 0.0 { ((target - low) / weight).clamp(0.0, 1.0) } else { 0.5 };
+    (i, along)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::sampler::hash_words;
+
+    fn dome(width: u32, texel: impl Fn(u32, u32) -> Vec3, rotate: f32) -> Arc<Dome> {
+        let height = width / 2;
+        let texels = (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| texel(x, y)).collect();
+        Arc::new(Dome {
+            file: "test.hdr".into(),
+            width,
+            height,
+            texels,
+            scale: Vec3::ONE,
+            rotate,
+            camera_visible: true,
+        })
+    }
+
+    fn random(n: u32, dim: u32) -> f32 {
+        (hash_words(&[n, dim]) >> 8) as f32 / (1u32 << 24) as f32
+    }
+
+    /// A smooth map with a small bright patch (a sun) in row 5 of 16.
+    fn sunny(x: u32, y: u32) -> Vec3 {
+        let (fx, fy) = (x as f32 / 32.0, y as f32 / 16.0);
+        let sky = Vec3::new(0.3 + 0.2 * (6.0 * fx).sin(), 0.4 + 0.3 * fy, 0.5 + 0.1 * (9.0 * fy).cos());
+        if (20..22).contains(&x) && (5..7).contains(&y) {
+            sky + Vec3::new(300.0, 280.0, 250.0)
+        } else {
+            sky
+        }
+    }
+
+    /// Integral over the sphere of `f(direction(uv))` by the midpoint rule on
+    /// an `n` x `n / 2` grid.
+    fn quadrature(s: &DomeSampler, n: u32, f: impl Fn(Vec3) -> Vec3) -> Vec3 {
+        let m = n / 2;
+        let mut sum = Vec3::ZERO;
+        for j in 0..m {
+            let v = (j as f32 + 0.5) / m as f32;
+            let area = 2.0 * PI * PI * (PI * v).sin() / (n * m) as f32;
+            for i in 0..n {
+                sum += f(s.direction(Vec2::new((i as f32 + 0.5) / n as f32, v))) * area;
+            }
+        }
+        sum
+    }
+
+    #[test]
+    fn uv_and_direction_round_trip() {
+        let s = DomeSampler::new(dome(16, |_, _| Vec3::ONE, 0.7));
+        for j in 1..20 {
+            for i in 0..40 {
+                let uv = Vec2::new(i as f32 / 40.0, j as f32 / 20.0);
+                let d = s.direction(uv);
+                assert!((d.length() - 1.0).abs() < 1e-6);
+                let back = s.uv(d) - uv;
+                // u = 0 and u = 1 are the same seam.
+                let du = back.x - back.x.round();
+                assert!(du.abs() < 1e-5 && back.y.abs() < 1e-5, "{uv} -> {d} -> {}", s.uv(d));
+            }
+        }
+    }
+
+    #[test]
+    fn orientation_matches_blender_and_the_peers() {
+        let still = DomeSampler::new(dome(16, |_, _| Vec3::ONE, 0.0));
+        let close = |a: Vec3, b: Vec3| (a - b).length() < 1e-6;
+        assert!(close(still.direction(Vec2::new(0.5, 0.5)), Vec3::X), "centre faces +X");
+        assert!(close(still.direction(Vec2::new(0.25, 0.5)), -Vec3::Z), "u = 0.25 faces -Z");
+        assert!(close(still.direction(Vec2::new(0.75, 0.5)), Vec3::Z));
+        assert!(close(still.direction(Vec2::new(0.0, 0.5)), -Vec3::X));
+        assert!(close(still.direction(Vec2::new(0.3, 0.0)), Vec3::Y), "top row is the zenith");
+        let turned = DomeSampler::new(dome(16, |_, _| Vec3::ONE, PI / 2.0));
+        assert!(close(turned.direction(Vec2::new(0.5, 0.5)), -Vec3::Z), "rotate 90: centre faces -Z");
+        assert!((turned.uv(-Vec3::Z) - Vec2::new(0.5, 0.5)).length() < 1e-6);
+    }
+
+    #[test]
+    fn radiance_is_bilinear_wraps_in_u_and_is_scaled() {
+        let mut d = (*dome(4, |x, y| Vec3::splat((x + 10 * y) as f32), 0.0)).clone();
+        d.scale = Vec3::new(1.0, 2.0, 0.5);
+        let s = DomeSampler::new(Arc::new(d));
+        let at = |u: f32, v: f32| s.radiance(s.direction(Vec2::new(u, v)));
+        // Texel centre (1, 0) and the midpoint between (1, 0) and (2, 1).
+        assert!((at(1.5 / 4.0, 0.25) - Vec3::new(1.0, 2.0, 0.5)).abs().max_element() < 1e-4);
+        assert!((at(0.5, 0.5) - Vec3::new(6.5, 13.0, 3.25)).abs().max_element() < 1e-4);
+        // The seam: halfway between texel 3 and texel 0 of row 0.
+        assert!((at(0.0, 0.25) - Vec3::new(1.5, 3.0, 0.75)).abs().max_element() < 1e-3);
+    }
+
+    #[test]
+    fn constant_dome_has_uniform_pdf() {
+        let s = DomeSampler::new(dome(32, |_, _| Vec3::splat(2.0), 1.1));
+        for n in 0..500 {
+            let dir = s.direction(Vec2::new(random(n, 0), random(n, 1)));
+            assert!((s.pdf(dir) * 4.0 * PI - 1.0).abs() < 1e-5, "{dir}: {}", s.pdf(dir));
+        }
+        assert!((s.mean_radiance() - 2.0).abs() < 1e-5);
+        let (_, radiance, pdf) = s.sample(Vec2::new(0.3, 0.999_999)).unwrap();
+        assert!((pdf * 4.0 * PI - 1.0).abs() < 1e-5 && (radiance - Vec3::splat(2.0)).length() < 1e-5);
+    }
+
+    #[test]
+    fn pdf_integrates_to_one_and_matches_the_samples() {
+        let s = DomeSampler::new(dome(32, sunny, 0.4));
+        let integral = quadrature(&s, 512, |d| Vec3::splat(s.pdf(d)));
+        assert!((integral.x - 1.0).abs() < 2e-3, "{integral}");
+        // Where the samples land, cell by cell, against pdf x solid angle.
+        let (w, h, n) = (32usize, 16usize, 200_000u32);
+        let mut counts = vec![0u32; w * h];
+        for k in 0..n {
+            let (dir, radiance, pdf) = s.sample(Vec2::new(random(k, 0), random(k, 1))).unwrap();
+            assert_eq!(pdf, s.pdf(dir));
+            assert_eq!(radiance, s.radiance(dir));
+            let uv = s.uv(dir);
+            counts[((uv.y * h as f32) as usize).min(h - 1) * w + ((uv.x * w as f32) as usize).min(w - 1)] += 1;
+        }
+        for j in 0..h {
+            for i in 0..w {
+                let centre = s.direction(Vec2::new((i as f32 + 0.5) / w as f32, (j as f32 + 0.5) / h as f32));
+                let expected = s.pdf(centre) as f64 * s.cell_solid_angle[j] * n as f64;
+                let got = counts[j * w + i] as f64;
+                assert!((got - expected).abs() < 5.0 * expected.sqrt() + 2.0, "cell {i},{j}: {got} vs {expected}");
+            }
+        }
+    }
+
+    #[test]
+    fn estimator_integrates_the_dome() {
+        let s = DomeSampler::new(dome(32, sunny, 2.0));
+        let n = 1u32 << 16;
+        let mut sum = Vec3::ZERO;
+        for k in 0..n {
+            let (_, radiance, pdf) = s.sample(Vec2::new(random(k, 0), random(k, 1))).unwrap();
+            sum += radiance / pdf;
+        }
+        let estimate = sum / n as f32;
+        // The bilinear radiance, finely integrated.
+        let fine = quadrature(&s, 1024, |d| s.radiance(d));
+        // The texels with sin(theta), as a lighter would add them up.
+        let (w, h) = (32u32, 16u32);
+        let mut texels = Vec3::ZERO;
+        for j in 0..h {
+            let theta = PI * (j as f32 + 0.5) / h as f32;
+            for i in 0..w {
+                texels += sunny(i, j) * theta.sin() * 2.0 * PI * PI / (w * h) as f32;
+            }
+        }
+        for reference in [fine, texels] {
+            let error = (estimate / reference - 1.0).abs().max_element();
+            assert!(error < 0.01, "{estimate} vs {reference}");
+        }
+        assert!((s.mean_radiance() - luminance(fine) / (4.0 * PI)).abs() < 2e-3 * s.mean_radiance());
+    }
+
+    #[test]
+    fn a_hot_texel_draws_the_samples() {
+        let (hot_x, hot_y) = (20u32, 5u32);
+        let s = DomeSampler::new(dome(32, |x, y| Vec3::splat(if (x, y) == (hot_x, hot_y) { 1e4 } else { 1e-3 }), 0.0));
+        let (mut inside, mut near) = (0u32, 0u32);
+        let n = 20_000u32;
+        for k in 0..n {
+            let (dir, _, _) = s.sample(Vec2::new(random(k, 0), random(k, 1))).unwrap();
+            let uv = s.uv(dir);
+            let (x, y) = ((uv.x * 32.0) as i32, (uv.y * 16.0) as i32);
+            inside += ((x, y) == (hot_x as i32, hot_y as i32)) as u32;
+            near += ((x - hot_x as i32).abs() <= 1 && (y - hot_y as i32).abs() <= 1) as u32;
+        }
+        // The bilinear lookup spreads the texel over its 3 x 3 cells, 9/16 of
+        // it in its own: the samples follow.
+        let share = inside as f32 / n as f32;
+        assert!((share - 9.0 / 16.0).abs() < 0.03, "{share}");
+        assert!(near as f32 / n as f32 > 0.999, "{near}");
+    }
+
+    #[test]
+    fn pdf_is_positive_wherever_radiance_is() {
+        let s = DomeSampler::new(dome(16, |x, y| if (x, y) == (3, 0) { Vec3::ONE } else { Vec3::ZERO }, 0.3));
+        let mut lit = 0;
+        for j in 0..200 {
+            for i in 0..400 {
+                let d = s.direction(Vec2::new((i as f32 + 0.5) / 400.0, (j as f32 + 0.5) / 200.0));
+                if s.radiance(d).max_element() > 0.0 {
+                    lit += 1;
+                    assert!(s.pdf(d) > 0.0, "{d}");
+                }
+            }
+        }
+        assert!(lit > 100);
+        let black = DomeSampler::new(dome(16, |_, _| Vec3::ZERO, 0.0));
+        assert!(black.sample(Vec2::new(0.5, 0.5)).is_none());
+        assert_eq!((black.pdf(Vec3::Y), black.mean_radiance()), (0.0, 0.0));
+    }
+}
