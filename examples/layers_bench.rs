@@ -20,7 +20,7 @@ fn thread_cpu() -> f64 {
 fn main() -> throng::error::Result<()> {
     let n: u32 = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(1_000_000);
     let yfov = 2.0 * ((36.0 / (16.0 / 9.0)) * 0.5f32 / 35.0).atan();
-    let cam = Camera { world_from_camera: look_at(Vec3::new(0.0, 1.7, 24.0), Vec3::new(0.0, 1.0, -2.0)), yfov };
+    let cam = Camera::pinhole(look_at(Vec3::new(0.0, 1.7, 24.0), Vec3::new(0.0, 1.0, -2.0)), yfov);
     // A 1 km square field of agents, deterministic, in id order as a cache
     // holds them (`--shuffled`: ids in random order, the worst case).
     let shuffled = std::env::args().any(|a| a == "--shuffled");

@@ -12,7 +12,7 @@ fn main() -> throng::error::Result<()> {
     let mode = args.get(2).map_or("count", String::as_str);
     let frames: Vec<i32> = (1001..=1048).collect();
     let yfov = 2.0 * ((36.0 / (16.0 / 9.0)) * 0.5f32 / 35.0).atan();
-    let cam = Camera { world_from_camera: look_at(Vec3::new(0.0, 1.7, 24.0), Vec3::new(0.0, 1.0, -2.0)), yfov };
+    let cam = Camera::pinhole(look_at(Vec3::new(0.0, 1.7, 24.0), Vec3::new(0.0, 1.0, -2.0)), yfov);
     // A loose crowd in x [-18, 18], z [-30, 12], drifting slowly, deterministic.
     let mut agents = Vec::new();
     let mut seed = 12345u64;

@@ -8,12 +8,16 @@
 //! options: --res W H (960 540)  --spp S (64)  --bounces B (5)  --threads T (2)
 //!          --sky R G B (0.30 0.38 0.50)  --seed S (0)  --materials diffuse|gltf (diffuse)
 //!          --camera NODE (first node with a perspective camera)  --no-rays  --no-render
+//!          --hdri FILE (.hdr/.exr lat-long; replaces --sky)  --hdri-strength S (1)  --hdri-rotate DEG (0)
 //! ```
-//! Any .glb with a perspective camera and a KHR_lights_punctual directional
-//! light (make_crowd.py output, `throng export` output). Conventions as the
-//! peers' scripts: sun irradiance W/m^2 = lux / 683, hard sun (angular
-//! diameter 0), uniform sky radiance visible to the camera, no clamping,
-//! pure Lambert materials from the base colour (`RenderSettings::diffuse_only`).
+//! Any .glb with a perspective camera (make_crowd.py output, `throng export`
+//! output), lit by its KHR_lights_punctual lights (directional, point, spot)
+//! and emissive materials. Conventions as the peers' scripts: sun irradiance
+//! W/m^2 = lux / 683, point and spot W/sr = cd / 683, Blender's spot edge,
+//! emission = emissiveFactor x strength, hard lights (angular diameter and
+//! radius 0), uniform sky radiance or the HDRI visible to the camera, no
+//! clamping, pure Lambert materials from the base colour
+//! (`RenderSettings::diffuse_only`).
 //!
 //! Bounces: our `max_bounces` B traces up to B BSDF-sampled rays after the
 //! camera ray and does sun next-event estimation at every vertex 0..=B.
@@ -48,11 +52,13 @@ use throng::render::exr::{camera_matrices, write_layer, write_preview_png, Layer
 use throng::render::film::render_frame_with_stats;
 use throng::render::integrator::{offset_ray_origin, CameraRays};
 use throng::render::{BlasSet, RenderSettings};
-use throng::scene::gltf::AssetCache;
-use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun};
+use throng::scene::dome::load_dome;
+use throng::scene::gltf::{AssetCache, LUMENS_PER_WATT};
+use throng::scene::{
+    lights::SceneLights, vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun,
+};
 
 /// Lumens per watt: the peers' (Blender glTF importer's) lux to W/m^2 factor.
-const LUMENS_PER_WATT: f32 = 683.0;
 
 struct Args {
     scene: Option<PathBuf>,
@@ -66,6 +72,9 @@ struct Args {
     seed: u64,
     diffuse: bool,
     camera: Option<String>,
+    hdri: Option<PathBuf>,
+    hdri_strength: f32,
+    hdri_rotate: f32,
     rays: bool,
     render: bool,
 }
@@ -83,6 +92,9 @@ fn parse_args() -> Result<Args, String> {
         seed: 0,
         diffuse: true,
         camera: None,
+        hdri: None,
+        hdri_strength: 1.0,
+        hdri_rotate: 0.0,
         rays: true,
         render: true,
     };
@@ -109,6 +121,9 @@ fn parse_args() -> Result<Args, String> {
                 }
             }
             "--camera" => a.camera = Some(it.next().ok_or("--camera needs a node name")?),
+            "--hdri" => a.hdri = Some(PathBuf::from(it.next().ok_or("--hdri needs a file")?)),
+            "--hdri-strength" => a.hdri_strength = num(&mut it, &arg)?,
+            "--hdri-rotate" => a.hdri_rotate = num(&mut it, &arg)?,
             "--no-rays" => a.rays = false,
             "--no-render" => a.render = false,
             s if s.starts_with("--") => return Err(format!("unknown flag {s}")),
@@ -151,7 +166,7 @@ fn load_glb(path: &PathBuf, args: &Args) -> Result<Loaded, String> {
     let mut cache = AssetCache::new();
     let placed = cache.load_scene_instances(path).map_err(|e| e.to_string())?;
     let camera = cache.find_camera(path, &camera_node).map_err(|e| e.to_string())?;
-    let lights = cache.directional_lights(path).map_err(|e| e.to_string())?;
+    let local = cache.punctual_lights(path).map_err(|e| e.to_string())?;
     let lib = cache.into_library();
     let instances = placed
         .into_iter()
@@ -165,20 +180,15 @@ fn load_glb(path: &PathBuf, args: &Args) -> Result<Loaded, String> {
         })
         .collect();
     let load_s = start.elapsed().as_secs_f64();
-    if lights.len() > 1 {
-        eprintln!("note: {} directional lights, using the first ({})", lights.len(), lights[0].node);
-    }
-    let sun = lights.first().map(|l| Sun {
-        direction: l.direction,
-        angular_diameter: 0.0,
-        irradiance: l.color * (l.intensity / LUMENS_PER_WATT),
-    });
-    Ok(Loaded {
-        lib,
-        scene: FrameScene { instances, camera, sun, sky: Sky { radiance: args.sky }, motion: None },
-        started: start,
-        load_s,
-    })
+    let dome = match &args.hdri {
+        Some(file) => Some(std::sync::Arc::new(
+            load_dome(file, Vec3::splat(args.hdri_strength), args.hdri_rotate.to_radians(), true)
+                .map_err(|e| e.to_string())?,
+        )),
+        None => None,
+    };
+    let lights = SceneLights { sun: None, sky: Sky { radiance: args.sky }, dome, local };
+    Ok(Loaded { lib, scene: FrameScene { instances, camera, lights, motion: None }, started: start, load_s })
 }
 
 // ------------------------------------------------------------ synthetic crowd
@@ -228,6 +238,7 @@ fn synthetic(n: usize, args: &Args) -> Loaded {
         base_color_texture: None,
         roughness: 1.0,
         metallic: 0.0,
+        ..Default::default()
     };
     let materials = vec![
         m("ground", [0.5, 0.5, 0.5]),
@@ -305,8 +316,7 @@ fn synthetic(n: usize, args: &Args) -> Loaded {
     let forward = (Vec3::new(0.0, 0.8, 0.0) - eye).normalize();
     let right = forward.cross(Vec3::Y).normalize();
     let up = right.cross(forward);
-    let camera =
-        Camera { world_from_camera: Affine3A::from_cols(right.into(), up.into(), (-forward).into(), eye.into()), yfov };
+    let camera = Camera::pinhole(Affine3A::from_cols(right.into(), up.into(), (-forward).into(), eye.into()), yfov);
     let sun_elevation = 50f32.to_radians();
     let sun_direction =
         Vec3::new(-0.5 * sun_elevation.cos(), sun_elevation.sin(), 0.87 * sun_elevation.cos()).normalize();
@@ -319,7 +329,12 @@ fn synthetic(n: usize, args: &Args) -> Loaded {
     let load_s = start.elapsed().as_secs_f64();
     Loaded {
         lib,
-        scene: FrameScene { instances, camera, sun, sky: Sky { radiance: args.sky }, motion: None },
+        scene: FrameScene {
+            instances,
+            camera,
+            lights: SceneLights::sun_and_sky(sun, Sky { radiance: args.sky }),
+            motion: None,
+        },
         started: start,
         load_s,
     }

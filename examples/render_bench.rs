@@ -12,7 +12,9 @@ use throng::render::accel::{BlasSet, Tlas, TlasKind, WorldRay};
 use throng::render::exr::write_preview_png;
 use throng::render::film::render_frame_with_stats;
 use throng::render::RenderSettings;
-use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun};
+use throng::scene::{
+    lights::SceneLights, vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun,
+};
 
 struct Lcg(u64);
 impl Lcg {
@@ -40,6 +42,7 @@ fn library() -> Library {
         base_color_texture: None,
         roughness,
         metallic,
+        ..Default::default()
     };
     Library {
         // Ground, a box part, a 2k-triangle head sphere, a 500-triangle limb sphere.
@@ -191,13 +194,17 @@ fn main() {
                     Vec3::new(0.0, 1.7, 24.0),
                 ),
                 yfov: 0.6,
+                aperture: 0.0,
+                focus_distance: 1.0,
             },
-            sun: Some(Sun {
-                direction: Vec3::new(-0.4, 0.6, 0.5).normalize(),
-                angular_diameter: 0.0093,
-                irradiance: Vec3::new(3.0, 2.85, 2.64),
-            }),
-            sky: Sky { radiance: Vec3::new(0.3, 0.38, 0.5) },
+            lights: SceneLights::sun_and_sky(
+                Some(Sun {
+                    direction: Vec3::new(-0.4, 0.6, 0.5).normalize(),
+                    angular_diameter: 0.0093,
+                    irradiance: Vec3::new(3.0, 2.85, 2.64),
+                }),
+                Sky { radiance: Vec3::new(0.3, 0.38, 0.5) },
+            ),
             motion: None,
         };
         let settings = RenderSettings {

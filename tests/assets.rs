@@ -6,7 +6,8 @@ mod common;
 
 use glam::{Affine3A, Quat, Vec3};
 use throng::error::Error;
-use throng::scene::gltf::{srgb_to_linear, AssetCache, GltfFile};
+use throng::scene::gltf::{srgb_to_linear, AssetCache, GltfFile, LUMENS_PER_WATT};
+use throng::scene::lights::LightKind;
 use throng::scene::Material;
 
 fn fixture(name: &str) -> String {
@@ -289,14 +290,15 @@ fn camera_and_sun() {
     let err = cache.find_camera(set(), "cam").err().map(|e| e.to_string()).unwrap_or_default();
     assert!(err.contains("shotcam"), "lists the nodes: {err}");
 
-    let suns = ok(cache.directional_lights(set()));
+    let suns = ok(cache.punctual_lights(set()));
     assert_eq!(suns.len(), 1);
-    assert_eq!(suns[0].node, "sun");
+    assert_eq!(suns[0].name, "sun");
+    assert_eq!(suns[0].kind, LightKind::Distant { angular_diameter: 0.0 });
     let s = std::f32::consts::FRAC_1_SQRT_2;
-    close3(suns[0].direction, Vec3::new(0.0, s, s), "towards the sun");
-    close3(suns[0].color, Vec3::new(1.0, 0.9, 0.8), "colour");
-    assert_eq!(suns[0].intensity, 3.0);
-    assert!(ok(cache.directional_lights(alien())).is_empty());
+    close3(-suns[0].facing(), Vec3::new(0.0, s, s), "towards the sun");
+    // lux -> W/m^2, as Blender's importer and the peers convert.
+    close3(suns[0].emission, Vec3::new(1.0, 0.9, 0.8) * (3.0 / LUMENS_PER_WATT), "irradiance");
+    assert!(ok(cache.punctual_lights(alien())).is_empty());
 }
 
 #[test]

@@ -12,7 +12,9 @@ use exr::prelude::{ReadChannels, ReadLayers};
 use glam::{Affine3A, Mat3, Quat, Vec2, Vec3};
 use throng::render::colour::{self, Colourspace};
 use throng::render::{render_frame, BlasSet, RenderSettings};
-use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun, Texture};
+use throng::scene::{
+    lights::SceneLights, vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun, Texture,
+};
 
 use common::run;
 
@@ -86,6 +88,7 @@ fn floor_scene(base: Vec3, texel: Option<[f32; 4]>, sun: Vec3, sky: Vec3) -> (Li
         base_color_texture: texel.map(|_| 0),
         roughness: 0.7,
         metallic: 0.0,
+        ..Default::default()
     };
     let textures = texel.map(|t| Texture { name: "t".into(), width: 2, height: 1, texels: vec![t; 2] });
     let lib = Library { meshes: vec![quad(8.0)], materials: vec![material], textures: textures.into_iter().collect() };
@@ -104,9 +107,13 @@ fn floor_scene(base: Vec3, texel: Option<[f32; 4]>, sun: Vec3, sky: Vec3) -> (Li
                 Vec3::new(0.0, 3.0, 0.0),
             ),
             yfov: 0.6,
+            aperture: 0.0,
+            focus_distance: 1.0,
         },
-        sun: Some(Sun { direction: Vec3::new(0.3, 1.0, 0.2).normalize(), angular_diameter: 0.02, irradiance: sun }),
-        sky: Sky { radiance: sky },
+        lights: SceneLights::sun_and_sky(
+            Some(Sun { direction: Vec3::new(0.3, 1.0, 0.2).normalize(), angular_diameter: 0.02, irradiance: sun }),
+            Sky { radiance: sky },
+        ),
         motion: None,
     };
     (lib, scene)

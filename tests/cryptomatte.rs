@@ -20,7 +20,9 @@ use throng::render::exr::{
 };
 use throng::render::film::{render_frame_with_cryptomatte, Film};
 use throng::render::RenderSettings;
-use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky};
+use throng::scene::{
+    lights::SceneLights, vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky,
+};
 
 fn fixtures() -> PathBuf {
     common::fixture("cryptomatte")
@@ -179,6 +181,8 @@ fn camera(eye: Vec3, target: Vec3, yfov_deg: f32) -> Camera {
     Camera {
         world_from_camera: Affine3A::from_cols(right.into(), up.into(), (-forward).into(), eye.into()),
         yfov: yfov_deg.to_radians(),
+        aperture: 0.0,
+        focus_distance: 1.0,
     }
 }
 
@@ -191,6 +195,7 @@ fn material(name: &str, grey: f32) -> Material {
         base_color_texture: None,
         roughness: 0.5,
         metallic: 0.0,
+        ..Default::default()
     }
 }
 
@@ -238,8 +243,7 @@ fn crowd_scene() -> (Library, FrameScene) {
     let scene = FrameScene {
         instances,
         camera: camera(Vec3::new(0.0, 1.0, 4.5), Vec3::new(0.0, 0.7, 0.0), 40.0),
-        sun: None,
-        sky: Sky { radiance: Vec3::splat(0.5) },
+        lights: SceneLights::sun_and_sky(None, Sky { radiance: Vec3::splat(0.5) }),
         motion: None,
     };
     (lib, scene)
@@ -498,8 +502,7 @@ fn set_scene() -> (Library, FrameScene, Vec<String>) {
     let scene = FrameScene {
         instances,
         camera: camera(Vec3::new(0.0, 1.0, 4.5), Vec3::new(0.0, 0.5, 0.0), 40.0),
-        sun: None,
-        sky: Sky { radiance: Vec3::splat(0.5) },
+        lights: SceneLights::sun_and_sky(None, Sky { radiance: Vec3::splat(0.5) }),
         motion: None,
     };
     (lib, scene, ["floor", "box_a", "box_b"].map(String::from).to_vec())

@@ -16,7 +16,7 @@ const FRAMES: std::ops::RangeInclusive<i32> = 1001..=1024;
 /// The demo camera: near (0, 1.7, 24) looking towards -Z, 35 mm on a 36 mm back, 16:9.
 fn camera() -> Camera {
     let yfov = 2.0 * ((36.0 / (16.0 / 9.0)) * 0.5f32 / 35.0).atan();
-    Camera { world_from_camera: look_at(Vec3::new(0.0, 1.7, 24.0), Vec3::new(0.0, 1.0, -2.0)), yfov }
+    Camera::pinhole(look_at(Vec3::new(0.0, 1.7, 24.0), Vec3::new(0.0, 1.0, -2.0)), yfov)
 }
 
 fn agent(id: u32, positions: Vec<Option<Vec3>>) -> AgentInput {

@@ -17,7 +17,8 @@ use throng::render::film::{render_frame, Film};
 use throng::render::job::{self, RenderJob};
 use throng::render::RenderSettings;
 use throng::scene::{
-    vis, Camera, FrameScene, Instance, InstanceAgent, InstanceMotion, Library, Material, Mesh, SceneMotion, Sky,
+    lights::SceneLights, vis, Camera, FrameScene, Instance, InstanceAgent, InstanceMotion, Library, Material, Mesh,
+    SceneMotion, Sky,
 };
 
 // ---------------------------------------------------------------- fixtures
@@ -48,7 +49,7 @@ const H: u32 = 32;
 const PX_PER_UNIT: f32 = 8.0;
 
 fn camera() -> Camera {
-    Camera { world_from_camera: Affine3A::from_translation(Vec3::new(0.0, 0.0, 10.0)), yfov: 2.0 * 0.2f32.atan() }
+    Camera::pinhole(Affine3A::from_translation(Vec3::new(0.0, 0.0, 10.0)), 2.0 * 0.2f32.atan())
 }
 
 fn settings(spp: u32, threads: usize) -> RenderSettings {
@@ -85,8 +86,7 @@ fn moving_square(from: Vec2, to: Vec2, shutter: [f32; 2]) -> FrameScene {
     FrameScene {
         instances: vec![inst],
         camera: camera(),
-        sun: None,
-        sky: Sky { radiance: Vec3::ONE },
+        lights: SceneLights::sun_and_sky(None, Sky { radiance: Vec3::ONE }),
         motion: Some(SceneMotion {
             shutter,
             instances: vec![InstanceMotion { world_from_object_close: close, deform: None }],

@@ -13,7 +13,9 @@ use throng::render::bsdf::Bsdf;
 use throng::render::exr::{camera_matrices, read_layer, write_layer, write_preview_png, LayerMeta, ID_MAPPING};
 use throng::render::film::{render_frame, Film};
 use throng::render::RenderSettings;
-use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun};
+use throng::scene::{
+    lights::SceneLights, vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun,
+};
 
 // ---------------------------------------------------------------- fixtures
 
@@ -46,7 +48,14 @@ fn quad(size: f32, centre: Vec3) -> Mesh {
 }
 
 fn material(name: &str, base: Vec3, metallic: f32, roughness: f32) -> Material {
-    Material { name: name.into(), base_color: base, base_color_texture: None, roughness, metallic }
+    Material {
+        name: name.into(),
+        base_color: base,
+        base_color_texture: None,
+        roughness,
+        metallic,
+        ..Default::default()
+    }
 }
 
 fn instance(mesh: u32, material: u32, world_from_object: Affine3A, agent: Option<u32>, visibility: u8) -> Instance {
@@ -60,7 +69,7 @@ fn camera(eye: Vec3, target: Vec3, yfov_deg: f32) -> Camera {
     let right = forward.cross(Vec3::Y).normalize();
     let up = right.cross(forward);
     let world_from_camera = Affine3A::from_cols(right.into(), up.into(), (-forward).into(), eye.into());
-    Camera { world_from_camera, yfov: yfov_deg.to_radians() }
+    Camera::pinhole(world_from_camera, yfov_deg.to_radians())
 }
 
 fn settings(width: u32, height: u32, spp: u32) -> RenderSettings {
@@ -236,8 +245,7 @@ fn furnace_convex_sphere_under_uniform_sky() {
     let scene = FrameScene {
         instances: vec![instance(0, 0, Affine3A::IDENTITY, None, vis::ALL)],
         camera: camera(eye, Vec3::ZERO, 40.0),
-        sun: None,
-        sky: Sky { radiance: Vec3::ONE },
+        lights: SceneLights::sun_and_sky(None, Sky { radiance: Vec3::ONE }),
         motion: None,
     };
     let s = RenderSettings { sky_visible: true, ..settings(48, 36, 64) };
@@ -290,12 +298,14 @@ fn small_set() -> (Library, FrameScene) {
     let scene = FrameScene {
         instances,
         camera: camera(Vec3::new(0.0, 2.0, 6.0), Vec3::new(0.0, 0.5, -1.0), 50.0),
-        sun: Some(Sun {
-            direction: Vec3::new(-0.4, 0.6, 0.5).normalize(),
-            angular_diameter: 0.0093,
-            irradiance: Vec3::splat(3.0),
-        }),
-        sky: Sky { radiance: Vec3::new(0.3, 0.38, 0.5) },
+        lights: SceneLights::sun_and_sky(
+            Some(Sun {
+                direction: Vec3::new(-0.4, 0.6, 0.5).normalize(),
+                angular_diameter: 0.0093,
+                irradiance: Vec3::splat(3.0),
+            }),
+            Sky { radiance: Vec3::new(0.3, 0.38, 0.5) },
+        ),
         motion: None,
     };
     (lib, scene)
@@ -376,8 +386,10 @@ fn shadow_only_instance_is_invisible_but_casts_a_shadow() {
     let scene = |instances| FrameScene {
         instances,
         camera: camera(Vec3::new(0.0, 6.0, 6.0), Vec3::ZERO, 50.0),
-        sun: Some(Sun { direction: Vec3::Y, angular_diameter: 0.0093, irradiance: Vec3::splat(3.0) }),
-        sky: Sky { radiance: Vec3::splat(0.1) },
+        lights: SceneLights::sun_and_sky(
+            Some(Sun { direction: Vec3::Y, angular_diameter: 0.0093, irradiance: Vec3::splat(3.0) }),
+            Sky { radiance: Vec3::splat(0.1) },
+        ),
         motion: None,
     };
     let s = settings(40, 30, 4);
@@ -421,12 +433,14 @@ fn glossy_floor_reflects_indirect_only_object() {
     let scene = |instances| FrameScene {
         instances,
         camera: camera(Vec3::new(0.0, 1.0, 6.0), Vec3::new(0.0, -0.5, -4.0), 50.0),
-        sun: Some(Sun {
-            direction: Vec3::new(0.0, 0.7, 0.7).normalize(),
-            angular_diameter: 0.0093,
-            irradiance: Vec3::splat(3.0),
-        }),
-        sky: Sky { radiance: Vec3::splat(0.2) },
+        lights: SceneLights::sun_and_sky(
+            Some(Sun {
+                direction: Vec3::new(0.0, 0.7, 0.7).normalize(),
+                angular_diameter: 0.0093,
+                irradiance: Vec3::splat(3.0),
+            }),
+            Sky { radiance: Vec3::splat(0.2) },
+        ),
         motion: None,
     };
     let s = settings(40, 30, 8);
@@ -459,12 +473,14 @@ fn no_shadow_acne_far_from_origin() {
         let scene = FrameScene {
             instances: vec![inst],
             camera: camera(far + Vec3::new(0.0, 4.0, 8.0), far, 40.0),
-            sun: Some(Sun {
-                direction: Vec3::new(0.3, 0.5, 0.2).normalize(),
-                angular_diameter: 0.0093,
-                irradiance: Vec3::splat(3.0),
-            }),
-            sky: Sky { radiance: Vec3::ZERO },
+            lights: SceneLights::sun_and_sky(
+                Some(Sun {
+                    direction: Vec3::new(0.3, 0.5, 0.2).normalize(),
+                    angular_diameter: 0.0093,
+                    irradiance: Vec3::splat(3.0),
+                }),
+                Sky { radiance: Vec3::ZERO },
+            ),
             motion: None,
         };
         let film = render_frame(&blas, &lib, &scene, &settings(48, 32, 4), None).unwrap();
@@ -661,9 +677,10 @@ fn base_color_texture_reaches_the_albedo_aov() {
                 Vec3::new(0.0, 3.0, 0.0),
             ),
             yfov: 0.5,
+            aperture: 0.0,
+            focus_distance: 1.0,
         },
-        sun: None,
-        sky: Sky { radiance: Vec3::ONE },
+        lights: SceneLights::sun_and_sky(None, Sky { radiance: Vec3::ONE }),
         motion: None,
     };
     let film = render_frame(&blas, &lib, &scene, &settings(32, 16, 4), None).unwrap();
@@ -680,8 +697,7 @@ fn empty_scene_renders_sky_and_reports_progress() {
     let scene = FrameScene {
         instances: vec![],
         camera: camera(Vec3::ZERO, -Vec3::Z, 40.0),
-        sun: None,
-        sky: Sky { radiance: Vec3::new(0.25, 0.5, 1.0) },
+        lights: SceneLights::sun_and_sky(None, Sky { radiance: Vec3::new(0.25, 0.5, 1.0) }),
         motion: None,
     };
     let done = std::sync::atomic::AtomicUsize::new(0);
@@ -711,8 +727,7 @@ fn diffuse_only_is_lambert_furnace() {
     let scene = FrameScene {
         instances: vec![instance(0, 0, Affine3A::IDENTITY, None, vis::ALL)],
         camera: camera(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, 40.0),
-        sun: None,
-        sky: Sky { radiance: Vec3::ONE },
+        lights: SceneLights::sun_and_sky(None, Sky { radiance: Vec3::ONE }),
         motion: None,
     };
     let s = RenderSettings { sky_visible: true, diffuse_only: true, ..settings(48, 36, 16) };

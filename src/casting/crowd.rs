@@ -17,6 +17,7 @@
 //! and shared by every agent, frame and layer on it.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use glam::{Affine3A, Quat, Vec3};
 
@@ -27,7 +28,9 @@ use crate::casting::poses::{PoseLibrary, PosedSkins};
 use crate::casting::rigs::{ShotRig, ShotRigs};
 use crate::casting::wardrobe::Wardrobes;
 use crate::error::{Error, Result};
+use crate::scene::dome::load_dome;
 use crate::scene::gltf::AssetCache;
+use crate::scene::lights::{Dome, Light, LightKind, SceneLights};
 use crate::scene::{vis, Camera, Instance, InstanceAgent, Library, Material, Rec709, Space, Texture};
 use crate::shot::Shot;
 
@@ -111,6 +114,37 @@ pub struct ShotCrowd<C = Rec709> {
     warnings: Vec<String>,
     /// The camera from a glTF node, when the shot names one instead of keys.
     gltf_camera: Option<Camera>,
+    /// The dome's pixels (read once), and the set glTF's own lights.
+    lights: LoadedLights,
+}
+
+/// The lights that come from files: the dome's map and the set's
+/// KHR_lights_punctual lights. The shot's own are read from it as asked.
+#[derive(Debug, Clone, Default)]
+struct LoadedLights {
+    dome: Option<Arc<Dome>>,
+    set: Vec<Light>,
+}
+
+impl LoadedLights {
+    fn load(shot: &Shot, assets: &mut AssetCache) -> Result<LoadedLights> {
+        let dome = match &shot.lights.dome {
+            Some(d) => Some(Arc::new(
+                load_dome(&d.file, d.scale, d.rotate, d.camera_visible).map_err(|e| e.or_field("lights.dome.file"))?,
+            )),
+            None => None,
+        };
+        let mut set = match &shot.set {
+            Some(s) => assets.punctual_lights(&s.file).map_err(|e| e.or_field("set.file"))?,
+            None => Vec::new(),
+        };
+        // The shot's sun is the sun: the set's directional lights light the
+        // shot only when it has none (docs/lights.md).
+        if shot.lights.sun.is_some() {
+            set.retain(|l| !matches!(l.kind, LightKind::Distant { .. }));
+        }
+        Ok(LoadedLights { dome, set })
+    }
 }
 
 /// Set objects with their own Cryptomatte name: every [`Instance::part`]
@@ -150,6 +184,7 @@ impl ShotCrowd {
         let mut skins = PosedSkins::default();
         skins.pose(&cast.still_steps, &worn, &rigs, &mut assets);
         let set = ShotSet::load(&shot, &mut assets, &mut warnings)?;
+        let lights = LoadedLights::load(&shot, &mut assets)?;
         let gltf_camera = match &shot.camera.gltf {
             Some((file, node)) => Some(assets.find_camera(file, node)?),
             None => None,
@@ -164,7 +199,7 @@ impl ShotCrowd {
         }
         warnings.extend(rigs.warnings().cloned());
         let poses = PoseLibrary::new(assets, skins, shutter);
-        Ok(ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera })
+        Ok(ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera, lights })
     }
 
     /// The same cast shot with `edit` applied to its shot, for what later
@@ -181,9 +216,9 @@ impl ShotCrowd {
         self,
         convert: impl FnOnce(&mut [Material], &mut [Texture]),
     ) -> ShotCrowd<D> {
-        let ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera } = self;
+        let ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera, lights } = self;
         let poses = poses.convert(convert);
-        ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera }
+        ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera, lights }
     }
 }
 
@@ -221,6 +256,15 @@ impl<C> ShotCrowd<C> {
     /// The meshes, materials and posed steps.
     pub fn poses(&self) -> &PoseLibrary<C> {
         &self.poses
+    }
+
+    /// Every light of the shot, as authored (linear Rec.709): the sun, the
+    /// sky, the dome, the shot's local lights, then the set glTF's.
+    pub fn lights(&self) -> SceneLights {
+        let l = &self.shot.lights;
+        let mut local = l.local.clone();
+        local.extend(self.lights.set.iter().cloned());
+        SceneLights { sun: l.sun(), sky: l.sky(), dome: self.lights.dome.clone(), local }
     }
 
     /// The shared meshes, materials and textures.

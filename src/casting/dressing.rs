@@ -137,6 +137,8 @@ fn wardrobe_material(
         base_color_texture: texture,
         roughness: spec.roughness,
         metallic: spec.metallic,
+        emission: Vec3::from(spec.emission),
+        emissive_texture: None,
     });
     made.insert(name.to_string(), m);
     Ok(m)

@@ -63,6 +63,10 @@ pub struct MaterialSpec {
     /// Optional base colour texture, relative to the wardrobe file (resolved on load).
     #[serde(default)]
     pub base_color_texture: Option<PathBuf>,
+    /// Emitted radiance, linear RGB, W/(m^2 sr) (glTF's emissiveFactor x
+    /// emissiveStrength): eyes, screens and lamps that light the crowd.
+    #[serde(default)]
+    pub emission: [f32; 3],
 }
 
 fn grey() -> [f32; 3] {
@@ -226,6 +230,13 @@ impl Wardrobes {
                         return Err(Error::invalid(path, format!("material `{name}`: {key} must be 0-1, got {v}"))
                             .field(format!("materials.{name}.{key}")));
                     }
+                }
+                if !m.emission.iter().all(|c| *c >= 0.0 && c.is_finite()) {
+                    return Err(Error::invalid(
+                        path,
+                        format!("material `{name}`: emission components must be finite and >= 0, got {:?}", m.emission),
+                    )
+                    .field(format!("materials.{name}.emission")));
                 }
                 if let Some(t) = &m.base_color_texture {
                     let full = base.join(t);

@@ -52,11 +52,12 @@ impl ShadingFrame {
     }
 }
 
-/// Concentric square-to-disk map (Shirley-Chiu), then lifted to the hemisphere.
+/// Concentric square-to-disk map (Shirley-Chiu) onto the unit disc: area
+/// preserving, so uniform `u` gives uniform points (lens and disc lights).
 #[inline]
-pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
+pub fn sample_concentric_disk(u: Vec2) -> Vec2 {
     let o = 2.0 * u - Vec2::ONE;
-    let d = if o.x == 0.0 && o.y == 0.0 {
+    if o.x == 0.0 && o.y == 0.0 {
         Vec2::ZERO
     } else if o.x.abs() > o.y.abs() {
         let phi = PI / 4.0 * (o.y / o.x);
@@ -64,7 +65,13 @@ pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
     } else {
         let phi = PI / 2.0 - PI / 4.0 * (o.x / o.y);
         o.y * Vec2::new(phi.cos(), phi.sin())
-    };
+    }
+}
+
+/// The concentric disc map lifted to the hemisphere (Malley's method).
+#[inline]
+pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
+    let d = sample_concentric_disk(u);
     Vec3::new(d.x, d.y, (1.0 - d.length_squared()).max(0.0).sqrt())
 }
 

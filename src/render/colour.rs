@@ -138,6 +138,7 @@ pub fn convert_library(materials: &mut [Material], textures: &mut [Texture], spa
     }
     for m in materials {
         m.base_color = input(space, m.base_color);
+        m.emission = input(space, m.emission);
     }
     for t in textures {
         for texel in &mut t.texels {
@@ -147,12 +148,29 @@ pub fn convert_library(materials: &mut [Material], textures: &mut [Texture], spa
     }
 }
 
-/// Converts a frame scene's sun and sky colours from Rec.709 into `space`.
+/// Converts a frame scene's light colours (sun, sky, dome texels, local
+/// lights) from Rec.709 into `space`.
 pub fn scene_lights(scene: &mut FrameScene, space: Colourspace) {
-    if let Some(sun) = &mut scene.sun {
+    if space == Colourspace::Rec709 {
+        return;
+    }
+    let lights = &mut scene.lights;
+    if let Some(sun) = &mut lights.sun {
         sun.irradiance = input(space, sun.irradiance);
     }
-    scene.sky.radiance = input(space, scene.sky.radiance);
+    lights.sky.radiance = input(space, lights.sky.radiance);
+    for light in &mut lights.local {
+        light.emission = input(space, light.emission);
+    }
+    if let Some(dome) = &mut lights.dome {
+        // A copy per frame scene (a 1k map is 6 MB): the shot's own stays Rec.709.
+        // The scale is a colour too: fold it in before the matrix.
+        let d = std::sync::Arc::make_mut(dome);
+        for t in &mut d.texels {
+            *t = input(space, *t * d.scale);
+        }
+        d.scale = Vec3::ONE;
+    }
 }
 
 #[cfg(test)]

@@ -1,6 +1,8 @@
 //! Unidirectional path tracer (pbrt's "path" integrator, simplified): next-event
-//! estimation to the sun cone with MIS against BSDF sampling, the uniform sky
-//! picked up by BSDF-sampled rays, Russian roulette after a few bounces.
+//! estimation to one light per shading point, picked by power among the sun,
+//! the dome, local lights and emissive triangles ([`super::lights`]), with
+//! MIS against BSDF sampling; the uniform sky picked up by BSDF-sampled rays;
+//! Russian roulette after a few bounces; a thin-lens camera for depth of field.
 //!
 //! Visibility per ray type (scene::vis): camera rays see CAMERA | HOLDOUT
 //! instances (a holdout hit ends the path with no colour and alpha 0), shadow
@@ -11,14 +13,16 @@ use std::f32::consts::PI;
 use glam::{Affine3A, Mat3A, Vec2, Vec3, Vec4};
 
 use super::accel::{Hit, Tlas, WorldRay};
-use super::bsdf::{Bsdf, ShadingFrame};
+use super::bsdf::{sample_concentric_disk, Bsdf, ShadingFrame};
+use super::lights::LightSampler;
 use super::sampler::Sampler;
 use super::RenderSettings;
 use crate::scene::{vis, FrameScene, Library, Material, Mesh, Texture};
 
 /// Bounces before Russian roulette may end a path.
 const RR_START: u32 = 3;
-/// Sampler dimensions used per bounce (sun 2, lobe 1, direction 2, roulette 1, spare 2).
+/// Sampler dimensions used per bounce (light point 2, lobe 1, direction 2,
+/// roulette 1, light pick 1, spare 1).
 const DIMS_PER_BOUNCE: u32 = 8;
 /// Pixel filter: a radially truncated Gaussian, importance-sampled exactly.
 pub const FILTER_RADIUS: f32 = 1.5;
@@ -53,7 +57,7 @@ pub struct RayCounts {
     pub camera: u64,
     /// BSDF-sampled bounce rays.
     pub bounce: u64,
-    /// Shadow rays to the sun.
+    /// Shadow rays towards lights.
     pub shadow: u64,
 }
 
@@ -62,51 +66,6 @@ impl std::ops::AddAssign for RayCounts {
         self.camera += o.camera;
         self.bounce += o.bounce;
         self.shadow += o.shadow;
-    }
-}
-
-/// The sun as the integrator samples it: a uniform cone.
-#[derive(Clone, Copy, Debug)]
-struct SunLight {
-    direction: Vec3,
-    frame: ShadingFrame,
-    cos_max: f32,
-    /// Radiance inside the cone (irradiance / solid angle); for a point-like
-    /// sun (zero diameter) the irradiance itself.
-    radiance: Vec3,
-    /// 1 / solid angle; zero marks a delta sun.
-    pdf: f32,
-}
-
-impl SunLight {
-    fn new(sun: &crate::scene::Sun) -> Option<SunLight> {
-        let direction = sun.direction.normalize_or_zero();
-        if direction == Vec3::ZERO || !sun.irradiance.is_finite() || sun.irradiance.max_element() <= 0.0 {
-            return None;
-        }
-        let half = (0.5 * sun.angular_diameter).clamp(0.0, 0.5 * PI);
-        let cos_max = half.cos();
-        let solid_angle = 2.0 * PI * (1.0 - cos_max);
-        let frame = ShadingFrame::from_normal(direction);
-        if solid_angle < 1e-9 {
-            return Some(SunLight { direction, frame, cos_max: 1.0, radiance: sun.irradiance, pdf: 0.0 });
-        }
-        Some(SunLight { direction, frame, cos_max, radiance: sun.irradiance / solid_angle, pdf: 1.0 / solid_angle })
-    }
-
-    /// A direction towards the sun disc.
-    fn sample(&self, u: Vec2) -> Vec3 {
-        if self.pdf == 0.0 {
-            return self.direction;
-        }
-        let cos = 1.0 - u.x * (1.0 - self.cos_max);
-        let sin = (1.0 - cos * cos).max(0.0).sqrt();
-        let phi = 2.0 * PI * u.y;
-        self.frame.to_world(Vec3::new(sin * phi.cos(), sin * phi.sin(), cos)).normalize()
-    }
-
-    fn contains(&self, d: Vec3) -> bool {
-        self.pdf > 0.0 && d.dot(self.direction) >= self.cos_max
     }
 }
 
@@ -160,7 +119,9 @@ pub fn sample_texture(tex: &Texture, uv: Vec2) -> Vec4 {
     top.lerp(bottom, fy)
 }
 
-/// Pinhole camera: looks down its local -Z, +Y up, vertical field of view.
+/// The camera's rays: looks down its local -Z, +Y up, vertical field of
+/// view; a thin lens of radius `aperture` focused at `focus_distance`, or a
+/// pinhole.
 #[derive(Clone, Copy, Debug)]
 pub struct CameraRays {
     world_from_camera: Affine3A,
@@ -169,6 +130,8 @@ pub struct CameraRays {
     aspect: f32,
     width: f32,
     height: f32,
+    aperture: f32,
+    focus_distance: f32,
 }
 
 impl CameraRays {
@@ -181,7 +144,14 @@ impl CameraRays {
             aspect: width as f32 / height.max(1) as f32,
             width: width as f32,
             height: height as f32,
+            aperture: camera.aperture.max(0.0),
+            focus_distance: camera.focus_distance,
         }
+    }
+
+    /// Whether rays start across a lens (depth of field) rather than at a point.
+    pub fn has_lens(&self) -> bool {
+        self.aperture > 0.0 && self.focus_distance > 0.0
     }
 
     /// The world ray (origin, unit direction) through film position
@@ -191,6 +161,24 @@ impl CameraRays {
         let sy = (1.0 - 2.0 * fy / self.height) * self.tan_half_y;
         let d = self.world_from_camera.transform_vector3(Vec3::new(sx, sy, -1.0)).normalize();
         (self.world_from_camera.translation.into(), d)
+    }
+
+    /// As [`CameraRays::ray`], from lens point `u` (uniform in [0, 1)^2):
+    /// every ray through one film position meets at the focus plane, so a
+    /// point there images to a point and others blur by their circle of
+    /// confusion. A pinhole camera ignores `u`.
+    pub fn lens_ray(&self, fx: f32, fy: f32, u: Vec2) -> (Vec3, Vec3) {
+        if !self.has_lens() {
+            return self.ray(fx, fy);
+        }
+        let sx = (2.0 * fx / self.width - 1.0) * self.aspect * self.tan_half_y;
+        let sy = (1.0 - 2.0 * fy / self.height) * self.tan_half_y;
+        let focus = Vec3::new(sx, sy, -1.0) * self.focus_distance;
+        let lens = sample_concentric_disk(u) * self.aperture;
+        let origin = Vec3::new(lens.x, lens.y, 0.0);
+        let o = self.world_from_camera.transform_point3(origin);
+        let d = self.world_from_camera.transform_vector3(focus - origin).normalize();
+        (o, d)
     }
 
     /// Camera-space depth of a world point, positive in front of the camera.
@@ -238,7 +226,7 @@ pub struct Integrator<'a> {
     tlas: &'a Tlas<'a>,
     camera: CameraRays,
     shutter: Option<ShutterCamera>,
-    sun: Option<SunLight>,
+    lights: LightSampler<'a>,
     settings: &'a RenderSettings,
     default_material: Material,
 }
@@ -252,6 +240,11 @@ struct SurfaceHit {
     ns: Vec3,
     base_color: Vec3,
     material: usize,
+    /// Emitted radiance towards the ray (zero unless the material emits and
+    /// the ray meets its front face).
+    emission: Vec3,
+    /// Cosine between the front face's normal and the way back along the ray.
+    cos_front: f32,
 }
 
 impl<'a> Integrator<'a> {
@@ -274,7 +267,7 @@ impl<'a> Integrator<'a> {
             tlas,
             camera: CameraRays::new(&scene.camera, settings.width, settings.height),
             shutter,
-            sun: scene.sun.as_ref().and_then(SunLight::new),
+            lights: LightSampler::new(lib, scene, tlas.bounds()),
             settings,
             default_material: Material::default(),
         }
@@ -294,12 +287,14 @@ impl<'a> Integrator<'a> {
         let (fx, fy) = (x as f32 + 0.5 + offset.x, y as f32 + 0.5 + offset.y);
         // The time stream is drawn only with a shutter, and draws no dimension.
         let time = if self.shutter.is_some() { sampler.time() } else { 0.0 };
+        // The lens stream likewise, only with depth of field.
+        let lens = if self.camera.has_lens() { sampler.lens() } else { Vec2::ZERO };
         let (origin, dir) = match &self.shutter {
             Some(sh) if sh.moves => {
-                let ((o0, d0), (o1, d1)) = (sh.keys[0].ray(fx, fy), sh.keys[1].ray(fx, fy));
+                let ((o0, d0), (o1, d1)) = (sh.keys[0].lens_ray(fx, fy, lens), sh.keys[1].lens_ray(fx, fy, lens));
                 (o0.lerp(o1, time), d0.lerp(d1, time).normalize())
             }
-            _ => self.camera.ray(fx, fy),
+            _ => self.camera.lens_ray(fx, fy, lens),
         };
         let mut result = self.trace_path(origin, dir, time, &mut sampler, counts);
         if !(result.rgb.is_finite()) {
@@ -421,6 +416,9 @@ impl<'a> Integrator<'a> {
         if ng == Vec3::ZERO {
             return None;
         }
+        // The front face (glTF: counter-clockwise, flipped by mirroring
+        // transforms, which the normal matrix does) is the one that emits.
+        let cos_front = -ng.dot(dir);
         if ng.dot(dir) > 0.0 {
             ng = -ng; // two-sided: face the incoming ray
         }
@@ -448,7 +446,17 @@ impl<'a> Integrator<'a> {
                 base_color *= sample_texture(tex, t0 * w + t1 * u + t2 * v).truncate();
             }
         }
-        Some(SurfaceHit { p, ng, ns, base_color, material: material_index })
+        let mut emission = Vec3::ZERO;
+        if cos_front > 0.0 && material.emission.max_element() > 0.0 {
+            emission = material.emission;
+            if let Some(tex) = material.emissive_texture.and_then(|t| self.lib.textures.get(t as usize)) {
+                if mesh.uvs.len() == mesh.positions.len() {
+                    let [t0, t1, t2] = idx.map(|i| mesh.uvs[i]);
+                    emission *= sample_texture(tex, t0 * w + t1 * u + t2 * v).truncate();
+                }
+            }
+        }
+        Some(SurfaceHit { p, ng, ns, base_color, material: material_index, emission, cos_front })
     }
 
     /// Scales an indirect contribution down to `settings.indirect_clamp`
@@ -483,28 +491,50 @@ impl<'a> Integrator<'a> {
         let mut prev_bsdf_pdf = 0.0f32;
         counts.camera += 1;
         for depth in 0.. {
-            let mask = if depth == 0 { vis::CAMERA | vis::HOLDOUT } else { vis::INDIRECT };
+            let camera = depth == 0;
+            let mask = if camera { vis::CAMERA | vis::HOLDOUT } else { vis::INDIRECT };
             let hit = self.tlas.intersect(&WorldRay { origin, direction: dir, tmax: f32::INFINITY, time }, mask);
+            // A sized light (rect, disk, sphere) in front of whatever the ray hits ends the path there.
+            let tmax = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
+            if let Some(light) = self.lights.hit_sized(origin, dir, tmax, camera) {
+                if camera {
+                    radiance += light.radiance;
+                    out.alpha = 1.0;
+                } else {
+                    let weight = power_heuristic(prev_bsdf_pdf, light.pdf);
+                    radiance += self.clamp_indirect(throughput * light.radiance * weight);
+                }
+                break;
+            }
             let Some(hit) = hit else {
-                if depth == 0 {
-                    if self.settings.sky_visible {
-                        radiance += self.scene.sky.radiance;
-                        if let Some(sun) = self.sun.filter(|s| s.contains(dir)) {
-                            radiance += sun.radiance;
+                if camera {
+                    // A dome hidden from camera leaves the background empty (alpha 0) for a plate.
+                    if self.settings.sky_visible
+                        && (self.scene.lights.dome.is_none() || self.lights.dome_camera_visible())
+                    {
+                        radiance += match self.lights.dome(dir) {
+                            Some((l, _)) => l,
+                            None => self.scene.lights.sky.radiance,
+                        };
+                        if let Some(sun) = self.lights.sun().filter(|s| s.contains(dir)) {
+                            radiance += sun.radiance();
                         }
                         out.alpha = 1.0;
                     }
                 } else {
-                    let mut escaped = self.scene.sky.radiance;
-                    if let Some(sun) = self.sun.filter(|s| s.contains(dir)) {
-                        escaped += sun.radiance * power_heuristic(prev_bsdf_pdf, sun.pdf);
+                    let mut escaped = match self.lights.dome(dir) {
+                        Some((l, pdf)) => l * power_heuristic(prev_bsdf_pdf, pdf),
+                        None => self.scene.lights.sky.radiance,
+                    };
+                    if let Some(sun) = self.lights.sun().filter(|s| s.contains(dir)) {
+                        escaped += sun.radiance() * power_heuristic(prev_bsdf_pdf, sun.pdf() * self.lights.sun_pick());
                     }
                     radiance += self.clamp_indirect(throughput * escaped);
                 }
                 break;
             };
             let Some(surface) = self.surface(&hit, dir, time) else { break };
-            if depth == 0 {
+            if camera {
                 let inst = &self.scene.instances[hit.instance as usize];
                 if inst.visibility & vis::HOLDOUT != 0 {
                     return SampleResult { z: f32::INFINITY, ..Default::default() };
@@ -519,6 +549,16 @@ impl<'a> Integrator<'a> {
                     out.motion = self.motion_vector(hit.instance as usize, hit.triangle, hit.u, hit.v);
                 }
             }
+            if surface.emission != Vec3::ZERO {
+                if camera {
+                    radiance += surface.emission;
+                } else {
+                    // Weighted against NEE's choice of this point (weight 1 where NEE never samples it).
+                    let pdf = self.lights.triangle_pdf(hit.instance, hit.triangle, hit.t, surface.cos_front);
+                    let weight = if pdf > 0.0 { power_heuristic(prev_bsdf_pdf, pdf) } else { 1.0 };
+                    radiance += self.clamp_indirect(throughput * surface.emission * weight);
+                }
+            }
 
             let material = self.material(surface.material);
             let bsdf = if self.settings.diffuse_only {
@@ -528,32 +568,38 @@ impl<'a> Integrator<'a> {
             };
             let frame = ShadingFrame::from_normal(surface.ns);
             let wo = frame.to_local(-dir);
-            sampler.set_dimension(2 + depth * DIMS_PER_BOUNCE);
+            let base = 2 + depth * DIMS_PER_BOUNCE;
+            // The pick is drawn only among several lights, from its own dimension.
+            let u_pick = if self.lights.needs_pick() {
+                sampler.set_dimension(base + 6);
+                sampler.next_1d()
+            } else {
+                0.0
+            };
+            sampler.set_dimension(base);
 
-            // Next-event estimation: one shadow ray towards the sun disc.
-            let u_sun = sampler.next_2d();
-            if let Some(sun) = &self.sun {
-                let wi = sun.sample(u_sun);
-                if wi.dot(surface.ng) > 0.0 {
-                    let wi_local = frame.to_local(wi);
+            // Next-event estimation: one shadow ray towards one light.
+            let u_light = sampler.next_2d();
+            if let Some(ls) = self.lights.sample(surface.p, u_pick, u_light) {
+                if ls.wi.dot(surface.ng) > 0.0 {
+                    let wi_local = frame.to_local(ls.wi);
                     let f = bsdf.eval(wo, wi_local);
                     if f != Vec3::ZERO {
                         counts.shadow += 1;
-                        let shadow = WorldRay {
-                            origin: offset_ray_origin(surface.p, surface.ng),
-                            direction: wi,
-                            tmax: f32::INFINITY,
-                            time,
-                        };
+                        // Stop short of a light at a distance: an emissive triangle must not shadow itself.
+                        let tmax = if ls.distance.is_finite() { ls.distance * (1.0 - 1e-4) } else { f32::INFINITY };
+                        let shadow =
+                            WorldRay { origin: offset_ray_origin(surface.p, surface.ng), direction: ls.wi, tmax, time };
                         if !self.tlas.occluded(&shadow, vis::SHADOW) {
-                            let contribution = if sun.pdf == 0.0 {
-                                f * wi_local.z * sun.radiance
+                            // At the last vertex no BSDF ray follows to find the light: NEE alone, weight 1.
+                            let contribution = if ls.delta || depth >= self.settings.max_bounces {
+                                f * wi_local.z * ls.radiance / ls.pdf
                             } else {
-                                let weight = power_heuristic(sun.pdf, bsdf.pdf(wo, wi_local));
-                                f * wi_local.z * sun.radiance * (weight / sun.pdf)
+                                let weight = power_heuristic(ls.pdf, bsdf.pdf(wo, wi_local));
+                                f * wi_local.z * ls.radiance * (weight / ls.pdf)
                             };
                             let contribution = throughput * contribution;
-                            radiance += if depth == 0 { contribution } else { self.clamp_indirect(contribution) };
+                            radiance += if camera { contribution } else { self.clamp_indirect(contribution) };
                         }
                     }
                 }

@@ -294,13 +294,7 @@ fn scene_from_poses<'p, T: Sync, C>(
     if let Some(bits) = set_bits {
         instances.extend(crowd.set().iter().map(|i| Instance { visibility: bits, ..*i }));
     }
-    Ok(FrameScene {
-        instances,
-        camera: crowd.camera(frame)?,
-        sun: crowd.shot().sun(),
-        sky: crowd.shot().sky(),
-        motion: None,
-    })
+    Ok(FrameScene { instances, camera: crowd.camera(frame)?, lights: crowd.lights(), motion: None })
 }
 
 /// At most how many instances a (frame, layer) scene of agents `ids` holds
@@ -357,8 +351,7 @@ pub fn motion_scene<C>(
     Ok(FrameScene {
         instances,
         camera: crowd.camera(frame)?,
-        sun: crowd.shot().sun(),
-        sky: crowd.shot().sky(),
+        lights: crowd.lights(),
         motion: Some(SceneMotion { shutter: motion.shutter, instances: keys, camera: motion.camera }),
     })
 }
@@ -392,6 +385,13 @@ pub fn render_fingerprint<C>(
         .debug("camera keys", &shot.camera.keys)
         .debug("camera node", &shot.camera.gltf.as_ref().map(|(_, node)| node))
         .debug("lights", &shot.lights)
+        .debug("set lights", &crowd.lights().local)
+        .bytes(
+            "dome",
+            &crowd.lights().dome.map_or(Vec::new(), |d| {
+                d.texels.iter().flat_map(|t| t.to_array()).flat_map(f32::to_le_bytes).collect()
+            }),
+        )
         .value("shutter", &job.shutter)
         .text("colourspace", colour::header_name(job.colourspace))
         .debug("cryptomatte", &job.cryptomatte)

@@ -19,6 +19,7 @@ pub mod exr;
 pub mod film;
 pub mod integrator;
 pub mod job;
+pub mod lights;
 pub mod sampler;
 
 pub use accel::{BlasSet, Tlas};

@@ -109,6 +109,8 @@ fn to_unit(x: u32) -> f32 {
 /// Salt of the time stream ([`Sampler::time`]): not `mix32` of any small
 /// dimension number, so it never coincides with a numbered dimension's key.
 const TIME_SALT: u32 = 0x7157_a3c1;
+/// Keys the lens stream apart from the time stream and every dimension.
+const LENS_SALT: u32 = 0x1e45_d0f7;
 
 /// Random numbers for one camera sample of one pixel.
 #[derive(Clone, Debug)]
@@ -153,6 +155,19 @@ impl Sampler {
         let seed = mix32(self.pixel_key ^ TIME_SALT);
         let index = nested_uniform_scramble(self.sample, seed);
         to_unit(nested_uniform_scramble(index.reverse_bits(), mix32(seed ^ 0x5bd1_e995)))
+    }
+
+    /// This camera sample's point on the lens in [0, 1)^2 (depth of field):
+    /// like [`Sampler::time`], a stream of its own, so a pinhole render
+    /// never draws it and keeps its bits; a power-of-two prefix of a pixel's
+    /// samples is stratified over the lens.
+    pub fn lens(&self) -> Vec2 {
+        let seed = mix32(self.pixel_key ^ LENS_SALT);
+        let index = nested_uniform_scramble(self.sample, seed);
+        let (x, y) = sobol_2d(index);
+        let x = nested_uniform_scramble(x, mix32(seed ^ 0x5bd1_e995));
+        let y = nested_uniform_scramble(y, mix32(seed ^ 0x27d4_eb2f));
+        Vec2::new(to_unit(x), to_unit(y))
     }
 
     /// The next number in [0, 1) (uses one dimension).

@@ -28,6 +28,7 @@ use glam::{Affine3A, Mat4, Quat, Vec2, Vec3};
 use gltf::accessor::{Accessor, DataType, Dimensions};
 
 use crate::error::{Error, Result};
+use crate::scene::lights::{Light, LightKind};
 use crate::scene::{Camera, Library, Material, MaterialId, Mesh, MeshId, Texture};
 
 /// One parsed glTF file with its buffers loaded (images are decoded only on
@@ -434,19 +435,10 @@ pub fn srgb_to_linear(c: f32) -> f32 {
     }
 }
 
-/// A directional light (KHR_lights_punctual) found in a scene file.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DirectionalLight {
-    /// Name of the node carrying the light (or `#index`).
-    pub node: String,
-    /// Unit vector from the scene towards the light (the node's world +Z;
-    /// the light shines down its local -Z).
-    pub direction: Vec3,
-    /// Linear RGB colour.
-    pub color: Vec3,
-    /// Intensity as stored in the file (lux for glTF directional lights).
-    pub intensity: f32,
-}
+/// Lumens per watt: glTF lights are photometric (candela, lux), render
+/// units radiometric (W/sr, W/m^2); Blender's glTF importer and the peer
+/// harness divide by 683 the same way.
+pub const LUMENS_PER_WATT: f32 = 683.0;
 
 #[derive(Clone, PartialEq, Eq, Hash)]
 enum MeshKey {
@@ -644,12 +636,25 @@ impl AssetCache {
                 Some(info) => Some(self.texture(src, info.texture().source().index())?),
                 None => None,
             };
+            let emissive_texture = match m.emissive_texture() {
+                Some(info) => Some(self.texture(src, info.texture().source().index())?),
+                None => None,
+            };
+            let strength = m.emissive_strength().unwrap_or(1.0);
+            let emission = Vec3::from(m.emissive_factor()) * strength;
+            if !(emission.is_finite() && emission.min_element() >= 0.0) {
+                return Err(file.err(format!(
+                    "material `{label}`: emissiveFactor x emissiveStrength must be finite and >= 0, got {emission}"
+                )));
+            }
             material = Material {
                 name: format!("{}#{label}", src.shown),
                 base_color: Vec3::new(r, g, b),
                 base_color_texture: texture,
                 roughness: pbr.roughness_factor(),
                 metallic: pbr.metallic_factor(),
+                emission,
+                emissive_texture,
             };
         }
         self.library.materials.push(material.clone());
@@ -822,25 +827,47 @@ impl AssetCache {
         }
         let world = file.world_transforms()?[node.index()];
         let (_, rotation, translation) = world.to_scale_rotation_translation();
-        Ok(Camera { world_from_camera: Affine3A::from_rotation_translation(rotation.normalize(), translation), yfov })
+        Ok(Camera::pinhole(Affine3A::from_rotation_translation(rotation.normalize(), translation), yfov))
     }
 
-    /// Directional lights (KHR_lights_punctual) on any node of the file, in node order.
-    pub fn directional_lights(&mut self, path: impl AsRef<Path>) -> Result<Vec<DirectionalLight>> {
+    /// Every KHR_lights_punctual light on a node of the file, in node order,
+    /// in render units: point and spot intensity candela / 683 (W/sr),
+    /// directional lux / 683 (W/m^2). A spot's cone takes Blender's edge
+    /// (blend = 1 - inner / outer), what Cycles renders for the same file.
+    /// `range` is ignored, as Blender does.
+    pub fn punctual_lights(&mut self, path: impl AsRef<Path>) -> Result<Vec<Light>> {
         let file = self.source(path.as_ref())?.file;
         let world = file.world_transforms()?;
         let mut out = Vec::new();
         for node in file.doc.nodes() {
             let Some(light) = node.light() else { continue };
-            if !matches!(light.kind(), gltf::khr_lights_punctual::Kind::Directional) {
-                continue;
+            let name = node.name().map(str::to_string).unwrap_or_else(|| format!("#{}", node.index()));
+            let err = |m: String| file.err(format!("light on node `{name}`: {m}"));
+            let (color, intensity) = (Vec3::from(light.color()), light.intensity());
+            if !(intensity >= 0.0 && intensity.is_finite()) || !(color.is_finite() && color.min_element() >= 0.0) {
+                return Err(err(format!("intensity {intensity} and color {color} must be finite and >= 0")));
             }
-            let direction = world[node.index()].transform_vector3(Vec3::Z).try_normalize().unwrap_or(Vec3::Y);
-            out.push(DirectionalLight {
-                node: node.name().map(str::to_string).unwrap_or_else(|| format!("#{}", node.index())),
-                direction,
-                color: Vec3::from(light.color()),
-                intensity: light.intensity(),
+            let kind = match light.kind() {
+                gltf::khr_lights_punctual::Kind::Directional => LightKind::Distant { angular_diameter: 0.0 },
+                gltf::khr_lights_punctual::Kind::Point => LightKind::Point,
+                gltf::khr_lights_punctual::Kind::Spot { inner_cone_angle, outer_cone_angle } => {
+                    let (inner, outer) = (inner_cone_angle, outer_cone_angle);
+                    if !(outer > 0.0 && outer <= std::f32::consts::FRAC_PI_2 && inner >= 0.0 && inner <= outer) {
+                        return Err(err(format!(
+                            "spot angles out of order: need 0 <= innerConeAngle ({inner}) <= outerConeAngle ({outer}) <= pi/2"
+                        )));
+                    }
+                    LightKind::Spot { outer, blend: 1.0 - inner / outer }
+                }
+            };
+            let (_, rotation, translation) = world[node.index()].to_scale_rotation_translation();
+            out.push(Light {
+                name,
+                kind,
+                world_from_light: Affine3A::from_rotation_translation(rotation.normalize(), translation),
+                emission: color * (intensity / LUMENS_PER_WATT),
+                two_sided: false,
+                camera_visible: false,
             });
         }
         Ok(out)

@@ -48,6 +48,12 @@ pub enum LightKind {
         /// Radius.
         radius: f32,
     },
+    /// A light at infinity shining down its local -Z (a glTF directional
+    /// light): `emission` is its irradiance, W/m^2.
+    Distant {
+        /// Full angular diameter, radians (0: a delta direction).
+        angular_diameter: f32,
+    },
 }
 
 /// One light placed in the world.
@@ -61,7 +67,7 @@ pub struct Light {
     /// the kind).
     pub world_from_light: Affine3A,
     /// Colour x intensity x 2^exposure: W/sr for point and spot lights,
-    /// W/(m^2 sr) for rect, disk and sphere lights.
+    /// W/(m^2 sr) for rect, disk and sphere lights, W/m^2 for distant ones.
     pub emission: Vec3,
     /// Rect and disk lights emit from both faces.
     pub two_sided: bool,
@@ -115,4 +121,11 @@ pub struct SceneLights {
     pub dome: Option<Arc<Dome>>,
     /// Point, spot and area lights.
     pub local: Vec<Light>,
+}
+
+impl SceneLights {
+    /// Just a sun (or none) and a uniform sky: the simple case.
+    pub fn sun_and_sky(sun: Option<Sun>, sky: Sky) -> SceneLights {
+        SceneLights { sun, sky, dome: None, local: Vec::new() }
+    }
 }

@@ -133,6 +133,12 @@ pub struct Material {
     pub roughness: f32,
     /// Metalness 0..1.
     pub metallic: f32,
+    /// Emitted radiance, W/(m^2 sr), linear: glTF emissiveFactor x
+    /// KHR_materials_emissive_strength. Emitted from the front face
+    /// (counter-clockwise winding) only; zero for most materials.
+    pub emission: Vec3,
+    /// Optional emissive texture, index into [`Library::textures`]; multiplies `emission`.
+    pub emissive_texture: Option<u32>,
 }
 
 impl Default for Material {
@@ -143,6 +149,8 @@ impl Default for Material {
             base_color_texture: None,
             roughness: 0.5,
             metallic: 0.0,
+            emission: Vec3::ZERO,
+            emissive_texture: None,
         }
     }
 }
@@ -240,13 +248,25 @@ impl InstanceAgent {
     }
 }
 
-/// A pinhole camera.
-#[derive(Clone, Copy, Debug)]
+/// A camera: a pinhole, or a thin lens when `aperture` > 0.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
     /// Camera to world; the camera looks down its local -Z with +Y up (glTF convention).
     pub world_from_camera: Affine3A,
     /// Vertical field of view in radians.
     pub yfov: f32,
+    /// Radius of the lens aperture in scene units (focal length / (2 f-stop));
+    /// 0 is a pinhole: everything in focus.
+    pub aperture: f32,
+    /// Distance from the camera to the plane in focus, along its view axis.
+    pub focus_distance: f32,
+}
+
+impl Camera {
+    /// A pinhole camera (no depth of field).
+    pub fn pinhole(world_from_camera: Affine3A, yfov: f32) -> Camera {
+        Camera { world_from_camera, yfov, aperture: 0.0, focus_distance: 1.0 }
+    }
 }
 
 /// A distant sun with a finite angular size.
@@ -313,10 +333,9 @@ pub struct FrameScene {
     pub instances: Vec<Instance>,
     /// The camera at this frame.
     pub camera: Camera,
-    /// The sun, if any.
-    pub sun: Option<Sun>,
-    /// The sky.
-    pub sky: Sky,
+    /// Every light: the sun, the sky or a dome, local lights. (Emissive
+    /// materials light the scene too.)
+    pub lights: lights::SceneLights,
     /// Motion over the shutter; `None` renders the frame as an instant.
     pub motion: Option<SceneMotion>,
 }

@@ -15,6 +15,10 @@ use crate::cache::{TabularOptions, TabularSpec};
 use crate::error::{line_of, Error, IoContext, Result};
 use crate::scene::{Camera, Sky, Sun};
 
+mod lights;
+use lights::LightsFile;
+pub use lights::{DomeSpec, Lights, SkySpec, SunSpec, MAX_SHOT_LIGHTS};
+
 /// The shot file version this build reads.
 pub const SHOT_VERSION: u32 = 1;
 
@@ -39,7 +43,7 @@ pub struct Shot {
     pub set: Option<SetRef>,
     /// The camera.
     pub camera: CameraSpec,
-    /// Sun and sky.
+    /// Sun, sky, dome and local lights.
     pub lights: Lights,
     /// How to split agents into layers.
     pub layers: LayerSettings,
@@ -106,17 +110,6 @@ pub fn check_shot_name(name: &str) -> std::result::Result<(), String> {
             "shot name `{}` names output files: no `/`, `\\` or control characters, and no leading `.`",
             name.escape_debug()
         ));
-    }
-    Ok(())
-}
-
-/// Checks a light's intensity and colour: finite and >= 0. Errors give the key (`intensity`, `color`).
-fn check_light(intensity: f32, color: [f32; 3]) -> std::result::Result<(), (&'static str, String)> {
-    if !(intensity >= 0.0 && intensity.is_finite()) {
-        return Err(("intensity", format!("must be finite and >= 0, got {intensity}")));
-    }
-    if !color.iter().all(|c| *c >= 0.0 && c.is_finite()) {
-        return Err(("color", format!("components must be finite and >= 0, got {color:?}")));
     }
     Ok(())
 }
@@ -289,6 +282,10 @@ pub struct CameraKey {
     pub aim: [f32; 3],
     /// Focal length in mm.
     pub focal_length: f32,
+    /// Lens f-number for depth of field (with `focus_distance`); none: a pinhole.
+    pub f_stop: Option<f32>,
+    /// Distance in focus, scene units (metres), along the view axis.
+    pub focus_distance: Option<f32>,
 }
 
 /// `[camera]`: keyframes, or a camera node in a glTF file.
@@ -300,50 +297,6 @@ pub struct CameraSpec {
     pub keys: Vec<CameraKey>,
     /// glTF file holding the camera node (instead of keys).
     pub gltf: Option<(PathBuf, String)>,
-}
-
-/// `[lights]`.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct Lights {
-    /// The sun.
-    pub sun: Option<SunSpec>,
-    /// The sky.
-    pub sky: SkySpec,
-}
-
-/// `[lights.sun]`.
-#[derive(Debug, Clone, Copy, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SunSpec {
-    /// Direction towards the sun (normalised on load).
-    pub direction: [f32; 3],
-    /// Full angular diameter in degrees.
-    #[serde(default = "default_sun_diameter")]
-    pub angular_diameter: f32,
-    /// Irradiance in W/m^2.
-    #[serde(default = "one")]
-    pub intensity: f32,
-    /// Linear colour.
-    #[serde(default = "white")]
-    pub color: [f32; 3],
-}
-
-/// `[lights.sky]`.
-#[derive(Debug, Clone, Copy, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SkySpec {
-    /// Linear colour.
-    #[serde(default = "white")]
-    pub color: [f32; 3],
-    /// Multiplier.
-    #[serde(default = "one")]
-    pub intensity: f32,
-}
-
-impl Default for SkySpec {
-    fn default() -> Self {
-        SkySpec { color: [0.3, 0.38, 0.5], intensity: 1.0 }
-    }
 }
 
 /// How agents are split into layers.
@@ -474,15 +427,6 @@ pub fn check_shutter(shutter: [f32; 2]) -> std::result::Result<(), String> {
 fn default_fps() -> f32 {
     24.0
 }
-fn default_sun_diameter() -> f32 {
-    0.53
-}
-fn one() -> f32 {
-    1.0
-}
-fn white() -> [f32; 3] {
-    [1.0; 3]
-}
 fn default_split() -> SplitMode {
     SplitMode::Count
 }
@@ -590,14 +534,6 @@ struct CameraFile {
     keys: Vec<CameraKey>,
     gltf: Option<Spanned<PathBuf>>,
     node: Option<String>,
-}
-
-#[derive(Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-struct LightsFile {
-    sun: Option<SunSpec>,
-    #[serde(default)]
-    sky: SkySpec,
 }
 
 // ---- the file as written -> checked, one section at a time ----
@@ -783,35 +719,27 @@ impl CameraFile {
                 .field("camera.keys"));
             }
         }
+        // Depth of field is keyed like the rest: every key has both, or none does.
+        let lens = keys.iter().filter(|k| k.f_stop.is_some() || k.focus_distance.is_some()).count();
+        for k in &keys {
+            let at = |m: String| Error::invalid(path, format!("camera key at frame {}: {m}", k.frame));
+            if lens > 0 && (k.f_stop.is_none() || k.focus_distance.is_none()) {
+                return Err(at("depth of field needs `f_stop` and `focus_distance` on every key, or on none".into())
+                    .field("camera.keys.f_stop"));
+            }
+            if let Some(n) = k.f_stop.filter(|n| !(*n > 0.0 && n.is_finite())) {
+                return Err(at(format!("f_stop must be finite and > 0, got {n}")).field("camera.keys.f_stop"));
+            }
+            if let Some(d) = k.focus_distance.filter(|d| !(*d > 0.0 && d.is_finite())) {
+                return Err(
+                    at(format!("focus_distance must be finite and > 0, got {d}")).field("camera.keys.focus_distance")
+                );
+            }
+        }
         if !(self.sensor_width > 0.0) {
             return Err(Error::invalid(path, "must be > 0").field("camera.sensor_width"));
         }
         Ok(CameraSpec { sensor_width: self.sensor_width, keys, gltf })
-    }
-}
-
-impl LightsFile {
-    /// `[lights]` -> a checked sun (direction, size, light) and sky.
-    fn check(&self, path: &Path) -> Result<Lights> {
-        if let Some(sun) = &self.sun {
-            let direction = Vec3::from(sun.direction);
-            if !direction.is_finite() || direction.length_squared() == 0.0 {
-                return Err(Error::invalid(path, "sun direction is zero or not finite").field("lights.sun.direction"));
-            }
-            if !(0.0..=180.0).contains(&sun.angular_diameter) {
-                return Err(Error::invalid(
-                    path,
-                    format!("angular diameter must be 0-180 degrees, got {}", sun.angular_diameter),
-                )
-                .field("lights.sun.angular_diameter"));
-            }
-            check_light(sun.intensity, sun.color)
-                .map_err(|(k, m)| Error::invalid(path, m).field(format!("lights.sun.{k}")))?;
-        }
-        let sky = &self.sky;
-        check_light(sky.intensity, sky.color)
-            .map_err(|(k, m)| Error::invalid(path, m).field(format!("lights.sky.{k}")))?;
-        Ok(Lights { sun: self.sun, sky: self.sky })
     }
 }
 
@@ -885,7 +813,7 @@ impl Shot {
             None => None,
         };
         let camera = file.camera.check(&cx)?;
-        let lights = file.lights.check(path)?;
+        let lights = file.lights.check(&cx)?;
         check_layers(&file.layers, path)?;
         check_render(&file.render, path)?;
         Ok(Shot {
@@ -920,37 +848,43 @@ impl Shot {
         let keys = &self.camera.keys;
         let first = keys.first()?;
         let last = keys.last()?;
-        let (pos, aim, focal) = if frame <= first.frame {
-            (Vec3::from(first.position), Vec3::from(first.aim), first.focal_length)
+        // f-stop and focus (0 without depth of field), interpolated like the rest.
+        let lens = |k: &CameraKey| (k.f_stop.unwrap_or(0.0), k.focus_distance.unwrap_or(0.0));
+        let (pos, aim, focal, (f_stop, focus)) = if frame <= first.frame {
+            (Vec3::from(first.position), Vec3::from(first.aim), first.focal_length, lens(first))
         } else if frame >= last.frame {
-            (Vec3::from(last.position), Vec3::from(last.aim), last.focal_length)
+            (Vec3::from(last.position), Vec3::from(last.aim), last.focal_length, lens(last))
         } else {
             let i = keys.windows(2).position(|w| frame >= w[0].frame && frame <= w[1].frame).unwrap_or(0);
             let (a, b) = (&keys[i], &keys[i + 1]);
             let t = if b.frame > a.frame { (frame - a.frame) / (b.frame - a.frame) } else { 0.0 };
+            let ((na, da), (nb, db)) = (lens(a), lens(b));
             (
                 Vec3::from(a.position).lerp(Vec3::from(b.position), t),
                 Vec3::from(a.aim).lerp(Vec3::from(b.aim), t),
                 a.focal_length + (b.focal_length - a.focal_length) * t,
+                (na + (nb - na) * t, da + (db - da) * t),
             )
         };
         let sensor_height = self.camera.sensor_width / self.aspect();
         let yfov = 2.0 * (sensor_height * 0.5 / focal).atan();
-        Some(Camera { world_from_camera: look_at(pos, aim), yfov })
+        let mut camera = Camera::pinhole(look_at(pos, aim), yfov);
+        if f_stop > 0.0 {
+            // Aperture radius: focal length (mm -> m) over twice the f-number.
+            camera.aperture = focal * 1e-3 / (2.0 * f_stop);
+            camera.focus_distance = focus;
+        }
+        Some(camera)
     }
 
     /// The sun, in scene units.
     pub fn sun(&self) -> Option<Sun> {
-        self.lights.sun.map(|s| Sun {
-            direction: Vec3::from(s.direction).normalize(),
-            angular_diameter: s.angular_diameter.to_radians(),
-            irradiance: Vec3::from(s.color) * s.intensity,
-        })
+        self.lights.sun()
     }
 
-    /// The sky.
+    /// The uniform sky.
     pub fn sky(&self) -> Sky {
-        Sky { radiance: Vec3::from(self.lights.sky.color) * self.lights.sky.intensity }
+        self.lights.sky()
     }
 
     /// Whether an agent on `cycle` is never height-scaled.
@@ -1129,10 +1063,11 @@ mod tests {
 
     #[test]
     fn lights_layers_and_render_sections_are_range_checked() {
+        let cx = Context { path: Path::new("s.toml"), text: "", base: PathBuf::new() };
         let lights: LightsFile = toml::from_str("sun = { direction = [0.0, 0.0, 0.0] }").unwrap();
-        assert!(err(lights.check(Path::new("s.toml"))).contains("lights.sun.direction"));
+        assert!(err(lights.check(&cx)).contains("lights.sun.direction"));
         let lights: LightsFile = toml::from_str("sky = { intensity = -1.0 }").unwrap();
-        assert!(err(lights.check(Path::new("s.toml"))).contains("lights.sky.intensity"));
+        assert!(err(lights.check(&cx)).contains("lights.sky.intensity"));
         let layers: LayerSettings = toml::from_str("count = 0").unwrap();
         assert!(err(check_layers(&layers, Path::new("s.toml"))).contains("layers.count"));
         let layers: LayerSettings = toml::from_str("cutoffs = [9.0, 3.0]").unwrap();

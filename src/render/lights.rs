@@ -1,0 +1,616 @@
+//! Next-event estimation over every light of a frame scene: the sun and the
+//! set's distant lights, an HDRI dome, point, spot, rect, disk and sphere
+//! lights, and every emissive triangle. One light is picked per shading
+//! point in proportion to its power (an alias table), so the cost of a shadow
+//! ray does not grow with the number of lights; each light then samples a
+//! point by solid angle (cones for the sun and spheres, the dome's own
+//! distribution) or by area, converted to solid angle. Rays that hit a light
+//! (an emissive surface, a sized light, the dome) are weighted against that
+//! pdf by multiple importance sampling in the integrator.
+//!
+//! The uniform sky stays what it was: found by BSDF-sampled rays only.
+
+use std::f32::consts::PI;
+
+use glam::{Vec2, Vec3};
+
+use super::bsdf::{luminance, sample_concentric_disk, ShadingFrame};
+use super::dome::DomeSampler;
+use super::integrator::sample_texture;
+use crate::scene::lights::{Light, LightKind, SceneLights};
+use crate::scene::{vis, FrameScene, Library, Sun};
+
+/// A distant light as the integrator samples it: a uniform cone (or a delta
+/// direction for zero angular size).
+#[derive(Clone, Copy, Debug)]
+pub struct Distant {
+    direction: Vec3,
+    frame: ShadingFrame,
+    cos_max: f32,
+    /// Radiance inside the cone (irradiance / solid angle); for a delta
+    /// light the irradiance itself.
+    radiance: Vec3,
+    /// 1 / solid angle; zero marks a delta light.
+    pdf: f32,
+}
+
+impl Distant {
+    /// The sampled form of `sun`; `None` when it gives no light.
+    pub fn new(sun: &Sun) -> Option<Distant> {
+        let direction = sun.direction.normalize_or_zero();
+        if direction == Vec3::ZERO || !sun.irradiance.is_finite() || sun.irradiance.max_element() <= 0.0 {
+            return None;
+        }
+        let half = (0.5 * sun.angular_diameter).clamp(0.0, 0.5 * PI);
+        let cos_max = half.cos();
+        let solid_angle = 2.0 * PI * (1.0 - cos_max);
+        let frame = ShadingFrame::from_normal(direction);
+        if solid_angle < 1e-9 {
+            return Some(Distant { direction, frame, cos_max: 1.0, radiance: sun.irradiance, pdf: 0.0 });
+        }
+        Some(Distant { direction, frame, cos_max, radiance: sun.irradiance / solid_angle, pdf: 1.0 / solid_angle })
+    }
+
+    /// A direction towards the disc.
+    fn sample(&self, u: Vec2) -> Vec3 {
+        if self.pdf == 0.0 {
+            return self.direction;
+        }
+        let cos = 1.0 - u.x * (1.0 - self.cos_max);
+        let sin = (1.0 - cos * cos).max(0.0).sqrt();
+        let phi = 2.0 * PI * u.y;
+        self.frame.to_world(Vec3::new(sin * phi.cos(), sin * phi.sin(), cos)).normalize()
+    }
+
+    /// Whether direction `d` looks into the disc (never for a delta light).
+    pub fn contains(&self, d: Vec3) -> bool {
+        self.pdf > 0.0 && d.dot(self.direction) >= self.cos_max
+    }
+
+    /// Radiance seen inside the disc.
+    pub fn radiance(&self) -> Vec3 {
+        self.radiance
+    }
+
+    /// Solid-angle pdf of its own sampling (0 for a delta light).
+    pub fn pdf(&self) -> f32 {
+        self.pdf
+    }
+
+    fn irradiance(&self) -> Vec3 {
+        if self.pdf == 0.0 {
+            self.radiance
+        } else {
+            self.radiance / self.pdf
+        }
+    }
+}
+
+/// An emissive triangle in world space (the shutter-open placement of its
+/// instance).
+#[derive(Clone, Copy, Debug)]
+struct Triangle {
+    p: [Vec3; 3],
+    /// Unit normal of the emitting (front, counter-clockwise) face.
+    n: Vec3,
+    area: f32,
+    mesh: u32,
+    triangle: u32,
+    material: u32,
+}
+
+/// One light the sampler can pick.
+#[derive(Clone, Debug)]
+enum Source<'a> {
+    Distant(Distant),
+    Dome,
+    Local(&'a Light),
+    Triangle(Triangle),
+}
+
+/// A light sample as seen from a shading point.
+#[derive(Clone, Copy, Debug)]
+pub struct LightSample {
+    /// Unit direction towards the light.
+    pub wi: Vec3,
+    /// Distance to the sampled point (infinite for distant lights and the dome).
+    pub distance: f32,
+    /// Incident radiance (for delta lights: irradiance at normal incidence).
+    pub radiance: Vec3,
+    /// Solid-angle pdf including the pick (for delta lights: the pick alone).
+    pub pdf: f32,
+    /// A delta light: no BSDF-sampled ray can find it, so no MIS.
+    pub delta: bool,
+}
+
+/// Where a ray meets a sized light (rect, disk, sphere).
+#[derive(Clone, Copy, Debug)]
+pub struct AreaHit {
+    /// Ray distance.
+    pub t: f32,
+    /// Emitted radiance towards the ray.
+    pub radiance: Vec3,
+    /// Solid-angle pdf of the light's own sampling of this point, including the pick.
+    pub pdf: f32,
+}
+
+/// Vose's alias table: picks index i with probability weight[i] / sum in
+/// O(1) from one uniform number. Built in f64, so the same weights give the
+/// same table on any machine.
+#[derive(Clone, Debug, Default)]
+struct AliasTable {
+    /// Probability of keeping bin i (else its alias).
+    keep: Vec<f32>,
+    alias: Vec<u32>,
+    /// Probability of each index.
+    pmf: Vec<f32>,
+}
+
+impl AliasTable {
+    fn new(weights: &[f64]) -> AliasTable {
+        let n = weights.len();
+        let total: f64 = weights.iter().sum();
+        if n == 0 || !(total > 0.0) {
+            return AliasTable::default();
+        }
+        let pmf: Vec<f64> = weights.iter().map(|w| w / total).collect();
+        let mut scaled: Vec<f64> = pmf.iter().map(|p| p * n as f64).collect();
+        let (mut small, mut large): (Vec<usize>, Vec<usize>) = (0..n).partition(|&i| scaled[i] < 1.0);
+        let mut keep = vec![1.0f32; n];
+        let mut alias: Vec<u32> = (0..n as u32).collect();
+        while let (Some(s), Some(&l)) = (small.pop(), large.last()) {
+            keep[s] = scaled[s] as f32;
+            alias[s] = l as u32;
+            scaled[l] -= 1.0 - scaled[s];
+            if scaled[l] < 1.0 {
+                large.pop();
+                small.push(l);
+            }
+        }
+        AliasTable { keep, alias, pmf: pmf.iter().map(|&p| p as f32).collect() }
+    }
+
+    /// The index `u` in [0, 1) picks.
+    fn pick(&self, u: f32) -> usize {
+        let n = self.keep.len();
+        let x = u * n as f32;
+        let i = (x as usize).min(n - 1);
+        if x - (i as f32) < self.keep[i] {
+            i
+        } else {
+            self.alias[i] as usize
+        }
+    }
+}
+
+/// Every light of one frame scene, ready to sample.
+pub struct LightSampler<'a> {
+    lib: &'a Library,
+    sources: Vec<Source<'a>>,
+    table: AliasTable,
+    /// Per instance, the source index of its first triangle (`u32::MAX`: not emissive).
+    first_triangle: Vec<u32>,
+    dome: Option<(DomeSampler, u32)>,
+    dome_camera_visible: bool,
+    /// Source indices of the sized lights rays can hit.
+    sized: Vec<u32>,
+    /// Source index of the shot's sun.
+    sun: Option<(Distant, u32)>,
+}
+
+/// Bounding-sphere radius of the scene, for the power of lights at infinity
+/// (what they deliver onto the scene: pbrt's pi r^2 L).
+fn scene_radius(bounds: Option<(Vec3, Vec3)>) -> f64 {
+    bounds.map_or(1.0, |(lo, hi)| (0.5 * (hi - lo).length()).max(1e-3) as f64)
+}
+
+impl<'a> LightSampler<'a> {
+    /// The lights of `scene` (its `lights` and its emissive instances that
+    /// bounce rays can see), with `bounds` the scene's world bounds.
+    pub fn new(lib: &'a Library, scene: &'a FrameScene, bounds: Option<(Vec3, Vec3)>) -> LightSampler<'a> {
+        let lights: &'a SceneLights = &scene.lights;
+        let r = scene_radius(bounds);
+        let infinite_area = PI as f64 * r * r;
+        let mut sources = Vec::new();
+        let mut power = Vec::new();
+        let mut sun = None;
+        if let Some(d) = lights.sun.as_ref().and_then(Distant::new) {
+            sun = Some((d, sources.len() as u32));
+            power.push(luminance(d.irradiance()) as f64 * infinite_area);
+            sources.push(Source::Distant(d));
+        }
+        let mut dome = None;
+        if let Some(d) = &lights.dome {
+            let sampler = DomeSampler::new(d.clone());
+            let p = sampler.mean_radiance() as f64 * 4.0 * PI as f64 * infinite_area;
+            if p > 0.0 {
+                dome = Some((sampler, sources.len() as u32));
+                power.push(p);
+                sources.push(Source::Dome);
+            }
+        }
+        let mut sized = Vec::new();
+        for light in &lights.local {
+            if let LightKind::Distant { angular_diameter } = light.kind {
+                let sun = Sun { direction: -light.facing(), angular_diameter, irradiance: light.emission };
+                if let Some(d) = Distant::new(&sun) {
+                    power.push(luminance(d.irradiance()) as f64 * infinite_area);
+                    sources.push(Source::Distant(d));
+                }
+                continue;
+            }
+            let p = local_power(light, infinite_area);
+            if !(p > 0.0) {
+                continue;
+            }
+            if matches!(light.kind, LightKind::Rect { .. } | LightKind::Disk { .. } | LightKind::Sphere { .. }) {
+                sized.push(sources.len() as u32);
+            }
+            power.push(p);
+            sources.push(Source::Local(light));
+        }
+        let mut first_triangle = Vec::new();
+        if lib.materials.iter().any(|m| m.emission.max_element() > 0.0) {
+            first_triangle = vec![u32::MAX; scene.instances.len()];
+            for (i, inst) in scene.instances.iter().enumerate() {
+                let Some(m) = lib.materials.get(inst.material as usize) else { continue };
+                if inst.visibility & vis::INDIRECT == 0 || !(m.emission.max_element() > 0.0) {
+                    continue;
+                }
+                let Some(mesh) = lib.meshes.get(inst.mesh as usize) else { continue };
+                let det = inst.world_from_object.matrix3.determinant();
+                first_triangle[i] = sources.len() as u32;
+                for (t, tri) in mesh.indices.chunks_exact(3).enumerate() {
+                    let p = [0, 1, 2].map(|j| {
+                        let k = tri[j] as usize;
+                        inst.world_from_object.transform_point3(mesh.positions.get(k).copied().unwrap_or_default())
+                    });
+                    let cross = (p[1] - p[0]).cross(p[2] - p[0]);
+                    // glTF: a mirroring transform flips which winding is the front.
+                    let n = (cross * det.signum()).normalize_or_zero();
+                    let area = 0.5 * cross.length();
+                    let p_t = if n == Vec3::ZERO || !(area > 0.0) {
+                        0.0
+                    } else {
+                        PI as f64 * luminance(m.emission) as f64 * area as f64
+                    };
+                    power.push(p_t);
+                    sources.push(Source::Triangle(Triangle {
+                        p,
+                        n,
+                        area,
+                        mesh: inst.mesh,
+                        triangle: t as u32,
+                        material: inst.material,
+                    }));
+                }
+            }
+        }
+        LightSampler {
+            lib,
+            table: AliasTable::new(&power),
+            sources,
+            first_triangle,
+            dome_camera_visible: lights.dome.as_ref().is_some_and(|d| d.camera_visible),
+            dome,
+            sized,
+            sun,
+        }
+    }
+
+    /// Whether there is anything to sample.
+    pub fn is_empty(&self) -> bool {
+        self.table.pmf.is_empty()
+    }
+
+    /// Whether picking a light takes a random number (more than one light).
+    pub fn needs_pick(&self) -> bool {
+        self.table.pmf.len() > 1
+    }
+
+    /// The shot's sun, as sampled.
+    pub fn sun(&self) -> Option<&Distant> {
+        self.sun.as_ref().map(|(d, _)| d)
+    }
+
+    /// Probability the pick chooses the sun (for MIS on rays that escape into it).
+    pub fn sun_pick(&self) -> f32 {
+        self.sun.map_or(0.0, |(_, i)| self.table.pmf[i as usize])
+    }
+
+    /// A light sample for a shading point at `p`: the light picked by
+    /// `u_pick`, a point on it by `u`.
+    pub fn sample(&self, p: Vec3, u_pick: f32, u: Vec2) -> Option<LightSample> {
+        if self.is_empty() {
+            return None;
+        }
+        let index = if self.needs_pick() { self.table.pick(u_pick) } else { 0 };
+        let pick = self.table.pmf[index];
+        match &self.sources[index] {
+            Source::Distant(d) => {
+                let wi = d.sample(u);
+                let delta = d.pdf == 0.0;
+                let pdf = if delta { pick } else { d.pdf * pick };
+                Some(LightSample { wi, distance: f32::INFINITY, radiance: d.radiance, pdf, delta })
+            }
+            Source::Dome => {
+                let (dome, _) = self.dome.as_ref()?;
+                let (wi, radiance, pdf) = dome.sample(u)?;
+                Some(LightSample { wi, distance: f32::INFINITY, radiance, pdf: pdf * pick, delta: false })
+            }
+            Source::Local(light) => sample_local(light, p, u).map(|s| LightSample { pdf: s.pdf * pick, ..s }),
+            Source::Triangle(tri) => {
+                let su = u.x.sqrt();
+                let (b1, b2) = (1.0 - su, u.y * su);
+                let q = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
+                let d = q - p;
+                let dist2 = d.length_squared();
+                let distance = dist2.sqrt();
+                if !(distance > 0.0) {
+                    return None;
+                }
+                let wi = d / distance;
+                let cos_l = -wi.dot(tri.n);
+                if cos_l <= 1e-6 {
+                    return None;
+                }
+                let radiance = self.triangle_emission(tri, b1, b2);
+                Some(LightSample { wi, distance, radiance, pdf: pick * dist2 / (tri.area * cos_l), delta: false })
+            }
+        }
+    }
+
+    /// The emission of a triangle's material at barycentrics (b1, b2),
+    /// with its emissive texture.
+    fn triangle_emission(&self, tri: &Triangle, b1: f32, b2: f32) -> Vec3 {
+        let Some(m) = self.lib.materials.get(tri.material as usize) else { return Vec3::ZERO };
+        let Some(tex) = m.emissive_texture.and_then(|t| self.lib.textures.get(t as usize)) else {
+            return m.emission;
+        };
+        let Some(mesh) = self.lib.meshes.get(tri.mesh as usize) else { return m.emission };
+        let k = tri.triangle as usize * 3;
+        match (mesh.indices.get(k..k + 3), mesh.uvs.len() == mesh.positions.len()) {
+            (Some(idx), true) => {
+                let [t0, t1, t2] = [0, 1, 2].map(|j| mesh.uvs[idx[j] as usize]);
+                m.emission * sample_texture(tex, t0 * (1.0 - b1 - b2) + t1 * b1 + t2 * b2).truncate()
+            }
+            _ => m.emission,
+        }
+    }
+
+    /// Solid-angle pdf (including the pick) with which NEE would have chosen
+    /// the point at ray distance `t` on triangle `triangle` of instance
+    /// `instance`, seen at cosine `cos_l` from its normal; 0 when NEE never
+    /// samples that surface.
+    pub fn triangle_pdf(&self, instance: u32, triangle: u32, t: f32, cos_l: f32) -> f32 {
+        let Some(&first) = self.first_triangle.get(instance as usize) else { return 0.0 };
+        if first == u32::MAX || !(cos_l > 0.0) {
+            return 0.0;
+        }
+        let index = first as usize + triangle as usize;
+        match self.sources.get(index) {
+            Some(Source::Triangle(tri)) if tri.area > 0.0 => self.table.pmf[index] * t * t / (tri.area * cos_l),
+            _ => 0.0,
+        }
+    }
+
+    /// The dome's radiance in direction `d` and its NEE pdf (including the
+    /// pick); `None` without a dome.
+    pub fn dome(&self, d: Vec3) -> Option<(Vec3, f32)> {
+        let (dome, index) = self.dome.as_ref()?;
+        Some((dome.radiance(d), dome.pdf(d) * self.table.pmf[*index as usize]))
+    }
+
+    /// Whether camera rays that miss see the dome.
+    pub fn dome_camera_visible(&self) -> bool {
+        self.dome_camera_visible
+    }
+
+    /// The nearest sized light a ray (unit `dir`) meets before `tmax`;
+    /// camera rays (`camera`) meet only those marked camera-visible.
+    pub fn hit_sized(&self, origin: Vec3, dir: Vec3, tmax: f32, camera: bool) -> Option<AreaHit> {
+        let mut best: Option<AreaHit> = None;
+        for &index in &self.sized {
+            let Source::Local(light) = &self.sources[index as usize] else { continue };
+            if camera && !light.camera_visible {
+                continue;
+            }
+            let limit = best.map_or(tmax, |b| b.t);
+            if let Some(hit) = intersect_sized(light, origin, dir, limit) {
+                best = Some(AreaHit { pdf: hit.pdf * self.table.pmf[index as usize], ..hit });
+            }
+        }
+        best
+    }
+}
+
+/// Power of a local light (luminance), for the pick.
+fn local_power(light: &Light, infinite_area: f64) -> f64 {
+    let l = luminance(light.emission) as f64;
+    let pi = PI as f64;
+    let sides = if light.two_sided { 2.0 } else { 1.0 };
+    match light.kind {
+        LightKind::Point => 4.0 * pi * l,
+        LightKind::Spot { outer, blend } => {
+            // The cone to halfway through its soft edge.
+            let half = outer as f64 * (1.0 - 0.5 * blend as f64);
+            2.0 * pi * l * (1.0 - half.cos()).max(1e-6)
+        }
+        LightKind::Rect { size } => pi * l * (size.x * size.y) as f64 * sides,
+        LightKind::Disk { radius } => pi * l * pi * (radius * radius) as f64 * sides,
+        LightKind::Sphere { radius } => pi * l * 4.0 * pi * (radius * radius) as f64,
+        LightKind::Distant { .. } => l * infinite_area,
+    }
+}
+
+/// Blender's spot edge (what Cycles renders for an imported glTF spot):
+/// smoothstep over the outer `blend` of the cone, measured in cosines.
+pub fn spot_falloff(cos_angle: f32, outer: f32, blend: f32) -> f32 {
+    let cos_outer = outer.cos();
+    if cos_angle <= cos_outer {
+        return 0.0;
+    }
+    let width = (1.0 - cos_outer) * blend;
+    if width <= 0.0 {
+        return 1.0;
+    }
+    let t = ((cos_angle - cos_outer) / width).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// Samples a point, spot, rect, disk or sphere light from `p` (pdf without the pick).
+fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
+    let m = &light.world_from_light;
+    let centre = light.position();
+    match light.kind {
+        LightKind::Point | LightKind::Spot { .. } => {
+            let d = centre - p;
+            let dist2 = d.length_squared();
+            if !(dist2 > 0.0) {
+                return None;
+            }
+            let distance = dist2.sqrt();
+            let wi = d / distance;
+            let mut radiance = light.emission / dist2;
+            if let LightKind::Spot { outer, blend } = light.kind {
+                radiance *= spot_falloff(-wi.dot(light.facing()), outer, blend);
+            }
+            if radiance == Vec3::ZERO {
+                return None;
+            }
+            Some(LightSample { wi, distance, radiance, pdf: 1.0, delta: true })
+        }
+        LightKind::Rect { .. } | LightKind::Disk { .. } => {
+            let (local, area) = match light.kind {
+                LightKind::Rect { size } => (Vec2::new((u.x - 0.5) * size.x, (u.y - 0.5) * size.y), size.x * size.y),
+                LightKind::Disk { radius } => (sample_concentric_disk(u) * radius, PI * radius * radius),
+                _ => return None,
+            };
+            let q = m.transform_point3(Vec3::new(local.x, local.y, 0.0));
+            let d = q - p;
+            let dist2 = d.length_squared();
+            let distance = dist2.sqrt();
+            if !(distance > 0.0) {
+                return None;
+            }
+            let wi = d / distance;
+            let mut cos_l = -wi.dot(light.facing());
+            if light.two_sided {
+                cos_l = cos_l.abs();
+            }
+            if cos_l <= 1e-6 {
+                return None;
+            }
+            Some(LightSample { wi, distance, radiance: light.emission, pdf: dist2 / (area * cos_l), delta: false })
+        }
+        LightKind::Sphere { radius } => {
+            let d = centre - p;
+            let dc2 = d.length_squared();
+            if dc2 <= radius * radius {
+                return None; // inside the light: it does not light its own interior
+            }
+            let dc = dc2.sqrt();
+            let axis = d / dc;
+            let sin2_max = radius * radius / dc2;
+            let cos_max = (1.0 - sin2_max).max(0.0).sqrt();
+            // 1 - cos_max without cancellation for small, far spheres.
+            let one_minus = sin2_max / (1.0 + cos_max);
+            let cos = 1.0 - u.x * one_minus;
+            let sin = (1.0 - cos * cos).max(0.0).sqrt();
+            let phi = 2.0 * PI * u.y;
+            let wi =
+                ShadingFrame::from_normal(axis).to_world(Vec3::new(sin * phi.cos(), sin * phi.sin(), cos)).normalize();
+            // The near intersection of the ray with the sphere.
+            let b = wi.dot(d);
+            let disc = (b * b - (dc2 - radius * radius)).max(0.0);
+            let distance = (b - disc.sqrt()).max(0.0);
+            Some(LightSample {
+                wi,
+                distance,
+                radiance: light.emission,
+                pdf: 1.0 / (2.0 * PI * one_minus),
+                delta: false,
+            })
+        }
+        LightKind::Distant { .. } => None,
+    }
+}
+
+/// A ray against one sized light: where it meets it before `tmax`, and the
+/// light's own solid-angle pdf for that point (without the pick).
+fn intersect_sized(light: &Light, origin: Vec3, dir: Vec3, tmax: f32) -> Option<AreaHit> {
+    let centre = light.position();
+    match light.kind {
+        LightKind::Rect { .. } | LightKind::Disk { .. } => {
+            let n = light.facing();
+            let denom = dir.dot(n);
+            if denom.abs() < 1e-9 {
+                return None;
+            }
+            let t = (centre - origin).dot(n) / denom;
+            if !(t > 1e-6 && t < tmax) {
+                return None;
+            }
+            let cos_l = -denom; // cosine between the light's facing and the way back to the origin
+            if cos_l <= 0.0 && !light.two_sided {
+                return None;
+            }
+            let q = light.world_from_light.inverse().transform_point3(origin + dir * t);
+            let area = match light.kind {
+                LightKind::Rect { size } if q.x.abs() <= 0.5 * size.x && q.y.abs() <= 0.5 * size.y => size.x * size.y,
+                LightKind::Disk { radius } if q.x * q.x + q.y * q.y <= radius * radius => PI * radius * radius,
+                _ => return None,
+            };
+            Some(AreaHit { t, radiance: light.emission, pdf: t * t / (area * cos_l.abs()) })
+        }
+        LightKind::Sphere { radius } => {
+            let d = centre - origin;
+            let dc2 = d.length_squared();
+            if dc2 <= radius * radius {
+                return None;
+            }
+            let b = dir.dot(d);
+            let disc = b * b - (dc2 - radius * radius);
+            if disc < 0.0 {
+                return None;
+            }
+            let t = b - disc.sqrt();
+            if !(t > 1e-6 && t < tmax) {
+                return None;
+            }
+            let sin2_max = radius * radius / dc2;
+            let one_minus = sin2_max / (1.0 + (1.0 - sin2_max).max(0.0).sqrt());
+            Some(AreaHit { t, radiance: light.emission, pdf: 1.0 / (2.0 * PI * one_minus) })
+        }
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn alias_table_picks_in_proportion() {
+        let table = AliasTable::new(&[1.0, 3.0, 0.0, 4.0]);
+        let n = 80_000;
+        let mut counts = [0u32; 4];
+        for i in 0..n {
+            counts[table.pick((i as f32 + 0.5) / n as f32)] += 1;
+        }
+        for (c, w) in counts.iter().zip([1.0, 3.0, 0.0, 4.0]) {
+            assert!((*c as f32 / n as f32 - w / 8.0).abs() < 0.002, "{counts:?}");
+        }
+        assert_eq!(table.pmf, [0.125, 0.375, 0.0, 0.5]);
+    }
+
+    #[test]
+    fn spot_edge_is_blenders_smoothstep() {
+        let outer = 0.5f32;
+        assert_eq!(spot_falloff(1.0, outer, 0.2), 1.0);
+        assert_eq!(spot_falloff(outer.cos() - 1e-4, outer, 0.2), 0.0);
+        assert_eq!(spot_falloff((outer - 0.01).cos(), outer, 0.0), 1.0);
+        let mid = outer.cos() + 0.5 * (1.0 - outer.cos()) * 0.2;
+        assert!((spot_falloff(mid, outer, 0.2) - 0.5).abs() < 1e-5);
+    }
+}

@@ -1,0 +1,418 @@
+//! Lights against closed forms: a diffuse floor seen straight down, lit by
+//! one light at a time, max_bounces 0 (direct light only), pure Lambert
+//! (radiance = albedo x irradiance / pi). A constant dome gives albedo x L
+//! (the furnace); a point light I h / r^3; a spot the same inside its cone
+//! and nothing outside; a rect light or an emissive panel facing the floor
+//! the closed-form form factor; a sphere light pi L (r/D)^2 below it. The
+//! thin lens images a point at focus to a point and blurs one off focus by
+//! its circle of confusion. The sunny HDRI's importance sampling against
+//! uniform sampling: the same mean, a fraction of the variance. And lit
+//! renders are bit-identical for any thread count.
+
+mod common;
+
+use std::f32::consts::PI;
+use std::sync::Arc;
+
+use glam::{Affine3A, Quat, Vec2, Vec3};
+use throng::render::accel::BlasSet;
+use throng::render::dome::DomeSampler;
+use throng::render::film::{render_frame, Film};
+use throng::render::RenderSettings;
+use throng::scene::dome::load_dome;
+use throng::scene::lights::{Dome, Light, LightKind, SceneLights};
+use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky};
+
+const ALBEDO: f32 = 0.5;
+/// Camera height over the floor, and the floor's half width seen.
+const HEIGHT: f32 = 4.0;
+const RES: u32 = 32;
+/// Vertical field of view: the image spans 2 x HEIGHT x tan(fov/2) = 4 m of floor.
+fn fov() -> f32 {
+    2.0 * (0.5f32).atan()
+}
+
+/// A square in the y = 0 plane, front face (counter-clockwise) up.
+fn quad(size: f32) -> Mesh {
+    let h = size / 2.0;
+    Mesh {
+        name: "quad".into(),
+        positions: [(-h, -h), (h, -h), (h, h), (-h, h)].map(|(x, z)| Vec3::new(x, 0.0, z)).to_vec(),
+        normals: vec![Vec3::Y; 4],
+        uvs: vec![Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y],
+        indices: vec![0, 2, 1, 0, 3, 2],
+    }
+}
+
+fn instance(mesh: u32, material: u32, world_from_object: Affine3A, visibility: u8) -> Instance {
+    Instance { mesh, material, world_from_object, agent: InstanceAgent::NONE, part: 0, visibility }
+}
+
+/// Straight down from HEIGHT over the origin; image up is -Z.
+fn top_camera() -> Camera {
+    Camera::pinhole(
+        Affine3A::from_cols(Vec3::X.into(), (-Vec3::Z).into(), Vec3::Y.into(), (Vec3::Y * HEIGHT).into()),
+        fov(),
+    )
+}
+
+fn settings(spp: u32, threads: usize) -> RenderSettings {
+    RenderSettings {
+        width: RES,
+        height: RES,
+        spp,
+        max_bounces: 0,
+        seed: 7,
+        frame: 1,
+        layer: 0,
+        sky_visible: false,
+        threads,
+        indirect_clamp: 0.0,
+        diffuse_only: true,
+    }
+}
+
+/// A grey floor (and `extra` instances and materials), lit by `lights`.
+fn floor_scene(lights: SceneLights, extra: Vec<(Mesh, Material, Affine3A)>) -> (Library, FrameScene) {
+    let grey = Material { name: "floor".into(), base_color: Vec3::splat(ALBEDO), ..Default::default() };
+    let mut lib = Library { meshes: vec![quad(200.0)], materials: vec![grey], textures: vec![] };
+    let mut instances = vec![instance(0, 0, Affine3A::IDENTITY, vis::ALL)];
+    for (mesh, material, m) in extra {
+        lib.meshes.push(mesh);
+        lib.materials.push(material);
+        instances.push(instance(lib.meshes.len() as u32 - 1, lib.materials.len() as u32 - 1, m, vis::ALL));
+    }
+    (lib, FrameScene { instances, camera: top_camera(), lights, motion: None })
+}
+
+fn render(lib: &Library, scene: &FrameScene, spp: u32, threads: usize) -> Film {
+    render_frame(&BlasSet::build(lib), lib, scene, &settings(spp, threads), None).expect("render")
+}
+
+/// The floor point under pixel (x, y)'s centre.
+fn floor_point(x: u32, y: u32) -> Vec3 {
+    let t = (0.5 * fov()).tan();
+    let sx = (2.0 * (x as f32 + 0.5) / RES as f32 - 1.0) * t;
+    let sy = (1.0 - 2.0 * (y as f32 + 0.5) / RES as f32) * t;
+    Vec3::new(sx * HEIGHT, 0.0, -sy * HEIGHT)
+}
+
+/// Compares the film (red channel) with `expected` radiance at floor points,
+/// over 4x4-pixel blocks (the filter blurs single pixels): each block within
+/// `block_tol` (relative, of the largest expected value) and the whole within 1%.
+fn assert_matches(film: &Film, expected: impl Fn(Vec3) -> f32, block_tol: f32, what: &str) {
+    let (mut sum, mut want) = (0.0f64, 0.0f64);
+    let peak = (0..RES * RES).map(|i| expected(floor_point(i % RES, i / RES))).fold(0.0f32, f32::max);
+    assert!(peak > 0.0, "{what}: nothing expected");
+    // Skip a 2-pixel border: the filter reaches past the image edge there.
+    for by in (2..RES - 2).step_by(4) {
+        for bx in (2..RES - 2).step_by(4) {
+            let (mut got, mut exp) = (0.0f64, 0.0f64);
+            for y in by..(by + 4).min(RES - 2) {
+                for x in bx..(bx + 4).min(RES - 2) {
+                    got += film.rgba[(y * RES + x) as usize][0] as f64;
+                    exp += expected(floor_point(x, y)) as f64;
+                }
+            }
+            let n = 16.0;
+            assert!(
+                ((got - exp) / n).abs() <= (block_tol * peak) as f64,
+                "{what}: block ({bx}, {by}) {:.5} vs closed form {:.5} (peak {peak:.5})",
+                got / n,
+                exp / n
+            );
+            sum += got;
+            want += exp;
+        }
+    }
+    assert!(((sum - want) / want).abs() < 0.01, "{what}: mean {sum} vs closed form {want}");
+}
+
+fn light(kind: LightKind, position: Vec3, facing: Vec3, emission: f32) -> Light {
+    let world_from_light = throng::shot::look_at(position, position + facing);
+    Light {
+        name: "test".into(),
+        kind,
+        world_from_light,
+        emission: Vec3::splat(emission),
+        two_sided: false,
+        camera_visible: false,
+    }
+}
+
+fn local(lights: Vec<Light>) -> SceneLights {
+    SceneLights { sun: None, sky: Sky { radiance: Vec3::ZERO }, dome: None, local: lights }
+}
+
+/// Irradiance at a point from a parallel rectangle with one corner straight
+/// above it at height d and sides a, b: pi L x the form factor
+/// F = 1/(2 pi) [X/sqrt(1+X^2) atan(Y/sqrt(1+X^2)) + Y/sqrt(1+Y^2) atan(X/sqrt(1+Y^2))].
+fn corner_irradiance(l: f32, a: f32, b: f32, d: f32) -> f32 {
+    let (x, y) = ((a / d) as f64, (b / d) as f64);
+    let f = (x / (1.0 + x * x).sqrt() * (y / (1.0 + x * x).sqrt()).atan()
+        + y / (1.0 + y * y).sqrt() * (x / (1.0 + y * y).sqrt()).atan())
+        / (2.0 * std::f64::consts::PI);
+    (std::f64::consts::PI * l as f64 * f) as f32
+}
+
+/// A w x h rectangle centred at (cx, cz), height d, as four corner pieces
+/// (signed, for points outside its footprint).
+fn rect_irradiance(l: f32, p: Vec3, w: f32, h: f32, d: f32) -> f32 {
+    let (x0, x1) = (-0.5 * w - p.x, 0.5 * w - p.x);
+    let (z0, z1) = (-0.5 * h - p.z, 0.5 * h - p.z);
+    let piece = |a: f32, b: f32| a.signum() * b.signum() * corner_irradiance(l, a.abs(), b.abs(), d);
+    piece(x1, z1) - piece(x0, z1) - piece(x1, z0) + piece(x0, z0)
+}
+
+#[test]
+fn a_constant_dome_gives_albedo_times_radiance() {
+    let dome = Dome {
+        file: "constant".into(),
+        width: 16,
+        height: 8,
+        texels: vec![Vec3::splat(2.0); 128],
+        scale: Vec3::ONE,
+        rotate: 0.3,
+        camera_visible: true,
+    };
+    let lights = SceneLights { dome: Some(Arc::new(dome)), ..local(vec![]) };
+    let (lib, scene) = floor_scene(lights, vec![]);
+    let film = render(&lib, &scene, 16, 2);
+    assert_matches(&film, |_| ALBEDO * 2.0, 0.02, "constant dome");
+}
+
+#[test]
+fn a_point_light_falls_off_with_distance_squared_and_cosine() {
+    let (i, h) = (30.0, 2.0);
+    let p0 = Vec3::new(0.7, h, -0.4);
+    let (lib, scene) = floor_scene(local(vec![light(LightKind::Point, p0, -Vec3::Y, i)]), vec![]);
+    let film = render(&lib, &scene, 4, 2);
+    let expected = |p: Vec3| {
+        let r = p0 - p;
+        ALBEDO / PI * i * h / r.length().powi(3)
+    };
+    assert_matches(&film, expected, 0.03, "point light");
+}
+
+#[test]
+fn a_spot_is_a_point_inside_its_cone_and_dark_outside() {
+    let (i, h) = (30.0, 2.0);
+    let outer = 20f32.to_radians();
+    let p0 = Vec3::new(0.0, h, 0.0);
+    let spot = light(LightKind::Spot { outer, blend: 0.0 }, p0, -Vec3::Y, i);
+    let (lib, scene) = floor_scene(local(vec![spot]), vec![]);
+    let film = render(&lib, &scene, 4, 2);
+    let (mut inside, mut outside) = (0, 0);
+    for y in 0..RES {
+        for x in 0..RES {
+            let p = floor_point(x, y);
+            let r = p0 - p;
+            let angle = (r.normalize().dot(Vec3::Y)).acos();
+            let got = film.rgba[(y * RES + x) as usize][0];
+            // Pixels clear of the edge by more than the filter's reach.
+            if angle < outer - 0.05 {
+                let want = ALBEDO / PI * i * h / r.length().powi(3);
+                assert!((got - want).abs() < 0.02 * want, "inside ({x}, {y}): {got} vs {want}");
+                inside += 1;
+            } else if angle > outer + 0.05 {
+                assert_eq!(got, 0.0, "outside ({x}, {y})");
+                outside += 1;
+            }
+        }
+    }
+    assert!(inside > 50 && outside > 50, "{inside} inside, {outside} outside");
+}
+
+#[test]
+fn a_rect_light_gives_the_form_factor() {
+    let (l, d, w, h) = (3.0, 1.5, 1.2, 0.8);
+    let rect = light(LightKind::Rect { size: Vec2::new(w, h) }, Vec3::new(0.0, d, 0.0), -Vec3::Y, l);
+    // look_at puts the light's local X along world X and its local Y along world -Z or +Z: the
+    // rectangle's w runs along X and h along Z either way.
+    let (lib, scene) = floor_scene(local(vec![rect]), vec![]);
+    let film = render(&lib, &scene, 64, 2);
+    assert_matches(&film, |p| ALBEDO / PI * rect_irradiance(l, p, w, h, d), 0.03, "rect light");
+}
+
+#[test]
+fn an_emissive_panel_lights_like_a_rect_light_and_only_from_its_front() {
+    let (l, d, size) = (3.0, 1.5, 1.0);
+    let glow = Material { name: "glow".into(), base_color: Vec3::ZERO, emission: Vec3::splat(l), ..Default::default() };
+    // Turned over (front face down), at height d.
+    let down = Affine3A::from_rotation_translation(Quat::from_rotation_x(PI), Vec3::new(0.0, d, 0.0));
+    let (lib, scene) = floor_scene(local(vec![]), vec![(quad(size), glow.clone(), down)]);
+    let film = render(&lib, &scene, 64, 2);
+    // The camera above sees the panel's dark back over its shadow on the
+    // image (its footprint grown by HEIGHT / (HEIGHT - d)): compare around it.
+    let hidden = 0.5 * size * HEIGHT / (HEIGHT - d) + 0.15;
+    let outside = |p: Vec3| p.x.abs() > hidden || p.z.abs() > hidden;
+    let (mut got, mut want, mut n) = (0.0f64, 0.0f64, 0);
+    for y in 2..RES - 2 {
+        for x in 2..RES - 2 {
+            let p = floor_point(x, y);
+            if outside(p) {
+                got += film.rgba[(y * RES + x) as usize][0] as f64;
+                want += (ALBEDO / PI * rect_irradiance(l, p, size, size, d)) as f64;
+                n += 1;
+            }
+        }
+    }
+    assert!(n > 300, "{n} pixels");
+    assert!(((got - want) / want).abs() < 0.02, "emissive panel: {got} vs closed form {want}");
+    // Its back over the footprint is black: base colour 0, and it emits only forwards.
+    let centre = film.rgba[(RES / 2 * RES + RES / 2) as usize];
+    assert_eq!(centre[0], 0.0, "the panel's back");
+    // Face up, it lights nothing below.
+    let up = Affine3A::from_translation(Vec3::new(0.0, d, 0.0));
+    let (lib, scene) = floor_scene(local(vec![]), vec![(quad(size), glow, up)]);
+    let film = render(&lib, &scene, 16, 2);
+    for y in 0..RES {
+        for x in 0..RES {
+            if outside(floor_point(x, y)) {
+                assert_eq!(film.rgba[(y * RES + x) as usize][0], 0.0, "a face-up panel lights nothing below it");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_sphere_light_gives_pi_l_r2_over_d2_below_it() {
+    let (l, r, centre_height) = (5.0, 0.3, 2.0);
+    let sphere = light(LightKind::Sphere { radius: r }, Vec3::new(0.0, centre_height, 0.0), -Vec3::Y, l);
+    let (lib, scene) = floor_scene(local(vec![sphere]), vec![]);
+    let film = render(&lib, &scene, 16, 2);
+    // A sphere seen from p: pi L sin^2(half angle) x cos of its direction.
+    let expected = |p: Vec3| {
+        let d = Vec3::new(0.0, centre_height, 0.0) - p;
+        ALBEDO / PI * PI * l * (r * r / d.length_squared()) * (d.normalize().y)
+    };
+    assert_matches(&film, expected, 0.03, "sphere light");
+}
+
+/// A small camera-visible emitter at distance `z` in front of a lens camera
+/// focused at `focus`: the radius (pixels) holding its image.
+fn image_radius(z: f32, focus: f32, aperture: f32) -> f32 {
+    let glow = Material { name: "glow".into(), emission: Vec3::ONE, ..Default::default() };
+    let size = 0.02 * z;
+    // Facing the camera (front towards +Z).
+    let m = Affine3A::from_rotation_translation(Quat::from_rotation_x(PI / 2.0), Vec3::new(0.0, 0.0, -z));
+    let lib = Library { meshes: vec![quad(size)], materials: vec![glow], textures: vec![] };
+    let mut camera = Camera::pinhole(Affine3A::IDENTITY, 20f32.to_radians());
+    camera.aperture = aperture;
+    camera.focus_distance = focus;
+    let scene =
+        FrameScene { instances: vec![instance(0, 0, m, vis::ALL)], camera, lights: local(vec![]), motion: None };
+    let s = RenderSettings { width: 64, height: 64, ..settings(64, 2) };
+    let film = render_frame(&BlasSet::build(&lib), &lib, &scene, &s, None).expect("render");
+    let total: f32 = film.rgba.iter().map(|p| p[0]).sum();
+    assert!(total > 0.0);
+    // The radius holding 95% of the light, from the image centre.
+    let mut by_radius: Vec<(f32, f32)> = (0..64 * 64)
+        .map(|i| {
+            let (x, y) = ((i % 64) as f32 + 0.5 - 32.0, (i / 64) as f32 + 0.5 - 32.0);
+            ((x * x + y * y).sqrt(), film.rgba[i][0])
+        })
+        .collect();
+    by_radius.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut acc = 0.0;
+    for (r, v) in by_radius {
+        acc += v;
+        if acc >= 0.95 * total {
+            return r;
+        }
+    }
+    64.0
+}
+
+#[test]
+fn the_thin_lens_focuses_at_its_distance_and_blurs_by_the_circle_of_confusion() {
+    let (focus, aperture) = (5.0, 0.05);
+    let sharp = image_radius(focus, focus, aperture);
+    let pinhole = image_radius(focus, focus, 0.0);
+    assert!((sharp - pinhole).abs() <= 1.0, "in focus: {sharp} px vs pinhole {pinhole} px");
+    // At 2.5 m the circle of confusion at the focus plane is 2 a |z - s| / z = 0.05 m across,
+    // which is 0.05 / (2 s tan(10 deg)) x 64 px = 1.81 px; at 10 m likewise 0.05 m -> 1.81 px...
+    // so take 1.25 m: 2 x 0.05 x 3.75 / 1.25 = 0.3 m -> 10.9 px across, 5.4 px radius.
+    let near = image_radius(1.25, focus, aperture);
+    let coc_radius = 0.5 * (2.0 * aperture * (focus - 1.25) / 1.25) / (2.0 * focus * (10f32).to_radians().tan()) * 64.0;
+    assert!((near - coc_radius).abs() < 1.5, "off focus: {near} px vs circle of confusion {coc_radius} px");
+    assert!(near > sharp + 3.0, "blur grows off focus: {near} vs {sharp}");
+}
+
+#[test]
+fn the_sunny_hdri_samples_to_the_same_mean_with_less_variance() {
+    let hdri = common::shared_asset("hdri/quarry_01_1k.hdr");
+    let dome = Arc::new(load_dome(&hdri, Vec3::ONE, 0.0, true).expect("the shared HDRI"));
+    let sampler = DomeSampler::new(dome.clone());
+    // Irradiance on an upward-facing plane: E = integral of L cos over the upper hemisphere.
+    let lum = |c: Vec3| (0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z) as f64;
+    // The closed form for the map as stored: every texel's radiance x cos x solid angle.
+    let (w, h) = (dome.width as usize, dome.height as usize);
+    let mut exact = 0.0f64;
+    for y in 0..h {
+        let (t0, t1) = (PI * y as f32 / h as f32, PI * (y + 1) as f32 / h as f32);
+        for x in 0..w {
+            let d = sampler.direction(Vec2::new((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32));
+            if d.y > 0.0 {
+                let solid_angle = 2.0 * PI / w as f32 * (t0.cos() - t1.cos());
+                exact += lum(dome.texels[y * w + x]) * d.y as f64 * solid_angle as f64;
+            }
+        }
+    }
+    let n = 1 << 14;
+    let (mut imp, mut imp2, mut uni, mut uni2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for k in 0..n {
+        // A (0,2) sequence: Hammersley points.
+        let u = Vec2::new((k as f32 + 0.5) / n as f32, (k as u32).reverse_bits() as f32 / 4294967296.0);
+        let e =
+            sampler.sample(u).map_or(0.0, |(d, l, pdf)| if d.y > 0.0 { lum(l) * d.y as f64 / pdf as f64 } else { 0.0 });
+        imp += e;
+        imp2 += e * e;
+        // Uniform over the sphere.
+        let z = 1.0 - 2.0 * u.x;
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        let d = Vec3::new(r * (2.0 * PI * u.y).cos(), z, r * (2.0 * PI * u.y).sin());
+        let e = if d.y > 0.0 { lum(sampler.radiance(d)) * d.y as f64 * 4.0 * std::f64::consts::PI } else { 0.0 };
+        uni += e;
+        uni2 += e * e;
+    }
+    let nf = n as f64;
+    let (mi, mu) = (imp / nf, uni / nf);
+    let (vi, vu) = (imp2 / nf - mi * mi, uni2 / nf - mu * mu);
+    // The sun is 0.5 degrees across: uniform directions all but never find
+    // it (so their mean falls short and their variance, measured, is a
+    // floor); the importance-sampled mean is the closed form.
+    assert!(((mi - exact) / exact).abs() < 0.01, "importance {mi} vs closed form {exact}");
+    assert!(mu < exact, "uniform {mu} vs closed form {exact}");
+    assert!(vi < 0.1 * vu, "variance: importance {vi} vs uniform {vu}");
+}
+
+#[test]
+fn lit_renders_are_bit_identical_for_any_thread_count() {
+    let dome = Dome {
+        file: "two".into(),
+        width: 8,
+        height: 4,
+        texels: (0..32).map(|i| Vec3::splat(0.1 + (i % 5) as f32)).collect(),
+        scale: Vec3::splat(0.2),
+        rotate: 0.0,
+        camera_visible: true,
+    };
+    let lights = SceneLights {
+        dome: Some(Arc::new(dome)),
+        ..local(vec![
+            light(LightKind::Point, Vec3::new(0.5, 1.0, 0.0), -Vec3::Y, 2.0),
+            light(LightKind::Rect { size: Vec2::ONE }, Vec3::new(-0.5, 1.5, 0.0), -Vec3::Y, 1.0),
+            light(LightKind::Sphere { radius: 0.2 }, Vec3::new(0.0, 1.0, 1.0), -Vec3::Y, 4.0),
+        ])
+    };
+    let glow = Material { name: "glow".into(), emission: Vec3::new(2.0, 1.0, 0.5), ..Default::default() };
+    let down = Affine3A::from_rotation_translation(Quat::from_rotation_x(PI), Vec3::new(1.0, 1.0, -1.0));
+    let (lib, scene) = floor_scene(lights, vec![(quad(0.5), glow, down)]);
+    let s = |threads| RenderSettings { max_bounces: 3, diffuse_only: false, ..settings(8, threads) };
+    let blas = BlasSet::build(&lib);
+    let a = render_frame(&blas, &lib, &scene, &s(1), None).unwrap();
+    let b = render_frame(&blas, &lib, &scene, &s(2), None).unwrap();
+    assert!(a.rgba.iter().any(|p| p[0] > 0.0));
+    assert_eq!(a.rgba, b.rgba);
+}
