@@ -9,6 +9,7 @@
 //!          --sky R G B (0.30 0.38 0.50)  --seed S (0)  --materials diffuse|gltf (diffuse)
 //!          --camera NODE (first node with a perspective camera)  --no-rays  --no-render
 //!          --hdri FILE (.hdr/.exr lat-long; replaces --sky)  --hdri-strength S (1)  --hdri-rotate DEG (0)
+//!          --no-sun (drop the sun)  --point-lights N (N lamps 4 m over the scene, 2,000 W/sr in all)
 //! ```
 //! Any .glb with a perspective camera (make_crowd.py output, `throng export`
 //! output), lit by its KHR_lights_punctual lights (directional, point, spot)
@@ -54,11 +55,10 @@ use throng::render::integrator::{offset_ray_origin, CameraRays};
 use throng::render::{BlasSet, RenderSettings};
 use throng::scene::dome::load_dome;
 use throng::scene::gltf::{AssetCache, LUMENS_PER_WATT};
+use throng::scene::lights::{Light, LightKind};
 use throng::scene::{
     lights::SceneLights, vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun,
 };
-
-/// Lumens per watt: the peers' (Blender glTF importer's) lux to W/m^2 factor.
 
 struct Args {
     scene: Option<PathBuf>,
@@ -75,6 +75,8 @@ struct Args {
     hdri: Option<PathBuf>,
     hdri_strength: f32,
     hdri_rotate: f32,
+    no_sun: bool,
+    point_lights: usize,
     rays: bool,
     render: bool,
 }
@@ -95,6 +97,8 @@ fn parse_args() -> Result<Args, String> {
         hdri: None,
         hdri_strength: 1.0,
         hdri_rotate: 0.0,
+        no_sun: false,
+        point_lights: 0,
         rays: true,
         render: true,
     };
@@ -124,6 +128,8 @@ fn parse_args() -> Result<Args, String> {
             "--hdri" => a.hdri = Some(PathBuf::from(it.next().ok_or("--hdri needs a file")?)),
             "--hdri-strength" => a.hdri_strength = num(&mut it, &arg)?,
             "--hdri-rotate" => a.hdri_rotate = num(&mut it, &arg)?,
+            "--no-sun" => a.no_sun = true,
+            "--point-lights" => a.point_lights = num(&mut it, &arg)?,
             "--no-rays" => a.rays = false,
             "--no-render" => a.render = false,
             s if s.starts_with("--") => return Err(format!("unknown flag {s}")),
@@ -199,6 +205,43 @@ impl Lcg {
         self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (self.0 >> 40) as f32 / (1u64 << 24) as f32
     }
+}
+
+/// `n` point lights on a square grid 4 m over the middle half of the
+/// scene's footprint, 2,000 W/sr shared between them (the same total light
+/// whatever `n`, for timing many lights against one).
+fn lamps(lib: &Library, scene: &FrameScene, n: usize) -> Vec<Light> {
+    if n == 0 {
+        return Vec::new();
+    }
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for inst in scene.instances.iter().skip(1) {
+        if let Some(m) = lib.meshes.get(inst.mesh as usize) {
+            let (a, b) = m.bounds();
+            lo = lo.min(inst.world_from_object.transform_point3(a));
+            hi = hi.max(inst.world_from_object.transform_point3(b));
+        }
+    }
+    let (centre, half) = (0.5 * (lo + hi), 0.25 * (hi - lo));
+    let side = (n as f32).sqrt().ceil() as usize;
+    (0..n)
+        .map(|k| {
+            let (i, j) = ((k % side) as f32 + 0.5, (k / side) as f32 + 0.5);
+            let p = Vec3::new(
+                centre.x - half.x + 2.0 * half.x * i / side as f32,
+                4.0,
+                centre.z - half.z + 2.0 * half.z * j / side as f32,
+            );
+            Light {
+                name: format!("lamp{k}"),
+                kind: LightKind::Point,
+                world_from_light: Affine3A::from_translation(p),
+                emission: Vec3::new(1.0, 0.8, 0.6) * (2000.0 / n as f32),
+                two_sided: false,
+                camera_visible: false,
+            }
+        })
+        .collect()
 }
 
 fn quad(half: f32) -> Mesh {
@@ -429,7 +472,12 @@ fn main() {
         (None, Some(n)) => synthetic(n, &args),
         (None, None) => unreachable!("checked by parse_args"),
     };
-    let Loaded { lib, scene, started: t0, load_s } = loaded;
+    let Loaded { lib, mut scene, started: t0, load_s } = loaded;
+    if args.no_sun {
+        scene.lights.sun = None;
+        scene.lights.local.retain(|l| !matches!(l.kind, LightKind::Distant { .. }));
+    }
+    scene.lights.local.extend(lamps(&lib, &scene, args.point_lights));
     let load_cpu_s = throng::bench::process_cpu_s() - cpu0;
     let rss_load = throng::bench::peak_rss_mib();
     let threads = args.threads;

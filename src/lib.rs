@@ -16,6 +16,7 @@ pub mod casting; // shot + cache + rigs + wardrobes -> `ShotCrowd`: every agent 
 pub mod comp; // a frame's layer EXRs -> one stacked EXR
 pub mod error; // typed errors naming file, line, frame, agent and field; atomic writes
 pub mod export; // a cast frame -> glTF (.glb); a frame range -> USD (.usda/.usd/.usdz)
+pub mod exr_guard; // limits on reading OpenEXR files (headers checked against the file size)
 pub mod farm; // a shot -> a render-farm task graph (the plan); engines (local, slurm) and status
 pub mod fingerprint; // the one change detector (FNV-1a 64): files in blocks, named fields
 pub mod layers; // a cast crowd -> the layer manifest (membership, LOD, visibility) and its map

@@ -416,3 +416,153 @@ fn lit_renders_are_bit_identical_for_any_thread_count() {
     assert!(a.rgba.iter().any(|p| p[0] > 0.0));
     assert_eq!(a.rgba, b.rgba);
 }
+
+// ------------------------------------------------------- the shot's lights, through the CLI
+
+mod cli {
+    use std::path::Path;
+
+    use super::common::{run, two_robots, DemoShot};
+
+    const LOCAL: &str = r#"
+[[lights.point]]
+position = [1.0, 2.5, 1.0]
+intensity = 6.0
+color = [1.0, 0.8, 0.6]
+[[lights.spot]]
+name = "follow"
+position = [0.0, 5.0, 3.0]
+aim = [0.0, 0.0, 0.0]
+intensity = 40.0
+outer_angle = 20.0
+inner_angle = 10.0
+[[lights.rect]]
+position = [-2.0, 2.0, 0.0]
+direction = [1.0, -0.3, 0.0]
+size = [1.0, 2.0]
+intensity = 2.0
+[[lights.disk]]
+position = [2.0, 2.0, -1.0]
+direction = [-1.0, -0.5, 0.0]
+radius = 0.4
+intensity = 3.0
+[[lights.sphere]]
+position = [0.0, 2.2, -2.0]
+radius = 0.2
+intensity = 5.0
+camera_visible = true
+"#;
+
+    fn render(dir: &Path, lights: &str, extra: &str, colourspace: &str) -> (i32, String) {
+        let shot = DemoShot { lights, extra, ..DemoShot::default() }.write(dir, &two_robots(1..=3));
+        let out = dir.join("out");
+        let (code, stdout, stderr) = run(&[
+            "render",
+            shot.to_str().unwrap(),
+            "--layer",
+            "full",
+            "--frames",
+            "1001",
+            "--colourspace",
+            colourspace,
+            "--progress",
+            "off",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        (code, format!("{stdout}{stderr}"))
+    }
+
+    fn exr_files(dir: &Path) -> usize {
+        walk(&dir.join("out"))
+    }
+
+    fn walk(dir: &Path) -> usize {
+        let Ok(entries) = std::fs::read_dir(dir) else { return 0 };
+        entries
+            .flatten()
+            .map(|e| {
+                if e.path().is_dir() {
+                    walk(&e.path())
+                } else {
+                    usize::from(e.path().extension().is_some_and(|x| x == "exr"))
+                }
+            })
+            .sum()
+    }
+
+    #[test]
+    fn a_shot_lit_by_the_hdri_and_every_local_light_renders() {
+        for space in ["rec709", "acescg"] {
+            let dir = super::common::tempdir().unwrap();
+            let hdri = super::common::shared_asset("hdri/quarry_01_1k.hdr");
+            let lights = format!("[lights.dome]\nfile = \"{}\"\nrotate = 30.0\n{LOCAL}", hdri.display());
+            let (code, log) = render(dir.path(), &lights, "", space);
+            assert_eq!(code, 0, "{log}");
+            assert_eq!(exr_files(dir.path()), 1, "{log}");
+        }
+    }
+
+    #[test]
+    fn depth_of_field_from_the_shot_renders() {
+        let dir = super::common::tempdir().unwrap();
+        let extra = "[[camera.keys]]\nframe = 1003\nposition = [0.0, 1.6, 9.0]\naim = [0.0, 0.9, 0.0]\nfocal_length = 35.0\nf_stop = 2.0\nfocus_distance = 9.0";
+        // The template's own key has no depth of field: every key or none.
+        let (code, log) = render(dir.path(), "", extra, "rec709");
+        assert_eq!(code, 2, "{log}");
+        assert!(log.contains("camera.keys.f_stop") && log.contains("every key"), "{log}");
+    }
+
+    /// Writes a tiny Radiance or OpenEXR map of `w` x `h` texels of `value`.
+    fn write_map(path: &Path, w: usize, h: usize, value: f32) {
+        if path.extension().is_some_and(|e| e == "exr") {
+            exr::prelude::write_rgb_file(path, w, h, |_, _| (value, value, value)).unwrap();
+        } else {
+            let file = std::fs::File::create(path).unwrap();
+            let px = vec![image::Rgb([value; 3]); w * h];
+            image::codecs::hdr::HdrEncoder::new(file).encode(&px, w, h).unwrap();
+        }
+    }
+
+    #[test]
+    fn bad_lights_exit_2_naming_file_light_and_field_and_write_nothing() {
+        let cases: Vec<(String, &str)> = vec![
+            ("[lights.dome]\nfile = \"missing.hdr\"".into(), "lights.dome.file"),
+            ("[lights.dome]\nfile = \"tall.hdr\"".into(), "twice as wide"),
+            ("[lights.dome]\nfile = \"negative.exr\"".into(), "lights.dome.file"),
+            ("[lights.dome]\nfile = \"flat.hdr\"\nintensity = 0.0".into(), "lights.dome.intensity"),
+            (
+                "[[lights.rect]]\nposition = [0.0, 2.0, 0.0]\nsize = [1.0, 0.0]\nintensity = 1.0".into(),
+                "lights.rect[0].size",
+            ),
+            (
+                "[[lights.sphere]]\nposition = [0.0, 2.0, 0.0]\nradius = -0.5\nintensity = 1.0".into(),
+                "lights.sphere[0].radius",
+            ),
+            ("[[lights.point]]\nposition = [0.0, 2.0, 0.0]\nintensity = -3.0".into(), "lights.point[0].intensity"),
+            (
+                "[[lights.spot]]\nposition = [0.0, 2.0, 0.0]\nintensity = 1.0\ninner_angle = 30.0\nouter_angle = 20.0"
+                    .into(),
+                "out of order",
+            ),
+        ];
+        for (lights, field) in cases {
+            let dir = super::common::tempdir().unwrap();
+            write_map(&dir.path().join("tall.hdr"), 4, 4, 1.0);
+            write_map(&dir.path().join("flat.hdr"), 8, 4, 1.0);
+            write_map(&dir.path().join("negative.exr"), 8, 4, -1.0);
+            let (code, log) = render(dir.path(), &lights, "", "rec709");
+            assert_eq!(code, 2, "{lights}\n{log}");
+            assert!(log.contains(field), "{lights}\n -> {log}");
+            assert_eq!(exr_files(dir.path()), 0, "{lights}: nothing written");
+        }
+        // An f-stop of 0 on a key.
+        let dir = super::common::tempdir().unwrap();
+        let extra = "[[camera.keys]]\nframe = 1003\nposition = [0.0, 1.6, 9.0]\naim = [0.0, 0.9, 0.0]\nfocal_length = 35.0\nf_stop = 0.0\nfocus_distance = 9.0";
+        let (code, log) = render(dir.path(), "", extra, "rec709");
+        assert_eq!(code, 2, "{log}");
+        assert!(log.contains("camera.keys.f_stop") && log.contains("> 0"), "{log}");
+        assert_eq!(exr_files(dir.path()), 0);
+    }
+}

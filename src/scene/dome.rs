@@ -133,7 +133,7 @@ fn read_exr(path: &Path) -> Result<(u32, u32, Vec<Vec3>)> {
         .find(|h| !h.deep && has_rgb(h))
         .ok_or_else(|| Error::invalid(path, "OpenEXR: no layer has R, G and B channels"))?;
     let (width, height) = check_size(path, header.layer_size.width() as u64, header.layer_size.height() as u64)?;
-    crate::render::exr::check_decoded_size(path)?;
+    crate::exr_guard::check_decoded_size(path)?;
 
     let (w, h) = (width as usize, height as usize);
     let image = exr::prelude::read()

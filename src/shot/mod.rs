@@ -723,10 +723,6 @@ impl CameraFile {
         let lens = keys.iter().filter(|k| k.f_stop.is_some() || k.focus_distance.is_some()).count();
         for k in &keys {
             let at = |m: String| Error::invalid(path, format!("camera key at frame {}: {m}", k.frame));
-            if lens > 0 && (k.f_stop.is_none() || k.focus_distance.is_none()) {
-                return Err(at("depth of field needs `f_stop` and `focus_distance` on every key, or on none".into())
-                    .field("camera.keys.f_stop"));
-            }
             if let Some(n) = k.f_stop.filter(|n| !(*n > 0.0 && n.is_finite())) {
                 return Err(at(format!("f_stop must be finite and > 0, got {n}")).field("camera.keys.f_stop"));
             }
@@ -735,6 +731,12 @@ impl CameraFile {
                     at(format!("focus_distance must be finite and > 0, got {d}")).field("camera.keys.focus_distance")
                 );
             }
+        }
+        if let Some(k) = keys.iter().find(|k| lens > 0 && (k.f_stop.is_none() || k.focus_distance.is_none())) {
+            let msg = "depth of field needs `f_stop` and `focus_distance` on every key, or on none";
+            return Err(
+                Error::invalid(path, format!("camera key at frame {}: {msg}", k.frame)).field("camera.keys.f_stop")
+            );
         }
         if !(self.sensor_width > 0.0) {
             return Err(Error::invalid(path, "must be > 0").field("camera.sensor_width"));
@@ -1059,6 +1061,19 @@ mod tests {
         assert!(err(check(&format!("keys = [{}, {}]", key(2.0), key(2.0)))).contains("two camera keys at frame 2"));
         let cam = check(&format!("keys = [{}, {}]", key(9.0), key(1.0))).unwrap();
         assert_eq!(cam.keys.iter().map(|k| k.frame).collect::<Vec<_>>(), [1.0, 9.0], "sorted by frame");
+        // Depth of field: values > 0, on every key or none.
+        let lens = |f: f32, n: f32, d: f32| {
+            format!(
+                "{{ frame = {f:?}, position = [0.0, 1.0, 5.0], aim = [0.0, 1.0, 0.0], focal_length = 35.0, f_stop = {n:?}, focus_distance = {d:?} }}"
+            )
+        };
+        let e = err(check(&format!("keys = [{}, {}]", key(1.0), lens(3.0, 0.0, 4.0))));
+        assert!(e.contains("camera.keys.f_stop") && e.contains("> 0"), "{e}");
+        let e = err(check(&format!("keys = [{}, {}]", key(1.0), lens(3.0, 2.0, -4.0))));
+        assert!(e.contains("camera.keys.focus_distance"), "{e}");
+        let e = err(check(&format!("keys = [{}, {}]", key(1.0), lens(3.0, 2.0, 4.0))));
+        assert!(e.contains("every key"), "{e}");
+        assert!(check(&format!("keys = [{}, {}]", lens(1.0, 2.8, 4.0), lens(3.0, 2.0, 6.0))).is_ok());
     }
 
     #[test]

@@ -23,6 +23,7 @@ use super::colour::{self, Colourspace};
 use super::cryptomatte;
 use super::film::Film;
 use crate::error::{write_atomic, Error, Result};
+use crate::exr_guard::exr_error;
 use crate::scene::Camera;
 
 pub mod mattes;
@@ -186,13 +187,6 @@ pub fn camera_matrices(camera: &Camera, width: u32, height: u32, near: f32, far:
 fn text(s: &str) -> Result<Text> {
     // Text::from(&str) panics on non-Latin-1; names come from user files.
     Text::new_or_none(s).ok_or_else(|| Error::Usage(format!("`{s}` cannot be written to an EXR header (not Latin-1)")))
-}
-
-fn exr_error(path: &Path, e: exr::error::Error) -> Error {
-    match e {
-        exr::error::Error::Io(io) => Error::io(path, io),
-        other => Error::invalid(path, format!("OpenEXR: {other}")),
-    }
 }
 
 fn half(values: impl Iterator<Item = f32>) -> FlatSamples {
@@ -393,42 +387,9 @@ pub fn sort_header_attributes(bytes: &mut [u8]) {
     }
 }
 
-/// How many times its own size an EXR may decode to. No EXR compression
-/// comes near: deflate (ZIP, ZIPS, PXR24) stops at about 1032:1, RLE at
-/// 64:1, PIZ at a few hundred, B44 at about 11:1.
-pub const MAX_EXR_EXPANSION: u64 = 4096;
-
-/// Refuses an EXR whose headers describe more pixel data than its size can
-/// hold ([`MAX_EXR_EXPANSION`]). The exr crate allocates every channel of
-/// every part from the header before it reads a pixel, so a corrupt data
-/// window or channel list would otherwise ask for gigabytes.
-pub(crate) fn check_decoded_size(path: &Path) -> Result<()> {
-    let file_len = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
-    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| exr_error(path, e))?;
-    let mut bytes = 0u64;
-    for header in meta.headers.iter().filter(|h| !h.deep) {
-        let (w, h) = (header.layer_size.width() as u64, header.layer_size.height() as u64);
-        for c in &header.channels.list {
-            let (sx, sy) = (c.sampling.width().max(1) as u64, c.sampling.height().max(1) as u64);
-            let samples = (w / sx).saturating_mul(h / sy);
-            bytes = bytes.saturating_add(samples.saturating_mul(c.sample_type.bytes_per_sample() as u64));
-        }
-    }
-    if bytes > file_len.saturating_mul(MAX_EXR_EXPANSION) {
-        return Err(Error::invalid(
-            path,
-            format!(
-                "OpenEXR: the headers describe {bytes} bytes of pixels, more than a {file_len}-byte file can hold \
-                 ({MAX_EXR_EXPANSION} times its size): the data window or channel list is corrupt"
-            ),
-        ));
-    }
-    Ok(())
-}
-
 /// Reads a file written by [`write_layer`] back (tests, resume, botinfo).
 pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
-    check_decoded_size(path)?;
+    crate::exr_guard::check_decoded_size(path)?;
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -576,7 +537,7 @@ fn raw_part(
 /// Reads every part of any scanline or tiled EXR (largest resolution level,
 /// no deep data), keeping the channels whose full name passes `keep`.
 pub fn read_parts(path: &Path, keep: impl Fn(&str) -> bool) -> Result<Vec<RawPart>> {
-    check_decoded_size(path)?;
+    crate::exr_guard::check_decoded_size(path)?;
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
