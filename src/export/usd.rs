@@ -18,9 +18,14 @@
 //!     /agent_<id>                Xform, time-sampled world_from_agent, throng primvars
 //!       /<slot>                  instanceable, references a prototype, time-sampled
 //!                                agent_from_part (skinned: one child per pose, visibility-sampled)
-//!   /shotcam                     Camera: focal length, apertures (tenths of a metre), clipping, time-sampled transform
-//!   /Lights/sun, /Lights/sky     DistantLight, DomeLight
+//!   /shotcam                     Camera: focal length, apertures (tenths of a metre), clipping, time-sampled
+//!                                transform; fStop and focusDistance with depth of field
+//!   /Lights/sun                  DistantLight, normalized: intensity x color is the irradiance
+//!   /Lights/<light>              Sphere (treatAsPoint for point and spot), Rect, Disk or DistantLight
+//!   /Lights/dome or /Lights/sky  DomeLight: the HDRI (copied beside the export) turned by rotateY, or the sky
 //! ```
+//!
+//! Every light in UsdLux's units (docs/usd.md, "Lights").
 //!
 //! With [`Instancing::PointInstancer`] the crowd is one PointInstancer per
 //! part slot instead (ids = agent ids); kept for the measurement in docs/usd.md.
@@ -676,7 +681,8 @@ fn dome_exr(dome: &Dome) -> Result<Vec<u8>> {
         let t = dome.texels[p.y() * w + p.x()];
         (t.x, t.y, t.z)
     });
-    let encoding = Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing };
+    let encoding =
+        Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing };
     let mut image = Image::from_layer(Layer::new((w, h), LayerAttributes::default(), encoding, channels));
     image.attributes.chromaticities = Some(crate::render::exr::rec709_chromaticities());
     let mut bytes = Vec::new();
@@ -1060,6 +1066,30 @@ mod tests {
             let linear = crate::scene::gltf::srgb_to_linear(f32::from(code) / 255.0);
             assert_eq!(srgb8(linear), code);
         }
+    }
+
+    #[test]
+    fn a_packaged_dome_map_reads_back_texel_for_texel() {
+        let texels: Vec<Vec3> =
+            (0..32).map(|i| Vec3::new(i as f32 * 0.37, 1e4 / (1.0 + i as f32), (i % 5) as f32 * 1e-3)).collect();
+        let dome = Dome {
+            file: PathBuf::from("sky.hdr"),
+            width: 8,
+            height: 4,
+            texels: texels.clone(),
+            scale: Vec3::splat(2.0),
+            rotate: 0.5,
+            camera_visible: true,
+        };
+        let bytes = dome_exr(&dome).unwrap();
+        let path = std::env::temp_dir().join(format!("throng-usd-dome-{}.exr", std::process::id()));
+        std::fs::write(&path, &bytes).unwrap();
+        let back = crate::scene::dome::load_dome(&path, Vec3::ONE, 0.0, true).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!((back.width, back.height), (8, 4));
+        assert_eq!(back.texels, texels);
+        // Deterministic: the same bytes twice.
+        assert!(dome_exr(&dome).unwrap() == bytes);
     }
 
     #[test]
