@@ -9,15 +9,22 @@ that resolve from the stage with st on their meshes.
 Camera lengths are tenths of a scene unit (the UsdGeomCamera spec): at
 metersPerUnit = 1, focalLength x 100 is millimetres (docs/usd.md).
 
+Every light and the lens (fStop, focusDistance) are read by the UsdLux and
+UsdGeomCamera specs and compared with the shot's values (.ci/usd_lights.py).
+
 usage: usd_check.py THRONG SHOT STAGE FRAME...
 """
 import json
 import math
+import os
 import subprocess
 import sys
 import tomllib
 
 from pxr import Gf, Usd, UsdGeom, UsdShade
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from usd_lights import check_lens, check_lights  # noqa: E402
 
 failures = []
 
@@ -137,10 +144,12 @@ def main(throng, shot_path, stage_path, frames):
           f"focal {cam.GetFocalLengthAttr().Get(stage.GetStartTimeCode()) * mm:.3f} mm "
           f"(tenths of a metre: {cam.GetFocalLengthAttr().Get(stage.GetStartTimeCode())}), "
           f"field of view {fov:.3f} deg, clipping {near}-{far}")
+    check_lights(stage, shot, os.path.dirname(os.path.abspath(shot_path)), check)
+    print(check_lens(stage, shot, check))
     if failures:
         print(f"{len(failures)} failures")
         return 1
-    print("usd-core reads back the same agents, transforms and camera as throng")
+    print("usd-core reads back the same agents, transforms, camera and lights as throng")
     return 0
 
 

@@ -356,3 +356,228 @@ fn usd_export_refuses_bad_requests() {
         assert!(!out.exists());
     }
 }
+
+/// `[lights]` of the lit test shot: the shared HDRI dome (turned), a sun and
+/// one light of every kind, a two-sided rect among them.
+fn lit_lights() -> String {
+    format!(
+        r#"
+[lights.sun]
+direction = [-0.7, 0.45, 0.35]
+intensity = 3.0
+color = [1.0, 0.93, 0.82]
+[lights.dome]
+file = "{hdri}"
+intensity = 0.8
+exposure = 0.5
+color = [1.0, 0.95, 0.9]
+rotate = 30.0
+[[lights.point]]
+position = [-2.0, 2.5, 1.0]
+intensity = 40.0
+color = [1.0, 0.8, 0.6]
+[[lights.spot]]
+name = "street lamp"
+position = [2.0, 4.0, 0.5]
+aim = [1.5, 0.0, 0.0]
+intensity = 120.0
+inner_angle = 20.0
+outer_angle = 35.0
+[[lights.rect]]
+name = "window"
+position = [0.0, 1.5, -3.0]
+direction = [0.0, 0.0, 1.0]
+size = [2.0, 1.2]
+intensity = 6.0
+two_sided = true
+[[lights.disk]]
+position = [1.0, 3.0, 2.0]
+radius = 0.3
+intensity = 15.0
+[[lights.sphere]]
+position = [-1.0, 1.0, -1.5]
+radius = 0.25
+intensity = 9.0
+exposure = -1.0
+"#,
+        hdri = common::shared_asset("hdri/quarry_01_1k.hdr").display()
+    )
+}
+
+/// The lit shot in `dir`: two idle robots on frames 1001-1003, [`lit_lights`],
+/// and a lens keyed from f/2.8 focused at 9 m to f/4 at 6 m.
+fn lit_shot(dir: &Path) -> PathBuf {
+    let second_key = "[[camera.keys]]\nframe = 1003\nposition = [0.5, 1.6, 8.0]\naim = [0.0, 0.9, 0.0]\n\
+                      focal_length = 50.0\nf_stop = 4.0\nfocus_distance = 6.0\n";
+    let lights = lit_lights();
+    let shot = common::DemoShot { name: "lit", lights: &lights, extra: second_key, ..Default::default() }
+        .write(dir, &common::two_robots(1..=3));
+    let text = std::fs::read_to_string(&shot).unwrap();
+    let text = text.replacen("focal_length = 35.0\n", "focal_length = 35.0\nf_stop = 2.8\nfocus_distance = 9.0\n", 1);
+    std::fs::write(&shot, text).unwrap();
+    shot
+}
+
+fn value(stage: &Stage, p: &str) -> sdf::Value {
+    stage.attribute(path(p)).get::<sdf::Value>().unwrap().unwrap_or_else(|| panic!("no value at {p}"))
+}
+
+fn float(stage: &Stage, p: &str) -> f32 {
+    stage.attribute(path(p)).get::<f32>().unwrap().unwrap_or_else(|| panic!("no float at {p}"))
+}
+
+fn flag(stage: &Stage, p: &str) -> bool {
+    matches!(stage.attribute(path(p)).get::<sdf::Value>().unwrap(), Some(sdf::Value::Bool(true)))
+}
+
+/// UsdLux's luminance L = intensity x 2^exposure x color (exposure unauthored: 0).
+fn luminance(stage: &Stage, prim: &str) -> glam::Vec3 {
+    let sdf::Value::Vec3f(c) = value(stage, &format!("{prim}.inputs:color")) else { panic!("{prim}: color") };
+    let exposure = stage.attribute(path(&format!("{prim}.inputs:exposure"))).get::<f32>().unwrap().unwrap_or(0.0);
+    glam::Vec3::new(c.x, c.y, c.z) * float(stage, &format!("{prim}.inputs:intensity")) * exposure.exp2()
+}
+
+fn light_matrix(stage: &Stage, prim: &str) -> glam::Mat4 {
+    let sdf::Value::Matrix4d(m) = value(stage, &format!("{prim}.xformOp:transform")) else { panic!("{prim}: xform") };
+    glam::Mat4::from_cols_array(&m.0.map(|x| x as f32))
+}
+
+fn near(a: glam::Vec3, b: glam::Vec3) -> bool {
+    (a - b).abs().max_element() <= 1e-5 * b.abs().max_element().max(1.0)
+}
+
+#[test]
+fn every_light_and_the_lens_export_in_usd_units_and_the_lit_export_reads_back() {
+    use throng::scene::lights::LightKind;
+    let dir = common::tempdir().unwrap();
+    let shot = lit_shot(dir.path());
+    let out = dir.path().join("lit.usda");
+    let (code, _, err) = run(&["export", shot.to_str().unwrap(), "--format", "usd", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "export failed: {err}");
+    let crowd = throng::casting::ShotCrowd::load(&shot).unwrap();
+    let lights = crowd.lights();
+    let stage = Stage::open(out.to_str().unwrap()).unwrap();
+    assert!(stage.composition_errors().is_empty(), "{:?}", stage.composition_errors());
+
+    // The sun: normalize on makes UsdLux's intensity x color the irradiance.
+    let sun = lights.sun.unwrap();
+    assert!(flag(&stage, "/World/Lights/sun.inputs:normalize"));
+    assert!(near(luminance(&stage, "/World/Lights/sun"), sun.irradiance));
+    assert!((float(&stage, "/World/Lights/sun.inputs:angle") - sun.angular_diameter.to_degrees()).abs() < 1e-5);
+    let towards = light_matrix(&stage, "/World/Lights/sun").transform_vector3(glam::Vec3::NEG_Z);
+    assert!(near(towards, -sun.direction), "the sun shines along {towards}");
+
+    // Every local light by its name: type, placement and implied quantity.
+    let names: Vec<String> =
+        stage.prim(path("/World/Lights")).child_names().unwrap().iter().map(|t| t.as_str().to_string()).collect();
+    let mut prims: std::collections::BTreeMap<String, Vec<String>> = Default::default();
+    for n in &names {
+        let p = format!("/World/Lights/{n}");
+        if let Ok(Some(name)) = stage.attribute(path(&format!("{p}.throng:name"))).get::<String>() {
+            prims.entry(name).or_default().push(p);
+        }
+    }
+    assert_eq!(lights.local.len(), 5);
+    for light in &lights.local {
+        let found = &prims[&light.name];
+        assert_eq!(found.len(), if light.two_sided { 2 } else { 1 }, "{}: {found:?}", light.name);
+        let p = &found[0];
+        let ty = stage.prim(path(p)).type_name().unwrap().unwrap().as_str().to_string();
+        let m = light_matrix(&stage, p);
+        assert!(m.abs_diff_eq(glam::Mat4::from(light.world_from_light), 1e-6), "{}: {m}", light.name);
+        let l = luminance(&stage, p);
+        match light.kind {
+            LightKind::Point | LightKind::Spot { .. } => {
+                // A treatAsPoint SphereLight, normalize on: its radiant
+                // intensity is L / (4 pi r^2) x pi r^2 = L / 4 at any radius.
+                assert_eq!(ty, "SphereLight");
+                assert!(flag(&stage, &format!("{p}.treatAsPoint")) && flag(&stage, &format!("{p}.inputs:normalize")));
+                assert_eq!(float(&stage, &format!("{p}.inputs:radius")), 0.0);
+                assert!(near(l / 4.0, light.emission), "{}: {l} / 4 vs {} W/sr", light.name, light.emission);
+                if let LightKind::Spot { outer, blend } = light.kind {
+                    let cone = float(&stage, &format!("{p}.inputs:shaping:cone:angle"));
+                    assert!((cone - 35.0).abs() < 1e-5 && (cone.to_radians() - outer).abs() < 1e-6, "cone {cone}");
+                    let soft = float(&stage, &format!("{p}.inputs:shaping:cone:softness"));
+                    assert!((soft - blend).abs() < 1e-6 && (soft - (1.0 - 20.0 / 35.0)).abs() < 1e-6);
+                }
+            }
+            LightKind::Rect { size } => {
+                assert_eq!(ty, "RectLight");
+                assert!(near(l, light.emission), "{}: radiance {l}", light.name);
+                assert_eq!(float(&stage, &format!("{p}.inputs:width")), size.x);
+                assert_eq!(float(&stage, &format!("{p}.inputs:height")), size.y);
+                // Its back face: a twin facing the other way from the same place.
+                let back = light_matrix(&stage, &found[1]);
+                assert!(near(back.transform_vector3(glam::Vec3::NEG_Z), -light.facing()));
+                assert!(near(back.w_axis.truncate(), light.position()));
+            }
+            LightKind::Disk { radius } | LightKind::Sphere { radius } => {
+                let want = if matches!(light.kind, LightKind::Disk { .. }) { "DiskLight" } else { "SphereLight" };
+                assert_eq!(ty, want);
+                assert!(!flag(&stage, &format!("{p}.inputs:normalize")));
+                assert!(near(l, light.emission), "{}: radiance {l}", light.name);
+                assert_eq!(float(&stage, &format!("{p}.inputs:radius")), radius);
+            }
+            LightKind::Distant { .. } => panic!("the shot has no distant light"),
+        }
+    }
+
+    // The dome: its map copied beside the layer, lat-long, a quarter turn
+    // more than throng's rotate (the image centre at +Z, not +X).
+    let dome = lights.dome.as_ref().unwrap();
+    assert!(names.contains(&"dome".to_string()) && !names.contains(&"sky".to_string()), "a dome replaces the sky");
+    assert!(near(luminance(&stage, "/World/Lights/dome"), dome.scale));
+    assert!((float(&stage, "/World/Lights/dome.xformOp:rotateY") - 120.0).abs() < 1e-4);
+    assert_eq!(value(&stage, "/World/Lights/dome.inputs:texture:format"), sdf::Value::Token("latlong".into()));
+    let sdf::Value::AssetPath(asset) = value(&stage, "/World/Lights/dome.inputs:texture:file") else { panic!() };
+    assert_eq!(asset.authored_path, "./lit_textures/quarry_01_1k.hdr");
+    let copied = std::fs::read(dir.path().join("lit_textures/quarry_01_1k.hdr")).unwrap();
+    assert!(copied == std::fs::read(&dome.file).unwrap(), "the dome map is not the shot's file");
+
+    // The lens: fStop and focusDistance per frame, the f-number that gives
+    // the renderer's aperture radius focal / (2 fStop).
+    let cam = stage.attribute(path("/World/shotcam.fStop"));
+    assert_eq!(cam.time_sample_times().unwrap(), vec![1001.0, 1002.0, 1003.0]);
+    for f in 1001..=1003 {
+        let t = TimeCode::new(f64::from(f));
+        // (openusd 0.6 reads a float time sample of a text layer as a double.)
+        let at = |a: &str| match stage.attribute(path(a)).get_at::<sdf::Value>(t).unwrap() {
+            Some(sdf::Value::Float(x)) => x,
+            Some(sdf::Value::Double(x)) => x as f32,
+            v => panic!("{a} at {f}: {v:?}"),
+        };
+        let c = crowd.camera(f).unwrap();
+        let focal_m = at("/World/shotcam.focalLength") * 0.1;
+        let n = at("/World/shotcam.fStop");
+        assert!((focal_m / (2.0 * n) - c.aperture).abs() < 1e-7, "frame {f}: f/{n} vs aperture {}", c.aperture);
+        assert!((at("/World/shotcam.focusDistance") - c.focus_distance).abs() < 1e-5, "frame {f}");
+        let (want_n, want_d) = [(2.8, 9.0), (3.4, 7.5), (4.0, 6.0)][(f - 1001) as usize];
+        assert!((n - want_n).abs() < 1e-5 && (at("/World/shotcam.focusDistance") - want_d).abs() < 1e-5);
+    }
+
+    // The lit export, and its package, read back as a crowd: the cache's agents.
+    let usdz = dir.path().join("lit.usdz");
+    let (code, _, err) = run(&["export", shot.to_str().unwrap(), "--format", "usd", "--out", usdz.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    for file in [&out, &usdz] {
+        let c = throng::cache::read(file).unwrap();
+        assert_eq!(c.frames.iter().map(|b| b.frame).collect::<Vec<_>>(), [1001, 1002, 1003], "{}", file.display());
+        for b in &c.frames {
+            let at: Vec<(u32, glam::Vec3)> = b.agents.iter().map(|a| (a.id, a.position)).collect();
+            assert_eq!(at.len(), 2, "{}", file.display());
+            assert!(at[0].0 == 1 && at[0].1.abs_diff_eq(glam::Vec3::new(-0.8, 0.0, 1.0), 1e-5), "{at:?}");
+            assert!(at[1].0 == 2 && at[1].1.abs_diff_eq(glam::Vec3::new(0.9, 0.0, -1.0), 1e-5), "{at:?}");
+        }
+    }
+    // ... and renders as the cache of a shot lit the same way.
+    let text = std::fs::read_to_string(&shot).unwrap();
+    let again = dir.path().join("again.toml");
+    let text =
+        text.replace("path = \"c.csv\"", "path = \"lit.usdz\"").replace("frame_offset = -1000", "frame_offset = 0");
+    std::fs::write(&again, text).unwrap();
+    let r = dir.path().join("r");
+    let (code, _, err) =
+        run(&["render", again.to_str().unwrap(), "--layer", "full", "--frames", "1002", "--out", r.to_str().unwrap()]);
+    assert_eq!(code, 0, "render of the lit USD crowd failed: {err}");
+    assert!(r.join("full/lit.full.1002.exr").exists());
+}

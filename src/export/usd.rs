@@ -18,9 +18,14 @@
 //!     /agent_<id>                Xform, time-sampled world_from_agent, throng primvars
 //!       /<slot>                  instanceable, references a prototype, time-sampled
 //!                                agent_from_part (skinned: one child per pose, visibility-sampled)
-//!   /shotcam                     Camera: focal length, apertures (tenths of a metre), clipping, time-sampled transform
-//!   /Lights/sun, /Lights/sky     DistantLight, DomeLight
+//!   /shotcam                     Camera: focal length, apertures (tenths of a metre), clipping, time-sampled
+//!                                transform; fStop and focusDistance with depth of field
+//!   /Lights/sun                  DistantLight, normalized: intensity x color is the irradiance
+//!   /Lights/<light>              Sphere (treatAsPoint for point and spot), Rect, Disk or DistantLight
+//!   /Lights/dome or /Lights/sky  DomeLight: the HDRI (copied beside the export) turned by rotateY, or the sky
 //! ```
+//!
+//! Every light in UsdLux's units (docs/usd.md, "Lights").
 //!
 //! With [`Instancing::PointInstancer`] the crowd is one PointInstancer per
 //! part slot instead (ids = agent ids); kept for the measurement in docs/usd.md.
@@ -37,6 +42,7 @@ use crate::casting::{Lod, ShotCrowd};
 use crate::error::{write_atomic, Error, IoContext, Result};
 use crate::layers::Manifest;
 use crate::render::cryptomatte::{agent_name, part_name};
+use crate::scene::lights::{Dome, Light, LightKind, SceneLights};
 use crate::scene::{vis, MaterialId, MeshId};
 
 /// Most transform samples one export holds in memory (agents x frames x parts).
@@ -326,7 +332,8 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     // Materials, and the base colour textures they read (written beside the
     // export, or into the .usdz package).
     let mat_names = unique_names(g.materials.iter().map(|&m| (m, material_name(&lib.materials[m as usize].name))));
-    let textures = Textures::of(lib, &g.materials, out)?;
+    let lights = crowd.lights();
+    let textures = Textures::of(lib, &g.materials, lights.dome.as_deref(), encoding, out)?;
     root.def("/World/Looks", "Scope");
     for (&m, name) in &mat_names {
         let src = &lib.materials[m as usize];
@@ -450,7 +457,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     }
 
     write_camera(&mut root, crowd, &times)?;
-    write_lights(&mut root, crowd);
+    write_lights(&mut root, &lights, textures.dome_asset().as_deref());
 
     // Files: per-layer files first, the root last.
     let ext = out.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default();
@@ -470,6 +477,22 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
                 }
                 write_bytes(&path, data)?;
                 bytes += data.len() as u64;
+                files.push(path);
+            }
+        }
+    }
+    // The dome's map: beside a text export, the file as it is; in a
+    // package, an OpenEXR (the file's bytes when it is one).
+    if let (Some((rel, map)), Some(dome)) = (&textures.dome, &lights.dome) {
+        match (encoding, map) {
+            (UsdEncoding::Usdz, DomeMap::Copy) => package.push((rel.clone(), read_dome_file(&dome.file)?)),
+            (UsdEncoding::Usdz, DomeMap::Exr) => package.push((rel.clone(), dome_exr(dome)?)),
+            _ => {
+                let path = out.with_file_name(rel);
+                if let Some(dir) = path.parent() {
+                    std::fs::create_dir_all(dir).at(dir)?;
+                }
+                bytes += copy_file(&dome.file, &path)?;
                 files.push(path);
             }
         }
@@ -509,10 +532,27 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
 struct Textures {
     /// Texture id -> (path relative to the exported file, PNG bytes).
     files: BTreeMap<u32, (String, Vec<u8>)>,
+    /// The dome's map: its path relative to the exported file, and how it is written.
+    dome: Option<(String, DomeMap)>,
+}
+
+/// How the dome's map goes with an export.
+enum DomeMap {
+    /// The file's own bytes.
+    Copy,
+    /// Its texels as an OpenEXR: a `.usdz` package takes no Radiance `.hdr`
+    /// (usdchecker: "unknown unsupported extension").
+    Exr,
 }
 
 impl Textures {
-    fn of(lib: &crate::scene::Library, materials: &BTreeSet<MaterialId>, out: &Path) -> Result<Textures> {
+    fn of(
+        lib: &crate::scene::Library,
+        materials: &BTreeSet<MaterialId>,
+        dome: Option<&Dome>,
+        encoding: UsdEncoding,
+        out: &Path,
+    ) -> Result<Textures> {
         let used: BTreeSet<u32> =
             materials.iter().filter_map(|&m| lib.materials.get(m as usize)?.base_color_texture).collect();
         let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
@@ -524,7 +564,21 @@ impl Textures {
             let tex = &lib.textures[t as usize];
             files.insert(t, (format!("{dir}/{name}.png"), png(tex)?));
         }
-        Ok(Textures { files })
+        // The map keeps its extension (.hdr or .exr, as the loader read it),
+        // so no PNG texture takes its name.
+        let dome = dome.map(|d| {
+            let stem = d.file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            let ext = d.file.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+            let map = if encoding == UsdEncoding::Usdz && ext != "exr" { DomeMap::Exr } else { DomeMap::Copy };
+            let ext = if matches!(map, DomeMap::Exr) { "exr".to_string() } else { identifier(&ext) };
+            (format!("{dir}/{}.{ext}", identifier(&stem)), map)
+        });
+        Ok(Textures { files, dome })
+    }
+
+    /// The asset path the DomeLight's `inputs:texture:file` holds.
+    fn dome_asset(&self) -> Option<String> {
+        self.dome.as_ref().map(|(rel, _)| format!("./{rel}"))
     }
 
     /// The asset path a material's `inputs:file` holds.
@@ -592,6 +646,62 @@ pub fn prototype_name(mesh: &str) -> String {
         }
         None => mesh.rsplit('/').next().unwrap_or(mesh).to_string(),
     }
+}
+
+/// Largest dome map a `.usdz` package takes into memory (a 16384 x 8192
+/// float RGBA OpenEXR, uncompressed, is 2 GiB).
+pub const MAX_PACKAGED_DOME_BYTES: u64 = 2 << 30;
+
+/// A dome map's bytes, for a package.
+fn read_dome_file(source: &Path) -> Result<Vec<u8>> {
+    let len = std::fs::metadata(source).at(source)?.len();
+    if len > MAX_PACKAGED_DOME_BYTES {
+        return Err(Error::invalid(
+            source,
+            format!(
+                "the dome map is {len} bytes, more than a .usdz package takes ({MAX_PACKAGED_DOME_BYTES}); \
+                 export .usda, which copies it beside the layer"
+            ),
+        ));
+    }
+    std::fs::read(source).at(source)
+}
+
+/// A dome's texels (before its scale: that is the light's intensity and
+/// colour) as a float RGB OpenEXR, linear Rec.709 as the map was read.
+fn dome_exr(dome: &Dome) -> Result<Vec<u8>> {
+    use exr::prelude::{
+        Blocks, Compression, Encoding, Image, Layer, LayerAttributes, LineOrder, SpecificChannels, WritableImage,
+    };
+    let (w, h) = (dome.width as usize, dome.height as usize);
+    if dome.texels.len() != w * h {
+        return Err(Error::invalid(&dome.file, format!("the dome holds {} texels for {w} x {h}", dome.texels.len())));
+    }
+    let channels = SpecificChannels::rgb(|p: exr::math::Vec2<usize>| {
+        let t = dome.texels[p.y() * w + p.x()];
+        (t.x, t.y, t.z)
+    });
+    let encoding =
+        Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing };
+    let mut image = Image::from_layer(Layer::new((w, h), LayerAttributes::default(), encoding, channels));
+    image.attributes.chromaticities = Some(crate::render::exr::rec709_chromaticities());
+    let mut bytes = Vec::new();
+    image
+        .write()
+        .to_buffered(std::io::Cursor::new(&mut bytes))
+        .map_err(|e| Error::invalid(&dome.file, format!("cannot encode the dome map as OpenEXR: {e}")))?;
+    Ok(bytes)
+}
+
+/// Copies `source` to `path` (atomically); the bytes copied.
+fn copy_file(source: &Path, path: &Path) -> Result<u64> {
+    let mut copied = 0;
+    write_atomic(path, |w| {
+        let mut f = std::fs::File::open(source).at(source)?;
+        copied = std::io::copy(&mut f, w).at(path)?;
+        Ok(())
+    })?;
+    Ok(copied)
 }
 
 fn write_bytes(path: &Path, data: &[u8]) -> Result<()> {
@@ -750,15 +860,24 @@ fn write_camera(l: &mut LayerBuilder, crowd: &ShotCrowd, times: &[i32]) -> Resul
     let cam = l.def("/World/shotcam", "Camera");
     let mut xf = Vec::new();
     let mut focal = Vec::new();
+    let (mut f_stop, mut focus) = (Vec::new(), Vec::new());
     for &f in times {
         let c = crowd.camera(f)?;
-        xf.push((f64::from(f), matrix(&c.world_from_camera)));
+        let t = f64::from(f);
+        xf.push((t, matrix(&c.world_from_camera)));
         // Focal length from the vertical field of view and film back: exact for keyed cameras.
-        let mm = match shot.camera.keys.is_empty() {
-            true => height * 0.5 / (c.yfov * 0.5).tan(),
-            false => keyed_focal(shot, f as f32),
+        let lens = keyed_lens(shot, f as f32);
+        let mm = match lens {
+            None => height * 0.5 / (c.yfov * 0.5).tan(),
+            Some(k) => k.focal_length,
         };
-        focal.push((f64::from(f), Value::Float(mm * CAMERA_UNITS_PER_MM)));
+        focal.push((t, Value::Float(mm * CAMERA_UNITS_PER_MM)));
+        // Depth of field: the f-number (dimensionless) and the focus
+        // distance (scene units, metres), as the renderer interpolates them.
+        if let Some(Lens { f_stop: Some(n), focus_distance: Some(d), .. }) = lens {
+            f_stop.push((t, Value::Float(n)));
+            focus.push((t, Value::Float(d)));
+        }
     }
     xform(l, cam, xf);
     put(l, cam, "focalLength", "float", focal);
@@ -766,42 +885,175 @@ fn write_camera(l: &mut LayerBuilder, crowd: &ShotCrowd, times: &[i32]) -> Resul
     l.attr(cam, "verticalAperture", "float", Value::Float(height * CAMERA_UNITS_PER_MM));
     l.attr(cam, "clippingRange", "float2", Value::Vec2f(gf::Vec2f { x: CLIPPING_RANGE[0], y: CLIPPING_RANGE[1] }));
     l.uniform(cam, "projection", "token", Value::Token("perspective".into()));
+    if !f_stop.is_empty() {
+        put(l, cam, "fStop", "float", f_stop);
+        put(l, cam, "focusDistance", "float", focus);
+    }
     Ok(())
 }
 
-/// The keyed focal length at a frame, interpolated as `Shot::keyed_camera` does.
-fn keyed_focal(shot: &crate::shot::Shot, frame: f32) -> f32 {
+/// The keyed lens at a frame.
+#[derive(Clone, Copy)]
+struct Lens {
+    /// Millimetres.
+    focal_length: f32,
+    /// f-number, when the shot has depth of field.
+    f_stop: Option<f32>,
+    /// Metres, when the shot has depth of field.
+    focus_distance: Option<f32>,
+}
+
+/// The keyed focal length, f-stop and focus distance at a frame,
+/// interpolated linearly as `Shot::keyed_camera` does; `None` for a glTF camera.
+fn keyed_lens(shot: &crate::shot::Shot, frame: f32) -> Option<Lens> {
     let keys = &shot.camera.keys;
-    let (Some(first), Some(last)) = (keys.first(), keys.last()) else { return 35.0 };
+    let (first, last) = (keys.first()?, keys.last()?);
+    let lens = |k: &crate::shot::CameraKey| Lens {
+        focal_length: k.focal_length,
+        f_stop: k.f_stop,
+        focus_distance: k.focus_distance,
+    };
     if frame <= first.frame {
-        return first.focal_length;
+        return Some(lens(first));
     }
     if frame >= last.frame {
-        return last.focal_length;
+        return Some(lens(last));
     }
     let i = keys.windows(2).position(|w| frame >= w[0].frame && frame <= w[1].frame).unwrap_or(0);
     let (a, b) = (&keys[i], &keys[i + 1]);
     let t = if b.frame > a.frame { (frame - a.frame) / (b.frame - a.frame) } else { 0.0 };
-    a.focal_length + (b.focal_length - a.focal_length) * t
+    let mix = |x: f32, y: f32| x + (y - x) * t;
+    let both = |x: Option<f32>, y: Option<f32>| Some(mix(x?, y?));
+    Some(Lens {
+        focal_length: mix(a.focal_length, b.focal_length),
+        f_stop: both(a.f_stop, b.f_stop),
+        focus_distance: both(a.focus_distance, b.focus_distance),
+    })
 }
 
-fn write_lights(l: &mut LayerBuilder, crowd: &ShotCrowd) {
+/// `inputs:intensity` and `inputs:color` for an RGB quantity: the peak
+/// channel as the intensity and the colour normalised to it (exposure 0).
+fn emission(l: &mut LayerBuilder, p: PrimId, value: Vec3) {
+    let peak = value.max_element();
+    let (intensity, color) = if peak > 0.0 { (peak, value / peak) } else { (0.0, Vec3::ONE) };
+    l.attr(p, "inputs:intensity", "float", Value::Float(intensity));
+    l.attr(p, "inputs:color", "color3f", Value::Vec3f(vec3(color)));
+}
+
+/// A DistantLight shining down `world_from_light`'s -Z with irradiance
+/// `irradiance` (W/m^2 at normal incidence): `inputs:normalize` on makes
+/// UsdLux's intensity the irradiance (docs/usd.md, "Lights").
+fn distant_light(
+    l: &mut LayerBuilder,
+    path: &str,
+    world_from_light: Affine3A,
+    irradiance: Vec3,
+    diameter: f32,
+) -> PrimId {
+    let p = l.def(path, "DistantLight");
+    xform(l, p, vec![(0.0, matrix(&world_from_light))]);
+    emission(l, p, irradiance);
+    l.attr(p, "inputs:normalize", "bool", Value::Bool(true));
+    l.attr(p, "inputs:angle", "float", Value::Float(diameter.to_degrees()));
+    p
+}
+
+/// One point, spot, area or distant light at `world_from_light` (shining
+/// down its -Z), named `path`.
+fn local_light(l: &mut LayerBuilder, path: &str, light: &Light, world_from_light: Affine3A) {
+    let p = match light.kind {
+        LightKind::Distant { angular_diameter } => {
+            distant_light(l, path, world_from_light, light.emission, angular_diameter)
+        }
+        LightKind::Point | LightKind::Spot { .. } => {
+            // A zero-radius SphereLight. With normalize on, a sphere's
+            // luminance is intensity / (4 pi r^2) and its radiant intensity
+            // that times its projected area pi r^2: intensity / 4 at any
+            // radius, and so in the limit r -> 0.
+            let p = l.def(path, "SphereLight");
+            if let LightKind::Spot { outer, blend } = light.kind {
+                l.api_schemas(p, &["ShapingAPI"]);
+                l.attr(p, "inputs:shaping:cone:angle", "float", Value::Float(outer.to_degrees()));
+                l.attr(p, "inputs:shaping:cone:softness", "float", Value::Float(blend));
+            }
+            xform(l, p, vec![(0.0, matrix(&world_from_light))]);
+            emission(l, p, light.emission * 4.0);
+            l.attr(p, "inputs:normalize", "bool", Value::Bool(true));
+            l.attr(p, "inputs:radius", "float", Value::Float(0.0));
+            l.attr(p, "treatAsPoint", "bool", Value::Bool(true));
+            p
+        }
+        // Area lights: intensity x color is the radiance (normalize off).
+        LightKind::Rect { size } => {
+            let p = l.def(path, "RectLight");
+            xform(l, p, vec![(0.0, matrix(&world_from_light))]);
+            emission(l, p, light.emission);
+            l.attr(p, "inputs:width", "float", Value::Float(size.x));
+            l.attr(p, "inputs:height", "float", Value::Float(size.y));
+            p
+        }
+        LightKind::Disk { radius } | LightKind::Sphere { radius } => {
+            let ty = if matches!(light.kind, LightKind::Disk { .. }) { "DiskLight" } else { "SphereLight" };
+            let p = l.def(path, ty);
+            xform(l, p, vec![(0.0, matrix(&world_from_light))]);
+            emission(l, p, light.emission);
+            l.attr(p, "inputs:radius", "float", Value::Float(radius));
+            p
+        }
+    };
+    l.attr(p, "throng:name", "string", string(&light.name));
+}
+
+/// Every light in UsdLux's units (docs/usd.md, "Lights"): the sun, the
+/// shot's and the set's lights, and the dome (with its map) or the uniform sky.
+fn write_lights(l: &mut LayerBuilder, lights: &SceneLights, dome_asset: Option<&str>) {
     l.def("/World/Lights", "Scope");
-    if let Some(sun) = crowd.shot().sun() {
-        let peak = sun.irradiance.max_element().max(1e-6);
-        let p = l.def("/World/Lights/sun", "DistantLight");
-        // A DistantLight shines down its local -Z: from the sun towards the scene.
-        let rot = Quat::from_rotation_arc(Vec3::NEG_Z, -sun.direction);
-        xform(l, p, vec![(0.0, matrix(&Affine3A::from_quat(rot)))]);
-        l.attr(p, "inputs:intensity", "float", Value::Float(peak));
-        l.attr(p, "inputs:color", "color3f", Value::Vec3f(vec3(sun.irradiance / peak)));
-        l.attr(p, "inputs:angle", "float", Value::Float(sun.angular_diameter.to_degrees()));
+    // Prim names: the sun and the environment keep theirs, local lights
+    // take their own, made unique.
+    let env = if lights.dome.is_some() { "dome" } else { "sky" };
+    // A two-sided rect or disk is two UsdLux lights, back to back.
+    let twin = |light: &Light| light.two_sided && matches!(light.kind, LightKind::Rect { .. } | LightKind::Disk { .. });
+    let mut pool = vec![(0, "sun".to_string()), (1, env.to_string())];
+    for (i, light) in lights.local.iter().enumerate() {
+        pool.push((2 + 2 * i, light.name.clone()));
+        if twin(light) {
+            pool.push((3 + 2 * i, format!("{}_back", light.name)));
+        }
     }
-    let sky = crowd.shot().sky();
-    let peak = sky.radiance.max_element().max(1e-6);
-    let p = l.def("/World/Lights/sky", "DomeLight");
-    l.attr(p, "inputs:intensity", "float", Value::Float(peak));
-    l.attr(p, "inputs:color", "color3f", Value::Vec3f(vec3(sky.radiance / peak)));
+    let names = unique_names(pool);
+    if let Some(sun) = &lights.sun {
+        // Down its local -Z: from the sun towards the scene.
+        let rot = Quat::from_rotation_arc(Vec3::NEG_Z, -sun.direction);
+        distant_light(l, "/World/Lights/sun", Affine3A::from_quat(rot), sun.irradiance, sun.angular_diameter);
+    }
+    for (i, light) in lights.local.iter().enumerate() {
+        local_light(l, &format!("/World/Lights/{}", names[&(2 + 2 * i)]), light, light.world_from_light);
+        if twin(light) {
+            // UsdLux's rect and disk lights emit from one face: the back
+            // face is a twin turned half a turn about its local Y.
+            let back = light.world_from_light * Affine3A::from_rotation_y(std::f32::consts::PI);
+            local_light(l, &format!("/World/Lights/{}", names[&(3 + 2 * i)]), light, back);
+        }
+    }
+    match &lights.dome {
+        Some(dome) => {
+            // OpenEXR's lat-long, as UsdLux's DomeLight reads it, puts the
+            // image centre at +Z; throng's unrotated dome has it at +X, a
+            // quarter turn about +Y.
+            let p = l.def("/World/Lights/dome", "DomeLight");
+            l.attr(p, "xformOp:rotateY", "float", Value::Float(dome.rotate.to_degrees() + 90.0));
+            l.uniform(p, "xformOpOrder", "token[]", Value::TokenVec(vec!["xformOp:rotateY".into()]));
+            emission(l, p, dome.scale);
+            if let Some(asset) = dome_asset {
+                l.attr(p, "inputs:texture:file", "asset", Value::AssetPath(asset.into()));
+            }
+            l.attr(p, "inputs:texture:format", "token", Value::Token("latlong".into()));
+        }
+        None => {
+            let p = l.def("/World/Lights/sky", "DomeLight");
+            emission(l, p, lights.sky.radiance);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -814,6 +1066,30 @@ mod tests {
             let linear = crate::scene::gltf::srgb_to_linear(f32::from(code) / 255.0);
             assert_eq!(srgb8(linear), code);
         }
+    }
+
+    #[test]
+    fn a_packaged_dome_map_reads_back_texel_for_texel() {
+        let texels: Vec<Vec3> =
+            (0..32).map(|i| Vec3::new(i as f32 * 0.37, 1e4 / (1.0 + i as f32), (i % 5) as f32 * 1e-3)).collect();
+        let dome = Dome {
+            file: PathBuf::from("sky.hdr"),
+            width: 8,
+            height: 4,
+            texels: texels.clone(),
+            scale: Vec3::splat(2.0),
+            rotate: 0.5,
+            camera_visible: true,
+        };
+        let bytes = dome_exr(&dome).unwrap();
+        let path = std::env::temp_dir().join(format!("throng-usd-dome-{}.exr", std::process::id()));
+        std::fs::write(&path, &bytes).unwrap();
+        let back = crate::scene::dome::load_dome(&path, Vec3::ONE, 0.0, true).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!((back.width, back.height), (8, 4));
+        assert_eq!(back.texels, texels);
+        // Deterministic: the same bytes twice.
+        assert!(dome_exr(&dome).unwrap() == bytes);
     }
 
     #[test]
