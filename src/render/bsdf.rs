@@ -283,6 +283,10 @@ pub struct DeltaSample {
     pub weight: Vec3,
     /// Through the surface rather than reflected off it.
     pub transmitted: bool,
+    /// The (n_t / n_i)^2 that `weight` divides by (1 but for refraction):
+    /// Russian roulette multiplies it back, so a path inside glass is not
+    /// ended for the radiance compression it will regain on leaving.
+    pub eta_scale: f32,
 }
 
 impl Dielectric {
@@ -312,17 +316,19 @@ impl Dielectric {
         }
         let r = self.reflectance(wo.z);
         if u < r {
-            return Some(DeltaSample { wi: Vec3::new(-wo.x, -wo.y, wo.z), weight: Vec3::ONE, transmitted: false });
+            let wi = Vec3::new(-wo.x, -wo.y, wo.z);
+            return Some(DeltaSample { wi, weight: Vec3::ONE, transmitted: false, eta_scale: 1.0 });
         }
         if self.thin {
-            return Some(DeltaSample { wi: -wo, weight: self.tint, transmitted: true });
+            return Some(DeltaSample { wi: -wo, weight: self.tint, transmitted: true, eta_scale: 1.0 });
         }
         // Snell: the tangential part scales by 1 / eta. Radiance is
         // compressed by (n_i / n_t)^2 going into the denser side.
         let sin2_t = (1.0 - wo.z * wo.z) / (self.eta * self.eta);
         let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
         let wi = Vec3::new(-wo.x / self.eta, -wo.y / self.eta, -cos_t).normalize();
-        Some(DeltaSample { wi, weight: self.tint / (self.eta * self.eta), transmitted: true })
+        let eta_scale = self.eta * self.eta;
+        Some(DeltaSample { wi, weight: self.tint / eta_scale, transmitted: true, eta_scale })
     }
 }
 

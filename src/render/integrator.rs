@@ -620,6 +620,8 @@ impl<'a> Integrator<'a> {
         let mut prev_delta = false;
         // Absorption per metre of the volume the ray travels in (zero: none).
         let mut medium = Vec3::ZERO;
+        // Product of the (n_t / n_i)^2 refraction divided the throughput by (Russian roulette undoes it).
+        let mut eta_scale = 1.0f32;
         counts.camera += 1;
         for depth in 0.. {
             let camera = depth == 0;
@@ -736,6 +738,7 @@ impl<'a> Integrator<'a> {
                     break; // the shading normal sent it to the wrong side of the true surface
                 }
                 throughput *= ds.weight;
+                eta_scale *= ds.eta_scale;
                 if ds.transmitted && !thin {
                     medium = match (surface.cos_front > 0.0, material.volume) {
                         (true, Some(v)) => v.absorption(),
@@ -746,7 +749,7 @@ impl<'a> Integrator<'a> {
                 prev_bsdf_pdf = 0.0;
                 sampler.set_dimension(base + 5);
                 if depth + 1 >= RR_START {
-                    let survive = throughput.max_element().min(0.95);
+                    let survive = (throughput * eta_scale).max_element().min(0.95);
                     if sampler.next_1d() >= survive {
                         break;
                     }
@@ -817,7 +820,8 @@ impl<'a> Integrator<'a> {
             prev_bsdf_pdf = bs.pdf;
             prev_delta = false;
             if depth + 1 >= RR_START {
-                let survive = throughput.max_element().min(0.95);
+                // eta_scale is 1 but inside glass: the same bits as without it.
+                let survive = (throughput * eta_scale).max_element().min(0.95);
                 if sampler.next_1d() >= survive {
                     break;
                 }
