@@ -67,14 +67,7 @@ fn slab(z0: f32, z1: f32, half: f32) -> Mesh {
 }
 
 fn instance(mesh: u32, material: u32, visibility: u8) -> Instance {
-    Instance {
-        mesh,
-        material,
-        world_from_object: Affine3A::IDENTITY,
-        agent: InstanceAgent::NONE,
-        part: 0,
-        visibility,
-    }
+    Instance { mesh, material, world_from_object: Affine3A::IDENTITY, agent: InstanceAgent::NONE, part: 0, visibility }
 }
 
 fn settings(spp: u32, threads: usize, max_bounces: u32, diffuse_only: bool) -> RenderSettings {
@@ -302,8 +295,10 @@ fn blend_alpha_passes_its_share_and_stays_deterministic() {
     let want = 0.5 * 0.7 * 0.7;
     // Away from the border, where the pixel filter reaches past the checker.
     let n = CHECKER_RES;
-    let inner: Vec<f64> =
-        (2..n - 2).flat_map(|y| (2..n - 2).map(move |x| (x, y))).map(|(x, y)| film.rgba[(y * n + x) as usize][0] as f64).collect();
+    let inner: Vec<f64> = (2..n - 2)
+        .flat_map(|y| (2..n - 2).map(move |x| (x, y)))
+        .map(|(x, y)| film.rgba[(y * n + x) as usize][0] as f64)
+        .collect();
     let got = inner.iter().sum::<f64>() / inner.len() as f64;
     assert!((got - want).abs() < 0.01, "{got} vs {want}");
     let again = render(&lib, &scene, &RenderSettings { threads: 2, ..s });
@@ -391,7 +386,8 @@ fn texture_transform_follows_the_extensions_example() {
         scale: Vec2::splat(0.5),
         tex_coord: 0,
     };
-    for (uv, want) in [((0.0, 0.0), (0.0, 1.0)), ((1.0, 0.0), (0.0, 0.5)), ((0.0, 1.0), (0.5, 1.0)), ((1.0, 1.0), (0.5, 0.5))]
+    for (uv, want) in
+        [((0.0, 0.0), (0.0, 1.0)), ((1.0, 0.0), (0.0, 0.5)), ((0.0, 1.0), (0.5, 1.0)), ((1.0, 1.0), (0.5, 0.5))]
     {
         let got = t.apply(Vec2::new(uv.0, uv.1));
         assert!((got - Vec2::new(want.0, want.1)).length() < 1e-6, "{uv:?} -> {got} (want {want:?})");
@@ -494,7 +490,10 @@ fn gltf_defaults_are_opaque_thin_and_ior_one_and_a_half() {
     let id = cache.gltf_material(&path, "tri").unwrap_or_else(|e| panic!("{e}"));
     let m = &cache.library().materials[id as usize];
     // glTF: thickness 0 is a thin wall; no KHR_materials_ior is 1.5; alpha OPAQUE; single-sided.
-    assert_eq!((m.transmission, m.ior, m.volume, m.alpha_mode, m.double_sided), (1.0, 1.5, None, AlphaMode::Opaque, false));
+    assert_eq!(
+        (m.transmission, m.ior, m.volume, m.alpha_mode, m.double_sided),
+        (1.0, 1.5, None, AlphaMode::Opaque, false)
+    );
 }
 
 #[test]
@@ -515,3 +514,41 @@ fn gltf_bad_material_values_are_refused_by_name() {
     }
 }
 
+// ---------------------------------------------------------------- cut-out emitters
+
+/// The floor's mean radiance under an emissive panel 2 m above it facing
+/// down (seen by bounce rays only, so NEE and BSDF rays both find it), with
+/// alpha `alpha` in `mode`.
+fn under_panel(mode: AlphaMode, alpha: f32, spp: u32) -> f64 {
+    let mut panel = quad_z(1.0, 2.0);
+    panel.indices = vec![0, 2, 1, 0, 3, 2]; // front face down, towards the floor
+    let glow = Material {
+        name: "sign".into(),
+        base_color: Vec3::ZERO,
+        emission: Vec3::splat(4.0),
+        alpha,
+        alpha_mode: mode,
+        ..Default::default()
+    };
+    let floor = Material { name: "floor".into(), base_color: Vec3::splat(0.5), ..Default::default() };
+    let lib = Library { meshes: vec![panel, quad_z(100.0, 0.0)], materials: vec![glow, floor], textures: vec![] };
+    let scene = FrameScene {
+        instances: vec![instance(0, 0, vis::INDIRECT | vis::SHADOW), instance(1, 1, vis::ALL)],
+        camera: Camera::pinhole(Affine3A::from_translation(Vec3::new(0.0, 0.0, 10.0)), 0.1),
+        lights: SceneLights::sun_and_sky(None, Sky { radiance: Vec3::ZERO }),
+        motion: None,
+    };
+    mean_red(&render(&lib, &scene, &settings(spp, 0, 1, true)))
+}
+
+#[test]
+fn cut_out_emitters_light_by_their_coverage() {
+    let full = under_panel(AlphaMode::Opaque, 1.0, 64);
+    assert!(full > 0.05, "{full}");
+    // Below the cutoff the panel is not there: no light, by NEE or by bounce rays.
+    assert_eq!(under_panel(AlphaMode::Mask { cutoff: 0.5 }, 0.2, 16), 0.0);
+    assert_eq!(under_panel(AlphaMode::Mask { cutoff: 0.5 }, 0.8, 64), full, "solid where alpha >= cutoff");
+    // BLEND at alpha 0.4 emits 40 % on average: NEE by the coverage, bounce rays by the coin.
+    let blend = under_panel(AlphaMode::Blend, 0.4, 64);
+    assert!((blend / full - 0.4).abs() < 0.02, "{blend} vs 0.4 x {full}");
+}
