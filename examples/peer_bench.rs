@@ -255,6 +255,7 @@ fn quad(half: f32) -> Mesh {
         ],
         normals: vec![Vec3::Y; 4],
         uvs: vec![],
+        tangents: vec![],
         indices: vec![0, 2, 1, 0, 3, 2],
     }
 }

@@ -31,6 +31,7 @@ fn ground(size: f32) -> Mesh {
         positions: vec![Vec3::new(-h, 0.0, -h), Vec3::new(h, 0.0, -h), Vec3::new(h, 0.0, h), Vec3::new(-h, 0.0, h)],
         normals: vec![Vec3::Y; 4],
         uvs: vec![],
+        tangents: vec![],
         indices: vec![0, 2, 1, 0, 3, 2],
     }
 }

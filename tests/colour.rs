@@ -75,6 +75,7 @@ fn quad(size: f32) -> Mesh {
         positions: [(-h, -h), (h, -h), (h, h), (-h, h)].map(|(x, z)| Vec3::new(x, 0.0, z)).to_vec(),
         normals: vec![Vec3::Y; 4],
         uvs: vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)],
+        tangents: vec![],
         indices: vec![0, 2, 1, 0, 3, 2],
     }
 }

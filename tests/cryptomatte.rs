@@ -169,6 +169,7 @@ fn floor() -> Mesh {
         name: "floor".into(),
         normals: vec![Vec3::Y; 4],
         uvs: vec![Vec2::ZERO; 4],
+        tangents: vec![],
         positions,
         indices: vec![0, 2, 1, 0, 3, 2],
     }

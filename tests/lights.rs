@@ -40,6 +40,7 @@ fn quad(size: f32) -> Mesh {
         positions: [(-h, -h), (h, -h), (h, h), (-h, h)].map(|(x, z)| Vec3::new(x, 0.0, z)).to_vec(),
         normals: vec![Vec3::Y; 4],
         uvs: vec![Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y],
+        tangents: vec![],
         indices: vec![0, 2, 1, 0, 3, 2],
     }
 }

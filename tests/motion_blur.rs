@@ -31,7 +31,14 @@ fn square() -> Mesh {
         Vec3::new(0.5, 0.5, 0.0),
         Vec3::new(-0.5, 0.5, 0.0),
     ];
-    Mesh { name: "square".into(), normals: vec![Vec3::Z; 4], positions, indices: vec![0, 1, 2, 0, 2, 3], uvs: vec![] }
+    Mesh {
+        name: "square".into(),
+        normals: vec![Vec3::Z; 4],
+        positions,
+        indices: vec![0, 1, 2, 0, 2, 3],
+        uvs: vec![],
+        tangents: vec![],
+    }
 }
 
 fn library() -> Library {

@@ -42,6 +42,7 @@ fn quad(size: f32, centre: Vec3) -> Mesh {
         name: "quad".into(),
         normals: vec![Vec3::Y; 4],
         uvs: vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)],
+        tangents: vec![],
         positions,
         indices: vec![0, 2, 1, 0, 3, 2],
     }

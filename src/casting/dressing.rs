@@ -139,6 +139,7 @@ fn wardrobe_material(
         metallic: spec.metallic,
         emission: Vec3::from(spec.emission),
         emissive_texture: None,
+        ..Material::default()
     });
     made.insert(name.to_string(), m);
     Ok(m)

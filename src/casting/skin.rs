@@ -687,6 +687,8 @@ impl SkinnedRig {
             positions: Vec::with_capacity(p.mesh.positions.len()),
             normals: Vec::with_capacity(p.mesh.normals.len()),
             uvs: p.mesh.uvs.clone(),
+            // Posed tangents are not kept: normal maps fall back to per-triangle tangents from the UVs.
+            tangents: Vec::new(),
             indices: p.mesh.indices.clone(),
         };
         for (i, inf) in p.influences.iter().enumerate() {

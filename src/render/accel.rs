@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use glam::{Affine3A, Vec3, Vec3A};
+use glam::{Affine3A, Vec2, Vec3, Vec3A};
 use obvhs::{
     aabb::Aabb,
     bvh2::{builder::build_bvh2, Bvh2},
@@ -22,7 +22,9 @@ use obvhs::{
 };
 use rayon::prelude::*;
 
-use crate::scene::{Instance, Library, Mesh, SceneMotion};
+use super::integrator::surface_alpha;
+use super::sampler::hash_words;
+use crate::scene::{AlphaMode, Instance, Library, Material, Mesh, SceneMotion};
 
 /// Bottom-level BVH of one mesh, in object space.
 pub struct Blas {
@@ -99,6 +101,18 @@ impl Blas {
     #[inline]
     fn occluded(&self, ray: Ray) -> bool {
         !self.bvh.ray_traverse_miss(ray, |r, s| intersect_triangle(&self.tris[s], r))
+    }
+
+    /// As [`Blas::intersect`], skipping the hits `holes` cuts out.
+    fn intersect_cut(&self, ray: Ray, holes: &Holes) -> Option<(u32, f32)> {
+        let mut hit = RayHit::none();
+        self.bvh
+            .ray_traverse(ray, &mut hit, |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]))
+            .then_some((hit.primitive_id, hit.t))
+    }
+
+    fn occluded_cut(&self, ray: Ray, holes: &Holes) -> bool {
+        !self.bvh.ray_traverse_miss(ray, |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]))
     }
 
     /// Runs obvhs' structural checks (panics on a broken tree; tests only).
@@ -193,6 +207,90 @@ impl DeformBlas {
     fn occluded(&self, ray: Ray, w: f32) -> bool {
         !self.bvh.ray_traverse_miss(ray, |r, s| intersect_triangle(&self.triangle(s, w), r))
     }
+
+    fn intersect_cut(&self, ray: Ray, w: f32, holes: &Holes) -> Option<(u32, f32)> {
+        let mut hit = RayHit::none();
+        self.bvh
+            .ray_traverse(ray, &mut hit, |r, s| {
+                holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s])
+            })
+            .then_some((hit.primitive_id, hit.t))
+    }
+
+    fn occluded_cut(&self, ray: Ray, w: f32, holes: &Holes) -> bool {
+        !self
+            .bvh
+            .ray_traverse_miss(ray, |r, s| holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s]))
+    }
+}
+
+/// As [`intersect_triangle`], also giving the barycentrics (u, v) of the hit.
+#[inline]
+fn hit_triangle(tri: &RtTriangle, ray: &Ray) -> Option<(f32, Vec2)> {
+    let c = tri.v0 - ray.origin;
+    let r = ray.direction.cross(c);
+    let inv_det = 1.0 / tri.ng.dot(ray.direction);
+    let u = r.dot(tri.e2) * inv_det;
+    let v = r.dot(tri.e1) * inv_det;
+    if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && inv_det.is_finite() {
+        let t = tri.ng.dot(c) * inv_det;
+        if t >= ray.tmin && t <= ray.tmax {
+            return Some((t, Vec2::new(u, v)));
+        }
+    }
+    None
+}
+
+/// The holes of one instance whose material has alpha MASK or BLEND, for
+/// one ray: a candidate hit is kept only where the surface is there.
+struct Holes<'m> {
+    mesh: &'m Mesh,
+    material: &'m Material,
+    lib: &'m Library,
+    /// Hash of the world ray and the instance: BLEND's coin per triangle.
+    key: u32,
+}
+
+impl Holes<'_> {
+    /// `t` of a candidate hit on original triangle `triangle`, or infinity
+    /// where the surface has a hole (so traversal goes on past it).
+    #[inline]
+    fn filter(&self, hit: Option<(f32, Vec2)>, triangle: u32) -> f32 {
+        let Some((t, uv)) = hit else { return f32::INFINITY };
+        let alpha = surface_alpha(self.lib, self.material, self.mesh, triangle, uv.x, uv.y);
+        let there = match self.material.alpha_mode {
+            AlphaMode::Opaque => true,
+            AlphaMode::Mask { cutoff } => alpha >= cutoff,
+            // Passes with probability 1 - alpha: a 24-bit uniform from the ray, instance and triangle.
+            AlphaMode::Blend => {
+                let u = (hash_words(&[self.key, triangle]) >> 8) as f32 * (1.0 / 16_777_216.0);
+                u < alpha
+            }
+        };
+        if there {
+            t
+        } else {
+            f32::INFINITY
+        }
+    }
+}
+
+/// Whether `m` can have a hole anywhere: alpha MASK or BLEND with a base
+/// colour texture, or whose constant alpha is not solid.
+fn may_cut(m: &Material, lib: &Library) -> bool {
+    let textured = m.base_color_texture.is_some_and(|t| (t as usize) < lib.textures.len());
+    match m.alpha_mode {
+        AlphaMode::Opaque => false,
+        AlphaMode::Mask { cutoff } => textured || m.alpha < cutoff,
+        AlphaMode::Blend => textured || m.alpha < 1.0,
+    }
+}
+
+/// The hash of a world ray that keys BLEND's coins: the same ray meets the
+/// same holes on every run and thread count.
+fn ray_key(r: &Ray, instance: u32) -> u32 {
+    let (o, d) = (r.origin, r.direction);
+    hash_words(&[o.x, o.y, o.z, d.x, d.y, d.z].map(f32::to_bits)) ^ hash_words(&[instance])
 }
 
 /// Möller-Trumbore on obvhs' `RtTriangle` layout, as `RtTriangle::intersect`
@@ -335,6 +433,9 @@ struct TlasInstance {
     /// Index into `Tlas::moving`, or [`STILL`].
     motion: u32,
     visibility: u8,
+    /// Its material has alpha holes ([`Tlas::holes`] says where); false
+    /// keeps the plain walk.
+    cutout: bool,
 }
 
 /// From this many instances on, each agent's parts share one TLAS leaf:
@@ -426,6 +527,9 @@ pub struct Tlas<'a> {
     aabbs: Vec<Aabb>,
     /// Instances that move over the shutter (empty for a still scene).
     moving: Vec<MovingInstance>,
+    /// The library, where a tree has instances with alpha holes (`None`:
+    /// every surface is solid).
+    holes: Option<&'a Library>,
     /// Wall time of the build.
     pub build_time: Duration,
 }
@@ -481,17 +585,20 @@ impl<'a> Tlas<'a> {
     /// when the scene has motion: a moving instance's leaf bounds are the
     /// union of its bounds at the two keys (exact for transforms interpolated
     /// linearly), and rays meet it at their own time. Instances that do not
-    /// move are stored and traced exactly as in a still scene.
+    /// move are stored and traced exactly as in a still scene. Instances
+    /// whose material has alpha MASK or BLEND let rays through their holes.
     pub fn build_scene(
         blas: &'a BlasSet,
-        lib: &Library,
+        lib: &'a Library,
         instances: &'a [Instance],
         motion: Option<&SceneMotion>,
     ) -> Tlas<'a> {
-        let Some(motion) = motion.filter(|m| m.instances.len() == instances.len()) else {
-            return Self::build(blas, instances);
-        };
         let kind = TlasKind::for_count(instances.len());
+        let by_agent = instances.len() >= AGENT_CLUSTERS_FROM;
+        let still = |_: usize, inst: &Instance, b: &Blas| world_bounds(&b.bounds(), &inst.world_from_object);
+        let Some(motion) = motion.filter(|m| m.instances.len() == instances.len()) else {
+            return Self::build_keyed(blas, instances, kind, still, &[], Vec::new(), by_agent).with_holes(lib);
+        };
         let mut moving = Vec::new();
         let mut index = vec![STILL; instances.len()];
         for (i, (inst, m)) in instances.iter().zip(&motion.instances).enumerate() {
@@ -509,7 +616,7 @@ impl<'a> Tlas<'a> {
             moving.push(MovingInstance { world_from_object: [inst.world_from_object, close], deform });
         }
         if moving.is_empty() {
-            return Self::build(blas, instances);
+            return Self::build_keyed(blas, instances, kind, still, &[], Vec::new(), by_agent).with_holes(lib);
         }
         // Moving bounds: the union over the two keys (the deforming BLAS's
         // bounds already cover both poses). An unknown mesh is skipped later.
@@ -529,8 +636,7 @@ impl<'a> Tlas<'a> {
             STILL => world_bounds(&b.bounds(), &inst.world_from_object),
             k => moving_bounds[k as usize].unwrap_or_else(|| world_bounds(&b.bounds(), &inst.world_from_object)),
         };
-        let by_agent = instances.len() >= AGENT_CLUSTERS_FROM;
-        Self::build_keyed(blas, instances, kind, bounds, &index, moving, by_agent)
+        Self::build_keyed(blas, instances, kind, bounds, &index, moving, by_agent).with_holes(lib)
     }
 
     /// Builds the TLAS with a chosen tree kind (for benchmarks).
@@ -650,13 +756,43 @@ impl<'a> Tlas<'a> {
                     mesh: inst.mesh,
                     visibility: inst.visibility,
                     motion: motion_index.get(i as usize).copied().unwrap_or(STILL),
+                    cutout: false,
                 });
             }
         }
         // The leaves' bounds are kept for `validate` in debug builds only.
         let aabbs =
             if cfg!(debug_assertions) { order.iter().map(|&c| aabbs[c as usize]).collect() } else { Vec::new() };
-        Tlas { blas, source, inverses, tree, instances, clusters, aabbs, moving, build_time: start.elapsed() }
+        Tlas {
+            blas,
+            source,
+            inverses,
+            tree,
+            instances,
+            clusters,
+            aabbs,
+            moving,
+            holes: None,
+            build_time: start.elapsed(),
+        }
+    }
+
+    /// Marks the instances whose material may cut holes (alpha MASK or
+    /// BLEND that is not everywhere solid), so rays pass through them.
+    fn with_holes(mut self, lib: &'a Library) -> Tlas<'a> {
+        if !lib.materials.iter().any(|m| may_cut(m, lib)) {
+            return self;
+        }
+        let start = Instant::now();
+        for inst in &mut self.instances {
+            let material = self.source.get(inst.index as usize).and_then(|i| lib.materials.get(i.material as usize));
+            inst.cutout = material.is_some_and(|m| may_cut(m, lib));
+        }
+        if self.instances.iter().any(|i| i.cutout) {
+            self.holes = Some(lib);
+        }
+        self.build_time += start.elapsed();
+        self
     }
 
     /// Number of instances in the tree.
@@ -689,9 +825,12 @@ impl<'a> Tlas<'a> {
     fn intersect_moving(&self, inst: &TlasInstance, r: &Ray, tmax: f32, time: f32) -> Option<(u32, f32)> {
         let mv = &self.moving[inst.motion as usize];
         let local = transform_ray(&mv.object_from_world(time)?, r, tmax);
-        match &mv.deform {
-            Some((d, _)) => d.intersect(local, mv.weight(time)),
-            None => self.blas.get(inst.mesh)?.intersect(local),
+        let holes = if inst.cutout { self.holes_of(inst, r) } else { None };
+        match (&mv.deform, &holes) {
+            (Some((d, _)), None) => d.intersect(local, mv.weight(time)),
+            (Some((d, _)), Some(h)) => d.intersect_cut(local, mv.weight(time), h),
+            (None, None) => self.blas.get(inst.mesh)?.intersect(local),
+            (None, Some(h)) => self.blas.get(inst.mesh)?.intersect_cut(local, h),
         }
     }
 
@@ -700,10 +839,26 @@ impl<'a> Tlas<'a> {
         let mv = &self.moving[inst.motion as usize];
         let Some(object_from_world) = mv.object_from_world(time) else { return false };
         let local = transform_ray(&object_from_world, r, r.tmax);
-        match &mv.deform {
-            Some((d, _)) => d.occluded(local, mv.weight(time)),
-            None => self.blas.get(inst.mesh).is_some_and(|b| b.occluded(local)),
+        let holes = if inst.cutout { self.holes_of(inst, r) } else { None };
+        match (&mv.deform, &holes) {
+            (Some((d, _)), None) => d.occluded(local, mv.weight(time)),
+            (Some((d, _)), Some(h)) => d.occluded_cut(local, mv.weight(time), h),
+            (None, None) => self.blas.get(inst.mesh).is_some_and(|b| b.occluded(local)),
+            (None, Some(h)) => self.blas.get(inst.mesh).is_some_and(|b| b.occluded_cut(local, h)),
         }
+    }
+
+    /// The holes of a cut-out instance for world ray `r` (`None`: solid).
+    #[cold]
+    fn holes_of(&self, inst: &TlasInstance, r: &Ray) -> Option<Holes<'a>> {
+        let lib = self.holes?;
+        let source = self.source.get(inst.index as usize)?;
+        Some(Holes {
+            mesh: lib.meshes.get(inst.mesh as usize)?,
+            material: lib.materials.get(source.material as usize)?,
+            lib,
+            key: ray_key(r, inst.index),
+        })
     }
 
     /// Closest hit among instances whose visibility shares a bit with `mask`.
@@ -724,7 +879,11 @@ impl<'a> Tlas<'a> {
                 }
                 let hit = if inst.motion == STILL {
                     let Some(b) = self.blas.get(inst.mesh) else { continue };
-                    b.intersect(object_ray(&self.object_from_world(k, inst), r, closest))
+                    let local = object_ray(&self.object_from_world(k, inst), r, closest);
+                    match inst.cutout.then(|| self.holes_of(inst, r)).flatten() {
+                        None => b.intersect(local),
+                        Some(holes) => b.intersect_cut(local, &holes),
+                    }
                 } else {
                     self.intersect_moving(inst, r, closest, time)
                 };
@@ -776,9 +935,13 @@ impl<'a> Tlas<'a> {
                 let inst = &self.instances[k];
                 inst.visibility & mask != 0
                     && if inst.motion == STILL {
-                        self.blas
-                            .get(inst.mesh)
-                            .is_some_and(|b| b.occluded(object_ray(&self.object_from_world(k, inst), r, r.tmax)))
+                        self.blas.get(inst.mesh).is_some_and(|b| {
+                            let local = object_ray(&self.object_from_world(k, inst), r, r.tmax);
+                            match inst.cutout.then(|| self.holes_of(inst, r)).flatten() {
+                                None => b.occluded(local),
+                                Some(holes) => b.occluded_cut(local, &holes),
+                            }
+                        })
                     } else {
                         self.occluded_moving(inst, r, time)
                     }

@@ -2,6 +2,11 @@
 //! plus a GGX microfacet specular lobe (height-correlated Smith G, Schlick
 //! Fresnel with F0 = mix(0.04, base colour, metallic)), combined as the glTF
 //! spec's appendix does: f = (1 - F) diffuse / pi + F D G / (4 cos_o cos_i).
+//! KHR_materials_ior sets the dielectric F0 = ((ior - 1) / (ior + 1))^2.
+//!
+//! [`Dielectric`]: the smooth glass of KHR_materials_transmission, exact
+//! (unpolarised) Fresnel between specular reflection and transmission, a
+//! refracting boundary of a volume or a thin wall; delta lobes only.
 //!
 //! Directions are in the local shading frame (z = shading normal) and point
 //! away from the surface.
@@ -104,14 +109,22 @@ pub struct BsdfSample {
 }
 
 impl Bsdf {
-    /// The BSDF of a glTF material with the (textured) base colour.
+    /// The BSDF of a glTF material with the (textured) base colour and the
+    /// default ior 1.5 (dielectric F0 = 0.04).
     pub fn new(base_color: Vec3, metallic: f32, roughness: f32) -> Bsdf {
+        Bsdf::with_ior(base_color, metallic, roughness, 1.5)
+    }
+
+    /// As [`Bsdf::new`] with KHR_materials_ior's `ior`.
+    pub fn with_ior(base_color: Vec3, metallic: f32, roughness: f32, ior: f32) -> Bsdf {
         let metallic = metallic.clamp(0.0, 1.0);
         let roughness = roughness.clamp(0.0, 1.0);
         let base_color = base_color.clamp(Vec3::ZERO, Vec3::ONE);
+        // 1.5 gives the glTF core's 0.04 exactly (the formula rounds differently).
+        let f0 = if ior == 1.5 { 0.04 } else { ((ior - 1.0) / (ior + 1.0)).powi(2) };
         Bsdf {
             diffuse: base_color * (1.0 - metallic),
-            f0: Vec3::splat(0.04).lerp(base_color, metallic),
+            f0: Vec3::splat(f0).lerp(base_color, metallic),
             alpha: (roughness * roughness).max(MIN_ALPHA),
             lambert: false,
         }
@@ -230,9 +243,149 @@ impl Bsdf {
     }
 }
 
+/// Fresnel reflectance of a smooth boundary between dielectrics for
+/// unpolarised light (the mean of the s and p reflectances), at cosine
+/// `cos_i` (> 0) of the incident direction, `eta` = n_transmitted /
+/// n_incident; 1 under total internal reflection.
+pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
+    let cos_i = cos_i.clamp(0.0, 1.0);
+    let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
+    if sin2_t >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    let parallel = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let perpendicular = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    0.5 * (parallel * parallel + perpendicular * perpendicular)
+}
+
+/// A smooth dielectric surface (KHR_materials_transmission at roughness 0):
+/// specular reflection and transmission, one picked by Fresnel. Either the
+/// boundary of a solid (KHR_materials_volume), refracting by Snell's law, or
+/// a thin wall: two boundaries back to back with every internal reflection
+/// summed (reflectance R + T^2 R / (1 - R^2) for one boundary's R and T = 1 - R),
+/// transmitting straight through. Transmission is tinted by the base colour.
+#[derive(Clone, Copy, Debug)]
+pub struct Dielectric {
+    /// n on the far side / n on the side the ray comes from (the material's
+    /// ior entering a solid, 1 / ior leaving it; the ior for a thin wall).
+    eta: f32,
+    tint: Vec3,
+    thin: bool,
+}
+
+/// One direction a [`Dielectric`] scatters into.
+#[derive(Clone, Copy, Debug)]
+pub struct DeltaSample {
+    /// Outgoing direction (local); for a thin wall's transmission exactly -wo.
+    pub wi: Vec3,
+    /// Throughput factor (f cos / pdf of the delta lobe).
+    pub weight: Vec3,
+    /// Through the surface rather than reflected off it.
+    pub transmitted: bool,
+    /// The (n_t / n_i)^2 that `weight` divides by (1 but for refraction):
+    /// Russian roulette multiplies it back, so a path inside glass is not
+    /// ended for the radiance compression it will regain on leaving.
+    pub eta_scale: f32,
+}
+
+impl Dielectric {
+    /// A boundary the ray crosses from index 1 into `ior` (`entering`) or
+    /// back out, or a thin wall of `ior` (`thin`), with transmission tint `tint`.
+    pub fn new(ior: f32, entering: bool, thin: bool, tint: Vec3) -> Dielectric {
+        let ior = ior.max(1.0);
+        let eta = if thin || entering { ior } else { 1.0 / ior };
+        Dielectric { eta, tint: tint.clamp(Vec3::ZERO, Vec3::ONE), thin }
+    }
+
+    /// Share of the light reflected at cosine `cos` (> 0) from the normal.
+    pub fn reflectance(&self, cos: f32) -> f32 {
+        let r = fresnel_dielectric(cos, self.eta);
+        if self.thin && r < 1.0 {
+            // A thin slab: R + T^2 R / (1 - R^2) = 2R / (1 + R).
+            2.0 * r / (1.0 + r)
+        } else {
+            r
+        }
+    }
+
+    /// Reflects (probability: the reflectance) or transmits, by `u`.
+    pub fn sample(&self, wo: Vec3, u: f32) -> Option<DeltaSample> {
+        if wo.z <= 0.0 {
+            return None;
+        }
+        let r = self.reflectance(wo.z);
+        if u < r {
+            let wi = Vec3::new(-wo.x, -wo.y, wo.z);
+            return Some(DeltaSample { wi, weight: Vec3::ONE, transmitted: false, eta_scale: 1.0 });
+        }
+        if self.thin {
+            return Some(DeltaSample { wi: -wo, weight: self.tint, transmitted: true, eta_scale: 1.0 });
+        }
+        // Snell: the tangential part scales by 1 / eta. Radiance is
+        // compressed by (n_i / n_t)^2 going into the denser side.
+        let sin2_t = (1.0 - wo.z * wo.z) / (self.eta * self.eta);
+        let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
+        let wi = Vec3::new(-wo.x / self.eta, -wo.y / self.eta, -cos_t).normalize();
+        let eta_scale = self.eta * self.eta;
+        Some(DeltaSample { wi, weight: self.tint / eta_scale, transmitted: true, eta_scale })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fresnel_at_normal_incidence_and_beyond_the_critical_angle() {
+        for n in [1.33f32, 1.5, 2.42] {
+            let r0 = ((n - 1.0) / (n + 1.0)).powi(2);
+            assert!((fresnel_dielectric(1.0, n) - r0).abs() < 1e-6, "{n}");
+            // Symmetric across the boundary at normal incidence.
+            assert!((fresnel_dielectric(1.0, 1.0 / n) - r0).abs() < 1e-6, "{n}");
+            // Grazing: everything reflects.
+            assert!(fresnel_dielectric(1e-4, n) > 0.99);
+            // Inside, past the critical angle sin = 1 / n: total internal reflection.
+            let critical = (1.0 / n).asin();
+            assert_eq!(fresnel_dielectric((critical + 0.01).cos(), 1.0 / n), 1.0);
+            assert!(fresnel_dielectric((critical - 0.01).cos(), 1.0 / n) < 1.0);
+        }
+        // Brewster's angle (tan = n): the p-polarised part vanishes, leaving half of s.
+        let n = 1.5f32;
+        let brewster = n.atan();
+        let (ci, st) = (brewster.cos(), brewster.sin() / n);
+        let ct = (1.0 - st * st).sqrt();
+        let rs = ((ci - n * ct) / (ci + n * ct)).powi(2);
+        assert!((fresnel_dielectric(ci, n) - 0.5 * rs).abs() < 1e-6);
+    }
+
+    #[test]
+    fn dielectric_refracts_by_snell_and_splits_by_fresnel() {
+        let n = 1.5f32;
+        let theta = 0.6f32;
+        let wo = Vec3::new(theta.sin(), 0.0, theta.cos());
+        let glass = Dielectric::new(n, true, false, Vec3::ONE);
+        let r = glass.reflectance(wo.z);
+        let reflect = glass.sample(wo, 0.5 * r).expect("reflects");
+        assert!(!reflect.transmitted && (reflect.wi - Vec3::new(-wo.x, 0.0, wo.z)).length() < 1e-6);
+        let t = glass.sample(wo, 0.5 * (1.0 + r)).expect("transmits");
+        assert!(t.transmitted && t.wi.z < 0.0);
+        // sin_t = sin_i / n, on the other side of the normal.
+        assert!((t.wi.x.abs() - theta.sin() / n).abs() < 1e-6 && t.wi.x < 0.0);
+        assert!((t.weight.x - 1.0 / (n * n)).abs() < 1e-6);
+        // Leaving, the same path back: the radiance factors cancel.
+        let out = Dielectric::new(n, false, false, Vec3::ONE);
+        let back = out.sample(-t.wi, 0.999).expect("leaves");
+        assert!(back.transmitted && (back.wi + wo).length() < 1e-5);
+        assert!((back.weight.x * t.weight.x - 1.0).abs() < 1e-5);
+        // A thin wall goes straight through, tinted, and reflects more than one boundary.
+        let tint = Vec3::new(1.0, 0.5, 0.25);
+        let thin = Dielectric::new(n, true, true, tint);
+        let s = thin.sample(wo, 0.999).expect("transmits");
+        assert!(s.transmitted && s.wi == -wo && s.weight == tint);
+        let r1 = fresnel_dielectric(wo.z, n);
+        assert!((thin.reflectance(wo.z) - 2.0 * r1 / (1.0 + r1)).abs() < 1e-6);
+    }
 
     /// Integrates f cos over the hemisphere by uniform sampling and by the
     /// BSDF's own sampling: both must agree (checks pdf / weight consistency).

@@ -130,17 +130,29 @@ pub fn into_acescg(crowd: ShotCrowd<Rec709>) -> ShotCrowd<Acescg> {
     crowd.convert_colours(|materials, textures| convert_library(materials, textures, Colourspace::Acescg))
 }
 
-/// Converts material base colours and texture texels (RGB; alpha kept) from
-/// Rec.709 into `space`, in place (what [`into_acescg`] does to a crowd's library).
+/// Converts material colours (base colour, emission, volume attenuation) and
+/// colour texture texels (RGB; alpha kept) from Rec.709 into `space`, in
+/// place (what [`into_acescg`] does to a crowd's library). Textures no
+/// material reads as colour (normal, metallic-roughness and transmission
+/// maps: data, not colour) are left as they are.
 pub fn convert_library(materials: &mut [Material], textures: &mut [Texture], space: Colourspace) {
     if space == Colourspace::Rec709 {
         return;
     }
+    let mut colour = vec![false; textures.len()];
     for m in materials {
         m.base_color = input(space, m.base_color);
         m.emission = input(space, m.emission);
+        if let Some(v) = &mut m.volume {
+            v.attenuation_color = input(space, v.attenuation_color);
+        }
+        for t in [m.base_color_texture, m.emissive_texture].into_iter().flatten() {
+            if let Some(c) = colour.get_mut(t as usize) {
+                *c = true;
+            }
+        }
     }
-    for t in textures {
+    for (t, _) in textures.iter_mut().zip(&colour).filter(|(_, &c)| c) {
         for texel in &mut t.texels {
             let c = input(space, Vec3::new(texel[0], texel[1], texel[2]));
             texel[..3].copy_from_slice(&c.to_array());

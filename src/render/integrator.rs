@@ -13,16 +13,16 @@ use std::f32::consts::PI;
 use glam::{Affine3A, Mat3A, Vec2, Vec3, Vec4};
 
 use super::accel::{Hit, Tlas, WorldRay};
-use super::bsdf::{sample_concentric_disk, Bsdf, ShadingFrame};
+use super::bsdf::{sample_concentric_disk, Bsdf, Dielectric, ShadingFrame};
 use super::lights::LightSampler;
 use super::sampler::Sampler;
 use super::RenderSettings;
-use crate::scene::{vis, FrameScene, Library, Material, Mesh, Texture};
+use crate::scene::{vis, AlphaMode, FrameScene, Library, Material, Mesh, Texture, TextureRef, UvTransform};
 
 /// Bounces before Russian roulette may end a path.
 const RR_START: u32 = 3;
 /// Sampler dimensions used per bounce (light point 2, lobe 1, direction 2,
-/// roulette 1, light pick 1, spare 1).
+/// roulette 1, light pick 1, glass-or-not pick 1).
 const DIMS_PER_BOUNCE: u32 = 8;
 /// Pixel filter: a radially truncated Gaussian, importance-sampled exactly.
 pub const FILTER_RADIUS: f32 = 1.5;
@@ -80,6 +80,26 @@ fn power_heuristic(f: f32, g: f32) -> f32 {
     }
 }
 
+/// The MIS weight of light a BSDF-sampled ray found, against NEE's pdf
+/// `light_pdf` for it: 1 after a delta bounce (glass, a mirror-smooth
+/// transmission), which NEE cannot sample.
+#[inline]
+fn bsdf_weight(prev_delta: bool, prev_bsdf_pdf: f32, light_pdf: f32) -> f32 {
+    if prev_delta {
+        1.0
+    } else {
+        power_heuristic(prev_bsdf_pdf, light_pdf)
+    }
+}
+
+/// Beer's law over distance `t` for absorption `sigma` (per channel), with
+/// no light left at infinity where sigma > 0.
+#[inline]
+fn transmittance(sigma: Vec3, t: f32) -> Vec3 {
+    let one = |s: f32| if s > 0.0 { (-s * t).exp() } else { 1.0 };
+    Vec3::new(one(sigma.x), one(sigma.y), one(sigma.z))
+}
+
 /// Offsets a surface point along the geometric normal `n` (pointing to the
 /// side the new ray leaves from) by a few hundred ULPs of each coordinate, so
 /// the offset grows with |p| and works hundreds of metres from the origin
@@ -117,6 +137,80 @@ pub fn sample_texture(tex: &Texture, uv: Vec2) -> Vec4 {
     let top = t(xa, ya).lerp(t(xb, ya), fx);
     let bottom = t(xa, yb).lerp(t(xb, yb), fx);
     top.lerp(bottom, fy)
+}
+
+/// The texture coordinate at barycentrics (b1, b2) of the triangle with
+/// vertices `idx`; `None` for a mesh without UVs.
+#[inline]
+fn uv_at(mesh: &Mesh, idx: [usize; 3], b1: f32, b2: f32) -> Option<Vec2> {
+    if mesh.uvs.len() != mesh.positions.len() {
+        return None;
+    }
+    let [t0, t1, t2] = idx.map(|i| mesh.uvs[i]);
+    Some(t0 * (1.0 - b1 - b2) + t1 * b1 + t2 * b2)
+}
+
+/// Texture `texture` (an index into `lib.textures`) at texture coordinate
+/// `uv` through `transform`; `None` without either.
+#[inline]
+fn texel(lib: &Library, texture: Option<u32>, transform: &UvTransform, uv: Option<Vec2>) -> Option<Vec4> {
+    let tex = lib.textures.get(texture? as usize)?;
+    Some(sample_texture(tex, transform.apply(uv?)))
+}
+
+#[inline]
+fn texel_ref(lib: &Library, texture: Option<TextureRef>, uv: Option<Vec2>) -> Option<Vec4> {
+    let t = texture?;
+    texel(lib, Some(t.texture), &t.uv, uv)
+}
+
+/// The vertex indices of triangle `triangle` of `mesh`, checked.
+#[inline]
+fn triangle_vertices(mesh: &Mesh, triangle: u32) -> Option<[usize; 3]> {
+    let k = triangle as usize * 3;
+    let idx = mesh.indices.get(k..k + 3)?;
+    let idx = [idx[0] as usize, idx[1] as usize, idx[2] as usize];
+    idx.iter().all(|&i| i < mesh.positions.len()).then_some(idx)
+}
+
+/// A material's alpha (coverage) at barycentrics (b1, b2) of a triangle of
+/// `mesh`: base colour factor alpha x base colour texture alpha.
+pub fn surface_alpha(lib: &Library, material: &Material, mesh: &Mesh, triangle: u32, b1: f32, b2: f32) -> f32 {
+    let texture = triangle_vertices(mesh, triangle)
+        .and_then(|idx| texel(lib, material.base_color_texture, &material.base_color_uv, uv_at(mesh, idx, b1, b2)));
+    material.alpha * texture.map_or(1.0, |t| t.w)
+}
+
+/// How much of a surface is there on average at alpha `alpha`: 0 or 1 for
+/// MASK, alpha itself for BLEND's stochastic holes, 1 for OPAQUE.
+pub fn coverage(material: &Material, alpha: f32) -> f32 {
+    match material.alpha_mode {
+        AlphaMode::Opaque => 1.0,
+        AlphaMode::Mask { cutoff } => {
+            if alpha >= cutoff {
+                1.0
+            } else {
+                0.0
+            }
+        }
+        AlphaMode::Blend => alpha.clamp(0.0, 1.0),
+    }
+}
+
+/// The emitted radiance of a material at barycentrics (b1, b2) of triangle
+/// `triangle` of `mesh`, front side: emission x emissive texture, x the
+/// coverage where alpha cuts holes (what NEE on emissive triangles sees).
+pub fn surface_emission(lib: &Library, material: &Material, mesh: &Mesh, triangle: u32, b1: f32, b2: f32) -> Vec3 {
+    let Some(idx) = triangle_vertices(mesh, triangle) else { return material.emission };
+    let uv = uv_at(mesh, idx, b1, b2);
+    let mut e = material.emission;
+    if let Some(t) = texel(lib, material.emissive_texture, &material.emissive_uv, uv) {
+        e *= t.truncate();
+    }
+    if material.has_cutouts() {
+        e *= coverage(material, surface_alpha(lib, material, mesh, triangle, b1, b2));
+    }
+    e
 }
 
 /// The camera's rays: looks down its local -Z, +Y up, vertical field of
@@ -245,6 +339,11 @@ struct SurfaceHit {
     emission: Vec3,
     /// Cosine between the front face's normal and the way back along the ray.
     cos_front: f32,
+    /// Roughness and metallic with the metallic-roughness texture.
+    roughness: f32,
+    metallic: f32,
+    /// KHR_materials_transmission with its texture (0: opaque).
+    transmission: f32,
 }
 
 impl<'a> Integrator<'a> {
@@ -381,9 +480,7 @@ impl<'a> Integrator<'a> {
     fn surface(&self, hit: &Hit, dir: Vec3, time: f32) -> Option<SurfaceHit> {
         let inst = self.scene.instances.get(hit.instance as usize)?;
         let mesh = self.lib.meshes.get(inst.mesh as usize)?;
-        let tri = hit.triangle as usize * 3;
-        let idx = mesh.indices.get(tri..tri + 3)?;
-        let idx = [idx[0] as usize, idx[1] as usize, idx[2] as usize];
+        let idx = triangle_vertices(mesh, hit.triangle)?;
         let (u, v) = (hit.u, hit.v);
         let w = 1.0 - u - v;
         let placed = match &self.scene.motion {
@@ -412,17 +509,22 @@ impl<'a> Integrator<'a> {
                 Mat3A::IDENTITY
             }
         };
-        let mut ng = (nmat * (p1 - p0).cross(p2 - p0)).normalize_or_zero();
-        if ng == Vec3::ZERO {
+        let front = (nmat * (p1 - p0).cross(p2 - p0)).normalize_or_zero();
+        if front == Vec3::ZERO {
             return None;
         }
         // The front face (glTF: counter-clockwise, flipped by mirroring
         // transforms, which the normal matrix does) is the one that emits.
-        let cos_front = -ng.dot(dir);
+        let cos_front = -front.dot(dir);
+        let mut ng = front;
         if ng.dot(dir) > 0.0 {
             ng = -ng; // two-sided: face the incoming ray
         }
-        let mut ns = ng;
+        let material_index = inst.material as usize;
+        let material = self.lib.materials.get(material_index).unwrap_or(&self.default_material);
+        let uv = uv_at(mesh, idx, u, v);
+        // The front side's shading normal: interpolated, then normal-mapped.
+        let mut n_front = None;
         if mesh.normals.len() == mesh.positions.len() {
             let [mut n0, mut n1, mut n2] = idx.map(|i| mesh.normals[i]);
             if let Some((hi, b)) = blend.filter(|(hi, _)| hi.normals.len() == mesh.normals.len()) {
@@ -431,32 +533,57 @@ impl<'a> Integrator<'a> {
             }
             let n = (nmat * (n0 * w + n1 * u + n2 * v)).normalize_or_zero();
             if n.is_finite() && n != Vec3::ZERO {
-                ns = if n.dot(ng) < 0.0 { -n } else { n };
-                if ns.dot(-dir) <= 1e-4 {
-                    ns = ng; // interpolated normal faces away from the viewer
-                }
+                n_front = Some(n);
             }
         }
-        let material_index = inst.material as usize;
-        let material = self.lib.materials.get(material_index).unwrap_or(&self.default_material);
+        if let Some(map) = texel_ref(self.lib, material.normal_texture, uv) {
+            let n = n_front.unwrap_or(front);
+            let tangent = tangent_frame(mesh, blend, idx, [w, u, v], [p0, p1, p2], world_from_object, material, n);
+            if let Some(mapped) = tangent.and_then(|(t, sign)| normal_map(n, t, sign, map, material.normal_scale)) {
+                n_front = Some(mapped);
+            }
+        }
+        let mut ns = ng;
+        if let Some(n) = n_front {
+            ns = if n.dot(ng) < 0.0 { -n } else { n };
+            if ns.dot(-dir) <= 1e-4 {
+                ns = ng; // interpolated normal faces away from the viewer
+            }
+        }
         let mut base_color = material.base_color;
-        if let Some(tex) = material.base_color_texture.and_then(|t| self.lib.textures.get(t as usize)) {
-            if mesh.uvs.len() == mesh.positions.len() {
-                let [t0, t1, t2] = idx.map(|i| mesh.uvs[i]);
-                base_color *= sample_texture(tex, t0 * w + t1 * u + t2 * v).truncate();
+        if let Some(t) = texel(self.lib, material.base_color_texture, &material.base_color_uv, uv) {
+            base_color *= t.truncate();
+        }
+        let (mut roughness, mut metallic) = (material.roughness, material.metallic);
+        if let Some(t) = texel_ref(self.lib, material.metallic_roughness_texture, uv) {
+            roughness *= t.y;
+            metallic *= t.z;
+        }
+        let mut transmission = material.transmission;
+        if transmission > 0.0 {
+            if let Some(t) = texel_ref(self.lib, material.transmission_texture, uv) {
+                transmission *= t.x;
             }
         }
         let mut emission = Vec3::ZERO;
         if cos_front > 0.0 && material.emission.max_element() > 0.0 {
             emission = material.emission;
-            if let Some(tex) = material.emissive_texture.and_then(|t| self.lib.textures.get(t as usize)) {
-                if mesh.uvs.len() == mesh.positions.len() {
-                    let [t0, t1, t2] = idx.map(|i| mesh.uvs[i]);
-                    emission *= sample_texture(tex, t0 * w + t1 * u + t2 * v).truncate();
-                }
+            if let Some(t) = texel(self.lib, material.emissive_texture, &material.emissive_uv, uv) {
+                emission *= t.truncate();
             }
         }
-        Some(SurfaceHit { p, ng, ns, base_color, material: material_index, emission, cos_front })
+        Some(SurfaceHit {
+            p,
+            ng,
+            ns,
+            base_color,
+            material: material_index,
+            emission,
+            cos_front,
+            roughness,
+            metallic,
+            transmission,
+        })
     }
 
     /// Scales an indirect contribution down to `settings.indirect_clamp`
@@ -489,6 +616,12 @@ impl<'a> Integrator<'a> {
         let mut radiance = Vec3::ZERO;
         let mut throughput = Vec3::ONE;
         let mut prev_bsdf_pdf = 0.0f32;
+        // The last bounce was a delta lobe (glass): what the ray finds has MIS weight 1.
+        let mut prev_delta = false;
+        // Absorption per metre of the volume the ray travels in (zero: none).
+        let mut medium = Vec3::ZERO;
+        // Product of the (n_t / n_i)^2 refraction divided the throughput by (Russian roulette undoes it).
+        let mut eta_scale = 1.0f32;
         counts.camera += 1;
         for depth in 0.. {
             let camera = depth == 0;
@@ -501,10 +634,16 @@ impl<'a> Integrator<'a> {
                     radiance += light.radiance;
                     out.alpha = 1.0;
                 } else {
-                    let weight = power_heuristic(prev_bsdf_pdf, light.pdf);
+                    if medium != Vec3::ZERO {
+                        throughput *= transmittance(medium, light.t);
+                    }
+                    let weight = bsdf_weight(prev_delta, prev_bsdf_pdf, light.pdf);
                     radiance += self.clamp_indirect(throughput * light.radiance * weight);
                 }
                 break;
+            }
+            if medium != Vec3::ZERO {
+                throughput *= transmittance(medium, tmax);
             }
             let Some(hit) = hit else {
                 if camera {
@@ -523,11 +662,12 @@ impl<'a> Integrator<'a> {
                     }
                 } else {
                     let mut escaped = match self.lights.dome(dir) {
-                        Some((l, pdf)) => l * power_heuristic(prev_bsdf_pdf, pdf),
+                        Some((l, pdf)) => l * bsdf_weight(prev_delta, prev_bsdf_pdf, pdf),
                         None => self.scene.lights.sky.radiance,
                     };
                     if let Some(sun) = self.lights.sun().filter(|s| s.contains(dir)) {
-                        escaped += sun.radiance() * power_heuristic(prev_bsdf_pdf, sun.pdf() * self.lights.sun_pick());
+                        let pdf = sun.pdf() * self.lights.sun_pick();
+                        escaped += sun.radiance() * bsdf_weight(prev_delta, prev_bsdf_pdf, pdf);
                     }
                     radiance += self.clamp_indirect(throughput * escaped);
                 }
@@ -555,20 +695,81 @@ impl<'a> Integrator<'a> {
                 } else {
                     // Weighted against NEE's choice of this point (weight 1 where NEE never samples it).
                     let pdf = self.lights.triangle_pdf(hit.instance, hit.triangle, hit.t, surface.cos_front);
-                    let weight = if pdf > 0.0 { power_heuristic(prev_bsdf_pdf, pdf) } else { 1.0 };
+                    let weight = if pdf > 0.0 { bsdf_weight(prev_delta, prev_bsdf_pdf, pdf) } else { 1.0 };
                     radiance += self.clamp_indirect(throughput * surface.emission * weight);
                 }
             }
 
             let material = self.material(surface.material);
-            let bsdf = if self.settings.diffuse_only {
-                Bsdf::lambert(surface.base_color)
-            } else {
-                Bsdf::new(surface.base_color, material.metallic, material.roughness)
-            };
             let frame = ShadingFrame::from_normal(surface.ns);
             let wo = frame.to_local(-dir);
             let base = 2 + depth * DIMS_PER_BOUNCE;
+            // Transmission replaces part of the dielectric base (glTF):
+            // f = (1 - w) f_opaque + w f_glass with w = (1 - metallic)
+            // transmission, f_opaque the material with metallic m / (1 - w).
+            // One of the two is picked per vertex, with probability its weight,
+            // from a dimension of its own (drawn only when both are possible).
+            let glass_weight = if self.settings.diffuse_only {
+                0.0
+            } else {
+                (1.0 - surface.metallic.clamp(0.0, 1.0)) * surface.transmission.clamp(0.0, 1.0)
+            };
+            let glass = if glass_weight <= 0.0 {
+                false
+            } else if glass_weight >= 1.0 {
+                true
+            } else {
+                sampler.set_dimension(base + 7);
+                sampler.next_1d() < glass_weight
+            };
+            if glass {
+                // Delta lobes: NEE finds nothing through them (f = 0), so no shadow ray.
+                if depth >= self.settings.max_bounces {
+                    break;
+                }
+                let thin = material.volume.is_none();
+                let dielectric = Dielectric::new(material.ior, surface.cos_front > 0.0, thin, surface.base_color);
+                sampler.set_dimension(base + 2);
+                let Some(ds) = dielectric.sample(wo, sampler.next_1d()) else { break };
+                // A thin wall passes the ray on unbent: the same direction, bit for bit.
+                let wi = if ds.transmitted && thin { dir } else { frame.to_world(ds.wi).normalize() };
+                let side = if ds.transmitted { -surface.ng } else { surface.ng };
+                if wi.dot(side) <= 0.0 {
+                    break; // the shading normal sent it to the wrong side of the true surface
+                }
+                throughput *= ds.weight;
+                eta_scale *= ds.eta_scale;
+                if ds.transmitted && !thin {
+                    medium = match (surface.cos_front > 0.0, material.volume) {
+                        (true, Some(v)) => v.absorption(),
+                        _ => Vec3::ZERO,
+                    };
+                }
+                prev_delta = true;
+                prev_bsdf_pdf = 0.0;
+                sampler.set_dimension(base + 5);
+                if depth + 1 >= RR_START {
+                    let survive = (throughput * eta_scale).max_element().min(0.95);
+                    if sampler.next_1d() >= survive {
+                        break;
+                    }
+                    throughput /= survive;
+                }
+                if throughput == Vec3::ZERO {
+                    break;
+                }
+                counts.bounce += 1;
+                origin = offset_ray_origin(surface.p, side);
+                dir = wi;
+                continue;
+            }
+            let bsdf = if self.settings.diffuse_only {
+                Bsdf::lambert(surface.base_color)
+            } else {
+                let metallic =
+                    if glass_weight > 0.0 { surface.metallic / (1.0 - glass_weight) } else { surface.metallic };
+                Bsdf::with_ior(surface.base_color, metallic, surface.roughness, material.ior)
+            };
             // The pick is drawn only among several lights, from its own dimension.
             let u_pick = if self.lights.needs_pick() {
                 sampler.set_dimension(base + 6);
@@ -617,8 +818,10 @@ impl<'a> Integrator<'a> {
             }
             throughput *= bs.weight;
             prev_bsdf_pdf = bs.pdf;
+            prev_delta = false;
             if depth + 1 >= RR_START {
-                let survive = throughput.max_element().min(0.95);
+                // eta_scale is 1 but inside glass: the same bits as without it.
+                let survive = (throughput * eta_scale).max_element().min(0.95);
                 if sampler.next_1d() >= survive {
                     break;
                 }
@@ -634,6 +837,61 @@ impl<'a> Integrator<'a> {
         out.rgb = radiance;
         out
     }
+}
+
+/// The world tangent (along the normal map's +X) at a hit and the sign of
+/// its bitangent (bitangent = sign x (n x tangent), n the world normal of the
+/// front side): glTF TANGENT where the mesh has it, else the triangle's own
+/// from its UVs, through the normal texture's transform (a rotated map turns
+/// its frame with it).
+#[allow(clippy::too_many_arguments)]
+fn tangent_frame(
+    mesh: &Mesh,
+    blend: Option<(&Mesh, f32)>,
+    idx: [usize; 3],
+    bary: [f32; 3],
+    p: [Vec3; 3],
+    world_from_object: &Affine3A,
+    material: &Material,
+    n: Vec3,
+) -> Option<(Vec3, f32)> {
+    let m = world_from_object.matrix3;
+    if mesh.tangents.len() == mesh.positions.len() {
+        let mut t = idx.map(|i| mesh.tangents[i]);
+        if let Some((hi, b)) = blend.filter(|(hi, _)| hi.tangents.len() == mesh.tangents.len()) {
+            t = [0, 1, 2].map(|k| t[k].lerp(hi.tangents[idx[k]], b));
+        }
+        let xyz = m * (t[0] * bary[0] + t[1] * bary[1] + t[2] * bary[2]).truncate();
+        if xyz.length_squared() > 0.0 && t[0].w != 0.0 {
+            // A mirroring transform flips which way n x t turns.
+            return Some((xyz, t[0].w.signum() * m.determinant().signum()));
+        }
+    }
+    let transform = material.normal_texture.map_or(UvTransform::IDENTITY, |t| t.uv);
+    let uv = idx.map(|i| mesh.uvs.get(i).map(|&uv| transform.apply(uv)));
+    let [Some(t0), Some(t1), Some(t2)] = uv else { return None };
+    let (d1, d2) = (t1 - t0, t2 - t0);
+    let det = d1.x * d2.y - d1.y * d2.x;
+    if !(det.abs() > 1e-20) {
+        return None;
+    }
+    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+    let dp_du = m * ((e1 * d2.y - e2 * d1.y) / det);
+    // The map's +Y is up in the image: towards -v, since glTF's v runs down.
+    let up = m * ((e1 * d2.x - e2 * d1.x) / det);
+    let sign = if n.cross(dp_du).dot(up) < 0.0 { -1.0 } else { 1.0 };
+    Some((dp_du, sign))
+}
+
+/// The normal a tangent-space normal map texel (linear RGB in 0..1, glTF:
+/// +X along the tangent, +Y along the bitangent, +Z out of the surface)
+/// gives around unit normal `n`, its X and Y scaled by `scale`; `None` for a
+/// degenerate frame or texel.
+fn normal_map(n: Vec3, tangent: Vec3, sign: f32, texel: Vec4, scale: f32) -> Option<Vec3> {
+    let t = (tangent - n * n.dot(tangent)).try_normalize()?;
+    let b = sign * n.cross(t);
+    let local = Vec3::new((2.0 * texel.x - 1.0) * scale, (2.0 * texel.y - 1.0) * scale, 2.0 * texel.z - 1.0);
+    (t * local.x + b * local.y + n * local.z).try_normalize()
 }
 
 /// Maps a uniform 2D point to a film offset (pixels) distributed as the

@@ -16,7 +16,7 @@ use glam::{Vec2, Vec3};
 
 use super::bsdf::{luminance, sample_concentric_disk, ShadingFrame};
 use super::dome::DomeSampler;
-use super::integrator::sample_texture;
+use super::integrator::surface_emission;
 use crate::scene::lights::{Light, LightKind, SceneLights};
 use crate::scene::{vis, FrameScene, Library, Sun};
 
@@ -361,20 +361,12 @@ impl<'a> LightSampler<'a> {
     }
 
     /// The emission of a triangle's material at barycentrics (b1, b2),
-    /// with its emissive texture.
+    /// with its emissive texture and alpha coverage.
     fn triangle_emission(&self, tri: &Triangle, b1: f32, b2: f32) -> Vec3 {
         let Some(m) = self.lib.materials.get(tri.material as usize) else { return Vec3::ZERO };
-        let Some(tex) = m.emissive_texture.and_then(|t| self.lib.textures.get(t as usize)) else {
-            return m.emission;
-        };
-        let Some(mesh) = self.lib.meshes.get(tri.mesh as usize) else { return m.emission };
-        let k = tri.triangle as usize * 3;
-        match (mesh.indices.get(k..k + 3), mesh.uvs.len() == mesh.positions.len()) {
-            (Some(idx), true) => {
-                let [t0, t1, t2] = [0, 1, 2].map(|j| mesh.uvs[idx[j] as usize]);
-                m.emission * sample_texture(tex, t0 * (1.0 - b1 - b2) + t1 * b1 + t2 * b2).truncate()
-            }
-            _ => m.emission,
+        match self.lib.meshes.get(tri.mesh as usize) {
+            Some(mesh) => surface_emission(self.lib, m, mesh, tri.triangle, b1, b2),
+            None => m.emission,
         }
     }
 

@@ -24,12 +24,14 @@ use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use glam::{Affine3A, Mat4, Quat, Vec2, Vec3};
+use glam::{Affine3A, Mat4, Quat, Vec2, Vec3, Vec4};
 use gltf::accessor::{Accessor, DataType, Dimensions};
 
 use crate::error::{Error, Result};
 use crate::scene::lights::{Light, LightKind};
-use crate::scene::{Camera, Library, Material, MaterialId, Mesh, MeshId, Texture};
+use crate::scene::{
+    AlphaMode, Camera, Library, Material, MaterialId, Mesh, MeshId, Texture, TextureRef, UvTransform, Volume,
+};
 
 /// One parsed glTF file with its buffers loaded (images are decoded only on
 /// demand, so a rig never needs its textures).
@@ -366,6 +368,14 @@ pub fn read_primitive(file: &GltfFile, mesh: &gltf::Mesh, prim: &gltf::Primitive
             return Err(ctx(format!("{} texture coordinates for {n} positions", uvs.len())));
         }
     }
+    let mut tangents = Vec::new();
+    if let Some(acc) = prim.get(&gltf::Semantic::Tangents) {
+        check_accessor(&acc, Dimensions::Vec4, &[DataType::F32]).map_err(ctx)?;
+        tangents = reader.read_tangents().ok_or_else(|| ctx(out_of_range(&acc)))?.map(Vec4::from).collect();
+        if tangents.len() != n {
+            return Err(ctx(format!("{} tangents for {n} positions", tangents.len())));
+        }
+    }
     let indices: Vec<u32> = match prim.indices() {
         Some(acc) => {
             check_accessor(&acc, Dimensions::Scalar, &[DataType::U8, DataType::U16, DataType::U32]).map_err(ctx)?;
@@ -379,7 +389,7 @@ pub fn read_primitive(file: &GltfFile, mesh: &gltf::Mesh, prim: &gltf::Primitive
     if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {
         return Err(ctx(format!("index {bad} is out of range ({n} vertices)")));
     }
-    let mut out = Mesh { name, positions, normals, uvs, indices };
+    let mut out = Mesh { name, positions, normals, uvs, tangents, indices };
     if out.normals.is_empty() {
         out.normals = smooth_normals(&out);
     }
@@ -420,9 +430,17 @@ fn append_mesh(into: &mut Mesh, mut part: Mesh) {
     if part.uvs.is_empty() && !into.uvs.is_empty() {
         part.uvs = vec![Vec2::ZERO; part.positions.len()];
     }
+    // A zero tangent is no tangent: the renderer derives one from the UVs there.
+    if into.tangents.is_empty() && !part.tangents.is_empty() {
+        into.tangents = vec![Vec4::ZERO; into.positions.len()];
+    }
+    if part.tangents.is_empty() && !into.tangents.is_empty() {
+        part.tangents = vec![Vec4::ZERO; part.positions.len()];
+    }
     into.positions.extend(part.positions);
     into.normals.extend(part.normals);
     into.uvs.extend(part.uvs);
+    into.tangents.extend(part.tangents);
     into.indices.extend(part.indices.into_iter().map(|i| i + base));
 }
 
@@ -468,7 +486,8 @@ pub struct AssetCache {
     /// glTF materials by (file, material index; `None` for primitives without one).
     gltf_materials: HashMap<(PathBuf, Option<usize>), MaterialId>,
     materials_by_name: HashMap<String, MaterialId>,
-    textures: HashMap<(PathBuf, usize), u32>,
+    /// Textures by (file, image index, sRGB colour rather than linear data).
+    textures: HashMap<(PathBuf, usize, bool), u32>,
 }
 
 impl AssetCache {
@@ -630,32 +649,7 @@ impl AssetCache {
         let mut material = Material { name: format!("{}#default", src.shown), ..Material::default() };
         if let Some(m) = index.and_then(|i| file.doc.materials().nth(i)) {
             let label = m.name().map(str::to_string).unwrap_or_else(|| format!("material{}", m.index().unwrap_or(0)));
-            let pbr = m.pbr_metallic_roughness();
-            let [r, g, b, _] = pbr.base_color_factor();
-            let texture = match pbr.base_color_texture() {
-                Some(info) => Some(self.texture(src, info.texture().source().index())?),
-                None => None,
-            };
-            let emissive_texture = match m.emissive_texture() {
-                Some(info) => Some(self.texture(src, info.texture().source().index())?),
-                None => None,
-            };
-            let strength = m.emissive_strength().unwrap_or(1.0);
-            let emission = Vec3::from(m.emissive_factor()) * strength;
-            if !(emission.is_finite() && emission.min_element() >= 0.0) {
-                return Err(file.err(format!(
-                    "material `{label}`: emissiveFactor x emissiveStrength must be finite and >= 0, got {emission}"
-                )));
-            }
-            material = Material {
-                name: format!("{}#{label}", src.shown),
-                base_color: Vec3::new(r, g, b),
-                base_color_texture: texture,
-                roughness: pbr.roughness_factor(),
-                metallic: pbr.metallic_factor(),
-                emission,
-                emissive_texture,
-            };
+            material = self.read_material(src, &m, &label)?;
         }
         self.library.materials.push(material.clone());
         let id = (self.library.materials.len() - 1) as MaterialId;
@@ -664,10 +658,171 @@ impl AssetCache {
         Ok(id)
     }
 
-    /// Image `index` of a file as a linear RGBA texture (colour channels
-    /// sRGB-decoded: glTF base colour textures are sRGB; alpha is linear).
-    fn texture(&mut self, src: &Source, index: usize) -> Result<u32> {
-        if let Some(&id) = self.textures.get(&(src.key.clone(), index)) {
+    /// One glTF material, named `<path>#<label>`: the metallic-roughness
+    /// core with its textures, alpha and doubleSided, emission
+    /// (KHR_materials_emissive_strength), KHR_materials_transmission,
+    /// KHR_materials_ior, KHR_materials_volume and KHR_texture_transform.
+    /// occlusionTexture is not read: the path tracer computes occlusion.
+    fn read_material(&mut self, src: &Source, m: &gltf::Material, label: &str) -> Result<Material> {
+        let file = src.file.clone();
+        let err = |field: &str, msg: String| file.err(format!("material `{label}`: {field} {msg}"));
+        let pbr = m.pbr_metallic_roughness();
+        let [r, g, b, alpha] = pbr.base_color_factor();
+        let (base_color_texture, base_color_uv) = match pbr.base_color_texture() {
+            Some(info) => {
+                let t = self.texture_ref(src, &info, true, label, "baseColorTexture")?;
+                (t.map(|t| t.texture), t.map_or(UvTransform::IDENTITY, |t| t.uv))
+            }
+            None => (None, UvTransform::IDENTITY),
+        };
+        let metallic_roughness_texture = match pbr.metallic_roughness_texture() {
+            Some(info) => self.texture_ref(src, &info, false, label, "metallicRoughnessTexture")?,
+            None => None,
+        };
+        let (emissive_texture, emissive_uv) = match m.emissive_texture() {
+            Some(info) => {
+                let t = self.texture_ref(src, &info, true, label, "emissiveTexture")?;
+                (t.map(|t| t.texture), t.map_or(UvTransform::IDENTITY, |t| t.uv))
+            }
+            None => (None, UvTransform::IDENTITY),
+        };
+        let strength = m.emissive_strength().unwrap_or(1.0);
+        let emission = Vec3::from(m.emissive_factor()) * strength;
+        if !(emission.is_finite() && emission.min_element() >= 0.0) {
+            return Err(err("emissiveFactor x emissiveStrength", format!("must be finite and >= 0, got {emission}")));
+        }
+        let alpha_mode = match m.alpha_mode() {
+            gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+            gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+            gltf::material::AlphaMode::Mask => {
+                let cutoff = m.alpha_cutoff().unwrap_or(0.5);
+                if !(cutoff.is_finite() && cutoff >= 0.0) {
+                    return Err(err("alphaCutoff", format!("must be finite and >= 0, got {cutoff}")));
+                }
+                AlphaMode::Mask { cutoff }
+            }
+        };
+        let (normal_texture, normal_scale) = match m.normal_texture() {
+            Some(nt) => {
+                let scale = nt.scale();
+                if !scale.is_finite() {
+                    return Err(err("normalTexture.scale", format!("must be finite, got {scale}")));
+                }
+                let uv = match nt.extension_value("KHR_texture_transform") {
+                    Some(v) => uv_transform_json(v, nt.tex_coord())
+                        .map_err(|e| err("normalTexture.extensions.KHR_texture_transform", e))?,
+                    None => UvTransform { tex_coord: nt.tex_coord(), ..UvTransform::IDENTITY },
+                };
+                let image = nt.texture().source().index();
+                let t = self.texture(src, image, false)?;
+                (usable_uv(uv).map(|uv| TextureRef { texture: t, uv }), scale)
+            }
+            None => (None, 1.0),
+        };
+        let (transmission, transmission_texture) = match m.transmission() {
+            Some(t) => {
+                let factor = t.transmission_factor();
+                if !(0.0..=1.0).contains(&factor) {
+                    return Err(err(
+                        "KHR_materials_transmission.transmissionFactor",
+                        format!("must be 0-1, got {factor}"),
+                    ));
+                }
+                let texture = match t.transmission_texture() {
+                    Some(info) => self.texture_ref(src, &info, false, label, "transmissionTexture")?,
+                    None => None,
+                };
+                (factor, texture)
+            }
+            None => (0.0, None),
+        };
+        let ior = m.ior().unwrap_or(1.5);
+        if !(ior.is_finite() && ior >= 1.0) {
+            return Err(err("KHR_materials_ior.ior", format!("must be finite and >= 1, got {ior}")));
+        }
+        // glTF: a volume of thickness 0 is thin-walled.
+        let volume = match m.volume() {
+            Some(v) if v.thickness_factor() > 0.0 => {
+                let (color, distance) = (Vec3::from(v.attenuation_color()), v.attenuation_distance());
+                if !(color.is_finite() && color.min_element() >= 0.0 && color.max_element() <= 1.0) {
+                    return Err(err("KHR_materials_volume.attenuationColor", format!("must be 0-1, got {color}")));
+                }
+                if !(distance > 0.0) {
+                    return Err(err(
+                        "KHR_materials_volume.attenuationDistance",
+                        format!("must be > 0, got {distance}"),
+                    ));
+                }
+                Some(Volume { attenuation_color: color, attenuation_distance: distance })
+            }
+            Some(v) if !(v.thickness_factor() >= 0.0) => {
+                let t = v.thickness_factor();
+                return Err(err("KHR_materials_volume.thicknessFactor", format!("must be >= 0, got {t}")));
+            }
+            _ => None,
+        };
+        Ok(Material {
+            name: format!("{}#{label}", src.shown),
+            base_color: Vec3::new(r, g, b),
+            base_color_texture,
+            base_color_uv,
+            roughness: pbr.roughness_factor(),
+            metallic: pbr.metallic_factor(),
+            metallic_roughness_texture,
+            emission,
+            emissive_texture,
+            emissive_uv,
+            alpha,
+            alpha_mode,
+            double_sided: m.double_sided(),
+            normal_texture,
+            normal_scale,
+            transmission,
+            transmission_texture,
+            ior,
+            volume,
+        })
+    }
+
+    /// A material's texture reference with its KHR_texture_transform; `None`
+    /// when it reads a UV set other than TEXCOORD_0 (not loaded). `colour`:
+    /// sRGB-encoded colour (base colour, emissive), else linear data.
+    fn texture_ref(
+        &mut self,
+        src: &Source,
+        info: &gltf::texture::Info,
+        colour: bool,
+        label: &str,
+        field: &str,
+    ) -> Result<Option<TextureRef>> {
+        let uv = match info.texture_transform() {
+            Some(t) => {
+                let uv = UvTransform {
+                    offset: Vec2::from(t.offset()),
+                    rotation: t.rotation(),
+                    scale: Vec2::from(t.scale()),
+                    tex_coord: t.tex_coord().unwrap_or(info.tex_coord()),
+                };
+                if !(uv.offset.is_finite() && uv.rotation.is_finite() && uv.scale.is_finite()) {
+                    return Err(src
+                        .file
+                        .err(format!("material `{label}`: {field}.extensions.KHR_texture_transform must be finite")));
+                }
+                uv
+            }
+            None => UvTransform { tex_coord: info.tex_coord(), ..UvTransform::IDENTITY },
+        };
+        let Some(uv) = usable_uv(uv) else { return Ok(None) };
+        let texture = self.texture(src, info.texture().source().index(), colour)?;
+        Ok(Some(TextureRef { texture, uv }))
+    }
+
+    /// Image `index` of a file as a linear RGBA texture: with `colour`, the
+    /// colour channels sRGB-decoded (glTF base colour and emissive textures
+    /// are sRGB), else read as linear data (normal, metallic-roughness and
+    /// transmission maps); alpha is linear either way.
+    fn texture(&mut self, src: &Source, index: usize, colour: bool) -> Result<u32> {
+        if let Some(&id) = self.textures.get(&(src.key.clone(), index, colour)) {
             return Ok(id);
         }
         let file = &src.file;
@@ -713,12 +868,13 @@ impl AssetCache {
         };
         let data = gltf::image::Data::from_source(image.source(), Some(base), &file.buffers)
             .map_err(|e| ctx(format!("cannot decode{from}: {e}")))?;
-        let texels = decode_texels(&data).ok_or_else(|| ctx(format!("unsupported pixel format {:?}", data.format)))?;
+        let texels =
+            decode_texels(&data, colour).ok_or_else(|| ctx(format!("unsupported pixel format {:?}", data.format)))?;
         let texture =
             Texture { name: format!("{}#{label}", src.shown), width: data.width, height: data.height, texels };
         self.library.textures.push(texture);
         let id = (self.library.textures.len() - 1) as u32;
-        self.textures.insert((src.key.clone(), index), id);
+        self.textures.insert((src.key.clone(), index, colour), id);
         Ok(id)
     }
 
@@ -749,7 +905,7 @@ impl AssetCache {
     /// per path: wardrobe materials' `base_color_texture`.
     pub fn texture_png(&mut self, path: impl AsRef<Path>) -> Result<u32> {
         let path = path.as_ref();
-        let key = (std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?, usize::MAX);
+        let key = (std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?, usize::MAX, true);
         if let Some(&id) = self.textures.get(&key) {
             return Ok(id);
         }
@@ -844,7 +1000,7 @@ impl AssetCache {
             let name = node.name().map(str::to_string).unwrap_or_else(|| format!("#{}", node.index()));
             let err = |m: String| file.err(format!("light on node `{name}`: {m}"));
             let (color, intensity) = (Vec3::from(light.color()), light.intensity());
-            if !(intensity >= 0.0 && intensity.is_finite()) || !(color.is_finite() && color.min_element() >= 0.0) {
+            if !(intensity >= 0.0 && intensity.is_finite() && color.is_finite() && color.min_element() >= 0.0) {
                 return Err(err(format!("intensity {intensity} and color {color} must be finite and >= 0")));
             }
             let kind = match light.kind() {
@@ -874,8 +1030,41 @@ impl AssetCache {
     }
 }
 
-/// Linear RGBA texels from decoded image data; `None` for formats we do not read.
-fn decode_texels(data: &gltf::image::Data) -> Option<Vec<[f32; 4]>> {
+/// `uv` if it reads a UV set throng loads (TEXCOORD_0 only).
+fn usable_uv(uv: UvTransform) -> Option<UvTransform> {
+    (uv.tex_coord == 0).then_some(uv)
+}
+
+/// KHR_texture_transform from its JSON (for normalTexture, which the gltf
+/// crate does not parse it on); `tex_coord` is the textureInfo's own set.
+fn uv_transform_json(v: &gltf::json::Value, tex_coord: u32) -> std::result::Result<UvTransform, String> {
+    let pair = |key: &str, default: Vec2| -> std::result::Result<Vec2, String> {
+        match v.get(key) {
+            None => Ok(default),
+            Some(a) => match a.as_array().map(|a| a.iter().map(|x| x.as_f64()).collect::<Vec<_>>()).as_deref() {
+                Some([Some(x), Some(y)]) => Ok(Vec2::new(*x as f32, *y as f32)),
+                _ => Err(format!("{key} must be two numbers")),
+            },
+        }
+    };
+    let rotation = match v.get("rotation") {
+        None => 0.0,
+        Some(r) => r.as_f64().ok_or("rotation must be a number")? as f32,
+    };
+    let tex_coord = match v.get("texCoord") {
+        None => tex_coord,
+        Some(t) => t.as_u64().and_then(|t| u32::try_from(t).ok()).ok_or("texCoord must be a set index")?,
+    };
+    let uv = UvTransform { offset: pair("offset", Vec2::ZERO)?, rotation, scale: pair("scale", Vec2::ONE)?, tex_coord };
+    if !(uv.offset.is_finite() && uv.rotation.is_finite() && uv.scale.is_finite()) {
+        return Err("must be finite".into());
+    }
+    Ok(uv)
+}
+
+/// Linear RGBA texels from decoded image data (RGB sRGB-decoded when
+/// `colour`); `None` for formats we do not read.
+fn decode_texels(data: &gltf::image::Data, colour: bool) -> Option<Vec<[f32; 4]>> {
     use gltf::image::Format;
     let px = &data.pixels;
     let u16_at = |i: usize| u16::from_ne_bytes([px[2 * i], px[2 * i + 1]]) as f32 / 65535.0;
@@ -905,7 +1094,11 @@ fn decode_texels(data: &gltf::image::Data) -> Option<Vec<[f32; 4]>> {
                 3 => ([c[0], c[1], c[2]], 1.0),
                 _ => ([c[0], c[1], c[2]], c[3]),
             };
-            [srgb_to_linear(rgb[0]), srgb_to_linear(rgb[1]), srgb_to_linear(rgb[2]), a]
+            if colour {
+                [srgb_to_linear(rgb[0]), srgb_to_linear(rgb[1]), srgb_to_linear(rgb[2]), a]
+            } else {
+                [rgb[0], rgb[1], rgb[2], a]
+            }
         })
         .collect();
     Some(texels)

@@ -8,7 +8,7 @@ pub mod dome;
 pub mod gltf;
 pub mod lights;
 
-use glam::{Affine3A, Vec2, Vec3};
+use glam::{Affine3A, Vec2, Vec3, Vec4};
 
 /// `render.working_colourspace` (read by `shot`): the RGB space light is computed in. Every
 /// input colour (materials, textures, lights) is authored in linear Rec.709;
@@ -40,6 +40,11 @@ pub struct Mesh {
     pub normals: Vec<Vec3>,
     /// Per-vertex texture coordinates (same length as positions, or empty).
     pub uvs: Vec<Vec2>,
+    /// Per-vertex tangents for normal maps, glTF TANGENT: xyz along +u, w
+    /// the bitangent's sign (bitangent = w * normal x tangent). Same length as
+    /// positions, or empty: the renderer then derives a tangent per triangle
+    /// from its UVs.
+    pub tangents: Vec<Vec4>,
     /// Triangle list, three indices per triangle.
     pub indices: Vec<u32>,
 }
@@ -90,9 +95,13 @@ impl Mesh {
         m
     }
 
-    /// Bytes of geometry this mesh holds (positions, normals, uvs, indices).
+    /// Bytes of geometry this mesh holds (positions, normals, uvs, tangents, indices).
     pub fn bytes(&self) -> usize {
-        self.positions.len() * 12 + self.normals.len() * 12 + self.uvs.len() * 8 + self.indices.len() * 4
+        self.positions.len() * 12
+            + self.normals.len() * 12
+            + self.uvs.len() * 8
+            + self.tangents.len() * 16
+            + self.indices.len() * 4
     }
 }
 
@@ -120,7 +129,105 @@ pub struct Texture {
     pub texels: Vec<[f32; 4]>,
 }
 
-/// glTF metallic-roughness material.
+/// glTF `alphaMode`: how a material's alpha (base colour factor alpha x
+/// base colour texture alpha) is used. Alpha is coverage: where the surface
+/// is not there, every ray (camera, shadow, bounce) passes through it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum AlphaMode {
+    /// Alpha is ignored: the surface is everywhere.
+    #[default]
+    Opaque,
+    /// The surface is there where alpha >= `cutoff` (glTF alphaCutoff, default 0.5).
+    Mask {
+        /// Alpha below this is a hole.
+        cutoff: f32,
+    },
+    /// Stochastic coverage: a ray passes through with probability 1 - alpha,
+    /// decided by a hash of the ray and the triangle (deterministic).
+    Blend,
+}
+
+/// glTF KHR_texture_transform on one texture reference: `uv' = T R S uv`
+/// (offset, rotation in radians, scale), and the UV set the texture reads
+/// (`texCoord`, the transform's override if it has one). throng reads
+/// TEXCOORD_0 only: a texture on another set is left out.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UvTransform {
+    /// Offset, in units of the texture.
+    pub offset: Vec2,
+    /// Rotation, radians (the glTF extension's sense).
+    pub rotation: f32,
+    /// Scale.
+    pub scale: Vec2,
+    /// The UV set (TEXCOORD_n).
+    pub tex_coord: u32,
+}
+
+impl UvTransform {
+    /// No transform, UV set 0.
+    pub const IDENTITY: UvTransform = UvTransform { offset: Vec2::ZERO, rotation: 0.0, scale: Vec2::ONE, tex_coord: 0 };
+
+    /// The texture coordinate `uv` maps to: scaled, rotated, then offset, as
+    /// KHR_texture_transform's matrix `translation * rotation * scale`. The
+    /// identity returns `uv` itself, bit for bit.
+    #[inline]
+    pub fn apply(&self, uv: Vec2) -> Vec2 {
+        if self.offset == Vec2::ZERO && self.rotation == 0.0 && self.scale == Vec2::ONE {
+            return uv;
+        }
+        let s = uv * self.scale;
+        let (sin, cos) = self.rotation.sin_cos();
+        Vec2::new(cos * s.x + sin * s.y, cos * s.y - sin * s.x) + self.offset
+    }
+}
+
+impl Default for UvTransform {
+    fn default() -> Self {
+        UvTransform::IDENTITY
+    }
+}
+
+/// A texture a material reads: which one, and through which transform.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TextureRef {
+    /// Index into [`Library::textures`].
+    pub texture: u32,
+    /// KHR_texture_transform and UV set.
+    pub uv: UvTransform,
+}
+
+impl TextureRef {
+    /// Texture `texture` with no transform, UV set 0.
+    pub fn plain(texture: u32) -> TextureRef {
+        TextureRef { texture, uv: UvTransform::IDENTITY }
+    }
+}
+
+/// KHR_materials_volume: the mesh encloses a solid of the material's `ior`
+/// (rays refract where they enter and leave), absorbing by Beer's law.
+/// Without it a transmissive material is a thin wall.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Volume {
+    /// The colour white light becomes after `attenuation_distance` inside.
+    pub attenuation_color: Vec3,
+    /// Metres; infinite: no absorption.
+    pub attenuation_distance: f32,
+}
+
+impl Volume {
+    /// Absorption coefficient per metre, per channel: -ln(colour) / distance.
+    pub fn absorption(&self) -> Vec3 {
+        let d = self.attenuation_distance;
+        if !(d.is_finite() && d > 0.0) {
+            return Vec3::ZERO;
+        }
+        let c = self.attenuation_color.clamp(Vec3::splat(1e-6), Vec3::ONE);
+        Vec3::new(-c.x.ln(), -c.y.ln(), -c.z.ln()) / d
+    }
+}
+
+/// glTF metallic-roughness material, with the extensions a lit set needs
+/// (docs/render.md, Materials).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
     /// Unique name, e.g. `robots/chrome`.
@@ -129,16 +236,42 @@ pub struct Material {
     pub base_color: Vec3,
     /// Optional base colour texture, index into [`Library::textures`]; multiplies the factor.
     pub base_color_texture: Option<u32>,
+    /// KHR_texture_transform of the base colour texture.
+    pub base_color_uv: UvTransform,
     /// Perceptual roughness 0..1.
     pub roughness: f32,
     /// Metalness 0..1.
     pub metallic: f32,
+    /// glTF metallicRoughnessTexture (linear): G multiplies roughness, B metallic.
+    pub metallic_roughness_texture: Option<TextureRef>,
     /// Emitted radiance, W/(m^2 sr), linear: glTF emissiveFactor x
     /// KHR_materials_emissive_strength. Emitted from the front face
     /// (counter-clockwise winding) only; zero for most materials.
     pub emission: Vec3,
     /// Optional emissive texture, index into [`Library::textures`]; multiplies `emission`.
     pub emissive_texture: Option<u32>,
+    /// KHR_texture_transform of the emissive texture.
+    pub emissive_uv: UvTransform,
+    /// Base colour factor alpha (coverage; see `alpha_mode`).
+    pub alpha: f32,
+    /// glTF alphaMode.
+    pub alpha_mode: AlphaMode,
+    /// glTF doubleSided. Kept for export; every surface renders from both
+    /// sides (docs/render.md says why).
+    pub double_sided: bool,
+    /// Tangent-space normal map (linear; glTF normalTexture).
+    pub normal_texture: Option<TextureRef>,
+    /// glTF normalTexture.scale: scales the map's X and Y.
+    pub normal_scale: f32,
+    /// KHR_materials_transmission factor 0..1: the share of the light
+    /// entering a dielectric surface that goes through it (0: opaque).
+    pub transmission: f32,
+    /// Transmission texture (linear, R channel); multiplies `transmission`.
+    pub transmission_texture: Option<TextureRef>,
+    /// KHR_materials_ior, >= 1 (glTF default 1.5): the dielectric's Fresnel and refraction.
+    pub ior: f32,
+    /// KHR_materials_volume; `None`: thin-walled.
+    pub volume: Option<Volume>,
 }
 
 impl Default for Material {
@@ -147,11 +280,30 @@ impl Default for Material {
             name: "default".into(),
             base_color: Vec3::splat(0.8),
             base_color_texture: None,
+            base_color_uv: UvTransform::IDENTITY,
             roughness: 0.5,
             metallic: 0.0,
+            metallic_roughness_texture: None,
             emission: Vec3::ZERO,
             emissive_texture: None,
+            emissive_uv: UvTransform::IDENTITY,
+            alpha: 1.0,
+            alpha_mode: AlphaMode::Opaque,
+            double_sided: true,
+            normal_texture: None,
+            normal_scale: 1.0,
+            transmission: 0.0,
+            transmission_texture: None,
+            ior: 1.5,
+            volume: None,
         }
+    }
+}
+
+impl Material {
+    /// Whether rays may pass through holes in it (alpha MASK or BLEND).
+    pub fn has_cutouts(&self) -> bool {
+        self.alpha_mode != AlphaMode::Opaque
     }
 }
 
