@@ -200,7 +200,7 @@ fn checker() -> Texture {
 /// the image exactly, rows top to bottom).
 fn solid_cell(x: u32, y: u32) -> bool {
     let per = CHECKER_RES / 4;
-    (x / per + y / per) % 2 == 0
+    (x / per + y / per).is_multiple_of(2)
 }
 
 fn checker_settings(spp: u32, threads: usize) -> RenderSettings {
