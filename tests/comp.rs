@@ -97,15 +97,17 @@ fn renders() -> &'static Renders {
         render(&crowd, &manifest, &["set", "crowd2", "crowd1", "crowd0", "full"], &a);
         // Another seed: an independent sample of the same full render.
         let seed = crowd.shot().seed;
-        let crowd = crowd.with_shot(|shot| shot.seed = seed + 1);
+        let crowd = crowd.with_shot(|shot| shot.seed = seed + 1).unwrap();
         render(&crowd, &manifest, &["full"], &dir.join("b"));
         // Removal keeps casting and layers, so only these agents go.
-        let crowd = crowd.with_shot(|shot| {
-            shot.seed = seed;
-            shot.removed = manifest.agents.iter().map(|a| a.id).collect();
-        });
+        let crowd = crowd
+            .with_shot(|shot| {
+                shot.seed = seed;
+                shot.removed = manifest.agents.iter().map(|a| a.id).collect();
+            })
+            .unwrap();
         render(&crowd, &manifest, &["set"], &dir.join("bare"));
-        let crowd = crowd.with_shot(|shot| shot.removed = vec![1]);
+        let crowd = crowd.with_shot(|shot| shot.removed = vec![1]).unwrap();
         render(&crowd, &manifest, &["crowd1"], &dir.join("without1"));
         Renders {
             full_b: read(&dir.join("b"), "full"),

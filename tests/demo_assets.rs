@@ -250,7 +250,7 @@ fn rigs_follow_spec() {
 }
 
 #[test]
-fn set_has_benches_camera_and_sun() {
+fn set_has_benches_camera_lamps_and_shop_windows() {
     let (doc, _, _) = import("demo/set/set.glb");
     let mut benches: Vec<[f32; 3]> = doc
         .nodes()
@@ -265,9 +265,33 @@ fn set_has_benches_camera_and_sun() {
     assert_eq!(bb.max, [1.5, 0.9, 0.25]);
     let cam = doc.nodes().find(|n| n.name() == Some("shotcam")).unwrap();
     assert!(cam.camera().is_some());
-    assert_eq!(cam.transform().decomposed().0, [0.0, 1.7, 24.0]);
-    let sun = doc.nodes().find(|n| n.light().is_some()).unwrap();
-    assert!(matches!(sun.light().unwrap().kind(), gltf::khr_lights_punctual::Kind::Directional));
+    let shot = toml_file("demo/shot.toml");
+    let key = &shot["camera"]["keys"][0]["position"];
+    let first_key: Vec<f32> = key.as_array().unwrap().iter().map(|v| v.as_float().unwrap() as f32).collect();
+    assert_eq!(cam.transform().decomposed().0.to_vec(), first_key, "shotcam sits at the first camera key");
+    // The sun is the dome's: a set sun would light the shot twice.
+    assert!(doc.nodes().all(|n| n.light().is_none()), "the set carries no lights of its own");
+    // Street lamps, each under one of the shot's camera-visible sphere lights.
+    let lamps: Vec<[f32; 3]> = doc
+        .nodes()
+        .filter(|n| n.name().is_some_and(|s| s.starts_with("lamp_")))
+        .map(|n| n.transform().decomposed().0)
+        .collect();
+    let globes = shot["lights"]["sphere"].as_array().expect("[[lights.sphere]] globes");
+    assert_eq!(lamps.len(), 4);
+    assert_eq!(globes.len(), lamps.len());
+    for (lamp, globe) in lamps.iter().zip(globes) {
+        let p: Vec<f64> = globe["position"].as_array().unwrap().iter().map(|v| v.as_float().unwrap()).collect();
+        assert!((p[0] - lamp[0] as f64).abs() < 1e-6 && p[1] > 3.0 && (p[2] - lamp[2] as f64).abs() < 1.0, "{p:?}");
+        assert_eq!(globe["camera_visible"].as_bool(), Some(true));
+    }
+    // Lit shop windows: emissive, so next-event estimation finds them.
+    let shops = doc.meshes().filter(|m| m.name().is_some_and(|s| s.ends_with("_shops"))).collect::<Vec<_>>();
+    assert_eq!(shops.len(), 3);
+    for m in &shops {
+        let e = m.primitives().next().unwrap().material().emissive_factor();
+        assert!(e.iter().all(|&c| c > 0.0), "{:?}: emissive {e:?}", m.name());
+    }
     let floor = doc.meshes().find(|m| m.name() == Some("floor")).unwrap();
     let mat = floor.primitives().next().unwrap().material();
     assert!((mat.pbr_metallic_roughness().roughness_factor() - 0.2).abs() < 0.05);
@@ -459,4 +483,34 @@ fn wardrobes_and_shot_agree() {
         }
     }
     assert_eq!(shot["layers"]["count"].as_integer(), Some(3));
+    // Lit by the shared HDRI, copied in with its licence.
+    let dome = crate_path("demo").join(shot["lights"]["dome"]["file"].as_str().unwrap());
+    let shared = common::shared_asset("hdri/quarry_01_1k.hdr");
+    assert_eq!(std::fs::read(&dome).unwrap(), std::fs::read(&shared).unwrap(), "{}", dome.display());
+    let source = std::fs::read_to_string(dome.with_file_name("SOURCE.md")).unwrap();
+    assert!(source.contains("CC0"), "the HDRI's licence is recorded beside it");
+}
+
+/// Nobody walks through a lamp post: the posts stand clear of every agent
+/// of every frame of the cache.
+#[test]
+fn lamp_posts_stand_clear_of_the_crowd() {
+    let (doc, _, _) = import("demo/set/set.glb");
+    let posts: Vec<[f32; 3]> = doc
+        .nodes()
+        .filter(|n| n.name().is_some_and(|s| s.starts_with("lamp_")))
+        .map(|n| n.transform().decomposed().0)
+        .collect();
+    assert!(!posts.is_empty());
+    let crowd = throng::cache::read(crate_path("demo/cache/demo.crowd")).unwrap();
+    let mut nearest = f32::INFINITY;
+    for f in &crowd.frames {
+        for a in &f.agents {
+            for p in &posts {
+                nearest = nearest.min(((a.position.x - p[0]).powi(2) + (a.position.z - p[2]).powi(2)).sqrt());
+            }
+        }
+    }
+    // Agent radius 0.3 (demo/sim/demo.toml) plus the post's half-width and room.
+    assert!(nearest > 1.0, "an agent comes within {nearest} m of a lamp post");
 }

@@ -182,6 +182,32 @@ fn a_constant_dome_gives_albedo_times_radiance() {
     assert_matches(&film, |_| ALBEDO * 2.0, 0.02, "constant dome");
 }
 
+/// Environment and local lights together (one shadow ray to each group):
+/// the dome's and the lamp's irradiance add up, each as alone.
+#[test]
+fn a_dome_and_a_point_light_add_up() {
+    let dome = Dome {
+        file: "constant".into(),
+        width: 16,
+        height: 8,
+        texels: vec![Vec3::splat(0.5); 128],
+        scale: Vec3::ONE,
+        rotate: 0.0,
+        camera_visible: true,
+    };
+    let (i, h) = (30.0, 2.0);
+    let p0 = Vec3::new(-0.3, h, 0.5);
+    let lights =
+        SceneLights { dome: Some(Arc::new(dome)), ..local(vec![light(LightKind::Point, p0, -Vec3::Y, i)]) };
+    let (lib, scene) = floor_scene(lights, vec![]);
+    let film = render(&lib, &scene, 16, 2);
+    let expected = |p: Vec3| {
+        let r = p0 - p;
+        ALBEDO * 0.5 + ALBEDO / PI * i * h / r.length().powi(3)
+    };
+    assert_matches(&film, expected, 0.03, "dome + point light");
+}
+
 #[test]
 fn a_point_light_falls_off_with_distance_squared_and_cosine() {
     let (i, h) = (30.0, 2.0);

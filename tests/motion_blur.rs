@@ -316,7 +316,7 @@ fn blurred_stack_matches_blurred_full_render() {
     let mut layers = job::all_layers(&manifest);
     layers.push("full".into());
     render(&crowd, layers, &dir.path().join("a"));
-    let crowd = crowd.with_shot(|shot| shot.seed += 1);
+    let crowd = crowd.with_shot(|shot| shot.seed += 1).unwrap();
     render(&crowd, vec!["full".into()], &dir.path().join("b"));
     let read = |d: &str, l: &str| {
         throng::render::exr::read_layer(&throng::output::layer_path(&dir.path().join(d), "demo", l, frame)).unwrap().0

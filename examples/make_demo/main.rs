@@ -75,13 +75,19 @@ fn shot_toml() -> String {
             f3(aim)
         );
     }
-    let _ = write!(
-        s,
-        "\n[lights.sun]\ndirection = {}\nangular_diameter = {SUN_ANGULAR_DIAMETER:?}\nintensity = {SUN_INTENSITY:?}\ncolor = {}\n",
-        f3(SUN_TOWARDS),
-        f3(SUN_COLOR)
-    );
-    let _ = write!(s, "[lights.sky]\ncolor = {}\nintensity = {SKY_INTENSITY:?}\n", f3(SKY_COLOR));
+    // Lit like a plate: the HDRI (its sun and sky) and the set's practicals.
+    let _ =
+        write!(s, "\n[lights.dome]\nfile = {DOME_FILE:?}\nintensity = {DOME_INTENSITY:?}\nrotate = {DOME_ROTATE:?}\n");
+    for (i, x) in LAMP_XS.iter().enumerate() {
+        let _ = write!(
+            s,
+            "\n[[lights.sphere]]\nname = \"lamp_{}\"\nposition = {}\nradius = {LAMP_RADIUS:?}\n\
+             intensity = {LAMP_RADIANCE:?}\ncolor = {}\ncamera_visible = true\n",
+            i + 1,
+            f3(lamp_globe(*x)),
+            f3(LAMP_COLOR)
+        );
+    }
     s.push_str("\n[layers]\nsplit = \"count\"\ncount = 3\npins = []\nlod_full_min_px = 40.0\n");
     let _ = write!(s, "\n[render]\nresolution = [{}, {}]\nspp = 16\nmax_bounces = 4\n", RESOLUTION[0], RESOLUTION[1]);
     s

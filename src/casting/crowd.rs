@@ -32,7 +32,7 @@ use crate::scene::dome::load_dome;
 use crate::scene::gltf::AssetCache;
 use crate::scene::lights::{Dome, Light, LightKind, SceneLights};
 use crate::scene::{vis, Camera, Instance, InstanceAgent, Library, Material, Rec709, Space, Texture};
-use crate::shot::Shot;
+use crate::shot::{DomeSpec, Shot};
 
 /// Level of detail an agent renders at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -134,16 +134,32 @@ impl LoadedLights {
             )),
             None => None,
         };
-        let mut set = match &shot.set {
+        let set = match &shot.set {
             Some(s) => assets.punctual_lights(&s.file).map_err(|e| e.or_field("set.file"))?,
             None => Vec::new(),
         };
-        // The shot's sun is the sun: the set's directional lights light the
-        // shot only when it has none (docs/lights.md).
-        if shot.lights.sun.is_some() {
-            set.retain(|l| !matches!(l.kind, LightKind::Distant { .. }));
-        }
         Ok(LoadedLights { dome, set })
+    }
+
+    /// The dome as `spec` now asks: the same map turned, scaled or hidden
+    /// anew without reading it again; another file is read.
+    fn refresh_dome(&mut self, spec: Option<&DomeSpec>) -> Result<()> {
+        self.dome = match (spec, self.dome.take()) {
+            (None, _) => None,
+            (Some(d), Some(old)) if old.file == d.file => {
+                if (old.scale, old.rotate, old.camera_visible) == (d.scale, d.rotate, d.camera_visible) {
+                    Some(old)
+                } else {
+                    let mut dome = Arc::unwrap_or_clone(old);
+                    (dome.scale, dome.rotate, dome.camera_visible) = (d.scale, d.rotate, d.camera_visible);
+                    Some(Arc::new(dome))
+                }
+            }
+            (Some(d), _) => Some(Arc::new(
+                load_dome(&d.file, d.scale, d.rotate, d.camera_visible).map_err(|e| e.or_field("lights.dome.file"))?,
+            )),
+        };
+        Ok(())
     }
 }
 
@@ -204,10 +220,13 @@ impl ShotCrowd {
 
     /// The same cast shot with `edit` applied to its shot, for what later
     /// stages read of it (a render's seed and lights, removed agents):
-    /// casting, dressing and poses stay as they were built.
-    pub fn with_shot(mut self, edit: impl FnOnce(&mut Shot)) -> ShotCrowd {
+    /// casting, dressing and poses stay as they were built. The dome
+    /// follows the edited `[lights.dome]` (a new file is read, hence the
+    /// `Result`).
+    pub fn with_shot(mut self, edit: impl FnOnce(&mut Shot)) -> Result<ShotCrowd> {
         edit(&mut self.shot);
-        self
+        self.lights.refresh_dome(self.shot.lights.dome.as_ref())?;
+        Ok(self)
     }
 
     /// The same cast shot with its library's colours converted by `convert`
@@ -263,7 +282,12 @@ impl<C> ShotCrowd<C> {
     pub fn lights(&self) -> SceneLights {
         let l = &self.shot.lights;
         let mut local = l.local.clone();
-        local.extend(self.lights.set.iter().cloned());
+        // The shot's sun is the sun: the set's directional lights light the
+        // shot only when it has none (docs/lights.md).
+        let set_sun = l.sun.is_none();
+        local.extend(
+            self.lights.set.iter().filter(|s| set_sun || !matches!(s.kind, LightKind::Distant { .. })).cloned(),
+        );
         SceneLights { sun: l.sun(), sky: l.sky(), dome: self.lights.dome.clone(), local }
     }
 

@@ -153,6 +153,10 @@ pub struct MaterialDesc {
     pub base_color_png: Option<Vec<u8>>,
     /// Render both faces.
     pub double_sided: bool,
+    /// Emitted radiance (linear RGB, W/(m^2 sr) in throng's units): written
+    /// as `emissiveFactor` scaled into 0..1, with the rest as
+    /// KHR_materials_emissive_strength. Black: not emissive.
+    pub emission: [f32; 3],
 }
 
 impl MaterialDesc {
@@ -165,6 +169,7 @@ impl MaterialDesc {
             roughness: 0.5,
             base_color_png: None,
             double_sided: false,
+            emission: [0.0; 3],
         }
     }
     /// Sets metalness and roughness.
@@ -176,6 +181,11 @@ impl MaterialDesc {
     /// Embeds a PNG as the base colour texture.
     pub fn texture_png(mut self, png: Vec<u8>) -> Self {
         self.base_color_png = Some(png);
+        self
+    }
+    /// Makes the material emit `radiance` from its front faces.
+    pub fn emission(mut self, radiance: [f32; 3]) -> Self {
+        self.emission = radiance;
         self
     }
 }
@@ -600,9 +610,31 @@ impl GlbBuilder {
             });
             json::texture::Info { index: texture, tex_coord: 0, extensions: None, extras: None }
         });
+        // glTF keeps emissiveFactor in 0..1; anything brighter goes in the
+        // strength extension, which is how throng reads it back.
+        let strength = desc.emission.iter().fold(0.0f32, |m, &c| m.max(c));
+        let (emissive_factor, extensions) = if strength > 1.0 {
+            const EXT: &str = "KHR_materials_emissive_strength";
+            if !self.root.extensions_used.iter().any(|e| e == EXT) {
+                self.root.extensions_used.push(EXT.to_string());
+            }
+            // Other gltf features add fields to this struct; keep the default for them.
+            #[allow(clippy::needless_update)]
+            let ext = json::extensions::material::Material {
+                emissive_strength: Some(json::extensions::material::EmissiveStrength {
+                    emissive_strength: json::extensions::material::EmissiveStrengthFactor(strength),
+                }),
+                ..Default::default()
+            };
+            (desc.emission.map(|c| c / strength), Some(ext))
+        } else {
+            (desc.emission, None)
+        };
         let index = self.root.push(json::Material {
             name: Some(desc.name.clone()),
             double_sided: desc.double_sided,
+            emissive_factor: json::material::EmissiveFactor(emissive_factor),
+            extensions,
             pbr_metallic_roughness: json::material::PbrMetallicRoughness {
                 base_color_factor: json::material::PbrBaseColorFactor(desc.base_color),
                 base_color_texture,

@@ -56,7 +56,9 @@ impl Writer<'_> {
             None => {
                 let src = &self.lib.materials[material as usize];
                 let c = src.base_color;
-                let desc = MaterialDesc::new(src.name.clone(), [c.x, c.y, c.z, 1.0]).pbr(src.metallic, src.roughness);
+                let desc = MaterialDesc::new(src.name.clone(), [c.x, c.y, c.z, 1.0])
+                    .pbr(src.metallic, src.roughness)
+                    .emission(src.emission.to_array());
                 let m = self.glb.add_material(&desc);
                 self.materials.insert(material, m);
                 m

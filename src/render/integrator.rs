@@ -770,41 +770,51 @@ impl<'a> Integrator<'a> {
                     if glass_weight > 0.0 { surface.metallic / (1.0 - glass_weight) } else { surface.metallic };
                 Bsdf::with_ior(surface.base_color, metallic, surface.roughness, material.ior)
             };
-            // The pick is drawn only among several lights, from its own dimension.
-            let u_pick = if self.lights.needs_pick() {
-                sampler.set_dimension(base + 6);
-                sampler.next_1d()
-            } else {
-                0.0
-            };
-            sampler.set_dimension(base);
-
-            // Next-event estimation: one shadow ray towards one light.
-            let u_light = sampler.next_2d();
-            if let Some(ls) = self.lights.sample(surface.p, u_pick, u_light) {
-                if ls.wi.dot(surface.ng) > 0.0 {
-                    let wi_local = frame.to_local(ls.wi);
-                    let f = bsdf.eval(wo, wi_local);
-                    if f != Vec3::ZERO {
-                        counts.shadow += 1;
-                        // Stop short of a light at a distance: an emissive triangle must not shadow itself.
-                        let tmax = if ls.distance.is_finite() { ls.distance * (1.0 - 1e-4) } else { f32::INFINITY };
-                        let shadow =
-                            WorldRay { origin: offset_ray_origin(surface.p, surface.ng), direction: ls.wi, tmax, time };
-                        if !self.tlas.occluded(&shadow, vis::SHADOW) {
-                            // At the last vertex no BSDF ray follows to find the light: NEE alone, weight 1.
-                            let contribution = if ls.delta || depth >= self.settings.max_bounces {
-                                f * wi_local.z * ls.radiance / ls.pdf
-                            } else {
-                                let weight = power_heuristic(ls.pdf, bsdf.pdf(wo, wi_local));
-                                f * wi_local.z * ls.radiance * (weight / ls.pdf)
-                            };
-                            let contribution = throughput * contribution;
-                            radiance += if camera { contribution } else { self.clamp_indirect(contribution) };
-                        }
-                    }
+            // Next-event estimation: one shadow ray to one light of each
+            // group (render::lights). The first group draws from this
+            // bounce's dimensions (its pick only among several lights), a
+            // second from a stream of its own.
+            for (g, &group) in self.lights.groups().iter().enumerate() {
+                let (u_pick, u_light) = if g == 0 {
+                    let u_pick = if self.lights.needs_pick(group) {
+                        sampler.set_dimension(base + 6);
+                        sampler.next_1d()
+                    } else {
+                        0.0
+                    };
+                    sampler.set_dimension(base);
+                    (u_pick, sampler.next_2d())
+                } else {
+                    sampler.second_light(depth)
+                };
+                let Some(ls) = self.lights.sample(group, surface.p, u_pick, u_light) else { continue };
+                if ls.wi.dot(surface.ng) <= 0.0 {
+                    continue;
                 }
+                let wi_local = frame.to_local(ls.wi);
+                let f = bsdf.eval(wo, wi_local);
+                if f == Vec3::ZERO {
+                    continue;
+                }
+                counts.shadow += 1;
+                // Stop short of a light at a distance: an emissive triangle must not shadow itself.
+                let tmax = if ls.distance.is_finite() { ls.distance * (1.0 - 1e-4) } else { f32::INFINITY };
+                let shadow =
+                    WorldRay { origin: offset_ray_origin(surface.p, surface.ng), direction: ls.wi, tmax, time };
+                if self.tlas.occluded(&shadow, vis::SHADOW) {
+                    continue;
+                }
+                // At the last vertex no BSDF ray follows to find the light: NEE alone, weight 1.
+                let contribution = if ls.delta || depth >= self.settings.max_bounces {
+                    f * wi_local.z * ls.radiance / ls.pdf
+                } else {
+                    let weight = power_heuristic(ls.pdf, bsdf.pdf(wo, wi_local));
+                    f * wi_local.z * ls.radiance * (weight / ls.pdf)
+                };
+                let contribution = throughput * contribution;
+                radiance += if camera { contribution } else { self.clamp_indirect(contribution) };
             }
+            sampler.set_dimension(base + 2);
 
             if depth >= self.settings.max_bounces {
                 break;

@@ -381,6 +381,7 @@ pub fn render_fingerprint<C>(
         .value("resolution", &job.resolution.unwrap_or(shot.render.resolution))
         .value("seed", &shot.seed)
         .value("max_bounces", &shot.render.max_bounces)
+        .value("indirect_clamp", &shot.render.indirect_clamp)
         .value("sensor_width", &shot.camera.sensor_width)
         .debug("camera keys", &shot.camera.keys)
         .debug("camera node", &shot.camera.gltf.as_ref().map(|(_, node)| node))
@@ -566,6 +567,7 @@ pub fn run<C: Space>(
                 height: h,
                 spp: job.spp,
                 max_bounces: crowd.shot().render.max_bounces,
+                indirect_clamp: crowd.shot().render.indirect_clamp,
                 seed: crowd.shot().seed,
                 frame: frame as i64,
                 layer: index,

@@ -1,12 +1,21 @@
 //! Next-event estimation over every light of a frame scene: the sun and the
 //! set's distant lights, an HDRI dome, point, spot, rect, disk and sphere
-//! lights, and every emissive triangle. One light is picked per shading
-//! point in proportion to its power (an alias table), so the cost of a shadow
-//! ray does not grow with the number of lights; each light then samples a
-//! point by solid angle (cones for the sun and spheres, the dome's own
-//! distribution) or by area, converted to solid angle. Rays that hit a light
-//! (an emissive surface, a sized light, the dome) are weighted against that
-//! pdf by multiple importance sampling in the integrator.
+//! lights, and every emissive triangle. The lights fall in two groups, the
+//! environment (the sun, distant lights, the dome: light from infinitely
+//! far) and the local lights (points, spots, sized lights, emissive
+//! triangles). A shading point sends one shadow ray per group the scene
+//! has, to one light of it picked in proportion to its power (an alias
+//! table), so the cost does not grow with the number of lights; each light
+//! then samples a point by solid angle (cones for the sun and spheres, the
+//! dome's own distribution) or by area, converted to solid angle. Rays that
+//! hit a light (an emissive surface, a sized light, the dome) are weighted
+//! against that pdf by multiple importance sampling in the integrator.
+//!
+//! Why two groups: by power the sun and dome (what they pour onto the whole
+//! scene) dwarf a street lamp, so one pick among all would almost never
+//! choose the lamp for the points it lights; and a pick that does share the
+//! samples out splits a sunny dome's stratified samples between its sun and
+//! the lamps at random, which speckles sunlit surfaces.
 //!
 //! The uniform sky stays what it was: found by BSDF-sampled rays only.
 
@@ -183,11 +192,42 @@ impl AliasTable {
     }
 }
 
+/// The two groups of lights that next-event estimation samples apart
+/// (the module's comment says why).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LightGroup {
+    /// The sun, distant lights and the dome.
+    Environment,
+    /// Point, spot, rect, disk and sphere lights and emissive triangles.
+    Local,
+}
+
+impl LightGroup {
+    fn of(source: &Source<'_>) -> LightGroup {
+        match source {
+            Source::Distant(_) | Source::Dome => LightGroup::Environment,
+            Source::Local(_) | Source::Triangle(_) => LightGroup::Local,
+        }
+    }
+}
+
+/// One group's pick: its sources (indices into `sources`) by power.
+#[derive(Clone, Debug, Default)]
+struct GroupTable {
+    sources: Vec<u32>,
+    table: AliasTable,
+}
+
 /// Every light of one frame scene, ready to sample.
 pub struct LightSampler<'a> {
     lib: &'a Library,
     sources: Vec<Source<'a>>,
-    table: AliasTable,
+    /// The environment's and the local lights' picks.
+    tables: [GroupTable; 2],
+    /// Per source, the probability its group's pick chooses it.
+    pmf: Vec<f32>,
+    /// The groups with light, environment first.
+    groups: Vec<LightGroup>,
     /// Per instance, the source index of its first triangle (`u32::MAX`: not emissive).
     first_triangle: Vec<u32>,
     dome: Option<(DomeSampler, u32)>,
@@ -286,9 +326,28 @@ impl<'a> LightSampler<'a> {
                 }
             }
         }
+        let mut tables = [GroupTable::default(), GroupTable::default()];
+        let mut pmf = vec![0.0; sources.len()];
+        let mut groups = Vec::new();
+        for (g, group) in [LightGroup::Environment, LightGroup::Local].into_iter().enumerate() {
+            let members: Vec<u32> =
+                (0..sources.len() as u32).filter(|&i| LightGroup::of(&sources[i as usize]) == group).collect();
+            let weights: Vec<f64> = members.iter().map(|&i| power[i as usize]).collect();
+            let table = AliasTable::new(&weights);
+            if table.pmf.is_empty() {
+                continue;
+            }
+            for (&i, &p) in members.iter().zip(&table.pmf) {
+                pmf[i as usize] = p;
+            }
+            groups.push(group);
+            tables[g] = GroupTable { sources: members, table };
+        }
         LightSampler {
             lib,
-            table: AliasTable::new(&power),
+            tables,
+            pmf,
+            groups,
             sources,
             first_triangle,
             dome_camera_visible: lights.dome.as_ref().is_some_and(|d| d.camera_visible),
@@ -298,14 +357,18 @@ impl<'a> LightSampler<'a> {
         }
     }
 
-    /// Whether there is anything to sample.
-    pub fn is_empty(&self) -> bool {
-        self.table.pmf.is_empty()
+    /// The groups that have light, environment first: one shadow ray each.
+    pub fn groups(&self) -> &[LightGroup] {
+        &self.groups
     }
 
-    /// Whether picking a light takes a random number (more than one light).
-    pub fn needs_pick(&self) -> bool {
-        self.table.pmf.len() > 1
+    fn table(&self, group: LightGroup) -> &GroupTable {
+        &self.tables[group as usize]
+    }
+
+    /// Whether picking a light of `group` takes a random number (it has more than one).
+    pub fn needs_pick(&self, group: LightGroup) -> bool {
+        self.table(group).sources.len() > 1
     }
 
     /// The shot's sun, as sampled.
@@ -315,17 +378,18 @@ impl<'a> LightSampler<'a> {
 
     /// Probability the pick chooses the sun (for MIS on rays that escape into it).
     pub fn sun_pick(&self) -> f32 {
-        self.sun.map_or(0.0, |(_, i)| self.table.pmf[i as usize])
+        self.sun.map_or(0.0, |(_, i)| self.pmf[i as usize])
     }
 
-    /// A light sample for a shading point at `p`: the light picked by
-    /// `u_pick`, a point on it by `u`.
-    pub fn sample(&self, p: Vec3, u_pick: f32, u: Vec2) -> Option<LightSample> {
-        if self.is_empty() {
+    /// A light sample of `group` for a shading point at `p`: the light
+    /// picked by `u_pick`, a point on it by `u`.
+    pub fn sample(&self, group: LightGroup, p: Vec3, u_pick: f32, u: Vec2) -> Option<LightSample> {
+        let t = self.table(group);
+        if t.sources.is_empty() {
             return None;
         }
-        let index = if self.needs_pick() { self.table.pick(u_pick) } else { 0 };
-        let pick = self.table.pmf[index];
+        let index = t.sources[if t.sources.len() > 1 { t.table.pick(u_pick) } else { 0 }] as usize;
+        let pick = self.pmf[index];
         match &self.sources[index] {
             Source::Distant(d) => {
                 let wi = d.sample(u);
@@ -381,7 +445,7 @@ impl<'a> LightSampler<'a> {
         }
         let index = first as usize + triangle as usize;
         match self.sources.get(index) {
-            Some(Source::Triangle(tri)) if tri.area > 0.0 => self.table.pmf[index] * t * t / (tri.area * cos_l),
+            Some(Source::Triangle(tri)) if tri.area > 0.0 => self.pmf[index] * t * t / (tri.area * cos_l),
             _ => 0.0,
         }
     }
@@ -390,7 +454,7 @@ impl<'a> LightSampler<'a> {
     /// pick); `None` without a dome.
     pub fn dome(&self, d: Vec3) -> Option<(Vec3, f32)> {
         let (dome, index) = self.dome.as_ref()?;
-        Some((dome.radiance(d), dome.pdf(d) * self.table.pmf[*index as usize]))
+        Some((dome.radiance(d), dome.pdf(d) * self.pmf[*index as usize]))
     }
 
     /// Whether camera rays that miss see the dome.
@@ -409,7 +473,7 @@ impl<'a> LightSampler<'a> {
             }
             let limit = best.map_or(tmax, |b| b.t);
             if let Some(hit) = intersect_sized(light, origin, dir, limit) {
-                best = Some(AreaHit { pdf: hit.pdf * self.table.pmf[index as usize], ..hit });
+                best = Some(AreaHit { pdf: hit.pdf * self.pmf[index as usize], ..hit });
             }
         }
         best

@@ -379,6 +379,11 @@ pub struct RenderSettings {
     /// Maximum path depth after the camera ray.
     #[serde(default = "default_bounces")]
     pub max_bounces: u32,
+    /// Largest RGB component one indirect contribution may add to a sample
+    /// (0: no clamp), like Cycles' and Arnold's indirect clamp: caustics of
+    /// a small bright sun through glossy floors otherwise speckle.
+    #[serde(default = "default_indirect_clamp")]
+    pub indirect_clamp: f32,
     /// Shutter `[open, close]` in frames relative to the rendered frame
     /// (`[-0.25, 0.25]`: a 180-degree shutter centred on the frame). `None`
     /// (the default): no motion blur, every frame an instant.
@@ -396,6 +401,7 @@ impl Default for RenderSettings {
             resolution: default_resolution(),
             spp: default_spp(),
             max_bounces: default_bounces(),
+            indirect_clamp: default_indirect_clamp(),
             shutter: None,
             working_colourspace: Colourspace::Rec709,
         }
@@ -442,6 +448,10 @@ fn default_resolution() -> [u32; 2] {
 fn default_spp() -> u32 {
     16
 }
+fn default_indirect_clamp() -> f32 {
+    10.0
+}
+
 fn default_bounces() -> u32 {
     4
 }
@@ -775,6 +785,13 @@ fn check_render(render: &RenderSettings, path: &Path) -> Result<()> {
     check_resolution(render.resolution[0], render.resolution[1])
         .map_err(|m| Error::invalid(path, m).field("render.resolution"))?;
     check_spp(render.spp).map_err(|m| Error::invalid(path, m).field("render.spp"))?;
+    if !(render.indirect_clamp.is_finite() && render.indirect_clamp >= 0.0) {
+        return Err(Error::invalid(
+            path,
+            format!("must be a finite number >= 0 (0: no clamp), got {}", render.indirect_clamp),
+        )
+        .field("render.indirect_clamp"));
+    }
     if let Some(shutter) = render.shutter {
         check_shutter(shutter).map_err(|m| Error::invalid(path, m).field("render.shutter"))?;
     }
@@ -1089,6 +1106,12 @@ mod tests {
         assert!(err(check_layers(&layers, Path::new("s.toml"))).contains("cut-offs must increase"));
         let render: RenderSettings = toml::from_str("spp = 0").unwrap();
         assert!(err(check_render(&render, Path::new("s.toml"))).contains("render.spp"));
+        for bad in [-1.0, f32::NAN, f32::INFINITY] {
+            let render = RenderSettings { indirect_clamp: bad, ..RenderSettings::default() };
+            assert!(err(check_render(&render, Path::new("s.toml"))).contains("render.indirect_clamp"));
+        }
+        let off = RenderSettings { indirect_clamp: 0.0, ..RenderSettings::default() };
+        assert!(check_render(&off, Path::new("s.toml")).is_ok());
         let render: RenderSettings = toml::from_str("shutter = [0.5, -0.5]").unwrap();
         assert!(err(check_render(&render, Path::new("s.toml"))).contains("render.shutter"));
         assert!(check_render(&RenderSettings::default(), Path::new("s.toml")).is_ok());
