@@ -197,8 +197,7 @@ fn a_dome_and_a_point_light_add_up() {
     };
     let (i, h) = (30.0, 2.0);
     let p0 = Vec3::new(-0.3, h, 0.5);
-    let lights =
-        SceneLights { dome: Some(Arc::new(dome)), ..local(vec![light(LightKind::Point, p0, -Vec3::Y, i)]) };
+    let lights = SceneLights { dome: Some(Arc::new(dome)), ..local(vec![light(LightKind::Point, p0, -Vec3::Y, i)]) };
     let (lib, scene) = floor_scene(lights, vec![]);
     let film = render(&lib, &scene, 16, 2);
     let expected = |p: Vec3| {

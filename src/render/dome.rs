@@ -24,6 +24,41 @@ use glam::{Vec2, Vec3};
 use super::bsdf::luminance;
 use crate::scene::lights::Dome;
 
+/// The two parts of a dome that next-event estimation samples apart: its
+/// sun (the few cells that hold much of its light in a small solid angle)
+/// and the rest. A dome without such a sun is all `Rest`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DomePart {
+    /// The sun's cells.
+    Sun,
+    /// Every other cell (the whole dome when it has no sun).
+    Rest,
+}
+
+/// Cells brighter than this many times the dome's mean radiance may be its sun.
+const SUN_CONTRAST: f64 = 50.0;
+/// ... if together they span at most this solid angle (sr; the real sun is
+/// 6.8e-5, a 1k map's sun with its bilinear spread about 1e-3) ...
+const SUN_MAX_SOLID_ANGLE: f64 = 0.02;
+/// ... and carry at least this share of the dome's light.
+const SUN_MIN_SHARE: f64 = 0.2;
+
+/// Each sun cell is sampled by [`SUN_SPLIT`] x [`SUN_SPLIT`] sub-cells of
+/// equal solid angle, weighted by the bilinear radiance at their centres:
+/// a 1k map's sun is a few texels whose bilinear spread makes the radiance
+/// vary by orders of magnitude across a cell, which a constant density per
+/// cell would turn into noise on every sunlit surface. Even, so sub-cells
+/// never straddle the texel-centre lines the bilinear lookup bends at.
+const SUN_SPLIT: usize = 8;
+
+/// The sun's cells: indices (row-major, ascending) and running sums of
+/// their sub-cells' weights ([`SUN_SPLIT`]^2 per cell, row by row).
+#[derive(Clone, Debug, Default)]
+struct SunCells {
+    cells: Vec<u32>,
+    cdf: Vec<f64>,
+}
+
 /// A dome ready to be looked up and sampled. Building it costs a pass over
 /// the texels and 8 bytes per texel: build one per loaded dome and share it.
 #[derive(Clone, Debug)]
@@ -31,7 +66,8 @@ pub struct DomeSampler {
     dome: Arc<Dome>,
     cos_rotate: f32,
     sin_rotate: f32,
-    /// Running sums (inclusive) of the cell weights along each row, row-major.
+    /// Running sums (inclusive) of the cell weights along each row, row-major
+    /// (the sun's cells weigh nothing here: they are the sun part's).
     row_cdf: Vec<f64>,
     /// Running sums (inclusive) of the row totals, top row first.
     marginal_cdf: Vec<f64>,
@@ -41,10 +77,16 @@ pub struct DomeSampler {
     cell_solid_angle: Vec<f64>,
     /// Sum of all cell weights: the integral of luminance over the sphere.
     total: f64,
+    /// Sum of the rest's cell weights.
+    rest_total: f64,
+    /// The sun's cells, when the dome has a sun.
+    sun: SunCells,
+    /// The parts with light: `[Sun, Rest]`, `[Rest]` or `[Sun]`.
+    parts: Vec<DomePart>,
 }
 
 impl DomeSampler {
-    /// Builds the lookup and the sampling distribution of `dome`.
+    /// Builds the lookup and the sampling distributions of `dome`.
     pub fn new(dome: Arc<Dome>) -> DomeSampler {
         let (w, h) = (dome.width as usize, dome.height as usize);
         let texel_luminance = |i: usize, j: usize| luminance(dome.texels[j * w + i] * dome.scale).max(0.0);
@@ -66,22 +108,99 @@ impl DomeSampler {
                 2.0 * ((a + b) / 2.0).sin() * ((b - a) / 2.0).sin() * 2.0 * PI64 / w as f64
             })
             .collect();
-        let mut row_cdf = vec![0f64; w * h];
-        let mut marginal_cdf = vec![0f64; h];
-        let mut total = 0f64;
+        // Cell weights: mean luminance x solid angle (kept in row_cdf's place).
+        let mut weights = vec![0f64; w * h];
         for j in 0..h {
             let (up, down) = (j.saturating_sub(1), (j + 1).min(h - 1));
-            let mut sum = 0f64;
             for i in 0..w {
                 let mean = (across[up * w + i] + 6.0 * across[j * w + i] + across[down * w + i]) as f64 / 8.0;
-                sum += mean * cell_solid_angle[j];
-                row_cdf[j * w + i] = sum;
+                weights[j * w + i] = mean * cell_solid_angle[j];
             }
-            total += sum;
-            marginal_cdf[j] = total;
+        }
+        let sun_cells = find_sun(&weights, &cell_solid_angle, w);
+        for &c in &sun_cells {
+            weights[c as usize] = 0.0;
+        }
+        let mut row_cdf = weights;
+        let mut marginal_cdf = vec![0f64; h];
+        let mut rest_total = 0f64;
+        for j in 0..h {
+            let mut sum = 0f64;
+            for c in &mut row_cdf[j * w..(j + 1) * w] {
+                sum += *c;
+                *c = sum;
+            }
+            rest_total += sum;
+            marginal_cdf[j] = rest_total;
         }
         let (sin_rotate, cos_rotate) = dome.rotate.sin_cos();
-        DomeSampler { dome, cos_rotate, sin_rotate, row_cdf, marginal_cdf, cos_theta, cell_solid_angle, total }
+        let mut sampler = DomeSampler {
+            dome,
+            cos_rotate,
+            sin_rotate,
+            row_cdf,
+            marginal_cdf,
+            cos_theta,
+            cell_solid_angle,
+            total: 0.0,
+            rest_total,
+            sun: SunCells::default(),
+            parts: Vec::new(),
+        };
+        sampler.sun = sampler.split_sun(sun_cells);
+        let sun_total = sampler.part_power(DomePart::Sun);
+        let mut parts = Vec::new();
+        if sun_total > 0.0 {
+            parts.push(DomePart::Sun);
+        }
+        if rest_total > 0.0 {
+            parts.push(DomePart::Rest);
+        }
+        // The parts share the cells, so their sums make the whole.
+        sampler.total = sun_total + rest_total;
+        sampler.parts = parts;
+        sampler
+    }
+
+    /// The sun part over `cells`: each cell's sub-cells weighted by the
+    /// bilinear luminance at their centres times their solid angle.
+    fn split_sun(&self, cells: Vec<u32>) -> SunCells {
+        let w = self.dome.width as usize;
+        let mut cdf = Vec::with_capacity(cells.len() * SUN_SPLIT * SUN_SPLIT);
+        let mut sum = 0f64;
+        for &cell in &cells {
+            let (row, column) = (cell as usize / w, cell as usize % w);
+            let (top, bottom) = (self.cos_theta[row], self.cos_theta[row + 1]);
+            let sub_solid_angle = self.cell_solid_angle[row] / (SUN_SPLIT * SUN_SPLIT) as f64;
+            for sr in 0..SUN_SPLIT {
+                let cos = top + (sr as f64 + 0.5) / SUN_SPLIT as f64 * (bottom - top);
+                let v = (cos.clamp(-1.0, 1.0).acos() / PI64) as f32;
+                for sc in 0..SUN_SPLIT {
+                    let u = ((column as f64 + (sc as f64 + 0.5) / SUN_SPLIT as f64) / w as f64) as f32;
+                    sum += luminance(self.lookup(Vec2::new(u, v))).max(0.0) as f64 * sub_solid_angle;
+                    cdf.push(sum);
+                }
+            }
+        }
+        if !(sum > 0.0) {
+            return SunCells::default();
+        }
+        SunCells { cells, cdf }
+    }
+
+    /// The parts with light, each sampled on its own by
+    /// [`DomeSampler::sample_part`].
+    pub fn parts(&self) -> &[DomePart] {
+        &self.parts
+    }
+
+    /// A part's integral of luminance over the sphere: its share of light
+    /// when choosing between lights by power.
+    pub fn part_power(&self, part: DomePart) -> f64 {
+        match part {
+            DomePart::Sun => self.sun.cdf.last().copied().unwrap_or(0.0),
+            DomePart::Rest => self.rest_total,
+        }
     }
 
     /// The dome it samples.
@@ -108,19 +227,54 @@ impl DomeSampler {
         self.lookup(self.uv(dir))
     }
 
-    /// Samples a direction towards the dome from two uniform numbers in
-    /// [0, 1): (direction, its radiance, its solid-angle pdf). None for a
-    /// black dome.
+    /// Samples a direction towards the whole dome from two uniform numbers
+    /// in [0, 1): (direction, its radiance, its solid-angle pdf). None for a
+    /// black dome. The parts in proportion to their light, so the density
+    /// is the one distribution over every cell.
     pub fn sample(&self, u: Vec2) -> Option<(Vec3, Vec3, f32)> {
         if self.total <= 0.0 {
             return None;
         }
+        let sun_share = (self.part_power(DomePart::Sun) / self.total) as f32;
+        let (part, u) = if u.y < sun_share {
+            (DomePart::Sun, Vec2::new(u.x, u.y / sun_share))
+        } else {
+            (DomePart::Rest, Vec2::new(u.x, (u.y - sun_share) / (1.0 - sun_share)))
+        };
+        let (dir, radiance, _) = self.sample_part(part, u)?;
+        let pdf = self.pdf(dir);
+        (pdf > 0.0).then_some((dir, radiance, pdf))
+    }
+
+    /// Samples a direction towards one part of the dome: (direction, its
+    /// radiance, its solid-angle pdf within the part). None when the part
+    /// has no light.
+    pub fn sample_part(&self, part: DomePart, u: Vec2) -> Option<(Vec3, Vec3, f32)> {
         let u = u.clamp(Vec2::ZERO, Vec2::splat(1.0 - f32::EPSILON));
         let w = self.dome.width as usize;
-        let (row, along_row) = pick(&self.marginal_cdf, u.y as f64 * self.total);
-        let cdf = &self.row_cdf[row * w..(row + 1) * w];
-        let (column, along_column) = pick(cdf, u.x as f64 * cdf[w - 1]);
-        // Uniform in solid angle within the cell: uniform in u and in cos(theta).
+        let (row, column, along_row, along_column) = match part {
+            DomePart::Rest => {
+                if self.rest_total <= 0.0 {
+                    return None;
+                }
+                let (row, along_row) = pick(&self.marginal_cdf, u.y as f64 * self.rest_total);
+                let cdf = &self.row_cdf[row * w..(row + 1) * w];
+                let (column, along_column) = pick(cdf, u.x as f64 * cdf[w - 1]);
+                (row, column, along_row, along_column)
+            }
+            DomePart::Sun => {
+                let total = *self.sun.cdf.last()?;
+                // One number picks the sub-cell and, rescaled, where across
+                // it; the other where down it.
+                let (k, along) = pick(&self.sun.cdf, u.x as f64 * total);
+                let n = SUN_SPLIT * SUN_SPLIT;
+                let cell = self.sun.cells[k / n] as usize;
+                let (sr, sc) = ((k % n) / SUN_SPLIT, (k % n) % SUN_SPLIT);
+                let split = SUN_SPLIT as f64;
+                (cell / w, cell % w, (sr as f64 + u.y as f64) / split, (sc as f64 + along) / split)
+            }
+        };
+        // Uniform in solid angle within the (sub-)cell: uniform in u and in cos(theta).
         let map_u = ((column as f64 + along_column) / w as f64) as f32;
         let (top, bottom) = (self.cos_theta[row], self.cos_theta[row + 1]);
         let cos_theta = top + along_row * (bottom - top);
@@ -128,8 +282,8 @@ impl DomeSampler {
         let dir = self.world_from_dome(sin_theta as f32, cos_theta as f32, map_u);
         // The pdf and radiance a ray leaving in `dir` would find, so that the
         // two strategies of multiple importance sampling agree exactly.
-        let pdf = self.pdf(dir);
-        (pdf > 0.0).then(|| (dir, self.radiance(dir), pdf))
+        let (found, pdf) = self.part_pdf(dir);
+        (found == part && pdf > 0.0).then(|| (dir, self.radiance(dir), pdf))
     }
 
     /// Solid-angle density with which [`DomeSampler::sample`] picks `dir`.
@@ -137,18 +291,40 @@ impl DomeSampler {
         if self.total <= 0.0 {
             return 0.0;
         }
+        let (part, pdf) = self.part_pdf(dir);
+        (pdf as f64 * self.part_power(part) / self.total) as f32
+    }
+
+    /// The part of the dome in direction `dir`, and the solid-angle density
+    /// with which [`DomeSampler::sample_part`] of that part picks it.
+    pub fn part_pdf(&self, dir: Vec3) -> (DomePart, f32) {
         let (w, h) = (self.dome.width as usize, self.dome.height as usize);
         let uv = self.uv(dir);
         let column = ((uv.x * w as f32) as usize).min(w - 1);
         let row = ((uv.y * h as f32) as usize).min(h - 1);
         let i = row * w + column;
+        let solid_angle = self.cell_solid_angle[row];
+        if let Ok(k) = self.sun.cells.binary_search(&(i as u32)) {
+            // The sub-cell: equal steps in u and in cos(theta) across the cell.
+            let d = self.dome_from_world(dir.normalize_or_zero());
+            let (top, bottom) = (self.cos_theta[row], self.cos_theta[row + 1]);
+            let down = ((d.y as f64 - top) / (bottom - top) * SUN_SPLIT as f64) as usize;
+            let across = ((uv.x * w as f32 - column as f32) * SUN_SPLIT as f32) as usize;
+            let sub = k * SUN_SPLIT * SUN_SPLIT + down.min(SUN_SPLIT - 1) * SUN_SPLIT + across.min(SUN_SPLIT - 1);
+            let weight = self.sun.cdf[sub] - if sub == 0 { 0.0 } else { self.sun.cdf[sub - 1] };
+            let total = self.part_power(DomePart::Sun);
+            let sub_solid_angle = solid_angle / (SUN_SPLIT * SUN_SPLIT) as f64;
+            return (DomePart::Sun, (weight / (total * sub_solid_angle)) as f32);
+        }
+        if self.rest_total <= 0.0 {
+            return (DomePart::Rest, 0.0);
+        }
         let weight = self.row_cdf[i] - if column == 0 { 0.0 } else { self.row_cdf[i - 1] };
-        (weight / (self.total * self.cell_solid_angle[row])) as f32
+        (DomePart::Rest, (weight / (self.rest_total * solid_angle)) as f32)
     }
 
-    /// Mean luminance of the radiance over the sphere (W/(m^2 sr)): the
-    /// dome's share of light when choosing between lights by power (a
-    /// constant dome of radiance L gives an open horizontal plane pi L).
+    /// Mean luminance of the radiance over the sphere (W/(m^2 sr)); a
+    /// constant dome of radiance L gives an open horizontal plane pi L.
     pub fn mean_radiance(&self) -> f32 {
         (self.total / (4.0 * PI64)) as f32
     }
@@ -181,6 +357,36 @@ impl DomeSampler {
         let lower = texel(left, down).lerp(texel(right, down), fx);
         upper.lerp(lower, fy) * self.dome.scale
     }
+}
+
+/// The dome's sun, if it has one: the cells brighter than [`SUN_CONTRAST`]
+/// times the mean radiance, when together they are small
+/// ([`SUN_MAX_SOLID_ANGLE`]) and carry much of the light ([`SUN_MIN_SHARE`]).
+/// Sampled apart from the rest, a sunny dome gives sunlit surfaces the
+/// clean light of a sun lamp: a single distribution over both spends a
+/// random share of each pixel's samples on the sun.
+fn find_sun(weights: &[f64], cell_solid_angle: &[f64], w: usize) -> Vec<u32> {
+    let total: f64 = weights.iter().sum();
+    if !(total > 0.0) {
+        return Vec::new();
+    }
+    let bright = SUN_CONTRAST * total / (4.0 * PI64);
+    let (mut cells, mut solid_angle, mut sum) = (Vec::new(), 0.0, 0.0);
+    for (i, &weight) in weights.iter().enumerate() {
+        let omega = cell_solid_angle[i / w];
+        if weight > bright * omega {
+            solid_angle += omega;
+            if solid_angle > SUN_MAX_SOLID_ANGLE {
+                return Vec::new();
+            }
+            sum += weight;
+            cells.push(i as u32);
+        }
+    }
+    if sum < SUN_MIN_SHARE * total {
+        return Vec::new();
+    }
+    cells
 }
 
 /// The bin of an inclusive running sum `cdf` that holds `target` (in [0,

@@ -772,8 +772,8 @@ impl<'a> Integrator<'a> {
             };
             // Next-event estimation: one shadow ray to one light of each
             // group (render::lights). The first group draws from this
-            // bounce's dimensions (its pick only among several lights), a
-            // second from a stream of its own.
+            // bounce's dimensions (its pick only among several lights), the
+            // others from streams of their own.
             for (g, &group) in self.lights.groups().iter().enumerate() {
                 let (u_pick, u_light) = if g == 0 {
                     let u_pick = if self.lights.needs_pick(group) {
@@ -785,7 +785,7 @@ impl<'a> Integrator<'a> {
                     sampler.set_dimension(base);
                     (u_pick, sampler.next_2d())
                 } else {
-                    sampler.second_light(depth)
+                    sampler.extra_light(group as u32, depth)
                 };
                 let Some(ls) = self.lights.sample(group, surface.p, u_pick, u_light) else { continue };
                 if ls.wi.dot(surface.ng) <= 0.0 {

@@ -112,8 +112,8 @@ const TIME_SALT: u32 = 0x7157_a3c1;
 /// Keys the lens stream apart from the time stream and every dimension.
 const LENS_SALT: u32 = 0x1e45_d0f7;
 
-/// Keys the second light group's stream (per bounce) apart from the rest.
-const SECOND_LIGHT_SALT: u32 = 0x4c69_6768;
+/// Keys the streams of the light groups after the first apart from the rest.
+const EXTRA_LIGHT_SALT: u32 = 0x4c69_6768;
 
 /// Random numbers for one camera sample of one pixel.
 #[derive(Clone, Debug)]
@@ -173,12 +173,12 @@ impl Sampler {
         Vec2::new(to_unit(x), to_unit(y))
     }
 
-    /// The pick and 2D point of the second light group's shadow ray at
-    /// bounce `depth` (a scene with both environment and local lights): a
-    /// stream of its own, like [`Sampler::lens`], so scenes with one group
+    /// The pick and 2D point of light group `group`'s shadow ray at bounce
+    /// `depth`, for every group after a scene's first: a stream of its own
+    /// per (group, bounce), like [`Sampler::lens`], so scenes with one group
     /// keep their bits; each is stratified over a pixel's samples.
-    pub fn second_light(&self, depth: u32) -> (f32, Vec2) {
-        let seed = mix32(self.pixel_key ^ SECOND_LIGHT_SALT ^ mix32(depth));
+    pub fn extra_light(&self, group: u32, depth: u32) -> (f32, Vec2) {
+        let seed = mix32(self.pixel_key ^ EXTRA_LIGHT_SALT ^ mix32(depth ^ (group << 16)));
         let index = nested_uniform_scramble(self.sample, seed);
         let (x, y) = sobol_2d(index);
         let x = nested_uniform_scramble(x, mix32(seed ^ 0x5bd1_e995));
