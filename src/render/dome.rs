@@ -84,11 +84,6 @@ impl DomeSampler {
         DomeSampler { dome, cos_rotate, sin_rotate, row_cdf, marginal_cdf, cos_theta, cell_solid_angle, total }
     }
 
-    /// The dome it samples.
-    pub fn dome(&self) -> &Dome {
-        &self.dome
-    }
-
     /// World direction of map coordinates `uv` (u right, v down, in [0, 1]).
     pub fn direction(&self, uv: Vec2) -> Vec3 {
         let (sin_theta, cos_theta) = (PI * uv.y).sin_cos();
@@ -96,7 +91,7 @@ impl DomeSampler {
     }
 
     /// Map coordinates of a world direction (need not be unit length).
-    pub fn uv(&self, dir: Vec3) -> Vec2 {
+    pub(crate) fn uv(&self, dir: Vec3) -> Vec2 {
         let d = self.dome_from_world(dir.normalize_or_zero());
         let u = (PI - (-d.z).atan2(d.x)) / (2.0 * PI);
         Vec2::new(u, d.y.clamp(-1.0, 1.0).acos() / PI)
@@ -133,7 +128,7 @@ impl DomeSampler {
     }
 
     /// Solid-angle density with which [`DomeSampler::sample`] picks `dir`.
-    pub fn pdf(&self, dir: Vec3) -> f32 {
+    pub(crate) fn pdf(&self, dir: Vec3) -> f32 {
         if self.total <= 0.0 {
             return 0.0;
         }
@@ -149,7 +144,7 @@ impl DomeSampler {
     /// Mean luminance of the radiance over the sphere (W/(m^2 sr)): the
     /// dome's share of light when choosing between lights by power (a
     /// constant dome of radiance L gives an open horizontal plane pi L).
-    pub fn mean_radiance(&self) -> f32 {
+    pub(crate) fn mean_radiance(&self) -> f32 {
         (self.total / (4.0 * PI64)) as f32
     }
 

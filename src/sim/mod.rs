@@ -12,7 +12,7 @@
 //! result is identical for any thread count.
 
 mod file;
-pub mod grid;
+pub(crate) mod grid;
 mod rng;
 pub mod steer;
 
@@ -28,15 +28,15 @@ use steer::{forward, heading_of, wrap_angle, Steer};
 
 /// Most targets a scene may declare (each agent keeps its visited targets
 /// in a 64-bit mask).
-pub const MAX_TARGETS: usize = 64;
+pub(crate) const MAX_TARGETS: usize = 64;
 /// Most agents in a scene (a guard against typos such as `count = 1e9`).
-pub const MAX_AGENTS: usize = 10_000_000;
+pub(crate) const MAX_AGENTS: usize = 10_000_000;
 /// Most frames a scene may simulate (warm-up included).
-pub const MAX_FRAMES: i64 = 1_000_000;
+pub(crate) const MAX_FRAMES: i64 = 1_000_000;
 /// Frames per second when `[frames] fps` is not given (SPEC: shot fps 24).
-pub const DEFAULT_FPS: f32 = 24.0;
+pub(crate) const DEFAULT_FPS: f32 = 24.0;
 /// Most (rig, cycle) pairs a scene may have (the timing table's size).
-pub const MAX_RIG_CYCLES: usize = 1 << 20;
+pub(crate) const MAX_RIG_CYCLES: usize = 1 << 20;
 
 // ---------------------------------------------------------------------------
 // Resolved scene
@@ -44,22 +44,22 @@ pub const MAX_RIG_CYCLES: usize = 1 << 20;
 
 /// Constants of the steering model; the defaults are the paper's.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Model {
+pub(crate) struct Model {
     /// Largest turn per frame away from objects, radians (5 degrees).
-    pub max_turn: f32,
+    pub(crate) max_turn: f32,
     /// Gap (metres) under which the turn limit relaxes: the paper's 5 units.
-    pub relax_distance: f32,
+    pub(crate) relax_distance: f32,
     /// Metres per unit of `d` in `D(d) = 1 / 2^d` (1: d in metres).
-    pub falloff: f32,
+    pub(crate) falloff: f32,
     /// Power `D` is raised to for agents, obstacles and walls (12).
-    pub power: f32,
+    pub(crate) power: f32,
     /// Slowest walk near objects, as a fraction of the cycle's speed (0.9).
-    pub min_speed: f32,
+    pub(crate) min_speed: f32,
     /// Agent radius (metres) when an agent gives none.
-    pub agent_radius: f32,
+    pub(crate) agent_radius: f32,
     /// Attenuate other agents by chase (the paper's model; off only to
     /// show the shaking it prevents).
-    pub chase: bool,
+    pub(crate) chase: bool,
 }
 
 impl Default for Model {
@@ -83,12 +83,12 @@ pub struct Cycle {
     /// Name, as in the rigs' animations.
     pub name: String,
     /// Explicit length in frames (`[cycles.X] length`), for rigs without a file.
-    pub length: Option<f32>,
+    pub(crate) length: Option<f32>,
     /// Explicit stride in metres (`[cycles.X] stride`), for rigs without a file.
-    pub stride: Option<f32>,
+    pub(crate) stride: Option<f32>,
     /// Cycles to switch to when this one ends: (cycle index, weight).
     /// Empty: the agent stays on this cycle.
-    pub next: Vec<(u16, f32)>,
+    pub(crate) next: Vec<(u16, f32)>,
 }
 
 /// Length and stride of one cycle on one rig: from the rig's glTF file, or
@@ -127,10 +127,10 @@ pub struct Target {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Obstacle {
     /// Radius in metres.
-    pub radius: f32,
+    pub(crate) radius: f32,
     /// Centre keys `(frame, (x, z))` in increasing frame order, at least one;
     /// linear between keys, held before the first and after the last.
-    pub path: Vec<(i32, Vec2)>,
+    pub(crate) path: Vec<(i32, Vec2)>,
 }
 
 impl Obstacle {
@@ -154,7 +154,7 @@ impl Obstacle {
 
 /// Shape of a wall on the ground plane.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum WallShape {
+pub(crate) enum WallShape {
     /// A segment between two points.
     Segment(Vec2, Vec2),
     /// An infinite line through `point` with unit `normal` (a vertical plane).
@@ -170,9 +170,9 @@ pub enum WallShape {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Wall {
     /// Where it runs.
-    pub shape: WallShape,
+    pub(crate) shape: WallShape,
     /// Half thickness in metres.
-    pub radius: f32,
+    pub(crate) radius: f32,
 }
 
 impl Wall {
@@ -192,15 +192,15 @@ impl Wall {
 
 /// An agent's handles: how strongly it heeds each kind of influence.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Weights {
+pub(crate) struct Weights {
     /// Goal attraction.
-    pub targets: f32,
+    pub(crate) targets: f32,
     /// Obstacle repulsion.
-    pub obstacles: f32,
+    pub(crate) obstacles: f32,
     /// Wall repulsion.
-    pub walls: f32,
+    pub(crate) walls: f32,
     /// Repulsion from other agents.
-    pub agents: f32,
+    pub(crate) agents: f32,
 }
 
 impl Default for Weights {
@@ -213,46 +213,46 @@ impl Default for Weights {
 #[derive(Clone, Debug, PartialEq)]
 pub struct AgentSpec {
     /// Stable id.
-    pub id: u32,
+    pub(crate) id: u32,
     /// Ground-plane start position `(x, z)`.
     pub position: Vec2,
     /// Start heading, radians.
-    pub heading: f32,
+    pub(crate) heading: f32,
     /// Index into [`SimScene::rigs`].
-    pub rig: u16,
+    pub(crate) rig: u16,
     /// Start cycle, index into [`SimScene::cycles`].
-    pub cycle: u16,
+    pub(crate) cycle: u16,
     /// Start cycle frame.
-    pub cycle_frame: f32,
+    pub(crate) cycle_frame: f32,
     /// Seated: never moves, never switches cycle.
-    pub seated: bool,
+    pub(crate) seated: bool,
     /// Targets this agent visits, as a bit mask over [`SimScene::targets`].
-    pub targets: u64,
+    pub(crate) targets: u64,
     /// Handles.
-    pub weights: Weights,
+    pub(crate) weights: Weights,
     /// Radius in metres.
-    pub radius: f32,
+    pub(crate) radius: f32,
 }
 
 /// A simulation scene, validated.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SimScene {
     /// The file it came from (for messages).
-    pub path: PathBuf,
+    pub(crate) path: PathBuf,
     /// Seed of every random choice.
-    pub seed: u64,
+    pub(crate) seed: u64,
     /// First cache frame written.
     pub start: i32,
     /// Last cache frame written.
     pub end: i32,
     /// Frames simulated before `start` and not written; agents start at
     /// frame `start - warmup`.
-    pub warmup: i32,
+    pub(crate) warmup: i32,
     /// Frames per second of the cache (cycle lengths from rig files are
     /// `duration * fps`).
-    pub fps: f32,
+    pub(crate) fps: f32,
     /// Model constants.
-    pub model: Model,
+    pub(crate) model: Model,
     /// Rig names (sorted).
     pub rigs: Vec<String>,
     /// Rig files by rig index (`[rigs]`, resolved against the scene file's
@@ -263,7 +263,7 @@ pub struct SimScene {
     /// Length and stride per (rig, cycle): index `rig * cycles.len() + cycle`
     /// (see [`SimScene::timing`]). Pairs no agent can reach hold a stand-in
     /// (1 frame, stride 0).
-    pub timings: Vec<CycleTiming>,
+    pub(crate) timings: Vec<CycleTiming>,
     /// Targets in file order.
     pub targets: Vec<Target>,
     /// Obstacles.
@@ -309,17 +309,17 @@ pub struct AgentState {
     /// Ground-plane position `(x, z)`.
     pub position: Vec2,
     /// Heading, radians in (-pi, pi].
-    pub heading: f32,
+    pub(crate) heading: f32,
     /// Metres walked in the last frame (0 when standing).
-    pub speed: f32,
+    pub(crate) speed: f32,
     /// Index into [`SimScene::cycles`].
-    pub cycle: u16,
+    pub(crate) cycle: u16,
     /// Frame within the cycle.
-    pub cycle_frame: f32,
+    pub(crate) cycle_frame: f32,
     /// Target being walked to, index into [`SimScene::targets`].
     pub target: Option<u8>,
     /// Targets visited since the agent last ran out of targets (bit mask).
-    pub visited: u64,
+    pub(crate) visited: u64,
 }
 
 /// A running simulation: the scene and the current frame's states.
@@ -394,7 +394,7 @@ impl<'a> Simulation<'a> {
     }
 
     /// The current frame as a cache block (agents in id order).
-    pub fn record(&self) -> FrameBlock {
+    pub(crate) fn record(&self) -> FrameBlock {
         let agents = self
             .scene
             .agents
