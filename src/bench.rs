@@ -21,7 +21,7 @@ pub fn peak_rss_bytes() -> Option<u64> {
 /// Resets the process's peak RSS (VmHWM) to its current RSS, so the next
 /// [`peak_rss_mib`] measures one stretch of work (one layer's render).
 /// Returns false where the kernel does not allow it (no /proc, not Linux).
-pub fn reset_peak_rss() -> bool {
+pub(crate) fn reset_peak_rss() -> bool {
     // "5" in clear_refs resets the peak resident set size (Linux >= 4.0).
     std::fs::write("/proc/self/clear_refs", "5").is_ok()
 }

@@ -17,41 +17,41 @@ pub struct BotInfo {
     /// Cache id ("Robot ID").
     pub id: u32,
     /// Rig.
-    pub rig: String,
+    pub(crate) rig: String,
     /// Cycle at the frame.
-    pub cycle: String,
+    pub(crate) cycle: String,
     /// Cycle frame at the frame.
-    pub cycle_frame: f32,
+    pub(crate) cycle_frame: f32,
     /// Shot frame asked about.
-    pub shot_frame: i32,
+    pub(crate) shot_frame: i32,
     /// Wardrobe scheme.
-    pub scheme: String,
+    pub(crate) scheme: String,
     /// Height scale.
-    pub height_scale: f32,
+    pub(crate) height_scale: f32,
     /// Foot position.
-    pub position: [f32; 3],
+    pub(crate) position: [f32; 3],
     /// Heading in degrees.
-    pub heading_deg: f32,
+    pub(crate) heading_deg: f32,
     /// Distance from the camera to the agent, metres.
     pub distance: f32,
     /// Seated at this frame.
-    pub seated: bool,
+    pub(crate) seated: bool,
     /// Removed in the shot.
-    pub removed: bool,
+    pub(crate) removed: bool,
     /// Layer, once the shot has a layer manifest.
-    pub layer: Option<String>,
+    pub(crate) layer: Option<String>,
     /// LOD, once the shot has a layer manifest.
-    pub lod: Option<String>,
+    pub(crate) lod: Option<String>,
     /// Parts per slot.
-    pub parts: Vec<PartRow>,
+    pub(crate) parts: Vec<PartRow>,
     /// The shared pose a skinned agent plays (`rig/cycle/<step>of<steps>`);
     /// absent for slot rigs.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub pose: Option<String>,
+    pub(crate) pose: Option<String>,
 }
 
 /// Ids closest to `id` among those that exist, for "did you mean".
-pub fn nearest_ids(existing: impl Iterator<Item = u32>, id: u32, n: usize) -> Vec<u32> {
+pub(crate) fn nearest_ids(existing: impl Iterator<Item = u32>, id: u32, n: usize) -> Vec<u32> {
     let mut all: Vec<u32> = existing.collect();
     all.sort_by_key(|&e| ((e as i64 - id as i64).abs(), e));
     all.truncate(n);

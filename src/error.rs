@@ -12,15 +12,15 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Location {
     /// File the data came from.
-    pub path: PathBuf,
+    pub(crate) path: PathBuf,
     /// 1-based line (text formats).
-    pub line: Option<usize>,
+    pub(crate) line: Option<usize>,
     /// Frame number (cache frame or shot frame, as the message says).
-    pub frame: Option<i64>,
+    pub(crate) frame: Option<i64>,
     /// Agent id.
-    pub agent: Option<u32>,
+    pub(crate) agent: Option<u32>,
     /// Field or key name.
-    pub field: Option<String>,
+    pub(crate) field: Option<String>,
 }
 
 impl fmt::Display for Location {
@@ -92,7 +92,7 @@ impl Error {
     /// A TOML parse error in `path` (whose text is `text`): the line, and the
     /// key written on that line, since toml's messages for wrong types do
     /// not name it.
-    pub fn toml(path: impl AsRef<Path>, text: &str, e: toml::de::Error) -> Self {
+    pub(crate) fn toml(path: impl AsRef<Path>, text: &str, e: toml::de::Error) -> Self {
         let mut err = Error::invalid(path, e.message().to_string());
         if let Some(span) = e.span() {
             let line = line_of(text, span.start);
@@ -106,7 +106,7 @@ impl Error {
     }
 
     /// A bad value for the stage option `option` (see [`Error::Setting`]).
-    pub fn setting(option: &'static str, msg: impl Into<String>) -> Self {
+    pub(crate) fn setting(option: &'static str, msg: impl Into<String>) -> Self {
         Error::Setting { option, msg: msg.into() }
     }
 
@@ -123,15 +123,15 @@ impl Error {
     }
 
     /// Adds the 1-based line number.
-    pub fn line(self, line: usize) -> Self {
+    pub(crate) fn line(self, line: usize) -> Self {
         self.with(|l| l.line = Some(line))
     }
     /// Adds the frame.
-    pub fn frame(self, frame: i64) -> Self {
+    pub(crate) fn frame(self, frame: i64) -> Self {
         self.with(|l| l.frame = Some(frame))
     }
     /// Adds the agent id.
-    pub fn agent(self, agent: u32) -> Self {
+    pub(crate) fn agent(self, agent: u32) -> Self {
         self.with(|l| l.agent = Some(agent))
     }
     /// Adds the field or key.
@@ -141,14 +141,14 @@ impl Error {
     }
     /// Names the field or key when the error does not name one yet: the
     /// key of the file that led here (`rigs.walker.file` for a rig's glTF).
-    pub fn or_field(self, field: impl Into<String>) -> Self {
+    pub(crate) fn or_field(self, field: impl Into<String>) -> Self {
         let field = field.into();
         self.with(|l| {
             l.field.get_or_insert(field);
         })
     }
     /// Qualifies the field, if any, with the key path it sits under (`rigs.walker`).
-    pub fn field_prefix(self, prefix: &str) -> Self {
+    pub(crate) fn field_prefix(self, prefix: &str) -> Self {
         self.with(|l| {
             if let Some(f) = &l.field {
                 l.field = Some(format!("{prefix}.{f}"));
@@ -158,7 +158,7 @@ impl Error {
 }
 
 /// The 1-based line of a byte offset in `text`.
-pub fn line_of(text: &str, offset: usize) -> usize {
+pub(crate) fn line_of(text: &str, offset: usize) -> usize {
     text.as_bytes()[..offset.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1
 }
 

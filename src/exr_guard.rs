@@ -10,13 +10,13 @@ use crate::error::{Error, Result};
 /// How many times its own size an EXR may decode to. No EXR compression
 /// comes near: deflate (ZIP, ZIPS, PXR24) stops at about 1032:1, RLE at
 /// 64:1, PIZ at a few hundred, B44 at about 11:1.
-pub const MAX_EXR_EXPANSION: u64 = 4096;
+pub(crate) const MAX_EXR_EXPANSION: u64 = 4096;
 
 /// Refuses an EXR whose headers describe more pixel data than its size can
 /// hold ([`MAX_EXR_EXPANSION`]). The exr crate allocates every channel of
 /// every part from the header before it reads a pixel, so a corrupt data
 /// window or channel list would otherwise ask for gigabytes.
-pub fn check_decoded_size(path: &Path) -> Result<()> {
+pub(crate) fn check_decoded_size(path: &Path) -> Result<()> {
     let file_len = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
     let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| exr_error(path, e))?;
     let mut bytes = 0u64;
@@ -41,7 +41,7 @@ pub fn check_decoded_size(path: &Path) -> Result<()> {
 }
 
 /// An exr crate error as ours: I/O as I/O, the rest as invalid input.
-pub fn exr_error(path: &Path, e: exr::error::Error) -> Error {
+pub(crate) fn exr_error(path: &Path, e: exr::error::Error) -> Error {
     match e {
         exr::error::Error::Io(io) => Error::io(path, io),
         other => Error::invalid(path, format!("OpenEXR: {other}")),

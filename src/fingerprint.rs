@@ -23,10 +23,10 @@ use serde::Serialize;
 use crate::error::{IoContext, Result};
 
 /// The algorithm's name, as manifests and plans record it.
-pub const ALGORITHM: &str = "fnv1a64";
+pub(crate) const ALGORITHM: &str = "fnv1a64";
 
 /// Bytes read from a file at a time.
-pub const BLOCK_BYTES: usize = 1 << 20;
+pub(crate) const BLOCK_BYTES: usize = 1 << 20;
 
 const OFFSET_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
 const PRIME: u64 = 0x0000_0100_0000_01b3;
@@ -40,12 +40,13 @@ fn update(mut h: u64, bytes: &[u8]) -> u64 {
 }
 
 /// FNV-1a 64 of `bytes`.
-pub fn hash_bytes(bytes: &[u8]) -> u64 {
+#[cfg(test)] // the tests check the FNV-1a reference values
+pub(crate) fn hash_bytes(bytes: &[u8]) -> u64 {
     update(OFFSET_BASIS, bytes)
 }
 
 /// A hash as it is written: 16 hex digits.
-pub fn hex(h: u64) -> String {
+pub(crate) fn hex(h: u64) -> String {
     format!("{h:016x}")
 }
 
@@ -94,7 +95,7 @@ impl std::io::Write for Stream<'_> {
 
 /// Hashes a structured value fed as named fields.
 #[derive(Debug, Clone)]
-pub struct Fingerprinter {
+pub(crate) struct Fingerprinter {
     h: u64,
 }
 
@@ -106,7 +107,7 @@ impl Default for Fingerprinter {
 
 impl Fingerprinter {
     /// An empty fingerprint.
-    pub fn new() -> Fingerprinter {
+    pub(crate) fn new() -> Fingerprinter {
         Fingerprinter::default()
     }
 
@@ -115,7 +116,7 @@ impl Fingerprinter {
     }
 
     /// Feeds the field `name` with raw bytes.
-    pub fn bytes(&mut self, name: &str, value: &[u8]) -> &mut Self {
+    pub(crate) fn bytes(&mut self, name: &str, value: &[u8]) -> &mut Self {
         self.named(name, |f| {
             f.put(value);
             value.len() as u64
@@ -123,7 +124,7 @@ impl Fingerprinter {
     }
 
     /// Feeds the field `name` with text.
-    pub fn text(&mut self, name: &str, value: &str) -> &mut Self {
+    pub(crate) fn text(&mut self, name: &str, value: &str) -> &mut Self {
         self.bytes(name, value.as_bytes())
     }
 
@@ -131,7 +132,7 @@ impl Fingerprinter {
     /// strings, whole structs: a field added to a struct is covered
     /// without touching this call). The JSON is streamed, never held: a
     /// manifest of a million agents is not copied.
-    pub fn value<T: Serialize + ?Sized>(&mut self, name: &str, value: &T) -> &mut Self {
+    pub(crate) fn value<T: Serialize + ?Sized>(&mut self, name: &str, value: &T) -> &mut Self {
         self.named(name, |f| {
             let mut stream = Stream { f, bytes: 0 };
             // Serializing fails only for maps with non-string keys, which no
@@ -155,24 +156,25 @@ impl Fingerprinter {
 
     /// Feeds the field `name` with a value's `Debug` text, for shot types
     /// that are not serializable (every field of the value is covered).
-    pub fn debug<T: Debug + ?Sized>(&mut self, name: &str, value: &T) -> &mut Self {
+    pub(crate) fn debug<T: Debug + ?Sized>(&mut self, name: &str, value: &T) -> &mut Self {
         self.text(name, &format!("{value:?}"))
     }
 
     /// Feeds the field `name` with a file's content hash (not its path, so
     /// moving a shot folder changes nothing).
-    pub fn file(&mut self, name: &str, path: &Path) -> Result<&mut Self> {
+    pub(crate) fn file(&mut self, name: &str, path: &Path) -> Result<&mut Self> {
         let h = hash_file(path)?;
         Ok(self.bytes(name, &h.hash.to_le_bytes()))
     }
 
     /// The hash of every field fed so far.
-    pub fn finish(&self) -> u64 {
+    #[cfg(test)] // the tests compare hashes as numbers
+    pub(crate) fn finish(&self) -> u64 {
         self.h
     }
 
-    /// [`Fingerprinter::finish`] as 16 hex digits.
-    pub fn hex(&self) -> String {
+    /// The hash of every field fed so far, as 16 hex digits.
+    pub(crate) fn hex(&self) -> String {
         hex(self.h)
     }
 }

@@ -2,6 +2,11 @@
 //! lighters. Modules in pipeline order; docs/architecture.md says what each
 //! owns and what passes between them.
 #![warn(missing_docs)]
+// The public API is deliberate (docs/architecture.md, "The public API"):
+// `pub` only for what the CLI, tests, examples and fuzz targets use, every
+// other item `pub(crate)` or private; a `pub` item nothing outside can reach,
+// or a type the API hands out that cannot be named, fails clippy -D warnings.
+#![warn(unreachable_pub, unnameable_types)]
 #![forbid(unsafe_code)]
 #![allow(
     clippy::neg_cmp_op_on_partial_ord,
@@ -16,7 +21,7 @@ pub mod casting; // shot + cache + rigs + wardrobes -> `ShotCrowd`: every agent 
 pub mod comp; // a frame's layer EXRs -> one stacked EXR
 pub mod error; // typed errors naming file, line, frame, agent and field; atomic writes
 pub mod export; // a cast frame -> glTF (.glb); a frame range -> USD (.usda/.usd/.usdz)
-pub mod exr_guard; // limits on reading OpenEXR files (headers checked against the file size)
+pub(crate) mod exr_guard; // limits on reading OpenEXR files (headers checked against the file size)
 pub mod farm; // a shot -> a render-farm task graph (the plan); engines (local, slurm) and status
 pub mod fingerprint; // the one change detector (FNV-1a 64): files in blocks, named fields
 pub mod layers; // a cast crowd -> the layer manifest (membership, LOD, visibility) and its map

@@ -6,17 +6,17 @@ use std::path::{Path, PathBuf};
 /// The render that needs no manifest: the set and every agent, fully visible.
 pub const FULL_LAYER: &str = "full";
 /// The layer name `throng comp` writes into its EXR header.
-pub const COMP_LAYER: &str = "comp";
+pub(crate) const COMP_LAYER: &str = "comp";
 /// The set layer.
-pub const SET_LAYER: &str = "set";
+pub(crate) const SET_LAYER: &str = "set";
 
 /// `crowdN`: the name of crowd layer `index` (0 nearest the camera).
-pub fn crowd_layer_name(index: usize) -> String {
+pub(crate) fn crowd_layer_name(index: usize) -> String {
     format!("crowd{index}")
 }
 
 /// Crowd layer index of a `crowdN` name.
-pub fn crowd_layer_index(name: &str) -> Option<usize> {
+pub(crate) fn crowd_layer_index(name: &str) -> Option<usize> {
     name.strip_prefix("crowd")?.parse().ok()
 }
 

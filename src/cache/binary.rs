@@ -22,27 +22,27 @@ use crate::error::{write_atomic, Error, IoContext, Result};
 /// First 8 bytes of every `.crowd` file.
 pub const MAGIC: [u8; 8] = *b"THRCROWD";
 /// The format version this code reads and writes.
-pub const VERSION: u32 = 1;
+pub(crate) const VERSION: u32 = 1;
 /// Bytes in the fixed header.
 pub const HEADER_LEN: u64 = 32;
 /// Bytes per frame-index entry.
-pub const INDEX_ENTRY_LEN: u64 = 24;
+pub(crate) const INDEX_ENTRY_LEN: u64 = 24;
 /// Bytes per agent record (including 3 zero padding bytes).
-pub const RECORD_LEN: u64 = 32;
+pub(crate) const RECORD_LEN: u64 = 32;
 /// Bytes in a frame block besides its records: frame, agent count, CRC.
-pub const BLOCK_OVERHEAD: u64 = 12;
+pub(crate) const BLOCK_OVERHEAD: u64 = 12;
 
 /// Where one frame's block lives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct IndexEntry {
     /// Cache frame number.
-    pub frame: i32,
+    pub(crate) frame: i32,
     /// Agents in the block.
-    pub agents: u32,
+    pub(crate) agents: u32,
     /// Byte offset of the block from the start of the file.
     pub offset: u64,
     /// Block length in bytes (`12 + 32 * agents`).
-    pub length: u64,
+    pub(crate) length: u64,
 }
 
 /// The header and index of a `.crowd` file: everything but the blocks.
@@ -276,7 +276,7 @@ pub fn parse_bytes(bytes: &[u8]) -> Result<CrowdCache> {
 }
 
 /// Reads a whole `.crowd` file.
-pub fn read(path: &Path) -> Result<CrowdCache> {
+pub(crate) fn read(path: &Path) -> Result<CrowdCache> {
     BinaryReader::open(path)?.read_all()
 }
 
@@ -315,19 +315,19 @@ impl BinaryReader {
     }
 
     /// The file.
-    pub fn path(&self) -> &Path {
+    pub(crate) fn path(&self) -> &Path {
         &self.path
     }
     /// Frame numbers, strictly increasing.
-    pub fn frames(&self) -> &[i32] {
+    pub(crate) fn frames(&self) -> &[i32] {
         &self.frames
     }
     /// Rig names.
-    pub fn rigs(&self) -> &[String] {
+    pub(crate) fn rigs(&self) -> &[String] {
         &self.rigs
     }
     /// Cycle names.
-    pub fn cycles(&self) -> &[String] {
+    pub(crate) fn cycles(&self) -> &[String] {
         &self.cycles
     }
     /// The frame index (frame, agent count, offset, length).
@@ -346,7 +346,7 @@ impl BinaryReader {
     }
 
     /// Reads and checks one frame's block.
-    pub fn read_frame(&self, frame: i32) -> Result<FrameBlock> {
+    pub(crate) fn read_frame(&self, frame: i32) -> Result<FrameBlock> {
         match self.frames.binary_search(&frame).ok().and_then(|i| self.index.get(i)) {
             Some(e) => self.read_entry(e),
             None => Err(missing_frame(&self.path, &self.frames, frame)),
@@ -354,7 +354,7 @@ impl BinaryReader {
     }
 
     /// Reads every frame.
-    pub fn read_all(&self) -> Result<CrowdCache> {
+    pub(crate) fn read_all(&self) -> Result<CrowdCache> {
         let frames = self.index.iter().map(|e| self.read_entry(e)).collect::<Result<Vec<_>>>()?;
         Ok(CrowdCache { rigs: self.rigs.clone(), cycles: self.cycles.clone(), frames })
     }
@@ -369,7 +369,7 @@ fn push_name(out: &mut Vec<u8>, name: &str) {
 /// Writes `crowd` as a `.crowd` file through [`write_atomic`], after
 /// [`super::validate`]; rig and cycle tables are written in first-use order.
 /// The output depends only on the crowd.
-pub fn write(path: &Path, crowd: &CrowdCache) -> Result<()> {
+pub(crate) fn write(path: &Path, crowd: &CrowdCache) -> Result<()> {
     super::validate(path, crowd)?;
     let too_big = |what: &str| Error::invalid(path, format!("too many {what} for one .crowd file"));
     let (rigs, rig_map, cycles, cycle_map) = first_use_tables(crowd);

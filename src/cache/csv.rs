@@ -22,11 +22,11 @@ use super::{check_name, validate, validate_record, AgentSample, CrowdCache, Fram
 use crate::error::{write_atomic, Error, IoContext, Result};
 
 /// The header line.
-pub const HEADER: &str = "frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags";
+pub(crate) const HEADER: &str = "frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags";
 const COLUMNS: [&str; 10] = ["frame", "id", "x", "y", "z", "heading", "rig", "cycle", "cycle_frame", "flags"];
 
 /// Flags as written: names joined by `|`, in bit order.
-pub fn flags_to_str(flags: u8) -> String {
+pub(crate) fn flags_to_str(flags: u8) -> String {
     let mut names = Vec::new();
     if flags & SEATED != 0 {
         names.push("seated");
@@ -50,7 +50,7 @@ fn parse_flags(s: &str) -> std::result::Result<u8, String> {
 }
 
 /// Reads a CSV cache (gzip is recognised by its magic bytes).
-pub fn read(path: &Path) -> Result<CrowdCache> {
+pub(crate) fn read(path: &Path) -> Result<CrowdCache> {
     parse_str(path, &super::tabular::read_text(path)?)
 }
 
@@ -67,7 +67,7 @@ fn intern(names: &mut Vec<String>, lookup: &mut HashMap<String, u16>, name: &str
 }
 
 /// Parses CSV text; `path` names it in errors.
-pub fn parse_str(path: &Path, text: &str) -> Result<CrowdCache> {
+pub(crate) fn parse_str(path: &Path, text: &str) -> Result<CrowdCache> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text); // spreadsheets add a BOM
                                                               // The csv crate splits fields, so quoted fields are fine; columns are
                                                               // found by header name, so any order is.
@@ -190,7 +190,7 @@ pub fn parse_str(path: &Path, text: &str) -> Result<CrowdCache> {
 }
 
 /// Writes `crowd` as CSV through [`write_atomic`], after [`validate`].
-pub fn write(path: &Path, crowd: &CrowdCache) -> Result<()> {
+pub(crate) fn write(path: &Path, crowd: &CrowdCache) -> Result<()> {
     validate(path, crowd)?;
     let name = |names: &[String], i: u16| names.get(usize::from(i)).cloned().unwrap_or_default();
     write_atomic(path, |w| {

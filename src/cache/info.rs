@@ -49,7 +49,7 @@ pub struct ImportInfo {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct CacheInfo {
     /// The file.
-    pub file: String,
+    pub(crate) file: String,
     /// `crowd`, `csv` or `jupedsim`.
     pub format: String,
     /// First frame, null when the cache is empty.
@@ -86,16 +86,16 @@ pub struct CacheInfo {
 
 /// Widest plausible crowd, metres: wider looks like centimetres (or feet)
 /// read as metres.
-pub const MAX_PLAUSIBLE_WIDTH: f32 = 2000.0;
+pub(crate) const MAX_PLAUSIBLE_WIDTH: f32 = 2000.0;
 /// Narrowest plausible spread of [`MIN_AGENTS_FOR_SPREAD`] or more agents, metres.
-pub const MIN_PLAUSIBLE_SPREAD: f32 = 0.5;
+pub(crate) const MIN_PLAUSIBLE_SPREAD: f32 = 0.5;
 /// Agents needed before a small spread is suspicious.
-pub const MIN_AGENTS_FOR_SPREAD: usize = 10;
+pub(crate) const MIN_AGENTS_FOR_SPREAD: usize = 10;
 
 /// A warning when bounds look like the wrong units: a crowd wider than
 /// [`MAX_PLAUSIBLE_WIDTH`] or many agents packed in less than
 /// [`MIN_PLAUSIBLE_SPREAD`].
-pub fn bounds_warning(b: &Bounds, agents: usize) -> Option<String> {
+pub(crate) fn bounds_warning(b: &Bounds, agents: usize) -> Option<String> {
     let (w, d) = (b.max[0] - b.min[0], b.max[2] - b.min[2]);
     let wide = w.max(d);
     let at = format!("x {:.1}..{:.1}, z {:.1}..{:.1}", b.min[0], b.max[0], b.min[2], b.max[2]);

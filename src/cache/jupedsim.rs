@@ -39,12 +39,12 @@ use super::{validate, AgentSample, CrowdCache, FrameBlock};
 use crate::error::{Error, IoContext, Result};
 
 /// Stride (metres per walk cycle) when neither --stride nor a rig gives one.
-pub const DEFAULT_STRIDE: f32 = 1.4;
+pub(crate) const DEFAULT_STRIDE: f32 = 1.4;
 /// Walk cycle length in frames when --cycle-length is not given.
-pub const DEFAULT_CYCLE_LENGTH: f32 = 32.0;
+pub(crate) const DEFAULT_CYCLE_LENGTH: f32 = 32.0;
 /// Frames per second cycle frames are counted in (SPEC: shot fps 24), so a
 /// rig clip's length is `duration * SHOT_FPS` frames.
-pub const SHOT_FPS: f32 = 24.0;
+pub(crate) const SHOT_FPS: f32 = 24.0;
 
 /// A walk cycle's length and stride read from a rig glTF (`--rig-file`;
 /// casting's `rig::import_clip` reads it, so the cache never loads rigs).
@@ -53,9 +53,9 @@ pub struct RigClip {
     /// The rig file.
     pub file: PathBuf,
     /// Metres the clip's root travels per cycle.
-    pub stride: f32,
+    pub(crate) stride: f32,
     /// Clip length in frames at [`SHOT_FPS`].
-    pub cycle_length: f32,
+    pub(crate) cycle_length: f32,
 }
 
 /// How imported trajectories become agents.
@@ -219,7 +219,7 @@ fn has_table(conn: &Connection, path: &Path, name: &str) -> Result<bool> {
 }
 
 /// Imports a JuPedSim trajectory file.
-pub fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
+pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
     opts.check()?;
     std::fs::metadata(path).at(path)?; // a clear "not found" before SQLite's message
     let conn = Connection::open_with_flags(path, OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX)

@@ -36,7 +36,7 @@ pub enum KeyKind {
 
 /// What a key is about.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum KeyGroup {
+pub(crate) enum KeyGroup {
     /// The preset: a table layout, or the name of a format.
     Preset,
     /// How the file's text and numbers are read; setting one makes a `.csv` a foreign table.
@@ -55,11 +55,11 @@ pub struct Key {
     /// The key's name (the `throng cache` flag is this with `-` for `_`).
     pub name: &'static str,
     /// Help, one line of the doc comment per item (docs/shot.md says more).
-    pub help_lines: &'static [&'static str],
+    pub(crate) help_lines: &'static [&'static str],
     /// How its value is written on a command line.
     pub kind: KeyKind,
     /// What it is about.
-    pub group: KeyGroup,
+    pub(crate) group: KeyGroup,
 }
 
 /// A key's value read from a command line, as the shot's table would hold it.
@@ -82,7 +82,8 @@ impl Key {
 }
 
 /// The key named `name`.
-pub fn key(name: &str) -> Option<&'static Key> {
+#[cfg(test)] // the tests look keys up by name
+pub(crate) fn key(name: &str) -> Option<&'static Key> {
     KEYS.iter().find(|k| k.name == name)
 }
 
@@ -233,7 +234,7 @@ macro_rules! import_keys {
             }
 
             /// These keys over `base`'s: each key set here wins; columns add up.
-            pub fn over(self, base: TabularSpec) -> TabularSpec {
+            pub(crate) fn over(self, base: TabularSpec) -> TabularSpec {
                 TabularSpec { $($name: Over::over(self.$name, base.$name),)+ }
             }
         }
@@ -350,7 +351,7 @@ source_fps = 25.0
 impl Preset {
     /// The `[cache]` keys a table preset stands for; `None` for `throng` and
     /// `jupedsim`, which name formats, not table layouts.
-    pub fn keys(self) -> Option<TabularSpec> {
+    pub(crate) fn keys(self) -> Option<TabularSpec> {
         let text = match self {
             Preset::PeTrack => PETRACK,
             Preset::Eth => ETH,

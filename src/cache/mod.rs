@@ -69,12 +69,12 @@ pub struct CrowdCache {
 // the shared interface).
 
 pub mod binary;
-pub mod csv;
+pub(crate) mod csv;
 mod info;
-pub mod jupedsim;
+pub(crate) mod jupedsim;
 pub mod keys;
 pub mod tabular;
-pub mod usd;
+pub(crate) mod usd;
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
@@ -82,12 +82,13 @@ use std::sync::Mutex;
 
 use crate::error::{Error, Result};
 
-pub use info::{bounds_warning, bounds_warnings, info, Bounds, CacheInfo, ImportInfo, NameCount};
-pub use jupedsim::ImportOptions;
+pub(crate) use info::bounds_warning;
+pub use info::{bounds_warnings, info, Bounds, CacheInfo, ImportInfo, NameCount};
+pub use jupedsim::{ImportOptions, RigClip};
 pub use tabular::{place, Placement, TabularOptions, TabularReport, TabularSpec};
 
 /// Longest rig or cycle name, in UTF-8 bytes.
-pub const MAX_NAME_LEN: usize = 255;
+pub(crate) const MAX_NAME_LEN: usize = 255;
 
 /// A cache file format, chosen by file extension (a `.gz` suffix is looked
 /// through: `a.csv.gz` is CSV, `a.txt.gz` a table).
@@ -241,13 +242,13 @@ impl CacheReader {
     }
 
     /// Opens a cache, importing simulator files with `opts`.
-    pub fn open_with(path: impl AsRef<Path>, opts: &ImportOptions) -> Result<CacheReader> {
+    pub(crate) fn open_with(path: impl AsRef<Path>, opts: &ImportOptions) -> Result<CacheReader> {
         Self::open_import(path, &Import { jupedsim: opts.clone(), ..Default::default() })
     }
 
     /// Opens a cache as `how` says. A `.crowd` file placed nowhere keeps
     /// frame-by-frame reading; anything else is read whole.
-    pub fn open_import(path: impl AsRef<Path>, how: &Import) -> Result<CacheReader> {
+    pub(crate) fn open_import(path: impl AsRef<Path>, how: &Import) -> Result<CacheReader> {
         let path = path.as_ref();
         if Format::of(path)? == Format::Binary && how.placement.is_identity() {
             return Ok(CacheReader::Binary(binary::BinaryReader::open(path)?));
@@ -286,7 +287,7 @@ impl CacheReader {
     }
 
     /// The file this reader reads.
-    pub fn path(&self) -> &Path {
+    pub(crate) fn path(&self) -> &Path {
         match self {
             CacheReader::Binary(r) => r.path(),
             CacheReader::Memory { path, .. } => path,
@@ -324,7 +325,7 @@ pub(crate) fn missing_frame(path: impl AsRef<Path>, frames: &[i32], frame: i32) 
 
 /// Checks a rig or cycle name: names travel through CSV unquoted, so they
 /// may not hold commas, quotes or control characters.
-pub fn check_name(name: &str) -> std::result::Result<(), String> {
+pub(crate) fn check_name(name: &str) -> std::result::Result<(), String> {
     if name.is_empty() {
         return Err("empty name".into());
     }
@@ -341,7 +342,7 @@ pub fn check_name(name: &str) -> std::result::Result<(), String> {
 }
 
 /// Checks a rig or cycle table: valid, unique names that fit a u16 index.
-pub fn validate_names(path: &Path, kind: &str, names: &[String]) -> Result<()> {
+pub(crate) fn validate_names(path: &Path, kind: &str, names: &[String]) -> Result<()> {
     if names.len() > usize::from(u16::MAX) + 1 {
         return Err(Error::invalid(path, format!("{} {kind} names; at most 65536 fit a u16 index", names.len())));
     }
@@ -357,7 +358,7 @@ pub fn validate_names(path: &Path, kind: &str, names: &[String]) -> Result<()> {
 
 /// Checks one agent record: finite numbers, known rig and cycle, no
 /// reserved flag bits. The error names the frame and agent.
-pub fn validate_record(path: &Path, frame: i32, a: &AgentSample, rigs: usize, cycles: usize) -> Result<()> {
+pub(crate) fn validate_record(path: &Path, frame: i32, a: &AgentSample, rigs: usize, cycles: usize) -> Result<()> {
     let bad = |msg: String, field: &str| Err(Error::invalid(path, msg).frame(frame.into()).agent(a.id).field(field));
     for (v, field) in [(a.position.x, "x"), (a.position.y, "y"), (a.position.z, "z")] {
         if !v.is_finite() {
@@ -383,7 +384,7 @@ pub fn validate_record(path: &Path, frame: i32, a: &AgentSample, rigs: usize, cy
 }
 
 /// Checks one frame: every record, and no agent id twice.
-pub fn validate_frame(path: &Path, block: &FrameBlock, rigs: usize, cycles: usize) -> Result<()> {
+pub(crate) fn validate_frame(path: &Path, block: &FrameBlock, rigs: usize, cycles: usize) -> Result<()> {
     let mut ids = HashSet::with_capacity(block.agents.len());
     for a in &block.agents {
         validate_record(path, block.frame, a, rigs, cycles)?;
@@ -397,7 +398,7 @@ pub fn validate_frame(path: &Path, block: &FrameBlock, rigs: usize, cycles: usiz
 }
 
 /// Checks frame order: strictly increasing. `frames` yields frame numbers.
-pub fn validate_frame_order(path: &Path, frames: impl IntoIterator<Item = i32>) -> Result<()> {
+pub(crate) fn validate_frame_order(path: &Path, frames: impl IntoIterator<Item = i32>) -> Result<()> {
     let mut prev: Option<i32> = None;
     for f in frames {
         if let Some(p) = prev {
@@ -414,7 +415,7 @@ pub fn validate_frame_order(path: &Path, frames: impl IntoIterator<Item = i32>) 
 
 /// The checks every reader (and [`write`]) applies: names, frame order, and
 /// every frame's records. `path` names the file in errors.
-pub fn validate(path: &Path, crowd: &CrowdCache) -> Result<()> {
+pub(crate) fn validate(path: &Path, crowd: &CrowdCache) -> Result<()> {
     validate_names(path, "rig", &crowd.rigs)?;
     validate_names(path, "cycle", &crowd.cycles)?;
     validate_frame_order(path, crowd.frames.iter().map(|b| b.frame))?;
@@ -428,7 +429,7 @@ pub fn validate(path: &Path, crowd: &CrowdCache) -> Result<()> {
 /// cache order), dropping unused names, with old-index -> new-index maps.
 /// This is the order CSV can reproduce, so binary -> CSV -> binary is
 /// byte-identical. Assumes a validated crowd (indices in range).
-pub fn first_use_tables(crowd: &CrowdCache) -> (Vec<String>, Vec<u16>, Vec<String>, Vec<u16>) {
+pub(crate) fn first_use_tables(crowd: &CrowdCache) -> (Vec<String>, Vec<u16>, Vec<String>, Vec<u16>) {
     fn table(names: &[String], used: impl Iterator<Item = u16>) -> (Vec<String>, Vec<u16>) {
         let mut map = vec![u16::MAX; names.len()];
         let mut out = Vec::new();

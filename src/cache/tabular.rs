@@ -32,20 +32,20 @@ use super::{check_name, validate, AgentSample, CrowdCache, FrameBlock};
 use crate::error::{Error, IoContext, Result};
 
 /// Largest input read, after gzip decompression (bytes).
-pub const MAX_INPUT_BYTES: u64 = 2 << 30;
+pub(crate) const MAX_INPUT_BYTES: u64 = 2 << 30;
 /// Most data rows read from one file.
-pub const MAX_ROWS: usize = 20_000_000;
+pub(crate) const MAX_ROWS: usize = 20_000_000;
 /// Most agent records an import may produce after resampling; checked
 /// before any per-frame array is allocated.
-pub const MAX_AGENT_FRAMES: u64 = 50_000_000;
+pub(crate) const MAX_AGENT_FRAMES: u64 = 50_000_000;
 /// Highest source or target frame rate accepted.
-pub const MAX_FPS: f64 = 1000.0;
+pub(crate) const MAX_FPS: f64 = 1000.0;
 /// Default longest interval, in seconds, interpolated across.
-pub const DEFAULT_MAX_GAP: f32 = 1.0;
+pub(crate) const DEFAULT_MAX_GAP: f32 = 1.0;
 /// Default heading smoothing window, seconds.
-pub const DEFAULT_HEADING_WINDOW: f32 = 0.5;
+pub(crate) const DEFAULT_HEADING_WINDOW: f32 = 0.5;
 /// Default speed (m/s) below which the heading is held.
-pub const DEFAULT_HOLD_SPEED: f32 = 0.25;
+pub(crate) const DEFAULT_HOLD_SPEED: f32 = 0.25;
 
 macro_rules! named_enum {
     ($(#[$m:meta])* $name:ident { $($(#[$vm:meta])* $v:ident = [$($s:literal),+]),+ $(,)? }) => {
@@ -55,7 +55,7 @@ macro_rules! named_enum {
         pub enum $name { $($(#[$vm])* $v),+ }
         impl $name {
             /// The value's name as written in a shot (the first of its names).
-            pub fn name(self) -> &'static str {
+            pub(crate) fn name(self) -> &'static str {
                 match self { $($name::$v => [$($s),+][0],)+ }
             }
         }
@@ -113,7 +113,7 @@ named_enum!(
 
 impl Units {
     /// Metres per unit.
-    pub fn metres(self) -> f64 {
+    pub(crate) fn metres(self) -> f64 {
         match self {
             Units::M => 1.0,
             Units::Cm => 0.01,
@@ -271,7 +271,8 @@ pub struct Columns {
 }
 
 /// The column roles, in the order errors list them.
-pub const ROLES: [&str; 12] = ["frame", "time", "id", "x", "y", "z", "heading", "vx", "vy", "vz", "rig", "cycle"];
+pub(crate) const ROLES: [&str; 12] =
+    ["frame", "time", "id", "x", "y", "z", "heading", "vx", "vy", "vz", "rig", "cycle"];
 
 impl Columns {
     fn slot(&mut self, role: &str) -> Option<&mut Option<Column>> {
@@ -293,7 +294,7 @@ impl Columns {
     }
 
     /// Sets one role; an unknown role is an error listing the roles.
-    pub fn set(&mut self, role: &str, col: Option<Column>) -> std::result::Result<(), String> {
+    pub(crate) fn set(&mut self, role: &str, col: Option<Column>) -> std::result::Result<(), String> {
         let slot = self
             .slot(role)
             .ok_or_else(|| format!("unknown column role `{role}`; expected one of: {}", ROLES.join(", ")))?;
@@ -321,7 +322,7 @@ impl Columns {
 
     /// Parses `frame=2,id=agent_id,x=3`: role=name or role=position. An
     /// empty value (`z=`) clears a preset's column.
-    pub fn parse_list(s: &str) -> std::result::Result<Vec<(String, Option<Column>)>, String> {
+    pub(crate) fn parse_list(s: &str) -> std::result::Result<Vec<(String, Option<Column>)>, String> {
         s.split(',')
             .filter(|p| !p.trim().is_empty())
             .map(|p| {
@@ -542,7 +543,7 @@ impl TabularOptions {
     }
 
     /// Checks numbers, names and that the columns can place an agent.
-    pub fn check(&self) -> std::result::Result<(), (String, String)> {
+    pub(crate) fn check(&self) -> std::result::Result<(), (String, String)> {
         let err = |k: &str, m: String| Err((k.to_string(), m));
         let rate = |v: f32| v.is_finite() && v > 0.0 && f64::from(v) <= MAX_FPS;
         if !rate(self.fps) {
@@ -645,7 +646,7 @@ pub struct TabularReport {
     /// Intervals longer than `max_gap` left empty.
     pub gaps: usize,
     /// Agent records written.
-    pub agent_frames: u64,
+    pub(crate) agent_frames: u64,
 }
 
 /// One row, in world metres, placed.
@@ -674,7 +675,7 @@ struct Pose {
 
 /// Reads the file's text: gzip (by magic bytes) is decompressed; a byte
 /// order mark is dropped; at most [`MAX_INPUT_BYTES`].
-pub fn read_text(path: &Path) -> Result<String> {
+pub(crate) fn read_text(path: &Path) -> Result<String> {
     let file = std::fs::File::open(path).at(path)?;
     let mut head = [0u8; 2];
     let mut bytes = Vec::new();

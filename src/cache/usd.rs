@@ -28,9 +28,9 @@ use super::{validate, AgentSample, CrowdCache, FrameBlock, ImportOptions, SEATED
 use crate::error::{Error, Result};
 
 /// Most frames a USD crowd may span.
-pub const MAX_FRAMES: i64 = 1_000_000;
+pub(crate) const MAX_FRAMES: i64 = 1_000_000;
 /// Most agent samples (agents x frames) one USD crowd may hold.
-pub const MAX_SAMPLES: usize = 50_000_000;
+pub(crate) const MAX_SAMPLES: usize = 50_000_000;
 
 struct Ctx<'a> {
     path: &'a Path,
@@ -206,7 +206,7 @@ impl Names2 {
 }
 
 /// Reads a USD crowd into a [`CrowdCache`].
-pub fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
+pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
     let text = path.to_str().ok_or_else(|| Error::invalid(path, "the USD file's path is not UTF-8"))?;
     if !path.exists() {
         return Err(Error::invalid(path, "no such USD file"));
@@ -540,7 +540,7 @@ fn sampled_attrs(ctx: &Ctx, instancers: &[String], agent_prims: &[String]) -> Re
 /// the stage's time code range. `None` when the file does not open as a
 /// crowd (its own error is reported elsewhere). For the shot's error on
 /// frames outside the cache.
-pub fn coverage(path: &Path, cache_frame: i32) -> Option<String> {
+pub(crate) fn coverage(path: &Path, cache_frame: i32) -> Option<String> {
     let stage = Stage::open(path.to_str()?).ok()?;
     let ctx = Ctx { path, stage };
     let (instancers, agent_prims) = find_crowd(&ctx).ok()?;

@@ -20,7 +20,7 @@ use crate::error::{Error, Result};
 use crate::shot::Shot;
 
 /// A 64-bit mix (splitmix64's finaliser): a bijection with good avalanche.
-pub fn mix64(mut z: u64) -> u64 {
+pub(crate) fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     z ^ (z >> 31)
@@ -52,7 +52,7 @@ fn uniform_hashed(seed: u64, agent: u32, purpose: u64) -> f64 {
 
 /// Index drawn with probability proportional to `weights` (all >= 0);
 /// `None` when they sum to zero.
-pub fn weighted_pick(weights: &[f32], u: f64) -> Option<usize> {
+pub(crate) fn weighted_pick(weights: &[f32], u: f64) -> Option<usize> {
     let total: f64 = weights.iter().map(|&w| w.max(0.0) as f64).sum();
     if total <= 0.0 {
         return None;
@@ -75,7 +75,7 @@ pub fn weighted_pick(weights: &[f32], u: f64) -> Option<usize> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct SlotCast {
     /// Rig slot name.
-    pub slot: Arc<str>,
+    pub(crate) slot: Arc<str>,
     /// The part, or `None` when the scheme has no candidate for this slot.
     /// Shared (`Arc`) by every agent cast in the same part and material.
     pub part: Option<Arc<CastPart>>,
@@ -93,7 +93,7 @@ pub struct AgentCast {
     /// Height scale (1.0 for agents that are never scaled).
     pub height_scale: f32,
     /// Whether the height jitter applies (false for seated and no-scale agents).
-    pub scaled: bool,
+    pub(crate) scaled: bool,
     /// Parts per rig slot, in rig slot order.
     pub slots: Vec<SlotCast>,
 }
@@ -163,12 +163,18 @@ pub fn cast_agent(
 }
 
 /// The scheme name of agents that wear their character as delivered.
-pub const DELIVERED_SCHEME: &str = "delivered";
+pub(crate) const DELIVERED_SCHEME: &str = "delivered";
 
 /// Casts an agent of a skinned rig whose shot names no schemes: it wears
 /// the file's own meshes and materials (`parts`, one per slot); only the
 /// height is drawn.
-pub fn cast_delivered(seed: u64, id: u32, rig: &RigCasting, parts: Vec<SlotCast>, never_scale: bool) -> AgentCast {
+pub(crate) fn cast_delivered(
+    seed: u64,
+    id: u32,
+    rig: &RigCasting,
+    parts: Vec<SlotCast>,
+    never_scale: bool,
+) -> AgentCast {
     AgentCast {
         id,
         rig: rig.name.clone(),
@@ -197,7 +203,7 @@ fn height_scale(seed: u64, id: u32, jitter: f32, never_scale: bool) -> f32 {
 /// Body parts scale per axis to fill the box. Uniform parts (heads) scale by
 /// the smallest axis ratio so they fit inside the box, rest on its bottom and
 /// are centred in X and Z: non-uniform heads looked "inflated and sickly".
-pub fn fit_part(mesh_lo: Vec3, mesh_hi: Vec3, box_lo: Vec3, box_hi: Vec3, uniform: bool) -> Affine3A {
+pub(crate) fn fit_part(mesh_lo: Vec3, mesh_hi: Vec3, box_lo: Vec3, box_hi: Vec3, uniform: bool) -> Affine3A {
     let size = mesh_hi - mesh_lo;
     let target = box_hi - box_lo;
     // A flat mesh (zero extent on an axis) keeps its unit size on that axis.
@@ -222,16 +228,16 @@ pub struct Casting {
 }
 
 /// A skinned pose step an agent takes: (rig, cycle index, pose step).
-pub type PoseStep = (Arc<str>, usize, u32);
+pub(crate) type PoseStep = (Arc<str>, usize, u32);
 
 /// What [`Casting::cast`] gives besides the casting.
-pub struct CastOutcome {
+pub(crate) struct CastOutcome {
     /// Every agent cast.
-    pub casting: Casting,
+    pub(crate) casting: Casting,
     /// Every pose step a visible skinned agent takes in the shot's frames.
-    pub still_steps: BTreeSet<PoseStep>,
+    pub(crate) still_steps: BTreeSet<PoseStep>,
     /// What casting noticed but accepted (shot frames outside the cache).
-    pub warnings: Vec<String>,
+    pub(crate) warnings: Vec<String>,
 }
 
 impl Casting {
@@ -239,7 +245,12 @@ impl Casting {
     /// frames once (each agent's rig at its first appearance, whether it is
     /// ever seated or on a no-scale cycle, the pose steps skinned agents
     /// take), refuses a cycle an agent's rig lacks, then casts every agent.
-    pub fn cast(shot: &Shot, cache: &CacheReader, rigs: &ShotRigs, wardrobes: &Wardrobes) -> Result<CastOutcome> {
+    pub(crate) fn cast(
+        shot: &Shot,
+        cache: &CacheReader,
+        rigs: &ShotRigs,
+        wardrobes: &Wardrobes,
+    ) -> Result<CastOutcome> {
         struct Seen {
             rig: u16,
             never_scale: bool,
@@ -369,7 +380,7 @@ impl Casting {
     }
 
     /// Agent `id`'s cast (`None`: it is not in the shot's frames).
-    pub fn get(&self, id: u32) -> Option<&AgentCast> {
+    pub(crate) fn get(&self, id: u32) -> Option<&AgentCast> {
         self.agents.get(&id)
     }
 

@@ -32,7 +32,8 @@ use crate::scene::dome::load_dome;
 use crate::scene::gltf::AssetCache;
 use crate::scene::lights::{Dome, Light, LightKind, SceneLights};
 use crate::scene::{vis, Camera, Instance, InstanceAgent, Library, Material, Rec709, Space, Texture};
-use crate::shot::{DomeSpec, Shot};
+use crate::shot::DomeSpec;
+use crate::shot::Shot;
 
 /// Level of detail an agent renders at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -165,7 +166,7 @@ impl LoadedLights {
 
 /// Set objects with their own Cryptomatte name: every [`Instance::part`]
 /// value but `u16::MAX` (which marks the unnamed rest).
-pub const SET_OBJECTS_NAMED: usize = u16::MAX as usize;
+pub(crate) const SET_OBJECTS_NAMED: usize = u16::MAX as usize;
 
 /// Name of an agent record's cycle in the cache (`?` if out of range).
 pub(crate) fn cycle_name<'a>(cache: &'a CacheReader, a: &AgentSample) -> &'a str {
@@ -298,14 +299,14 @@ impl<C> ShotCrowd<C> {
 
     /// The set's instances (agent `None`), fully visible; each one's `part`
     /// indexes [`ShotCrowd::set_names`].
-    pub fn set(&self) -> &[Instance] {
+    pub(crate) fn set(&self) -> &[Instance] {
         &self.set.instances
     }
 
     /// Unique names of the set's objects (its glTF nodes with a mesh, by
     /// [`crate::scene::gltf::set_object_names`]): Cryptomatte's `set/<name>`.
     /// At most [`SET_OBJECTS_NAMED`]; later objects are plain `set`.
-    pub fn set_names(&self) -> &[String] {
+    pub(crate) fn set_names(&self) -> &[String] {
         &self.set.names
     }
 
@@ -325,7 +326,7 @@ impl<C> ShotCrowd<C> {
 
     /// Only the cache frames the shot reads (they keep their cache numbers),
     /// without reading the rest of a long simulation.
-    pub fn shot_crowd(&self) -> Result<crate::cache::CrowdCache> {
+    pub(crate) fn shot_crowd(&self) -> Result<crate::cache::CrowdCache> {
         let mut frames = Vec::new();
         for f in self.shot.frames.iter() {
             let cf = self.shot.cache.cache_frame(f);
@@ -342,14 +343,14 @@ impl<C> ShotCrowd<C> {
     }
 
     /// Agent to world: foot position, heading about +Y, height scale about the foot pivot.
-    pub fn world_from_agent(&self, a: &AgentSample) -> Affine3A {
+    pub(crate) fn world_from_agent(&self, a: &AgentSample) -> Affine3A {
         let h = self.casting.get(a.id).map_or(1.0, |c| c.height_scale);
         Affine3A::from_scale_rotation_translation(Vec3::splat(h), Quat::from_rotation_y(a.heading), a.position)
     }
 
     /// An agent's standing height in metres: its rig's height times its
     /// height scale (`None` for an agent that was not cast).
-    pub fn agent_height(&self, id: u32) -> Option<f32> {
+    pub(crate) fn agent_height(&self, id: u32) -> Option<f32> {
         let cast = self.casting.get(id)?;
         Some(self.rigs.height(&cast.rig)? * cast.height_scale)
     }
@@ -404,7 +405,7 @@ impl<C> ShotCrowd<C> {
 
     /// As [`ShotCrowd::agent_instances`], from a pose already computed (a
     /// render poses each agent once per frame, not once per layer).
-    pub fn posed_instances(&self, id: u32, pose: &AgentPose, lod: Lod, visibility: u8, out: &mut Vec<Instance>) {
+    pub(crate) fn posed_instances(&self, id: u32, pose: &AgentPose, lod: Lod, visibility: u8, out: &mut Vec<Instance>) {
         let instance = |mesh, material, world_from_object, part: usize| Instance {
             mesh,
             material,
@@ -463,12 +464,12 @@ impl<C> ShotCrowd<C> {
 
     /// The name of part `part` (a cast slot) of an agent, for Cryptomatte
     /// and export node names.
-    pub fn slot_name(&self, id: u32, part: u16) -> Option<&str> {
+    pub(crate) fn slot_name(&self, id: u32, part: u16) -> Option<&str> {
         self.casting.get(id)?.slots.get(part as usize).map(|s| &*s.slot)
     }
 
     /// The pose key a skinned agent plays at a frame: `<rig>/<cycle>/<step>of<steps>`.
-    pub fn pose_key(&self, a: &AgentSample) -> Option<String> {
+    pub(crate) fn pose_key(&self, a: &AgentSample) -> Option<String> {
         let cast = self.casting.get(a.id)?;
         let rig = self.rigs.skinned(&cast.rig)?;
         let cycle = rig.cycle_index(self.cycle_name(a)).ok()?;

@@ -26,12 +26,12 @@ pub struct DressedPart {
     /// The part mesh.
     pub mesh: MeshId,
     /// The part's material.
-    pub material: MaterialId,
+    pub(crate) material: MaterialId,
     /// Index of its fit ([`Dressing::fit`]): fits depend only on (rig, slot, mesh).
     pub fit: u32,
     /// Whether this piece stands for its slot at proxy LOD (one per slot,
     /// wearing the part's first material).
-    pub proxy: bool,
+    pub(crate) proxy: bool,
 }
 
 /// How a part mesh and the proxy cube sit in a slot.
@@ -40,18 +40,18 @@ pub struct PartFit {
     /// Fit of the part mesh to the slot's proxy box.
     pub slot_from_part: Affine3A,
     /// The unit proxy cube mapped onto the slot's proxy box.
-    pub slot_from_proxy: Affine3A,
+    pub(crate) slot_from_proxy: Affine3A,
 }
 
 /// One skinned piece a skinned agent wears.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SkinDress {
     /// Index into the agent's cast slots.
-    pub slot: usize,
+    pub(crate) slot: usize,
     /// Index into the rig's pieces ([`crate::casting::skin::SkinnedRig::piece`]).
-    pub piece: usize,
+    pub(crate) piece: usize,
     /// The piece's material.
-    pub material: MaterialId,
+    pub(crate) material: MaterialId,
 }
 
 /// What one agent wears, by its rig's kind.
@@ -65,7 +65,7 @@ pub enum AgentDress {
 
 impl AgentDress {
     /// The material worn in cast slot `slot` (its first piece's), if any.
-    pub fn material_in_slot(&self, slot: usize) -> Option<MaterialId> {
+    pub(crate) fn material_in_slot(&self, slot: usize) -> Option<MaterialId> {
         match self {
             AgentDress::Slots(parts) => parts.iter().find(|p| p.slot as usize == slot).map(|p| p.material),
             AgentDress::Skinned(pieces) => pieces.iter().find(|p| p.slot == slot).map(|p| p.material),
@@ -163,7 +163,7 @@ impl Dressing {
     /// Dresses every cast agent in id order, loading the parts it wears into
     /// `assets` (the proxy cube first) and, for skinned characters, into
     /// their rigs.
-    pub fn dress(
+    pub(crate) fn dress(
         casting: &Casting,
         rigs: &mut ShotRigs,
         wardrobes: &Wardrobes,
@@ -268,12 +268,12 @@ impl Dressing {
     }
 
     /// The unit cube every proxy box instances.
-    pub fn proxy_mesh(&self) -> MeshId {
+    pub(crate) fn proxy_mesh(&self) -> MeshId {
         self.proxy_mesh
     }
 
     /// The skinned pieces worn on each skinned rig, over all its agents.
-    pub fn worn_pieces(&self, casting: &Casting) -> BTreeMap<Arc<str>, BTreeSet<usize>> {
+    pub(crate) fn worn_pieces(&self, casting: &Casting) -> BTreeMap<Arc<str>, BTreeSet<usize>> {
         let mut worn: BTreeMap<Arc<str>, BTreeSet<usize>> = BTreeMap::new();
         for (id, dress) in self.iter() {
             let (AgentDress::Skinned(pieces), Some(cast)) = (dress, casting.get(id)) else { continue };
@@ -285,7 +285,7 @@ impl Dressing {
     /// How many instances agent `id` places at `lod` in any pose: its parts,
     /// one proxy box per slot, its skinned pieces, or one box per joint of
     /// its pieces (0 for an agent not dressed).
-    pub fn instance_count(&self, id: u32, lod: Lod, rigs: &ShotRigs, casting: &Casting) -> usize {
+    pub(crate) fn instance_count(&self, id: u32, lod: Lod, rigs: &ShotRigs, casting: &Casting) -> usize {
         match (self.get(id), lod) {
             (None, _) => 0,
             (Some(AgentDress::Slots(parts)), Lod::Full) => parts.len(),

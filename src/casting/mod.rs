@@ -5,28 +5,27 @@
 //! [`PoseLibrary`] (every mesh, and every skinned pose step still frames and
 //! the shutter take); and from them any frame's posed instances.
 
-pub mod cast;
-pub mod crowd;
-pub mod dressing;
+pub(crate) mod cast;
+pub(crate) mod crowd;
+pub(crate) mod dressing;
 pub mod motion;
-pub mod poses;
+pub(crate) mod poses;
 pub mod rig;
-pub mod rigs;
+pub(crate) mod rigs;
 pub mod shot_cache;
 pub mod skin;
 pub mod table;
 pub mod wardrobe;
 
-pub use cast::{cast_agent, cast_delivered, fit_part, mix64, uniform, AgentCast, Casting, RigCasting, SlotCast};
+pub use cast::{cast_agent, uniform, AgentCast, Casting, RigCasting, SlotCast};
 pub use crowd::{AgentPose, Lod, ShotCrowd};
-pub use dressing::{AgentDress, DressedPart, Dressing, SkinDress};
+pub use dressing::{AgentDress, DressedPart, Dressing, PartFit, SkinDress};
 pub use poses::{PoseLibrary, PosedSkins};
 pub use rigs::{ShotRig, ShotRigs};
-pub use wardrobe::CastPart;
 
 /// Refuses an agent id that cannot be represented downstream: `agent.id` in
 /// the EXRs is id + 1 (0 = no agent), so `u32::MAX` would write as "no agent".
-pub fn check_agent_id(cache: &std::path::Path, cache_frame: i32, id: u32) -> crate::error::Result<()> {
+pub(crate) fn check_agent_id(cache: &std::path::Path, cache_frame: i32, id: u32) -> crate::error::Result<()> {
     if id == u32::MAX {
         return Err(crate::error::Error::invalid(
             cache,
@@ -42,7 +41,7 @@ pub fn check_agent_id(cache: &std::path::Path, cache_frame: i32, id: u32) -> cra
 /// Shot frames with no cache frame (`outside`, in order): an error naming the
 /// first one, unless the shot sets `frames.outside_cache = "empty"`, when they
 /// render no agents and this returns the warning to print.
-pub fn check_outside_cache(
+pub(crate) fn check_outside_cache(
     shot: &crate::shot::Shot,
     cache_frames: &[i32],
     cache: &std::path::Path,

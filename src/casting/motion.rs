@@ -51,9 +51,9 @@ use crate::shot::Shot;
 #[derive(Debug, Clone)]
 pub struct AgentMotion {
     /// The pose at shutter open.
-    pub open: AgentPose,
+    pub(crate) open: AgentPose,
     /// The pose at shutter close.
-    pub close: AgentPose,
+    pub(crate) close: AgentPose,
     /// Skinned agents: the blend weight of the close pose's meshes at open
     /// and at close (vertices blend from the open pose's meshes); `None` for
     /// rigid motion only.
@@ -64,13 +64,13 @@ pub struct AgentMotion {
 /// camera at both: computed once per frame and shared by every layer.
 pub struct MotionFrame {
     /// Shot frame.
-    pub frame: i32,
+    pub(crate) frame: i32,
     /// Shutter `[open, close]`, frames relative to the frame.
-    pub shutter: [f32; 2],
+    pub(crate) shutter: [f32; 2],
     /// (agent id, its motion), in cache order.
     pub agents: Vec<(u32, AgentMotion)>,
     /// The camera at shutter open and close.
-    pub camera: [Camera; 2],
+    pub(crate) camera: [Camera; 2],
 }
 
 /// The cache records of an agent's neighbours.
@@ -97,7 +97,7 @@ impl Neighbours {
 }
 
 /// The shortest signed angle from `a` to `b`, radians in [-pi, pi].
-pub fn shortest_arc(a: f32, b: f32) -> f32 {
+pub(crate) fn shortest_arc(a: f32, b: f32) -> f32 {
     let tau = std::f32::consts::TAU;
     let d = (b - a).rem_euclid(tau);
     if d > std::f32::consts::PI {
@@ -110,7 +110,7 @@ pub fn shortest_arc(a: f32, b: f32) -> f32 {
 /// `to - from` of two cycle frames, taken modulo `length` to the value
 /// nearest zero (a wrap from the cycle's end to its start is a small step
 /// forward). Without a length, the plain difference.
-pub fn cycle_delta(from: f32, to: f32, length: Option<f32>) -> f32 {
+pub(crate) fn cycle_delta(from: f32, to: f32, length: Option<f32>) -> f32 {
     let d = to - from;
     match length {
         Some(l) if l > 0.0 && l.is_finite() => d - l * (d / l).round(),
@@ -119,7 +119,7 @@ pub fn cycle_delta(from: f32, to: f32, length: Option<f32>) -> f32 {
 }
 
 /// Length in frames of the cycle an agent record plays (`None` if unknown).
-pub fn cycle_length<C>(crowd: &ShotCrowd<C>, a: &AgentSample) -> Option<f32> {
+pub(crate) fn cycle_length<C>(crowd: &ShotCrowd<C>, a: &AgentSample) -> Option<f32> {
     length_of(crowd.shot(), crowd.cache(), crowd.casting(), crowd.rigs(), a)
 }
 
@@ -132,7 +132,7 @@ fn length_of(shot: &Shot, cache: &CacheReader, casting: &Casting, rigs: &ShotRig
 /// The agent record `a` (at the frame's cache frame) moved to sub-frame
 /// offset `s` with the rule of the module docs. `prev` and `next` are its
 /// records at the neighbouring cache frames, if there.
-pub fn sample_at(
+pub(crate) fn sample_at(
     a: &AgentSample,
     prev: Option<&AgentSample>,
     next: Option<&AgentSample>,
@@ -211,7 +211,7 @@ fn skin_keys(skinned: (&Arc<str>, &SkinnedRig), cycle_name: &str, c0: f32, c1: f
 }
 
 /// The camera at a fractional shot frame (keys interpolated; a glTF camera does not move).
-pub fn camera_at<C>(crowd: &ShotCrowd<C>, shot_frame: i32, offset: f32) -> Result<Camera> {
+pub(crate) fn camera_at<C>(crowd: &ShotCrowd<C>, shot_frame: i32, offset: f32) -> Result<Camera> {
     match crowd.shot().keyed_camera(shot_frame as f32 + offset) {
         Some(c) => Ok(c),
         None => crowd.camera(shot_frame),

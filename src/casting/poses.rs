@@ -53,22 +53,22 @@ impl PosedSkins {
     }
 
     /// The mesh of `piece` of `rig` posed at (`cycle`, `step`).
-    pub fn mesh(&self, rig: &Arc<str>, piece: usize, cycle: usize, step: u32) -> Option<MeshId> {
+    pub(crate) fn mesh(&self, rig: &Arc<str>, piece: usize, cycle: usize, step: u32) -> Option<MeshId> {
         self.meshes.get(&(rig.clone(), piece, cycle, step)).copied()
     }
 
     /// `rig_from_node` of every node of `rig` at (`cycle`, `step`).
-    pub fn joints(&self, rig: &Arc<str>, cycle: usize, step: u32) -> Option<&[Affine3A]> {
+    pub(crate) fn joints(&self, rig: &Arc<str>, cycle: usize, step: u32) -> Option<&[Affine3A]> {
         self.joints.get(&(rig.clone(), cycle, step)).map(Vec::as_slice)
     }
 
     /// Every posed mesh: ((rig, piece, cycle, step), mesh), in key order.
-    pub fn meshes(&self) -> impl Iterator<Item = (&(Arc<str>, usize, usize, u32), MeshId)> {
+    pub(crate) fn meshes(&self) -> impl Iterator<Item = (&(Arc<str>, usize, usize, u32), MeshId)> {
         self.meshes.iter().map(|(k, &m)| (k, m))
     }
 
     /// The first posed mesh of `piece` of `rig` (any cycle and step).
-    pub fn first_mesh(&self, rig: &str, piece: usize) -> Option<MeshId> {
+    pub(crate) fn first_mesh(&self, rig: &str, piece: usize) -> Option<MeshId> {
         self.meshes
             .range((Arc::<str>::from(rig), piece, 0, 0)..)
             .find(|(k, _)| *k.0 == *rig && k.1 == piece)
@@ -115,7 +115,7 @@ impl PoseLibrary<Rec709> {
 
 impl<C> PoseLibrary<C> {
     /// The shared meshes, materials and textures.
-    pub fn library(&self) -> &Library {
+    pub(crate) fn library(&self) -> &Library {
         self.assets.library()
     }
 

@@ -39,11 +39,11 @@ use crate::scene::gltf::{check_accessor, node_label, out_of_range, quat_from_glt
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Trs {
     /// Translation.
-    pub translation: Vec3,
+    pub(crate) translation: Vec3,
     /// Unit rotation.
     pub rotation: Quat,
     /// Non-uniform scale.
-    pub scale: Vec3,
+    pub(crate) scale: Vec3,
 }
 
 impl Default for Trs {
@@ -54,7 +54,7 @@ impl Default for Trs {
 
 impl Trs {
     /// As an affine transform (parent_from_node).
-    pub fn affine(&self) -> Affine3A {
+    pub(crate) fn affine(&self) -> Affine3A {
         Affine3A::from_scale_rotation_translation(self.scale, self.rotation, self.translation)
     }
 }
@@ -65,9 +65,9 @@ pub struct Node {
     /// Node name (`#index` when the file gives none).
     pub name: String,
     /// Parent node index; `None` for top-level nodes.
-    pub parent: Option<usize>,
+    pub(crate) parent: Option<usize>,
     /// Rest transform relative to the parent.
-    pub rest: Trs,
+    pub(crate) rest: Trs,
 }
 
 /// The node tree of a glTF file.
@@ -106,18 +106,18 @@ impl Hierarchy {
     }
 
     /// Index of the first node named `name`.
-    pub fn find(&self, name: &str) -> Option<usize> {
+    pub(crate) fn find(&self, name: &str) -> Option<usize> {
         self.nodes.iter().position(|n| n.name == name)
     }
 
     /// Every node's rest transform.
-    pub fn rest_pose(&self) -> Vec<Trs> {
+    pub(crate) fn rest_pose(&self) -> Vec<Trs> {
         self.nodes.iter().map(|n| n.rest).collect()
     }
 
     /// Composes local transforms down the tree: `top_from_node` for every
     /// node (the space of the top-level nodes' parent).
-    pub fn compose(&self, local: &[Trs]) -> Vec<Affine3A> {
+    pub(crate) fn compose(&self, local: &[Trs]) -> Vec<Affine3A> {
         let mut world = vec![Affine3A::IDENTITY; self.nodes.len()];
         for &i in &self.order {
             let local = local.get(i).copied().unwrap_or(self.nodes[i].rest).affine();
@@ -178,7 +178,7 @@ impl Channel {
 
     /// The value at `t` seconds (clamped to the first and last keys).
     /// Rotations come back normalised.
-    pub fn sample(&self, t: f32) -> Vec4 {
+    pub(crate) fn sample(&self, t: f32) -> Vec4 {
         let v = self.sample_raw(t);
         if self.property == Property::Rotation {
             v.try_normalize().unwrap_or(Vec4::W)
@@ -263,13 +263,13 @@ pub struct Clip {
 
 impl Clip {
     /// `end - start`, seconds.
-    pub fn duration(&self) -> f32 {
+    pub(crate) fn duration(&self) -> f32 {
         self.end - self.start
     }
 
     /// Overwrites the animated properties of `pose` (local TRS per node) with
     /// their values at `t` seconds; other properties keep their values.
-    pub fn apply(&self, t: f32, pose: &mut [Trs]) {
+    pub(crate) fn apply(&self, t: f32, pose: &mut [Trs]) {
         for ch in &self.channels {
             let Some(trs) = pose.get_mut(ch.node) else { continue };
             match ch.property {
@@ -281,7 +281,7 @@ impl Clip {
     }
 
     /// The channel driving `property` of node `node`, if any.
-    pub fn channel(&self, node: usize, property: Property) -> Option<&Channel> {
+    pub(crate) fn channel(&self, node: usize, property: Property) -> Option<&Channel> {
         self.channels.iter().find(|c| c.node == node && c.property == property)
     }
 
@@ -364,7 +364,7 @@ impl Clip {
 #[derive(Clone, Debug)]
 pub struct Animated {
     /// The file.
-    pub path: PathBuf,
+    pub(crate) path: PathBuf,
     /// Its nodes.
     pub hierarchy: Hierarchy,
     /// Its animations, in file order.
@@ -379,7 +379,7 @@ impl Animated {
     }
 
     /// The nodes and animations of an already opened file.
-    pub fn from_file(file: &GltfFile) -> Result<Animated> {
+    pub(crate) fn from_file(file: &GltfFile) -> Result<Animated> {
         let hierarchy = Hierarchy::load(file)?;
         let clips = file.doc.animations().map(|a| Clip::load(file, &a)).collect::<Result<Vec<_>>>()?;
         Ok(Animated { path: file.path.clone(), hierarchy, clips })
@@ -459,11 +459,6 @@ impl Rig {
         Ok(Rig { path: file.path, shape, cycles })
     }
 
-    /// The file it came from.
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
-
     /// Slots in node order (stable).
     pub fn slots(&self) -> &[Slot] {
         &self.shape.slots
@@ -480,7 +475,7 @@ impl Rig {
     }
 
     /// All cycles, in file order.
-    pub fn cycles(&self) -> &[Cycle] {
+    pub(crate) fn cycles(&self) -> &[Cycle] {
         &self.cycles
     }
 
@@ -499,7 +494,7 @@ impl Rig {
 
     /// Standing height in metres: the top of the proxy boxes in the rest
     /// pose (the feet are on y = 0).
-    pub fn height(&self) -> f32 {
+    pub(crate) fn height(&self) -> f32 {
         let pose = self.rest_pose();
         pose.slot_transforms()
             .into_iter()
@@ -513,7 +508,7 @@ impl Rig {
 
 /// Whether any node of the file is a slot (extras with a `"slot"` key):
 /// what tells a slot rig from a skinned character when both have a skin.
-pub fn has_slots(file: &GltfFile) -> bool {
+pub(crate) fn has_slots(file: &GltfFile) -> bool {
     file.doc.nodes().any(|n| {
         n.extras()
             .as_ref()
@@ -566,18 +561,8 @@ pub struct Cycle {
 
 impl Cycle {
     /// Cycle name (the glTF animation name).
-    pub fn name(&self) -> &str {
+    pub(crate) fn name(&self) -> &str {
         &self.clip.name
-    }
-
-    /// The underlying clip.
-    pub fn clip(&self) -> &Clip {
-        &self.clip
-    }
-
-    /// Length in seconds (first to last key).
-    pub fn duration(&self) -> f32 {
-        self.clip.duration()
     }
 
     /// Length in frames at `fps` (`duration * fps`).

@@ -21,7 +21,7 @@ pub enum ShotRig {
 
 impl ShotRig {
     /// Slot names casting fills, in rig order.
-    pub fn slot_names(&self) -> Vec<&str> {
+    pub(crate) fn slot_names(&self) -> Vec<&str> {
         match self {
             ShotRig::Slots(rig) => rig.slots().iter().map(|s| s.name.as_str()).collect(),
             ShotRig::Skinned(rig) => rig.slots().iter().map(String::as_str).collect(),
@@ -29,7 +29,7 @@ impl ShotRig {
     }
 
     /// Why the rig cannot play cycle `name` (`None`: it can).
-    pub fn lacks_cycle(&self, name: &str) -> Option<Error> {
+    pub(crate) fn lacks_cycle(&self, name: &str) -> Option<Error> {
         match self {
             ShotRig::Slots(rig) => rig.cycle(name).err(),
             ShotRig::Skinned(rig) => rig.cycle_index(name).err(),
@@ -37,7 +37,7 @@ impl ShotRig {
     }
 
     /// Length in frames of cycle `name` (`None` if the rig lacks it).
-    pub fn cycle_frames(&self, name: &str, fps: f32) -> Option<f32> {
+    pub(crate) fn cycle_frames(&self, name: &str, fps: f32) -> Option<f32> {
         match self {
             ShotRig::Slots(rig) => rig.cycle(name).ok().map(|c| c.frames(fps)),
             ShotRig::Skinned(rig) => rig.cycle_index(name).ok().map(|c| rig.cycle_frames(c)),
@@ -45,7 +45,7 @@ impl ShotRig {
     }
 
     /// The skinned character, for a skinned rig.
-    pub fn skinned(&self) -> Option<&SkinnedRig> {
+    pub(crate) fn skinned(&self) -> Option<&SkinnedRig> {
         match self {
             ShotRig::Skinned(rig) => Some(rig),
             ShotRig::Slots(_) => None,
@@ -61,7 +61,7 @@ pub struct ShotRigs {
 
 impl ShotRigs {
     /// Loads every rig of the shot and checks its schemes fill slots it has.
-    pub fn load(shot: &Shot, wardrobes: &Wardrobes) -> Result<ShotRigs> {
+    pub(crate) fn load(shot: &Shot, wardrobes: &Wardrobes) -> Result<ShotRigs> {
         let mut rigs = BTreeMap::new();
         for (name, r) in &shot.rigs {
             let rig = if is_skinned_rig(r)? {
@@ -89,22 +89,22 @@ impl ShotRigs {
     }
 
     /// The skinned character named `name` (`None` for a slot rig or no such rig).
-    pub fn skinned(&self, name: &str) -> Option<&SkinnedRig> {
+    pub(crate) fn skinned(&self, name: &str) -> Option<&SkinnedRig> {
         self.get(name)?.skinned()
     }
 
     /// Standing height of rig `name` in metres (rest pose, before height jitter).
-    pub fn height(&self, name: &str) -> Option<f32> {
+    pub(crate) fn height(&self, name: &str) -> Option<f32> {
         self.rigs.get(name).map(|&(_, h)| h)
     }
 
     /// Every rig by name, in name order.
-    pub fn iter(&self) -> impl Iterator<Item = (&str, &ShotRig)> {
+    pub(crate) fn iter(&self) -> impl Iterator<Item = (&str, &ShotRig)> {
         self.rigs.iter().map(|(name, (rig, _))| (name.as_str(), rig))
     }
 
     /// Whether any rig is a skinned character.
-    pub fn any_skinned(&self) -> bool {
+    pub(crate) fn any_skinned(&self) -> bool {
         self.iter().any(|(_, rig)| rig.skinned().is_some())
     }
 
@@ -117,7 +117,7 @@ impl ShotRigs {
     }
 
     /// What loading the skinned characters noticed but accepted, in rig order.
-    pub fn warnings(&self) -> impl Iterator<Item = &String> {
+    pub(crate) fn warnings(&self) -> impl Iterator<Item = &String> {
         self.iter().filter_map(|(_, rig)| rig.skinned()).flat_map(|r| r.warnings().iter())
     }
 }

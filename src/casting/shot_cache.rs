@@ -68,7 +68,7 @@ fn skinned_gait(rig: &SkinnedRig, walk: &str, idle: Option<&str>) -> Result<Opti
 
 /// How the shot's cache becomes a crowd: the `[cache]` keys over their
 /// preset, at the shot's fps, with the gaits of the shot's rigs.
-pub fn shot_import(shot: &Shot) -> Result<Import> {
+pub(crate) fn shot_import(shot: &Shot) -> Result<Import> {
     let spec = &shot.cache.import;
     let path = &shot.cache.path;
     let key_err = |(k, m): (String, String)| Error::invalid(&shot.path, m).field(format!("cache.{k}"));

@@ -36,12 +36,12 @@ use crate::scene::Mesh;
 use crate::shot::{Axis, SkinOptions};
 
 /// Most influences per vertex (JOINTS_0/WEIGHTS_0 and JOINTS_1/WEIGHTS_1).
-pub const MAX_INFLUENCES: usize = 8;
+pub(crate) const MAX_INFLUENCES: usize = 8;
 /// Pose step in cycle frames when the shot gives none (see docs/wardrobes.md
 /// for the displacement it costs on the demo character).
-pub const DEFAULT_POSE_STEP: f32 = 1.0;
+pub(crate) const DEFAULT_POSE_STEP: f32 = 1.0;
 /// Most pose steps one cycle may be cut into (bounds posed geometry).
-pub const MAX_STEPS_PER_CYCLE: u32 = 1024;
+pub(crate) const MAX_STEPS_PER_CYCLE: u32 = 1024;
 /// Weight sums further than this from 1 are renormalised with a warning.
 const WEIGHT_SUM_TOLERANCE: f32 = 1e-3;
 
@@ -49,30 +49,28 @@ const WEIGHT_SUM_TOLERANCE: f32 = 1e-3;
 #[derive(Clone, Debug)]
 pub struct SkinPiece {
     /// Bind geometry in mesh space, named `<file>#<mesh>[/<primitive>]`.
-    pub mesh: Mesh,
+    pub(crate) mesh: Mesh,
     /// Per vertex: (joint, weight), joints indexing [`SkinPiece::joint_nodes`];
     /// unused influences have weight 0. Weights sum to 1.
     pub influences: Vec<[(u16, f32); MAX_INFLUENCES]>,
     /// Skin joint -> node index in the rig's hierarchy.
-    pub joint_nodes: Vec<usize>,
+    pub(crate) joint_nodes: Vec<usize>,
     /// Skin joint -> inverse bind matrix.
-    pub inverse_bind: Vec<Affine3A>,
+    pub(crate) inverse_bind: Vec<Affine3A>,
     /// The file the mesh came from (its own materials are looked up there).
-    pub file: PathBuf,
+    pub(crate) file: PathBuf,
     /// The primitive's glTF material index in `file`.
-    pub material: Option<usize>,
+    pub(crate) material: Option<usize>,
     /// Per skin joint: bounds, in joint space, of the vertices weighted
     /// mostly to that joint (`None` for joints that dominate no vertex).
-    pub joint_boxes: Vec<Option<(Vec3, Vec3)>>,
+    pub(crate) joint_boxes: Vec<Option<(Vec3, Vec3)>>,
 }
 
 /// A skinned mesh a wardrobe can choose: every primitive of one glTF mesh.
 #[derive(Clone, Debug)]
-pub struct SkinPart {
-    /// `<file>#<mesh>` as shown to users.
-    pub label: String,
+pub(crate) struct SkinPart {
     /// Indices into [`SkinnedRig::pieces`].
-    pub pieces: Vec<usize>,
+    pub(crate) pieces: Vec<usize>,
 }
 
 /// One cycle of a skinned rig: a cache cycle name mapped to a clip.
@@ -81,9 +79,9 @@ pub struct SkinCycle {
     /// The cache's cycle name.
     pub name: String,
     /// Index into the rig file's clips.
-    pub clip: usize,
+    pub(crate) clip: usize,
     /// The clip's name (`#index` when unnamed).
-    pub clip_name: String,
+    pub(crate) clip_name: String,
     /// Metres per cycle: given in the shot, else the root joint's travel, else 0.
     pub stride: f32,
     /// Steps the cycle is cut into for pose instancing.
@@ -112,13 +110,13 @@ pub struct SkinnedRig {
 }
 
 /// Whether a glTF file holds a skin (a skinned character, not a slot rig).
-pub fn is_skinned(file: &GltfFile) -> bool {
+pub(crate) fn is_skinned(file: &GltfFile) -> bool {
     file.doc.skins().len() > 0
 }
 
 /// Whether a shot's rig is a skinned character: its `kind`, else detected
 /// from the file (a skin and no slot extras).
-pub fn is_skinned_rig(rig: &crate::shot::RigRef) -> Result<bool> {
+pub(crate) fn is_skinned_rig(rig: &crate::shot::RigRef) -> Result<bool> {
     match rig.kind {
         Some(k) => Ok(k == crate::shot::RigKind::Skinned),
         None => {
@@ -129,7 +127,7 @@ pub fn is_skinned_rig(rig: &crate::shot::RigRef) -> Result<bool> {
 }
 
 /// The error for a skinned file used where rigid geometry is expected.
-pub fn skinned_refusal(path: &Path, what: &str) -> Error {
+pub(crate) fn skinned_refusal(path: &Path, what: &str) -> Error {
     Error::invalid(
         path,
         format!(
@@ -348,7 +346,7 @@ impl SkinnedRig {
         if gmesh.weights().is_some() || gmesh.primitives().any(|p| p.morph_targets().len() > 0) {
             self.warnings.push(format!("{label}: morph targets are ignored (skinning only)"));
         }
-        self.part_list.push(SkinPart { label, pieces });
+        self.part_list.push(SkinPart { pieces });
         let i = self.part_list.len() - 1;
         self.parts.insert(key, i);
         Ok(i)
@@ -517,7 +515,7 @@ impl SkinnedRig {
 
     /// The part for a wardrobe's `file` + `mesh` (a name or `#index`),
     /// loading it on first use.
-    pub fn part(&mut self, file: &Path, mesh_ref: &str) -> Result<usize> {
+    pub(crate) fn part(&mut self, file: &Path, mesh_ref: &str) -> Result<usize> {
         let canonical = std::fs::canonicalize(file).map_err(|e| Error::io(file, e))?;
         if let Some(&i) = self.parts.get(&(canonical.clone(), mesh_ref.to_string())) {
             return Ok(i);
@@ -544,16 +542,16 @@ impl SkinnedRig {
     }
 
     /// The file.
-    pub fn path(&self) -> &Path {
+    pub(crate) fn path(&self) -> &Path {
         &self.path
     }
     /// Slot names casting fills (one skinned mesh each).
-    pub fn slots(&self) -> &[String] {
+    pub(crate) fn slots(&self) -> &[String] {
         &self.slots
     }
     /// The file's own skinned meshes: (slot, mesh name or `#index`, part),
     /// what an agent wears when the shot gives the rig no schemes.
-    pub fn delivered(&self) -> &[(String, String, usize)] {
+    pub(crate) fn delivered(&self) -> &[(String, String, usize)] {
         &self.delivered
     }
     /// Standing height in metres (rest pose, before height jitter).
@@ -565,7 +563,7 @@ impl SkinnedRig {
         &self.cycles
     }
     /// A part by index.
-    pub fn part_at(&self, i: usize) -> &SkinPart {
+    pub(crate) fn part_at(&self, i: usize) -> &SkinPart {
         &self.part_list[i]
     }
     /// A piece by index.
@@ -604,14 +602,14 @@ impl SkinnedRig {
     }
 
     /// Number of pose steps a cycle is cut into (`steps + 1` poses, 0 to `steps`).
-    pub fn cycle_steps(&self, cycle: usize) -> u32 {
+    pub(crate) fn cycle_steps(&self, cycle: usize) -> u32 {
         self.cycles[cycle].steps
     }
 
     /// The pose step nearest cycle frame `frame` (wrapped into the cycle):
     /// 0 to `steps` inclusive, since a clip that does not loop seamlessly
     /// ends on a pose other than its first.
-    pub fn step_of(&self, cycle: usize, frame: f32) -> u32 {
+    pub(crate) fn step_of(&self, cycle: usize, frame: f32) -> u32 {
         let c = &self.cycles[cycle];
         let length = self.cycle_frames(cycle);
         if !(length > 0.0 && frame.is_finite()) {
@@ -703,7 +701,7 @@ impl SkinnedRig {
     }
 
     /// Pose name of a step, for mesh names and botinfo: `<clip>/<step>of<steps>`.
-    pub fn pose_name(&self, cycle: usize, step: u32) -> String {
+    pub(crate) fn pose_name(&self, cycle: usize, step: u32) -> String {
         let c = &self.cycles[cycle];
         format!("{}/{}of{}", c.clip_name, step, c.steps)
     }
@@ -711,7 +709,7 @@ impl SkinnedRig {
     /// The largest vertex displacement, metres (rig space, before height
     /// jitter), between a piece posed at a step and posed half a step away:
     /// the worst error pose quantisation makes on this cycle.
-    pub fn quantisation_error(&self, piece: usize, cycle: usize) -> f32 {
+    pub(crate) fn quantisation_error(&self, piece: usize, cycle: usize) -> f32 {
         let steps = self.cycles[cycle].steps;
         let at: Vec<Vec<Vec3>> = (0..=steps).map(|q| self.skin_positions(piece, &self.step_joints(cycle, q))).collect();
         let mut worst = 0.0f32;

@@ -10,32 +10,32 @@ use super::{AgentCast, AgentDress, ShotCrowd};
 
 /// One part row of the casting table.
 #[derive(Debug, Clone, Serialize)]
-pub struct PartRow {
+pub(crate) struct PartRow {
     /// Rig slot.
-    pub slot: String,
+    pub(crate) slot: String,
     /// Mesh name, or null for an empty slot.
-    pub mesh: Option<String>,
+    pub(crate) mesh: Option<String>,
     /// glTF file of the mesh.
-    pub file: Option<String>,
+    pub(crate) file: Option<String>,
     /// Material name.
-    pub material: Option<String>,
+    pub(crate) material: Option<String>,
 }
 
 /// One agent of the casting table.
 #[derive(Debug, Serialize)]
 pub struct CastRow {
     /// Cache id.
-    pub id: u32,
+    pub(crate) id: u32,
     /// Rig.
-    pub rig: String,
+    pub(crate) rig: String,
     /// Scheme.
-    pub scheme: String,
+    pub(crate) scheme: String,
     /// Height scale.
-    pub height_scale: f32,
+    pub(crate) height_scale: f32,
     /// Whether the height jitter applies.
-    pub scaled: bool,
+    pub(crate) scaled: bool,
     /// Parts per slot.
-    pub parts: Vec<PartRow>,
+    pub(crate) parts: Vec<PartRow>,
 }
 
 /// Instancing figures for `throng cast --stats`.
@@ -68,10 +68,10 @@ pub struct SkinStats {
     /// Posed meshes built (one per piece per pose), each with one BLAS.
     pub posed_meshes: usize,
     /// Bytes of all posed geometry, held once for every frame and layer.
-    pub posed_geometry_bytes: usize,
+    pub(crate) posed_geometry_bytes: usize,
     /// Bytes of one posed copy per skinned agent: what one frame costs
     /// without pose sharing.
-    pub posed_per_agent_bytes: usize,
+    pub(crate) posed_per_agent_bytes: usize,
     /// Largest vertex displacement, metres (before height jitter), between a
     /// pose step and the exact pose halfway to the next step, over the
     /// pieces and cycles the shot uses.

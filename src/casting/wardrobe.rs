@@ -32,41 +32,41 @@ use crate::error::{Error, IoContext, Result};
 #[derive(Debug, Clone, PartialEq)]
 pub struct CastPart {
     /// glTF file.
-    pub file: Arc<Path>,
+    pub(crate) file: Arc<Path>,
     /// Mesh name in the file.
     pub mesh: Arc<str>,
     /// Qualified wardrobe material (`wardrobe/name`) or `gltf` for the mesh's own.
-    pub material: Arc<str>,
+    pub(crate) material: Arc<str>,
     /// Scaled uniformly (heads) rather than per axis.
     pub uniform: bool,
 }
 
 /// The wardrobe file version this build reads.
-pub const WARDROBE_VERSION: u32 = 1;
+pub(crate) const WARDROBE_VERSION: u32 = 1;
 
 /// The material name meaning "the part mesh's own glTF material".
-pub const GLTF_MATERIAL: &str = "gltf";
+pub(crate) const GLTF_MATERIAL: &str = "gltf";
 
 /// A material defined in a wardrobe.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct MaterialSpec {
+pub(crate) struct MaterialSpec {
     /// Linear base colour.
     #[serde(default = "grey")]
-    pub base_color: [f32; 3],
+    pub(crate) base_color: [f32; 3],
     /// Metalness.
     #[serde(default)]
-    pub metallic: f32,
+    pub(crate) metallic: f32,
     /// Perceptual roughness.
     #[serde(default = "half")]
-    pub roughness: f32,
+    pub(crate) roughness: f32,
     /// Optional base colour texture, relative to the wardrobe file (resolved on load).
     #[serde(default)]
-    pub base_color_texture: Option<PathBuf>,
+    pub(crate) base_color_texture: Option<PathBuf>,
     /// Emitted radiance, linear RGB, W/(m^2 sr) (glTF's emissiveFactor x
     /// emissiveStrength): eyes, screens and lamps that light the crowd.
     #[serde(default)]
-    pub emission: [f32; 3],
+    pub(crate) emission: [f32; 3],
 }
 
 fn grey() -> [f32; 3] {
@@ -82,27 +82,27 @@ fn one() -> f32 {
 /// A candidate part for one slot.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct PartSpec {
+pub(crate) struct PartSpec {
     /// Rig slot it dresses.
-    pub slot: String,
+    pub(crate) slot: String,
     /// glTF file (resolved to absolute on load). Shared (`Arc`) with every
     /// agent cast in this part, so casting a million agents copies no paths.
-    pub file: Arc<Path>,
+    pub(crate) file: Arc<Path>,
     /// Mesh name inside the file.
-    pub mesh: Arc<str>,
+    pub(crate) mesh: Arc<str>,
     /// Relative weight among the slot's candidates.
     #[serde(default = "one")]
-    pub weight: f32,
+    pub(crate) weight: f32,
     /// Material variants (wardrobe material names, or "gltf").
     #[serde(default = "gltf_only")]
-    pub materials: Vec<Arc<str>>,
+    pub(crate) materials: Vec<Arc<str>>,
     /// Optional weights for `materials` (default uniform).
     #[serde(default)]
-    pub material_weights: Option<Vec<f32>>,
+    pub(crate) material_weights: Option<Vec<f32>>,
     /// The cast part for each material, made once on load and shared by
     /// every agent that draws it.
     #[serde(skip)]
-    pub cast: Vec<Arc<CastPart>>,
+    pub(crate) cast: Vec<Arc<CastPart>>,
 }
 
 fn gltf_only() -> Vec<Arc<str>> {
@@ -112,7 +112,7 @@ fn gltf_only() -> Vec<Arc<str>> {
 impl PartSpec {
     /// The cast part for material variant `m`: the shared one a loaded
     /// wardrobe made (see [`PartSpec::cast`]), else a new one.
-    pub fn cast_part(&self, m: usize, uniform: bool) -> Arc<CastPart> {
+    pub(crate) fn cast_part(&self, m: usize, uniform: bool) -> Arc<CastPart> {
         self.cast.get(m).cloned().unwrap_or_else(|| {
             Arc::new(CastPart {
                 file: self.file.clone(),
@@ -124,7 +124,7 @@ impl PartSpec {
     }
 
     /// The weight of each material variant.
-    pub fn material_weight_list(&self) -> Vec<f32> {
+    pub(crate) fn material_weight_list(&self) -> Vec<f32> {
         self.material_weights.clone().unwrap_or_else(|| vec![1.0; self.materials.len()])
     }
 }
@@ -135,27 +135,31 @@ impl PartSpec {
 pub struct Scheme {
     /// Mesh names never used by this scheme.
     #[serde(default)]
-    pub exclude: Vec<String>,
+    pub(crate) exclude: Vec<String>,
     /// Candidate parts.
     #[serde(default)]
-    pub parts: Vec<PartSpec>,
+    pub(crate) parts: Vec<PartSpec>,
     /// The scheme's name (set on load), shared by every agent cast in it.
     #[serde(skip)]
-    pub name: Arc<str>,
+    pub(crate) name: Arc<str>,
     /// Which wardrobe the scheme came from (set on load).
     #[serde(skip)]
-    pub wardrobe: String,
+    pub(crate) wardrobe: String,
     /// Slots scaled uniformly, from the wardrobe (set on load).
     #[serde(skip)]
-    pub uniform_slots: Vec<String>,
+    pub(crate) uniform_slots: Vec<String>,
     /// The wardrobe file it came from (set on load).
     #[serde(skip)]
-    pub source: PathBuf,
+    pub(crate) source: PathBuf,
 }
 
 impl Scheme {
     /// Candidates for `slot`, without excluded meshes (scheme- or shot-level).
-    pub fn candidates<'a>(&'a self, slot: &'a str, shot_excludes: &'a [String]) -> impl Iterator<Item = &'a PartSpec> {
+    pub(crate) fn candidates<'a>(
+        &'a self,
+        slot: &'a str,
+        shot_excludes: &'a [String],
+    ) -> impl Iterator<Item = &'a PartSpec> {
         self.parts.iter().filter(move |p| {
             p.slot == slot
                 && p.weight > 0.0
@@ -164,7 +168,7 @@ impl Scheme {
         })
     }
     /// Whether parts in `slot` scale uniformly.
-    pub fn is_uniform(&self, slot: &str) -> bool {
+    pub(crate) fn is_uniform(&self, slot: &str) -> bool {
         self.uniform_slots.iter().any(|s| s == slot)
     }
 }
@@ -188,7 +192,7 @@ pub struct Wardrobes {
     /// Schemes by name (names are unique across files).
     pub schemes: BTreeMap<String, Scheme>,
     /// Materials by qualified name `wardrobe/material`.
-    pub materials: BTreeMap<String, MaterialSpec>,
+    pub(crate) materials: BTreeMap<String, MaterialSpec>,
 }
 
 impl Wardrobes {

@@ -42,15 +42,13 @@ use crate::render::Film;
 
 /// One layer file read for compositing.
 #[derive(Debug, Clone)]
-pub struct CompInput {
-    /// Layer name (from the file's header).
-    pub layer: String,
+pub(crate) struct CompInput {
     /// The file.
-    pub path: PathBuf,
+    pub(crate) path: PathBuf,
     /// Its pixels.
-    pub film: Film,
+    pub(crate) film: Film,
     /// Its header.
-    pub meta: LayerMeta,
+    pub(crate) meta: LayerMeta,
 }
 
 /// Stacks films back to front (index 0 is the farthest). All must have the
@@ -269,7 +267,7 @@ pub fn layer_files(dir: &Path, frame: i32, manifest: Option<&Manifest>) -> Resul
 
 /// Reads the layer files and checks they belong together (same shot, frame,
 /// size, and each header names the layer its path says).
-pub fn read_inputs(files: &[(String, PathBuf)], frame: i32) -> Result<Vec<CompInput>> {
+pub(crate) fn read_inputs(files: &[(String, PathBuf)], frame: i32) -> Result<Vec<CompInput>> {
     let mut out: Vec<CompInput> = Vec::new();
     for (layer, path) in files {
         let (film, meta) = exr::read_layer(path)?;
@@ -321,14 +319,14 @@ pub fn read_inputs(files: &[(String, PathBuf)], frame: i32) -> Result<Vec<CompIn
                 ));
             }
         }
-        out.push(CompInput { layer: layer.clone(), path: path.clone(), film, meta });
+        out.push(CompInput { path: path.clone(), film, meta });
     }
     Ok(out)
 }
 
 /// The comp's header: the back layer's, renamed, with near/far spanning
 /// every layer and `worldToNDC` rebuilt for that range.
-pub fn comp_meta(inputs: &[CompInput]) -> Result<LayerMeta> {
+pub(crate) fn comp_meta(inputs: &[CompInput]) -> Result<LayerMeta> {
     let Some(back) = inputs.first() else {
         return Err(Error::Usage("nothing to composite: no layers".into()));
     };

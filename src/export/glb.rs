@@ -47,7 +47,7 @@ pub struct NodeId(u32);
 
 impl NodeId {
     /// The glTF node index.
-    pub fn index(self) -> usize {
+    pub(crate) fn index(self) -> usize {
         self.0 as usize
     }
 }
@@ -142,15 +142,15 @@ impl MeshData {
 #[derive(Clone, Debug, PartialEq)]
 pub struct MaterialDesc {
     /// Material name.
-    pub name: String,
+    pub(crate) name: String,
     /// Linear RGBA base colour factor.
-    pub base_color: [f32; 4],
+    pub(crate) base_color: [f32; 4],
     /// Metalness 0..1.
-    pub metallic: f32,
+    pub(crate) metallic: f32,
     /// Perceptual roughness 0..1.
-    pub roughness: f32,
+    pub(crate) roughness: f32,
     /// Optional base colour texture: PNG file bytes, embedded in the buffer.
-    pub base_color_png: Option<Vec<u8>>,
+    pub(crate) base_color_png: Option<Vec<u8>>,
     /// Render both faces.
     pub double_sided: bool,
     /// Emitted radiance (linear RGB, W/(m^2 sr) in throng's units): written
@@ -192,7 +192,7 @@ impl MaterialDesc {
 
 /// A node's local transform.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Transform {
+pub(crate) enum Transform {
     /// Translation, rotation quaternion (x, y, z, w) and scale.
     Trs {
         /// Translation.
@@ -208,7 +208,7 @@ pub enum Transform {
 
 impl Transform {
     /// The identity (written as no transform at all).
-    pub const IDENTITY: Transform =
+    pub(crate) const IDENTITY: Transform =
         Transform::Trs { translation: [0.0; 3], rotation: [0.0, 0.0, 0.0, 1.0], scale: [1.0; 3] };
 }
 
@@ -216,17 +216,17 @@ impl Transform {
 #[derive(Clone, Debug, PartialEq)]
 pub struct NodeDesc {
     /// Node name.
-    pub name: String,
+    pub(crate) name: String,
     /// Local transform.
-    pub transform: Transform,
+    pub(crate) transform: Transform,
     /// Children (added earlier or later; see [`GlbBuilder::add_child`]).
-    pub children: Vec<NodeId>,
+    pub(crate) children: Vec<NodeId>,
     /// Mesh drawn at this node; several nodes may share one mesh.
-    pub mesh: Option<MeshId>,
+    pub(crate) mesh: Option<MeshId>,
     /// Application data written as the node's `extras`.
-    pub extras: Option<serde_json::Value>,
+    pub(crate) extras: Option<serde_json::Value>,
     /// Skin deforming this node's mesh (the mesh must carry joints and weights).
-    pub skin: Option<SkinId>,
+    pub(crate) skin: Option<SkinId>,
 }
 
 impl NodeDesc {
@@ -266,7 +266,8 @@ impl NodeDesc {
         self
     }
     /// Sets a column-major matrix transform instead of TRS.
-    pub fn matrix(mut self, m: [f32; 16]) -> Self {
+    #[cfg(test)] // the tests write a matrix node
+    pub(crate) fn matrix(mut self, m: [f32; 16]) -> Self {
         self.transform = Transform::Matrix(m);
         self
     }
@@ -282,7 +283,7 @@ impl NodeDesc {
         self
     }
     /// Sets the children.
-    pub fn children(mut self, children: Vec<NodeId>) -> Self {
+    pub(crate) fn children(mut self, children: Vec<NodeId>) -> Self {
         self.children = children;
         self
     }

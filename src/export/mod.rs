@@ -4,7 +4,7 @@
 
 pub mod glb;
 pub mod usd;
-pub mod usd_layer;
+pub(crate) mod usd_layer;
 
 use std::collections::{BTreeSet, HashMap};
 use std::path::Path;

@@ -46,14 +46,14 @@ use crate::scene::lights::{Dome, Light, LightKind, SceneLights};
 use crate::scene::{vis, MaterialId, MeshId};
 
 /// Most transform samples one export holds in memory (agents x frames x parts).
-pub const MAX_SAMPLES: usize = 40_000_000;
+pub(crate) const MAX_SAMPLES: usize = 40_000_000;
 /// Near and far clipping planes written on the camera: the shot has no
 /// clipping keys, and throng's renderer clips at neither.
-pub const CLIPPING_RANGE: [f32; 2] = [0.05, 100_000.0];
+pub(crate) const CLIPPING_RANGE: [f32; 2] = [0.05, 100_000.0];
 /// UsdGeomCamera lengths (focal length, apertures) are in tenths of a scene
 /// unit; at `metersPerUnit = 1` that is 100 mm, so 35 mm is written 0.35
 /// (docs/usd.md, "Camera units").
-pub const CAMERA_UNITS_PER_MM: f32 = 0.01;
+pub(crate) const CAMERA_UNITS_PER_MM: f32 = 0.01;
 
 /// How agents are instanced in the stage.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -98,7 +98,7 @@ pub struct UsdExportSummary {
     /// Shared instancing prototypes: one per (mesh, material).
     pub prototypes: usize,
     /// Meshes (geometry written once each, under /World/Prototypes/Meshes).
-    pub meshes: usize,
+    pub(crate) meshes: usize,
     /// Materials.
     pub materials: usize,
     /// Instanceable prims (agent parts and set pieces) or point instances per frame.
@@ -638,7 +638,7 @@ fn png(tex: &crate::scene::Texture) -> Result<Vec<u8>> {
 /// A prototype's name from its mesh's library name `<file>#<mesh>`: the
 /// file stem and mesh name, never the directory (which depends on how the
 /// shot's path was given).
-pub fn prototype_name(mesh: &str) -> String {
+pub(crate) fn prototype_name(mesh: &str) -> String {
     match mesh.rsplit_once('#') {
         Some((file, name)) => {
             let stem = Path::new(file).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
@@ -650,7 +650,7 @@ pub fn prototype_name(mesh: &str) -> String {
 
 /// Largest dome map a `.usdz` package takes into memory (a 16384 x 8192
 /// float RGBA OpenEXR, uncompressed, is 2 GiB).
-pub const MAX_PACKAGED_DOME_BYTES: u64 = 2 << 30;
+pub(crate) const MAX_PACKAGED_DOME_BYTES: u64 = 2 << 30;
 
 /// A dome map's bytes, for a package.
 fn read_dome_file(source: &Path) -> Result<Vec<u8>> {

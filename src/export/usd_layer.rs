@@ -18,7 +18,7 @@ use crate::error::{Error, Result};
 
 /// Which encoding to write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum UsdEncoding {
+pub(crate) enum UsdEncoding {
     /// Text.
     Usda,
     /// Binary crate (`.usdc`). openusd 0.6's crate output does not open in
@@ -31,7 +31,7 @@ pub enum UsdEncoding {
 
 impl UsdEncoding {
     /// The encoding of an output path, from its extension.
-    pub fn of(path: &std::path::Path) -> Option<UsdEncoding> {
+    pub(crate) fn of(path: &std::path::Path) -> Option<UsdEncoding> {
         match path.extension()?.to_string_lossy().to_ascii_lowercase().as_str() {
             // `.usd` may hold either encoding; throng writes text there.
             "usda" | "usd" => Some(UsdEncoding::Usda),
@@ -69,11 +69,11 @@ struct Prim {
 
 /// Handle of a prim in a [`LayerBuilder`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct PrimId(usize);
+pub(crate) struct PrimId(usize);
 
 /// Builds one layer, prims and properties in insertion order.
 #[derive(Clone, Debug, Default)]
-pub struct LayerBuilder {
+pub(crate) struct LayerBuilder {
     prims: Vec<Prim>,
     index: HashMap<String, usize>,
     roots: Vec<String>,
@@ -88,7 +88,7 @@ fn leaf(path: &str) -> &str {
 
 /// A valid USD prim name from any text: `[A-Za-z0-9_]`, not starting with a
 /// digit, never empty.
-pub fn identifier(name: &str) -> String {
+pub(crate) fn identifier(name: &str) -> String {
     let mut out: String = name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' }).collect();
     if out.is_empty() || out.starts_with(|c: char| c.is_ascii_digit()) {
         out.insert(0, '_');
@@ -98,23 +98,23 @@ pub fn identifier(name: &str) -> String {
 
 impl LayerBuilder {
     /// An empty layer.
-    pub fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Self::default()
     }
 
     /// Sets a layer metadata field (`metersPerUnit`, `upAxis`, ...).
-    pub fn layer_meta(&mut self, key: &str, value: impl Into<Value>) {
+    pub(crate) fn layer_meta(&mut self, key: &str, value: impl Into<Value>) {
         self.meta.push((key.to_string(), value.into()));
     }
 
     /// Appends a sublayer asset path (strongest first).
-    pub fn sublayer(&mut self, asset: impl Into<String>) {
+    pub(crate) fn sublayer(&mut self, asset: impl Into<String>) {
         self.sublayers.push(asset.into());
     }
 
     /// Adds a prim at an absolute `path` whose parent was added before (or is
     /// the root). Adding a path twice gives the existing prim.
-    pub fn prim(&mut self, path: &str, specifier: Specifier, type_name: &str) -> PrimId {
+    pub(crate) fn prim(&mut self, path: &str, specifier: Specifier, type_name: &str) -> PrimId {
         if let Some(&i) = self.index.get(path) {
             return PrimId(i);
         }
@@ -137,33 +137,23 @@ impl LayerBuilder {
     }
 
     /// `def <type> "<name>"`.
-    pub fn def(&mut self, path: &str, type_name: &str) -> PrimId {
+    pub(crate) fn def(&mut self, path: &str, type_name: &str) -> PrimId {
         self.prim(path, Specifier::Def, type_name)
     }
 
-    /// A prim by path, if added.
-    pub fn find(&self, path: &str) -> Option<PrimId> {
-        self.index.get(path).map(|&i| PrimId(i))
-    }
-
-    /// The path of a prim.
-    pub fn path(&self, prim: PrimId) -> &str {
-        &self.prims[prim.0].path
-    }
-
     /// Sets prim metadata (`instanceable`, `kind`, `apiSchemas`, ...).
-    pub fn meta(&mut self, prim: PrimId, key: &str, value: impl Into<Value>) {
+    pub(crate) fn meta(&mut self, prim: PrimId, key: &str, value: impl Into<Value>) {
         self.prims[prim.0].meta.push((key.to_string(), value.into()));
     }
 
     /// Applies API schemas (prepended).
-    pub fn api_schemas(&mut self, prim: PrimId, names: &[&str]) {
+    pub(crate) fn api_schemas(&mut self, prim: PrimId, names: &[&str]) {
         let op = ListOp { prepended_items: names.iter().map(|&n| n.into()).collect(), ..Default::default() };
         self.meta(prim, FieldKey::ApiSchemas.as_str(), Value::TokenListOp(op));
     }
 
     /// An internal reference to the prim at `target`.
-    pub fn reference(&mut self, prim: PrimId, target: &str) -> Result<()> {
+    pub(crate) fn reference(&mut self, prim: PrimId, target: &str) -> Result<()> {
         let r = Reference { prim_path: sdf_path(target)?, ..Default::default() };
         let op = ListOp { prepended_items: vec![r], ..Default::default() };
         self.meta(prim, FieldKey::References.as_str(), Value::ReferenceListOp(op));
@@ -192,68 +182,63 @@ impl LayerBuilder {
     }
 
     /// An attribute with a default value.
-    pub fn attr(&mut self, prim: PrimId, name: &str, type_name: &str, value: impl Into<Value>) {
+    pub(crate) fn attr(&mut self, prim: PrimId, name: &str, type_name: &str, value: impl Into<Value>) {
         self.prop(prim, name, Some(type_name)).default = Some(value.into());
     }
 
     /// A `uniform` attribute with a default value.
-    pub fn uniform(&mut self, prim: PrimId, name: &str, type_name: &str, value: impl Into<Value>) {
+    pub(crate) fn uniform(&mut self, prim: PrimId, name: &str, type_name: &str, value: impl Into<Value>) {
         let p = self.prop(prim, name, Some(type_name));
         p.default = Some(value.into());
         p.uniform = true;
     }
 
     /// An attribute with time samples (times in increasing order).
-    pub fn samples(&mut self, prim: PrimId, name: &str, type_name: &str, samples: Vec<(f64, Value)>) {
+    pub(crate) fn samples(&mut self, prim: PrimId, name: &str, type_name: &str, samples: Vec<(f64, Value)>) {
         self.prop(prim, name, Some(type_name)).samples = samples;
     }
 
     /// A constant primvar (`primvars:<name>`, interpolation `constant`).
-    pub fn primvar(&mut self, prim: PrimId, name: &str, type_name: &str, value: impl Into<Value>) {
+    pub(crate) fn primvar(&mut self, prim: PrimId, name: &str, type_name: &str, value: impl Into<Value>) {
         let p = self.prop(prim, &format!("primvars:{name}"), Some(type_name));
         p.default = Some(value.into());
         p.meta.push(("interpolation".into(), Value::Token("constant".into())));
     }
 
     /// A time-sampled constant primvar.
-    pub fn primvar_samples(&mut self, prim: PrimId, name: &str, type_name: &str, samples: Vec<(f64, Value)>) {
+    pub(crate) fn primvar_samples(&mut self, prim: PrimId, name: &str, type_name: &str, samples: Vec<(f64, Value)>) {
         let p = self.prop(prim, &format!("primvars:{name}"), Some(type_name));
         p.samples = samples;
         p.meta.push(("interpolation".into(), Value::Token("constant".into())));
     }
 
     /// Sets attribute metadata (`interpolation`, ...).
-    pub fn attr_meta(&mut self, prim: PrimId, name: &str, key: &str, value: impl Into<Value>) {
+    pub(crate) fn attr_meta(&mut self, prim: PrimId, name: &str, key: &str, value: impl Into<Value>) {
         self.prop(prim, name, None).meta.push((key.to_string(), value.into()));
     }
 
     /// An output attribute connected to `source` (`</path.outputs:x>`).
-    pub fn connect(&mut self, prim: PrimId, name: &str, type_name: &str, source: &str) {
+    pub(crate) fn connect(&mut self, prim: PrimId, name: &str, type_name: &str, source: &str) {
         self.prop(prim, name, Some(type_name)).targets = vec![source.to_string()];
     }
 
     /// An attribute declared with no value (a shader output).
-    pub fn declare(&mut self, prim: PrimId, name: &str, type_name: &str) {
+    pub(crate) fn declare(&mut self, prim: PrimId, name: &str, type_name: &str) {
         self.prop(prim, name, Some(type_name));
     }
 
     /// A relationship with explicit targets.
-    pub fn rel(&mut self, prim: PrimId, name: &str, targets: Vec<String>) {
+    pub(crate) fn rel(&mut self, prim: PrimId, name: &str, targets: Vec<String>) {
         self.prop(prim, name, None).targets = targets;
     }
 
-    /// Marks a relationship or attribute `uniform`.
-    pub fn set_uniform(&mut self, prim: PrimId, name: &str) {
-        self.prop(prim, name, None).uniform = true;
-    }
-
     /// Number of prims.
-    pub fn prim_count(&self) -> usize {
+    pub(crate) fn prim_count(&self) -> usize {
         self.prims.len()
     }
 
     /// The layer as `sdf::Data`.
-    pub fn to_data(&self) -> Result<sdf::Data> {
+    pub(crate) fn to_data(&self) -> Result<sdf::Data> {
         let mut data = sdf::Data::new();
         let root = sdf::Path::abs_root();
         let root_spec = data.create_spec(root.clone(), SpecType::PseudoRoot);
@@ -322,14 +307,19 @@ impl LayerBuilder {
 
     /// The layer encoded. `name` is the layer's file name (the entry inside
     /// a `.usdz` package).
-    pub fn encode(&self, encoding: UsdEncoding, name: &str) -> Result<Vec<u8>> {
+    pub(crate) fn encode(&self, encoding: UsdEncoding, name: &str) -> Result<Vec<u8>> {
         self.encode_with(encoding, name, &[])
     }
 
     /// [`LayerBuilder::encode`], with `extra` files (package-relative path,
     /// bytes) after the layer in a `.usdz` package; ignored for the other
     /// encodings.
-    pub fn encode_with(&self, encoding: UsdEncoding, name: &str, extra: &[(String, Vec<u8>)]) -> Result<Vec<u8>> {
+    pub(crate) fn encode_with(
+        &self,
+        encoding: UsdEncoding,
+        name: &str,
+        extra: &[(String, Vec<u8>)],
+    ) -> Result<Vec<u8>> {
         let data = self.to_data()?;
         match encoding {
             UsdEncoding::Usdz => encode_package(&data, name, extra),
@@ -339,7 +329,7 @@ impl LayerBuilder {
 }
 
 /// Encodes any layer data.
-pub fn encode_data(data: &dyn AbstractData, encoding: UsdEncoding, name: &str) -> Result<Vec<u8>> {
+pub(crate) fn encode_data(data: &dyn AbstractData, encoding: UsdEncoding, name: &str) -> Result<Vec<u8>> {
     fn fail_in(name: &str) -> impl Fn(&dyn std::fmt::Display) -> Error + '_ {
         move |e| Error::invalid(name, format!("openusd cannot encode the layer: {e}"))
     }
@@ -381,7 +371,7 @@ fn encode_package(data: &dyn AbstractData, name: &str, extra: &[(String, Vec<u8>
 /// (`prepend apiSchemas = "MaterialBindingAPI"`); Pixar's text parser takes
 /// that for references but not for `apiSchemas`, so the item gets its
 /// brackets back: `prepend apiSchemas = ["MaterialBindingAPI"]`.
-pub fn bracket_single_api_schemas(text: &str) -> String {
+pub(crate) fn bracket_single_api_schemas(text: &str) -> String {
     let mut out = String::with_capacity(text.len() + 64);
     for line in text.split_inclusive('\n') {
         let body = line.trim_end_matches('\n');
@@ -412,7 +402,7 @@ fn bad_path(path: &str, e: impl std::fmt::Display) -> Error {
 }
 
 /// An `sdf::Path` from text (prim, or prim plus `.property`).
-pub fn sdf_path(path: &str) -> Result<sdf::Path> {
+pub(crate) fn sdf_path(path: &str) -> Result<sdf::Path> {
     sdf::Path::new(path).map_err(|e| bad_path(path, e))
 }
 

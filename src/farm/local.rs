@@ -29,7 +29,7 @@ pub struct LocalReport {
 }
 
 /// Most workers a local run starts.
-pub const MAX_WORKERS: usize = 256;
+pub(crate) const MAX_WORKERS: usize = 256;
 
 /// Runs every task not done with `workers` processes of `exe`; `say`
 /// receives one line per task started and finished (flushed by the caller).

@@ -17,21 +17,21 @@ use crate::error::{write_atomic, Error, IoContext, Result};
 use crate::fingerprint::{hash_file, hex, Fingerprinter, ALGORITHM};
 
 pub mod local;
-pub mod plan;
-pub mod run;
+pub(crate) mod plan;
+pub(crate) mod run;
 pub mod slurm;
-pub mod status;
+pub(crate) mod status;
 
-pub use plan::{build_plan, write_new_plan, PlanOptions};
+pub use plan::{write_new_plan, PlanOptions};
 pub use run::run_task;
 pub use status::{plan_status, TaskState, TaskStatus};
 
 /// `format` of a plan file.
-pub const PLAN_FORMAT: &str = "throng-farm-plan";
+pub(crate) const PLAN_FORMAT: &str = "throng-farm-plan";
 /// The plan file version this throng reads and writes.
-pub const PLAN_VERSION: u32 = 1;
+pub(crate) const PLAN_VERSION: u32 = 1;
 /// The plan's file name inside its output directory.
-pub const PLAN_FILE: &str = "plan.json";
+pub(crate) const PLAN_FILE: &str = "plan.json";
 
 /// What a task does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -53,7 +53,7 @@ pub struct Task {
     /// The layer rendered (render tasks).
     pub layer: Option<String>,
     /// Chunk index within the layer (render tasks): the Slurm array index.
-    pub chunk: Option<usize>,
+    pub(crate) chunk: Option<usize>,
     /// Shot frames the task writes.
     pub frames: Vec<i32>,
     /// The command line; `argv[0]` is `throng`, which engines resolve to a binary.
@@ -74,20 +74,20 @@ pub struct Task {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FingerprintInput {
     /// `shot`, `cache`, `rig`, `wardrobe`, `set` or `manifest`.
-    pub role: String,
+    pub(crate) role: String,
     /// The file.
-    pub path: PathBuf,
+    pub(crate) path: PathBuf,
     /// Its size.
-    pub bytes: u64,
+    pub(crate) bytes: u64,
     /// Its bytes' hash ([`crate::fingerprint`]), 16 hex digits.
-    pub fnv1a64: String,
+    pub(crate) fnv1a64: String,
 }
 
 /// What the plan was made from, so a plan for an edited shot is refused.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Fingerprint {
     /// Always `fnv1a64` ([`crate::fingerprint`]).
-    pub algorithm: String,
+    pub(crate) algorithm: String,
     /// The hash of every input's role, path and hash, 16 hex digits.
     pub value: String,
     /// The inputs, in a fixed order.
@@ -98,21 +98,21 @@ pub struct Fingerprint {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Plan {
     /// [`PLAN_FORMAT`].
-    pub format: String,
+    pub(crate) format: String,
     /// [`PLAN_VERSION`].
-    pub version: u32,
+    pub(crate) version: u32,
     /// Shot name.
     pub shot: String,
     /// The shot file (absolute).
-    pub shot_file: PathBuf,
+    pub(crate) shot_file: PathBuf,
     /// The inputs' fingerprint.
     pub fingerprint: Fingerprint,
     /// The layer manifest, computed once at planning time.
     pub manifest: PathBuf,
     /// The plan's directory (absolute).
-    pub out: PathBuf,
+    pub(crate) out: PathBuf,
     /// Where render tasks write (`render/<layer>/...`) and comps go (`render/comp/...`).
-    pub render_dir: PathBuf,
+    pub(crate) render_dir: PathBuf,
     /// Task logs.
     pub log_dir: PathBuf,
     /// Planned frames, in order.
@@ -122,11 +122,11 @@ pub struct Plan {
     /// Frames per render task.
     pub chunk: usize,
     /// Samples per pixel.
-    pub spp: u32,
+    pub(crate) spp: u32,
     /// Image size.
-    pub resolution: [u32; 2],
+    pub(crate) resolution: [u32; 2],
     /// Extra attempts of a failed task before it counts as failed.
-    pub retries: u32,
+    pub(crate) retries: u32,
     /// The tasks: render tasks layer by layer, then comps frame by frame.
     pub tasks: Vec<Task>,
 }
@@ -138,17 +138,17 @@ impl Plan {
     }
 
     /// Engine bookkeeping (markers, submissions): `<out>/farm`.
-    pub fn farm_dir(&self) -> PathBuf {
+    pub(crate) fn farm_dir(&self) -> PathBuf {
         self.out.join("farm")
     }
 
     /// Per-task state markers written by `farm run-task`.
-    pub fn state_dir(&self) -> PathBuf {
+    pub(crate) fn state_dir(&self) -> PathBuf {
         self.farm_dir().join("state")
     }
 
     /// Tasks by id.
-    pub fn by_id(&self) -> BTreeMap<&str, &Task> {
+    pub(crate) fn by_id(&self) -> BTreeMap<&str, &Task> {
         self.tasks.iter().map(|t| (t.id.as_str(), t)).collect()
     }
 }
@@ -156,7 +156,7 @@ impl Plan {
 /// Fingerprints `inputs` (role, path): each file's content hash
 /// ([`crate::fingerprint`], read in blocks), and one value over every
 /// input's role, path and hash.
-pub fn fingerprint(inputs: &[(String, PathBuf)]) -> Result<Fingerprint> {
+pub(crate) fn fingerprint(inputs: &[(String, PathBuf)]) -> Result<Fingerprint> {
     let mut files = Vec::with_capacity(inputs.len());
     let mut all = Fingerprinter::new();
     for (role, path) in inputs {
@@ -169,7 +169,7 @@ pub fn fingerprint(inputs: &[(String, PathBuf)]) -> Result<Fingerprint> {
 }
 
 /// Writes a plan atomically (pretty JSON, a final newline).
-pub fn write_plan(path: &Path, plan: &Plan) -> Result<()> {
+pub(crate) fn write_plan(path: &Path, plan: &Plan) -> Result<()> {
     write_atomic(path, |w| {
         use std::io::Write;
         serde_json::to_writer_pretty(&mut *w, plan).map_err(|e| Error::io(path, e.into()))?;
@@ -245,7 +245,7 @@ fn check_graph(path: &Path, plan: &Plan) -> Result<()> {
 
 /// Refuses a plan whose inputs changed since planning (or that names
 /// another shot than `shot`, when given), naming the file that changed.
-pub fn check_fingerprint(plan_path: &Path, plan: &Plan, shot: Option<&Path>) -> Result<()> {
+pub(crate) fn check_fingerprint(plan_path: &Path, plan: &Plan, shot: Option<&Path>) -> Result<()> {
     if let Some(shot) = shot {
         let asked = std::fs::canonicalize(shot).at(shot)?;
         if asked != plan.shot_file {
@@ -292,14 +292,14 @@ pub fn open_plan(path: &Path, shot: Option<&Path>) -> Result<Plan> {
 
 /// Whether every output of `task` exists and reads back whole (an EXR that
 /// decodes completely); the one definition of "done" for every engine.
-pub fn task_done(task: &Task) -> bool {
+pub(crate) fn task_done(task: &Task) -> bool {
     !task.outputs.is_empty() && task.outputs.iter().all(|p| crate::render::exr::read_layer(p).is_ok())
 }
 
 /// The tasks a (re)submission must run: every task not done, and every task
 /// downstream of one that runs (a comp over a re-rendered layer is redone).
 /// In plan order, which is a topological order.
-pub fn tasks_to_run<'a>(plan: &'a Plan, done: &dyn Fn(&Task) -> bool) -> Vec<&'a Task> {
+pub(crate) fn tasks_to_run<'a>(plan: &'a Plan, done: &dyn Fn(&Task) -> bool) -> Vec<&'a Task> {
     let mut run: std::collections::BTreeSet<&str> = std::collections::BTreeSet::new();
     let mut out = Vec::new();
     for t in &plan.tasks {
@@ -312,7 +312,7 @@ pub fn tasks_to_run<'a>(plan: &'a Plan, done: &dyn Fn(&Task) -> bool) -> Vec<&'a
 }
 
 /// Quotes a word for a POSIX shell.
-pub fn shell_quote(word: &str) -> String {
+pub(crate) fn shell_quote(word: &str) -> String {
     if !word.is_empty() && word.bytes().all(|b| b.is_ascii_alphanumeric() || b"-_./=:,+@%".contains(&b)) {
         word.to_string()
     } else {

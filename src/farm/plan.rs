@@ -52,9 +52,9 @@ impl PlanOptions {
 }
 
 /// Most tasks one plan may hold; bounds the plan before it is built.
-pub const MAX_TASKS: usize = 1_000_000;
+pub(crate) const MAX_TASKS: usize = 1_000_000;
 /// Most cores a task may ask for.
-pub const MAX_CORES: u32 = 4096;
+pub(crate) const MAX_CORES: u32 = 4096;
 
 /// Memory a throng process needs besides the scene: binary, allocator, buffers.
 const PROCESS_BYTES: u64 = 256 << 20;
@@ -157,12 +157,12 @@ fn s(p: &Path) -> String {
 }
 
 /// Writes the manifest and fingerprints the (role, file) inputs it is given.
-pub type FingerprintInputs<'a> = dyn Fn(&[(String, PathBuf)]) -> Result<super::Fingerprint> + 'a;
+pub(crate) type FingerprintInputs<'a> = dyn Fn(&[(String, PathBuf)]) -> Result<super::Fingerprint> + 'a;
 
 /// Builds the plan of `crowd` with its `manifest` (to be at
 /// `manifest_path`) in `out`; `fingerprint_inputs` writes the manifest and
 /// fingerprints the inputs it is given.
-pub fn build_plan(
+pub(crate) fn build_plan(
     crowd: &ShotCrowd,
     manifest: &Manifest,
     manifest_path: &Path,

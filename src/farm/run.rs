@@ -13,30 +13,30 @@ use crate::error::{write_atomic, Error, IoContext, Result};
 
 /// `<task>.started`: who runs the task.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Started {
+pub(crate) struct Started {
     /// Host name.
-    pub host: String,
+    pub(crate) host: String,
     /// Process id of `farm run-task`.
-    pub pid: u32,
+    pub(crate) pid: u32,
 }
 
 /// `<task>.exit`: how the last run ended.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Exited {
+pub(crate) struct Exited {
     /// Exit status of the last attempt (-1: killed by a signal; 0 and
     /// outputs whole: done).
-    pub status: i32,
+    pub(crate) status: i32,
     /// Attempts made.
-    pub attempts: u32,
+    pub(crate) attempts: u32,
 }
 
 /// The marker files of a task.
-pub fn marker(plan: &Plan, task: &str, what: &str) -> PathBuf {
+pub(crate) fn marker(plan: &Plan, task: &str, what: &str) -> PathBuf {
     plan.state_dir().join(format!("{task}.{what}"))
 }
 
 /// This machine's host name (the kernel's, no `hostname` binary needed).
-pub fn host_name() -> String {
+pub(crate) fn host_name() -> String {
     std::fs::read_to_string("/proc/sys/kernel/hostname").map(|h| h.trim().to_string()).unwrap_or_default()
 }
 
@@ -45,7 +45,7 @@ fn write_json(path: &Path, v: &impl Serialize) -> Result<()> {
 }
 
 /// Reads a marker; `None` when absent or unreadable (a marker is a hint, outputs decide).
-pub fn read_marker<T: for<'de> Deserialize<'de>>(path: &Path) -> Option<T> {
+pub(crate) fn read_marker<T: for<'de> Deserialize<'de>>(path: &Path) -> Option<T> {
     let text = std::fs::read_to_string(path).ok()?;
     serde_json::from_str(&text).ok()
 }

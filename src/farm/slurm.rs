@@ -16,21 +16,21 @@ use crate::error::{write_atomic, Error, IoContext, Result};
 
 /// `<out>/farm/slurm.json`: the job id of every submitted task.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct Submission {
+pub(crate) struct Submission {
     /// Always `slurm`.
-    pub engine: String,
+    pub(crate) engine: String,
     /// Task id -> Slurm job id (`123` or `123_4` for an array element).
-    pub jobs: BTreeMap<String, String>,
+    pub(crate) jobs: BTreeMap<String, String>,
 }
 
 /// A task's job as the scheduler sees it.
 #[derive(Debug, Clone, PartialEq)]
-pub struct JobState {
+pub(crate) struct JobState {
     /// Slurm job id.
-    pub id: String,
+    pub(crate) id: String,
     /// squeue's state (`PENDING`, `RUNNING`, `COMPLETED`, `FAILED`,
     /// `CANCELLED`, ...), empty when squeue no longer lists the job.
-    pub state: String,
+    pub(crate) state: String,
 }
 
 /// What one submission did.
@@ -72,7 +72,7 @@ fn slurm_command(name: &str, args: &[String]) -> Result<String> {
 
 /// Asks squeue about the plan's submitted jobs: `Ok(None)` when the plan
 /// was never submitted to Slurm, `Err(reason)` when squeue cannot answer.
-pub fn query(plan: &Plan) -> std::result::Result<Option<BTreeMap<String, JobState>>, String> {
+pub(crate) fn query(plan: &Plan) -> std::result::Result<Option<BTreeMap<String, JobState>>, String> {
     let Some(sub) = read_submission(plan) else { return Ok(None) };
     let mut base: Vec<&str> = sub.jobs.values().map(|j| j.split('_').next().unwrap_or(j)).collect();
     base.sort_unstable();

@@ -45,7 +45,7 @@ pub struct TaskStatus {
     /// Why, in a wrangler's words (scheduler state, exit status).
     pub detail: String,
     /// Scheduler job id, when submitted to one.
-    pub job: Option<String>,
+    pub(crate) job: Option<String>,
     /// The task's log.
     pub log: PathBuf,
 }

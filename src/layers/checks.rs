@@ -13,20 +13,20 @@ use crate::error::Result;
 
 /// Shot frames sampled for the checks (evenly spread), so a long shot
 /// against a large set stays quick.
-pub const CHECK_FRAMES: usize = 48;
+pub(crate) const CHECK_FRAMES: usize = 48;
 /// Height above the feet that is tested for being inside geometry: the
 /// torso, clear of floors, kerbs and ground planes.
-pub const TORSO_HEIGHT: f32 = 1.0;
+pub(crate) const TORSO_HEIGHT: f32 = 1.0;
 /// Agent ids a warning lists.
-pub const LISTED_IDS: usize = 5;
+pub(crate) const LISTED_IDS: usize = 5;
 
 /// What the checks found.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PlacementReport {
     /// The bounds warning, if the units look wrong.
-    pub bounds: Option<String>,
+    pub(crate) bounds: Option<String>,
     /// Agents inside set geometry at some checked frame, in id order.
-    pub inside_set: Vec<u32>,
+    pub(crate) inside_set: Vec<u32>,
 }
 
 impl PlacementReport {

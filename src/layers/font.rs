@@ -4,9 +4,9 @@
 //! at small sizes rather than beauty.
 
 /// Glyph width and height in font pixels.
-pub const W: u32 = 5;
+pub(crate) const W: u32 = 5;
 /// Glyph height.
-pub const H: u32 = 7;
+pub(crate) const H: u32 = 7;
 
 const GLYPHS: &[(char, [&str; 7])] = &[
     ('A', [".###.", "#...#", "#...#", "#####", "#...#", "#...#", "#...#"]),
@@ -67,7 +67,7 @@ const GLYPHS: &[(char, [&str; 7])] = &[
 
 /// The rows of a glyph as bit masks (bit 4 = leftmost column); unknown
 /// characters draw as `?`.
-pub fn glyph(c: char) -> [u8; 7] {
+pub(crate) fn glyph(c: char) -> [u8; 7] {
     let c = c.to_ascii_uppercase();
     let rows = GLYPHS.iter().find(|(g, _)| *g == c).or_else(|| GLYPHS.iter().find(|(g, _)| *g == '?'));
     let mut out = [0u8; 7];
@@ -80,7 +80,7 @@ pub fn glyph(c: char) -> [u8; 7] {
 }
 
 /// Width in pixels of `text` at `scale` (one blank column between glyphs).
-pub fn text_width(text: &str, scale: u32) -> u32 {
+pub(crate) fn text_width(text: &str, scale: u32) -> u32 {
     let n = text.chars().count() as u32;
     if n == 0 {
         0

@@ -21,28 +21,28 @@ use crate::shot::Shot;
 pub struct MadeFrom {
     /// [`fingerprint::ALGORITHM`]; a manifest fingerprinted otherwise (an
     /// older throng's `crc32`) is stale.
-    pub algorithm: String,
+    pub(crate) algorithm: String,
     /// The cache file's bytes.
-    pub cache: String,
+    pub(crate) cache: String,
     /// The `[cache]` import keys (every key but `path` and `frame_offset`:
     /// layout, columns, units, axes, rates, headings, rig and cycles,
     /// placement), each key's decoded value hashed. Keys the shot leaves out
     /// are not listed; placement's are always.
     #[serde(default)]
-    pub cache_keys: BTreeMap<String, String>,
+    pub(crate) cache_keys: BTreeMap<String, String>,
     /// Casting inputs: seed, rig files and their `[rigs]` settings, wardrobe
     /// files, removals, culled and no-scale cycles, excluded parts.
-    pub casting: String,
+    pub(crate) casting: String,
     /// The camera (keys or glTF node, sensor) and the shot's resolution, which
     /// decide distances and LOD.
-    pub camera: String,
+    pub(crate) camera: String,
     /// Shot frames `[start, end]`.
     pub frames: [i32; 2],
     /// `frames.fps`, the rate a tabular cache is resampled to.
     #[serde(default)]
-    pub fps: f32,
+    pub(crate) fps: f32,
     /// `cache.frame_offset`.
-    pub frame_offset: i32,
+    pub(crate) frame_offset: i32,
 }
 
 /// Each import key the shot sets, by name: its value's hash. Hashing the
@@ -73,7 +73,7 @@ fn cache_key_words(key: &str) -> String {
 
 impl MadeFrom {
     /// The fingerprint of a shot as it is now on disk.
-    pub fn of(shot: &Shot) -> Result<MadeFrom> {
+    pub(crate) fn of(shot: &Shot) -> Result<MadeFrom> {
         let mut casting = Fingerprinter::new();
         casting.value("seed", &shot.seed);
         for (name, r) in &shot.rigs {
@@ -114,7 +114,7 @@ impl MadeFrom {
     }
 
     /// What differs between this (the manifest's) and `now`, in a lighter's words.
-    pub fn changes(&self, now: &MadeFrom, shot: &Shot) -> Vec<String> {
+    pub(crate) fn changes(&self, now: &MadeFrom, shot: &Shot) -> Vec<String> {
         if self.algorithm != now.algorithm {
             // Every hash differs: name the cause, not each of them.
             return vec![format!(

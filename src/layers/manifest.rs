@@ -13,7 +13,7 @@ use crate::error::{write_atomic, Error, IoContext, Result};
 use crate::scene::{vis, Camera};
 
 /// The manifest version this build writes and reads.
-pub const MANIFEST_VERSION: u32 = 1;
+pub(crate) const MANIFEST_VERSION: u32 = 1;
 
 /// How agents were ranked. Membership is always the reference-frame ranking;
 /// `PerFrame` additionally ranked every frame to count pops, for comparison.
@@ -32,7 +32,7 @@ pub use crate::casting::Lod;
 /// A ray type an object is visible to; see [`crate::scene::vis`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-pub enum RayKind {
+pub(crate) enum RayKind {
     /// Camera rays: colour and alpha.
     Camera,
     /// Shadow rays.
@@ -44,7 +44,7 @@ pub enum RayKind {
 }
 
 /// [`vis`] bits of a ray list.
-pub fn vis_bits(rays: &[RayKind]) -> u8 {
+pub(crate) fn vis_bits(rays: &[RayKind]) -> u8 {
     rays.iter().fold(0, |b, r| {
         b | match r {
             RayKind::Camera => vis::CAMERA,
@@ -57,15 +57,15 @@ pub fn vis_bits(rays: &[RayKind]) -> u8 {
 
 /// What one render (a crowd layer or the set layer) sees of what.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Visibility {
+pub(crate) struct Visibility {
     /// This layer's own (non-removed) agents.
-    pub own_agents: Vec<RayKind>,
+    pub(crate) own_agents: Vec<RayKind>,
     /// Every other non-removed agent.
-    pub other_agents: Vec<RayKind>,
+    pub(crate) other_agents: Vec<RayKind>,
     /// Other agents drawn as proxy boxes (else at their own LOD).
-    pub other_agents_as_proxy: bool,
+    pub(crate) other_agents_as_proxy: bool,
     /// The set.
-    pub set: Vec<RayKind>,
+    pub(crate) set: Vec<RayKind>,
 }
 
 /// One crowd layer.
@@ -78,23 +78,23 @@ pub struct LayerRecord {
     /// Agents assigned, removed ones included.
     pub agents: usize,
     /// Agents rendered (assigned and not removed).
-    pub rendered: usize,
+    pub(crate) rendered: usize,
     /// Agents assigned but removed.
     pub removed: usize,
     /// Agents here by a pin (counted in `agents`).
-    pub pinned: usize,
+    pub(crate) pinned: usize,
     /// Nearest agent the split put here (pinned agents excluded), metres; null when none.
     pub distance_min_m: Option<f32>,
     /// Farthest agent the split put here (pinned agents excluded), metres; null when none.
     pub distance_max_m: Option<f32>,
     /// Rendered agents at full LOD (at the reference frame).
-    pub lod_full: usize,
+    pub(crate) lod_full: usize,
     /// Rendered agents as proxies (at the reference frame).
-    pub lod_proxy: usize,
+    pub(crate) lod_proxy: usize,
     /// Estimated render memory: shared bytes plus rendered agents' estimates.
     pub memory_bytes: u64,
     /// Visibility in this layer's render.
-    pub visibility: Visibility,
+    pub(crate) visibility: Visibility,
 }
 
 impl LayerRecord {
@@ -128,7 +128,7 @@ pub struct SetRecord {
     /// Always `set`.
     pub name: String,
     /// Visibility in the set render (`own_agents` is empty: it has none).
-    pub visibility: Visibility,
+    pub(crate) visibility: Visibility,
 }
 
 impl SetRecord {
@@ -151,9 +151,9 @@ impl SetRecord {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LodChange {
     /// First shot frame with this LOD.
-    pub frame: i32,
+    pub(crate) frame: i32,
     /// The LOD from that frame on.
-    pub lod: Lod,
+    pub(crate) lod: Lod,
 }
 
 /// One agent.
@@ -202,15 +202,15 @@ impl LayerAgent {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CameraRecord {
     /// Position.
-    pub position: [f32; 3],
+    pub(crate) position: [f32; 3],
     /// Unit view direction.
-    pub forward: [f32; 3],
+    pub(crate) forward: [f32; 3],
     /// Unit up.
-    pub up: [f32; 3],
+    pub(crate) up: [f32; 3],
     /// Vertical field of view, radians.
-    pub yfov: f32,
+    pub(crate) yfov: f32,
     /// Image width and height, pixels.
-    pub image_size: [u32; 2],
+    pub(crate) image_size: [u32; 2],
 }
 
 impl CameraRecord {
@@ -248,19 +248,19 @@ impl CameraRecord {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SplitRecord {
     /// `count`, `cutoffs` or `budget`.
-    pub mode: String,
+    pub(crate) mode: String,
     /// Layer count (count split).
-    pub count: Option<usize>,
+    pub(crate) count: Option<usize>,
     /// Cut-offs in metres (cut-off split).
     #[serde(default)]
-    pub cutoffs_m: Vec<f32>,
+    pub(crate) cutoffs_m: Vec<f32>,
     /// Budget per layer in bytes (budget split).
     pub budget_bytes: Option<u64>,
     /// Memory every layer carries, counted once per layer.
     pub shared_bytes: u64,
     /// Distance where each layer after crowd0 begins, before pins (null for
     /// an empty layer): the cut-offs, or the nearest agent of that layer.
-    pub boundaries_m: Vec<Option<f32>>,
+    pub(crate) boundaries_m: Vec<Option<f32>>,
 }
 
 /// Agents that change layer during the shot.
@@ -276,7 +276,7 @@ pub struct Pops {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Manifest {
     /// [`MANIFEST_VERSION`].
-    pub version: u32,
+    pub(crate) version: u32,
     /// Shot name.
     pub shot: String,
     /// The frame agents were ranked at.
@@ -288,13 +288,13 @@ pub struct Manifest {
     /// The split.
     pub split: SplitRecord,
     /// Projected height in pixels at or above which an agent is full LOD.
-    pub lod_full_min_px: f32,
+    pub(crate) lod_full_min_px: f32,
     /// LOD chosen per frame (see agents' `lod_changes`).
-    pub lod_per_frame: bool,
+    pub(crate) lod_per_frame: bool,
     /// Hysteresis band of per-frame LOD, fraction of `lod_full_min_px`.
-    pub lod_hysteresis: f32,
+    pub(crate) lod_hysteresis: f32,
     /// Other layers' agents cast shadows and reflections as proxy boxes.
-    pub proxy_shadow_casters: bool,
+    pub(crate) proxy_shadow_casters: bool,
     /// The camera at the reference frame.
     pub camera: CameraRecord,
     /// Pops: 0 in fixed ranking; measured with per-frame ranking.
@@ -469,53 +469,53 @@ fn check_consistent(path: &Path, m: &Manifest) -> Result<()> {
 /// part (10,000 robots), about 120 with a leaf per agent (100,000 and
 /// 1,000,000 robots); 360 covers the larger with room, so the estimate
 /// holds in both kinds of tree.
-pub const INSTANCE_BYTES: u64 = 360;
+pub(crate) const INSTANCE_BYTES: u64 = 360;
 /// BLAS bytes per triangle: the 8-wide nodes, the 48-byte precomputed
 /// triangle, two index arrays, and the build's scratch.
-pub const BLAS_BYTES_PER_TRIANGLE: u64 = 240;
+pub(crate) const BLAS_BYTES_PER_TRIANGLE: u64 = 240;
 /// Bytes per agent of the shot that every render holds, in its layer or
 /// not: casting, dressing, the cache's frame index and the frame's pose
 /// (`throng cast` of 1,000,000 robots peaks at 838 MiB).
-pub const AGENT_LOADED_BYTES: u64 = 1_000;
+pub(crate) const AGENT_LOADED_BYTES: u64 = 1_000;
 /// Bytes of a render process before it loads a shot: the binary, allocator
 /// arenas and the worker threads' stacks.
-pub const PROCESS_BYTES: u64 = 24_000_000;
+pub(crate) const PROCESS_BYTES: u64 = 24_000_000;
 /// Bytes per pixel of the shot's resolution: the film and its AOVs, the
 /// Cryptomatte ranks of three types, tile results and the EXR channels being encoded.
-pub const PIXEL_BYTES: u64 = 520;
+pub(crate) const PIXEL_BYTES: u64 = 520;
 
 /// An agent's render memory as `instances` traced instances (its parts, or
 /// its proxy boxes); its meshes' BLASes are in [`estimate_render_floor`].
-pub fn estimate_agent_memory(instances: usize) -> u64 {
+pub(crate) fn estimate_agent_memory(instances: usize) -> u64 {
     instances as u64 * INSTANCE_BYTES
 }
 
 /// An agent's estimated render memory as proxies: one instance per box.
-pub fn estimate_proxy_memory(boxes: usize) -> u64 {
+pub(crate) fn estimate_proxy_memory(boxes: usize) -> u64 {
     estimate_agent_memory(boxes)
 }
 
 /// What every layer render of a shot holds whatever its agents.
 #[derive(Debug, Clone, Copy, Default)]
-pub struct RenderFloor {
+pub(crate) struct RenderFloor {
     /// Agents in the shot (every one is loaded and posed in every render).
-    pub agents: u64,
+    pub(crate) agents: u64,
     /// Geometry bytes of every mesh loaded (wardrobe parts, posed skins, set).
-    pub mesh_bytes: u64,
+    pub(crate) mesh_bytes: u64,
     /// Triangles of every mesh loaded (each may get a BLAS).
-    pub triangles: u64,
+    pub(crate) triangles: u64,
     /// Texel bytes of every texture loaded.
-    pub texture_bytes: u64,
+    pub(crate) texture_bytes: u64,
     /// The set's instances.
-    pub set_instances: u64,
+    pub(crate) set_instances: u64,
     /// Pixels of the shot's resolution.
-    pub pixels: u64,
+    pub(crate) pixels: u64,
 }
 
 /// The floor of every layer render's memory: process, loaded shot, the
 /// whole library with a BLAS per mesh (an upper bound: a layer builds only
 /// the BLASes it uses), the set, and the film.
-pub fn estimate_render_floor(f: &RenderFloor) -> u64 {
+pub(crate) fn estimate_render_floor(f: &RenderFloor) -> u64 {
     PROCESS_BYTES
         .saturating_add(f.agents.saturating_mul(AGENT_LOADED_BYTES))
         .saturating_add(f.mesh_bytes)

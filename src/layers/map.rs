@@ -53,7 +53,7 @@ const PALETTE: [Rgba; 8] = [
 ];
 
 /// A layer's colour.
-pub fn layer_color(layer: usize) -> [u8; 4] {
+pub(crate) fn layer_color(layer: usize) -> [u8; 4] {
     PALETTE[layer % PALETTE.len()]
 }
 

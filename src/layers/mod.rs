@@ -15,10 +15,10 @@
 
 pub mod checks;
 mod font;
-pub mod input;
-pub mod made_from;
+pub(crate) mod input;
+pub(crate) mod made_from;
 pub mod manifest;
-pub mod map;
+pub(crate) mod map;
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -31,11 +31,11 @@ use crate::shot::{parse_bytes, LayerSettings, SplitMode};
 
 pub use input::{build_layers, set_bounds, settings_with_overrides, LayerOverrides};
 pub use made_from::{check_current, MadeFrom};
-pub use manifest::{
-    estimate_agent_memory, estimate_proxy_memory, estimate_render_floor, format_bytes, read_manifest, summary,
-    write_manifest, CameraRecord, LayerAgent, LayerRecord, Lod, LodChange, Manifest, Pops, Ranking, RayKind,
-    RenderFloor, SetRecord, SplitRecord, Visibility, MANIFEST_VERSION,
+pub(crate) use manifest::{
+    estimate_agent_memory, estimate_proxy_memory, estimate_render_floor, CameraRecord, LayerAgent, LayerRecord,
+    LodChange, Pops, RenderFloor, SetRecord, SplitRecord, MANIFEST_VERSION,
 };
+pub use manifest::{format_bytes, read_manifest, summary, write_manifest, Lod, Manifest, Ranking};
 pub use map::{draw_map, render_map, MapOptions};
 
 /// One agent as layering sees it.
@@ -99,7 +99,7 @@ pub struct LayerInput {
 
 impl LayerInput {
     /// The reference frame: `settings.ref_frame`, else the middle shot frame.
-    pub fn ref_frame(&self) -> i32 {
+    pub(crate) fn ref_frame(&self) -> i32 {
         match self.settings.ref_frame {
             Some(f) => f,
             None => self.frames.get((self.frames.len().saturating_sub(1)) / 2).copied().unwrap_or(0),
@@ -146,7 +146,7 @@ fn nearest_present(positions: &[Option<Vec3>], fi: usize) -> Option<usize> {
 /// Distance is Euclidean from the camera to the agent's centre (half height),
 /// projected height uses the depth along the view axis. botinfo uses this
 /// too, so both report the same distance.
-pub fn measure(cam: &Camera, image_h: u32, pos: Vec3, height: f32) -> (f32, f32, bool) {
+pub(crate) fn measure(cam: &Camera, image_h: u32, pos: Vec3, height: f32) -> (f32, f32, bool) {
     let eye = Vec3::from(cam.world_from_camera.translation);
     let forward = cam.world_from_camera.transform_vector3(-Vec3::Z).normalize_or_zero();
     let to = pos + Vec3::Y * (0.5 * height) - eye;
@@ -691,7 +691,10 @@ fn count_pops(input: &LayerInput, prep: &Prepared, full_lod: &dyn Fn(usize, &Sam
 /// Every agent's foot position at each shot frame (`None` where the cache
 /// has no record for it), sorted by id: the positions half of a
 /// [`LayerInput`]. Hidden agents count as present (they are still simulated).
-pub fn shot_positions(shot: &crate::shot::Shot, crowd: &crate::cache::CrowdCache) -> Vec<(u32, Vec<Option<Vec3>>)> {
+pub(crate) fn shot_positions(
+    shot: &crate::shot::Shot,
+    crowd: &crate::cache::CrowdCache,
+) -> Vec<(u32, Vec<Option<Vec3>>)> {
     let frames: Vec<i32> = shot.frames.iter().collect();
     let mut by_id: std::collections::BTreeMap<u32, Vec<Option<Vec3>>> = Default::default();
     for (fi, &f) in frames.iter().enumerate() {

@@ -41,7 +41,7 @@ impl Blas {
     /// zero-area triangles and exact duplicates: they can never be the
     /// (first) hit, and thousands of them at one point would make a
     /// degenerate, over-deep tree.
-    pub fn build(mesh: &Mesh) -> Blas {
+    pub(crate) fn build(mesh: &Mesh) -> Blas {
         let mut tris = Vec::with_capacity(mesh.triangle_count());
         let mut original = Vec::with_capacity(mesh.triangle_count());
         let mut seen = std::collections::HashSet::with_capacity(mesh.triangle_count());
@@ -68,7 +68,7 @@ impl Blas {
     }
 
     /// True when the mesh has no valid triangle.
-    pub fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.tris.is_empty()
     }
 
@@ -78,7 +78,7 @@ impl Blas {
     }
 
     /// Approximate heap bytes of the BVH and its triangles.
-    pub fn bytes(&self) -> usize {
+    pub(crate) fn bytes(&self) -> usize {
         self.bvh.nodes.len() * std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>()
             + self.bvh.primitive_indices.len() * 4
             + self.tris.len() * std::mem::size_of::<RtTriangle>()
@@ -117,7 +117,7 @@ impl Blas {
 
     /// Runs obvhs' structural checks (panics on a broken tree; tests only).
     #[doc(hidden)]
-    pub fn validate(&self) {
+    pub(crate) fn validate(&self) {
         if !self.is_empty() {
             self.bvh.validate(&self.tris, true);
         }
@@ -128,7 +128,7 @@ impl Blas {
 /// (deformation blur): each triangle's vertices at both keys, and a tree over
 /// the union of each triangle's bounds at the two keys. A ray at blend weight
 /// `w` meets the triangle `lerp(lo, hi, w)`, which lies inside that union.
-pub struct DeformBlas {
+pub(crate) struct DeformBlas {
     bvh: CwBvh,
     /// Vertices at the first key, in BVH slot order.
     lo: Vec<[Vec3A; 3]>,
@@ -141,7 +141,7 @@ pub struct DeformBlas {
 impl DeformBlas {
     /// Builds the blend of `a` into `b`. Empty when the index buffers differ
     /// (not the same piece) or no triangle is valid at both keys.
-    pub fn build(a: &Mesh, b: &Mesh) -> DeformBlas {
+    pub(crate) fn build(a: &Mesh, b: &Mesh) -> DeformBlas {
         let empty = || DeformBlas { bvh: CwBvh::default(), lo: Vec::new(), hi: Vec::new(), triangle_index: Vec::new() };
         if a.indices != b.indices || a.positions.len() != b.positions.len() {
             return empty();
@@ -177,12 +177,12 @@ impl DeformBlas {
     }
 
     /// True when nothing can be hit.
-    pub fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.lo.is_empty()
     }
 
     /// Approximate heap bytes.
-    pub fn bytes(&self) -> usize {
+    pub(crate) fn bytes(&self) -> usize {
         self.bvh.nodes.len() * std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>()
             + self.bvh.primitive_indices.len() * 4
             + (self.lo.len() + self.hi.len()) * std::mem::size_of::<[Vec3A; 3]>()
@@ -328,7 +328,7 @@ pub struct BlasSet {
 
 impl BlasSet {
     /// An empty set for `lib`: nothing built yet.
-    pub fn lazy(lib: &Library) -> BlasSet {
+    pub(crate) fn lazy(lib: &Library) -> BlasSet {
         BlasSet {
             blas: (0..lib.meshes.len()).map(|_| std::sync::OnceLock::new()).collect(),
             deform: Mutex::new(HashMap::new()),
@@ -345,7 +345,7 @@ impl BlasSet {
 
     /// Builds, in parallel, the BLAS of every mesh in `meshes` not built yet
     /// (unknown ids are ignored). Deterministic: a BLAS depends only on its mesh.
-    pub fn prepare(&mut self, lib: &Library, meshes: impl IntoIterator<Item = u32>) {
+    pub(crate) fn prepare(&mut self, lib: &Library, meshes: impl IntoIterator<Item = u32>) {
         let start = Instant::now();
         let mut todo: Vec<u32> =
             meshes.into_iter().filter(|&m| self.blas.get(m as usize).is_some_and(|b| b.get().is_none())).collect();
@@ -376,7 +376,7 @@ impl BlasSet {
     /// The deforming BLAS blending mesh `a` into mesh `b` (same topology),
     /// built once and cached. `None` when either mesh is unknown or their
     /// topologies differ, or nothing in them can be hit.
-    pub fn deforming(&self, lib: &Library, a: u32, b: u32) -> Option<Arc<DeformBlas>> {
+    pub(crate) fn deforming(&self, lib: &Library, a: u32, b: u32) -> Option<Arc<DeformBlas>> {
         if let Some(d) = self.deform.lock().ok()?.get(&(a, b)) {
             return (!d.is_empty()).then(|| d.clone());
         }
@@ -441,7 +441,7 @@ struct TlasInstance {
 /// From this many instances on, each agent's parts share one TLAS leaf:
 /// below it, a tree over parts traces faster; above it, memory and build
 /// time per part dominate (a million robots are eleven million parts).
-pub const AGENT_CLUSTERS_FROM: usize = 1_000_000;
+pub(crate) const AGENT_CLUSTERS_FROM: usize = 1_000_000;
 
 /// `TlasInstance::motion` of an instance that does not move.
 const STILL: u32 = u32::MAX;
@@ -587,7 +587,7 @@ impl<'a> Tlas<'a> {
     /// linearly), and rays meet it at their own time. Instances that do not
     /// move are stored and traced exactly as in a still scene. Instances
     /// whose material has alpha MASK or BLEND let rays through their holes.
-    pub fn build_scene(
+    pub(crate) fn build_scene(
         blas: &'a BlasSet,
         lib: &'a Library,
         instances: &'a [Instance],
@@ -958,11 +958,6 @@ impl<'a> Tlas<'a> {
             TlasTree::Bvh2(bvh) => !bvh.ray_traverse_miss(world, visit),
             TlasTree::CwBvh(bvh) => !bvh.ray_traverse_miss(world, visit),
         }
-    }
-
-    /// Number of instances that move over the shutter.
-    pub fn moving_len(&self) -> usize {
-        self.moving.len()
     }
 
     /// World-space bounds of everything in the tree (`None` when empty).

@@ -20,7 +20,7 @@ const MIN_ALPHA: f32 = 1e-3;
 
 /// Rec. 709 luminance.
 #[inline]
-pub fn luminance(c: Vec3) -> f32 {
+pub(crate) fn luminance(c: Vec3) -> f32 {
     c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
 }
 
@@ -28,11 +28,11 @@ pub fn luminance(c: Vec3) -> f32 {
 #[derive(Clone, Copy, Debug)]
 pub struct ShadingFrame {
     /// Tangent.
-    pub s: Vec3,
+    pub(crate) s: Vec3,
     /// Bitangent.
-    pub t: Vec3,
+    pub(crate) t: Vec3,
     /// Normal.
-    pub n: Vec3,
+    pub(crate) n: Vec3,
 }
 
 impl ShadingFrame {
@@ -47,7 +47,7 @@ impl ShadingFrame {
     }
     /// World to local.
     #[inline]
-    pub fn to_local(&self, v: Vec3) -> Vec3 {
+    pub(crate) fn to_local(self, v: Vec3) -> Vec3 {
         Vec3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))
     }
     /// Local to world.
@@ -60,7 +60,7 @@ impl ShadingFrame {
 /// Concentric square-to-disk map (Shirley-Chiu) onto the unit disc: area
 /// preserving, so uniform `u` gives uniform points (lens and disc lights).
 #[inline]
-pub fn sample_concentric_disk(u: Vec2) -> Vec2 {
+pub(crate) fn sample_concentric_disk(u: Vec2) -> Vec2 {
     let o = 2.0 * u - Vec2::ONE;
     if o.x == 0.0 && o.y == 0.0 {
         Vec2::ZERO
@@ -99,13 +99,13 @@ pub struct Bsdf {
 
 /// One sampled direction.
 #[derive(Clone, Copy, Debug)]
-pub struct BsdfSample {
+pub(crate) struct BsdfSample {
     /// Incident direction (local).
-    pub wi: Vec3,
+    pub(crate) wi: Vec3,
     /// f * cos / pdf.
-    pub weight: Vec3,
+    pub(crate) weight: Vec3,
     /// Solid-angle pdf of the whole mixture.
-    pub pdf: f32,
+    pub(crate) pdf: f32,
 }
 
 impl Bsdf {
@@ -116,7 +116,7 @@ impl Bsdf {
     }
 
     /// As [`Bsdf::new`] with KHR_materials_ior's `ior`.
-    pub fn with_ior(base_color: Vec3, metallic: f32, roughness: f32, ior: f32) -> Bsdf {
+    pub(crate) fn with_ior(base_color: Vec3, metallic: f32, roughness: f32, ior: f32) -> Bsdf {
         let metallic = metallic.clamp(0.0, 1.0);
         let roughness = roughness.clamp(0.0, 1.0);
         let base_color = base_color.clamp(Vec3::ZERO, Vec3::ONE);
@@ -134,7 +134,7 @@ impl Bsdf {
     /// gives for metallic 0, roughness 1: that keeps a GGX lobe with F0 = 0.04
     /// and weights the diffuse by (1 - F). For comparisons with renderers set
     /// to plain diffuse materials (see `RenderSettings::diffuse_only`).
-    pub fn lambert(base_color: Vec3) -> Bsdf {
+    pub(crate) fn lambert(base_color: Vec3) -> Bsdf {
         Bsdf { diffuse: base_color.clamp(Vec3::ZERO, Vec3::ONE), f0: Vec3::ZERO, alpha: 1.0, lambert: true }
     }
 
@@ -190,7 +190,7 @@ impl Bsdf {
     }
 
     /// Solid-angle pdf of [`Bsdf::sample`] producing `wi`.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+    pub(crate) fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
@@ -205,7 +205,7 @@ impl Bsdf {
     }
 
     /// Samples wi: `u_lobe` picks the lobe, `u` the direction.
-    pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+    pub(crate) fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
@@ -247,7 +247,7 @@ impl Bsdf {
 /// unpolarised light (the mean of the s and p reflectances), at cosine
 /// `cos_i` (> 0) of the incident direction, `eta` = n_transmitted /
 /// n_incident; 1 under total internal reflection.
-pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
+pub(crate) fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
     let cos_i = cos_i.clamp(0.0, 1.0);
     let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
     if sin2_t >= 1.0 {
@@ -266,7 +266,7 @@ pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
 /// summed (reflectance R + T^2 R / (1 - R^2) for one boundary's R and T = 1 - R),
 /// transmitting straight through. Transmission is tinted by the base colour.
 #[derive(Clone, Copy, Debug)]
-pub struct Dielectric {
+pub(crate) struct Dielectric {
     /// n on the far side / n on the side the ray comes from (the material's
     /// ior entering a solid, 1 / ior leaving it; the ior for a thin wall).
     eta: f32,
@@ -276,30 +276,30 @@ pub struct Dielectric {
 
 /// One direction a [`Dielectric`] scatters into.
 #[derive(Clone, Copy, Debug)]
-pub struct DeltaSample {
+pub(crate) struct DeltaSample {
     /// Outgoing direction (local); for a thin wall's transmission exactly -wo.
-    pub wi: Vec3,
+    pub(crate) wi: Vec3,
     /// Throughput factor (f cos / pdf of the delta lobe).
-    pub weight: Vec3,
+    pub(crate) weight: Vec3,
     /// Through the surface rather than reflected off it.
-    pub transmitted: bool,
+    pub(crate) transmitted: bool,
     /// The (n_t / n_i)^2 that `weight` divides by (1 but for refraction):
     /// Russian roulette multiplies it back, so a path inside glass is not
     /// ended for the radiance compression it will regain on leaving.
-    pub eta_scale: f32,
+    pub(crate) eta_scale: f32,
 }
 
 impl Dielectric {
     /// A boundary the ray crosses from index 1 into `ior` (`entering`) or
     /// back out, or a thin wall of `ior` (`thin`), with transmission tint `tint`.
-    pub fn new(ior: f32, entering: bool, thin: bool, tint: Vec3) -> Dielectric {
+    pub(crate) fn new(ior: f32, entering: bool, thin: bool, tint: Vec3) -> Dielectric {
         let ior = ior.max(1.0);
         let eta = if thin || entering { ior } else { 1.0 / ior };
         Dielectric { eta, tint: tint.clamp(Vec3::ZERO, Vec3::ONE), thin }
     }
 
     /// Share of the light reflected at cosine `cos` (> 0) from the normal.
-    pub fn reflectance(&self, cos: f32) -> f32 {
+    pub(crate) fn reflectance(&self, cos: f32) -> f32 {
         let r = fresnel_dielectric(cos, self.eta);
         if self.thin && r < 1.0 {
             // A thin slab: R + T^2 R / (1 - R^2) = 2R / (1 + R).
@@ -310,7 +310,7 @@ impl Dielectric {
     }
 
     /// Reflects (probability: the reflectance) or transmits, by `u`.
-    pub fn sample(&self, wo: Vec3, u: f32) -> Option<DeltaSample> {
+    pub(crate) fn sample(&self, wo: Vec3, u: f32) -> Option<DeltaSample> {
         if wo.z <= 0.0 {
             return None;
         }

@@ -18,7 +18,7 @@
 use glam::{Mat3, Vec3};
 
 use crate::casting::ShotCrowd;
-pub use crate::scene::{Acescg, Rec709, Space};
+pub(crate) use crate::scene::{Acescg, Rec709};
 use crate::scene::{FrameScene, Material, Texture};
 pub use crate::shot::Colourspace;
 
@@ -52,12 +52,12 @@ pub fn rec709_to_acescg(c: Vec3) -> Vec3 {
 }
 
 /// An ACEScg colour in linear Rec.709.
-pub fn acescg_to_rec709(c: Vec3) -> Vec3 {
+pub(crate) fn acescg_to_rec709(c: Vec3) -> Vec3 {
     mat(ACESCG_TO_REC709) * c
 }
 
 /// An input colour (authored in linear Rec.709) in the working space.
-pub fn input(space: Colourspace, c: Vec3) -> Vec3 {
+pub(crate) fn input(space: Colourspace, c: Vec3) -> Vec3 {
     match space {
         Colourspace::Rec709 => c,
         Colourspace::Acescg => rec709_to_acescg(c),
@@ -65,7 +65,7 @@ pub fn input(space: Colourspace, c: Vec3) -> Vec3 {
 }
 
 /// A working-space colour in linear Rec.709, for display (PNG previews).
-pub fn to_rec709(space: Colourspace, c: Vec3) -> Vec3 {
+pub(crate) fn to_rec709(space: Colourspace, c: Vec3) -> Vec3 {
     match space {
         Colourspace::Rec709 => c,
         Colourspace::Acescg => acescg_to_rec709(c),
@@ -73,7 +73,7 @@ pub fn to_rec709(space: Colourspace, c: Vec3) -> Vec3 {
 }
 
 /// The primaries and white of `space`, as OpenEXR's `chromaticities` wants them.
-pub fn chromaticities(space: Colourspace) -> [[f32; 2]; 4] {
+pub(crate) fn chromaticities(space: Colourspace) -> [[f32; 2]; 4] {
     match space {
         Colourspace::Rec709 => REC709_CHROMATICITIES,
         Colourspace::Acescg => AP1_CHROMATICITIES,
@@ -81,7 +81,7 @@ pub fn chromaticities(space: Colourspace) -> [[f32; 2]; 4] {
 }
 
 /// `throng/colorspace`: `lin_rec709` or `ACEScg` (OpenColorIO's names).
-pub fn header_name(space: Colourspace) -> &'static str {
+pub(crate) fn header_name(space: Colourspace) -> &'static str {
     match space {
         Colourspace::Rec709 => "lin_rec709",
         Colourspace::Acescg => "ACEScg",
@@ -89,7 +89,7 @@ pub fn header_name(space: Colourspace) -> &'static str {
 }
 
 /// The working space a `throng/colorspace` header names (`None`: not ours).
-pub fn from_header_name(name: &str) -> Option<Colourspace> {
+pub(crate) fn from_header_name(name: &str) -> Option<Colourspace> {
     [Colourspace::Rec709, Colourspace::Acescg].into_iter().find(|&s| header_name(s) == name)
 }
 

@@ -34,7 +34,7 @@ pub const MATERIAL_MATTE: &str = "CryptoMaterial";
 /// The matte types a render writes, in [`CryptoNames`] order (agent, part,
 /// material: the index [`CryptoNames::manifest`] takes). Films and files
 /// list them sorted by type name instead.
-pub const MATTES: [&str; 3] = [AGENT_MATTE, PART_MATTE, MATERIAL_MATTE];
+pub(crate) const MATTES: [&str; 3] = [AGENT_MATTE, PART_MATTE, MATERIAL_MATTE];
 /// Name of set (non-agent) geometry that has no object name, in the agent
 /// and part mattes; named set objects are `set/<object>` ([`set_object_name`]).
 pub const SET_NAME: &str = "set";
@@ -44,14 +44,14 @@ pub const RANKS: usize = 6;
 /// objects than this under one pixel is rare (16 spp can see at most 16); the
 /// samples of ids that do not fit are dropped (they would rank below the
 /// kept ones only if they arrive late, so mattes stay usable).
-pub const ACCUMULATOR_CAPACITY: usize = 32;
+pub(crate) const ACCUMULATOR_CAPACITY: usize = 32;
 /// The `hash` header value.
-pub const HASH: &str = "MurmurHash3_32";
+pub(crate) const HASH: &str = "MurmurHash3_32";
 /// The `conversion` header value.
-pub const CONVERSION: &str = "uint32_to_float32";
+pub(crate) const CONVERSION: &str = "uint32_to_float32";
 
 /// MurmurHash3_x86_32 of `bytes` with `seed`.
-pub fn murmur3_32(bytes: &[u8], seed: u32) -> u32 {
+pub(crate) fn murmur3_32(bytes: &[u8], seed: u32) -> u32 {
     const C1: u32 = 0xcc9e_2d51;
     const C2: u32 = 0x1b87_3593;
     let mut h = seed;
@@ -80,7 +80,7 @@ pub fn murmur3_32(bytes: &[u8], seed: u32) -> u32 {
 
 /// The spec's `uint32_to_float32`: the hash's bits as a float, with an
 /// exponent of 0 or 255 (zero, denormal, inf, NaN) toggled to 1 or 254.
-pub fn hash_to_float(hash: u32) -> f32 {
+pub(crate) fn hash_to_float(hash: u32) -> f32 {
     let exponent = (hash >> 23) & 0xff;
     let bits = if exponent == 0 || exponent == 255 { hash ^ (1 << 23) } else { hash };
     f32::from_bits(bits)
@@ -121,13 +121,13 @@ pub fn set_object_name(object: &str) -> String {
 /// materials are `<file>#<material>` in the library and keep `<material>`,
 /// the name given in the file (the same on every machine, wherever the file
 /// lives); wardrobe materials (`wardrobe/material`, no `#`) keep theirs.
-pub fn material_name(library_name: &str) -> &str {
+pub(crate) fn material_name(library_name: &str) -> &str {
     library_name.rsplit_once('#').map_or(library_name, |(_, name)| name)
 }
 
 /// One pixel's running (id, sample count) table: fixed capacity, no heap.
 #[derive(Clone, Debug)]
-pub struct RankAccumulator {
+pub(crate) struct RankAccumulator {
     ids: [u32; ACCUMULATOR_CAPACITY],
     counts: [u32; ACCUMULATOR_CAPACITY],
     len: usize,
@@ -142,7 +142,7 @@ impl Default for RankAccumulator {
 impl RankAccumulator {
     /// Adds one sample (weight 1) of the id with float bits `id_bits`; 0 (no
     /// object) is ignored: coverage is normalised by the pixel's sample count.
-    pub fn add(&mut self, id_bits: u32) {
+    pub(crate) fn add(&mut self, id_bits: u32) {
         if id_bits == 0 {
             return;
         }
@@ -157,7 +157,7 @@ impl RankAccumulator {
 
     /// Writes the top `out.len()` (id, coverage) pairs, coverage = count /
     /// `samples`, highest first, ties by id bits; unused ranks are (0, 0).
-    pub fn write_ranked(&self, samples: u32, out: &mut [[f32; 2]]) {
+    pub(crate) fn write_ranked(&self, samples: u32, out: &mut [[f32; 2]]) {
         let mut order: [(u32, u32); ACCUMULATOR_CAPACITY] = [(0, 0); ACCUMULATOR_CAPACITY];
         for (i, o) in order.iter_mut().enumerate().take(self.len) {
             *o = (self.counts[i], self.ids[i]);
@@ -194,7 +194,7 @@ pub struct Cryptomatte {
 
 impl Cryptomatte {
     /// An empty (all id 0) matte.
-    pub fn new(name: &str, width: u32, height: u32, ranks: usize) -> Cryptomatte {
+    pub(crate) fn new(name: &str, width: u32, height: u32, ranks: usize) -> Cryptomatte {
         Cryptomatte {
             name: name.to_string(),
             width,
@@ -216,7 +216,7 @@ impl Cryptomatte {
     }
 
     /// Coverage per pixel of the object with float id `id` (row-major).
-    pub fn matte_id(&self, id: f32) -> Vec<f32> {
+    pub(crate) fn matte_id(&self, id: f32) -> Vec<f32> {
         let bits = id.to_bits();
         if self.ranks == 0 {
             return vec![0.0; self.width as usize * self.height as usize];
@@ -241,12 +241,12 @@ impl Cryptomatte {
     }
 
     /// Every non-zero id with coverage somewhere, as float bits.
-    pub fn ids_present(&self) -> BTreeSet<u32> {
+    pub(crate) fn ids_present(&self) -> BTreeSet<u32> {
         self.pairs.iter().filter(|p| p[1] > 0.0 && p[0].to_bits() != 0).map(|p| p[0].to_bits()).collect()
     }
 
     /// The manifest as the spec's JSON: `{"name":"<8 hex>", ...}`, names sorted.
-    pub fn manifest_json(&self) -> String {
+    pub(crate) fn manifest_json(&self) -> String {
         let map: BTreeMap<&str, String> =
             self.manifest.iter().map(|(k, &v)| (k.as_str(), format!("{v:08x}"))).collect();
         serde_json::to_string(&map).unwrap_or_else(|_| "{}".to_string())
@@ -337,14 +337,14 @@ impl<'a> CryptoNames<'a> {
     }
 
     /// [agent, part, material] matte id bits of instance `i` (0 = none).
-    pub fn ids(&self, instance: u32) -> [u32; 3] {
+    pub(crate) fn ids(&self, instance: u32) -> [u32; 3] {
         self.ids.get(instance as usize).copied().unwrap_or([0; 3])
     }
 
     /// The manifest of matte `matte` (index into [`MATTES`]: 0 agents, 1
     /// parts, 2 materials) restricted to `present` ids. Every name with a
     /// present id is listed, so two names that collide on one id both are.
-    pub fn manifest(&self, matte: usize, present: &BTreeSet<u32>) -> BTreeMap<String, u32> {
+    pub(crate) fn manifest(&self, matte: usize, present: &BTreeSet<u32>) -> BTreeMap<String, u32> {
         let mut out = BTreeMap::new();
         if matte >= MATTES.len() || present.is_empty() {
             return out;

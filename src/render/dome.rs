@@ -28,7 +28,7 @@ use crate::scene::lights::Dome;
 /// sun (the few cells that hold much of its light in a small solid angle)
 /// and the rest. A dome without such a sun is all `Rest`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum DomePart {
+pub(crate) enum DomePart {
     /// The sun's cells.
     Sun,
     /// Every other cell (the whole dome when it has no sun).
@@ -190,22 +190,17 @@ impl DomeSampler {
 
     /// The parts with light, each sampled on its own by
     /// [`DomeSampler::sample_part`].
-    pub fn parts(&self) -> &[DomePart] {
+    pub(crate) fn parts(&self) -> &[DomePart] {
         &self.parts
     }
 
     /// A part's integral of luminance over the sphere: its share of light
     /// when choosing between lights by power.
-    pub fn part_power(&self, part: DomePart) -> f64 {
+    pub(crate) fn part_power(&self, part: DomePart) -> f64 {
         match part {
             DomePart::Sun => self.sun.cdf.last().copied().unwrap_or(0.0),
             DomePart::Rest => self.rest_total,
         }
-    }
-
-    /// The dome it samples.
-    pub fn dome(&self) -> &Dome {
-        &self.dome
     }
 
     /// World direction of map coordinates `uv` (u right, v down, in [0, 1]).
@@ -215,7 +210,7 @@ impl DomeSampler {
     }
 
     /// Map coordinates of a world direction (need not be unit length).
-    pub fn uv(&self, dir: Vec3) -> Vec2 {
+    pub(crate) fn uv(&self, dir: Vec3) -> Vec2 {
         let d = self.dome_from_world(dir.normalize_or_zero());
         let u = (PI - (-d.z).atan2(d.x)) / (2.0 * PI);
         Vec2::new(u, d.y.clamp(-1.0, 1.0).acos() / PI)
@@ -249,7 +244,7 @@ impl DomeSampler {
     /// Samples a direction towards one part of the dome: (direction, its
     /// radiance, its solid-angle pdf within the part). None when the part
     /// has no light.
-    pub fn sample_part(&self, part: DomePart, u: Vec2) -> Option<(Vec3, Vec3, f32)> {
+    pub(crate) fn sample_part(&self, part: DomePart, u: Vec2) -> Option<(Vec3, Vec3, f32)> {
         let u = u.clamp(Vec2::ZERO, Vec2::splat(1.0 - f32::EPSILON));
         let w = self.dome.width as usize;
         let (row, column, along_row, along_column) = match part {
@@ -287,7 +282,7 @@ impl DomeSampler {
     }
 
     /// Solid-angle density with which [`DomeSampler::sample`] picks `dir`.
-    pub fn pdf(&self, dir: Vec3) -> f32 {
+    pub(crate) fn pdf(&self, dir: Vec3) -> f32 {
         if self.total <= 0.0 {
             return 0.0;
         }
@@ -297,7 +292,7 @@ impl DomeSampler {
 
     /// The part of the dome in direction `dir`, and the solid-angle density
     /// with which [`DomeSampler::sample_part`] of that part picks it.
-    pub fn part_pdf(&self, dir: Vec3) -> (DomePart, f32) {
+    pub(crate) fn part_pdf(&self, dir: Vec3) -> (DomePart, f32) {
         let (w, h) = (self.dome.width as usize, self.dome.height as usize);
         let uv = self.uv(dir);
         let column = ((uv.x * w as f32) as usize).min(w - 1);
@@ -321,12 +316,6 @@ impl DomeSampler {
         }
         let weight = self.row_cdf[i] - if column == 0 { 0.0 } else { self.row_cdf[i - 1] };
         (DomePart::Rest, (weight / (self.rest_total * solid_angle)) as f32)
-    }
-
-    /// Mean luminance of the radiance over the sphere (W/(m^2 sr)); a
-    /// constant dome of radiance L gives an open horizontal plane pi L.
-    pub fn mean_radiance(&self) -> f32 {
-        (self.total / (4.0 * PI64)) as f32
     }
 
     /// Dome (map) frame to world: turned by `rotate` about +Y.
@@ -418,6 +407,11 @@ mod tests {
         })
     }
 
+    /// Mean luminance of the radiance over the sphere.
+    fn mean_radiance(s: &DomeSampler) -> f32 {
+        (s.total / (4.0 * PI64)) as f32
+    }
+
     fn random(n: u32, dim: u32) -> f32 {
         (hash_words(&[n, dim]) >> 8) as f32 / (1u32 << 24) as f32
     }
@@ -498,7 +492,7 @@ mod tests {
             let dir = s.direction(Vec2::new(random(n, 0), random(n, 1)));
             assert!((s.pdf(dir) * 4.0 * PI - 1.0).abs() < 1e-5, "{dir}: {}", s.pdf(dir));
         }
-        assert!((s.mean_radiance() - 2.0).abs() < 1e-5);
+        assert!((mean_radiance(&s) - 2.0).abs() < 1e-5);
         let (_, radiance, pdf) = s.sample(Vec2::new(0.3, 0.999_999)).unwrap();
         assert!((pdf * 4.0 * PI - 1.0).abs() < 1e-5 && (radiance - Vec3::splat(2.0)).length() < 1e-5);
     }
@@ -553,7 +547,7 @@ mod tests {
             let error = (estimate / reference - 1.0).abs().max_element();
             assert!(error < 0.01, "{estimate} vs {reference}");
         }
-        assert!((s.mean_radiance() - luminance(fine) / (4.0 * PI)).abs() < 2e-3 * s.mean_radiance());
+        assert!((mean_radiance(&s) - luminance(fine) / (4.0 * PI)).abs() < 2e-3 * mean_radiance(&s));
     }
 
     #[test]
@@ -592,6 +586,6 @@ mod tests {
         assert!(lit > 100);
         let black = DomeSampler::new(dome(16, |_, _| Vec3::ZERO, 0.0));
         assert!(black.sample(Vec2::new(0.5, 0.5)).is_none());
-        assert_eq!((black.pdf(Vec3::Y), black.mean_radiance()), (0.0, 0.0));
+        assert_eq!((black.pdf(Vec3::Y), mean_radiance(&black)), (0.0, 0.0));
     }
 }

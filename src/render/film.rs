@@ -46,8 +46,6 @@ pub struct RenderStats {
     pub trace: Duration,
     /// Rays traced.
     pub rays: RayCounts,
-    /// Instances in the TLAS.
-    pub instances: usize,
 }
 
 /// The rendered image and its AOVs. See the module docs for conventions.
@@ -210,7 +208,7 @@ pub fn render_frame_with_cryptomatte(
         .map_err(|e| Error::Usage(format!("cannot start {} render threads: {e}", settings.threads)))?;
     pool.install(|| {
         let tlas = Tlas::build_scene(blas, lib, &scene.instances, scene.motion.as_ref());
-        let mut stats = RenderStats { tlas_build: tlas.build_time, instances: tlas.len(), ..Default::default() };
+        let mut stats = RenderStats { tlas_build: tlas.build_time, ..Default::default() };
         let integrator = Integrator::new(lib, scene, &tlas, settings);
         let (w, h) = (settings.width, settings.height);
         let tiles: Vec<(u32, u32)> =

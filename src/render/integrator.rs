@@ -25,29 +25,29 @@ const RR_START: u32 = 3;
 /// roulette 1, light pick 1, glass-or-not pick 1).
 const DIMS_PER_BOUNCE: u32 = 8;
 /// Pixel filter: a radially truncated Gaussian, importance-sampled exactly.
-pub const FILTER_RADIUS: f32 = 1.5;
+pub(crate) const FILTER_RADIUS: f32 = 1.5;
 const FILTER_SIGMA: f32 = 0.5;
 
 /// What one camera sample returns.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct SampleResult {
+pub(crate) struct SampleResult {
     /// Radiance (already zero where alpha is zero, i.e. premultiplied).
-    pub rgb: Vec3,
+    pub(crate) rgb: Vec3,
     /// Coverage 0 or 1.
-    pub alpha: f32,
+    pub(crate) alpha: f32,
     /// Camera-space depth (positive forward) of the first hit; +inf for none.
-    pub z: f32,
+    pub(crate) z: f32,
     /// World shading normal at the first hit (zero for none).
-    pub normal: Vec3,
+    pub(crate) normal: Vec3,
     /// Albedo (textured base colour) at the first hit (zero for none).
-    pub albedo: Vec3,
+    pub(crate) albedo: Vec3,
     /// 0 = no agent, else cache agent id + 1.
-    pub agent: u32,
+    pub(crate) agent: u32,
     /// Index in `scene.instances` of the first hit; `None` for a miss or a holdout.
-    pub instance: Option<u32>,
+    pub(crate) instance: Option<u32>,
     /// Screen-space motion of the first hit in pixels per frame, Nuke's
     /// convention (+u right, +v up); zero without motion or for no hit.
-    pub motion: Vec2,
+    pub(crate) motion: Vec2,
 }
 
 /// Ray counts, summed per tile (integers, so any thread count gives the same totals).
@@ -121,7 +121,7 @@ pub fn offset_ray_origin(p: Vec3, n: Vec3) -> Vec3 {
 }
 
 /// Bilinear lookup with wrap (glTF REPEAT); v = 0 is the top row.
-pub fn sample_texture(tex: &Texture, uv: Vec2) -> Vec4 {
+pub(crate) fn sample_texture(tex: &Texture, uv: Vec2) -> Vec4 {
     let (w, h) = (tex.width as usize, tex.height as usize);
     if w == 0 || h == 0 || tex.texels.len() < w * h || !uv.is_finite() {
         return Vec4::ONE;
@@ -175,7 +175,7 @@ fn triangle_vertices(mesh: &Mesh, triangle: u32) -> Option<[usize; 3]> {
 
 /// A material's alpha (coverage) at barycentrics (b1, b2) of a triangle of
 /// `mesh`: base colour factor alpha x base colour texture alpha.
-pub fn surface_alpha(lib: &Library, material: &Material, mesh: &Mesh, triangle: u32, b1: f32, b2: f32) -> f32 {
+pub(crate) fn surface_alpha(lib: &Library, material: &Material, mesh: &Mesh, triangle: u32, b1: f32, b2: f32) -> f32 {
     let texture = triangle_vertices(mesh, triangle)
         .and_then(|idx| texel(lib, material.base_color_texture, &material.base_color_uv, uv_at(mesh, idx, b1, b2)));
     material.alpha * texture.map_or(1.0, |t| t.w)
@@ -183,7 +183,7 @@ pub fn surface_alpha(lib: &Library, material: &Material, mesh: &Mesh, triangle: 
 
 /// How much of a surface is there on average at alpha `alpha`: 0 or 1 for
 /// MASK, alpha itself for BLEND's stochastic holes, 1 for OPAQUE.
-pub fn coverage(material: &Material, alpha: f32) -> f32 {
+pub(crate) fn coverage(material: &Material, alpha: f32) -> f32 {
     match material.alpha_mode {
         AlphaMode::Opaque => 1.0,
         AlphaMode::Mask { cutoff } => {
@@ -200,7 +200,14 @@ pub fn coverage(material: &Material, alpha: f32) -> f32 {
 /// The emitted radiance of a material at barycentrics (b1, b2) of triangle
 /// `triangle` of `mesh`, front side: emission x emissive texture, x the
 /// coverage where alpha cuts holes (what NEE on emissive triangles sees).
-pub fn surface_emission(lib: &Library, material: &Material, mesh: &Mesh, triangle: u32, b1: f32, b2: f32) -> Vec3 {
+pub(crate) fn surface_emission(
+    lib: &Library,
+    material: &Material,
+    mesh: &Mesh,
+    triangle: u32,
+    b1: f32,
+    b2: f32,
+) -> Vec3 {
     let Some(idx) = triangle_vertices(mesh, triangle) else { return material.emission };
     let uv = uv_at(mesh, idx, b1, b2);
     let mut e = material.emission;
@@ -244,7 +251,7 @@ impl CameraRays {
     }
 
     /// Whether rays start across a lens (depth of field) rather than at a point.
-    pub fn has_lens(&self) -> bool {
+    pub(crate) fn has_lens(&self) -> bool {
         self.aperture > 0.0 && self.focus_distance > 0.0
     }
 
@@ -261,7 +268,7 @@ impl CameraRays {
     /// every ray through one film position meets at the focus plane, so a
     /// point there images to a point and others blur by their circle of
     /// confusion. A pinhole camera ignores `u`.
-    pub fn lens_ray(&self, fx: f32, fy: f32, u: Vec2) -> (Vec3, Vec3) {
+    pub(crate) fn lens_ray(&self, fx: f32, fy: f32, u: Vec2) -> (Vec3, Vec3) {
         if !self.has_lens() {
             return self.ray(fx, fy);
         }
@@ -276,13 +283,13 @@ impl CameraRays {
     }
 
     /// Camera-space depth of a world point, positive in front of the camera.
-    pub fn depth(&self, p: Vec3) -> f32 {
+    pub(crate) fn depth(&self, p: Vec3) -> f32 {
         -self.camera_from_world.transform_point3(p).z
     }
 
     /// The film position (pixels, y down, (0, 0) the top-left corner) a
     /// world point projects to; `None` behind the camera. Inverse of [`CameraRays::ray`].
-    pub fn raster(&self, p: Vec3) -> Option<Vec2> {
+    pub(crate) fn raster(&self, p: Vec3) -> Option<Vec2> {
         let c = self.camera_from_world.transform_point3(p);
         if !(c.z < 0.0) {
             return None;
@@ -314,7 +321,7 @@ struct Placed<'m> {
 }
 
 /// Everything a render thread reads: immutable, shared by reference.
-pub struct Integrator<'a> {
+pub(crate) struct Integrator<'a> {
     lib: &'a Library,
     scene: &'a FrameScene,
     tlas: &'a Tlas<'a>,
@@ -348,7 +355,12 @@ struct SurfaceHit {
 
 impl<'a> Integrator<'a> {
     /// Prepares per-frame data. `tlas` must be built from `scene.instances`.
-    pub fn new(lib: &'a Library, scene: &'a FrameScene, tlas: &'a Tlas<'a>, settings: &'a RenderSettings) -> Self {
+    pub(crate) fn new(
+        lib: &'a Library,
+        scene: &'a FrameScene,
+        tlas: &'a Tlas<'a>,
+        settings: &'a RenderSettings,
+    ) -> Self {
         let shutter = scene.motion.as_ref().map(|m| {
             let [a, b] = m.camera;
             ShutterCamera {
@@ -372,14 +384,9 @@ impl<'a> Integrator<'a> {
         }
     }
 
-    /// The camera this integrator renders through.
-    pub fn camera(&self) -> &CameraRays {
-        &self.camera
-    }
-
     /// Traces camera sample `sample` of pixel (x, y). Returns the sample
     /// result and its film offset from the pixel centre (for nearest-sample AOVs).
-    pub fn sample_pixel(&self, x: u32, y: u32, sample: u32, counts: &mut RayCounts) -> (SampleResult, Vec2) {
+    pub(crate) fn sample_pixel(&self, x: u32, y: u32, sample: u32, counts: &mut RayCounts) -> (SampleResult, Vec2) {
         let s = self.settings;
         let mut sampler = Sampler::new(s.seed, s.frame, s.layer, x, y, sample);
         let offset = sample_filter(sampler.next_2d());
@@ -907,7 +914,7 @@ fn normal_map(n: Vec3, tangent: Vec3, sign: f32, texel: Vec4, scale: f32) -> Opt
 /// Maps a uniform 2D point to a film offset (pixels) distributed as the
 /// truncated Gaussian filter, so every sample has weight 1 (filter
 /// importance sampling): inverse CDF of the radial distribution.
-pub fn sample_filter(u: Vec2) -> Vec2 {
+pub(crate) fn sample_filter(u: Vec2) -> Vec2 {
     let tail = 1.0 - (-FILTER_RADIUS * FILTER_RADIUS / (2.0 * FILTER_SIGMA * FILTER_SIGMA)).exp();
     let r = FILTER_SIGMA * (-2.0 * (1.0 - u.x * tail).ln()).max(0.0).sqrt();
     let phi = 2.0 * PI * u.y;

@@ -140,7 +140,7 @@ pub enum CryptoOutput {
 /// The Cryptomatte names of a frame scene's instances: slot names from each
 /// agent's rig, set objects from the set file's nodes
 /// ([`ShotCrowd::set_names`]), materials from the library.
-pub fn crypto_names<'a, C>(crowd: &'a ShotCrowd<C>, scene: &'a FrameScene) -> CryptoNames<'a> {
+pub(crate) fn crypto_names<'a, C>(crowd: &'a ShotCrowd<C>, scene: &'a FrameScene) -> CryptoNames<'a> {
     let tables = NameTables { materials: &crowd.library().materials, set_objects: crowd.set_names() };
     CryptoNames::new(&scene.instances, &tables, |agent| {
         let slots = &crowd.cast(agent)?.slots;
@@ -175,9 +175,9 @@ pub struct RenderedLayer {
 /// posed once per frame and shared by every layer's scene.
 pub struct PosedFrame {
     /// Shot frame.
-    pub frame: i32,
+    pub(crate) frame: i32,
     /// (agent id, its pose).
-    pub agents: Vec<(u32, AgentPose)>,
+    pub(crate) agents: Vec<(u32, AgentPose)>,
 }
 
 impl PosedFrame {
@@ -407,7 +407,7 @@ pub fn render_fingerprint<C>(
 /// Removes the temporaries that a killed run left beside this job's targets
 /// (`.<file>.<pid>.tmp`, as `write_atomic` names them, for a frame of the
 /// job in a layer of the job) whose pid is not this process. Returns them.
-pub fn remove_stale_temporaries(shot: &str, job: &RenderJob) -> Result<Vec<PathBuf>> {
+pub(crate) fn remove_stale_temporaries(shot: &str, job: &RenderJob) -> Result<Vec<PathBuf>> {
     let frames: std::collections::HashSet<i32> = job.frames.iter().copied().collect();
     let own = std::process::id();
     let mut removed = Vec::new();

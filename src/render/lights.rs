@@ -34,7 +34,7 @@ use crate::scene::{vis, FrameScene, Library, Sun};
 /// A distant light as the integrator samples it: a uniform cone (or a delta
 /// direction for zero angular size).
 #[derive(Clone, Copy, Debug)]
-pub struct Distant {
+pub(crate) struct Distant {
     direction: Vec3,
     frame: ShadingFrame,
     cos_max: f32,
@@ -47,7 +47,7 @@ pub struct Distant {
 
 impl Distant {
     /// The sampled form of `sun`; `None` when it gives no light.
-    pub fn new(sun: &Sun) -> Option<Distant> {
+    pub(crate) fn new(sun: &Sun) -> Option<Distant> {
         let direction = sun.direction.normalize_or_zero();
         if direction == Vec3::ZERO || !sun.irradiance.is_finite() || sun.irradiance.max_element() <= 0.0 {
             return None;
@@ -74,17 +74,17 @@ impl Distant {
     }
 
     /// Whether direction `d` looks into the disc (never for a delta light).
-    pub fn contains(&self, d: Vec3) -> bool {
+    pub(crate) fn contains(&self, d: Vec3) -> bool {
         self.pdf > 0.0 && d.dot(self.direction) >= self.cos_max
     }
 
     /// Radiance seen inside the disc.
-    pub fn radiance(&self) -> Vec3 {
+    pub(crate) fn radiance(&self) -> Vec3 {
         self.radiance
     }
 
     /// Solid-angle pdf of its own sampling (0 for a delta light).
-    pub fn pdf(&self) -> f32 {
+    pub(crate) fn pdf(&self) -> f32 {
         self.pdf
     }
 
@@ -121,28 +121,28 @@ enum Source<'a> {
 
 /// A light sample as seen from a shading point.
 #[derive(Clone, Copy, Debug)]
-pub struct LightSample {
+pub(crate) struct LightSample {
     /// Unit direction towards the light.
-    pub wi: Vec3,
+    pub(crate) wi: Vec3,
     /// Distance to the sampled point (infinite for distant lights and the dome).
-    pub distance: f32,
+    pub(crate) distance: f32,
     /// Incident radiance (for delta lights: irradiance at normal incidence).
-    pub radiance: Vec3,
+    pub(crate) radiance: Vec3,
     /// Solid-angle pdf including the pick (for delta lights: the pick alone).
-    pub pdf: f32,
+    pub(crate) pdf: f32,
     /// A delta light: no BSDF-sampled ray can find it, so no MIS.
-    pub delta: bool,
+    pub(crate) delta: bool,
 }
 
 /// Where a ray meets a sized light (rect, disk, sphere).
 #[derive(Clone, Copy, Debug)]
-pub struct AreaHit {
+pub(crate) struct AreaHit {
     /// Ray distance.
-    pub t: f32,
+    pub(crate) t: f32,
     /// Emitted radiance towards the ray.
-    pub radiance: Vec3,
+    pub(crate) radiance: Vec3,
     /// Solid-angle pdf of the light's own sampling of this point, including the pick.
-    pub pdf: f32,
+    pub(crate) pdf: f32,
 }
 
 /// Vose's alias table: picks index i with probability weight[i] / sum in
@@ -197,7 +197,7 @@ impl AliasTable {
 /// The two groups of lights that next-event estimation samples apart
 /// (the module's comment says why).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum LightGroup {
+pub(crate) enum LightGroup {
     /// Suns: the shot's sun, distant lights and the dome's own sun.
     Sun,
     /// The dome (but its sun).
@@ -226,7 +226,7 @@ struct GroupTable {
 }
 
 /// Every light of one frame scene, ready to sample.
-pub struct LightSampler<'a> {
+pub(crate) struct LightSampler<'a> {
     lib: &'a Library,
     sources: Vec<Source<'a>>,
     /// Each group's pick, in [`LightGroup::ALL`]'s order.
@@ -255,7 +255,7 @@ fn scene_radius(bounds: Option<(Vec3, Vec3)>) -> f64 {
 impl<'a> LightSampler<'a> {
     /// The lights of `scene` (its `lights` and its emissive instances that
     /// bounce rays can see), with `bounds` the scene's world bounds.
-    pub fn new(lib: &'a Library, scene: &'a FrameScene, bounds: Option<(Vec3, Vec3)>) -> LightSampler<'a> {
+    pub(crate) fn new(lib: &'a Library, scene: &'a FrameScene, bounds: Option<(Vec3, Vec3)>) -> LightSampler<'a> {
         let lights: &'a SceneLights = &scene.lights;
         let r = scene_radius(bounds);
         let infinite_area = PI as f64 * r * r;
@@ -370,7 +370,7 @@ impl<'a> LightSampler<'a> {
     }
 
     /// The groups that have light, environment first: one shadow ray each.
-    pub fn groups(&self) -> &[LightGroup] {
+    pub(crate) fn groups(&self) -> &[LightGroup] {
         &self.groups
     }
 
@@ -379,23 +379,23 @@ impl<'a> LightSampler<'a> {
     }
 
     /// Whether picking a light of `group` takes a random number (it has more than one).
-    pub fn needs_pick(&self, group: LightGroup) -> bool {
+    pub(crate) fn needs_pick(&self, group: LightGroup) -> bool {
         self.table(group).sources.len() > 1
     }
 
     /// The shot's sun, as sampled.
-    pub fn sun(&self) -> Option<&Distant> {
+    pub(crate) fn sun(&self) -> Option<&Distant> {
         self.sun.as_ref().map(|(d, _)| d)
     }
 
     /// Probability the pick chooses the sun (for MIS on rays that escape into it).
-    pub fn sun_pick(&self) -> f32 {
+    pub(crate) fn sun_pick(&self) -> f32 {
         self.sun.map_or(0.0, |(_, i)| self.pmf[i as usize])
     }
 
     /// A light sample of `group` for a shading point at `p`: the light
     /// picked by `u_pick`, a point on it by `u`.
-    pub fn sample(&self, group: LightGroup, p: Vec3, u_pick: f32, u: Vec2) -> Option<LightSample> {
+    pub(crate) fn sample(&self, group: LightGroup, p: Vec3, u_pick: f32, u: Vec2) -> Option<LightSample> {
         let t = self.table(group);
         if t.sources.is_empty() {
             return None;
@@ -450,7 +450,7 @@ impl<'a> LightSampler<'a> {
     /// the point at ray distance `t` on triangle `triangle` of instance
     /// `instance`, seen at cosine `cos_l` from its normal; 0 when NEE never
     /// samples that surface.
-    pub fn triangle_pdf(&self, instance: u32, triangle: u32, t: f32, cos_l: f32) -> f32 {
+    pub(crate) fn triangle_pdf(&self, instance: u32, triangle: u32, t: f32, cos_l: f32) -> f32 {
         let Some(&first) = self.first_triangle.get(instance as usize) else { return 0.0 };
         if first == u32::MAX || !(cos_l > 0.0) {
             return 0.0;
@@ -464,7 +464,7 @@ impl<'a> LightSampler<'a> {
 
     /// The dome's radiance in direction `d` and its NEE pdf (including the
     /// pick); `None` without a dome.
-    pub fn dome(&self, d: Vec3) -> Option<(Vec3, f32)> {
+    pub(crate) fn dome(&self, d: Vec3) -> Option<(Vec3, f32)> {
         let (dome, index) = self.dome.as_ref()?;
         let (part, pdf) = dome.part_pdf(d);
         let pick = self.pmf.get(index[part as usize] as usize).copied().unwrap_or(0.0);
@@ -472,13 +472,13 @@ impl<'a> LightSampler<'a> {
     }
 
     /// Whether camera rays that miss see the dome.
-    pub fn dome_camera_visible(&self) -> bool {
+    pub(crate) fn dome_camera_visible(&self) -> bool {
         self.dome_camera_visible
     }
 
     /// The nearest sized light a ray (unit `dir`) meets before `tmax`;
     /// camera rays (`camera`) meet only those marked camera-visible.
-    pub fn hit_sized(&self, origin: Vec3, dir: Vec3, tmax: f32, camera: bool) -> Option<AreaHit> {
+    pub(crate) fn hit_sized(&self, origin: Vec3, dir: Vec3, tmax: f32, camera: bool) -> Option<AreaHit> {
         let mut best: Option<AreaHit> = None;
         for &index in &self.sized {
             let Source::Local(light) = &self.sources[index as usize] else { continue };
@@ -515,7 +515,7 @@ fn local_power(light: &Light, infinite_area: f64) -> f64 {
 
 /// Blender's spot edge (what Cycles renders for an imported glTF spot):
 /// smoothstep over the outer `blend` of the cone, measured in cosines.
-pub fn spot_falloff(cos_angle: f32, outer: f32, blend: f32) -> f32 {
+pub(crate) fn spot_falloff(cos_angle: f32, outer: f32, blend: f32) -> f32 {
     let cos_outer = outer.cos();
     if cos_angle <= cos_outer {
         return 0.0;

@@ -19,8 +19,8 @@ pub mod exr;
 pub mod film;
 pub mod integrator;
 pub mod job;
-pub mod lights;
-pub mod sampler;
+pub(crate) mod lights;
+pub(crate) mod sampler;
 
 pub use accel::{BlasSet, Tlas};
 pub use film::{render_frame, Film};

@@ -12,7 +12,7 @@ use glam::Vec2;
 
 /// Mixes a 32-bit value (the "lowbias32" hash by Chris Wellons: full avalanche).
 #[inline]
-pub fn mix32(mut x: u32) -> u32 {
+pub(crate) fn mix32(mut x: u32) -> u32 {
     x ^= x >> 16;
     x = x.wrapping_mul(0x7feb_352d);
     x ^= x >> 15;
@@ -23,7 +23,7 @@ pub fn mix32(mut x: u32) -> u32 {
 
 /// Hashes a list of words; order matters.
 #[inline]
-pub fn hash_words(words: &[u32]) -> u32 {
+pub(crate) fn hash_words(words: &[u32]) -> u32 {
     // Seed with the length so [] and [0] differ.
     let mut h = mix32(words.len() as u32 ^ 0x9e37_79b9);
     for &w in words {
@@ -117,7 +117,7 @@ const EXTRA_LIGHT_SALT: u32 = 0x4c69_6768;
 
 /// Random numbers for one camera sample of one pixel.
 #[derive(Clone, Debug)]
-pub struct Sampler {
+pub(crate) struct Sampler {
     pixel_key: u32,
     sample: u32,
     dimension: u32,
@@ -125,7 +125,7 @@ pub struct Sampler {
 
 impl Sampler {
     /// The sampler of sample `sample` of pixel (x, y).
-    pub fn new(seed: u64, frame: i64, layer: u32, x: u32, y: u32, sample: u32) -> Sampler {
+    pub(crate) fn new(seed: u64, frame: i64, layer: u32, x: u32, y: u32, sample: u32) -> Sampler {
         let pixel_key =
             hash_words(&[seed as u32, (seed >> 32) as u32, frame as u32, (frame >> 32) as u32, layer, x, y]);
         Sampler { pixel_key, sample, dimension: 0 }
@@ -133,12 +133,12 @@ impl Sampler {
 
     /// Jumps to a fixed dimension, so each bounce uses the same dimensions
     /// whatever branches earlier bounces took.
-    pub fn set_dimension(&mut self, dimension: u32) {
+    pub(crate) fn set_dimension(&mut self, dimension: u32) {
         self.dimension = dimension;
     }
 
     /// The next 2D point in [0, 1)^2 (uses two dimensions).
-    pub fn next_2d(&mut self) -> Vec2 {
+    pub(crate) fn next_2d(&mut self) -> Vec2 {
         let seed = mix32(self.pixel_key ^ mix32(self.dimension));
         self.dimension += 2;
         let index = nested_uniform_scramble(self.sample, seed);
@@ -154,7 +154,7 @@ impl Sampler {
     /// a still scene renders the same bits with or without a shutter. Like
     /// the dimensions, a power-of-two prefix of a pixel's samples is
     /// stratified in time.
-    pub fn time(&self) -> f32 {
+    pub(crate) fn time(&self) -> f32 {
         let seed = mix32(self.pixel_key ^ TIME_SALT);
         let index = nested_uniform_scramble(self.sample, seed);
         to_unit(nested_uniform_scramble(index.reverse_bits(), mix32(seed ^ 0x5bd1_e995)))
@@ -164,7 +164,7 @@ impl Sampler {
     /// like [`Sampler::time`], a stream of its own, so a pinhole render
     /// never draws it and keeps its bits; a power-of-two prefix of a pixel's
     /// samples is stratified over the lens.
-    pub fn lens(&self) -> Vec2 {
+    pub(crate) fn lens(&self) -> Vec2 {
         let seed = mix32(self.pixel_key ^ LENS_SALT);
         let index = nested_uniform_scramble(self.sample, seed);
         let (x, y) = sobol_2d(index);
@@ -177,7 +177,7 @@ impl Sampler {
     /// `depth`, for every group after a scene's first: a stream of its own
     /// per (group, bounce), like [`Sampler::lens`], so scenes with one group
     /// keep their bits; each is stratified over a pixel's samples.
-    pub fn extra_light(&self, group: u32, depth: u32) -> (f32, Vec2) {
+    pub(crate) fn extra_light(&self, group: u32, depth: u32) -> (f32, Vec2) {
         let seed = mix32(self.pixel_key ^ EXTRA_LIGHT_SALT ^ mix32(depth ^ (group << 16)));
         let index = nested_uniform_scramble(self.sample, seed);
         let (x, y) = sobol_2d(index);
@@ -189,7 +189,7 @@ impl Sampler {
     }
 
     /// The next number in [0, 1) (uses one dimension).
-    pub fn next_1d(&mut self) -> f32 {
+    pub(crate) fn next_1d(&mut self) -> f32 {
         let seed = mix32(self.pixel_key ^ mix32(self.dimension));
         self.dimension += 1;
         let index = nested_uniform_scramble(self.sample, seed);

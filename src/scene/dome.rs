@@ -17,7 +17,7 @@ use super::lights::Dome;
 use crate::error::{Error, Result};
 
 /// Widest dome map accepted (16384 x 8192 texels: 1.6 GB of RGB floats).
-pub const MAX_DOME_WIDTH: u32 = 16384;
+pub(crate) const MAX_DOME_WIDTH: u32 = 16384;
 
 /// How many texels a Radiance file may decode to per byte of file. Its
 /// run-length encoding stores at most 127 equal bytes of a channel in 2

@@ -37,11 +37,11 @@ use crate::scene::{
 /// demand, so a rig never needs its textures).
 pub struct GltfFile {
     /// The file, as given by the caller (used in errors and names).
-    pub path: PathBuf,
+    pub(crate) path: PathBuf,
     /// The parsed glTF document.
     pub doc: gltf::Document,
     /// Buffer contents, by buffer index.
-    pub buffers: Vec<gltf::buffer::Data>,
+    pub(crate) buffers: Vec<gltf::buffer::Data>,
 }
 
 impl GltfFile {
@@ -104,17 +104,17 @@ impl GltfFile {
     }
 
     /// The bytes of a buffer, for gltf's readers.
-    pub fn buffer_data(&self, buffer: gltf::Buffer) -> Option<&[u8]> {
+    pub(crate) fn buffer_data(&self, buffer: gltf::Buffer) -> Option<&[u8]> {
         self.buffers.get(buffer.index()).map(|d| &d.0[..])
     }
 
     /// An error about this file.
-    pub fn err(&self, msg: impl Into<String>) -> Error {
+    pub(crate) fn err(&self, msg: impl Into<String>) -> Error {
         Error::invalid(&self.path, msg)
     }
 
     /// The mesh named `name`; the error lists the mesh names in the file.
-    pub fn mesh_by_name(&self, name: &str) -> Result<gltf::Mesh<'_>> {
+    pub(crate) fn mesh_by_name(&self, name: &str) -> Result<gltf::Mesh<'_>> {
         if let Some(mesh) = self.doc.meshes().find(|m| m.name() == Some(name)) {
             return Ok(mesh);
         }
@@ -123,7 +123,7 @@ impl GltfFile {
     }
 
     /// The node named `name`; the error lists the node names in the file.
-    pub fn node_by_name(&self, name: &str) -> Result<gltf::Node<'_>> {
+    pub(crate) fn node_by_name(&self, name: &str) -> Result<gltf::Node<'_>> {
         if let Some(node) = self.doc.nodes().find(|n| n.name() == Some(name)) {
             return Ok(node);
         }
@@ -133,7 +133,7 @@ impl GltfFile {
 
     /// Parent index of every node, checked to be a forest (no node with two
     /// parents, no cycles), because we compose transforms up the chain.
-    pub fn parents(&self) -> Result<Vec<Option<usize>>> {
+    pub(crate) fn parents(&self) -> Result<Vec<Option<usize>>> {
         let mut parents = vec![None; self.doc.nodes().len()];
         for node in self.doc.nodes() {
             for child in node.children() {
@@ -179,13 +179,13 @@ impl GltfFile {
 }
 
 /// A node's local transform as an affine (glTF: T * R * S, or its matrix).
-pub fn node_affine(node: &gltf::Node) -> Affine3A {
+pub(crate) fn node_affine(node: &gltf::Node) -> Affine3A {
     Affine3A::from_mat4(Mat4::from_cols_array_2d(&node.transform().matrix()))
 }
 
 /// What [`AssetCache::load_scene_objects`] gives: (mesh, material,
 /// world_from_object, object index) per placed primitive, and the objects' names.
-pub type SceneObjects = (Vec<(MeshId, MaterialId, Affine3A, u32)>, Vec<String>);
+pub(crate) type SceneObjects = (Vec<(MeshId, MaterialId, Affine3A, u32)>, Vec<String>);
 
 /// Unique, stable names for a set's objects from their node paths (the node
 /// names from a scene root down to the object's node, `#<index>` for an
@@ -199,7 +199,7 @@ pub type SceneObjects = (Vec<(MeshId, MaterialId, Affine3A, u32)>, Vec<String>);
 ///
 /// Depends only on the file's names and order: the same file gives the same
 /// names on every machine and run.
-pub fn set_object_names(paths: &[Vec<String>]) -> Vec<String> {
+pub(crate) fn set_object_names(paths: &[Vec<String>]) -> Vec<String> {
     let leaf = |p: &[String]| p.last().cloned().unwrap_or_default();
     let mut leaves: HashMap<String, usize> = HashMap::new();
     for p in paths {
@@ -235,7 +235,7 @@ pub fn set_object_names(paths: &[Vec<String>]) -> Vec<String> {
 }
 
 /// `name` or `#index` for messages about unnamed nodes.
-pub fn node_label(node: &gltf::Node) -> String {
+pub(crate) fn node_label(node: &gltf::Node) -> String {
     node.name().map(|n| format!("`{n}`")).unwrap_or_else(|| format!("#{}", node.index()))
 }
 
@@ -254,7 +254,7 @@ fn list(names: &[&str]) -> String {
 
 /// Checks that an accessor can be read as `dims` of one of `types` without
 /// tripping the gltf crate's asserts (which would panic on a bad file).
-pub fn check_accessor(acc: &Accessor, dims: Dimensions, types: &[DataType]) -> std::result::Result<(), String> {
+pub(crate) fn check_accessor(acc: &Accessor, dims: Dimensions, types: &[DataType]) -> std::result::Result<(), String> {
     let id = acc.index();
     if acc.dimensions() != dims {
         return Err(format!("accessor {id} is {:?}, expected {dims:?}", acc.dimensions()));
@@ -335,12 +335,12 @@ fn decode_uri(uri: &str) -> Option<String> {
 }
 
 /// Error text for an accessor whose bytes lie outside its buffer.
-pub fn out_of_range(acc: &Accessor) -> String {
+pub(crate) fn out_of_range(acc: &Accessor) -> String {
     format!("accessor {} reaches outside its buffer", acc.index())
 }
 
 /// Reads one glTF mesh primitive (triangles only) into a [`Mesh`] named `name`.
-pub fn read_primitive(file: &GltfFile, mesh: &gltf::Mesh, prim: &gltf::Primitive, name: String) -> Result<Mesh> {
+pub(crate) fn read_primitive(file: &GltfFile, mesh: &gltf::Mesh, prim: &gltf::Primitive, name: String) -> Result<Mesh> {
     let ctx = |msg: String| file.err(format!("mesh {} primitive {}: {msg}", mesh_label(mesh), prim.index()));
     if prim.mode() != gltf::mesh::Mode::Triangles {
         return Err(ctx(format!("mode {:?} is not supported (triangles only)", prim.mode())));
@@ -397,7 +397,7 @@ pub fn read_primitive(file: &GltfFile, mesh: &gltf::Mesh, prim: &gltf::Primitive
 }
 
 /// All primitives of `mesh` merged into one triangle mesh named `name`.
-pub fn read_mesh(file: &GltfFile, mesh: &gltf::Mesh, name: String) -> Result<Mesh> {
+pub(crate) fn read_mesh(file: &GltfFile, mesh: &gltf::Mesh, name: String) -> Result<Mesh> {
     let mut merged = Mesh { name, ..Default::default() };
     for prim in mesh.primitives() {
         append_mesh(&mut merged, read_primitive(file, mesh, &prim, String::new())?);
@@ -504,7 +504,7 @@ impl AssetCache {
     /// The loaded materials and textures, to change their colours in place
     /// (the render's working colourspace, `render::colour::into_acescg`); what
     /// is loaded and every id stay as they are.
-    pub fn colours_mut(&mut self) -> (&mut [Material], &mut [Texture]) {
+    pub(crate) fn colours_mut(&mut self) -> (&mut [Material], &mut [Texture]) {
         (&mut self.library.materials, &mut self.library.textures)
     }
 
@@ -593,7 +593,7 @@ impl AssetCache {
 
     /// Whether glTF mesh `mesh_name` of `path` is skinned (a primitive has
     /// JOINTS_0): such a mesh follows a skeleton, not a rigid slot.
-    pub fn is_skinned_mesh(&mut self, path: impl AsRef<Path>, mesh_name: &str) -> Result<bool> {
+    pub(crate) fn is_skinned_mesh(&mut self, path: impl AsRef<Path>, mesh_name: &str) -> Result<bool> {
         let src = self.source(path.as_ref())?;
         let gmesh = src.file.mesh_by_name(mesh_name)?;
         let skinned = gmesh.primitives().any(|p| p.get(&gltf::Semantic::Joints(0)).is_some());
@@ -633,7 +633,7 @@ impl AssetCache {
 
     /// glTF material `index` of the file at `path` (`None`: the default
     /// material), loaded once.
-    pub fn gltf_material_at(&mut self, path: impl AsRef<Path>, index: Option<usize>) -> Result<MaterialId> {
+    pub(crate) fn gltf_material_at(&mut self, path: impl AsRef<Path>, index: Option<usize>) -> Result<MaterialId> {
         let src = self.source(path.as_ref())?;
         self.material_of(&src, index)
     }
@@ -891,7 +891,7 @@ impl AssetCache {
     }
 
     /// Adds a mesh built in code (e.g. the proxy box), deduplicated by name.
-    pub fn add_mesh(&mut self, mesh: Mesh) -> MeshId {
+    pub(crate) fn add_mesh(&mut self, mesh: Mesh) -> MeshId {
         let key = MeshKey::Merged(PathBuf::new(), mesh.name.clone());
         if let Some(&id) = self.meshes.get(&key) {
             return id;
@@ -903,7 +903,7 @@ impl AssetCache {
 
     /// A PNG file as a linear RGBA texture (colour sRGB-decoded), loaded once
     /// per path: wardrobe materials' `base_color_texture`.
-    pub fn texture_png(&mut self, path: impl AsRef<Path>) -> Result<u32> {
+    pub(crate) fn texture_png(&mut self, path: impl AsRef<Path>) -> Result<u32> {
         let path = path.as_ref();
         let key = (std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?, usize::MAX, true);
         if let Some(&id) = self.textures.get(&key) {
@@ -1106,7 +1106,7 @@ fn decode_texels(data: &gltf::image::Data, colour: bool) -> Option<Vec<[f32; 4]>
 
 /// Quaternion from glTF `[x, y, z, w]`, normalised (files may carry slightly
 /// unnormalised rotations); identity if degenerate.
-pub fn quat_from_gltf(q: [f32; 4]) -> Quat {
+pub(crate) fn quat_from_gltf(q: [f32; 4]) -> Quat {
     let q = Quat::from_array(q);
     if q.length_squared() > 1e-12 && q.is_finite() {
         q.normalize()

@@ -25,9 +25,9 @@ pub enum Colourspace {
 }
 
 /// Index into [`Library::meshes`].
-pub type MeshId = u32;
+pub(crate) type MeshId = u32;
 /// Index into [`Library::materials`].
-pub type MaterialId = u32;
+pub(crate) type MaterialId = u32;
 
 /// A triangle mesh in object space.
 #[derive(Clone, Debug, Default)]
@@ -96,7 +96,7 @@ impl Mesh {
     }
 
     /// Bytes of geometry this mesh holds (positions, normals, uvs, tangents, indices).
-    pub fn bytes(&self) -> usize {
+    pub(crate) fn bytes(&self) -> usize {
         self.positions.len() * 12
             + self.normals.len() * 12
             + self.uvs.len() * 8
@@ -106,7 +106,7 @@ impl Mesh {
 }
 
 /// The eight corners of the box `lo..hi`.
-pub fn box_corners(lo: Vec3, hi: Vec3) -> [Vec3; 8] {
+pub(crate) fn box_corners(lo: Vec3, hi: Vec3) -> [Vec3; 8] {
     std::array::from_fn(|c| {
         Vec3::new(
             if c & 1 == 0 { lo.x } else { hi.x },
@@ -216,7 +216,7 @@ pub struct Volume {
 
 impl Volume {
     /// Absorption coefficient per metre, per channel: -ln(colour) / distance.
-    pub fn absorption(&self) -> Vec3 {
+    pub(crate) fn absorption(&self) -> Vec3 {
         let d = self.attenuation_distance;
         if !(d.is_finite() && d > 0.0) {
             return Vec3::ZERO;
@@ -302,7 +302,7 @@ impl Default for Material {
 
 impl Material {
     /// Whether rays may pass through holes in it (alpha MASK or BLEND).
-    pub fn has_cutouts(&self) -> bool {
+    pub(crate) fn has_cutouts(&self) -> bool {
         self.alpha_mode != AlphaMode::Opaque
     }
 }
@@ -445,9 +445,9 @@ pub struct Sky {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Deform {
     /// The mesh blended towards (same vertex count and indices).
-    pub mesh: MeshId,
+    pub(crate) mesh: MeshId,
     /// Blend weight of `mesh` at shutter open and at close, in 0..=1.
-    pub weight: [f32; 2],
+    pub(crate) weight: [f32; 2],
 }
 
 /// How one instance moves over the shutter. The instance itself holds the
@@ -462,7 +462,7 @@ pub struct InstanceMotion {
 
 impl InstanceMotion {
     /// An instance that does not move: its close key equals its open key.
-    pub fn still(inst: &Instance) -> InstanceMotion {
+    pub(crate) fn still(inst: &Instance) -> InstanceMotion {
         InstanceMotion { world_from_object_close: inst.world_from_object, deform: None }
     }
 }

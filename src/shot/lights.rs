@@ -2,7 +2,7 @@
 //! point, spot, rect, disk and sphere lights, checked one light at a time.
 //! Units and orientations: docs/lights.md.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use glam::{Affine3A, Mat4, Vec2, Vec3};
 use serde::Deserialize;
@@ -19,12 +19,12 @@ pub struct Lights {
     /// The sun.
     pub sun: Option<SunSpec>,
     /// The sky (the environment when there is no dome).
-    pub sky: SkySpec,
+    pub(crate) sky: SkySpec,
     /// An HDRI dome.
     pub dome: Option<DomeSpec>,
     /// Point, spot and area lights, world space, in file order (points,
     /// spots, rects, disks, spheres).
-    pub local: Vec<Light>,
+    pub(crate) local: Vec<Light>,
 }
 
 /// `[lights.sun]`.
@@ -35,25 +35,25 @@ pub struct SunSpec {
     pub direction: [f32; 3],
     /// Full angular diameter in degrees.
     #[serde(default = "default_sun_diameter")]
-    pub angular_diameter: f32,
+    pub(crate) angular_diameter: f32,
     /// Irradiance in W/m^2.
     #[serde(default = "one")]
-    pub intensity: f32,
+    pub(crate) intensity: f32,
     /// Linear colour.
     #[serde(default = "white")]
-    pub color: [f32; 3],
+    pub(crate) color: [f32; 3],
 }
 
 /// `[lights.sky]`.
 #[derive(Debug, Clone, Copy, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct SkySpec {
+pub(crate) struct SkySpec {
     /// Linear colour.
     #[serde(default = "white")]
-    pub color: [f32; 3],
+    pub(crate) color: [f32; 3],
     /// Multiplier.
     #[serde(default = "one")]
-    pub intensity: f32,
+    pub(crate) intensity: f32,
 }
 
 impl Default for SkySpec {
@@ -67,13 +67,13 @@ impl Default for SkySpec {
 #[derive(Debug, Clone, PartialEq)]
 pub struct DomeSpec {
     /// The lat-long map (.hdr or .exr).
-    pub file: PathBuf,
+    pub(crate) file: PathBuf,
     /// colour x intensity x 2^exposure.
-    pub scale: Vec3,
+    pub(crate) scale: Vec3,
     /// Rotation about +Y, radians.
     pub rotate: f32,
     /// Camera rays that miss see the dome.
-    pub camera_visible: bool,
+    pub(crate) camera_visible: bool,
 }
 
 fn default_sun_diameter() -> f32 {
@@ -165,7 +165,7 @@ pub(super) struct LightsFile {
 }
 
 /// Most local lights a shot may declare (the set's glTF may add more).
-pub const MAX_SHOT_LIGHTS: usize = 100_000;
+pub(crate) const MAX_SHOT_LIGHTS: usize = 100_000;
 
 /// Largest exposure (stops) a light may take: 2^64 is far past any real light.
 const MAX_EXPOSURE: f32 = 64.0;
@@ -367,7 +367,7 @@ impl LocalFile {
 
 impl Lights {
     /// The sun, in scene units.
-    pub fn sun(&self) -> Option<Sun> {
+    pub(crate) fn sun(&self) -> Option<Sun> {
         self.sun.map(|s| Sun {
             direction: Vec3::from(s.direction).normalize(),
             angular_diameter: s.angular_diameter.to_radians(),
@@ -376,13 +376,8 @@ impl Lights {
     }
 
     /// The uniform sky.
-    pub fn sky(&self) -> Sky {
+    pub(crate) fn sky(&self) -> Sky {
         Sky { radiance: Vec3::from(self.sky.color) * self.sky.intensity }
-    }
-
-    /// The dome's file, if any (for fingerprints and exports).
-    pub fn dome_file(&self) -> Option<&Path> {
-        self.dome.as_ref().map(|d| d.file.as_path())
     }
 }
 
@@ -392,7 +387,7 @@ mod tests {
 
     fn check(text: &str) -> std::result::Result<Lights, String> {
         let file: LightsFile = toml::from_str(text).map_err(|e| e.to_string())?;
-        let cx = Context { path: Path::new("s.toml"), text, base: PathBuf::from(".") };
+        let cx = Context { path: std::path::Path::new("s.toml"), text, base: PathBuf::from(".") };
         file.check(&cx).map_err(|e| e.to_string())
     }
 

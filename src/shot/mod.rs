@@ -17,10 +17,10 @@ use crate::scene::{Camera, Sky, Sun};
 
 mod lights;
 use lights::LightsFile;
-pub use lights::{DomeSpec, Lights, SkySpec, SunSpec, MAX_SHOT_LIGHTS};
+pub use lights::{DomeSpec, Lights, SunSpec};
 
 /// The shot file version this build reads.
-pub const SHOT_VERSION: u32 = 1;
+pub(crate) const SHOT_VERSION: u32 = 1;
 
 /// A parsed, validated shot with absolute paths.
 #[derive(Debug, Clone)]
@@ -40,9 +40,9 @@ pub struct Shot {
     /// Rigs by name, as named in the cache.
     pub rigs: BTreeMap<String, RigRef>,
     /// The environment.
-    pub set: Option<SetRef>,
+    pub(crate) set: Option<SetRef>,
     /// The camera.
-    pub camera: CameraSpec,
+    pub(crate) camera: CameraSpec,
     /// Sun, sky, dome and local lights.
     pub lights: Lights,
     /// How to split agents into layers.
@@ -54,7 +54,7 @@ pub struct Shot {
     /// Agents on these cycles are not rendered.
     pub culled_cycles: Vec<String>,
     /// Agents on these cycles are never height-scaled.
-    pub no_scale_cycles: Vec<String>,
+    pub(crate) no_scale_cycles: Vec<String>,
     /// Part mesh names never cast in this shot.
     pub exclude_parts: Vec<String>,
 }
@@ -73,13 +73,13 @@ pub struct Frames {
     /// What a shot frame with no cache frame (a gap, or past the cache's
     /// ends) renders: an error (the default) or an empty crowd, with a warning.
     #[serde(default)]
-    pub outside_cache: OutsideCache,
+    pub(crate) outside_cache: OutsideCache,
 }
 
 /// `frames.outside_cache`: shot frames the cache does not hold.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
-pub enum OutsideCache {
+pub(crate) enum OutsideCache {
     /// Loading the shot fails, naming the first such frame.
     #[default]
     Error,
@@ -88,7 +88,7 @@ pub enum OutsideCache {
 }
 
 /// Most frames a shot or a `--frames` list may hold (about 70 minutes at 24 fps).
-pub const MAX_FRAMES: u64 = 100_000;
+pub(crate) const MAX_FRAMES: u64 = 100_000;
 /// Largest width or height of a render.
 pub const MAX_RESOLUTION: u32 = 16384;
 /// Most pixels of a render (8192 x 8192): the film holds about 60 bytes a pixel.
@@ -96,12 +96,12 @@ pub const MAX_PIXELS: u64 = 8192 * 8192;
 /// Most samples per pixel.
 pub const MAX_SPP: u32 = 65536;
 /// Most bounces after the camera ray (Russian roulette ends paths long before).
-pub const MAX_BOUNCES: u32 = 1024;
+pub(crate) const MAX_BOUNCES: u32 = 1024;
 
 /// Checks a shot name: it names output files (`<shot>.<layer>.<frame>.exr`),
 /// so it is one plain file-name part: 1-255 bytes, no `/` or `\`, no
 /// control characters, not starting with `.`.
-pub fn check_shot_name(name: &str) -> std::result::Result<(), String> {
+pub(crate) fn check_shot_name(name: &str) -> std::result::Result<(), String> {
     if name.is_empty() || name.len() > 255 {
         return Err(format!("shot name must be 1-255 bytes, got {}", name.len()));
     }
@@ -161,7 +161,7 @@ pub struct CacheRef {
     /// The cache file.
     pub path: PathBuf,
     /// cache frame = shot frame + frame_offset.
-    pub frame_offset: i32,
+    pub(crate) frame_offset: i32,
     /// How raw data is imported and where the crowd stands (every other
     /// `[cache]` key; docs/shot.md).
     pub import: TabularSpec,
@@ -189,7 +189,7 @@ pub struct RigRef {
     /// Height jitter: scale drawn uniformly from 1 +/- this.
     pub height_jitter: f32,
     /// `kind`: `None` detects it from the file (a skin and no slots: skinned).
-    pub kind: Option<RigKind>,
+    pub(crate) kind: Option<RigKind>,
     /// Options of a skinned character (defaults for slot rigs, which ignore them).
     pub skin: SkinOptions,
 }
@@ -197,7 +197,7 @@ pub struct RigRef {
 /// What kind of character a rig file is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
-pub enum RigKind {
+pub(crate) enum RigKind {
     /// Rigid nodes with part slots (the frankenbot).
     Slots,
     /// A skinned mesh on a skeleton.
@@ -265,38 +265,38 @@ impl Default for SkinOptions {
 
 /// `[set]`.
 #[derive(Debug, Clone)]
-pub struct SetRef {
+pub(crate) struct SetRef {
     /// Environment glTF.
-    pub file: PathBuf,
+    pub(crate) file: PathBuf,
 }
 
 /// One camera keyframe.
 #[derive(Debug, Clone, Copy, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct CameraKey {
+pub(crate) struct CameraKey {
     /// Shot frame.
-    pub frame: f32,
+    pub(crate) frame: f32,
     /// Camera position.
-    pub position: [f32; 3],
+    pub(crate) position: [f32; 3],
     /// Point the camera looks at.
-    pub aim: [f32; 3],
+    pub(crate) aim: [f32; 3],
     /// Focal length in mm.
-    pub focal_length: f32,
+    pub(crate) focal_length: f32,
     /// Lens f-number for depth of field (with `focus_distance`); none: a pinhole.
-    pub f_stop: Option<f32>,
+    pub(crate) f_stop: Option<f32>,
     /// Distance in focus, scene units (metres), along the view axis.
-    pub focus_distance: Option<f32>,
+    pub(crate) focus_distance: Option<f32>,
 }
 
 /// `[camera]`: keyframes, or a camera node in a glTF file.
 #[derive(Debug, Clone)]
-pub struct CameraSpec {
+pub(crate) struct CameraSpec {
     /// Horizontal film back in mm.
-    pub sensor_width: f32,
+    pub(crate) sensor_width: f32,
     /// Keyframes, sorted by frame.
-    pub keys: Vec<CameraKey>,
+    pub(crate) keys: Vec<CameraKey>,
     /// glTF file holding the camera node (instead of keys).
-    pub gltf: Option<(PathBuf, String)>,
+    pub(crate) gltf: Option<(PathBuf, String)>,
 }
 
 /// How agents are split into layers.
@@ -907,7 +907,7 @@ impl Shot {
     }
 
     /// Whether an agent on `cycle` is never height-scaled.
-    pub fn is_no_scale_cycle(&self, cycle: &str) -> bool {
+    pub(crate) fn is_no_scale_cycle(&self, cycle: &str) -> bool {
         self.no_scale_cycles.iter().any(|c| c == cycle)
     }
 }

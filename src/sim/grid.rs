@@ -13,7 +13,7 @@ const MAX_CELLS: usize = 1 << 22;
 
 /// Points bucketed into square cells. Ground-plane points are `Vec2(x, z)`.
 #[derive(Clone, Debug)]
-pub struct Grid {
+pub(crate) struct Grid {
     origin: Vec2,
     cell: f32,
     nx: usize,
@@ -27,7 +27,7 @@ pub struct Grid {
 impl Grid {
     /// Buckets `points` into cells of side at least `cell` metres.
     /// Non-finite points are left out (they have no neighbours).
-    pub fn build(points: &[Vec2], cell: f32) -> Grid {
+    pub(crate) fn build(points: &[Vec2], cell: f32) -> Grid {
         let mut lo = Vec2::splat(f32::INFINITY);
         let mut hi = Vec2::splat(f32::NEG_INFINITY);
         for p in points.iter().filter(|p| p.is_finite()) {
@@ -85,27 +85,23 @@ impl Grid {
         (ix, iz)
     }
 
-    /// The cell side in metres (may be larger than asked for huge spreads).
-    pub fn cell_size(&self) -> f32 {
-        self.cell
-    }
-
     /// Point indices in cell order: slot `k` holds point `items()[k]`.
     /// Callers copy per-point data into this order so a query reads memory
     /// that neighbours share.
-    pub fn items(&self) -> &[u32] {
+    pub(crate) fn items(&self) -> &[u32] {
         &self.items
     }
 
     /// Calls `f` with the index of every point that may lie within `radius`
     /// of `p` (a superset: callers test the distance), in a fixed order.
-    pub fn for_each_near(&self, p: Vec2, radius: f32, mut f: impl FnMut(usize)) {
+    #[cfg(test)] // the simulation queries slots (`for_each_slot_near`)
+    pub(crate) fn for_each_near(&self, p: Vec2, radius: f32, mut f: impl FnMut(usize)) {
         self.for_each_slot_near(p, radius, |k| f(self.items[k] as usize));
     }
 
     /// Like [`Grid::for_each_near`] but gives slots (positions in
     /// [`Grid::items`]), in increasing slot order within each cell row.
-    pub fn for_each_slot_near(&self, p: Vec2, radius: f32, mut f: impl FnMut(usize)) {
+    pub(crate) fn for_each_slot_near(&self, p: Vec2, radius: f32, mut f: impl FnMut(usize)) {
         if !p.is_finite() || self.items.is_empty() {
             return;
         }

@@ -11,13 +11,13 @@ use glam::Vec2;
 use super::Model;
 
 /// The paper's distance fall-off, `D(d) = 1 / 2^d`.
-pub fn falloff(d: f32) -> f32 {
+pub(crate) fn falloff(d: f32) -> f32 {
     (-d).exp2()
 }
 
 /// The paper's angular repulsion, `((1 + cos a) / 2)^2`: 1 for an object
 /// straight ahead, 0.25 at 90 degrees, 0 behind.
-pub fn repulsion(cos_a: f32) -> f32 {
+pub(crate) fn repulsion(cos_a: f32) -> f32 {
     let t = (1.0 + cos_a.clamp(-1.0, 1.0)) * 0.5;
     t * t
 }
@@ -25,7 +25,7 @@ pub fn repulsion(cos_a: f32) -> f32 {
 /// Attenuation of another agent's influence by "chase", the dot product of
 /// the two normalised velocities: agents walking the same way (chase > 0)
 /// push less, by `1 - chase`, so a file of walkers does not shake.
-pub fn chase_attenuation(chase: f32) -> f32 {
+pub(crate) fn chase_attenuation(chase: f32) -> f32 {
     if chase > 0.0 {
         1.0 - chase.min(1.0)
     } else {
@@ -46,13 +46,13 @@ pub fn turn_limit(max_turn: f32, relax: f32, d: f32) -> f32 {
 }
 
 /// Unit facing direction of `heading` on the ground plane.
-pub fn forward(heading: f32) -> Vec2 {
+pub(crate) fn forward(heading: f32) -> Vec2 {
     let (s, c) = heading.sin_cos();
     Vec2::new(s, c)
 }
 
 /// Heading that faces along `dir` (inverse of [`forward`]).
-pub fn heading_of(dir: Vec2) -> f32 {
+pub(crate) fn heading_of(dir: Vec2) -> f32 {
     dir.x.atan2(dir.y)
 }
 
@@ -72,7 +72,7 @@ pub fn wrap_angle(a: f32) -> f32 {
 /// counter-clockwise) for an object on the right, -1 for one on the left.
 /// An object dead ahead turns the agent left, so two agents meeting head on
 /// both veer left and pass.
-pub fn turn_side(forward: Vec2, to_object: Vec2) -> f32 {
+pub(crate) fn turn_side(forward: Vec2, to_object: Vec2) -> f32 {
     // Y component of (forward x to) in 3D with (x, 0, z) vectors: positive
     // when the object is counter-clockwise from the facing, i.e. on the left.
     let cross_y = forward.y * to_object.x - forward.x * to_object.y;
@@ -85,13 +85,13 @@ pub fn turn_side(forward: Vec2, to_object: Vec2) -> f32 {
 
 /// Influences gathered for one agent in one frame.
 #[derive(Clone, Copy, Debug)]
-pub struct Steer {
+pub(crate) struct Steer {
     /// Signed sum of weighted repulsions (positive turns left).
-    pub sum: f32,
+    pub(crate) sum: f32,
     /// Strongest slow-down cue in [0, 1].
-    pub slow: f32,
+    pub(crate) slow: f32,
     /// Smallest gap (metres) to any object this agent heeds.
-    pub nearest: f32,
+    pub(crate) nearest: f32,
 }
 
 impl Default for Steer {
@@ -105,7 +105,7 @@ impl Steer {
     /// closest point, `gap` is the surface-to-surface distance in metres,
     /// `weight` the agent's handle for this kind of object, `atten` the
     /// chase attenuation (1 for obstacles and walls).
-    pub fn add(&mut self, model: &Model, fwd: Vec2, to: Vec2, gap: f32, weight: f32, atten: f32) {
+    pub(crate) fn add(&mut self, model: &Model, fwd: Vec2, to: Vec2, gap: f32, weight: f32, atten: f32) {
         if weight == 0.0 {
             return; // a blind agent does not see this kind of object at all
         }

@@ -33,7 +33,7 @@ pub fn parse_manifest(json: &str, what: &Path) -> Result<BTreeMap<String, u32>> 
 /// `exr_path` resolves sidecar manifests (`manif_file`, relative to the
 /// EXR's directory). Types whose rank channels are missing are errors.
 /// Sorted by type name.
-pub fn decode_part(part: &RawPart, exr_path: &Path) -> Result<Vec<Cryptomatte>> {
+pub(crate) fn decode_part(part: &RawPart, exr_path: &Path) -> Result<Vec<Cryptomatte>> {
     // Keys as `cryptomatte/<key>/<field>`; tolerate Nuke's `exr/` prefix.
     let mut types: BTreeMap<String, BTreeMap<String, String>> = BTreeMap::new();
     for (k, v) in &part.attributes {

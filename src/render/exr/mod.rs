@@ -68,24 +68,19 @@ pub struct LayerMeta {
 
 /// Names of the motion-vector channels: Nuke's `forward` layer (VectorBlur's
 /// `uv` input, `motion` = forward + backward), as OpenImageIO lists them.
-pub const MOTION_CHANNELS: [&str; 2] = ["forward.u", "forward.v"];
+pub(crate) const MOTION_CHANNELS: [&str; 2] = ["forward.u", "forward.v"];
 
 /// What the motion-vector channels mean, written to `throng/motionConvention`.
-pub const MOTION_CONVENTION: &str =
+pub(crate) const MOTION_CONVENTION: &str =
     "forward.u/v = screen motion of the surface at the sample nearest the pixel centre, pixels per frame, +u right, +v up (Nuke), from shutter open to close";
 
-/// The default working colourspace of every beauty and albedo channel:
-/// linear light with Rec.709 / sRGB primaries and a D65 white
-/// (`chromaticities`); `ACEScg` with `render.working_colourspace = "acescg"`.
-pub const COLORSPACE: &str = "lin_rec709";
-
 /// Rec.709 primaries and D65 white, as OpenEXR's `chromaticities` attribute.
-pub fn rec709_chromaticities() -> exr::meta::attribute::Chromaticities {
+pub(crate) fn rec709_chromaticities() -> exr::meta::attribute::Chromaticities {
     chromaticities(Colourspace::Rec709)
 }
 
 /// The primaries and white of `space` as OpenEXR's `chromaticities` attribute.
-pub fn chromaticities(space: Colourspace) -> exr::meta::attribute::Chromaticities {
+pub(crate) fn chromaticities(space: Colourspace) -> exr::meta::attribute::Chromaticities {
     use exr::math::Vec2;
     let [r, g, b, w] = colour::chromaticities(space).map(|[x, y]| Vec2(x, y));
     exr::meta::attribute::Chromaticities { red: r, green: g, blue: b, white: w }
@@ -93,7 +88,7 @@ pub fn chromaticities(space: Colourspace) -> exr::meta::attribute::Chromaticitie
 
 /// `fps` as the rational OpenEXR's `framesPerSecond` wants: 24 -> 24/1,
 /// 23.976 -> 24000/1001, 29.97 -> 30000/1001, else thousandths.
-pub fn fps_rational(fps: f32) -> (i32, u32) {
+pub(crate) fn fps_rational(fps: f32) -> (i32, u32) {
     let f = fps as f64;
     if (f - f.round()).abs() < 1e-4 {
         (f.round() as i32, 1)
@@ -131,21 +126,11 @@ impl LayerCompression {
             LayerCompression::None => Compression::Uncompressed,
         }
     }
-    /// The name `--compression` takes and the docs use.
-    pub fn name(self) -> &'static str {
-        match self {
-            LayerCompression::Zip => "zip",
-            LayerCompression::Zips => "zips",
-            LayerCompression::Piz => "piz",
-            LayerCompression::B44 => "b44",
-            LayerCompression::None => "none",
-        }
-    }
 }
 
 /// The depth terms of a `worldToNDC` for clip planes `near`, `far`: NDC z =
 /// `a + b / depth`, 0 at near and 1 at far.
-pub fn ndc_depth_terms(near: f32, far: f32) -> (f32, f32) {
+pub(crate) fn ndc_depth_terms(near: f32, far: f32) -> (f32, f32) {
     if far > near {
         (far / (far - near), -far * near / (far - near))
     } else {
@@ -215,7 +200,7 @@ pub struct WriteOptions {
 }
 
 /// The sidecar manifest file name of Cryptomatte type `type_name` for the EXR `exr_path`.
-pub fn sidecar_name(exr_path: &Path, type_name: &str) -> String {
+pub(crate) fn sidecar_name(exr_path: &Path, type_name: &str) -> String {
     let stem = exr_path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     format!("{stem}.{type_name}.json")
 }
@@ -348,7 +333,7 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
 /// name in place keeps the same bytes and length (chunk offsets stay valid)
 /// and makes the same render give the same file. Leaves anything it cannot
 /// parse untouched.
-pub fn sort_header_attributes(bytes: &mut [u8]) {
+pub(crate) fn sort_header_attributes(bytes: &mut [u8]) {
     let nul_from = |b: &[u8], at: usize| b.get(at..)?.iter().position(|&c| c == 0).map(|p| at + p);
     let Some(version) = bytes.get(4..8) else { return };
     let multipart = u32::from_le_bytes([version[0], version[1], version[2], version[3]]) & 0x1000 != 0;
@@ -490,12 +475,10 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
 /// One part (layer) of an EXR as plain data: what the Cryptomatte decoder needs.
 #[derive(Clone, Debug, Default)]
 pub struct RawPart {
-    /// Part name, if the file names it.
-    pub name: Option<String>,
     /// Width in pixels.
-    pub width: u32,
+    pub(crate) width: u32,
     /// Height in pixels.
-    pub height: u32,
+    pub(crate) height: u32,
     /// Text header attributes (shared and the part's own), UTF-8 decoded.
     pub attributes: BTreeMap<String, String>,
     /// Channels as f32, row-major, by full channel name.
@@ -525,13 +508,7 @@ fn raw_part(
         .filter(|(n, _)| keep(n))
         .map(|(n, c)| (n, c.sample_data.values_as_f32().collect()))
         .collect();
-    RawPart {
-        name: layer.attributes.layer_name.as_ref().map(lossy),
-        width: layer.size.width() as u32,
-        height: layer.size.height() as u32,
-        attributes,
-        channels,
-    }
+    RawPart { width: layer.size.width() as u32, height: layer.size.height() as u32, attributes, channels }
 }
 
 /// Reads every part of any scanline or tiled EXR (largest resolution level,
