@@ -13,6 +13,7 @@ use std::process::Command;
 
 use common::{demo_shot, repo_path, run};
 use throng::farm::{read_plan, TaskKind};
+use throng::layers::memory;
 
 const FRAMES: &str = "1024-1025";
 
@@ -122,8 +123,16 @@ fn comps_depend_on_their_frames_layer_tasks() {
         assert_eq!(r.cores, 2);
         assert!(r.depends_on.is_empty());
         assert_eq!(r.outputs.len(), r.frames.len());
-        let estimate = manifest.layer(layer).map(|l| l.memory_bytes).unwrap_or(0);
-        assert!(r.memory_bytes >= estimate && r.memory_bytes % (1 << 20) == 0, "{}: memory from the estimate", r.id);
+        // The one memory model, counted once: the manifest's estimate (which
+        // holds the process and the film at the shot's 960x540) with only its
+        // film moved to the task's 32x18, rounded up to whole MiB. Adding
+        // process or film again, as plans once did, fails this.
+        let estimate = manifest.render_memory(layer).unwrap();
+        let [mw, mh] = manifest.camera.image_size;
+        let moved = memory::at_pixels(estimate, mw as u64 * mh as u64, 32 * 18, false);
+        assert_eq!(moved, estimate - memory::film_bytes(960 * 540, false) + memory::film_bytes(32 * 18, false));
+        assert_eq!(r.memory_bytes, moved.div_ceil(1 << 20) << 20, "{}: memory from the one model", r.id);
+        assert!(r.memory_bytes < estimate, "{}: a smaller image needs less than the shot's", r.id);
         assert!(r.log.starts_with(&plan.log_dir));
     }
     for c in &comps {

@@ -472,3 +472,52 @@ count = 2
     assert!(m.agent(2).unwrap().removed);
     assert_eq!(m.agent(3).unwrap().ranked_frame, 1004);
 }
+
+/// The memory model on the demo (rigid robots and skinned walkers over 48
+/// frames, a set): what the manifest charges is the one model's floor plus
+/// the agents, each part counted once; a frame's BLASes, not the whole
+/// library's; and with a shutter, its deforming BLASes, whether or not the
+/// crowd was posed for it.
+#[test]
+fn the_memory_model_counts_each_part_once() {
+    use throng::casting::ShotCrowd;
+    use throng::layers::{build_layers, memory, LayerOverrides, RenderFloor};
+    let shot = common::demo_shot();
+    let crowd = ShotCrowd::load(&shot).unwrap();
+    let [w, h] = crowd.shot().render.resolution;
+    let px = w as u64 * h as u64;
+    let unsplit = LayerOverrides { count: Some(1), ..Default::default() };
+    let m = build_layers(&crowd, &unsplit).unwrap();
+    assert!(m.absent.is_empty() && m.agents.iter().all(|a| !a.removed));
+    let full = |id: u32, f: i32| m.agent(id).is_some_and(|a| a.lod_at(f) == Lod::Full);
+    let floor = RenderFloor::of(&crowd, None, px, full).unwrap();
+    // Shared: the floor plus every agent as a caster at its LOD; the one
+    // crowd layer adds nothing on top (its agents are those casters).
+    let agents: u64 = m.agents.iter().map(|a| a.memory_bytes).sum();
+    assert_eq!(m.split.shared_bytes, floor.bytes() + agents);
+    assert_eq!(m.render_memory("crowd0"), Some(m.split.shared_bytes));
+    assert_eq!(m.render_memory("set"), Some(m.split.shared_bytes));
+    // The film (and the process) once.
+    assert_eq!(floor.bytes() - RenderFloor { pixels: 0, ..floor }.bytes(), memory::film_bytes(px, false));
+    assert_eq!(memory::at_pixels(floor.bytes(), px, 0, false), RenderFloor { pixels: 0, ..floor }.bytes());
+    // One frame's poses, not the 48 frames' the library holds; only full agents trace theirs.
+    let library: u64 = crowd.library().meshes.iter().map(|m| m.triangle_count() as u64).sum();
+    assert!(floor.triangles < library / 2, "{} of {library} triangles", floor.triangles);
+    let no_full = RenderFloor::of(&crowd, None, px, |_, _| false).unwrap();
+    assert!(no_full.triangles < floor.triangles);
+    assert_eq!(floor.deform_triangles, 0);
+    // Blurred: deforming BLASes, motion records and the motion AOV.
+    let shutter = [-0.25f32, 0.25];
+    let blurred = RenderFloor::of(&crowd, Some(shutter), px, full).unwrap();
+    assert!(blurred.blurred && blurred.deform_triangles > 0);
+    assert!(blurred.bytes() > floor.bytes() + memory::blas_bytes(0, blurred.deform_triangles) / 2);
+    let shot_blurred = crowd.with_shot(|s| s.render.shutter = Some(shutter)).unwrap();
+    let mb = build_layers(&shot_blurred, &unsplit).unwrap();
+    assert!(mb.split.shared_bytes > m.split.shared_bytes);
+    // A crowd posed for the shutter (as `throng render` poses it) gets the same estimate.
+    let mut posed_shot = throng::shot::Shot::load(&shot).unwrap();
+    posed_shot.render.shutter = Some(shutter);
+    let posed = ShotCrowd::open(posed_shot, Some(shutter)).unwrap();
+    assert!(posed.library().meshes.len() >= shot_blurred.library().meshes.len());
+    assert_eq!(build_layers(&posed, &unsplit).unwrap().split.shared_bytes, mb.split.shared_bytes);
+}

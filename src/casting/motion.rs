@@ -258,26 +258,45 @@ pub(crate) fn shutter_steps(
 ) -> Result<BTreeSet<PoseStep>> {
     let mut needed: BTreeSet<PoseStep> = BTreeSet::new();
     for f in shot.frames.iter() {
-        let cf = shot.cache.cache_frame(f);
-        if cache.frames().binary_search(&cf).is_err() {
-            continue;
-        }
-        let block = cache.read_frame(cf)?;
-        let near = Neighbours::read(shot, cache, f)?;
-        for a in block.agents.iter().filter(|a| !a.hidden()) {
-            let Some(skinned) = skinned_of(casting, rigs, a.id) else { continue };
-            let length = length_of(shot, cache, casting, rigs, a);
-            let (prev, next) = (near.prev.get(&a.id), near.next.get(&a.id));
-            let [s0, s1] = shutter.map(|s| sample_at(a, prev, next, s, length));
-            if let Some((rig, cycle, k0, k1, _)) =
-                skin_keys(skinned, cycle_name(cache, a), s0.cycle_frame, s1.cycle_frame)
-            {
-                needed.insert((rig.clone(), cycle, k0));
-                needed.insert((rig, cycle, k1));
-            }
+        for (_, open, close) in shutter_keys_at(shot, cache, casting, rigs, f, shutter)? {
+            needed.insert(open);
+            needed.insert(close);
         }
     }
     Ok(needed)
+}
+
+/// The shutter keys of every visible skinned agent at shot frame `f`: (agent
+/// id, its step at shutter open, its step at close), in cache order; empty
+/// when the cache has no record of that frame. The steps a shutter poses
+/// ([`shutter_steps`]) and what a blurred render of the frame traces (its
+/// open meshes, and a deforming BLAS where the two steps differ).
+pub(crate) fn shutter_keys_at(
+    shot: &Shot,
+    cache: &CacheReader,
+    casting: &Casting,
+    rigs: &ShotRigs,
+    f: i32,
+    shutter: [f32; 2],
+) -> Result<Vec<(u32, PoseStep, PoseStep)>> {
+    let cf = shot.cache.cache_frame(f);
+    if cache.frames().binary_search(&cf).is_err() {
+        return Ok(Vec::new());
+    }
+    let block = cache.read_frame(cf)?;
+    let near = Neighbours::read(shot, cache, f)?;
+    let mut keys = Vec::new();
+    for a in block.agents.iter().filter(|a| !a.hidden()) {
+        let Some(skinned) = skinned_of(casting, rigs, a.id) else { continue };
+        let length = length_of(shot, cache, casting, rigs, a);
+        let (prev, next) = (near.prev.get(&a.id), near.next.get(&a.id));
+        let [s0, s1] = shutter.map(|s| sample_at(a, prev, next, s, length));
+        if let Some((rig, cycle, k0, k1, _)) = skin_keys(skinned, cycle_name(cache, a), s0.cycle_frame, s1.cycle_frame)
+        {
+            keys.push((a.id, (rig.clone(), cycle, k0), (rig, cycle, k1)));
+        }
+    }
+    Ok(keys)
 }
 
 /// Whether a shot's agents move at all over a shutter (tests and benchmarks).

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use super::{fingerprint, Plan, Task, TaskKind, PLAN_FILE, PLAN_FORMAT, PLAN_VERSION};
 use crate::casting::ShotCrowd;
 use crate::error::{Error, IoContext, Result};
-use crate::layers::{build_layers, LayerOverrides, Manifest};
+use crate::layers::{build_layers, memory, render_shutter, LayerOverrides, Manifest};
 use crate::output::{layer_path, COMP_LAYER};
 
 /// What to plan; `Default`-like values come from [`PlanOptions::new`].
@@ -56,11 +56,6 @@ pub(crate) const MAX_TASKS: usize = 1_000_000;
 /// Most cores a task may ask for.
 pub(crate) const MAX_CORES: u32 = 4096;
 
-/// Memory a throng process needs besides the scene: binary, allocator, buffers.
-const PROCESS_BYTES: u64 = 256 << 20;
-/// Film bytes per pixel while rendering: accumulated channels, ids and
-/// Cryptomatte ranks, with slack (measured peak is below this).
-const FILM_BYTES_PER_PIXEL: u64 = 512;
 /// Bytes per pixel per layer held by a comp (every layer's film at once).
 const COMP_BYTES_PER_PIXEL: u64 = 256;
 
@@ -138,13 +133,14 @@ fn inputs(crowd: &ShotCrowd, manifest_path: &Path) -> Result<Vec<(String, PathBu
     Ok(v)
 }
 
-/// Estimated render memory of `layer`: the manifest's estimate (the set
-/// layer traces every agent as a caster, so it takes the largest crowd
-/// layer's), plus the film and the process.
-fn render_memory(manifest: &Manifest, layer: &str, [w, h]: [u32; 2]) -> u64 {
-    let largest = manifest.layers.iter().map(|l| l.memory_bytes).max().unwrap_or(manifest.split.shared_bytes);
-    let scene = manifest.layer(layer).map_or(largest, |l| l.memory_bytes);
-    round_mib(scene + w as u64 * h as u64 * FILM_BYTES_PER_PIXEL + PROCESS_BYTES)
+/// Estimated peak memory of a render task of `layer`: the manifest's
+/// estimate from the one model ([`crate::layers::memory`], which holds the
+/// process and the film already), its film moved to the task's image size.
+pub(crate) fn render_memory(manifest: &Manifest, layer: &str, [w, h]: [u32; 2], blurred: bool) -> Result<u64> {
+    let bytes =
+        manifest.render_memory(layer).ok_or_else(|| Error::Usage(format!("no layer `{layer}` in the manifest")))?;
+    let [mw, mh] = manifest.camera.image_size;
+    Ok(round_mib(memory::at_pixels(bytes, mw as u64 * mh as u64, w as u64 * h as u64, blurred)))
 }
 
 /// Rounds up to whole MiB (schedulers ask in MB).
@@ -216,6 +212,8 @@ pub(crate) fn build_plan(
     }
     let spp = opts.spp.unwrap_or(shot.render.spp).max(1);
     let resolution = opts.resolution.unwrap_or(shot.render.resolution);
+    // Tasks pass no --shutter: they blur as the shot says, as the manifest's estimate assumed.
+    let blurred = render_shutter(crowd).is_some();
     let shot_file = std::fs::canonicalize(&shot.path).at(&shot.path)?;
     let render_dir = out.join("render");
     let log_dir = out.join("logs");
@@ -263,7 +261,7 @@ pub(crate) fn build_plan(
                 argv,
                 outputs: frames.iter().map(|&f| layer_path(&render_dir, &shot.name, layer, f)).collect(),
                 cores: opts.cores,
-                memory_bytes: render_memory(manifest, layer, resolution),
+                memory_bytes: render_memory(manifest, layer, resolution, blurred)?,
                 depends_on: Vec::new(),
             });
         }
@@ -299,7 +297,7 @@ pub(crate) fn build_plan(
                 cores: 1,
                 memory_bytes: round_mib(
                     resolution[0] as u64 * resolution[1] as u64 * COMP_BYTES_PER_PIXEL * (layers.len() as u64 + 1)
-                        + PROCESS_BYTES,
+                        + memory::PROCESS_BYTES,
                 ),
                 depends_on: deps,
             });

@@ -3,12 +3,12 @@
 //! caller puts over the shot's `[layers]` table, and the set bounds the layer
 //! map draws.
 
+use std::collections::HashMap;
+
 use glam::Vec3;
 
-use super::{
-    build_manifest, estimate_agent_memory, estimate_proxy_memory, estimate_render_floor, shot_input, LayerOptions,
-    Manifest, RenderFloor,
-};
+use super::memory::{instance_bytes, RenderFloor};
+use super::{agent_lods, build_manifest, lod_at, shot_input, LayerOptions, LodChange, Manifest};
 use crate::casting::{Lod, ShotCrowd};
 use crate::error::{Error, Result};
 use crate::shot::{parse_bytes, LayerSettings, SplitMode};
@@ -62,30 +62,38 @@ pub fn settings_with_overrides(
     Ok((s, options))
 }
 
-/// Builds the layer manifest of a cast shot with `overrides` over the shot's `[layers]`.
+/// The shutter a shot's layer renders use: the one the crowd was posed
+/// for, else the shot's `render.shutter` (what `throng render` and farm
+/// tasks blur with when no `--shutter` is given).
+pub fn render_shutter(crowd: &ShotCrowd) -> Option<[f32; 2]> {
+    crowd.poses().shutter().or(crowd.shot().render.shutter)
+}
+
+/// Builds the layer manifest of a cast shot with `overrides` over the
+/// shot's `[layers]`; memory is estimated for renders at the shot's
+/// resolution with [`render_shutter`].
 pub fn build_layers(crowd: &ShotCrowd, overrides: &LayerOverrides) -> Result<Manifest> {
-    let (settings, mut options) = settings_with_overrides(&crowd.shot().layers, overrides)?;
-    let lib = crowd.library();
+    let (settings, options) = settings_with_overrides(&crowd.shot().layers, overrides)?;
     let all = crowd.shot_crowd()?;
     let [w, h] = crowd.shot().render.resolution;
-    options.shared_bytes = estimate_render_floor(&RenderFloor {
-        agents: crowd.casting().len() as u64,
-        mesh_bytes: lib.meshes.iter().map(|m| m.bytes() as u64).sum(),
-        triangles: lib.meshes.iter().map(|m| m.triangle_count() as u64).sum(),
-        texture_bytes: lib.textures.iter().map(|t| t.texels.len() as u64 * 16).sum(),
-        set_instances: crowd.set().len() as u64,
-        pixels: w as u64 * h as u64,
-    });
+    let shutter = render_shutter(crowd);
+    let blurred = shutter.is_some();
     let cameras = match crowd.shot().keyed_camera(crowd.shot().frames.start as f32) {
         Some(_) => None,
         None => Some(crowd.shot().frames.iter().map(|f| crowd.camera(f)).collect::<Result<Vec<_>>>()?),
     };
-    let input = shot_input(crowd.shot(), &all, cameras, settings, options, |id| {
+    let mut input = shot_input(crowd.shot(), &all, cameras, settings, options, |id| {
         // Every agent of the shot's frames was cast; others never reach here.
         let Some(height) = crowd.agent_height(id) else { return (1.8, 0, 0) };
         let (full, proxies) = (crowd.instance_count(id, Lod::Full), crowd.instance_count(id, Lod::Proxy));
-        (height, estimate_agent_memory(full), estimate_proxy_memory(proxies))
+        (height, instance_bytes(full as u64, blurred), instance_bytes(proxies as u64, blurred))
     })?;
+    // The floor needs each agent's LOD (only full agents trace their poses),
+    // which does not depend on the split.
+    let lods: HashMap<u32, Vec<LodChange>> =
+        input.agents.iter().zip(agent_lods(&input)?).filter_map(|(a, l)| Some((a.id, l?))).collect();
+    let full = |id: u32, f: i32| lods.get(&id).and_then(|c| lod_at(c, f)) == Some(Lod::Full);
+    input.options.shared_bytes = RenderFloor::of(crowd, shutter, w as u64 * h as u64, full)?.bytes();
     let mut manifest = build_manifest(&input)?;
     manifest.made_from = Some(super::MadeFrom::of(crowd.shot())?);
     Ok(manifest)

@@ -1,7 +1,8 @@
 //! The layer manifest (JSON, versioned; docs/layers.md): agent -> layer and
 //! LOD, distances, thresholds, the reference frame, memory per layer, and the
 //! visibility each render gives every agent and the set. Rendering reads it
-//! and never re-ranks. Also: memory estimates and the human summary.
+//! and never re-ranks. Also: byte formatting and the human summary (the
+//! memory figures come from [`super::memory`]).
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -91,7 +92,8 @@ pub struct LayerRecord {
     pub(crate) lod_full: usize,
     /// Rendered agents as proxies (at the reference frame).
     pub(crate) lod_proxy: usize,
-    /// Estimated render memory: shared bytes plus rendered agents' estimates.
+    /// Estimated peak memory of this layer's render process
+    /// ([`super::memory`]): shared bytes plus rendered agents' estimates.
     pub memory_bytes: u64,
     /// Visibility in this layer's render.
     pub(crate) visibility: Visibility,
@@ -191,11 +193,14 @@ pub struct LayerAgent {
 impl LayerAgent {
     /// LOD at a shot frame.
     pub fn lod_at(&self, frame: i32) -> Lod {
-        match self.lod_changes.iter().rev().find(|c| c.frame <= frame).or(self.lod_changes.first()) {
-            Some(c) => c.lod,
-            None => self.lod,
-        }
+        lod_at(&self.lod_changes, frame).unwrap_or(self.lod)
     }
+}
+
+/// The LOD at a shot frame from a list of changes (the first one holds
+/// before it); `None` when there are none.
+pub fn lod_at(changes: &[LodChange], frame: i32) -> Option<Lod> {
+    changes.iter().rev().find(|c| c.frame <= frame).or(changes.first()).map(|c| c.lod)
 }
 
 /// The camera at the reference frame (for the map and for checking).
@@ -210,7 +215,7 @@ pub struct CameraRecord {
     /// Vertical field of view, radians.
     pub(crate) yfov: f32,
     /// Image width and height, pixels.
-    pub(crate) image_size: [u32; 2],
+    pub image_size: [u32; 2],
 }
 
 impl CameraRecord {
@@ -338,6 +343,17 @@ impl Manifest {
         self.layers.iter().find(|l| l.name == name)
     }
 
+    /// Estimated peak memory of the render of `layer` at the manifest's
+    /// image size ([`super::memory`]): a crowd layer's `memory_bytes`, or for
+    /// the set layer the shared part (the floor with every agent as a
+    /// caster, which is all it traces). `None` for an unknown layer.
+    pub fn render_memory(&self, layer: &str) -> Option<u64> {
+        if layer == self.set.name {
+            return Some(self.split.shared_bytes);
+        }
+        self.layer(layer).map(|l| l.memory_bytes)
+    }
+
     fn visibility_of(&self, layer: &str) -> Option<&Visibility> {
         if layer == self.set.name {
             Some(&self.set.visibility)
@@ -452,77 +468,6 @@ fn check_consistent(path: &Path, m: &Manifest) -> Result<()> {
         .field("agents.layer"));
     }
     Ok(())
-}
-
-// ---- memory estimates ----
-//
-// A layer render's peak memory, modelled from what `throng render` holds and
-// calibrated against measured peaks (docs/benchmarks.md, "Layer budget";
-// `examples/budget_bench.rs` prints estimate against measurement per layer).
-// Every constant is an upper bound of what was measured, so an estimate errs
-// high.
-
-/// Bytes per traced instance: its scene record (80), TLAS record (16, plus
-/// a 48-byte inverse in trees with a leaf per part), its Cryptomatte ids
-/// (12), and the TLAS build's scratch (bounds, sort keys, the binary tree
-/// PLOC builds before the 8-wide one). Measured: about 230 with a leaf per
-/// part (10,000 robots), about 120 with a leaf per agent (100,000 and
-/// 1,000,000 robots); 360 covers the larger with room, so the estimate
-/// holds in both kinds of tree.
-pub(crate) const INSTANCE_BYTES: u64 = 360;
-/// BLAS bytes per triangle: the 8-wide nodes, the 48-byte precomputed
-/// triangle, two index arrays, and the build's scratch.
-pub(crate) const BLAS_BYTES_PER_TRIANGLE: u64 = 240;
-/// Bytes per agent of the shot that every render holds, in its layer or
-/// not: casting, dressing, the cache's frame index and the frame's pose
-/// (`throng cast` of 1,000,000 robots peaks at 838 MiB).
-pub(crate) const AGENT_LOADED_BYTES: u64 = 1_000;
-/// Bytes of a render process before it loads a shot: the binary, allocator
-/// arenas and the worker threads' stacks.
-pub(crate) const PROCESS_BYTES: u64 = 24_000_000;
-/// Bytes per pixel of the shot's resolution: the film and its AOVs, the
-/// Cryptomatte ranks of three types, tile results and the EXR channels being encoded.
-pub(crate) const PIXEL_BYTES: u64 = 520;
-
-/// An agent's render memory as `instances` traced instances (its parts, or
-/// its proxy boxes); its meshes' BLASes are in [`estimate_render_floor`].
-pub(crate) fn estimate_agent_memory(instances: usize) -> u64 {
-    instances as u64 * INSTANCE_BYTES
-}
-
-/// An agent's estimated render memory as proxies: one instance per box.
-pub(crate) fn estimate_proxy_memory(boxes: usize) -> u64 {
-    estimate_agent_memory(boxes)
-}
-
-/// What every layer render of a shot holds whatever its agents.
-#[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct RenderFloor {
-    /// Agents in the shot (every one is loaded and posed in every render).
-    pub(crate) agents: u64,
-    /// Geometry bytes of every mesh loaded (wardrobe parts, posed skins, set).
-    pub(crate) mesh_bytes: u64,
-    /// Triangles of every mesh loaded (each may get a BLAS).
-    pub(crate) triangles: u64,
-    /// Texel bytes of every texture loaded.
-    pub(crate) texture_bytes: u64,
-    /// The set's instances.
-    pub(crate) set_instances: u64,
-    /// Pixels of the shot's resolution.
-    pub(crate) pixels: u64,
-}
-
-/// The floor of every layer render's memory: process, loaded shot, the
-/// whole library with a BLAS per mesh (an upper bound: a layer builds only
-/// the BLASes it uses), the set, and the film.
-pub(crate) fn estimate_render_floor(f: &RenderFloor) -> u64 {
-    PROCESS_BYTES
-        .saturating_add(f.agents.saturating_mul(AGENT_LOADED_BYTES))
-        .saturating_add(f.mesh_bytes)
-        .saturating_add(f.triangles.saturating_mul(BLAS_BYTES_PER_TRIANGLE))
-        .saturating_add(f.texture_bytes)
-        .saturating_add(f.set_instances.saturating_mul(INSTANCE_BYTES))
-        .saturating_add(f.pixels.saturating_mul(PIXEL_BYTES))
 }
 
 /// Bytes in decimal units, as `--budget` takes them: `1.21 GB`, `512 MB`.

@@ -19,6 +19,7 @@ pub(crate) mod input;
 pub(crate) mod made_from;
 pub mod manifest;
 pub(crate) mod map;
+pub mod memory;
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -29,14 +30,14 @@ use crate::error::{Error, Result};
 use crate::scene::Camera;
 use crate::shot::{parse_bytes, LayerSettings, SplitMode};
 
-pub use input::{build_layers, set_bounds, settings_with_overrides, LayerOverrides};
+pub use input::{build_layers, render_shutter, set_bounds, settings_with_overrides, LayerOverrides};
 pub use made_from::{check_current, MadeFrom};
-pub(crate) use manifest::{
-    estimate_agent_memory, estimate_proxy_memory, estimate_render_floor, CameraRecord, LayerAgent, LayerRecord,
-    LodChange, Pops, RenderFloor, SetRecord, SplitRecord, MANIFEST_VERSION,
-};
 pub use manifest::{format_bytes, read_manifest, summary, write_manifest, Lod, Manifest, Ranking};
+pub(crate) use manifest::{
+    lod_at, CameraRecord, LayerAgent, LayerRecord, LodChange, Pops, SetRecord, SplitRecord, MANIFEST_VERSION,
+};
 pub use map::{draw_map, render_map, MapOptions};
+pub use memory::RenderFloor;
 
 /// One agent as layering sees it.
 #[derive(Debug, Clone)]
@@ -47,9 +48,9 @@ pub struct AgentInput {
     pub positions: Vec<Option<Vec3>>,
     /// Standing height in metres, casting's height scale included.
     pub height_m: f32,
-    /// Estimated render memory with full parts, bytes (see [`estimate_agent_memory`]).
+    /// Estimated render memory with full parts, bytes (see [`memory::instance_bytes`]).
     pub memory_full: u64,
-    /// Estimated render memory as proxy boxes, bytes (see [`estimate_proxy_memory`]).
+    /// Estimated render memory as proxy boxes, bytes (see [`memory::instance_bytes`]).
     pub memory_proxy: u64,
     /// Ranked like everyone else, then left out of every render.
     pub removed: bool,
@@ -65,8 +66,9 @@ pub struct LayerOptions {
     /// Hysteresis band for per-frame LOD, as a fraction of `lod_full_min_px`:
     /// an agent turns full above `min * (1 + h)` and proxy below `min * (1 - h)`.
     pub lod_hysteresis: f32,
-    /// Memory every layer render carries whatever its agents (the set, shadow
-    /// casters from other layers), counted once per layer against the budget.
+    /// Memory every layer render carries whatever its agents (the render
+    /// floor, [`memory::RenderFloor::bytes`]), counted once per layer against
+    /// the budget; the split adds the other layers' agents as casters.
     pub shared_bytes: u64,
 }
 
@@ -504,6 +506,32 @@ fn budget_charges(
         })
         .collect();
     (input.options.shared_bytes.saturating_add(casters), charge)
+}
+
+/// Each agent's LOD over the shot (input order), as the manifest will
+/// record it: the changes from its first frame (one entry when LOD is
+/// fixed), or `None` for an agent absent from every frame. What the memory
+/// model needs before the split ([`memory::RenderFloor::of`]).
+pub fn agent_lods(input: &LayerInput) -> Result<Vec<Option<Vec<LodChange>>>> {
+    let prep = prepare(input)?;
+    let min_px = input.settings.lod_full_min_px;
+    let spans = if input.options.lod_per_frame { Some(lod_spans(input)) } else { None };
+    let first = input.frames[0];
+    Ok(input
+        .agents
+        .iter()
+        .enumerate()
+        .map(|(i, a)| {
+            let s = sample(input, a, prep.ref_idx)?;
+            Some(match &spans {
+                Some(sp) => sp[i].clone(),
+                None => {
+                    let lod = if charged_full(&spans, min_px, i, &s) { Lod::Full } else { Lod::Proxy };
+                    vec![LodChange { frame: first, lod }]
+                }
+            })
+        })
+        .collect())
 }
 
 /// Ranks, splits and chooses LOD: the layer manifest for this input.

@@ -358,6 +358,22 @@ impl BlasSet {
         self.build_time += start.elapsed();
     }
 
+    /// Drops every BLAS whose mesh `keep` refuses, and every deforming BLAS
+    /// whose (first, second) mesh pair `keep_deform` refuses: a render keeps
+    /// only what its current frame traces, so its peak memory is one
+    /// frame's BLASes however many frames it renders (skinned crowds change
+    /// poses every frame). A dropped BLAS is rebuilt, identically, if needed again.
+    pub fn retain(&mut self, keep: impl Fn(u32) -> bool, keep_deform: impl Fn((u32, u32)) -> bool) {
+        for (m, b) in self.blas.iter_mut().enumerate() {
+            if !keep(m as u32) {
+                b.take();
+            }
+        }
+        if let Ok(d) = self.deform.get_mut() {
+            d.retain(|&k, _| keep_deform(k));
+        }
+    }
+
     /// The BLAS of mesh `id`, if it exists and has been built.
     pub fn get(&self, id: u32) -> Option<&Blas> {
         self.blas.get(id as usize)?.get()

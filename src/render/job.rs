@@ -496,6 +496,7 @@ pub fn run<C: Space>(
         // Read and pose lazily: a fully resumed frame needs neither.
         let mut posed: Option<PosedFrame> = None;
         let mut moving: Option<MotionFrame> = None;
+        let mut first_of_frame = true;
         for layer in &job.layers {
             let path = layer_path(&job.out, &crowd.shot().name, layer, frame);
             let fingerprint = fingerprints.get(layer.as_str()).cloned().unwrap_or_default();
@@ -577,6 +578,23 @@ pub fn run<C: Space>(
             };
             let pixels = (w as usize * h as usize).max(1);
             let report = |p: usize| observer.pixels(at, p as f64 / pixels as f64);
+            if first_of_frame {
+                // Drop what earlier frames built and this one does not trace
+                // (its later layers add to it): one frame's BLASes at a time,
+                // what the memory model (`layers::memory`) counts.
+                let meshes: std::collections::HashSet<u32> = scene.instances.iter().map(|i| i.mesh).collect();
+                let pairs: std::collections::HashSet<(u32, u32)> =
+                    scene.motion.as_ref().map_or_else(Default::default, |m| {
+                        scene
+                            .instances
+                            .iter()
+                            .zip(&m.instances)
+                            .filter_map(|(i, k)| k.deform.map(|d| (i.mesh, d.mesh)))
+                            .collect()
+                    });
+                blas.retain(|m| meshes.contains(&m), |p| pairs.contains(&p));
+                first_of_frame = false;
+            }
             blas.prepare(crowd.library(), scene.instances.iter().map(|i| i.mesh));
             let names = (job.cryptomatte != CryptoOutput::Off).then(|| crypto_names(crowd, &scene));
             let (film, stats) = render_frame_with_cryptomatte(

@@ -322,38 +322,125 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
     };
     let mut image = Image::from_layer(Layer::new((w, h), attrs, encoding, channels));
     image.attributes.chromaticities = Some(chromaticities(meta.colourspace));
-    let mut bytes = Vec::new();
-    image.write().to_buffered(std::io::Cursor::new(&mut bytes)).map_err(|e| exr_error(path, e))?;
-    sort_header_attributes(&mut bytes);
-    write_atomic(path, |out| std::io::Write::write_all(out, &bytes).map_err(|e| Error::io(path, e)))
+    write_atomic(path, |out| {
+        use std::io::{Seek, SeekFrom, Write};
+        // Streamed to the file, so a render never holds the encoded frame
+        // in memory (its size depends on the image; the memory model,
+        // `layers::memory`, counts the film); the headers are kept as they
+        // pass, sorted, and written back over themselves.
+        let mut w = HeaderCapture { out: &mut *out, pos: 0, head: Vec::new(), end: None };
+        image.write().to_buffered(&mut w).map_err(|e| exr_error(path, e))?;
+        let mut head = std::mem::take(&mut w.head);
+        if w.end.is_some() && sort_header_attributes(&mut head) {
+            out.seek(SeekFrom::Start(0)).map_err(|e| Error::io(path, e))?;
+            out.write_all(&head).map_err(|e| Error::io(path, e))?;
+            out.seek(SeekFrom::End(0)).map_err(|e| Error::io(path, e))?;
+        }
+        Ok(())
+    })
+}
+
+/// A writer that passes everything on and keeps a copy of the file's
+/// headers (the bytes before [`headers_end`]) as they are written.
+struct HeaderCapture<'a, W> {
+    out: &'a mut W,
+    pos: u64,
+    head: Vec<u8>,
+    /// Where the headers end, once they have all been written.
+    end: Option<usize>,
+}
+
+impl<W: std::io::Write> std::io::Write for HeaderCapture<'_, W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.out.write(buf)?;
+        let (at, limit) = (self.pos as usize, self.end.unwrap_or(usize::MAX));
+        if at < limit {
+            let upto = (at + n).min(limit);
+            if self.head.len() < upto {
+                self.head.resize(upto, 0);
+            }
+            self.head[at..upto].copy_from_slice(&buf[..upto - at]);
+            if self.end.is_none() {
+                self.end = headers_end(&self.head);
+                if let Some(e) = self.end {
+                    self.head.truncate(e);
+                }
+            }
+        }
+        self.pos += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.out.flush()
+    }
+}
+
+impl<W: std::io::Seek> std::io::Seek for HeaderCapture<'_, W> {
+    fn seek(&mut self, to: std::io::SeekFrom) -> std::io::Result<u64> {
+        self.pos = self.out.seek(to)?;
+        Ok(self.pos)
+    }
+}
+
+/// Where an OpenEXR file's headers end (after the terminating null of the
+/// last header), or `None` while `bytes` does not hold them all.
+fn headers_end(bytes: &[u8]) -> Option<usize> {
+    let nul_from = |at: usize| bytes.get(at..)?.iter().position(|&c| c == 0).map(|p| at + p);
+    let version = bytes.get(4..8)?;
+    let multipart = u32::from_le_bytes([version[0], version[1], version[2], version[3]]) & 0x1000 != 0;
+    let mut pos = 8;
+    loop {
+        loop {
+            let name_end = nul_from(pos)?;
+            if name_end == pos {
+                pos += 1;
+                break;
+            }
+            let type_end = nul_from(name_end + 1)?;
+            let size = bytes.get(type_end + 1..type_end + 5)?;
+            let size = usize::try_from(i32::from_le_bytes([size[0], size[1], size[2], size[3]])).ok()?;
+            pos = type_end + 5 + size;
+            if pos > bytes.len() {
+                return None;
+            }
+        }
+        if !multipart {
+            return Some(pos);
+        }
+        // Multi-part: an empty header (a lone null) ends the list.
+        if *bytes.get(pos)? == 0 {
+            return Some(pos + 1);
+        }
+    }
 }
 
 /// The exr crate keeps custom attributes in a `HashMap`, so their order in
 /// the header changes from run to run. Sorting each header's attributes by
 /// name in place keeps the same bytes and length (chunk offsets stay valid)
 /// and makes the same render give the same file. Leaves anything it cannot
-/// parse untouched.
-pub(crate) fn sort_header_attributes(bytes: &mut [u8]) {
+/// parse untouched. Returns whether every header was sorted.
+pub(crate) fn sort_header_attributes(bytes: &mut [u8]) -> bool {
     let nul_from = |b: &[u8], at: usize| b.get(at..)?.iter().position(|&c| c == 0).map(|p| at + p);
-    let Some(version) = bytes.get(4..8) else { return };
+    let Some(version) = bytes.get(4..8) else { return false };
     let multipart = u32::from_le_bytes([version[0], version[1], version[2], version[3]]) & 0x1000 != 0;
     let mut pos = 8;
     loop {
         let start = pos;
         let mut attrs: Vec<std::ops::Range<usize>> = Vec::new();
         loop {
-            let Some(name_end) = nul_from(bytes, pos) else { return };
+            let Some(name_end) = nul_from(bytes, pos) else { return false };
             if name_end == pos {
                 pos += 1; // the header's terminating null
                 break;
             }
-            let Some(type_end) = nul_from(bytes, name_end + 1) else { return };
-            let Some(size) = bytes.get(type_end + 1..type_end + 5) else { return };
+            let Some(type_end) = nul_from(bytes, name_end + 1) else { return false };
+            let Some(size) = bytes.get(type_end + 1..type_end + 5) else { return false };
             let size = i32::from_le_bytes([size[0], size[1], size[2], size[3]]);
-            let Ok(size) = usize::try_from(size) else { return };
+            let Ok(size) = usize::try_from(size) else { return false };
             let end = type_end + 5 + size;
             if end > bytes.len() {
-                return;
+                return false;
             }
             attrs.push(pos..end);
             pos = end;
@@ -367,7 +454,7 @@ pub(crate) fn sort_header_attributes(bytes: &mut [u8]) {
         let reordered: Vec<u8> = sorted.iter().flat_map(|r| bytes[r.clone()].to_vec()).collect();
         bytes[start..start + reordered.len()].copy_from_slice(&reordered);
         if !multipart || bytes.get(pos) == Some(&0) {
-            return;
+            return true;
         }
     }
 }

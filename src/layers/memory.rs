@@ -1,0 +1,258 @@
+//! The render-memory model: one estimate of the peak resident memory of a
+//! `throng render` process rendering one layer of a shot (one farm task).
+//! The layer budget (`layers --budget`, the manifest's `memory_bytes`) and
+//! the farm plan (Slurm `--mem`) both read it, so each part is counted once:
+//! the process, the loaded shot, the library and the BLASes one frame
+//! traces, the traced instances, the film with its AOVs, Cryptomatte and EXR
+//! encoding, and, when the shot renders with a shutter, the shutter's poses,
+//! deforming BLASes and motion records.
+//!
+//! Calibrated against the measured peak RSS of real renders (docs/benchmarks.md,
+//! "One memory model"; `examples/budget_bench.rs --cases` measures them):
+//! every constant is rounded up from what was measured, so an estimate errs
+//! high, by little.
+
+use std::collections::BTreeSet;
+use std::sync::Arc;
+
+use crate::casting::{AgentDress, AgentPose, Lod, ShotCrowd};
+use crate::error::Result;
+
+/// Bytes of a render process before it loads a shot: the binary's resident
+/// pages, allocator arenas, the worker threads.
+pub const PROCESS_BYTES: u64 = 17_000_000;
+/// Bytes per agent of the shot that every render holds, in its layer or
+/// not: its casting, dressing, the cache's records and the frame's sample.
+pub const AGENT_LOADED_BYTES: u64 = 500;
+/// Bytes per part (at full LOD) of every agent of the shot, in its layer or
+/// not: its cast slot and dressed part.
+pub const PART_LOADED_BYTES: u64 = 100;
+/// Bytes per traced instance: its scene record, TLAS record and build
+/// scratch, Cryptomatte ids.
+pub const INSTANCE_BYTES: u64 = 380;
+/// Extra bytes per traced instance with a shutter: its close key and
+/// deformation, and the TLAS's motion bounds.
+pub const MOTION_INSTANCE_BYTES: u64 = 280;
+/// BLAS bytes per triangle: the 8-wide nodes, the precomputed triangle, the
+/// index arrays, and the build's scratch.
+pub const BLAS_BYTES_PER_TRIANGLE: u64 = 170;
+/// Deforming-BLAS bytes per triangle (a skinned mesh blending between two
+/// pose steps): both keys' vertices, nodes over their union, build scratch.
+pub const DEFORM_BYTES_PER_TRIANGLE: u64 = 195;
+/// Bytes per pixel of the image: the film and its AOVs, Cryptomatte ranks
+/// of three types, tile results and the EXR channels being encoded.
+pub const PIXEL_BYTES: u64 = 590;
+/// Extra bytes per pixel with a shutter: the motion-vector AOV and its channels.
+pub const MOTION_PIXEL_BYTES: u64 = 30;
+
+/// What every layer render of a shot holds whatever its agents, as counts;
+/// [`RenderFloor::bytes`] prices them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RenderFloor {
+    /// Agents in the shot (every one is loaded, and posed, in every render).
+    pub agents: u64,
+    /// Parts of every agent at full LOD.
+    pub agent_parts: u64,
+    /// Geometry bytes of every mesh loaded (wardrobe parts, posed skins,
+    /// set), the shutter's poses included when blurred.
+    pub mesh_bytes: u64,
+    /// Texel bytes of every texture loaded.
+    pub texture_bytes: u64,
+    /// Triangles of the meshes one frame traces (rigid parts, proxy box and
+    /// set, and the poses its agents at full LOD play): the most of any shot
+    /// frame, since a render keeps only the current frame's BLASes.
+    pub triangles: u64,
+    /// Triangles of the deforming BLASes that frame traces (blurred only).
+    pub deform_triangles: u64,
+    /// The set's instances.
+    pub set_instances: u64,
+    /// Pixels of the image.
+    pub pixels: u64,
+    /// Rendered with a shutter (motion blur).
+    pub blurred: bool,
+}
+
+impl RenderFloor {
+    /// The floor's bytes: process, loaded shot, library, the frame's BLASes,
+    /// the set's instances and the film.
+    pub fn bytes(&self) -> u64 {
+        PROCESS_BYTES
+            .saturating_add(self.agents.saturating_mul(AGENT_LOADED_BYTES))
+            .saturating_add(self.agent_parts.saturating_mul(PART_LOADED_BYTES))
+            .saturating_add(self.mesh_bytes)
+            .saturating_add(self.texture_bytes)
+            .saturating_add(blas_bytes(self.triangles, self.deform_triangles))
+            .saturating_add(instance_bytes(self.set_instances, self.blurred))
+            .saturating_add(film_bytes(self.pixels, self.blurred))
+    }
+
+    /// The floor of `crowd` rendered with `shutter` (`None`: still frames)
+    /// at `pixels`, where `full(agent id, shot frame)` says whether an agent
+    /// renders at full LOD at a frame (the manifest's LOD; only those trace
+    /// their skinned poses). The crowd may be posed for still frames only: a
+    /// shutter's poses are counted from the steps it needs.
+    pub fn of<C>(
+        crowd: &ShotCrowd<C>,
+        shutter: Option<[f32; 2]>,
+        pixels: u64,
+        full: impl Fn(u32, i32) -> bool,
+    ) -> Result<RenderFloor> {
+        let lib = crowd.library();
+        let skins = crowd.poses().skins();
+        let tris = |m: u32| lib.meshes.get(m as usize).map_or(0, |m| m.triangle_count() as u64);
+        // Rigid parts, proxy boxes and the set: traced whatever the frame.
+        let mut fixed: BTreeSet<u32> = BTreeSet::new();
+        fixed.insert(crowd.dressing().proxy_mesh());
+        fixed.extend(crowd.set().iter().map(|i| i.mesh));
+        let mut agent_parts = 0u64;
+        for (id, dress) in crowd.dressing().iter() {
+            if let AgentDress::Slots(parts) = dress {
+                fixed.extend(parts.iter().map(|p| p.mesh));
+            }
+            agent_parts += crowd.instance_count(id, Lod::Full) as u64;
+        }
+        let fixed_tris: u64 = fixed.iter().map(|&m| tris(m)).sum();
+        // A skinned piece's poses share its topology: price them by any one.
+        let piece = |rig: &Arc<str>, p: usize| skins.first_mesh(rig, p).and_then(|m| lib.meshes.get(m as usize));
+        let worn = crowd.dressing().worn_pieces(crowd.casting());
+        let pieces_of = |id: u32| match crowd.dressing().get(id) {
+            Some(AgentDress::Skinned(pieces)) => pieces.iter().map(|d| d.piece).collect(),
+            _ => Vec::new(),
+        };
+        let mut mesh_bytes: u64 = lib.meshes.iter().map(|m| m.bytes() as u64).sum();
+        let (mut triangles, mut deform_triangles) = (fixed_tris, 0u64);
+        let mut shutter_poses: BTreeSet<(Arc<str>, usize, u32)> = BTreeSet::new();
+        let shot = crowd.shot();
+        for f in shot.frames.iter() {
+            // (rig, piece, cycle, step) traced, and deforming (.., open step, close step).
+            let mut traced: BTreeSet<(Arc<str>, usize, usize, u32)> = BTreeSet::new();
+            let mut deform: BTreeSet<(Arc<str>, usize, usize, u32, u32)> = BTreeSet::new();
+            match shutter {
+                None => {
+                    let Ok(block) = crowd.agents_at(f) else { continue };
+                    for a in block.agents.iter().filter(|a| crowd.renders(a) && full(a.id, f)) {
+                        let Some(cast) = crowd.cast(a.id) else { continue };
+                        if crowd.rigs().skinned(&cast.rig).is_none() {
+                            continue;
+                        }
+                        if let Ok(AgentPose::Skinned { cycle, step, .. }) = crowd.agent_pose(a) {
+                            for p in pieces_of(a.id) {
+                                traced.insert((cast.rig.clone(), p, cycle, step));
+                            }
+                        }
+                    }
+                }
+                Some(s) => {
+                    let keys = crate::casting::motion::shutter_keys_at(
+                        shot,
+                        crowd.cache(),
+                        crowd.casting(),
+                        crowd.rigs(),
+                        f,
+                        s,
+                    )?;
+                    for (id, (rig, cycle, k0), (_, _, k1)) in keys {
+                        // Every step is posed (the library); only full agents trace theirs.
+                        shutter_poses.insert((rig.clone(), cycle, k0));
+                        shutter_poses.insert((rig.clone(), cycle, k1));
+                        if !full(id, f) {
+                            continue;
+                        }
+                        for p in pieces_of(id) {
+                            traced.insert((rig.clone(), p, cycle, k0));
+                            if k0 != k1 {
+                                deform.insert((rig.clone(), p, cycle, k0, k1));
+                            }
+                        }
+                    }
+                }
+            }
+            let t = fixed_tris
+                + traced.iter().map(|(r, p, ..)| piece(r, *p).map_or(0, |m| m.triangle_count() as u64)).sum::<u64>();
+            let d = deform.iter().map(|(r, p, ..)| piece(r, *p).map_or(0, |m| m.triangle_count() as u64)).sum::<u64>();
+            if blas_bytes(t, d) > blas_bytes(triangles, deform_triangles) {
+                (triangles, deform_triangles) = (t, d);
+            }
+        }
+        // A shutter's steps not posed yet: every worn piece of its rig is posed at each.
+        for (rig, cycle, step) in &shutter_poses {
+            for &p in worn.get(rig).into_iter().flatten() {
+                if skins.mesh(rig, p, *cycle, *step).is_none() {
+                    mesh_bytes += piece(rig, p).map_or(0, |m| m.bytes() as u64);
+                }
+            }
+        }
+        Ok(RenderFloor {
+            agents: crowd.casting().len() as u64,
+            agent_parts,
+            mesh_bytes,
+            texture_bytes: lib.textures.iter().map(|t| t.texels.len() as u64 * 16).sum(),
+            triangles,
+            deform_triangles,
+            set_instances: crowd.set().len() as u64,
+            pixels,
+            blurred: shutter.is_some(),
+        })
+    }
+}
+
+/// BLAS bytes of `triangles` still and `deform_triangles` deforming triangles.
+pub fn blas_bytes(triangles: u64, deform_triangles: u64) -> u64 {
+    triangles
+        .saturating_mul(BLAS_BYTES_PER_TRIANGLE)
+        .saturating_add(deform_triangles.saturating_mul(DEFORM_BYTES_PER_TRIANGLE))
+}
+
+/// Bytes of `instances` traced instances (an agent's parts or proxy boxes,
+/// or the set's), with motion records when `blurred`.
+pub fn instance_bytes(instances: u64, blurred: bool) -> u64 {
+    let each = if blurred { INSTANCE_BYTES + MOTION_INSTANCE_BYTES } else { INSTANCE_BYTES };
+    instances.saturating_mul(each)
+}
+
+/// Bytes of the film of `pixels` pixels, with motion vectors when `blurred`.
+pub fn film_bytes(pixels: u64, blurred: bool) -> u64 {
+    let each = if blurred { PIXEL_BYTES + MOTION_PIXEL_BYTES } else { PIXEL_BYTES };
+    pixels.saturating_mul(each)
+}
+
+/// A layer render's estimate `bytes` made at `from` pixels, rendered at `to`
+/// pixels instead (the farm plan's `--resolution`): only the film changes.
+pub fn at_pixels(bytes: u64, from: u64, to: u64, blurred: bool) -> u64 {
+    bytes.saturating_sub(film_bytes(from, blurred)).saturating_add(film_bytes(to, blurred))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_floor_prices_each_part_once() {
+        let f = RenderFloor {
+            agents: 10,
+            agent_parts: 40,
+            mesh_bytes: 1_000,
+            texture_bytes: 2_000,
+            triangles: 100,
+            deform_triangles: 50,
+            set_instances: 3,
+            pixels: 64,
+            blurred: false,
+        };
+        let want = PROCESS_BYTES
+            + 10 * AGENT_LOADED_BYTES
+            + 40 * PART_LOADED_BYTES
+            + 3_000
+            + 100 * BLAS_BYTES_PER_TRIANGLE
+            + 50 * DEFORM_BYTES_PER_TRIANGLE
+            + 3 * INSTANCE_BYTES
+            + 64 * PIXEL_BYTES;
+        assert_eq!(f.bytes(), want);
+        let b = RenderFloor { blurred: true, ..f };
+        assert_eq!(b.bytes() - f.bytes(), 3 * MOTION_INSTANCE_BYTES + 64 * MOTION_PIXEL_BYTES);
+        // Another image size moves only the film.
+        let big = RenderFloor { pixels: 6400, ..f };
+        assert_eq!(at_pixels(f.bytes(), 64, 6400, false), big.bytes());
+        assert_eq!(at_pixels(big.bytes(), 6400, 64, false), f.bytes());
+    }
+}
