@@ -211,7 +211,15 @@ fn export_reopens_with_shared_meshes() {
     assert_eq!(doc.meshes().count(), s.meshes);
     assert!(doc.meshes().count() * 5 < mesh_nodes, "{} meshes for {mesh_nodes} nodes", doc.meshes().count());
     assert_eq!(doc.cameras().count(), 1);
-    assert!(doc.lights().is_some_and(|l| l.count() == 1));
+    // The demo's four lamp globes (sphere lights) as points; its dome has no glTF form.
+    let lights: Vec<_> = doc.lights().expect("KHR_lights_punctual").collect();
+    assert_eq!(lights.len(), 4);
+    for l in &lights {
+        assert!(matches!(l.kind(), gltf::khr_lights_punctual::Kind::Point), "{:?}", l.name());
+        // pi r^2 L x 683 cd per W/sr: radius 0.16, radiance 30.
+        let want = std::f32::consts::PI * 0.16 * 0.16 * 30.0 * 683.0;
+        assert!((l.intensity() - want).abs() < 1e-3 * want, "{} cd", l.intensity());
+    }
 }
 
 /// Casting runs in parallel: one worker or several, every agent's casting

@@ -378,8 +378,24 @@ pub fn rotation_looking_along(forward: [f32; 3], up: [f32; 3]) -> [f32; 4] {
     q.to_array()
 }
 
+/// The kind of a KHR_lights_punctual light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PunctualKind {
+    /// A sun: lux, down the node's -Z.
+    Directional,
+    /// A point: candela.
+    Point,
+    /// A spot: candela on its axis, cone angles in radians from it.
+    Spot {
+        /// Where the edge's falloff begins.
+        inner: f32,
+        /// Where it ends.
+        outer: f32,
+    },
+}
+
 /// Builds a .glb in memory. Add meshes, materials, nodes, animations, a
-/// camera and a sun, then call [`GlbBuilder::finish`] or [`GlbBuilder::write`].
+/// camera and lights, then call [`GlbBuilder::finish`] or [`GlbBuilder::write`].
 /// Nodes that are nobody's child become the roots of the single scene.
 #[derive(Debug)]
 pub struct GlbBuilder {
@@ -765,10 +781,24 @@ impl GlbBuilder {
     }
 
     /// Adds a KHR_lights_punctual directional light on a new node; the light
-    /// shines down the node's local -Z. `intensity` is written as given.
+    /// shines down the node's local -Z. `intensity` (lux) is written as given.
     pub fn add_sun(&mut self, node: NodeDesc, color: [f32; 3], intensity: f32) -> Result<NodeId> {
+        self.add_light(node, PunctualKind::Directional, color, intensity)
+    }
+
+    /// Adds a KHR_lights_punctual light of `kind` on a new node (spots and
+    /// directional lights shine down the node's local -Z); `intensity` (lux
+    /// or candela, as the extension defines) is written as given.
+    pub fn add_light(&mut self, node: NodeDesc, kind: PunctualKind, color: [f32; 3], intensity: f32) -> Result<NodeId> {
         use json::extensions::scene::khr_lights_punctual as klp;
         const EXT: &str = "KHR_lights_punctual";
+        let (type_, spot) = match kind {
+            PunctualKind::Directional => (klp::Type::Directional, None),
+            PunctualKind::Point => (klp::Type::Point, None),
+            PunctualKind::Spot { inner, outer } => {
+                (klp::Type::Spot, Some(klp::Spot { inner_cone_angle: inner, outer_cone_angle: outer }))
+            }
+        };
         let lights = &mut self
             .root
             .extensions
@@ -783,8 +813,8 @@ impl GlbBuilder {
             intensity,
             name: Some(node.name.clone()),
             range: None,
-            spot: None,
-            type_: Checked::Valid(klp::Type::Directional),
+            spot,
+            type_: Checked::Valid(type_),
         });
         let light = json::Index::new((lights.len() - 1) as u32);
         if !self.root.extensions_used.iter().any(|e| e == EXT) {

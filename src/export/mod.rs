@@ -13,8 +13,10 @@ use glam::{Affine3A, Mat4};
 
 use crate::casting::{Lod, ShotCrowd};
 use crate::error::Result;
+use crate::scene::lights::LightKind;
 use crate::scene::{vis, Instance, Library, MaterialId, MeshId};
 use glb::{GlbBuilder, MaterialDesc, MeshData, NodeDesc, Perspective, Transform};
+use std::f32::consts::PI;
 
 /// What an export wrote.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -141,7 +143,7 @@ pub fn export_frame(crowd: &ShotCrowd, frame: i32, only: Option<&BTreeSet<u32>>,
         w.glb.add_node(NodeDesc::new("set").children(children))?;
     }
 
-    // Camera and sun.
+    // Camera and lights.
     let camera = crowd.camera(frame)?;
     let (_, rot, pos) = camera.world_from_camera.to_scale_rotation_translation();
     let mut cam_node = NodeDesc::new("shotcam");
@@ -160,6 +162,27 @@ pub fn export_frame(crowd: &ShotCrowd, frame: i32, only: Option<&BTreeSet<u32>>,
             scale: [1.0; 3],
         };
         w.glb.add_sun(node, colour, peak * LUX_PER_WATT)?;
+    }
+    // The shot's points, spots and spheres as KHR_lights_punctual (W/sr x
+    // 683 = candela; a sphere as the point of its intensity, pi r^2 L). Rects,
+    // discs and the dome have no glTF form: the USD export carries them.
+    for light in &crowd.lights().local {
+        let (kind, intensity) = match light.kind {
+            LightKind::Point => (glb::PunctualKind::Point, light.emission),
+            LightKind::Spot { outer, blend } => {
+                (glb::PunctualKind::Spot { inner: outer * (1.0 - blend), outer }, light.emission)
+            }
+            LightKind::Sphere { radius } => (glb::PunctualKind::Point, light.emission * (PI * radius * radius)),
+            _ => continue,
+        };
+        let peak = intensity.max_element();
+        if !(peak > 0.0) {
+            continue;
+        }
+        let (_, rot, pos) = light.world_from_light.to_scale_rotation_translation();
+        let mut node = NodeDesc::new(light.name.clone());
+        node.transform = Transform::Trs { translation: pos.to_array(), rotation: rot.to_array(), scale: [1.0; 3] };
+        w.glb.add_light(node, kind, (intensity / peak).to_array(), peak * LUX_PER_WATT)?;
     }
     let summary =
         ExportSummary { agents, mesh_nodes: w.mesh_nodes, meshes: w.meshes.len(), instanced_triangles: w.triangles };
