@@ -566,17 +566,21 @@ fn set_object_mattes_cover_exactly_their_object() {
 #[test]
 fn set_objects_are_named_from_the_glb_nodes() {
     // The demo set: every node with a mesh is an object named after it
-    // (the four benches share one mesh and keep their own names).
+    // (the four benches share one mesh and keep their own names, as do the
+    // four lamps): floor, 7 buildings, 3 shop fronts, 4 lamps, 4 benches.
     let mut assets = throng::scene::gltf::AssetCache::new();
     let set = concat!(env!("CARGO_MANIFEST_DIR"), "/demo/set/set.glb");
     let (placed, names) = assets.load_scene_objects(set).unwrap();
-    assert_eq!(names.len(), 12, "{names:?}");
+    assert_eq!(names.len(), 19, "{names:?}");
     assert_eq!(names[0], "floor");
     assert!(names.contains(&"bench_3".to_string()) && names.contains(&"building_back_mid".to_string()), "{names:?}");
     assert!(placed.iter().all(|p| (p.3 as usize) < names.len()));
     let benches: BTreeSet<u32> =
         placed.iter().filter(|p| names[p.3 as usize].starts_with("bench_")).map(|p| p.3).collect();
     assert_eq!(benches.len(), 4);
+    let lamps: BTreeSet<u32> =
+        placed.iter().filter(|p| names[p.3 as usize].starts_with("lamp_")).map(|p| p.3).collect();
+    assert_eq!(lamps.len(), 4);
     // The placed primitives are the ones load_scene_instances gives.
     let plain = assets.load_scene_instances(set).unwrap();
     assert_eq!(plain.len(), placed.len());

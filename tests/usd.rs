@@ -72,8 +72,12 @@ fn demo_exports_and_reads_back_through_openusd() {
     assert!((focal - 0.35).abs() < 1e-6, "focal {focal}");
     let ha: f32 = stage.attribute(path("/World/shotcam.horizontalAperture")).get().unwrap().unwrap();
     assert!((ha - 0.36).abs() < 1e-6, "aperture {ha}");
-    assert_eq!(stage.prim(path("/World/Lights/sun")).type_name().unwrap().unwrap().as_str(), "DistantLight");
-    assert_eq!(stage.prim(path("/World/Lights/sky")).type_name().unwrap().unwrap().as_str(), "DomeLight");
+    // The demo is lit by its HDRI dome and the four lamp globes.
+    assert_eq!(stage.prim(path("/World/Lights/dome")).type_name().unwrap().unwrap().as_str(), "DomeLight");
+    for lamp in ["lamp_1", "lamp_2", "lamp_3", "lamp_4"] {
+        let prim = stage.prim(path(&format!("/World/Lights/{lamp}")));
+        assert_eq!(prim.type_name().unwrap().unwrap().as_str(), "SphereLight", "{lamp}");
+    }
 }
 
 #[test]
@@ -151,6 +155,7 @@ fn shot_until(dir: &Path, cache: &Path, end: i32) -> PathBuf {
         .replace("\"../wardrobes/", &format!("\"{}/", repo_path("wardrobes").display()))
         .replace("\"rigs/", &format!("\"{}/rigs/", demo.display()))
         .replace("\"set/", &format!("\"{}/set/", demo.display()))
+        .replace("\"hdri/", &format!("\"{}/hdri/", demo.display()))
         .replace("path = \"cache/demo.crowd\"", &format!("path = \"{}\"", cache.display()))
         .replace("end = 1048", &format!("end = {end}"));
     let p = dir.join("usd_shot.toml");

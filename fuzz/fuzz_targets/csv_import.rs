@@ -9,7 +9,7 @@
 use libfuzzer_sys::fuzz_target;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
-use throng::cache::tabular::{self, Column, Preset, TabularOptions};
+use throng::cache::tabular::{self, Column, ColumnChoices, Preset, TabularOptions};
 use throng::cache::{Import, TabularSpec};
 
 fn file() -> &'static Path {
@@ -27,14 +27,14 @@ fn layouts() -> &'static [TabularOptions] {
             .collect();
         let name = |role: &str, col: &str| (role.to_string(), Some(Column::Name(col.into())));
         let spec = TabularSpec {
-            columns: vec![
+            columns: ColumnChoices(vec![
                 name("frame", "frame"),
                 name("id", "agent_id"),
                 name("x", "x"),
                 name("y", "y"),
                 name("z", "z"),
                 name("heading", "heading_radians"),
-            ],
+            ]),
             source_fps: Some(25.0),
             ..Default::default()
         };

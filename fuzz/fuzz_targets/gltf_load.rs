@@ -40,5 +40,5 @@ fuzz_target!(|data: &[u8]| {
     for name in &nodes {
         let _ = assets.find_camera(path, name);
     }
-    let _ = assets.directional_lights(path);
+    let _ = assets.punctual_lights(path);
 });

@@ -638,6 +638,11 @@ impl<'a> Integrator<'a> {
             let tmax = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
             if let Some(light) = self.lights.hit_sized(origin, dir, tmax, camera) {
                 if camera {
+                    // A visible lamp is the set's: crowd layers hold it out
+                    // (empty, alpha 0, like set geometry), so the stack shows it once.
+                    if !self.settings.sky_visible {
+                        return SampleResult { z: f32::INFINITY, ..Default::default() };
+                    }
                     radiance += light.radiance;
                     out.alpha = 1.0;
                 } else {
