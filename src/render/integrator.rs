@@ -24,6 +24,9 @@ const RR_START: u32 = 3;
 /// Sampler dimensions used per bounce (light point 2, lobe 1, direction 2,
 /// roulette 1, light pick 1, glass-or-not pick 1).
 const DIMS_PER_BOUNCE: u32 = 8;
+/// The extra stream (`Sampler::extra_light`) that picks the light group at
+/// vertices after the camera's; past any group index.
+const GROUP_PICK_STREAM: u32 = 7;
 /// Pixel filter: a radially truncated Gaussian, importance-sampled exactly.
 pub(crate) const FILTER_RADIUS: f32 = 1.5;
 const FILTER_SIGMA: f32 = 0.5;
@@ -623,6 +626,9 @@ impl<'a> Integrator<'a> {
         let mut radiance = Vec3::ZERO;
         let mut throughput = Vec3::ONE;
         let mut prev_bsdf_pdf = 0.0f32;
+        // The chance the last vertex's next-event estimation sampled a given
+        // light's group (1 at the camera vertex, which samples every group).
+        let mut prev_group_pick = 1.0f32;
         // The last bounce was a delta lobe (glass): what the ray finds has MIS weight 1.
         let mut prev_delta = false;
         // Absorption per metre of the volume the ray travels in (zero: none).
@@ -649,7 +655,7 @@ impl<'a> Integrator<'a> {
                     if medium != Vec3::ZERO {
                         throughput *= transmittance(medium, light.t);
                     }
-                    let weight = bsdf_weight(prev_delta, prev_bsdf_pdf, light.pdf);
+                    let weight = bsdf_weight(prev_delta, prev_bsdf_pdf, light.pdf * prev_group_pick);
                     radiance += self.clamp_indirect(throughput * light.radiance * weight);
                 }
                 break;
@@ -674,11 +680,11 @@ impl<'a> Integrator<'a> {
                     }
                 } else {
                     let mut escaped = match self.lights.dome(dir) {
-                        Some((l, pdf)) => l * bsdf_weight(prev_delta, prev_bsdf_pdf, pdf),
+                        Some((l, pdf)) => l * bsdf_weight(prev_delta, prev_bsdf_pdf, pdf * prev_group_pick),
                         None => self.scene.lights.sky.radiance,
                     };
                     if let Some(sun) = self.lights.sun().filter(|s| s.contains(dir)) {
-                        let pdf = sun.pdf() * self.lights.sun_pick();
+                        let pdf = sun.pdf() * self.lights.sun_pick() * prev_group_pick;
                         escaped += sun.radiance() * bsdf_weight(prev_delta, prev_bsdf_pdf, pdf);
                     }
                     radiance += self.clamp_indirect(throughput * escaped);
@@ -706,7 +712,8 @@ impl<'a> Integrator<'a> {
                     radiance += surface.emission;
                 } else {
                     // Weighted against NEE's choice of this point (weight 1 where NEE never samples it).
-                    let pdf = self.lights.triangle_pdf(hit.instance, hit.triangle, hit.t, surface.cos_front);
+                    let pdf = self.lights.triangle_pdf(hit.instance, hit.triangle, hit.t, surface.cos_front)
+                        * prev_group_pick;
                     let weight = if pdf > 0.0 { bsdf_weight(prev_delta, prev_bsdf_pdf, pdf) } else { 1.0 };
                     radiance += self.clamp_indirect(throughput * surface.emission * weight);
                 }
@@ -782,11 +789,21 @@ impl<'a> Integrator<'a> {
                     if glass_weight > 0.0 { surface.metallic / (1.0 - glass_weight) } else { surface.metallic };
                 Bsdf::with_ior(surface.base_color, metallic, surface.roughness, material.ior)
             };
-            // Next-event estimation: one shadow ray to one light of each
-            // group (render::lights). The first group draws from this
-            // bounce's dimensions (its pick only among several lights), the
-            // others from streams of their own.
-            for (g, &group) in self.lights.groups().iter().enumerate() {
+            // Next-event estimation: at the camera vertex one shadow ray to
+            // one light of each group (render::lights), where the noise
+            // shows; at later vertices, whose light is averaged over the
+            // bounce, one ray to one group picked uniformly. The first group
+            // draws from this bounce's dimensions (its pick only among
+            // several lights), the others from streams of their own.
+            let groups = self.lights.groups();
+            let (first, count) = if camera || groups.len() < 2 {
+                (0, groups.len())
+            } else {
+                let u = sampler.extra_light(GROUP_PICK_STREAM, depth).0;
+                (((u * groups.len() as f32) as usize).min(groups.len() - 1), 1)
+            };
+            let group_pick = if count == groups.len() { 1.0 } else { 1.0 / groups.len() as f32 };
+            for (g, &group) in groups.iter().enumerate().skip(first).take(count) {
                 let (u_pick, u_light) = if g == 0 {
                     let u_pick = if self.lights.needs_pick(group) {
                         sampler.set_dimension(base + 6);
@@ -820,11 +837,13 @@ impl<'a> Integrator<'a> {
                 let contribution = if ls.delta || depth >= self.settings.max_bounces {
                     f * wi_local.z * ls.radiance / ls.pdf
                 } else {
-                    let weight = power_heuristic(ls.pdf, bsdf.pdf(wo, wi_local));
+                    let weight = power_heuristic(ls.pdf * group_pick, bsdf.pdf(wo, wi_local));
                     f * wi_local.z * ls.radiance * (weight / ls.pdf)
                 };
                 let contribution = throughput * contribution;
-                radiance += if camera { contribution } else { self.clamp_indirect(contribution) };
+                // Clamped before the pick's 1 / probability, so the clamp takes
+                // what it took with a ray to every group.
+                radiance += if camera { contribution } else { self.clamp_indirect(contribution) / group_pick };
             }
             sampler.set_dimension(base + 2);
 
@@ -840,6 +859,7 @@ impl<'a> Integrator<'a> {
             }
             throughput *= bs.weight;
             prev_bsdf_pdf = bs.pdf;
+            prev_group_pick = group_pick;
             prev_delta = false;
             if depth + 1 >= RR_START {
                 // eta_scale is 1 but inside glass: the same bits as without it.
