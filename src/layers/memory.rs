@@ -8,7 +8,7 @@
 //! deforming BLASes and motion records.
 //!
 //! Calibrated against the measured peak RSS of real renders (docs/benchmarks.md,
-//! "One memory model"; `examples/budget_bench.rs --cases` measures them):
+//! section One memory model; the `budget_bench` example measures them):
 //! every constant is rounded up from what was measured, so an estimate errs
 //! high, by little.
 
