@@ -592,3 +592,21 @@ camera_visible = true
         assert_eq!(exr_files(dir.path()), 0);
     }
 }
+
+/// A farm task names the shot by another path than a local render (absolute
+/// against relative): the dome's texels are fingerprinted, not its path, so
+/// `--resume` and the farm's byte-identity hold for a dome-lit shot.
+#[test]
+fn the_render_fingerprint_does_not_depend_on_how_the_shot_is_named() {
+    use throng::casting::ShotCrowd;
+    use throng::render::job::{render_fingerprint, RenderJob};
+    let root = common::repo_path("demo/shot.toml");
+    let detour = common::repo_path("demo/../demo/shot.toml");
+    let fingerprint = |shot: &std::path::Path| {
+        let crowd = ShotCrowd::load(shot).expect("the demo loads");
+        assert!(crowd.shot().lights.dome.is_some(), "the demo is lit by a dome");
+        let job = RenderJob::new(vec!["full".into()], vec![1024], 1, std::env::temp_dir());
+        render_fingerprint(&crowd, None, &job, "full")
+    };
+    assert_eq!(fingerprint(&root), fingerprint(&detour));
+}
