@@ -123,6 +123,20 @@ impl Fingerprinter {
         })
     }
 
+    /// Feeds the field `name` with numbers, little-endian, streamed (the
+    /// same bytes as [`Fingerprinter::bytes`] of them all, never held: a
+    /// dome's millions of texels are not copied).
+    pub(crate) fn floats(&mut self, name: &str, values: impl IntoIterator<Item = f32>) -> &mut Self {
+        self.named(name, |f| {
+            let mut n = 0u64;
+            for v in values {
+                f.put(&v.to_le_bytes());
+                n += 4;
+            }
+            n
+        })
+    }
+
     /// Feeds the field `name` with text.
     pub(crate) fn text(&mut self, name: &str, value: &str) -> &mut Self {
         self.bytes(name, value.as_bytes())
@@ -182,6 +196,15 @@ impl Fingerprinter {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn streamed_floats_hash_as_their_bytes() {
+        let values = [1.5f32, -0.0, 3e9, f32::MIN_POSITIVE];
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let (mut a, mut b) = (Fingerprinter::new(), Fingerprinter::new());
+        assert_eq!(a.floats("dome", values).finish(), b.bytes("dome", &bytes).finish());
+        assert_ne!(a.finish(), Fingerprinter::new().floats("dome", [1.5f32]).finish());
+    }
 
     #[test]
     fn fnv1a64_matches_the_published_test_vectors() {

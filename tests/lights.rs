@@ -165,18 +165,22 @@ fn rect_irradiance(l: f32, p: Vec3, w: f32, h: f32, d: f32) -> f32 {
     piece(x1, z1) - piece(x0, z1) - piece(x1, z0) + piece(x0, z0)
 }
 
-#[test]
-fn a_constant_dome_gives_albedo_times_radiance() {
-    let dome = Dome {
+/// A 16 x 8 dome of constant `radiance`, turned by `rotate` radians.
+fn constant_dome(radiance: f32, rotate: f32) -> Arc<Dome> {
+    Arc::new(Dome {
         file: "constant".into(),
         width: 16,
         height: 8,
-        texels: vec![Vec3::splat(2.0); 128],
+        texels: vec![Vec3::splat(radiance); 128],
         scale: Vec3::ONE,
-        rotate: 0.3,
+        rotate,
         camera_visible: true,
-    };
-    let lights = SceneLights { dome: Some(Arc::new(dome)), ..local(vec![]) };
+    })
+}
+
+#[test]
+fn a_constant_dome_gives_albedo_times_radiance() {
+    let lights = SceneLights { dome: Some(constant_dome(2.0, 0.3)), ..local(vec![]) };
     let (lib, scene) = floor_scene(lights, vec![]);
     let film = render(&lib, &scene, 16, 2);
     assert_matches(&film, |_| ALBEDO * 2.0, 0.02, "constant dome");
@@ -186,18 +190,10 @@ fn a_constant_dome_gives_albedo_times_radiance() {
 /// the dome's and the lamp's irradiance add up, each as alone.
 #[test]
 fn a_dome_and_a_point_light_add_up() {
-    let dome = Dome {
-        file: "constant".into(),
-        width: 16,
-        height: 8,
-        texels: vec![Vec3::splat(0.5); 128],
-        scale: Vec3::ONE,
-        rotate: 0.0,
-        camera_visible: true,
-    };
     let (i, h) = (30.0, 2.0);
     let p0 = Vec3::new(-0.3, h, 0.5);
-    let lights = SceneLights { dome: Some(Arc::new(dome)), ..local(vec![light(LightKind::Point, p0, -Vec3::Y, i)]) };
+    let lamp = light(LightKind::Point, p0, -Vec3::Y, i);
+    let lights = SceneLights { dome: Some(constant_dome(0.5, 0.0)), ..local(vec![lamp]) };
     let (lib, scene) = floor_scene(lights, vec![]);
     let film = render(&lib, &scene, 16, 2);
     let expected = |p: Vec3| {

@@ -224,8 +224,12 @@ impl DeformBlas {
     }
 }
 
-/// As [`intersect_triangle`], also giving the barycentrics (u, v) of the hit.
-#[inline]
+/// Möller-Trumbore on obvhs' `RtTriangle` layout, as `RtTriangle::intersect`
+/// but with comparisons instead of sign-bit tests: obvhs rejects barycentrics
+/// of -0.0, so a ray exactly on the shared edge of two triangles (an
+/// axis-aligned ray on a box's face diagonal) missed both and went through.
+/// Gives the distance and the barycentrics (u, v) of the hit.
+#[inline(always)]
 fn hit_triangle(tri: &RtTriangle, ray: &Ray) -> Option<(f32, Vec2)> {
     let c = tri.v0 - ray.origin;
     let r = ray.direction.cross(c);
@@ -293,24 +297,11 @@ fn ray_key(r: &Ray, instance: u32) -> u32 {
     hash_words(&[o.x, o.y, o.z, d.x, d.y, d.z].map(f32::to_bits)) ^ hash_words(&[instance])
 }
 
-/// Möller-Trumbore on obvhs' `RtTriangle` layout, as `RtTriangle::intersect`
-/// but with comparisons instead of sign-bit tests: obvhs rejects barycentrics
-/// of -0.0, so a ray exactly on the shared edge of two triangles (an
-/// axis-aligned ray on a box's face diagonal) missed both and went through.
+/// The distance to `tri` along `ray` ([`hit_triangle`]), infinite on a miss:
+/// what obvhs' traversal takes.
 #[inline(always)]
 fn intersect_triangle(tri: &RtTriangle, ray: &Ray) -> f32 {
-    let c = tri.v0 - ray.origin;
-    let r = ray.direction.cross(c);
-    let inv_det = 1.0 / tri.ng.dot(ray.direction);
-    let u = r.dot(tri.e2) * inv_det;
-    let v = r.dot(tri.e1) * inv_det;
-    if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && inv_det.is_finite() {
-        let t = tri.ng.dot(c) * inv_det;
-        if t >= ray.tmin && t <= ray.tmax {
-            return t;
-        }
-    }
-    f32::INFINITY
+    hit_triangle(tri, ray).map_or(f32::INFINITY, |(t, _)| t)
 }
 
 /// One BLAS per [`Library::meshes`] entry, indexed by `MeshId`, each built

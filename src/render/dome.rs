@@ -40,8 +40,11 @@ const SUN_CONTRAST: f64 = 50.0;
 /// ... if together they span at most this solid angle (sr; the real sun is
 /// 6.8e-5, a 1k map's sun with its bilinear spread about 1e-3) ...
 const SUN_MAX_SOLID_ANGLE: f64 = 0.02;
-/// ... and carry at least this share of the dome's light.
+/// ... and carry at least this share of the dome's light; and are at most
+/// this many (a sun at the pole of a 16k map spans whole rows of tiny cells,
+/// and each sun cell costs 64 sub-cell weights).
 const SUN_MIN_SHARE: f64 = 0.2;
+const SUN_MAX_CELLS: usize = 4096;
 
 /// Each sun cell is sampled by [`SUN_SPLIT`] x [`SUN_SPLIT`] sub-cells of
 /// equal solid angle, weighted by the bilinear radiance at their centres:
@@ -75,14 +78,8 @@ pub struct DomeSampler {
     cos_theta: Vec<f64>,
     /// Solid angle of one cell of each row.
     cell_solid_angle: Vec<f64>,
-    /// Sum of all cell weights: the integral of luminance over the sphere.
-    total: f64,
-    /// Sum of the rest's cell weights.
-    rest_total: f64,
     /// The sun's cells, when the dome has a sun.
     sun: SunCells,
-    /// The parts with light: `[Sun, Rest]`, `[Rest]` or `[Sun]`.
-    parts: Vec<DomePart>,
 }
 
 impl DomeSampler {
@@ -142,23 +139,10 @@ impl DomeSampler {
             marginal_cdf,
             cos_theta,
             cell_solid_angle,
-            total: 0.0,
-            rest_total,
             sun: SunCells::default(),
-            parts: Vec::new(),
         };
+        // The sun's sub-cells are weighed by the bilinear lookup, so after the rest.
         sampler.sun = sampler.split_sun(sun_cells);
-        let sun_total = sampler.part_power(DomePart::Sun);
-        let mut parts = Vec::new();
-        if sun_total > 0.0 {
-            parts.push(DomePart::Sun);
-        }
-        if rest_total > 0.0 {
-            parts.push(DomePart::Rest);
-        }
-        // The parts share the cells, so their sums make the whole.
-        sampler.total = sun_total + rest_total;
-        sampler.parts = parts;
         sampler
     }
 
@@ -188,10 +172,16 @@ impl DomeSampler {
         SunCells { cells, cdf }
     }
 
-    /// The parts with light, each sampled on its own by
+    /// The parts with light, sun first, each sampled on its own by
     /// [`DomeSampler::sample_part`].
-    pub(crate) fn parts(&self) -> &[DomePart] {
-        &self.parts
+    pub(crate) fn parts(&self) -> impl Iterator<Item = DomePart> + '_ {
+        [DomePart::Sun, DomePart::Rest].into_iter().filter(|&p| self.part_power(p) > 0.0)
+    }
+
+    /// The integral of luminance over the sphere: the parts share the cells,
+    /// so their sums make the whole.
+    fn total(&self) -> f64 {
+        self.part_power(DomePart::Sun) + self.part_power(DomePart::Rest)
     }
 
     /// A part's integral of luminance over the sphere: its share of light
@@ -199,7 +189,8 @@ impl DomeSampler {
     pub(crate) fn part_power(&self, part: DomePart) -> f64 {
         match part {
             DomePart::Sun => self.sun.cdf.last().copied().unwrap_or(0.0),
-            DomePart::Rest => self.rest_total,
+            // The marginal's last running sum: every rest cell's weight.
+            DomePart::Rest => self.marginal_cdf.last().copied().unwrap_or(0.0),
         }
     }
 
@@ -211,9 +202,14 @@ impl DomeSampler {
 
     /// Map coordinates of a world direction (need not be unit length).
     pub(crate) fn uv(&self, dir: Vec3) -> Vec2 {
+        self.in_map(dir).1
+    }
+
+    /// A world direction in the dome's frame (unit) and its map coordinates.
+    fn in_map(&self, dir: Vec3) -> (Vec3, Vec2) {
         let d = self.dome_from_world(dir.normalize_or_zero());
         let u = (PI - (-d.z).atan2(d.x)) / (2.0 * PI);
-        Vec2::new(u, d.y.clamp(-1.0, 1.0).acos() / PI)
+        (d, Vec2::new(u, d.y.clamp(-1.0, 1.0).acos() / PI))
     }
 
     /// Radiance arriving from direction `dir` (W/(m^2 sr)): the bilinear
@@ -222,15 +218,24 @@ impl DomeSampler {
         self.lookup(self.uv(dir))
     }
 
+    /// [`DomeSampler::radiance`] and [`DomeSampler::part_pdf`] of `dir`,
+    /// mapping it once (what a ray escaping into the dome needs).
+    pub(crate) fn radiance_and_pdf(&self, dir: Vec3) -> (Vec3, DomePart, f32) {
+        let (d, uv) = self.in_map(dir);
+        let (part, pdf) = self.pdf_at(d, uv);
+        (self.lookup(uv), part, pdf)
+    }
+
     /// Samples a direction towards the whole dome from two uniform numbers
     /// in [0, 1): (direction, its radiance, its solid-angle pdf). None for a
     /// black dome. The parts in proportion to their light, so the density
     /// is the one distribution over every cell.
     pub fn sample(&self, u: Vec2) -> Option<(Vec3, Vec3, f32)> {
-        if self.total <= 0.0 {
+        let total = self.total();
+        if total <= 0.0 {
             return None;
         }
-        let sun_share = (self.part_power(DomePart::Sun) / self.total) as f32;
+        let sun_share = (self.part_power(DomePart::Sun) / total) as f32;
         let (part, u) = if u.y < sun_share {
             (DomePart::Sun, Vec2::new(u.x, u.y / sun_share))
         } else {
@@ -249,10 +254,11 @@ impl DomeSampler {
         let w = self.dome.width as usize;
         let (row, column, along_row, along_column) = match part {
             DomePart::Rest => {
-                if self.rest_total <= 0.0 {
+                let rest_total = self.part_power(DomePart::Rest);
+                if rest_total <= 0.0 {
                     return None;
                 }
-                let (row, along_row) = pick(&self.marginal_cdf, u.y as f64 * self.rest_total);
+                let (row, along_row) = pick(&self.marginal_cdf, u.y as f64 * rest_total);
                 let cdf = &self.row_cdf[row * w..(row + 1) * w];
                 let (column, along_column) = pick(cdf, u.x as f64 * cdf[w - 1]);
                 (row, column, along_row, along_column)
@@ -277,31 +283,36 @@ impl DomeSampler {
         let dir = self.world_from_dome(sin_theta as f32, cos_theta as f32, map_u);
         // The pdf and radiance a ray leaving in `dir` would find, so that the
         // two strategies of multiple importance sampling agree exactly.
-        let (found, pdf) = self.part_pdf(dir);
-        (found == part && pdf > 0.0).then(|| (dir, self.radiance(dir), pdf))
+        let (radiance, found, pdf) = self.radiance_and_pdf(dir);
+        (found == part && pdf > 0.0).then_some((dir, radiance, pdf))
     }
 
     /// Solid-angle density with which [`DomeSampler::sample`] picks `dir`.
     pub(crate) fn pdf(&self, dir: Vec3) -> f32 {
-        if self.total <= 0.0 {
+        let total = self.total();
+        if total <= 0.0 {
             return 0.0;
         }
         let (part, pdf) = self.part_pdf(dir);
-        (pdf as f64 * self.part_power(part) / self.total) as f32
+        (pdf as f64 * self.part_power(part) / total) as f32
     }
 
     /// The part of the dome in direction `dir`, and the solid-angle density
     /// with which [`DomeSampler::sample_part`] of that part picks it.
     pub(crate) fn part_pdf(&self, dir: Vec3) -> (DomePart, f32) {
+        let (d, uv) = self.in_map(dir);
+        self.pdf_at(d, uv)
+    }
+
+    /// [`DomeSampler::part_pdf`] of the dome-frame direction `d` at map coordinates `uv`.
+    fn pdf_at(&self, d: Vec3, uv: Vec2) -> (DomePart, f32) {
         let (w, h) = (self.dome.width as usize, self.dome.height as usize);
-        let uv = self.uv(dir);
         let column = ((uv.x * w as f32) as usize).min(w - 1);
         let row = ((uv.y * h as f32) as usize).min(h - 1);
         let i = row * w + column;
         let solid_angle = self.cell_solid_angle[row];
         if let Ok(k) = self.sun.cells.binary_search(&(i as u32)) {
             // The sub-cell: equal steps in u and in cos(theta) across the cell.
-            let d = self.dome_from_world(dir.normalize_or_zero());
             let (top, bottom) = (self.cos_theta[row], self.cos_theta[row + 1]);
             let down = ((d.y as f64 - top) / (bottom - top) * SUN_SPLIT as f64) as usize;
             let across = ((uv.x * w as f32 - column as f32) * SUN_SPLIT as f32) as usize;
@@ -311,11 +322,12 @@ impl DomeSampler {
             let sub_solid_angle = solid_angle / (SUN_SPLIT * SUN_SPLIT) as f64;
             return (DomePart::Sun, (weight / (total * sub_solid_angle)) as f32);
         }
-        if self.rest_total <= 0.0 {
+        let rest_total = self.part_power(DomePart::Rest);
+        if rest_total <= 0.0 {
             return (DomePart::Rest, 0.0);
         }
         let weight = self.row_cdf[i] - if column == 0 { 0.0 } else { self.row_cdf[i - 1] };
-        (DomePart::Rest, (weight / (self.rest_total * solid_angle)) as f32)
+        (DomePart::Rest, (weight / (rest_total * solid_angle)) as f32)
     }
 
     /// Dome (map) frame to world: turned by `rotate` about +Y.
@@ -350,7 +362,7 @@ impl DomeSampler {
 
 /// The dome's sun, if it has one: the cells brighter than [`SUN_CONTRAST`]
 /// times the mean radiance, when together they are small
-/// ([`SUN_MAX_SOLID_ANGLE`]) and carry much of the light ([`SUN_MIN_SHARE`]).
+/// ([`SUN_MAX_SOLID_ANGLE`], [`SUN_MAX_CELLS`]) and carry much of the light ([`SUN_MIN_SHARE`]).
 /// Sampled apart from the rest, a sunny dome gives sunlit surfaces the
 /// clean light of a sun lamp: a single distribution over both spends a
 /// random share of each pixel's samples on the sun.
@@ -365,7 +377,7 @@ fn find_sun(weights: &[f64], cell_solid_angle: &[f64], w: usize) -> Vec<u32> {
         let omega = cell_solid_angle[i / w];
         if weight > bright * omega {
             solid_angle += omega;
-            if solid_angle > SUN_MAX_SOLID_ANGLE {
+            if solid_angle > SUN_MAX_SOLID_ANGLE || cells.len() == SUN_MAX_CELLS {
                 return Vec::new();
             }
             sum += weight;
@@ -409,7 +421,7 @@ mod tests {
 
     /// Mean luminance of the radiance over the sphere.
     fn mean_radiance(s: &DomeSampler) -> f32 {
-        (s.total / (4.0 * PI64)) as f32
+        (s.total() / (4.0 * PI64)) as f32
     }
 
     fn random(n: u32, dim: u32) -> f32 {
@@ -548,6 +560,54 @@ mod tests {
             assert!(error < 0.01, "{estimate} vs {reference}");
         }
         assert!((mean_radiance(&s) - luminance(fine) / (4.0 * PI)).abs() < 2e-3 * mean_radiance(&s));
+    }
+
+    /// A 256 x 128 map with a 2 x 2 texel sun: its cells form a part of
+    /// their own, and the parts together are still one distribution: its
+    /// samples cover the sphere (the mean of 1 / pdf is 4 pi) and integrate
+    /// the dome.
+    #[test]
+    fn a_small_bright_sun_is_a_part_of_its_own() {
+        let (w, h) = (256u32, 128u32);
+        let sun = |x: u32, y: u32| {
+            let sky = Vec3::new(0.3, 0.4, 0.5 + 0.1 * (y as f32 / 64.0));
+            if (160..162).contains(&x) && (40..42).contains(&y) {
+                sky + Vec3::splat(2e4)
+            } else {
+                sky
+            }
+        };
+        let s = DomeSampler::new(dome(w, sun, 0.7));
+        assert_eq!(s.parts().collect::<Vec<_>>(), [DomePart::Sun, DomePart::Rest]);
+        let share = s.part_power(DomePart::Sun) / s.total();
+        assert!(share > 0.5, "the sun carries {share}");
+        // Each part's samples report that part, its pdf and radiance.
+        for part in [DomePart::Sun, DomePart::Rest] {
+            for k in 0..2000 {
+                let (dir, radiance, pdf) = s.sample_part(part, Vec2::new(random(k, 0), random(k, 1))).unwrap();
+                assert_eq!(s.part_pdf(dir), (part, pdf));
+                assert_eq!(radiance, s.radiance(dir));
+            }
+        }
+        let n = 1u32 << 16;
+        let (mut measure, mut light) = (0f64, 0f64);
+        for k in 0..n {
+            let (_, radiance, pdf) = s.sample(Vec2::new(random(k, 2), random(k, 3))).unwrap();
+            measure += 1.0 / pdf as f64;
+            light += radiance.x as f64 / pdf as f64;
+        }
+        let sphere = measure / n as f64 / (4.0 * PI64);
+        assert!((sphere - 1.0).abs() < 0.02, "the samples cover {sphere} of the sphere");
+        // The texels with sin(theta), in f64, as a lighter would add them up.
+        let mut texels = 0f64;
+        for j in 0..h {
+            let theta = PI64 * (j as f64 + 0.5) / h as f64;
+            for i in 0..w {
+                texels += sun(i, j).x as f64 * theta.sin() * 2.0 * PI64 * PI64 / (w * h) as f64;
+            }
+        }
+        let error = (light / n as f64 / texels - 1.0).abs();
+        assert!(error < 0.01, "{} vs {texels}", light / n as f64);
     }
 
     #[test]

@@ -767,14 +767,7 @@ impl<'a> Integrator<'a> {
                 prev_delta = true;
                 prev_bsdf_pdf = 0.0;
                 sampler.set_dimension(base + 5);
-                if depth + 1 >= RR_START {
-                    let survive = (throughput * eta_scale).max_element().min(0.95);
-                    if sampler.next_1d() >= survive {
-                        break;
-                    }
-                    throughput /= survive;
-                }
-                if throughput == Vec3::ZERO {
+                if !survives_roulette(&mut throughput, eta_scale, depth, sampler) {
                     break;
                 }
                 counts.bounce += 1;
@@ -861,15 +854,7 @@ impl<'a> Integrator<'a> {
             prev_bsdf_pdf = bs.pdf;
             prev_group_pick = group_pick;
             prev_delta = false;
-            if depth + 1 >= RR_START {
-                // eta_scale is 1 but inside glass: the same bits as without it.
-                let survive = (throughput * eta_scale).max_element().min(0.95);
-                if sampler.next_1d() >= survive {
-                    break;
-                }
-                throughput /= survive;
-            }
-            if throughput == Vec3::ZERO {
+            if !survives_roulette(&mut throughput, eta_scale, depth, sampler) {
                 break;
             }
             counts.bounce += 1;
@@ -879,6 +864,22 @@ impl<'a> Integrator<'a> {
         out.rgb = radiance;
         out
     }
+}
+
+/// Russian roulette after the bounce from vertex `depth` (from the sampler's
+/// current dimension): whether the path goes on, its throughput divided by
+/// the chance it did. `eta_scale` undoes refraction's (n_t / n_i)^2 in the
+/// throughput (1 outside glass: the same bits as without it). A path whose
+/// throughput is zero ends either way.
+fn survives_roulette(throughput: &mut Vec3, eta_scale: f32, depth: u32, sampler: &mut Sampler) -> bool {
+    if depth + 1 >= RR_START {
+        let survive = (*throughput * eta_scale).max_element().min(0.95);
+        if sampler.next_1d() >= survive {
+            return false;
+        }
+        *throughput /= survive;
+    }
+    *throughput != Vec3::ZERO
 }
 
 /// The world tangent (along the normal map's +X) at a hit and the sign of

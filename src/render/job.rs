@@ -376,6 +376,7 @@ pub fn render_fingerprint<C>(
     layer: &str,
 ) -> String {
     let shot = crowd.shot();
+    let lights = crowd.lights();
     // The dome's texels are hashed below; its path is not what the render
     // used (a farm task names the shot by another path than a local run).
     let mut lights_without_paths = shot.lights.clone();
@@ -392,13 +393,8 @@ pub fn render_fingerprint<C>(
         .debug("camera keys", &shot.camera.keys)
         .debug("camera node", &shot.camera.gltf.as_ref().map(|(_, node)| node))
         .debug("lights", &lights_without_paths)
-        .debug("set lights", &crowd.lights().local)
-        .bytes(
-            "dome",
-            &crowd.lights().dome.map_or(Vec::new(), |d| {
-                d.texels.iter().flat_map(|t| t.to_array()).flat_map(f32::to_le_bytes).collect()
-            }),
-        )
+        .debug("set lights", &lights.local)
+        .floats("dome", lights.dome.iter().flat_map(|d| d.texels.iter().flat_map(|t| t.to_array())))
         .value("shutter", &job.shutter)
         .text("colourspace", colour::header_name(job.colourspace))
         .debug("cryptomatte", &job.cryptomatte)

@@ -272,12 +272,12 @@ impl<'a> LightSampler<'a> {
             let sampler = DomeSampler::new(d.clone());
             // Each part of the dome a source: its sun and the rest.
             let mut index = [u32::MAX; 2];
-            for &part in sampler.parts() {
+            for part in sampler.parts() {
                 index[part as usize] = sources.len() as u32;
                 power.push(sampler.part_power(part) * infinite_area);
                 sources.push(Source::Dome(part));
             }
-            if !sampler.parts().is_empty() {
+            if sampler.parts().next().is_some() {
                 dome = Some((sampler, index));
             }
         }
@@ -466,9 +466,9 @@ impl<'a> LightSampler<'a> {
     /// pick); `None` without a dome.
     pub(crate) fn dome(&self, d: Vec3) -> Option<(Vec3, f32)> {
         let (dome, index) = self.dome.as_ref()?;
-        let (part, pdf) = dome.part_pdf(d);
+        let (radiance, part, pdf) = dome.radiance_and_pdf(d);
         let pick = self.pmf.get(index[part as usize] as usize).copied().unwrap_or(0.0);
-        Some((dome.radiance(d), pdf * pick))
+        Some((radiance, pdf * pick))
     }
 
     /// Whether camera rays that miss see the dome.

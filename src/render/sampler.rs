@@ -141,11 +141,7 @@ impl Sampler {
     pub(crate) fn next_2d(&mut self) -> Vec2 {
         let seed = mix32(self.pixel_key ^ mix32(self.dimension));
         self.dimension += 2;
-        let index = nested_uniform_scramble(self.sample, seed);
-        let (x, y) = sobol_2d(index);
-        let x = nested_uniform_scramble(x, mix32(seed ^ 0x5bd1_e995));
-        let y = nested_uniform_scramble(y, mix32(seed ^ 0x27d4_eb2f));
-        Vec2::new(to_unit(x), to_unit(y))
+        self.point_2d(seed)
     }
 
     /// This camera sample's time in [0, 1) across the shutter (motion blur).
@@ -155,9 +151,7 @@ impl Sampler {
     /// the dimensions, a power-of-two prefix of a pixel's samples is
     /// stratified in time.
     pub(crate) fn time(&self) -> f32 {
-        let seed = mix32(self.pixel_key ^ TIME_SALT);
-        let index = nested_uniform_scramble(self.sample, seed);
-        to_unit(nested_uniform_scramble(index.reverse_bits(), mix32(seed ^ 0x5bd1_e995)))
+        self.point_1d(mix32(self.pixel_key ^ TIME_SALT))
     }
 
     /// This camera sample's point on the lens in [0, 1)^2 (depth of field):
@@ -165,12 +159,7 @@ impl Sampler {
     /// never draws it and keeps its bits; a power-of-two prefix of a pixel's
     /// samples is stratified over the lens.
     pub(crate) fn lens(&self) -> Vec2 {
-        let seed = mix32(self.pixel_key ^ LENS_SALT);
-        let index = nested_uniform_scramble(self.sample, seed);
-        let (x, y) = sobol_2d(index);
-        let x = nested_uniform_scramble(x, mix32(seed ^ 0x5bd1_e995));
-        let y = nested_uniform_scramble(y, mix32(seed ^ 0x27d4_eb2f));
-        Vec2::new(to_unit(x), to_unit(y))
+        self.point_2d(mix32(self.pixel_key ^ LENS_SALT))
     }
 
     /// The pick and 2D point of light group `group`'s shadow ray at bounce
@@ -179,19 +168,30 @@ impl Sampler {
     /// keep their bits; each is stratified over a pixel's samples.
     pub(crate) fn extra_light(&self, group: u32, depth: u32) -> (f32, Vec2) {
         let seed = mix32(self.pixel_key ^ EXTRA_LIGHT_SALT ^ mix32(depth ^ (group << 16)));
+        let point = self.point_2d(seed);
+        (self.point_1d(mix32(seed ^ 0x68e3_1da4)), point)
+    }
+
+    /// This sample's point of the Owen-scrambled, shuffled 2D Sobol
+    /// sequence keyed by `seed`.
+    fn point_2d(&self, seed: u32) -> Vec2 {
         let index = nested_uniform_scramble(self.sample, seed);
         let (x, y) = sobol_2d(index);
         let x = nested_uniform_scramble(x, mix32(seed ^ 0x5bd1_e995));
         let y = nested_uniform_scramble(y, mix32(seed ^ 0x27d4_eb2f));
-        let pick_seed = mix32(seed ^ 0x68e3_1da4);
-        let pick = nested_uniform_scramble(nested_uniform_scramble(self.sample, pick_seed).reverse_bits(), pick_seed);
-        (to_unit(pick), Vec2::new(to_unit(x), to_unit(y)))
+        Vec2::new(to_unit(x), to_unit(y))
     }
 
     /// The next number in [0, 1) (uses one dimension).
     pub(crate) fn next_1d(&mut self) -> f32 {
         let seed = mix32(self.pixel_key ^ mix32(self.dimension));
         self.dimension += 1;
+        self.point_1d(seed)
+    }
+
+    /// This sample's number of the Owen-scrambled, shuffled 1D Sobol
+    /// (van der Corput) sequence keyed by `seed`.
+    fn point_1d(&self, seed: u32) -> f32 {
         let index = nested_uniform_scramble(self.sample, seed);
         to_unit(nested_uniform_scramble(index.reverse_bits(), mix32(seed ^ 0x5bd1_e995)))
     }
