@@ -9,7 +9,7 @@
 //!          --sky R G B (0.30 0.38 0.50)  --seed S (0)  --materials diffuse|gltf (diffuse)
 //!          --camera NODE (first node with a perspective camera)  --no-rays  --no-render
 //!          --hdri FILE (.hdr/.exr lat-long; replaces --sky)  --hdri-strength S (1)  --hdri-rotate DEG (0)
-//!          --no-sun (drop the sun)  --point-lights N (N lamps 4 m over the scene, 2,000 W/sr in all)
+//!          --no-sun (drop the sun)  --sun-angle DEG (the sun's angular diameter, 0: delta)  --sun-direction X Y Z (towards the sun)  --point-lights N (N lamps 4 m over the scene, 2,000 W/sr in all)
 //! ```
 //! Any .glb with a perspective camera (make_crowd.py output, `throng export`
 //! output), lit by its KHR_lights_punctual lights (directional, point, spot)
@@ -76,6 +76,8 @@ struct Args {
     hdri_strength: f32,
     hdri_rotate: f32,
     no_sun: bool,
+    sun_angle: Option<f32>,
+    sun_direction: Option<Vec3>,
     point_lights: usize,
     rays: bool,
     render: bool,
@@ -98,6 +100,8 @@ fn parse_args() -> Result<Args, String> {
         hdri_strength: 1.0,
         hdri_rotate: 0.0,
         no_sun: false,
+        sun_angle: None,
+        sun_direction: None,
         point_lights: 0,
         rays: true,
         render: true,
@@ -129,6 +133,11 @@ fn parse_args() -> Result<Args, String> {
             "--hdri-strength" => a.hdri_strength = num(&mut it, &arg)?,
             "--hdri-rotate" => a.hdri_rotate = num(&mut it, &arg)?,
             "--no-sun" => a.no_sun = true,
+            "--sun-angle" => a.sun_angle = Some(num(&mut it, &arg)?),
+            "--sun-direction" => {
+                let d = Vec3::new(num(&mut it, &arg)?, num(&mut it, &arg)?, num(&mut it, &arg)?);
+                a.sun_direction = Some(d.try_normalize().ok_or("--sun-direction: a zero vector")?);
+            }
             "--point-lights" => a.point_lights = num(&mut it, &arg)?,
             "--no-rays" => a.rays = false,
             "--no-render" => a.render = false,
@@ -477,6 +486,24 @@ fn main() {
     if args.no_sun {
         scene.lights.sun = None;
         scene.lights.local.retain(|l| !matches!(l.kind, LightKind::Distant { .. }));
+    }
+    if let Some(direction) = args.sun_direction {
+        // The scene's sun moved (a glTF directional light becomes the shot sun).
+        let first = scene.lights.local.iter().find(|l| matches!(l.kind, LightKind::Distant { .. }));
+        let irradiance = scene.lights.sun.as_ref().map(|s| s.irradiance).or(first.map(|l| l.emission));
+        scene.lights.local.retain(|l| !matches!(l.kind, LightKind::Distant { .. }));
+        scene.lights.sun = irradiance.map(|irradiance| Sun { direction, angular_diameter: 0.0, irradiance });
+    }
+    if let Some(degrees) = args.sun_angle {
+        // A sun of a given size, to weigh a dome's soft sun against a lamp of its size.
+        if let Some(sun) = &mut scene.lights.sun {
+            sun.angular_diameter = degrees.to_radians();
+        }
+        for light in &mut scene.lights.local {
+            if let LightKind::Distant { angular_diameter } = &mut light.kind {
+                *angular_diameter = degrees.to_radians();
+            }
+        }
     }
     scene.lights.local.extend(lamps(&lib, &scene, args.point_lights));
     let load_cpu_s = throng::bench::process_cpu_s() - cpu0;

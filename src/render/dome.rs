@@ -6,14 +6,16 @@
 //! v = 0 the top row. At `rotate` 0 the image centre faces +X.
 //!
 //! Radiance is bilinear between texel centres (wrapping in u, clamped in v).
-//! Sampling is piecewise constant over the texel cells: a cell is picked with
-//! probability proportional to the mean luminance of the bilinear radiance
-//! over it times its solid angle (a marginal distribution over rows, a
-//! conditional one along each row), then a direction uniformly in solid angle
-//! within it. So the density is constant over each cell, exactly 1 / (4 pi)
-//! everywhere for a constant map, and positive wherever the radiance is (the
-//! cell mean sees every texel the bilinear lookup reads), as multiple
-//! importance sampling needs.
+//! Sampling is piecewise constant over blocks of texel cells (one cell per
+//! block up to [`REST_MAX_COLUMNS`] texels across, square blocks of a power
+//! of two beyond): a block is picked with probability proportional to the
+//! mean luminance of the bilinear radiance over its cells times their solid
+//! angle (a marginal distribution over block rows, a conditional one along
+//! each), then a direction uniformly in solid angle within it. So the
+//! density is constant over each block, exactly 1 / (4 pi) everywhere for a
+//! constant map, and positive wherever the radiance is (the cell mean sees
+//! every texel the bilinear lookup reads), as multiple importance sampling
+//! needs. The sun, where a map has one, is sampled apart, finer than a texel.
 
 use std::f32::consts::PI;
 use std::f64::consts::PI as PI64;
@@ -41,45 +43,128 @@ const SUN_CONTRAST: f64 = 50.0;
 /// 6.8e-5, a 1k map's sun with its bilinear spread about 1e-3) ...
 const SUN_MAX_SOLID_ANGLE: f64 = 0.02;
 /// ... and carry at least this share of the dome's light; and are at most
-/// this many (a sun at the pole of a 16k map spans whole rows of tiny cells,
-/// and each sun cell costs 64 sub-cell weights).
+/// this many (a sun at the pole of a 16k map spans whole rows of tiny cells).
 const SUN_MIN_SHARE: f64 = 0.2;
 const SUN_MAX_CELLS: usize = 4096;
+/// The most quadrants the sun's window holds (16 K cells; 1.5 MiB of
+/// corners and running sums): a wider window is no sun (bright cells
+/// scattered over the map, which the rest samples as well).
+const SUN_MAX_QUADRANTS: usize = 1 << 16;
 
-/// Each sun cell is sampled by [`SUN_SPLIT`] x [`SUN_SPLIT`] sub-cells of
-/// equal solid angle, weighted by the bilinear radiance at their centres:
-/// a 1k map's sun is a few texels whose bilinear spread makes the radiance
-/// vary by orders of magnitude across a cell, which a constant density per
-/// cell would turn into noise on every sunlit surface. Even, so sub-cells
-/// never straddle the texel-centre lines the bilinear lookup bends at.
-const SUN_SPLIT: usize = 8;
+/// The widest the distribution of the rest of the dome gets, in blocks:
+/// 256 x 128 blocks of f64 running sums are 256 KiB, which stay in a core's
+/// cache, where a 1k map's cells (4 MiB) made every draw's binary search a
+/// string of cache misses. The rest of a dome is its smooth sky and ground
+/// (the sun is sampled apart), so the coarser density costs little noise.
+const REST_MAX_COLUMNS: usize = 256;
 
-/// The sun's cells: indices (row-major, ascending) and running sums of
-/// their sub-cells' weights ([`SUN_SPLIT`]^2 per cell, row by row).
+/// The sun part, sampled exactly as bright as it is: each sun cell is four
+/// quadrants (split on the texel-centre lines, where the bilinear lookup
+/// bends), each quadrant one bilinear patch, picked by its integral and then
+/// sampled in proportion to the patch itself, so a sample's radiance over
+/// its pdf is the same everywhere on the sun but for sin(theta) and colour,
+/// as a sun lamp's is. (A 1k map's sun is a few texels whose bilinear
+/// spread varies by orders of magnitude across a cell: constant densities
+/// over 8 x 8 sub-cells left 10 % of noise in every sunlit sample.) The
+/// quadrants form a window of cells around the sun, with a marginal over
+/// its quadrant rows and a conditional along each, so a pixel's stratified
+/// samples spread over the sun's disc; quadrants of cells that are not the
+/// sun's weigh nothing.
 #[derive(Clone, Debug, Default)]
-struct SunCells {
+struct Sun {
     cells: Vec<u32>,
-    cdf: Vec<f64>,
+    window: SunWindow,
+    /// Running sums (inclusive) of the quadrant row weights, top first.
+    marginal: Vec<f64>,
+    /// Running sums (inclusive) of the quadrant weights along each quadrant
+    /// row (a quadrant weighs the sum of its corners' luminance).
+    conditional: Vec<f64>,
+    /// Each quadrant's luminance at its corners: top left, top right,
+    /// bottom left, bottom right (u right, v down).
+    corners: Vec<[f32; 4]>,
+    /// The integral of luminance over the sun's quadrants in map
+    /// coordinates (du dv), and over the sphere (d omega).
+    uv_total: f64,
+    power: f64,
 }
 
-/// A dome ready to be looked up and sampled. Building it costs a pass over
-/// the texels and 8 bytes per texel: build one per loaded dome and share it.
+/// Where the sun's window lies: `rows` cells down from `row`, `columns`
+/// across from `column` (wrapping in u).
+#[derive(Clone, Copy, Debug, Default)]
+struct SunWindow {
+    row: usize,
+    rows: usize,
+    column: usize,
+    columns: usize,
+}
+
+impl SunWindow {
+    /// The smallest window around `cells` of a map `w` cells wide (across
+    /// the u seam when that is narrower); None when it would hold more
+    /// than [`SUN_MAX_QUADRANTS`].
+    fn around(cells: &[u32], w: usize) -> Option<SunWindow> {
+        let (first, last) = (*cells.first()? as usize / w, *cells.last()? as usize / w);
+        let mut occupied = vec![false; w];
+        for &c in cells {
+            occupied[c as usize % w] = true;
+        }
+        // The window starts after the longest run of empty columns (circular).
+        let (mut best, mut best_end, mut run) = (0, 0, 0);
+        for i in 0..2 * w {
+            run = if occupied[i % w] { 0 } else { run + 1 };
+            if run > best && run < w {
+                (best, best_end) = (run, i % w);
+            }
+        }
+        let (column, columns) = ((best_end + 1) % w, w - best);
+        let rows = last - first + 1;
+        (4 * rows * columns <= SUN_MAX_QUADRANTS).then_some(SunWindow { row: first, rows, column, columns })
+    }
+
+    /// Quadrants across the window.
+    fn quadrant_columns(&self) -> usize {
+        2 * self.columns
+    }
+}
+
+/// A number in [0, 1) with density proportional to (1 - x) a + x b (a, b
+/// at least 0), from a uniform `u`: the inverse of the linear density's
+/// running integral.
+fn sample_linear(u: f32, a: f32, b: f32) -> f32 {
+    if !(a + b > 0.0) {
+        return u;
+    }
+    let x = u * (a + b) / (a + (a * a + u * (b * b - a * a)).max(0.0).sqrt());
+    x.clamp(0.0, 1.0 - f32::EPSILON)
+}
+
+/// A dome ready to be looked up and sampled. Building it costs a few passes
+/// over the texels and 12 bytes per texel while it runs (it keeps 8 bytes
+/// per block and 40 per sun quadrant): build one per loaded dome and share it.
 #[derive(Clone, Debug)]
 pub struct DomeSampler {
     dome: Arc<Dome>,
     cos_rotate: f32,
     sin_rotate: f32,
-    /// Running sums (inclusive) of the cell weights along each row, row-major
-    /// (the sun's cells weigh nothing here: they are the sun part's).
-    row_cdf: Vec<f64>,
-    /// Running sums (inclusive) of the row totals, top row first.
+    /// Blocks of the rest's distribution are `1 << block_shift` cells square
+    /// (the last block of a row or column may be short).
+    block_shift: u32,
+    /// Blocks across and down.
+    blocks: (usize, usize),
+    /// Running sums (inclusive) of the block weights along each block row
+    /// over the row's total, row-major, in f32 (half the cache a draw's
+    /// search walks; the sun's cells weigh nothing here: they are the sun
+    /// part's).
+    row_cdf: Vec<f32>,
+    /// Each block's solid-angle density within the rest, kept apart so a
+    /// small block's density is not the difference of two large sums.
+    block_pdf: Vec<f32>,
+    /// Running sums (inclusive) of the block row totals, top row first.
     marginal_cdf: Vec<f64>,
     /// cos(theta) at each row boundary, `height + 1` values from +1 (zenith).
     cos_theta: Vec<f64>,
-    /// Solid angle of one cell of each row.
-    cell_solid_angle: Vec<f64>,
-    /// The sun's cells, when the dome has a sun.
-    sun: SunCells,
+    /// The sun, when the dome has one.
+    sun: Sun,
 }
 
 impl DomeSampler {
@@ -105,7 +190,7 @@ impl DomeSampler {
                 2.0 * ((a + b) / 2.0).sin() * ((b - a) / 2.0).sin() * 2.0 * PI64 / w as f64
             })
             .collect();
-        // Cell weights: mean luminance x solid angle (kept in row_cdf's place).
+        // Cell weights: mean luminance x solid angle.
         let mut weights = vec![0f64; w * h];
         for j in 0..h {
             let (up, down) = (j.saturating_sub(1), (j + 1).min(h - 1));
@@ -114,62 +199,113 @@ impl DomeSampler {
                 weights[j * w + i] = mean * cell_solid_angle[j];
             }
         }
-        let sun_cells = find_sun(&weights, &cell_solid_angle, w);
+        let mut sun_cells = find_sun(&weights, &cell_solid_angle, w);
+        let window = SunWindow::around(&sun_cells, w);
+        if window.is_none() {
+            sun_cells.clear();
+        }
         for &c in &sun_cells {
             weights[c as usize] = 0.0;
         }
-        let mut row_cdf = weights;
-        let mut marginal_cdf = vec![0f64; h];
-        let mut rest_total = 0f64;
+        let mut block_shift = 0;
+        while w.div_ceil(1 << block_shift) > REST_MAX_COLUMNS {
+            block_shift += 1;
+        }
+        let blocks = (w.div_ceil(1 << block_shift), h.div_ceil(1 << block_shift));
+        let mut row_cdf = vec![0f64; blocks.0 * blocks.1];
         for j in 0..h {
-            let mut sum = 0f64;
-            for c in &mut row_cdf[j * w..(j + 1) * w] {
-                sum += *c;
-                *c = sum;
+            for i in 0..w {
+                row_cdf[(j >> block_shift) * blocks.0 + (i >> block_shift)] += weights[j * w + i];
             }
-            rest_total += sum;
-            marginal_cdf[j] = rest_total;
+        }
+        let mut marginal_cdf = vec![0f64; blocks.1];
+        let mut rest_total = 0f64;
+        for (row, running) in row_cdf.chunks(blocks.0).zip(&mut marginal_cdf) {
+            rest_total += row.iter().sum::<f64>();
+            *running = rest_total;
+        }
+        let block_span = |block: usize, cells: usize| (block << block_shift)..((block + 1) << block_shift).min(cells);
+        let mut block_pdf = vec![0f32; row_cdf.len()];
+        let mut conditional = vec![0f32; row_cdf.len()];
+        for (b, &weight) in row_cdf.iter().enumerate() {
+            let (rows, columns) = (block_span(b / blocks.0, h), block_span(b % blocks.0, w));
+            let solid_angle =
+                (cos_theta[rows.start] - cos_theta[rows.end]) * 2.0 * PI64 * columns.len() as f64 / w as f64;
+            if rest_total > 0.0 {
+                block_pdf[b] = (weight / (rest_total * solid_angle)) as f32;
+            }
+        }
+        for (row, cdf) in row_cdf.chunks(blocks.0).zip(conditional.chunks_mut(blocks.0)) {
+            let total: f64 = row.iter().sum();
+            let mut sum = 0f64;
+            for (weight, c) in row.iter().zip(cdf) {
+                sum += weight;
+                *c = if total > 0.0 { (sum / total) as f32 } else { 0.0 };
+            }
         }
         let (sin_rotate, cos_rotate) = dome.rotate.sin_cos();
         let mut sampler = DomeSampler {
             dome,
             cos_rotate,
             sin_rotate,
-            row_cdf,
+            block_shift,
+            blocks,
+            row_cdf: conditional,
+            block_pdf,
             marginal_cdf,
             cos_theta,
-            cell_solid_angle,
-            sun: SunCells::default(),
+            sun: Sun::default(),
         };
         // The sun's sub-cells are weighed by the bilinear lookup, so after the rest.
-        sampler.sun = sampler.split_sun(sun_cells);
+        if let Some(window) = window {
+            sampler.sun = sampler.split_sun(sun_cells, window);
+        }
         sampler
     }
 
-    /// The sun part over `cells`: each cell's sub-cells weighted by the
-    /// bilinear luminance at their centres times their solid angle.
-    fn split_sun(&self, cells: Vec<u32>) -> SunCells {
-        let w = self.dome.width as usize;
-        let mut cdf = Vec::with_capacity(cells.len() * SUN_SPLIT * SUN_SPLIT);
-        let mut sum = 0f64;
-        for &cell in &cells {
-            let (row, column) = (cell as usize / w, cell as usize % w);
-            let (top, bottom) = (self.cos_theta[row], self.cos_theta[row + 1]);
-            let sub_solid_angle = self.cell_solid_angle[row] / (SUN_SPLIT * SUN_SPLIT) as f64;
-            for sr in 0..SUN_SPLIT {
-                let cos = top + (sr as f64 + 0.5) / SUN_SPLIT as f64 * (bottom - top);
-                let v = (cos.clamp(-1.0, 1.0).acos() / PI64) as f32;
-                for sc in 0..SUN_SPLIT {
-                    let u = ((column as f64 + (sc as f64 + 0.5) / SUN_SPLIT as f64) / w as f64) as f32;
-                    sum += luminance(self.lookup(Vec2::new(u, v))).max(0.0) as f64 * sub_solid_angle;
-                    cdf.push(sum);
+    /// The sun part over `cells`, quadrant by quadrant of `window`.
+    fn split_sun(&self, cells: Vec<u32>, window: SunWindow) -> Sun {
+        let (w, h) = (self.dome.width as usize, self.dome.height as usize);
+        let (rows, columns) = (2 * window.rows, window.quadrant_columns());
+        let mut conditional = Vec::with_capacity(rows * columns);
+        let mut corners = Vec::with_capacity(rows * columns);
+        let mut marginal = Vec::with_capacity(rows);
+        let (mut total, mut power) = (0f64, 0f64);
+        // A quadrant's area in map coordinates.
+        let area = 1.0 / (4.0 * w as f64 * h as f64);
+        let luminance_at =
+            |x: f64, y: f64| luminance(self.lookup(Vec2::new((x / w as f64) as f32, (y / h as f64) as f32))).max(0.0);
+        for qr in 0..rows {
+            let row = window.row + qr / 2;
+            let (top, bottom) = (row as f64 + (qr % 2) as f64 * 0.5, row as f64 + (qr % 2 + 1) as f64 * 0.5);
+            let sin_theta = (PI64 * (top + bottom) / 2.0 / h as f64).sin();
+            let mut sum = 0f64;
+            for qc in 0..columns {
+                let column = (window.column + qc / 2) % w;
+                let mut quad = [0f32; 4];
+                if cells.binary_search(&((row * w + column) as u32)).is_ok() {
+                    let (left, right) =
+                        (column as f64 + (qc % 2) as f64 * 0.5, column as f64 + (qc % 2 + 1) as f64 * 0.5);
+                    quad = [
+                        luminance_at(left, top),
+                        luminance_at(right, top),
+                        luminance_at(left, bottom),
+                        luminance_at(right, bottom),
+                    ];
                 }
+                let weight: f64 = quad.iter().map(|&c| c as f64).sum();
+                sum += weight;
+                power += weight / 4.0 * area * 2.0 * PI64 * PI64 * sin_theta;
+                conditional.push(sum);
+                corners.push(quad);
             }
+            total += sum;
+            marginal.push(total);
         }
-        if !(sum > 0.0) {
-            return SunCells::default();
+        if !(total > 0.0) {
+            return Sun::default();
         }
-        SunCells { cells, cdf }
+        Sun { cells, window, marginal, conditional, corners, uv_total: total / 4.0 * area, power }
     }
 
     /// The parts with light, sun first, each sampled on its own by
@@ -188,7 +324,7 @@ impl DomeSampler {
     /// when choosing between lights by power.
     pub(crate) fn part_power(&self, part: DomePart) -> f64 {
         match part {
-            DomePart::Sun => self.sun.cdf.last().copied().unwrap_or(0.0),
+            DomePart::Sun => self.sun.power,
             // The marginal's last running sum: every rest cell's weight.
             DomePart::Rest => self.marginal_cdf.last().copied().unwrap_or(0.0),
         }
@@ -222,8 +358,9 @@ impl DomeSampler {
     /// mapping it once (what a ray escaping into the dome needs).
     pub(crate) fn radiance_and_pdf(&self, dir: Vec3) -> (Vec3, DomePart, f32) {
         let (d, uv) = self.in_map(dir);
-        let (part, pdf) = self.pdf_at(d, uv);
-        (self.lookup(uv), part, pdf)
+        let radiance = self.lookup(uv);
+        let (part, pdf) = self.pdf_at(d.y, uv, radiance);
+        (radiance, part, pdf)
     }
 
     /// Samples a direction towards the whole dome from two uniform numbers
@@ -251,39 +388,49 @@ impl DomeSampler {
     /// has no light.
     pub(crate) fn sample_part(&self, part: DomePart, u: Vec2) -> Option<(Vec3, Vec3, f32)> {
         let u = u.clamp(Vec2::ZERO, Vec2::splat(1.0 - f32::EPSILON));
-        let w = self.dome.width as usize;
-        let (row, column, along_row, along_column) = match part {
+        let (w, h) = (self.dome.width as usize, self.dome.height as usize);
+        // cos(theta) and the map's u of the direction: uniform in both is
+        // uniform in solid angle within a block or sub-cell.
+        let (cos_theta, map_u) = match part {
             DomePart::Rest => {
                 let rest_total = self.part_power(DomePart::Rest);
                 if rest_total <= 0.0 {
                     return None;
                 }
-                let (row, along_row) = pick(&self.marginal_cdf, u.y as f64 * rest_total);
-                let cdf = &self.row_cdf[row * w..(row + 1) * w];
-                let (column, along_column) = pick(cdf, u.x as f64 * cdf[w - 1]);
-                (row, column, along_row, along_column)
+                let bw = self.blocks.0;
+                let (block_row, along_row) = pick(&self.marginal_cdf, u.y as f64 * rest_total);
+                let cdf = &self.row_cdf[block_row * bw..(block_row + 1) * bw];
+                let (block_column, along_column) = pick(cdf, u.x);
+                let (rows, columns) = (self.block_span(block_row, h), self.block_span(block_column, w));
+                let (top, bottom) = (self.cos_theta[rows.start], self.cos_theta[rows.end]);
+                let map_u = (columns.start as f64 + along_column * columns.len() as f64) / w as f64;
+                (top + along_row * (bottom - top), map_u)
             }
             DomePart::Sun => {
-                let total = *self.sun.cdf.last()?;
-                // One number picks the sub-cell and, rescaled, where across
-                // it; the other where down it.
-                let (k, along) = pick(&self.sun.cdf, u.x as f64 * total);
-                let n = SUN_SPLIT * SUN_SPLIT;
-                let cell = self.sun.cells[k / n] as usize;
-                let (sr, sc) = ((k % n) / SUN_SPLIT, (k % n) % SUN_SPLIT);
-                let split = SUN_SPLIT as f64;
-                (cell / w, cell % w, (sr as f64 + u.y as f64) / split, (sc as f64 + along) / split)
+                let total = *self.sun.marginal.last()?;
+                let (window, columns) = (self.sun.window, self.sun.window.quadrant_columns());
+                let (qr, along_row) = pick(&self.sun.marginal, u.y as f64 * total);
+                let cdf = &self.sun.conditional[qr * columns..(qr + 1) * columns];
+                let (qc, along_column) = pick(cdf, u.x as f64 * cdf[columns - 1]);
+                // Within the quadrant, in proportion to its bilinear patch.
+                let [tl, tr, bl, br] = self.sun.corners[qr * columns + qc];
+                let down = sample_linear(along_row as f32, tl + tr, bl + br);
+                let across = sample_linear(along_column as f32, tl + (bl - tl) * down, tr + (br - tr) * down);
+                let row = (window.row + qr / 2) as f64 + ((qr % 2) as f64 + down as f64) / 2.0;
+                let column = (window.column + qc / 2) % w;
+                let map_u = (column as f64 + ((qc % 2) as f64 + across as f64) / 2.0) / w as f64;
+                ((PI64 * row / h as f64).cos(), map_u)
             }
         };
-        // Uniform in solid angle within the (sub-)cell: uniform in u and in cos(theta).
-        let map_u = ((column as f64 + along_column) / w as f64) as f32;
-        let (top, bottom) = (self.cos_theta[row], self.cos_theta[row + 1]);
-        let cos_theta = top + along_row * (bottom - top);
+        let (cos_theta, map_u) = (cos_theta as f32, map_u as f32);
         let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
-        let dir = self.world_from_dome(sin_theta as f32, cos_theta as f32, map_u);
-        // The pdf and radiance a ray leaving in `dir` would find, so that the
-        // two strategies of multiple importance sampling agree exactly.
-        let (radiance, found, pdf) = self.radiance_and_pdf(dir);
+        let dir = self.world_from_dome(sin_theta, cos_theta, map_u);
+        // The pdf and radiance from the sample's own map coordinates: what a
+        // ray leaving in `dir` finds (render::lights MIS), but for a sample on
+        // a cell's edge that the direction's rounding puts across it.
+        let uv = Vec2::new(map_u, cos_theta.clamp(-1.0, 1.0).acos() / PI);
+        let radiance = self.lookup(uv);
+        let (found, pdf) = self.pdf_at(cos_theta, uv, radiance);
         (found == part && pdf > 0.0).then_some((dir, radiance, pdf))
     }
 
@@ -301,33 +448,35 @@ impl DomeSampler {
     /// with which [`DomeSampler::sample_part`] of that part picks it.
     pub(crate) fn part_pdf(&self, dir: Vec3) -> (DomePart, f32) {
         let (d, uv) = self.in_map(dir);
-        self.pdf_at(d, uv)
+        self.pdf_at(d.y, uv, self.lookup(uv))
     }
 
-    /// [`DomeSampler::part_pdf`] of the dome-frame direction `d` at map coordinates `uv`.
-    fn pdf_at(&self, d: Vec3, uv: Vec2) -> (DomePart, f32) {
+    /// [`DomeSampler::part_pdf`] of the direction at map coordinates `uv`
+    /// whose cos(theta) in the dome's frame is `cos_theta` and whose
+    /// radiance is `radiance` (the sun's density follows it).
+    fn pdf_at(&self, cos_theta: f32, uv: Vec2, radiance: Vec3) -> (DomePart, f32) {
         let (w, h) = (self.dome.width as usize, self.dome.height as usize);
         let column = ((uv.x * w as f32) as usize).min(w - 1);
         let row = ((uv.y * h as f32) as usize).min(h - 1);
-        let i = row * w + column;
-        let solid_angle = self.cell_solid_angle[row];
-        if let Ok(k) = self.sun.cells.binary_search(&(i as u32)) {
-            // The sub-cell: equal steps in u and in cos(theta) across the cell.
-            let (top, bottom) = (self.cos_theta[row], self.cos_theta[row + 1]);
-            let down = ((d.y as f64 - top) / (bottom - top) * SUN_SPLIT as f64) as usize;
-            let across = ((uv.x * w as f32 - column as f32) * SUN_SPLIT as f32) as usize;
-            let sub = k * SUN_SPLIT * SUN_SPLIT + down.min(SUN_SPLIT - 1) * SUN_SPLIT + across.min(SUN_SPLIT - 1);
-            let weight = self.sun.cdf[sub] - if sub == 0 { 0.0 } else { self.sun.cdf[sub - 1] };
-            let total = self.part_power(DomePart::Sun);
-            let sub_solid_angle = solid_angle / (SUN_SPLIT * SUN_SPLIT) as f64;
-            return (DomePart::Sun, (weight / (total * sub_solid_angle)) as f32);
+        if self.sun.cells.binary_search(&((row * w + column) as u32)).is_ok() {
+            // Density in map coordinates: luminance / its integral; per solid
+            // angle divided by d omega / (du dv) = 2 pi^2 sin(theta).
+            let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt() as f64;
+            let pdf = luminance(radiance).max(0.0) as f64 / (self.sun.uv_total * 2.0 * PI64 * PI64 * sin_theta);
+            return (DomePart::Sun, if pdf.is_finite() { pdf as f32 } else { 0.0 });
         }
         let rest_total = self.part_power(DomePart::Rest);
         if rest_total <= 0.0 {
             return (DomePart::Rest, 0.0);
         }
-        let weight = self.row_cdf[i] - if column == 0 { 0.0 } else { self.row_cdf[i - 1] };
-        (DomePart::Rest, (weight / (rest_total * solid_angle)) as f32)
+        let (block_row, block_column) = (row >> self.block_shift, column >> self.block_shift);
+        let b = block_row * self.blocks.0 + block_column;
+        (DomePart::Rest, self.block_pdf[b])
+    }
+
+    /// The cells (rows or columns, of `cells` in all) of block row or column `block`.
+    fn block_span(&self, block: usize, cells: usize) -> std::ops::Range<usize> {
+        (block << self.block_shift)..((block + 1) << self.block_shift).min(cells)
     }
 
     /// Dome (map) frame to world: turned by `rotate` about +Y.
@@ -350,8 +499,10 @@ impl DomeSampler {
         let (x, y) = (uv.x * w as f32 - 0.5, uv.y * h as f32 - 0.5);
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = (x - x0, y - y0);
-        let left = (x0 as i64).rem_euclid(w);
-        let right = (left + 1) % w;
+        // Wrapped without a division: x0 is in [-1, w - 1] for u in [0, 1].
+        let left = (x0 as i64).clamp(-1, w - 1);
+        let left = if left < 0 { left + w } else { left };
+        let right = if left + 1 == w { 0 } else { left + 1 };
         let (up, down) = ((y0 as i64).clamp(0, h - 1), (y0 as i64 + 1).clamp(0, h - 1));
         let texel = |i: i64, j: i64| self.dome.texels[(j * w + i) as usize];
         let upper = texel(left, up).lerp(texel(right, up), fx);
@@ -392,10 +543,11 @@ fn find_sun(weights: &[f64], cell_solid_angle: &[f64], w: usize) -> Vec<u32> {
 
 /// The bin of an inclusive running sum `cdf` that holds `target` (in [0,
 /// total)), and where in it `target` falls (0..1). Never a bin of weight 0.
-fn pick(cdf: &[f64], target: f64) -> (usize, f64) {
+fn pick<T: Into<f64> + Copy + PartialOrd>(cdf: &[T], target: T) -> (usize, f64) {
     let i = cdf.partition_point(|&c| c <= target).min(cdf.len() - 1);
-    let low = if i == 0 { 0.0 } else { cdf[i - 1] };
-    let weight = cdf[i] - low;
+    let (target, high) = (target.into(), cdf[i].into());
+    let low = if i == 0 { 0.0 } else { cdf[i - 1].into() };
+    let weight = high - low;
     let along = if weight > 0.0 { ((target - low) / weight).clamp(0.0, 1.0) } else { 0.5 };
     (i, along)
 }
@@ -422,6 +574,11 @@ mod tests {
     /// Mean luminance of the radiance over the sphere.
     fn mean_radiance(s: &DomeSampler) -> f32 {
         (s.total() / (4.0 * PI64)) as f32
+    }
+
+    /// The solid angle of one cell of row `j`.
+    fn cell_solid_angle(s: &DomeSampler, j: usize) -> f64 {
+        (s.cos_theta[j] - s.cos_theta[j + 1]) * 2.0 * PI64 / s.dome.width as f64
     }
 
     fn random(n: u32, dim: u32) -> f32 {
@@ -452,6 +609,20 @@ mod tests {
             }
         }
         sum
+    }
+
+    /// Whether a sample's `radiance` is what a ray leaving in `dir` finds, to
+    /// the rounding of the direction (1e-6 in map coordinates, which on a
+    /// sun's edge moves the bilinear radiance by more than its own rounding).
+    fn what_a_ray_finds(s: &DomeSampler, dir: Vec3, radiance: Vec3) -> bool {
+        let uv = s.uv(dir);
+        let (lo, hi) =
+            [Vec2::new(1e-6, 0.0), Vec2::new(0.0, 1e-6)].iter().fold((s.lookup(uv), s.lookup(uv)), |(lo, hi), &d| {
+                let (a, b) = (s.lookup(uv - d), s.lookup(uv + d));
+                (lo.min(a).min(b), hi.max(a).max(b))
+            });
+        let slack = 1e-5 * hi.max_element();
+        radiance.cmpge(lo - slack).all() && radiance.cmple(hi + slack).all()
     }
 
     #[test]
@@ -517,17 +688,21 @@ mod tests {
         // Where the samples land, cell by cell, against pdf x solid angle.
         let (w, h, n) = (32usize, 16usize, 200_000u32);
         let mut counts = vec![0u32; w * h];
+        let mut across_an_edge = 0;
         for k in 0..n {
             let (dir, radiance, pdf) = s.sample(Vec2::new(random(k, 0), random(k, 1))).unwrap();
-            assert_eq!(pdf, s.pdf(dir));
-            assert_eq!(radiance, s.radiance(dir));
+            // What a ray leaving in `dir` finds: the same, but for samples
+            // that the direction's rounding puts across a cell's edge.
+            across_an_edge += (pdf != s.pdf(dir)) as u32;
+            assert!(what_a_ray_finds(&s, dir, radiance), "{dir}: {radiance} vs {}", s.radiance(dir));
             let uv = s.uv(dir);
             counts[((uv.y * h as f32) as usize).min(h - 1) * w + ((uv.x * w as f32) as usize).min(w - 1)] += 1;
         }
+        assert!(across_an_edge < n / 10_000, "{across_an_edge} samples disagree with their direction's pdf");
         for j in 0..h {
             for i in 0..w {
                 let centre = s.direction(Vec2::new((i as f32 + 0.5) / w as f32, (j as f32 + 0.5) / h as f32));
-                let expected = s.pdf(centre) as f64 * s.cell_solid_angle[j] * n as f64;
+                let expected = s.pdf(centre) as f64 * cell_solid_angle(&s, j) * n as f64;
                 let got = counts[j * w + i] as f64;
                 assert!((got - expected).abs() < 5.0 * expected.sqrt() + 2.0, "cell {i},{j}: {got} vs {expected}");
             }
@@ -583,11 +758,17 @@ mod tests {
         assert!(share > 0.5, "the sun carries {share}");
         // Each part's samples report that part, its pdf and radiance.
         for part in [DomePart::Sun, DomePart::Rest] {
+            let mut across_an_edge = 0;
             for k in 0..2000 {
                 let (dir, radiance, pdf) = s.sample_part(part, Vec2::new(random(k, 0), random(k, 1))).unwrap();
-                assert_eq!(s.part_pdf(dir), (part, pdf));
-                assert_eq!(radiance, s.radiance(dir));
+                // The sun's density follows its radiance, which the ray's
+                // direction may find a rounding away.
+                let (found, ray_pdf) = s.part_pdf(dir);
+                let (ray, sample) = (luminance(s.radiance(dir)), luminance(radiance));
+                across_an_edge += (found != part || (ray_pdf * sample / (pdf * ray) - 1.0).abs() > 1e-4) as u32;
+                assert!(what_a_ray_finds(&s, dir, radiance), "{dir}: {radiance} vs {}", s.radiance(dir));
             }
+            assert!(across_an_edge <= 2, "{part:?}: {across_an_edge} samples disagree with their direction's pdf");
         }
         let n = 1u32 << 16;
         let (mut measure, mut light) = (0f64, 0f64);
@@ -608,6 +789,85 @@ mod tests {
         }
         let error = (light / n as f64 / texels - 1.0).abs();
         assert!(error < 0.01, "{} vs {texels}", light / n as f64);
+    }
+
+    /// A sun across the u seam: its window is the columns either side (its
+    /// texels' and, by the bilinear spread, their neighbours'), not the
+    /// whole map, and its samples stay on it and integrate it.
+    #[test]
+    fn a_sun_across_the_seam_has_a_narrow_window() {
+        let (w, h) = (256u32, 128u32);
+        let sun = |x: u32, y: u32| {
+            let sky = Vec3::new(0.3, 0.4, 0.5);
+            if (x == 0 || x == w - 1) && (60..62).contains(&y) {
+                sky + Vec3::splat(2e4)
+            } else {
+                sky
+            }
+        };
+        let s = DomeSampler::new(dome(w, sun, 0.0));
+        let window = s.sun.window;
+        assert_eq!((window.row, window.rows, window.column, window.columns), (59, 4, 254, 4));
+        let n = 1u32 << 14;
+        let (mut light, mut least, mut most) = (0f64, f64::MAX, 0f64);
+        for k in 0..n {
+            let (dir, radiance, pdf) = s.sample_part(DomePart::Sun, Vec2::new(random(k, 0), random(k, 1))).unwrap();
+            let uv = s.uv(dir);
+            let x = (uv.x * w as f32) as u32;
+            assert!((x <= 1 || x >= w - 2) && (59..63).contains(&((uv.y * h as f32) as u32)), "{uv}");
+            let each = luminance(radiance) as f64 / pdf as f64 / (PI64 * uv.y as f64).sin();
+            (light, least, most) = (light + each, least.min(each), most.max(each));
+        }
+        // Sampled as bright as it is: every sample carries the same light
+        // but for sin(theta), which the density over the map leaves out.
+        assert!(most / least < 1.001, "{least} .. {most}");
+        let error = (light / n as f64 / s.part_power(DomePart::Sun) - 1.0).abs();
+        assert!(error < 0.01, "{error}");
+    }
+
+    /// A map wider than [`REST_MAX_COLUMNS`] is sampled by square blocks of
+    /// cells: the density is constant over each, follows the light block by
+    /// block, integrates to one, and the estimator still integrates the dome.
+    #[test]
+    fn a_wide_map_is_sampled_by_blocks() {
+        let (w, h) = (1024u32, 512u32);
+        let sky = |x: u32, y: u32| {
+            sunny(x / 32, y / 32) + Vec3::splat(if (x / 3 + y / 5).is_multiple_of(7) { 2.0 } else { 0.0 })
+        };
+        let s = DomeSampler::new(dome(w, sky, 0.9));
+        assert_eq!((s.block_shift, s.blocks), (2, (256, 128)));
+        let integral = quadrature(&s, 1024, |d| Vec3::splat(s.pdf(d)));
+        assert!((integral.x - 1.0).abs() < 2e-3, "{integral}");
+        let (bw, bh, n) = (256usize, 128usize, 1u32 << 20);
+        let mut counts = vec![0u32; bw * bh];
+        let mut light = Vec3::ZERO;
+        for k in 0..n {
+            let (dir, radiance, pdf) = s.sample_part(DomePart::Rest, Vec2::new(random(k, 4), random(k, 5))).unwrap();
+            light += radiance / pdf;
+            let uv = s.uv(dir);
+            let (i, j) = ((uv.x * w as f32) as usize / 4, (uv.y * h as f32) as usize / 4);
+            counts[j.min(bh - 1) * bw + i.min(bw - 1)] += 1;
+        }
+        for j in (0..bh).step_by(7) {
+            for i in (0..bw).step_by(5) {
+                // One density over the block: at its four inner corners as at its centre.
+                let at = |fi: f32, fj: f32| {
+                    let uv = Vec2::new((4 * i) as f32 + fi, (4 * j) as f32 + fj) / Vec2::new(w as f32, h as f32);
+                    s.part_pdf(s.direction(uv)).1
+                };
+                let centre = at(2.0, 2.0);
+                for (fi, fj) in [(0.1, 0.1), (3.9, 0.1), (0.1, 3.9), (3.9, 3.9)] {
+                    assert!((at(fi, fj) / centre - 1.0).abs() < 1e-4, "block {i},{j}");
+                }
+                let solid_angle: f64 = (4 * j..4 * j + 4).map(|r| cell_solid_angle(&s, r) * 4.0).sum();
+                let expected = centre as f64 * solid_angle * n as f64;
+                let got = counts[j * bw + i] as f64;
+                assert!((got - expected).abs() < 5.0 * expected.sqrt() + 2.0, "block {i},{j}: {got} vs {expected}");
+            }
+        }
+        let fine = quadrature(&s, 2048, |d| s.radiance(d));
+        let error = (light / n as f32 / fine - 1.0).abs().max_element();
+        assert!(error < 0.01, "{} vs {fine}", light / n as f32);
     }
 
     #[test]
