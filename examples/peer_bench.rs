@@ -202,7 +202,7 @@ fn load_glb(path: &PathBuf, args: &Args) -> Result<Loaded, String> {
         )),
         None => None,
     };
-    let lights = SceneLights { sun: None, sky: Sky { radiance: args.sky }, dome, local };
+    let lights = SceneLights { sun: None, sky: Sky { radiance: args.sky }, dome, local, groups: Default::default() };
     Ok(Loaded { lib, scene: FrameScene { instances, camera, lights, motion: None }, started: start, load_s })
 }
 
@@ -248,6 +248,7 @@ fn lamps(lib: &Library, scene: &FrameScene, n: usize) -> Vec<Light> {
                 emission: Vec3::new(1.0, 0.8, 0.6) * (2000.0 / n as f32),
                 two_sided: false,
                 camera_visible: false,
+                light_group: None,
             }
         })
         .collect()
@@ -536,6 +537,7 @@ fn main() {
         threads,
         indirect_clamp: 0.0,
         diffuse_only: args.diffuse,
+        passes: Default::default(),
     };
     let mut out = serde_json::json!({
         "tool": "throng peer_bench",

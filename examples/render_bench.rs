@@ -220,6 +220,7 @@ fn main() {
             threads: 0,
             indirect_clamp: 10.0,
             diffuse_only: false,
+            passes: Default::default(),
         };
         let cpu = throng::bench::process_cpu_s();
         let (film, stats) = render_frame_with_stats(&blas, &lib, &scene, &settings, None).expect("render");

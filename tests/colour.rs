@@ -133,6 +133,7 @@ fn settings(diffuse_only: bool, max_bounces: u32) -> RenderSettings {
         threads: 2,
         indirect_clamp: 10.0,
         diffuse_only,
+        passes: Default::default(),
     }
 }
 

@@ -273,6 +273,7 @@ fn settings(spp: u32, threads: usize) -> RenderSettings {
         threads,
         indirect_clamp: 10.0,
         diffuse_only: false,
+        passes: Default::default(),
     }
 }
 

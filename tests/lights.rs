@@ -70,6 +70,7 @@ fn settings(spp: u32, threads: usize) -> RenderSettings {
         threads,
         indirect_clamp: 0.0,
         diffuse_only: true,
+        passes: Default::default(),
     }
 }
 
@@ -138,11 +139,12 @@ fn light(kind: LightKind, position: Vec3, facing: Vec3, emission: f32) -> Light 
         emission: Vec3::splat(emission),
         two_sided: false,
         camera_visible: false,
+        light_group: None,
     }
 }
 
 fn local(lights: Vec<Light>) -> SceneLights {
-    SceneLights { sun: None, sky: Sky { radiance: Vec3::ZERO }, dome: None, local: lights }
+    SceneLights { sun: None, sky: Sky { radiance: Vec3::ZERO }, dome: None, local: lights, groups: Default::default() }
 }
 
 /// Irradiance at a point from a parallel rectangle with one corner straight
@@ -605,4 +607,54 @@ fn the_render_fingerprint_does_not_depend_on_how_the_shot_is_named() {
         render_fingerprint(&crowd, None, &job, "full")
     };
     assert_eq!(fingerprint(&root), fingerprint(&detour));
+}
+
+/// Passes: the light-path passes and the light groups each add up to the
+/// beauty on every pixel (to f32 rounding: 1e-5 of the pixel's light plus
+/// 1e-6), with bounces, glossy floors, a dome and two lamps in groups of
+/// their own; and a group holds its own light only.
+#[test]
+fn passes_and_light_groups_add_up_to_the_beauty() {
+    let mut a = light(LightKind::Point, Vec3::new(-0.3, 2.0, 0.5), -Vec3::Y, 30.0);
+    a.name = "lamp a".into();
+    let mut b = light(LightKind::Point, Vec3::new(0.6, 1.5, -0.2), -Vec3::Y, 20.0);
+    b.light_group = Some("key".into());
+    let lights = SceneLights { dome: Some(constant_dome(0.5, 0.0)), ..local(vec![a, b]) };
+    let (lib, scene) = floor_scene(lights, vec![]);
+    let mut s = settings(8, 2);
+    (s.max_bounces, s.diffuse_only, s.sky_visible, s.indirect_clamp) = (3, false, true, 10.0);
+    s.passes = throng::render::passes::PassSet::all();
+    let film = render_frame(&BlasSet::build(&lib), &lib, &scene, &s, None).expect("render");
+    let names: Vec<&str> = film.passes.iter().map(|p| p.name.as_str()).collect();
+    assert!(names.contains(&"diffuse_direct") && names.contains(&"environment") && names.contains(&"P"), "{names:?}");
+    assert!(names.contains(&"lg_dome") && names.contains(&"lg_lamp_a") && names.contains(&"lg_key"), "{names:?}");
+    let paths: Vec<_> = film.passes.iter().filter(|p| !p.name.starts_with("lg_") && p.name != "P").collect();
+    let groups: Vec<_> = film.passes.iter().filter(|p| p.name.starts_with("lg_")).collect();
+    assert_eq!(paths.len(), 7);
+    for i in 0..film.rgba.len() {
+        let beauty = Vec3::from_slice(&film.rgba[i][..3]);
+        for family in [&paths, &groups] {
+            let sum: Vec3 = family.iter().map(|p| Vec3::from(p.data[i])).sum();
+            let size: f32 = family.iter().map(|p| Vec3::from(p.data[i]).abs().max_element()).sum();
+            assert!((sum - beauty).abs().max_element() <= 1e-5 * size + 1e-6, "pixel {i}: {sum} vs {beauty}");
+        }
+    }
+    let pass = |n: &str| film.passes.iter().find(|p| p.name == n).unwrap();
+    let total = |n: &str| pass(n).data.iter().map(|v| Vec3::from(*v).x as f64).sum::<f64>();
+    // Every pass that should hold light does; the floor has no glass.
+    for n in ["diffuse_direct", "specular_direct", "lg_dome", "lg_lamp_a", "lg_key"] {
+        assert!(total(n) > 0.0, "{n} is empty");
+    }
+    // A lone plane sees no other surface: no light comes back to it by a bounce.
+    for n in ["diffuse_indirect", "specular_indirect", "transmission"] {
+        assert_eq!(total(n), 0.0, "{n}");
+    }
+    // The camera looks down at the floor only: no environment seen, P on the floor.
+    assert_eq!(total("environment"), 0.0);
+    assert!(pass("P").data.iter().all(|p| p[1].abs() < 1e-4));
+    // Beauty is the same with passes off.
+    s.passes = Default::default();
+    let plain = render_frame(&BlasSet::build(&lib), &lib, &scene, &s, None).expect("render");
+    assert_eq!(plain.rgba, film.rgba);
+    assert!(plain.passes.is_empty());
 }

@@ -83,6 +83,7 @@ fn settings(spp: u32, threads: usize, max_bounces: u32, diffuse_only: bool) -> R
         threads,
         indirect_clamp: 0.0,
         diffuse_only,
+        passes: Default::default(),
     }
 }
 
@@ -121,8 +122,15 @@ fn through_glass(glass_mesh: Mesh, material: Material, threads: usize) -> Film {
         emission: Vec3::ONE,
         two_sided: false,
         camera_visible: true,
+        light_group: None,
     };
-    let lights = SceneLights { sun: None, sky: Sky { radiance: Vec3::ZERO }, dome: None, local: vec![light] };
+    let lights = SceneLights {
+        sun: None,
+        sky: Sky { radiance: Vec3::ZERO },
+        dome: None,
+        local: vec![light],
+        groups: Default::default(),
+    };
     let scene = FrameScene {
         instances: vec![instance(0, 0, vis::ALL)],
         camera: Camera::pinhole(Affine3A::IDENTITY, 0.02),

@@ -86,6 +86,7 @@ fn settings(width: u32, height: u32, spp: u32) -> RenderSettings {
         threads: 2,
         indirect_clamp: 10.0,
         diffuse_only: false,
+        passes: Default::default(),
     }
 }
 

@@ -289,7 +289,7 @@ impl<C> ShotCrowd<C> {
         local.extend(
             self.lights.set.iter().filter(|s| set_sun || !matches!(s.kind, LightKind::Distant { .. })).cloned(),
         );
-        SceneLights { sun: l.sun(), sky: l.sky(), dome: self.lights.dome.clone(), local }
+        SceneLights { sun: l.sun(), sky: l.sky(), dome: self.lights.dome.clone(), local, groups: l.groups.clone() }
     }
 
     /// The shared meshes, materials and textures.

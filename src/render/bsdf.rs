@@ -189,6 +189,24 @@ impl Bsdf {
         (Vec3::ONE - f) * self.diffuse * FRAC_1_PI + specular
     }
 
+    /// [`Bsdf::eval`] as its diffuse and specular parts (which sum to it),
+    /// for the light-path passes.
+    pub(crate) fn eval_lobes(&self, wo: Vec3, wi: Vec3) -> (Vec3, Vec3) {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return (Vec3::ZERO, Vec3::ZERO);
+        }
+        if self.lambert {
+            return (self.diffuse * FRAC_1_PI, Vec3::ZERO);
+        }
+        let h = (wo + wi).normalize_or_zero();
+        if h == Vec3::ZERO {
+            return (Vec3::ZERO, Vec3::ZERO);
+        }
+        let f = schlick(self.f0, wi.dot(h));
+        let g = 1.0 / (1.0 + self.lambda(wo) + self.lambda(wi));
+        ((Vec3::ONE - f) * self.diffuse * FRAC_1_PI, f * (self.d(h) * g / (4.0 * wo.z * wi.z)))
+    }
+
     /// Solid-angle pdf of [`Bsdf::sample`] producing `wi`.
     pub(crate) fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         if wo.z <= 0.0 || wi.z <= 0.0 {

@@ -19,6 +19,10 @@
 //!   reads back): per pixel the top [`RANKS`] (id, coverage) pairs, ranked
 //!   from a fixed-size per-pixel accumulator over the samples in index order
 //!   (so also independent of threading).
+//! - `passes`: the light-path passes and light groups asked for (means over
+//!   all samples, like RGB, from the same samples: render::passes), then the
+//!   world position `P` of the nearest sample's first hit (never filtered,
+//!   like `z`; zero where it missed).
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -29,6 +33,7 @@ use rayon::prelude::*;
 use super::accel::{BlasSet, Tlas};
 use super::cryptomatte::{CryptoNames, Cryptomatte, RankAccumulator, MATTES, RANKS};
 use super::integrator::{Integrator, RayCounts, SampleResult};
+use super::passes::{LightGroups, PassSet, Split};
 use super::RenderSettings;
 use crate::error::{Error, Result};
 use crate::scene::{FrameScene, Library};
@@ -70,6 +75,36 @@ pub struct Film {
     pub cryptomatte: Vec<Cryptomatte>,
     /// Motion vectors (u right, v up), pixels per frame; empty when rendered without a shutter.
     pub motion: Vec<[f32; 2]>,
+    /// Light-path passes, light groups and position, in file order; empty
+    /// when none were asked for.
+    pub passes: Vec<Pass>,
+}
+
+/// One three-channel pass of a film.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Pass {
+    /// Its layer name in the file (`diffuse_direct`, `lg_sun`, `P`).
+    pub name: String,
+    /// Its channels' suffixes (`R`, `G`, `B` or `X`, `Y`, `Z`).
+    pub channels: [&'static str; 3],
+    /// Row-major values.
+    pub data: Vec<[f32; 3]>,
+}
+
+impl Pass {
+    /// The layer names of the passes `set` writes with light groups `groups`, in file order.
+    pub fn names(set: &PassSet, groups: &[String]) -> Vec<(String, [&'static str; 3])> {
+        const RGB: [&str; 3] = ["R", "G", "B"];
+        let mut names: Vec<(String, [&'static str; 3])> =
+            set.light_paths.iter().map(|p| (p.name().to_string(), RGB)).collect();
+        if set.light_groups {
+            names.extend(groups.iter().map(|g| (format!("lg_{g}"), RGB)));
+        }
+        if set.position {
+            names.push(("P".into(), ["X", "Y", "Z"]));
+        }
+        names
+    }
 }
 
 impl Film {
@@ -86,6 +121,7 @@ impl Film {
             agent_id: vec![0; n],
             cryptomatte: Vec::new(),
             motion: Vec::new(),
+            passes: Vec::new(),
         }
     }
 
@@ -117,6 +153,14 @@ struct Pixel {
     crypto: [[[f32; 2]; RANKS]; 3],
 }
 
+/// Where a pixel's passes go: the scratch split of one sample and the
+/// pixel's pass values (one triple per pass of `set`).
+struct PassOut<'p> {
+    set: &'p PassSet,
+    split: &'p mut Split,
+    values: &'p mut [[f32; 3]],
+}
+
 fn render_pixel(
     integrator: &Integrator,
     x: u32,
@@ -124,13 +168,31 @@ fn render_pixel(
     spp: u32,
     crypto: Option<&CryptoNames>,
     counts: &mut RayCounts,
+    mut passes: Option<PassOut>,
 ) -> Pixel {
     let (mut rgb, mut alpha, mut normal, mut albedo) = (Vec3::ZERO, 0.0f32, Vec3::ZERO, Vec3::ZERO);
     let mut nearest = (f32::INFINITY, SampleResult { z: f32::INFINITY, ..Default::default() });
     let mut acc: [RankAccumulator; 3] = Default::default();
     // Samples summed in index order: the float result is independent of threading.
+    let mut sums = [Vec3::ZERO; 7];
+    let mut group_sums = vec![Vec3::ZERO; passes.as_ref().map_or(0, |p| p.split.groups.len())];
     for s in 0..spp {
-        let (r, offset) = integrator.sample_pixel(x, y, s, counts);
+        let split = passes.as_mut().map(|p| {
+            p.split.clear();
+            &mut *p.split
+        });
+        let (r, offset) = integrator.sample_pixel(x, y, s, counts, split);
+        if let Some(p) = &passes {
+            // A sample the beauty drops (not finite) the passes drop too.
+            if r.rgb.is_finite() {
+                for (sum, c) in sums.iter_mut().zip(&p.split.paths) {
+                    *sum += *c;
+                }
+                for (sum, c) in group_sums.iter_mut().zip(&p.split.groups) {
+                    *sum += *c;
+                }
+            }
+        }
         if let Some(names) = crypto {
             // Each sample has filter weight 1 (importance-sampled filter).
             let ids = r.instance.map_or([0; 3], |i| names.ids(i));
@@ -148,6 +210,26 @@ fn render_pixel(
         }
     }
     let inv = 1.0 / spp as f32;
+    if let Some(p) = passes {
+        let mut out = p.values.iter_mut();
+        for path in &p.set.light_paths {
+            if let Some(v) = out.next() {
+                *v = (sums[*path as usize] * inv).to_array();
+            }
+        }
+        if p.set.light_groups {
+            for g in &group_sums {
+                if let Some(v) = out.next() {
+                    *v = (*g * inv).to_array();
+                }
+            }
+        }
+        if p.set.position {
+            if let Some(v) = out.next() {
+                *v = nearest.1.position.to_array();
+            }
+        }
+    }
     let mut ranked = [[[0.0f32; 2]; RANKS]; 3];
     if crypto.is_some() {
         for (a, out) in acc.iter().zip(&mut ranked) {
@@ -209,27 +291,39 @@ pub fn render_frame_with_cryptomatte(
     pool.install(|| {
         let tlas = Tlas::build_scene(blas, lib, &scene.instances, scene.motion.as_ref());
         let mut stats = RenderStats { tlas_build: tlas.build_time, ..Default::default() };
-        let integrator = Integrator::new(lib, scene, &tlas, settings);
+        let groups = if settings.passes.light_groups { Some(LightGroups::new(&scene.lights, lib)?) } else { None };
+        let group_count = groups.as_ref().map_or(0, |g| g.names.len());
+        let triples = if settings.passes.any() { settings.passes.triples(group_count) } else { 0 };
+        let integrator = Integrator::new(lib, scene, &tlas, settings, groups.as_ref());
         let (w, h) = (settings.width, settings.height);
         let tiles: Vec<(u32, u32)> =
             (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE))).collect();
         let done = AtomicUsize::new(0);
         let start = Instant::now();
-        let rendered: Vec<(Vec<Pixel>, RayCounts)> = tiles
+        let rendered: Vec<(Vec<Pixel>, Vec<[f32; 3]>, RayCounts)> = tiles
             .par_iter()
             .map(|&(x0, y0)| {
                 let mut counts = RayCounts::default();
                 let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-                let mut pixels = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+                let n = ((x1 - x0) * (y1 - y0)) as usize;
+                let mut pixels = Vec::with_capacity(n);
+                let mut values = vec![[0f32; 3]; n * triples];
+                let mut split = Split::new(if settings.passes.light_groups { group_count } else { 0 });
+                let mut chunks = values.chunks_mut(triples.max(1));
                 for y in y0..y1 {
                     for x in x0..x1 {
-                        pixels.push(render_pixel(&integrator, x, y, settings.spp, crypto, &mut counts));
+                        let out = chunks.next().filter(|_| triples > 0).map(|values| PassOut {
+                            set: &settings.passes,
+                            split: &mut split,
+                            values,
+                        });
+                        pixels.push(render_pixel(&integrator, x, y, settings.spp, crypto, &mut counts, out));
                     }
                 }
                 if let Some(report) = progress {
                     report(done.fetch_add(pixels.len(), Ordering::Relaxed) + pixels.len());
                 }
-                (pixels, counts)
+                (pixels, values, counts)
             })
             .collect();
         stats.trace = start.elapsed();
@@ -242,8 +336,20 @@ pub fn render_frame_with_cryptomatte(
             Some(_) => MATTES.iter().map(|name| Cryptomatte::new(name, w, h, RANKS)).collect(),
             None => Vec::new(),
         };
-        for (&(x0, y0), (pixels, counts)) in tiles.iter().zip(&rendered) {
+        let group_names = groups.map(|g| g.names).unwrap_or_default();
+        film.passes = Pass::names(&settings.passes, &group_names)
+            .into_iter()
+            .map(|(name, channels)| Pass { name, channels, data: vec![[0.0; 3]; film.rgba.len()] })
+            .collect();
+        for (&(x0, y0), (pixels, values, counts)) in tiles.iter().zip(&rendered) {
             stats.rays += *counts;
+            let tw = (x0 + TILE).min(w) - x0;
+            for (k, px) in values.chunks(triples.max(1)).enumerate().filter(|_| triples > 0) {
+                let i = film.index(x0 + k as u32 % tw, y0 + k as u32 / tw);
+                for (pass, v) in film.passes.iter_mut().zip(px) {
+                    pass.data[i] = *v;
+                }
+            }
             let tw = (x0 + TILE).min(w) - x0;
             for (k, px) in pixels.iter().enumerate() {
                 let i = film.index(x0 + k as u32 % tw, y0 + k as u32 / tw);

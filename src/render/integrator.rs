@@ -15,6 +15,7 @@ use glam::{Affine3A, Mat3A, Vec2, Vec3, Vec4};
 use super::accel::{Hit, Tlas, WorldRay};
 use super::bsdf::{sample_concentric_disk, Bsdf, Dielectric, ShadingFrame};
 use super::lights::LightSampler;
+use super::passes::{LightGroups, LightPath, Split};
 use super::sampler::Sampler;
 use super::RenderSettings;
 use crate::scene::{vis, AlphaMode, FrameScene, Library, Material, Mesh, Texture, TextureRef, UvTransform};
@@ -51,6 +52,47 @@ pub(crate) struct SampleResult {
     /// Screen-space motion of the first hit in pixels per frame, Nuke's
     /// convention (+u right, +v up); zero without motion or for no hit.
     pub(crate) motion: Vec2,
+    /// World position of the first hit (zero for none).
+    pub(crate) position: Vec3,
+}
+
+/// How the first surface sent the path on, which decides the light-path
+/// pass of everything the path brings back (render::passes).
+#[derive(Clone, Copy, Debug)]
+enum FirstBounce {
+    /// Still at the camera vertex.
+    Camera,
+    /// An opaque lobe pair: the shares of the BSDF value in the bounce's
+    /// direction that are diffuse and specular, per channel.
+    Lobes { diffuse: Vec3, specular: Vec3 },
+    /// Through glass.
+    Transmission,
+    /// A mirror reflection off glass.
+    Mirror,
+}
+
+/// Adds contribution `c` of light group `group` to `split`'s passes, as
+/// `first` and whether the light came straight from a light (`direct`) say.
+#[inline]
+fn deposit(split: &mut Split, c: Vec3, first: FirstBounce, direct: bool, group: u16) {
+    let (diffuse, specular) = if direct {
+        (LightPath::DiffuseDirect, LightPath::SpecularDirect)
+    } else {
+        (LightPath::DiffuseIndirect, LightPath::SpecularIndirect)
+    };
+    match first {
+        // Only camera-ray light is deposited here before a bounce (emission, environment).
+        FirstBounce::Camera => split.add(c, LightPath::Emission, group),
+        FirstBounce::Lobes { diffuse: d, specular: sp } => {
+            split.paths[diffuse as usize] += c * d;
+            split.paths[specular as usize] += c * sp;
+            if let Some(g) = split.groups.get_mut(group as usize) {
+                *g += c;
+            }
+        }
+        FirstBounce::Transmission => split.add(c, LightPath::Transmission, group),
+        FirstBounce::Mirror => split.add(c, specular, group),
+    }
 }
 
 /// Ray counts, summed per tile (integers, so any thread count gives the same totals).
@@ -363,6 +405,7 @@ impl<'a> Integrator<'a> {
         scene: &'a FrameScene,
         tlas: &'a Tlas<'a>,
         settings: &'a RenderSettings,
+        groups: Option<&'a LightGroups>,
     ) -> Self {
         let shutter = scene.motion.as_ref().map(|m| {
             let [a, b] = m.camera;
@@ -381,7 +424,7 @@ impl<'a> Integrator<'a> {
             tlas,
             camera: CameraRays::new(&scene.camera, settings.width, settings.height),
             shutter,
-            lights: LightSampler::new(lib, scene, tlas.bounds()),
+            lights: LightSampler::new(lib, scene, tlas.bounds(), groups),
             settings,
             default_material: Material::default(),
         }
@@ -389,7 +432,15 @@ impl<'a> Integrator<'a> {
 
     /// Traces camera sample `sample` of pixel (x, y). Returns the sample
     /// result and its film offset from the pixel centre (for nearest-sample AOVs).
-    pub(crate) fn sample_pixel(&self, x: u32, y: u32, sample: u32, counts: &mut RayCounts) -> (SampleResult, Vec2) {
+    /// With `split`, the sample's light is also split into passes there.
+    pub(crate) fn sample_pixel(
+        &self,
+        x: u32,
+        y: u32,
+        sample: u32,
+        counts: &mut RayCounts,
+        split: Option<&mut Split>,
+    ) -> (SampleResult, Vec2) {
         let s = self.settings;
         let mut sampler = Sampler::new(s.seed, s.frame, s.layer, x, y, sample);
         let offset = sample_filter(sampler.next_2d());
@@ -405,7 +456,7 @@ impl<'a> Integrator<'a> {
             }
             _ => self.camera.lens_ray(fx, fy, lens),
         };
-        let mut result = self.trace_path(origin, dir, time, &mut sampler, counts);
+        let mut result = self.trace_path(origin, dir, time, &mut sampler, counts, split);
         if !(result.rgb.is_finite()) {
             result.rgb = Vec3::ZERO; // one bad sample must not poison the pixel
         }
@@ -621,8 +672,18 @@ impl<'a> Integrator<'a> {
         time: f32,
         sampler: &mut Sampler,
         counts: &mut RayCounts,
+        mut split: Option<&mut Split>,
     ) -> SampleResult {
         let mut out = SampleResult { z: f32::INFINITY, ..Default::default() };
+        let mut first_bounce = FirstBounce::Camera;
+        // Light deposited into the passes as it is added to `radiance`.
+        macro_rules! pass {
+            ($c:expr, $direct:expr, $group:expr) => {
+                if let Some(split) = split.as_deref_mut() {
+                    deposit(split, $c, first_bounce, $direct, $group);
+                }
+            };
+        }
         let mut radiance = Vec3::ZERO;
         let mut throughput = Vec3::ONE;
         let mut prev_bsdf_pdf = 0.0f32;
@@ -650,13 +711,16 @@ impl<'a> Integrator<'a> {
                         return SampleResult { z: f32::INFINITY, ..Default::default() };
                     }
                     radiance += light.radiance;
+                    pass!(light.radiance, true, light.group);
                     out.alpha = 1.0;
                 } else {
                     if medium != Vec3::ZERO {
                         throughput *= transmittance(medium, light.t);
                     }
                     let weight = bsdf_weight(prev_delta, prev_bsdf_pdf, light.pdf * prev_group_pick);
-                    radiance += self.clamp_indirect(throughput * light.radiance * weight);
+                    let c = self.clamp_indirect(throughput * light.radiance * weight);
+                    radiance += c;
+                    pass!(c, depth == 1, light.group);
                 }
                 break;
             }
@@ -669,25 +733,47 @@ impl<'a> Integrator<'a> {
                     if self.settings.sky_visible
                         && (self.scene.lights.dome.is_none() || self.lights.dome_camera_visible())
                     {
-                        radiance += match self.lights.dome(dir) {
+                        let environment = match self.lights.dome(dir) {
                             Some((l, _)) => l,
                             None => self.scene.lights.sky.radiance,
                         };
+                        radiance += environment;
+                        if let Some(split) = split.as_deref_mut() {
+                            split.add(environment, LightPath::Environment, self.lights.environment_group());
+                        }
                         if let Some(sun) = self.lights.sun().filter(|s| s.contains(dir)) {
                             radiance += sun.radiance();
+                            if let Some(split) = split.as_deref_mut() {
+                                split.add(sun.radiance(), LightPath::Environment, self.lights.sun_group());
+                            }
                         }
                         out.alpha = 1.0;
                     }
                 } else {
-                    let mut escaped = match self.lights.dome(dir) {
+                    let environment = match self.lights.dome(dir) {
                         Some((l, pdf)) => l * bsdf_weight(prev_delta, prev_bsdf_pdf, pdf * prev_group_pick),
                         None => self.scene.lights.sky.radiance,
                     };
+                    let mut escaped = environment;
+                    let mut sun_light = Vec3::ZERO;
                     if let Some(sun) = self.lights.sun().filter(|s| s.contains(dir)) {
                         let pdf = sun.pdf() * self.lights.sun_pick() * prev_group_pick;
-                        escaped += sun.radiance() * bsdf_weight(prev_delta, prev_bsdf_pdf, pdf);
+                        sun_light = sun.radiance() * bsdf_weight(prev_delta, prev_bsdf_pdf, pdf);
+                        escaped += sun_light;
                     }
-                    radiance += self.clamp_indirect(throughput * escaped);
+                    let c = self.clamp_indirect(throughput * escaped);
+                    radiance += c;
+                    if split.is_some() {
+                        // The clamp scales both parts alike.
+                        let scale = if escaped.max_element() > 0.0 { c / (throughput * escaped) } else { Vec3::ZERO };
+                        let scale = Vec3::select(scale.is_finite_mask(), scale, Vec3::ZERO);
+                        if sun_light == Vec3::ZERO {
+                            pass!(c, depth == 1, self.lights.environment_group());
+                        } else {
+                            pass!(throughput * environment * scale, depth == 1, self.lights.environment_group());
+                            pass!(throughput * sun_light * scale, depth == 1, self.lights.sun_group());
+                        }
+                    }
                 }
                 break;
             };
@@ -703,19 +789,24 @@ impl<'a> Integrator<'a> {
                 out.albedo = surface.base_color;
                 out.agent = inst.agent.get().map_or(0, |a| a.wrapping_add(1));
                 out.instance = Some(hit.instance);
+                out.position = surface.p;
                 if self.shutter.is_some() {
                     out.motion = self.motion_vector(hit.instance as usize, hit.triangle, hit.u, hit.v);
                 }
             }
             if surface.emission != Vec3::ZERO {
+                let group = self.lights.material_group(surface.material as u32);
                 if camera {
                     radiance += surface.emission;
+                    pass!(surface.emission, true, group);
                 } else {
                     // Weighted against NEE's choice of this point (weight 1 where NEE never samples it).
                     let pdf = self.lights.triangle_pdf(hit.instance, hit.triangle, hit.t, surface.cos_front)
                         * prev_group_pick;
                     let weight = if pdf > 0.0 { bsdf_weight(prev_delta, prev_bsdf_pdf, pdf) } else { 1.0 };
-                    radiance += self.clamp_indirect(throughput * surface.emission * weight);
+                    let c = self.clamp_indirect(throughput * surface.emission * weight);
+                    radiance += c;
+                    pass!(c, depth == 1, group);
                 }
             }
 
@@ -758,6 +849,9 @@ impl<'a> Integrator<'a> {
                 }
                 throughput *= ds.weight;
                 eta_scale *= ds.eta_scale;
+                if camera {
+                    first_bounce = if ds.transmitted { FirstBounce::Transmission } else { FirstBounce::Mirror };
+                }
                 if ds.transmitted && !thin {
                     medium = match (surface.cos_front > 0.0, material.volume) {
                         (true, Some(v)) => v.absorption(),
@@ -836,7 +930,22 @@ impl<'a> Integrator<'a> {
                 let contribution = throughput * contribution;
                 // Clamped before the pick's 1 / probability, so the clamp takes
                 // what it took with a ray to every group.
-                radiance += if camera { contribution } else { self.clamp_indirect(contribution) / group_pick };
+                let c = if camera { contribution } else { self.clamp_indirect(contribution) / group_pick };
+                radiance += c;
+                if let Some(split) = split.as_deref_mut() {
+                    if camera {
+                        // Direct light at the first surface, lobe by lobe.
+                        let (diffuse, _) = bsdf.eval_lobes(wo, wi_local);
+                        let share = lobe_share(diffuse, f);
+                        split.paths[LightPath::DiffuseDirect as usize] += c * share;
+                        split.paths[LightPath::SpecularDirect as usize] += c * (Vec3::ONE - share);
+                        if let Some(g) = split.groups.get_mut(ls.group as usize) {
+                            *g += c;
+                        }
+                    } else {
+                        deposit(split, c, first_bounce, false, ls.group);
+                    }
+                }
             }
             sampler.set_dimension(base + 2);
 
@@ -849,6 +958,11 @@ impl<'a> Integrator<'a> {
             let wi = frame.to_world(bs.wi);
             if wi.dot(surface.ng) <= 0.0 {
                 break; // below the true surface: would leak through
+            }
+            if camera && split.is_some() {
+                let (diffuse, specular) = bsdf.eval_lobes(wo, bs.wi);
+                let share = lobe_share(diffuse, diffuse + specular);
+                first_bounce = FirstBounce::Lobes { diffuse: share, specular: Vec3::ONE - share };
             }
             throughput *= bs.weight;
             prev_bsdf_pdf = bs.pdf;
@@ -864,6 +978,14 @@ impl<'a> Integrator<'a> {
         out.rgb = radiance;
         out
     }
+}
+
+/// The diffuse share of a BSDF value `f` whose diffuse part is `diffuse`,
+/// per channel (all diffuse where `f` is zero).
+#[inline]
+fn lobe_share(diffuse: Vec3, f: Vec3) -> Vec3 {
+    let share = diffuse / f;
+    Vec3::select(share.is_finite_mask(), share.clamp(Vec3::ZERO, Vec3::ONE), Vec3::ONE)
 }
 
 /// Russian roulette after the bounce from vertex `depth` (from the sampler's

@@ -18,6 +18,7 @@ use crate::layers::Manifest;
 use crate::output::{layer_path, FULL_LAYER};
 use crate::render::colour::{self, Colourspace};
 use crate::render::cryptomatte::{CryptoNames, NameTables};
+use crate::render::passes::PassSet;
 use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, RenderSettings};
 use crate::scene::{vis, Deform, FrameScene, Instance, InstanceMotion, SceneMotion, Space};
 
@@ -389,6 +390,7 @@ pub fn render_fingerprint<C>(
         .value("seed", &shot.seed)
         .value("max_bounces", &shot.render.max_bounces)
         .value("indirect_clamp", &shot.render.indirect_clamp)
+        .value("passes", &shot.render.passes)
         .value("sensor_width", &shot.camera.sensor_width)
         .debug("camera keys", &shot.camera.keys)
         .debug("camera node", &shot.camera.gltf.as_ref().map(|(_, node)| node))
@@ -576,6 +578,8 @@ pub fn run<C: Space>(
                 layer: index,
                 sky_visible: layer == FULL_LAYER || manifest.is_some_and(|m| *layer == m.set.name),
                 threads: job.threads,
+                // Checked when the shot was read.
+                passes: PassSet::parse(&crowd.shot().render.passes, "render.passes").unwrap_or_default(),
                 ..RenderSettings::default()
             };
             let pixels = (w as usize * h as usize).max(1);

@@ -28,6 +28,7 @@ use glam::{Vec2, Vec3};
 use super::bsdf::{luminance, sample_concentric_disk, ShadingFrame};
 use super::dome::{DomePart, DomeSampler};
 use super::integrator::surface_emission;
+use super::passes::LightGroups;
 use crate::scene::lights::{Light, LightKind, SceneLights};
 use crate::scene::{vis, FrameScene, Library, Sun};
 
@@ -132,6 +133,8 @@ pub(crate) struct LightSample {
     pub(crate) pdf: f32,
     /// A delta light: no BSDF-sampled ray can find it, so no MIS.
     pub(crate) delta: bool,
+    /// Its light group (render::passes; 0 without groups).
+    pub(crate) group: u16,
 }
 
 /// Where a ray meets a sized light (rect, disk, sphere).
@@ -143,6 +146,8 @@ pub(crate) struct AreaHit {
     pub(crate) radiance: Vec3,
     /// Solid-angle pdf of the light's own sampling of this point, including the pick.
     pub(crate) pdf: f32,
+    /// Its light group.
+    pub(crate) group: u16,
 }
 
 /// Vose's alias table: picks index i with probability weight[i] / sum in
@@ -244,6 +249,9 @@ pub(crate) struct LightSampler<'a> {
     sized: Vec<u32>,
     /// Source index of the shot's sun.
     sun: Option<(Distant, u32)>,
+    /// Each source's light group, and the groups (None: not split).
+    group: Vec<u16>,
+    light_groups: Option<&'a LightGroups>,
 }
 
 /// Bounding-sphere radius of the scene, for the power of lights at infinity
@@ -255,7 +263,12 @@ fn scene_radius(bounds: Option<(Vec3, Vec3)>) -> f64 {
 impl<'a> LightSampler<'a> {
     /// The lights of `scene` (its `lights` and its emissive instances that
     /// bounce rays can see), with `bounds` the scene's world bounds.
-    pub(crate) fn new(lib: &'a Library, scene: &'a FrameScene, bounds: Option<(Vec3, Vec3)>) -> LightSampler<'a> {
+    pub(crate) fn new(
+        lib: &'a Library,
+        scene: &'a FrameScene,
+        bounds: Option<(Vec3, Vec3)>,
+        light_groups: Option<&'a LightGroups>,
+    ) -> LightSampler<'a> {
         let lights: &'a SceneLights = &scene.lights;
         let r = scene_radius(bounds);
         let infinite_area = PI as f64 * r * r;
@@ -282,12 +295,23 @@ impl<'a> LightSampler<'a> {
             }
         }
         let mut sized = Vec::new();
-        for light in &lights.local {
+        let lg = |f: &dyn Fn(&LightGroups) -> u16| light_groups.map_or(0, f);
+        let sun_group = lg(&|g| g.sun());
+        let mut group = vec![sun_group; sources.len()];
+        if let Some((_, index)) = &dome {
+            for &i in index.iter().filter(|&&i| i != u32::MAX) {
+                group[i as usize] = lg(&|g| g.environment());
+            }
+        }
+        for (k, light) in lights.local.iter().enumerate() {
+            group.resize(sources.len(), 0);
+            let light_group = lg(&|g| g.local(k));
             if let LightKind::Distant { angular_diameter } = light.kind {
                 let sun = Sun { direction: -light.facing(), angular_diameter, irradiance: light.emission };
                 if let Some(d) = Distant::new(&sun) {
                     power.push(luminance(d.irradiance()) as f64 * infinite_area);
                     sources.push(Source::Distant(d));
+                    group.push(light_group);
                 }
                 continue;
             }
@@ -300,6 +324,7 @@ impl<'a> LightSampler<'a> {
             }
             power.push(p);
             sources.push(Source::Local(light));
+            group.push(light_group);
         }
         let mut first_triangle = Vec::new();
         if lib.materials.iter().any(|m| m.emission.max_element() > 0.0) {
@@ -312,6 +337,7 @@ impl<'a> LightSampler<'a> {
                 let Some(mesh) = lib.meshes.get(inst.mesh as usize) else { continue };
                 let det = inst.world_from_object.matrix3.determinant();
                 first_triangle[i] = sources.len() as u32;
+                let material_group = lg(&|g| g.material(inst.material));
                 for (t, tri) in mesh.indices.chunks_exact(3).enumerate() {
                     let p = [0, 1, 2].map(|j| {
                         let k = tri[j] as usize;
@@ -327,6 +353,7 @@ impl<'a> LightSampler<'a> {
                         PI as f64 * luminance(m.emission) as f64 * area as f64
                     };
                     power.push(p_t);
+                    group.push(material_group);
                     sources.push(Source::Triangle(Triangle {
                         p,
                         n,
@@ -366,6 +393,8 @@ impl<'a> LightSampler<'a> {
             dome,
             sized,
             sun,
+            group,
+            light_groups,
         }
     }
 
@@ -402,17 +431,18 @@ impl<'a> LightSampler<'a> {
         }
         let index = t.sources[if t.sources.len() > 1 { t.table.pick(u_pick) } else { 0 }] as usize;
         let pick = self.pmf[index];
-        match &self.sources[index] {
+        let group = self.group[index];
+        let sample = match &self.sources[index] {
             Source::Distant(d) => {
                 let wi = d.sample(u);
                 let delta = d.pdf == 0.0;
                 let pdf = if delta { pick } else { d.pdf * pick };
-                Some(LightSample { wi, distance: f32::INFINITY, radiance: d.radiance, pdf, delta })
+                Some(LightSample { wi, distance: f32::INFINITY, radiance: d.radiance, pdf, delta, group })
             }
             Source::Dome(part) => {
                 let (dome, _) = self.dome.as_ref()?;
                 let (wi, radiance, pdf) = dome.sample_part(*part, u)?;
-                Some(LightSample { wi, distance: f32::INFINITY, radiance, pdf: pdf * pick, delta: false })
+                Some(LightSample { wi, distance: f32::INFINITY, radiance, pdf: pdf * pick, delta: false, group })
             }
             Source::Local(light) => sample_local(light, p, u).map(|s| LightSample { pdf: s.pdf * pick, ..s }),
             Source::Triangle(tri) => {
@@ -431,9 +461,17 @@ impl<'a> LightSampler<'a> {
                     return None;
                 }
                 let radiance = self.triangle_emission(tri, b1, b2);
-                Some(LightSample { wi, distance, radiance, pdf: pick * dist2 / (tri.area * cos_l), delta: false })
+                Some(LightSample {
+                    wi,
+                    distance,
+                    radiance,
+                    pdf: pick * dist2 / (tri.area * cos_l),
+                    delta: false,
+                    group,
+                })
             }
-        }
+        };
+        sample.map(|s| LightSample { group, ..s })
     }
 
     /// The emission of a triangle's material at barycentrics (b1, b2),
@@ -471,6 +509,21 @@ impl<'a> LightSampler<'a> {
         Some((radiance, pdf * pick))
     }
 
+    /// The light group of the sun (the shot's and a dome's own).
+    pub(crate) fn sun_group(&self) -> u16 {
+        self.light_groups.map_or(0, |g| g.sun())
+    }
+
+    /// The light group of the dome or uniform sky.
+    pub(crate) fn environment_group(&self) -> u16 {
+        self.light_groups.map_or(0, |g| g.environment())
+    }
+
+    /// The light group of material `m`'s emission.
+    pub(crate) fn material_group(&self, m: u32) -> u16 {
+        self.light_groups.map_or(0, |g| g.material(m))
+    }
+
     /// Whether camera rays that miss see the dome.
     pub(crate) fn dome_camera_visible(&self) -> bool {
         self.dome_camera_visible
@@ -487,7 +540,8 @@ impl<'a> LightSampler<'a> {
             }
             let limit = best.map_or(tmax, |b| b.t);
             if let Some(hit) = intersect_sized(light, origin, dir, limit) {
-                best = Some(AreaHit { pdf: hit.pdf * self.pmf[index as usize], ..hit });
+                best =
+                    Some(AreaHit { pdf: hit.pdf * self.pmf[index as usize], group: self.group[index as usize], ..hit });
             }
         }
         best
@@ -548,7 +602,7 @@ fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
             if radiance == Vec3::ZERO {
                 return None;
             }
-            Some(LightSample { wi, distance, radiance, pdf: 1.0, delta: true })
+            Some(LightSample { wi, distance, radiance, pdf: 1.0, delta: true, group: 0 })
         }
         LightKind::Rect { .. } | LightKind::Disk { .. } => {
             let (local, area) = match light.kind {
@@ -571,7 +625,14 @@ fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
             if cos_l <= 1e-6 {
                 return None;
             }
-            Some(LightSample { wi, distance, radiance: light.emission, pdf: dist2 / (area * cos_l), delta: false })
+            Some(LightSample {
+                wi,
+                distance,
+                radiance: light.emission,
+                pdf: dist2 / (area * cos_l),
+                delta: false,
+                group: 0,
+            })
         }
         LightKind::Sphere { radius } => {
             let d = centre - p;
@@ -600,6 +661,7 @@ fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
                 radiance: light.emission,
                 pdf: 1.0 / (2.0 * PI * one_minus),
                 delta: false,
+                group: 0,
             })
         }
         LightKind::Distant { .. } => None,
@@ -631,7 +693,7 @@ fn intersect_sized(light: &Light, origin: Vec3, dir: Vec3, tmax: f32) -> Option<
                 LightKind::Disk { radius } if q.x * q.x + q.y * q.y <= radius * radius => PI * radius * radius,
                 _ => return None,
             };
-            Some(AreaHit { t, radiance: light.emission, pdf: t * t / (area * cos_l.abs()) })
+            Some(AreaHit { t, radiance: light.emission, pdf: t * t / (area * cos_l.abs()), group: 0 })
         }
         LightKind::Sphere { radius } => {
             let d = centre - origin;
@@ -650,7 +712,7 @@ fn intersect_sized(light: &Light, origin: Vec3, dir: Vec3, tmax: f32) -> Option<
             }
             let sin2_max = radius * radius / dc2;
             let one_minus = sin2_max / (1.0 + (1.0 - sin2_max).max(0.0).sqrt());
-            Some(AreaHit { t, radiance: light.emission, pdf: 1.0 / (2.0 * PI * one_minus) })
+            Some(AreaHit { t, radiance: light.emission, pdf: 1.0 / (2.0 * PI * one_minus), group: 0 })
         }
         _ => None,
     }

@@ -20,6 +20,7 @@ pub mod film;
 pub mod integrator;
 pub mod job;
 pub(crate) mod lights;
+pub mod passes;
 pub(crate) mod sampler;
 
 pub use accel::{BlasSet, Tlas};
@@ -56,6 +57,8 @@ pub struct RenderSettings {
     /// ignoring metallic and roughness. For comparisons with other renderers'
     /// plain diffuse materials (benchmarks); off for production.
     pub diffuse_only: bool,
+    /// Light-path passes, light groups and position to write (render::passes).
+    pub passes: passes::PassSet,
 }
 
 impl Default for RenderSettings {
@@ -72,6 +75,7 @@ impl Default for RenderSettings {
             threads: 0,
             indirect_clamp: 10.0,
             diffuse_only: false,
+            passes: passes::PassSet::default(),
         }
     }
 }

@@ -1024,6 +1024,7 @@ impl AssetCache {
                 emission: color * (intensity / LUMENS_PER_WATT),
                 two_sided: false,
                 camera_visible: false,
+                light_group: None,
             });
         }
         Ok(out)

@@ -73,6 +73,9 @@ pub struct Light {
     pub two_sided: bool,
     /// Camera rays see a sized light's surface (bounce rays always do).
     pub camera_visible: bool,
+    /// The light group its light is written to (`lg_<name>`); None: a
+    /// group of its own, named after it (render::passes).
+    pub light_group: Option<String>,
 }
 
 impl Light {
@@ -121,11 +124,27 @@ pub struct SceneLights {
     pub dome: Option<Arc<Dome>>,
     /// Point, spot and area lights.
     pub local: Vec<Light>,
+    /// The light groups the sun, sky, dome and emissive materials are in.
+    pub groups: NamedGroups,
+}
+
+/// Light groups a shot names for the lights that are not [`Light`]s
+/// (render::passes gives the defaults: `sun`, `sky`, `dome`, the material's name).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct NamedGroups {
+    /// The sun's (`lights.sun.light_group`).
+    pub sun: Option<String>,
+    /// The uniform sky's.
+    pub sky: Option<String>,
+    /// The dome's.
+    pub dome: Option<String>,
+    /// Emissive materials by name (`lights.material_groups`).
+    pub materials: std::collections::BTreeMap<String, String>,
 }
 
 impl SceneLights {
     /// Just a sun (or none) and a uniform sky: the simple case.
     pub fn sun_and_sky(sun: Option<Sun>, sky: Sky) -> SceneLights {
-        SceneLights { sun, sky, dome: None, local: Vec::new() }
+        SceneLights { sun, sky, dome: None, local: Vec::new(), groups: NamedGroups::default() }
     }
 }

@@ -10,7 +10,8 @@ use toml::Spanned;
 
 use super::{look_at, Context};
 use crate::error::{Error, Result};
-use crate::scene::lights::{Light, LightKind};
+use crate::render::passes::check_group_name;
+use crate::scene::lights::{Light, LightKind, NamedGroups};
 use crate::scene::{Sky, Sun};
 
 /// `[lights]`, checked.
@@ -25,6 +26,19 @@ pub struct Lights {
     /// Point, spot and area lights, world space, in file order (points,
     /// spots, rects, disks, spheres).
     pub(crate) local: Vec<Light>,
+    /// `[lights.groups]`: the light groups of the sun, sky, dome and emissive materials.
+    pub(crate) groups: NamedGroups,
+}
+
+/// `[lights.groups]` as written.
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct GroupsFile {
+    sun: Option<String>,
+    sky: Option<String>,
+    dome: Option<String>,
+    #[serde(default)]
+    materials: std::collections::BTreeMap<String, String>,
 }
 
 /// `[lights.sun]`.
@@ -142,6 +156,8 @@ struct LocalFile {
     outer_angle: Option<f32>,
     two_sided: Option<bool>,
     camera_visible: Option<bool>,
+    /// The light group it is written to (default: its own, by its name).
+    light_group: Option<String>,
 }
 
 /// `[lights]` as written.
@@ -162,6 +178,8 @@ pub(super) struct LightsFile {
     disk: Vec<LocalFile>,
     #[serde(default)]
     sphere: Vec<LocalFile>,
+    #[serde(default)]
+    groups: GroupsFile,
 }
 
 /// Most local lights a shot may declare (the set's glTF may add more).
@@ -223,7 +241,24 @@ impl LightsFile {
                 local.push(l.check(kind, &key).map_err(|(k, m)| Error::invalid(path, m).field(format!("{key}.{k}")))?);
             }
         }
-        Ok(Lights { sun: self.sun, sky: self.sky, dome, local })
+        let g = &self.groups;
+        let named = |key: &str, v: &Option<String>| -> Result<Option<String>> {
+            if let Some(name) = v {
+                check_group_name(name, key).map_err(|e| Error::invalid(path, e.to_string()).field(key))?;
+            }
+            Ok(v.clone())
+        };
+        for (material, group) in &g.materials {
+            let key = format!("lights.groups.materials.{material}");
+            check_group_name(group, &key).map_err(|e| Error::invalid(path, e.to_string()).field(key.clone()))?;
+        }
+        let groups = NamedGroups {
+            sun: named("lights.groups.sun", &g.sun)?,
+            sky: named("lights.groups.sky", &g.sky)?,
+            dome: named("lights.groups.dome", &g.dome)?,
+            materials: g.materials.clone(),
+        };
+        Ok(Lights { sun: self.sun, sky: self.sky, dome, local, groups })
     }
 }
 
@@ -327,6 +362,9 @@ impl LocalFile {
         let intensity = positive(self.intensity, "intensity", kind)?;
         check_light(intensity, self.color)?;
         let exposure = exposure_scale(self.exposure).map_err(|m| ("exposure", m))?;
+        if let Some(g) = &self.light_group {
+            check_group_name(g, &format!("{key}.light_group")).map_err(|e| ("light_group", e.to_string()))?;
+        }
         let world_from_light = self.placement()?;
         let kind = match kind {
             "point" => LightKind::Point,
@@ -361,6 +399,7 @@ impl LocalFile {
             emission: Vec3::from(self.color) * intensity * exposure,
             two_sided: self.two_sided.unwrap_or(false),
             camera_visible: self.camera_visible.unwrap_or(false),
+            light_group: self.light_group.clone(),
         })
     }
 }

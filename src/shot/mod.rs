@@ -367,7 +367,7 @@ impl Default for LayerSettings {
 }
 
 /// `[render]`.
-#[derive(Debug, Clone, Copy, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RenderSettings {
     /// Width, height in pixels.
@@ -393,6 +393,10 @@ pub struct RenderSettings {
     /// `acescg`); inputs are always read as linear Rec.709 (docs/render.md).
     #[serde(default)]
     pub working_colourspace: Colourspace,
+    /// Passes beyond the beauty and data passes: light-path names,
+    /// `light_groups`, `P` or `all` (render::passes, docs/render.md).
+    #[serde(default)]
+    pub passes: Vec<String>,
 }
 
 impl Default for RenderSettings {
@@ -404,6 +408,7 @@ impl Default for RenderSettings {
             indirect_clamp: default_indirect_clamp(),
             shutter: None,
             working_colourspace: Colourspace::Rec709,
+            passes: Vec::new(),
         }
     }
 }
@@ -795,6 +800,8 @@ fn check_render(render: &RenderSettings, path: &Path) -> Result<()> {
     if let Some(shutter) = render.shutter {
         check_shutter(shutter).map_err(|m| Error::invalid(path, m).field("render.shutter"))?;
     }
+    crate::render::passes::PassSet::parse(&render.passes, "render.passes")
+        .map_err(|e| Error::invalid(path, e.to_string()).field("render.passes"))?;
     Ok(())
 }
 

@@ -8,7 +8,10 @@
 //! the film has them the Cryptomatte rank channels `CryptoAgent00.R ...`,
 //! `CryptoMaterial00.R ...`, `CryptoPart00.R ...` (float) with their
 //! `cryptomatte/<key>/...` header
-//! (see [`super::cryptomatte`]).
+//! (see [`super::cryptomatte`]), and the passes asked for
+//! ([`super::passes`]): `diffuse_direct.B diffuse_direct.G diffuse_direct.R`
+//! ... and `lg_<group>.B/G/R` (half, premultiplied like the beauty), `P.X
+//! P.Y P.Z` (float, world position).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -262,6 +265,17 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
             }
         }
     }
+    for pass in &film.passes {
+        if pass.data.len() != w * h {
+            return Err(Error::invalid(path, format!("pass `{}` does not match the film size", pass.name)));
+        }
+        for (c, suffix) in pass.channels.iter().enumerate() {
+            let values = pass.data.iter().map(move |p| p[c]);
+            // Position needs a float's precision; light is half, like the beauty.
+            let samples = if pass.name == "P" { FlatSamples::F32(values.collect()) } else { half(values) };
+            list.push(AnyChannel::new(text(&format!("{}.{suffix}", pass.name))?, samples));
+        }
+    }
     let channels = AnyChannels::sort(SmallVec::from_vec(list));
 
     let mut attrs = LayerAttributes::named(text(&meta.layer)?);
@@ -459,6 +473,37 @@ pub(crate) fn sort_header_attributes(bytes: &mut [u8]) -> bool {
     }
 }
 
+/// The passes among a file's `channels` (light paths, `lg_*`, `P`), in file
+/// order, read with `floats`.
+fn read_passes(
+    channels: impl Iterator<Item = String>,
+    floats: &dyn Fn(&str) -> Result<Vec<f32>>,
+) -> Result<Vec<super::film::Pass>> {
+    use super::passes::LightPath;
+    let names: Vec<String> = channels.collect();
+    let mut passes: Vec<(String, [&'static str; 3])> = Vec::new();
+    for name in &names {
+        let Some(layer) = name.strip_suffix(".R") else { continue };
+        if LightPath::ALL.iter().any(|p| p.name() == layer) || layer.starts_with("lg_") {
+            passes.push((layer.to_string(), ["R", "G", "B"]));
+        }
+    }
+    // File order: light paths as listed, then light groups, then P.
+    passes.sort_by_key(|(n, _)| (LightPath::ALL.iter().position(|p| p.name() == n).unwrap_or(usize::MAX), n.clone()));
+    if names.iter().any(|n| n == "P.X") {
+        passes.push(("P".into(), ["X", "Y", "Z"]));
+    }
+    passes
+        .into_iter()
+        .map(|(name, channels)| {
+            let [a, b, c] = channels.map(|s| floats(&format!("{name}.{s}")));
+            let (a, b, c) = (a?, b?, c?);
+            let data = a.iter().zip(&b).zip(&c).map(|((&a, &b), &c)| [a, b, c]).collect();
+            Ok(super::film::Pass { name, channels, data })
+        })
+        .collect()
+}
+
 /// Reads a file written by [`write_layer`] back (tests, resume, botinfo).
 pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
     crate::exr_guard::check_decoded_size(path)?;
@@ -513,6 +558,7 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
             (Ok(u), Ok(v)) => u.iter().zip(&v).map(|(&u, &v)| [u, v]).collect(),
             _ => Vec::new(),
         },
+        passes: read_passes(layer.channel_data.list.iter().map(|c| c.name.to_string()), &floats)?,
     };
 
     let attrs = &layer.attributes;
