@@ -623,7 +623,7 @@ fn passes_and_light_groups_add_up_to_the_beauty() {
     let (lib, scene) = floor_scene(lights, vec![]);
     let mut s = settings(8, 2);
     (s.max_bounces, s.diffuse_only, s.sky_visible, s.indirect_clamp) = (3, false, true, 10.0);
-    s.passes = throng::render::passes::PassSet::all();
+    s.passes = throng::scene::passes::PassSet::all();
     let film = render_frame(&BlasSet::build(&lib), &lib, &scene, &s, None).expect("render");
     let names: Vec<&str> = film.passes.iter().map(|p| p.name.as_str()).collect();
     assert!(names.contains(&"diffuse_direct") && names.contains(&"environment") && names.contains(&"P"), "{names:?}");

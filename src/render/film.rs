@@ -20,7 +20,7 @@
 //!   from a fixed-size per-pixel accumulator over the samples in index order
 //!   (so also independent of threading).
 //! - `passes`: the light-path passes and light groups asked for (means over
-//!   all samples, like RGB, from the same samples: render::passes), then the
+//!   all samples, like RGB, from the same samples: scene::passes), then the
 //!   world position `P` of the nearest sample's first hit (never filtered,
 //!   like `z`; zero where it missed).
 
@@ -33,9 +33,9 @@ use rayon::prelude::*;
 use super::accel::{BlasSet, Tlas};
 use super::cryptomatte::{CryptoNames, Cryptomatte, RankAccumulator, MATTES, RANKS};
 use super::integrator::{Integrator, RayCounts, SampleResult};
-use super::passes::{LightGroups, PassSet, Split};
 use super::RenderSettings;
 use crate::error::{Error, Result};
+use crate::scene::passes::{LightGroups, PassSet, Split};
 use crate::scene::{FrameScene, Library};
 
 /// Tile edge in pixels: small enough to balance load, large enough to keep a

@@ -15,9 +15,9 @@ use glam::{Affine3A, Mat3A, Vec2, Vec3, Vec4};
 use super::accel::{Hit, Tlas, WorldRay};
 use super::bsdf::{sample_concentric_disk, Bsdf, Dielectric, ShadingFrame};
 use super::lights::LightSampler;
-use super::passes::{LightGroups, LightPath, Split};
 use super::sampler::Sampler;
 use super::RenderSettings;
+use crate::scene::passes::{LightGroups, LightPath, Split};
 use crate::scene::{vis, AlphaMode, FrameScene, Library, Material, Mesh, Texture, TextureRef, UvTransform};
 
 /// Bounces before Russian roulette may end a path.
@@ -57,7 +57,7 @@ pub(crate) struct SampleResult {
 }
 
 /// How the first surface sent the path on, which decides the light-path
-/// pass of everything the path brings back (render::passes).
+/// pass of everything the path brings back (scene::passes).
 #[derive(Clone, Copy, Debug)]
 enum FirstBounce {
     /// Still at the camera vertex.

@@ -18,8 +18,8 @@ use crate::layers::Manifest;
 use crate::output::{layer_path, FULL_LAYER};
 use crate::render::colour::{self, Colourspace};
 use crate::render::cryptomatte::{CryptoNames, NameTables};
-use crate::render::passes::PassSet;
 use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, RenderSettings};
+use crate::scene::passes::PassSet;
 use crate::scene::{vis, Deform, FrameScene, Instance, InstanceMotion, SceneMotion, Space};
 
 /// What to render.

@@ -28,8 +28,8 @@ use glam::{Vec2, Vec3};
 use super::bsdf::{luminance, sample_concentric_disk, ShadingFrame};
 use super::dome::{DomePart, DomeSampler};
 use super::integrator::surface_emission;
-use super::passes::LightGroups;
 use crate::scene::lights::{Light, LightKind, SceneLights};
+use crate::scene::passes::LightGroups;
 use crate::scene::{vis, FrameScene, Library, Sun};
 
 /// A distant light as the integrator samples it: a uniform cone (or a delta
@@ -133,7 +133,7 @@ pub(crate) struct LightSample {
     pub(crate) pdf: f32,
     /// A delta light: no BSDF-sampled ray can find it, so no MIS.
     pub(crate) delta: bool,
-    /// Its light group (render::passes; 0 without groups).
+    /// Its light group (scene::passes; 0 without groups).
     pub(crate) group: u16,
 }
 

@@ -20,7 +20,6 @@ pub mod film;
 pub mod integrator;
 pub mod job;
 pub(crate) mod lights;
-pub mod passes;
 pub(crate) mod sampler;
 
 pub use accel::{BlasSet, Tlas};
@@ -57,8 +56,8 @@ pub struct RenderSettings {
     /// ignoring metallic and roughness. For comparisons with other renderers'
     /// plain diffuse materials (benchmarks); off for production.
     pub diffuse_only: bool,
-    /// Light-path passes, light groups and position to write (render::passes).
-    pub passes: passes::PassSet,
+    /// Light-path passes, light groups and position to write (scene::passes).
+    pub passes: crate::scene::passes::PassSet,
 }
 
 impl Default for RenderSettings {
@@ -75,7 +74,7 @@ impl Default for RenderSettings {
             threads: 0,
             indirect_clamp: 10.0,
             diffuse_only: false,
-            passes: passes::PassSet::default(),
+            passes: crate::scene::passes::PassSet::default(),
         }
     }
 }

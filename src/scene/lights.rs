@@ -74,7 +74,7 @@ pub struct Light {
     /// Camera rays see a sized light's surface (bounce rays always do).
     pub camera_visible: bool,
     /// The light group its light is written to (`lg_<name>`); None: a
-    /// group of its own, named after it (render::passes).
+    /// group of its own, named after it (scene::passes).
     pub light_group: Option<String>,
 }
 
@@ -129,7 +129,7 @@ pub struct SceneLights {
 }
 
 /// Light groups a shot names for the lights that are not [`Light`]s
-/// (render::passes gives the defaults: `sun`, `sky`, `dome`, the material's name).
+/// (scene::passes gives the defaults: `sun`, `sky`, `dome`, the material's name).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct NamedGroups {
     /// The sun's (`lights.sun.light_group`).

@@ -7,6 +7,7 @@
 pub mod dome;
 pub mod gltf;
 pub mod lights;
+pub mod passes;
 
 use glam::{Affine3A, Vec2, Vec3, Vec4};
 

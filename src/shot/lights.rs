@@ -10,8 +10,8 @@ use toml::Spanned;
 
 use super::{look_at, Context};
 use crate::error::{Error, Result};
-use crate::render::passes::check_group_name;
 use crate::scene::lights::{Light, LightKind, NamedGroups};
+use crate::scene::passes::check_group_name;
 use crate::scene::{Sky, Sun};
 
 /// `[lights]`, checked.

@@ -394,7 +394,7 @@ pub struct RenderSettings {
     #[serde(default)]
     pub working_colourspace: Colourspace,
     /// Passes beyond the beauty and data passes: light-path names,
-    /// `light_groups`, `P` or `all` (render::passes, docs/render.md).
+    /// `light_groups`, `P` or `all` (scene::passes, docs/render.md).
     #[serde(default)]
     pub passes: Vec<String>,
 }
@@ -800,7 +800,7 @@ fn check_render(render: &RenderSettings, path: &Path) -> Result<()> {
     if let Some(shutter) = render.shutter {
         check_shutter(shutter).map_err(|m| Error::invalid(path, m).field("render.shutter"))?;
     }
-    crate::render::passes::PassSet::parse(&render.passes, "render.passes")
+    crate::scene::passes::PassSet::parse(&render.passes, "render.passes")
         .map_err(|e| Error::invalid(path, e.to_string()).field("render.passes"))?;
     Ok(())
 }

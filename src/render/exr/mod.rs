@@ -479,7 +479,7 @@ fn read_passes(
     channels: impl Iterator<Item = String>,
     floats: &dyn Fn(&str) -> Result<Vec<f32>>,
 ) -> Result<Vec<super::film::Pass>> {
-    use super::passes::LightPath;
+    use crate::scene::passes::LightPath;
     let names: Vec<String> = channels.collect();
     let mut passes: Vec<(String, [&'static str; 3])> = Vec::new();
     for name in &names {
