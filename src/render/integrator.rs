@@ -935,13 +935,9 @@ impl<'a> Integrator<'a> {
                 if let Some(split) = split.as_deref_mut() {
                     if camera {
                         // Direct light at the first surface, lobe by lobe.
-                        let (diffuse, _) = bsdf.eval_lobes(wo, wi_local);
-                        let share = lobe_share(diffuse, f);
-                        split.paths[LightPath::DiffuseDirect as usize] += c * share;
-                        split.paths[LightPath::SpecularDirect as usize] += c * (Vec3::ONE - share);
-                        if let Some(g) = split.groups.get_mut(ls.group as usize) {
-                            *g += c;
-                        }
+                        let share = lobe_share(bsdf.eval_lobes(wo, wi_local).0, f);
+                        let lobes = FirstBounce::Lobes { diffuse: share, specular: Vec3::ONE - share };
+                        deposit(split, c, lobes, true, ls.group);
                     } else {
                         deposit(split, c, first_bounce, false, ls.group);
                     }

@@ -138,7 +138,7 @@ pub struct NamedGroups {
     pub sky: Option<String>,
     /// The dome's.
     pub dome: Option<String>,
-    /// Emissive materials by name (`lights.material_groups`).
+    /// Emissive materials by name (`lights.groups.materials`).
     pub materials: std::collections::BTreeMap<String, String>,
 }
 

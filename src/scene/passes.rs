@@ -188,7 +188,7 @@ impl LightGroups {
         for name in named.materials.keys() {
             if !lib.materials.iter().any(|m| &m.name == name) {
                 return Err(Error::Usage(format!(
-                    "lights.material_groups: no material is named `{name}` (in the set, the wardrobes or the rigs)"
+                    "lights.groups.materials: no material is named `{name}` (in the set, the wardrobes or the rigs)"
                 )));
             }
         }
@@ -208,7 +208,7 @@ impl LightGroups {
             return Err(Error::Usage(format!(
                 "the shot has {} light groups (a light or emissive material that names none is a group of its \
                  own); at most {MAX_LIGHT_GROUPS} are written: give lights a `light_group` (or map materials in \
-                 lights.material_groups)",
+                 lights.groups.materials)",
                 all.len()
             )));
         }
