@@ -77,6 +77,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
         compression: Default::default(),
         shutter: None,
         colourspace: Default::default(),
+        passes: None,
     };
     job::run(crowd, Some(manifest), &job, &job::Silent).unwrap();
 }

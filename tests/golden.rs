@@ -121,6 +121,7 @@ fn render_with_shutter(
         compression: Default::default(),
         shutter,
         colourspace: Default::default(),
+        passes: None,
     };
     let done = job::run(crowd, Some(manifest), &job, &job::Silent).expect("demo renders").layers;
     done.into_iter().map(|r| (r.layer, r.path)).collect()

@@ -20,7 +20,8 @@
 //!   from a fixed-size per-pixel accumulator over the samples in index order
 //!   (so also independent of threading).
 //! - `passes`: the light-path passes and light groups asked for (means over
-//!   all samples, like RGB, from the same samples: scene::passes), then the
+//!   all samples, like RGB, from the same samples: scene::passes), the
+//!   shadow pass (set surfaces' direct light the crowd's shadows took), then the
 //!   world position `P` of the nearest sample's first hit (never filtered,
 //!   like `z`; zero where it missed).
 
@@ -100,6 +101,9 @@ impl Pass {
         if set.light_groups {
             names.extend(groups.iter().map(|g| (format!("lg_{g}"), RGB)));
         }
+        if set.shadow {
+            names.push((crate::scene::passes::SHADOW.into(), RGB));
+        }
         if set.position {
             names.push(("P".into(), ["X", "Y", "Z"]));
         }
@@ -176,6 +180,7 @@ fn render_pixel(
     // Samples summed in index order: the float result is independent of threading.
     let mut sums = [Vec3::ZERO; 7];
     let mut group_sums = vec![Vec3::ZERO; passes.as_ref().map_or(0, |p| p.split.groups.len())];
+    let mut shadow = Vec3::ZERO;
     for s in 0..spp {
         let split = passes.as_mut().map(|p| {
             p.split.clear();
@@ -191,6 +196,7 @@ fn render_pixel(
                 for (sum, c) in group_sums.iter_mut().zip(&p.split.groups) {
                     *sum += *c;
                 }
+                shadow += p.split.shadow;
             }
         }
         if let Some(names) = crypto {
@@ -222,6 +228,11 @@ fn render_pixel(
                 if let Some(v) = out.next() {
                     *v = (*g * inv).to_array();
                 }
+            }
+        }
+        if p.set.shadow {
+            if let Some(v) = out.next() {
+                *v = (shadow * inv).to_array();
             }
         }
         if p.set.position {

@@ -184,6 +184,19 @@ struct LayerFrameSummary {
     peak_rss_bytes: Option<u64>,
     /// Seconds building the top-level tree.
     tlas_build_s: f64,
+    /// Bytes of the EXR written.
+    file_bytes: u64,
+    /// Each pass written and its channels' bytes before compression.
+    passes: Vec<PassSummary>,
+}
+
+/// One pass of a layer file in `render --json`.
+#[derive(Debug, serde::Serialize)]
+struct PassSummary {
+    name: String,
+    /// Its channels' bytes in the file before compression (compression
+    /// works on blocks of every channel at once, so a pass has no compressed size of its own).
+    bytes: u64,
 }
 
 impl Summary {

@@ -11,6 +11,7 @@ use throng::output::FULL_LAYER;
 use throng::render::colour::{self, Colourspace};
 use throng::render::exr;
 use throng::render::job::{self, CryptoOutput, RenderJob};
+use throng::scene::passes::PassSet;
 
 /// `--cryptomatte`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -156,6 +157,12 @@ pub struct RenderArgs {
     /// colours are linear Rec.709; acescg converts them and writes AP1 `chromaticities`.
     #[arg(long, value_enum)]
     pub colourspace: Option<ColourspaceFlag>,
+    /// Passes beyond beauty and the data passes, comma-separated: diffuse_direct, diffuse_indirect,
+    /// specular_direct, specular_indirect, transmission, emission, environment, light_groups (one
+    /// lg_<name> per light group), P (world position), shadow (the set layer's crowd shadows), or all
+    /// (default: the shot's `render.passes`).
+    #[arg(long, value_delimiter = ',', value_name = "NAME,...")]
+    pub passes: Option<Vec<String>>,
 }
 
 /// `throng render SHOT ...`: renders the asked layers and frames.
@@ -201,7 +208,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         None => crowd.shot().frames.iter().collect(),
     };
     let spp = args.spp.unwrap_or(crowd.shot().render.spp);
+    let passes = args.passes.as_ref().map(|names| PassSet::parse(names, "--passes")).transpose()?;
     let job = RenderJob {
+        passes,
         threads: args.threads.unwrap_or(0),
         resume: args.resume,
         png: args.png,
@@ -234,6 +243,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 instances: d.instances as u64,
                 peak_rss_bytes: d.peak_rss_bytes,
                 tlas_build_s: d.tlas_build_s,
+                file_bytes: d.file_bytes,
+                passes: d
+                    .pass_bytes
+                    .iter()
+                    .map(|(name, bytes)| super::PassSummary { name: name.clone(), bytes: *bytes })
+                    .collect(),
             })
             .collect();
         // The per-layer resets lower VmHWM: the process peak is the largest of them.

@@ -271,8 +271,7 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
         }
         for (c, suffix) in pass.channels.iter().enumerate() {
             let values = pass.data.iter().map(move |p| p[c]);
-            // Position needs a float's precision; light is half, like the beauty.
-            let samples = if pass.name == "P" { FlatSamples::F32(values.collect()) } else { half(values) };
+            let samples = if pass_is_float(&pass.name) { FlatSamples::F32(values.collect()) } else { half(values) };
             list.push(AnyChannel::new(text(&format!("{}.{suffix}", pass.name))?, samples));
         }
     }
@@ -473,23 +472,39 @@ pub(crate) fn sort_header_attributes(bytes: &mut [u8]) -> bool {
     }
 }
 
-/// The passes among a file's `channels` (light paths, `lg_*`, `P`), in file
+/// Whether a pass is written as float: position needs a float's precision;
+/// light is half, like the beauty.
+fn pass_is_float(name: &str) -> bool {
+    name == crate::scene::passes::POSITION
+}
+
+/// Each pass of `film` with the bytes its channels hold in a layer file
+/// before compression (half or float samples, every pixel).
+pub fn pass_bytes(film: &Film) -> Vec<(String, u64)> {
+    let pixels = film.width as u64 * film.height as u64;
+    film.passes
+        .iter()
+        .map(|p| (p.name.clone(), pixels * p.channels.len() as u64 * if pass_is_float(&p.name) { 4 } else { 2 }))
+        .collect()
+}
+
+/// The passes among a file's `channels` (light paths, `lg_*`, `shadow`, `P`), in file
 /// order, read with `floats`.
 fn read_passes(
     channels: impl Iterator<Item = String>,
     floats: &dyn Fn(&str) -> Result<Vec<f32>>,
 ) -> Result<Vec<super::film::Pass>> {
-    use crate::scene::passes::LightPath;
+    use crate::scene::passes::{file_order, LightPath, SHADOW};
     let names: Vec<String> = channels.collect();
     let mut passes: Vec<(String, [&'static str; 3])> = Vec::new();
     for name in &names {
         let Some(layer) = name.strip_suffix(".R") else { continue };
-        if LightPath::ALL.iter().any(|p| p.name() == layer) || layer.starts_with("lg_") {
+        if LightPath::ALL.iter().any(|p| p.name() == layer) || layer.starts_with("lg_") || layer == SHADOW {
             passes.push((layer.to_string(), ["R", "G", "B"]));
         }
     }
-    // File order: light paths as listed, then light groups, then P.
-    passes.sort_by_key(|(n, _)| (LightPath::ALL.iter().position(|p| p.name() == n).unwrap_or(usize::MAX), n.clone()));
+    // File order: light paths as listed, then light groups, the shadow pass, then P.
+    passes.sort_by(|a, b| file_order(&a.0).cmp(&file_order(&b.0)));
     if names.iter().any(|n| n == "P.X") {
         passes.push(("P".into(), ["X", "Y", "Z"]));
     }
