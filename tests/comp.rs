@@ -78,6 +78,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
         shutter: None,
         colourspace: Default::default(),
         passes: None,
+        adaptive: None,
     };
     job::run(crowd, Some(manifest), &job, &job::Silent).unwrap();
 }

@@ -122,6 +122,7 @@ fn render_with_shutter(
         shutter,
         colourspace: Default::default(),
         passes: None,
+        adaptive: None,
     };
     let done = job::run(crowd, Some(manifest), &job, &job::Silent).expect("demo renders").layers;
     done.into_iter().map(|r| (r.layer, r.path)).collect()

@@ -72,6 +72,7 @@ fn settings(spp: u32, threads: usize) -> RenderSettings {
         indirect_clamp: 0.0,
         diffuse_only: true,
         passes: Default::default(),
+        adaptive: None,
     }
 }
 
@@ -707,4 +708,48 @@ fn the_shadow_pass_is_the_light_the_crowd_took_from_the_set() {
     assert!(empty.passes[0].data.iter().all(|v| *v == [0.0; 3]), "no crowd, no crowd shadow");
     s.passes = Default::default();
     assert_eq!(render_frame(&blas, &lib, &with, &s, None).expect("render").rgba, film.rgba);
+}
+
+/// Adaptive sampling (docs/render.md, "Adaptive sampling"): every pixel
+/// takes between min_spp and max_spp samples, the soft shadow's penumbra
+/// more than the flat floor; the decision reads the pixel's own samples, so
+/// the image is bit-identical for any thread count, and a pixel that took n
+/// samples equals the fixed n-sample render's pixel, bit for bit.
+#[test]
+fn adaptive_sampling_stops_each_pixel_on_its_own_samples() {
+    let rect = light(LightKind::Rect { size: Vec2::new(1.5, 1.5) }, Vec3::new(0.0, 2.0, 0.0), -Vec3::Y, 8.0);
+    let grey = Material { name: "blocker".into(), base_color: Vec3::splat(0.3), ..Default::default() };
+    let blocker = (quad(1.0), grey, Affine3A::from_translation(Vec3::new(0.4, 1.0, 0.0)));
+    let (lib, scene) = floor_scene(local(vec![rect]), vec![blocker]);
+    let blas = BlasSet::build(&lib);
+    let (min, max) = (4, 64);
+    let mut s = settings(1, 1);
+    s.adaptive = Some(throng::shot::Adaptive { threshold: 0.1, min_spp: min, max_spp: max });
+    let one = render_frame(&blas, &lib, &scene, &s, None).expect("render");
+    s.threads = 2;
+    let two = render_frame(&blas, &lib, &scene, &s, None).expect("render");
+    assert_eq!((&one.rgba, &one.samples), (&two.rgba, &two.samples), "thread count changed the image");
+    let n = &one.samples;
+    assert_eq!(n.len(), one.rgba.len());
+    assert!(n.iter().all(|&k| (min..=max).contains(&k)), "{n:?}");
+    let fewest = *n.iter().min().unwrap();
+    let most = *n.iter().max().unwrap();
+    assert!(most > 4 * fewest, "noisy pixels sample longer: {fewest} to {most}");
+    let mut sorted = n.clone();
+    sorted.sort();
+    assert!(sorted[sorted.len() / 2] <= max / 2, "most pixels stop early: median {}", sorted[sorted.len() / 2]);
+    for k in [fewest, most] {
+        let fixed = render_frame(&blas, &lib, &scene, &RenderSettings { spp: k, adaptive: None, ..s.clone() }, None)
+            .expect("render");
+        assert!(fixed.samples.is_empty());
+        let matched = (0..n.len()).filter(|&i| n[i] == k).inspect(|&i| assert_eq!(one.rgba[i], fixed.rgba[i])).count();
+        assert!(matched > 0);
+    }
+    // Bad keys are refused by name.
+    s.adaptive = Some(throng::shot::Adaptive { threshold: f32::NAN, min_spp: 4, max_spp: 8 });
+    let e = render_frame(&blas, &lib, &scene, &s, None).unwrap_err().to_string();
+    assert!(e.contains("render.adaptive.threshold"), "{e}");
+    s.adaptive = Some(throng::shot::Adaptive { threshold: 0.1, min_spp: 16, max_spp: 8 });
+    let e = render_frame(&blas, &lib, &scene, &s, None).unwrap_err().to_string();
+    assert!(e.contains("render.adaptive.min_spp") && e.contains("above max_spp"), "{e}");
 }

@@ -233,7 +233,7 @@ pub(crate) fn build_plan(
         for (chunk, frames) in frames.chunks(opts.chunk).enumerate() {
             let id = format!("render.{layer}.{chunk}");
             let list = frames.iter().map(|f| f.to_string()).collect::<Vec<_>>().join(",");
-            let argv = [
+            let mut argv = [
                 "throng",
                 "render",
                 &s(&shot_file),
@@ -243,8 +243,6 @@ pub(crate) fn build_plan(
                 layer,
                 "--frames",
                 &list,
-                "--spp",
-                &spp.to_string(),
                 "--resolution",
                 &format!("{}x{}", resolution[0], resolution[1]),
                 "--threads",
@@ -257,6 +255,11 @@ pub(crate) fn build_plan(
             ]
             .map(String::from)
             .to_vec();
+            // A fixed sample count, unless the shot samples adaptively and
+            // the plan was given none (a task's --spp turns adaptive off).
+            if opts.spp.is_some() || shot.render.adaptive.is_none() {
+                argv.splice(9..9, ["--spp".to_string(), spp.to_string()]);
+            }
             for &f in frames {
                 writer.insert((layer.as_str(), f), id.clone());
             }

@@ -57,6 +57,10 @@ pub struct RenderJob {
     /// Light-path passes, light groups and position to write (`None`: the
     /// shot's `render.passes`).
     pub passes: Option<PassSet>,
+    /// Adaptive sampling (`spp` is then not used); `None`: `spp` samples
+    /// in every pixel. `throng render` takes the shot's `render.adaptive`
+    /// unless given `--spp`.
+    pub adaptive: Option<crate::shot::Adaptive>,
 }
 
 impl RenderJob {
@@ -87,6 +91,7 @@ impl RenderJob {
             shutter: None,
             colourspace: Colourspace::Rec709,
             passes: None,
+            adaptive: None,
         }
     }
 }
@@ -409,6 +414,7 @@ pub fn render_fingerprint<C>(
         .value("max_bounces", &shot.render.max_bounces)
         .value("indirect_clamp", &shot.render.indirect_clamp)
         .debug("passes", &job.passes_of(shot).unwrap_or_default())
+        .debug("adaptive", &job.adaptive)
         .value("sensor_width", &shot.camera.sensor_width)
         .debug("camera keys", &shot.camera.keys)
         .debug("camera node", &shot.camera.gltf.as_ref().map(|(_, node)| node))
@@ -600,6 +606,7 @@ pub fn run<C: Space>(
                 sky_visible: layer == FULL_LAYER || manifest.is_some_and(|m| *layer == m.set.name),
                 threads: job.threads,
                 passes: passes.clone(),
+                adaptive: job.adaptive,
                 ..RenderSettings::default()
             };
             let pixels = (w as usize * h as usize).max(1);
@@ -638,7 +645,7 @@ pub fn run<C: Space>(
                 layer: layer.clone(),
                 frame,
                 seed: crowd.shot().seed,
-                spp: job.spp,
+                spp: job.adaptive.map_or(job.spp, |a| a.max_spp),
                 id_mapping: exr::ID_MAPPING.to_string(),
                 world_to_camera,
                 world_to_ndc,

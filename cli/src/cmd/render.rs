@@ -114,7 +114,8 @@ pub struct RenderArgs {
     /// Shot frames, e.g. 1001-1010 or 1001,1005.
     #[arg(long, value_parser = frame_list)]
     pub frames: Option<FrameList>,
-    /// Samples per pixel, 1-65536 (default: the shot's).
+    /// Samples per pixel, 1-65536 (default: the shot's); in every pixel, overriding the shot's
+    /// `render.adaptive`.
     #[arg(long, value_parser = spp)]
     pub spp: Option<u32>,
     /// Render threads, 1-4096 (default: all cores). Output does not depend on it.
@@ -211,6 +212,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let passes = args.passes.as_ref().map(|names| PassSet::parse(names, "--passes")).transpose()?;
     let job = RenderJob {
         passes,
+        // --spp asks for a fixed count: it overrides the shot's render.adaptive.
+        adaptive: if args.spp.is_some() { None } else { crowd.shot().render.adaptive },
         threads: args.threads.unwrap_or(0),
         resume: args.resume,
         png: args.png,

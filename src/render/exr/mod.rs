@@ -9,9 +9,10 @@
 //! `CryptoMaterial00.R ...`, `CryptoPart00.R ...` (float) with their
 //! `cryptomatte/<key>/...` header
 //! (see [`super::cryptomatte`]), and the passes asked for
-//! ([`super::passes`]): `diffuse_direct.B diffuse_direct.G diffuse_direct.R`
-//! ... and `lg_<group>.B/G/R` (half, premultiplied like the beauty), `P.X
-//! P.Y P.Z` (float, world position).
+//! (`scene::passes`): `diffuse_direct.B diffuse_direct.G diffuse_direct.R`
+//! ... and `lg_<group>.B/G/R` and `shadow.B/G/R` (half, premultiplied like
+//! the beauty), `P.X P.Y P.Z` (float, world position); with adaptive
+//! sampling `samples` (uint, the samples each pixel took).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -30,6 +31,9 @@ use crate::exr_guard::exr_error;
 use crate::scene::Camera;
 
 pub mod mattes;
+
+/// The channel holding each pixel's sample count (adaptive sampling only).
+pub const SAMPLES_CHANNEL: &str = "samples";
 
 /// What `agent.id` means, written to `throng/idMapping`.
 pub const ID_MAPPING: &str = "agent.id = cache agent id + 1; 0 = no agent (sky, set or holdout)";
@@ -240,6 +244,12 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
         AnyChannel::new("albedo.B", vec3(&film.albedo, 2)),
         AnyChannel::new("agent.id", FlatSamples::U32(film.agent_id.clone())),
     ];
+    if !film.samples.is_empty() {
+        if film.samples.len() != w * h {
+            return Err(Error::invalid(path, "the samples channel does not match the film size"));
+        }
+        list.push(AnyChannel::new(SAMPLES_CHANNEL, FlatSamples::U32(film.samples.clone())));
+    }
     if !film.motion.is_empty() {
         if film.motion.len() != w * h {
             return Err(Error::invalid(path, "motion vectors do not match the film size"));
@@ -574,6 +584,15 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
             _ => Vec::new(),
         },
         passes: read_passes(layer.channel_data.list.iter().map(|c| c.name.to_string()), &floats)?,
+        samples: match find(SAMPLES_CHANNEL).ok().map(|c| &c.sample_data) {
+            None => Vec::new(),
+            Some(FlatSamples::U32(v)) if v.len() == n => v.clone(),
+            Some(_) => {
+                return Err(
+                    Error::invalid(path, format!("channel `{SAMPLES_CHANNEL}` is not uint")).field(SAMPLES_CHANNEL)
+                )
+            }
+        },
     };
 
     let attrs = &layer.attributes;
