@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::{Args, ValueEnum};
 
 use super::progress::{Progress, ProgressStyle};
-use super::values::{frame_list, resolution, shutter, spp, threads, FrameList, Resolution, ShutterFlag};
+use super::values::{frame_list, resolution, shutter, spp, FrameList, Resolution, ShutterFlag};
 use throng::error::{Error, Result};
 use throng::output::FULL_LAYER;
 use throng::render::colour::{self, Colourspace};
@@ -118,9 +118,6 @@ pub struct RenderArgs {
     /// `render.adaptive`.
     #[arg(long, value_parser = spp)]
     pub spp: Option<u32>,
-    /// Render threads, 1-4096 (default: all cores). Output does not depend on it.
-    #[arg(long, value_parser = threads)]
-    pub threads: Option<usize>,
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
@@ -167,7 +164,8 @@ pub struct RenderArgs {
 }
 
 /// `throng render SHOT ...`: renders the asked layers and frames.
-pub fn run(args: &RenderArgs) -> Result<()> {
+/// `threads`: the process's `--threads` cap, if any.
+pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
     let clock = std::time::Instant::now();
     let shot = throng::shot::Shot::load(&args.shot)?;
     // The crowd is posed for the shutter it renders with.
@@ -214,7 +212,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         passes,
         // --spp asks for a fixed count: it overrides the shot's render.adaptive.
         adaptive: if args.spp.is_some() { None } else { crowd.shot().render.adaptive },
-        threads: args.threads.unwrap_or(0),
+        threads: threads.unwrap_or(0),
         resume: args.resume,
         png: args.png,
         resolution: args.resolution.map(|Resolution(r)| r),
