@@ -49,7 +49,10 @@ pub fn gait(file: &Path, walk: &str, idle: Option<&str>) -> Result<Gait> {
 /// cycle. A walk whose stride is 0 (no root, no given stride) is refused.
 fn skinned_gait(rig: &SkinnedRig, walk: &str, idle: Option<&str>) -> Result<Option<Gait>> {
     let Ok(c) = rig.cycle_index(walk) else { return Ok(None) };
-    let (stride, cycle_length) = (rig.cycles()[c].stride, rig.cycle_frames(c));
+    // Cycles on one clip share its poses (`cycle_index` gives the first of
+    // them), not their strides: the walk's own is its `strides` entry.
+    let own = rig.cycles().iter().find(|x| x.name == walk).map_or(rig.cycles()[c].stride, |x| x.stride);
+    let (stride, cycle_length) = (own, rig.cycle_frames(c));
     if !(stride.is_finite() && stride > 0.0 && cycle_length.is_finite() && cycle_length > 0.0) {
         return Err(Error::invalid(
             rig.path(),
@@ -115,4 +118,27 @@ pub(crate) fn shot_import(shot: &Shot) -> Result<Import> {
 /// Opens the shot's cache (see [`shot_import`]).
 pub fn open(shot: &Shot) -> Result<CacheReader> {
     CacheReader::open_import(&shot.cache.path, &shot_import(shot)?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shot::SkinOptions;
+
+    /// Two cache cycles on one clip keep their own strides (they share poses only).
+    #[test]
+    fn cycles_sharing_a_clip_keep_their_own_strides() {
+        let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/assets/gltf/SimpleSkin/SimpleSkin.gltf");
+        let options = SkinOptions {
+            cycles: [("WalkA", "#0"), ("WalkB", "#0")].map(|(c, k)| (c.to_string(), k.to_string())).into(),
+            strides: [("WalkB".to_string(), 1.25)].into(),
+            ..Default::default()
+        };
+        let rig = SkinnedRig::load(&file, &options, SHOT_FPS).expect("SimpleSkin loads");
+        let g = skinned_gait(&rig, "WalkB", None).expect("WalkB has a stride").expect("a walk cycle");
+        assert_eq!(g.stride, 1.25);
+        // WalkA has none of its own and SimpleSkin's root does not travel.
+        let e = skinned_gait(&rig, "WalkA", None).unwrap_err().to_string();
+        assert!(e.contains("cycle `WalkA` walks 0 m"), "{e}");
+    }
 }
