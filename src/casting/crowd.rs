@@ -16,7 +16,7 @@
 //! nearest its cycle frame (`casting::skin`); every pose step is posed once
 //! and shared by every agent, frame and layer on it.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use glam::{Affine3A, Quat, Vec3};
@@ -117,6 +117,8 @@ pub struct ShotCrowd<C = Rec709> {
     gltf_camera: Option<Camera>,
     /// The dome's pixels (read once), and the set glTF's own lights.
     lights: LoadedLights,
+    /// The wardrobes' part files and textures (`input_files`).
+    wardrobe_files: Vec<(String, PathBuf)>,
 }
 
 /// The lights that come from files: the dome's map and the set's
@@ -216,7 +218,20 @@ impl ShotCrowd {
         }
         warnings.extend(rigs.warnings().cloned());
         let poses = PoseLibrary::new(assets, skins, shutter);
-        Ok(ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera, lights })
+        let wardrobe_files = wardrobes.input_files();
+        Ok(ShotCrowd {
+            shot,
+            cache,
+            rigs,
+            casting,
+            dressing,
+            poses,
+            set,
+            warnings,
+            gltf_camera,
+            lights,
+            wardrobe_files,
+        })
     }
 
     /// The same cast shot with `edit` applied to its shot, for what later
@@ -236,13 +251,35 @@ impl ShotCrowd {
         self,
         convert: impl FnOnce(&mut [Material], &mut [Texture]),
     ) -> ShotCrowd<D> {
-        let ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera, lights } = self;
+        let ShotCrowd {
+            shot,
+            cache,
+            rigs,
+            casting,
+            dressing,
+            poses,
+            set,
+            warnings,
+            gltf_camera,
+            lights,
+            wardrobe_files,
+        } = self;
         let poses = poses.convert(convert);
-        ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera, lights }
+        ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera, lights, wardrobe_files }
     }
 }
 
 impl<C> ShotCrowd<C> {
+    /// Every file the cast shot was read from, as the shot or its
+    /// wardrobes name it: the shot's own ([`Shot::input_files`]), then each
+    /// wardrobe part file and texture. What no output may be
+    /// ([`crate::output::InputFiles`]).
+    pub fn input_files(&self) -> Vec<(String, PathBuf)> {
+        let mut out = self.shot.input_files();
+        out.extend(self.wardrobe_files.iter().cloned());
+        out
+    }
+
     /// The shot.
     pub fn shot(&self) -> &Shot {
         &self.shot

@@ -196,6 +196,26 @@ pub struct Wardrobes {
 }
 
 impl Wardrobes {
+    /// Every part file and texture the wardrobes name, once each, as the
+    /// wardrobe names it (`schemes.Rich.parts[0].file`).
+    pub(crate) fn input_files(&self) -> Vec<(String, PathBuf)> {
+        let mut seen = std::collections::BTreeSet::new();
+        let mut out = Vec::new();
+        for (name, scheme) in &self.schemes {
+            for (i, part) in scheme.parts.iter().enumerate() {
+                if seen.insert(part.file.to_path_buf()) {
+                    out.push((format!("wardrobe part schemes.{name}.parts[{i}].file"), part.file.to_path_buf()));
+                }
+            }
+        }
+        for (name, m) in &self.materials {
+            if let Some(t) = m.base_color_texture.as_ref().filter(|t| seen.insert(t.to_path_buf())) {
+                out.push((format!("texture of material {name}"), t.clone()));
+            }
+        }
+        out
+    }
+
     /// Loads and validates wardrobe files; scheme names must be unique across them.
     pub fn load(paths: &[PathBuf]) -> Result<Wardrobes> {
         let mut all = Wardrobes::default();

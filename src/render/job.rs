@@ -78,6 +78,30 @@ impl RenderJob {
     }
 }
 
+impl RenderJob {
+    /// Every file the job may write for shot `shot`: each layer-frame's
+    /// EXR, and its PNG preview and Cryptomatte sidecars when asked for.
+    pub fn outputs(&self, shot: &str) -> Vec<PathBuf> {
+        let mut out = Vec::new();
+        for layer in &self.layers {
+            for &frame in &self.frames {
+                let exr_path = layer_path(&self.out, shot, layer, frame);
+                if self.png {
+                    out.push(exr_path.with_extension("png"));
+                }
+                if self.cryptomatte == CryptoOutput::Sidecar {
+                    let dir = exr_path.parent().map(std::path::Path::to_path_buf).unwrap_or_default();
+                    out.extend(
+                        crate::render::cryptomatte::MATTES.iter().map(|t| dir.join(exr::sidecar_name(&exr_path, t))),
+                    );
+                }
+                out.push(exr_path);
+            }
+        }
+        out
+    }
+}
+
 /// Where a running job is: the layer-frame at hand and how many of the
 /// job's layer-frames are finished.
 #[derive(Debug, Clone, Copy)]

@@ -100,8 +100,12 @@ pub fn run(args: &LayersArgs) -> Result<()> {
     for w in layers::checks::check_placement(&crowd)?.warnings() {
         eprintln!("throng: warning: {w}");
     }
-    let manifest = build_layers(&crowd, &args.overrides())?;
     let out = args.out.clone().unwrap_or_else(|| layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name));
+    throng::output::refuse_input_overwrite(
+        std::iter::once(out.as_path()).chain(args.map.as_deref()),
+        crowd.input_files(),
+    )?;
+    let manifest = build_layers(&crowd, &args.overrides())?;
     layers::write_manifest(&out, &manifest)?;
     if let Some(map) = &args.map {
         layers::draw_map(&manifest, &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, map)?;

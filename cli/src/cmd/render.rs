@@ -212,6 +212,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         colourspace,
         ..RenderJob::new(layers, frames, spp, args.out.clone())
     };
+    // No output over an input: the shot's files and the manifest.
+    let mut inputs = throng::output::InputFiles::new(crowd.input_files());
+    if manifest.is_some() {
+        inputs.extend([("layer manifest".to_string(), manifest_path.clone())]);
+    }
+    inputs.check_all(job.outputs(&crowd.shot().name).iter().map(PathBuf::as_path))?;
     let progress = Progress::new(args.progress.into());
     let report = match colourspace {
         Colourspace::Rec709 => job::run(&crowd, manifest.as_ref(), &job, &progress),
