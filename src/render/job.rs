@@ -15,7 +15,7 @@ use crate::casting::{AgentPose, Lod, ShotCrowd};
 use crate::error::{Error, Result};
 use crate::fingerprint::Fingerprinter;
 use crate::layers::Manifest;
-use crate::output::{layer_path, FULL_LAYER};
+use crate::output::{layer_path, WriterLock, FULL_LAYER};
 use crate::render::colour::{self, Colourspace};
 use crate::render::cryptomatte::{CryptoNames, NameTables};
 use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, RenderSettings};
@@ -432,14 +432,73 @@ pub fn render_fingerprint<C>(
     f.hex()
 }
 
+/// Claims each layer folder of the job for this process
+/// ([`WriterLock`]: its files and its layer's render fingerprint), so a
+/// second render of the same frames, or of the same layer with other
+/// settings, into the same folder is refused naming this one.
+fn claim_layer_folders(
+    shot: &str,
+    job: &RenderJob,
+    fingerprints: &std::collections::HashMap<&str, String>,
+) -> Result<Vec<(String, WriterLock)>> {
+    let outputs = job.outputs(shot);
+    let mut claims = Vec::new();
+    for layer in &job.layers {
+        let dir = job.out.join(layer);
+        let names: Vec<String> = (outputs.iter())
+            .filter(|p| p.parent() == Some(dir.as_path()))
+            .filter_map(|p| Some(p.file_name()?.to_string_lossy().into_owned()))
+            .collect();
+        let settings = fingerprints.get(layer.as_str()).map_or("", String::as_str);
+        claims.push((layer.clone(), WriterLock::claim(&dir, &names, settings)?));
+    }
+    Ok(claims)
+}
+
+/// Per layer of the job, the frames already in its folder that the job
+/// does not render and whose `throng/renderFingerprint` is not this run's
+/// (read from their headers only).
+fn other_settings(
+    shot: &str,
+    job: &RenderJob,
+    fingerprints: &std::collections::HashMap<&str, String>,
+) -> Vec<(String, Vec<i32>)> {
+    let rendered: std::collections::HashSet<i32> = job.frames.iter().copied().collect();
+    let mut out = Vec::new();
+    for layer in &job.layers {
+        let Ok(entries) = std::fs::read_dir(job.out.join(layer)) else { continue };
+        let prefix = format!("{shot}.{layer}.");
+        let mut frames: Vec<i32> = entries
+            .flatten()
+            .filter_map(|e| {
+                let name = e.file_name().to_string_lossy().into_owned();
+                let frame: i32 = name.strip_prefix(&prefix)?.strip_suffix(".exr")?.parse().ok()?;
+                let fingerprint = exr::read_render_fingerprint(&e.path()).ok()?;
+                let now = fingerprints.get(layer.as_str())?;
+                (!rendered.contains(&frame) && fingerprint != *now).then_some(frame)
+            })
+            .collect();
+        frames.sort_unstable();
+        if !frames.is_empty() {
+            out.push((layer.clone(), frames));
+        }
+    }
+    out
+}
+
 /// Removes the temporaries that a killed run left beside this job's targets
 /// (`.<file>.<pid>.tmp`, as `write_atomic` names them, for a frame of the
-/// job in a layer of the job) whose pid is not this process. Returns them.
-pub(crate) fn remove_stale_temporaries(shot: &str, job: &RenderJob) -> Result<Vec<PathBuf>> {
+/// job in a layer of the job) whose process is gone: not this one, not
+/// alive, not another writer holding a claim on the folder (`claims`, one
+/// per layer, taken first). Returns them.
+pub(crate) fn remove_stale_temporaries(
+    shot: &str,
+    job: &RenderJob,
+    claims: &[(String, WriterLock)],
+) -> Result<Vec<PathBuf>> {
     let frames: std::collections::HashSet<i32> = job.frames.iter().copied().collect();
-    let own = std::process::id();
     let mut removed = Vec::new();
-    for layer in &job.layers {
+    for (layer, claim) in claims {
         let dir = job.out.join(layer);
         let Ok(entries) = std::fs::read_dir(&dir) else { continue };
         let prefix = format!("{shot}.{layer}.");
@@ -447,7 +506,7 @@ pub(crate) fn remove_stale_temporaries(shot: &str, job: &RenderJob) -> Result<Ve
             let name = e.file_name().to_string_lossy().into_owned();
             let Some(inner) = name.strip_prefix('.').and_then(|n| n.strip_suffix(".tmp")) else { continue };
             let Some((target, pid)) = inner.rsplit_once('.') else { continue };
-            if pid.parse::<u32>().map_or(true, |p| p == own) {
+            if pid.parse::<u32>().map_or(true, |p| claim.may_be_writing(p)) {
                 continue;
             }
             let frame = target.strip_prefix(&prefix).and_then(|r| r.split('.').next()).and_then(|f| f.parse().ok());
@@ -506,7 +565,20 @@ pub fn run<C: Space>(
             )));
         }
     }
-    let stale = remove_stale_temporaries(&crowd.shot().name, job)?;
+    let fingerprints: std::collections::HashMap<&str, String> =
+        job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
+    // Held until the job returns: one writer per file and per layer's settings.
+    let claims = claim_layer_folders(&crowd.shot().name, job, &fingerprints)?;
+    for (layer, others) in other_settings(&crowd.shot().name, job, &fingerprints) {
+        warn(format!(
+            "{} holds {} frame(s) of layer {layer} rendered with other settings (first: {}): the folder will \
+             mix two renders; render every frame again, or into another folder, to keep it whole",
+            job.out.join(&layer).display(),
+            others.len(),
+            others[0]
+        ));
+    }
+    let stale = remove_stale_temporaries(&crowd.shot().name, job, &claims)?;
     if !stale.is_empty() {
         warn(format!(
             "removed {} stale temporary file(s) a killed render left behind (first: {})",
@@ -514,8 +586,6 @@ pub fn run<C: Space>(
             stale[0].display()
         ));
     }
-    let fingerprints: std::collections::HashMap<&str, String> =
-        job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
     // BLASes are built as layer-frames need them (and kept for later frames).
     let mut blas = BlasSet::lazy(crowd.library());
     let total = job.frames.len() * job.layers.len();

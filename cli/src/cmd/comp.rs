@@ -46,6 +46,9 @@ pub fn run(args: &CompArgs) -> Result<()> {
     );
     inputs.extend(args.manifest.iter().map(|m| ("layer manifest".to_string(), m.clone())));
     inputs.check_all(std::iter::once(args.out.as_path()).chain(args.png.as_deref()))?;
+    // One writer per output file: held until the files are written.
+    let _claims =
+        throng::output::WriterLock::claim_files(std::iter::once(args.out.as_path()).chain(args.png.as_deref()))?;
     let comped = throng::comp::comp_frame(&args.dir, args.frame, manifest.as_ref())?;
     exr::write_layer(&args.out, &comped.film, &comped.meta)?;
     if let Some(png) = &args.png {

@@ -80,6 +80,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         )));
     }
     refuse_input_overwrite(args, &crowd)?;
+    let _claim = claim_out(args)?;
     // --layer: only that crowd layer's agents, from the manifest beside the shot.
     let only = layer_agents(args, &crowd)?;
     let s = throng::export::export_frame(&crowd, frame, only.as_ref(), &args.out)?;
@@ -107,6 +108,11 @@ fn refuse_input_overwrite(args: &ExportArgs, crowd: &throng::casting::ShotCrowd)
         inputs.push(("layer manifest".into(), manifest));
     }
     throng::output::refuse_input_overwrite([args.out.as_path()], inputs)
+}
+
+/// Claims `--out` for this process until the export returns (one writer per file).
+fn claim_out(args: &ExportArgs) -> Result<Vec<throng::output::WriterLock>> {
+    throng::output::WriterLock::claim_files([args.out.as_path()])
 }
 
 /// The manifest beside the shot, when `throng layers` wrote one for it.
@@ -137,6 +143,7 @@ fn run_usd(args: &ExportArgs, clock: std::time::Instant) -> Result<()> {
         }
     };
     refuse_input_overwrite(args, &crowd)?;
+    let _claim = claim_out(args)?;
     let only = layer_agents(args, &crowd)?;
     let manifest = match &args.manifest {
         Some(p) => Some(throng::layers::read_manifest(p)?),
