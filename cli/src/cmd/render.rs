@@ -170,7 +170,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         .manifest
         .clone()
         .unwrap_or_else(|| throng::layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name));
-    let manifest = if manifest_path.exists() {
+    let mut manifest = if manifest_path.exists() {
         Some(throng::layers::read_manifest(&manifest_path)?)
     } else if args.layer == FULL_LAYER {
         None
@@ -181,7 +181,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             args.shot.display()
         )));
     };
-    if let Some(m) = &manifest {
+    if let Some(m) = &mut manifest {
         if m.shot != crowd.shot().name {
             return Err(Error::invalid(
                 &manifest_path,
