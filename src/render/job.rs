@@ -455,6 +455,26 @@ fn claim_layer_folders(
     Ok(claims)
 }
 
+/// Refuses, before anything is allocated or written, an image whose film
+/// (the memory model's bytes a pixel: film, AOVs, Cryptomatte, the EXR
+/// being encoded, [`crate::layers::memory::film_bytes`]) needs more than
+/// this process may still allocate ([`crate::bench::memory_headroom`]),
+/// naming both figures.
+fn check_film_fits(w: u32, h: u32, blurred: bool) -> Result<()> {
+    let need = crate::layers::memory::film_bytes(u64::from(w) * u64::from(h), blurred);
+    match crate::bench::memory_headroom() {
+        Some(free) if need > free => Err(Error::Usage(format!(
+            "a {w}x{h} image needs {} for its film alone ({} bytes a pixel: the film, its AOVs, Cryptomatte and \
+             the EXR being written), more than the {} this process may still use (its address-space limit, \
+             its control group's memory limit or the memory available): render a smaller image",
+            crate::layers::format_bytes(need),
+            need / (u64::from(w) * u64::from(h)).max(1),
+            crate::layers::format_bytes(free)
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// Per layer of the job, the frames already in its folder that the job
 /// does not render and whose `throng/renderFingerprint` is not this run's
 /// (read from their headers only).
@@ -565,6 +585,7 @@ pub fn run<C: Space>(
             )));
         }
     }
+    check_film_fits(w, h, job.shutter.is_some())?;
     let fingerprints: std::collections::HashMap<&str, String> =
         job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
     // Held until the job returns: one writer per file and per layer's settings.

@@ -571,6 +571,7 @@ impl Context<'_> {
     fn existing(&self, p: &Spanned<PathBuf>, key: &str) -> Result<PathBuf> {
         let full = self.base.join(p.get_ref());
         if full.exists() {
+            crate::error::check_readable_file(&full).map_err(|e| e.field(key))?;
             Ok(full)
         } else {
             Err(self.at(p.span(), key, format!("file not found: {}", full.display())))
@@ -808,6 +809,7 @@ fn check_render(render: &RenderSettings, path: &Path) -> Result<()> {
 impl Shot {
     /// Reads and validates a shot file.
     pub fn load(path: &Path) -> Result<Shot> {
+        crate::error::check_readable_file(path)?;
         let text = std::fs::read_to_string(path).at(path)?;
         Shot::parse(&text, path)
     }

@@ -53,7 +53,17 @@ impl LayersArgs {
         if self.count == Some(0) {
             return Err(Error::Usage("--count 0: at least one crowd layer".into()));
         }
+        if let Some(n) = self.count.filter(|&n| n > layers::MAX_LAYERS) {
+            return Err(Error::Usage(format!("--count {n}: at most {} crowd layers", layers::MAX_LAYERS)));
+        }
         if let Some(c) = &self.cutoffs {
+            if c.len() >= layers::MAX_LAYERS {
+                return Err(Error::Usage(format!(
+                    "--cutoffs: {} distances, at most {}",
+                    c.len(),
+                    layers::MAX_LAYERS - 1
+                )));
+            }
             if c.iter().any(|v| !(*v > 0.0 && v.is_finite())) || c.windows(2).any(|w| !(w[0] < w[1])) {
                 return Err(Error::Usage(format!(
                     "--cutoffs {c:?}: distances must be positive metres and increase, e.g. 10,25,60"
