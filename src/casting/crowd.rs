@@ -121,6 +121,41 @@ pub struct ShotCrowd<C = Rec709> {
     wardrobe_files: Vec<(String, PathBuf)>,
 }
 
+/// Refuses a name in the shot's lists that names nothing (a typo would
+/// otherwise be accepted without a word): a `culled_cycles` entry that is
+/// no cycle of the cache, an `exclude_parts` entry that is no part mesh of
+/// any wardrobe scheme, a `removed` id that is no agent of the shot's frames.
+fn check_shot_lists(
+    shot: &Shot,
+    cache: &CacheReader,
+    wardrobes: &crate::casting::wardrobe::Wardrobes,
+    casting: &crate::casting::cast::Casting,
+) -> Result<()> {
+    let bad = |key: String, msg: String| Err(crate::error::Error::invalid(&shot.path, msg).field(key));
+    let cycles = cache.cycles();
+    for (i, c) in shot.culled_cycles.iter().enumerate() {
+        if !cycles.contains(c) {
+            return bad(
+                format!("culled_cycles[{i}]"),
+                format!("`{c}` is no cycle of the cache (its cycles: {})", cycles.join(", ")),
+            );
+        }
+    }
+    let meshes: std::collections::BTreeSet<&str> =
+        wardrobes.schemes.values().flat_map(|s| s.parts.iter().map(|p| &*p.mesh)).collect();
+    for (i, m) in shot.exclude_parts.iter().enumerate() {
+        if !meshes.contains(m.as_str()) {
+            return bad(format!("exclude_parts[{i}]"), format!("`{m}` is no part mesh of the shot's wardrobes"));
+        }
+    }
+    for (i, id) in shot.removed.iter().enumerate() {
+        if casting.get(*id).is_none() {
+            return bad(format!("removed[{i}]"), format!("agent {id} is in none of the shot's frames of the cache"));
+        }
+    }
+    Ok(())
+}
+
 /// The lights that come from files: the dome's map and the set's
 /// KHR_lights_punctual lights. The shot's own are read from it as asked.
 #[derive(Debug, Clone, Default)]
@@ -197,7 +232,9 @@ impl ShotCrowd {
         let mut rigs = ShotRigs::load(&shot, &wardrobes)?;
         let cast = Casting::cast(&shot, &cache, &rigs, &wardrobes)?;
         let (casting, mut warnings) = (cast.casting, cast.warnings);
+        check_shot_lists(&shot, &cache, &wardrobes, &casting)?;
         let mut assets = AssetCache::new();
+        crate::casting::dressing::check_schemes(&shot, &rigs, &wardrobes, &mut assets)?;
         let dressing = Dressing::dress(&casting, &mut rigs, &wardrobes, &mut assets)?;
         let worn = dressing.worn_pieces(&casting);
         let mut skins = PosedSkins::default();
