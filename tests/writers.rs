@@ -150,3 +150,22 @@ fn two_renders_at_once_into_one_folder_end_correctly_or_one_refuses() {
         assert!(!names.iter().any(|f| f.ends_with(".tmp") || f.ends_with(WRITERS_FILE)), "round {round}: {names:?}");
     }
 }
+
+#[test]
+fn a_run_beside_frames_of_other_settings_says_the_folder_will_mix() {
+    let dir = common::tempdir().unwrap();
+    let d = dir.path();
+    let shot = shot(d, 1);
+    let out = d.join("render");
+    let (code, o, err) = run(&render_args(&shot, &out, "1001-1002", "1"));
+    assert_eq!(code, 0, "{o}{err}");
+    // The same settings: no word.
+    let (code, _, err) = run(&render_args(&shot, &out, "1003", "1"));
+    assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("other settings"), "{err}");
+    // Other settings: rendered, with the warning naming the folder.
+    let (code, _, err) = run(&render_args(&shot, &out, "1004", "2"));
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("rendered with other settings") && err.contains("will mix two renders"), "{err}");
+    assert!(err.contains(s(&out.join("crowd0"))), "{err}");
+}

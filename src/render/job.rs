@@ -475,9 +475,13 @@ fn check_film_fits(w: u32, h: u32, blurred: bool) -> Result<()> {
     }
 }
 
+/// Frames of other runs whose headers [`other_settings`] reads per layer.
+const OTHER_SETTINGS_SAMPLE: usize = 8;
+
 /// Per layer of the job, the frames already in its folder that the job
 /// does not render and whose `throng/renderFingerprint` is not this run's
-/// (read from their headers only).
+/// (read from their headers only, of the [`OTHER_SETTINGS_SAMPLE`] such
+/// frames nearest the job's first).
 fn other_settings(
     shot: &str,
     job: &RenderJob,
@@ -488,15 +492,24 @@ fn other_settings(
     for layer in &job.layers {
         let Ok(entries) = std::fs::read_dir(job.out.join(layer)) else { continue };
         let prefix = format!("{shot}.{layer}.");
-        let mut frames: Vec<i32> = entries
+        let Some(now) = fingerprints.get(layer.as_str()) else { continue };
+        let mut others: Vec<(i32, PathBuf)> = entries
             .flatten()
             .filter_map(|e| {
                 let name = e.file_name().to_string_lossy().into_owned();
                 let frame: i32 = name.strip_prefix(&prefix)?.strip_suffix(".exr")?.parse().ok()?;
-                let fingerprint = exr::read_render_fingerprint(&e.path()).ok()?;
-                let now = fingerprints.get(layer.as_str())?;
-                (!rendered.contains(&frame) && fingerprint != *now).then_some(frame)
+                (!rendered.contains(&frame)).then(|| (frame, e.path()))
             })
+            .collect();
+        // Headers may hold large Cryptomatte manifests, and a farm task of
+        // one frame must not read a thousand: the nearest few tell.
+        let first = job.frames.iter().copied().min().unwrap_or(0);
+        others.sort_unstable_by_key(|(f, _)| ((i64::from(*f) - i64::from(first)).abs(), *f));
+        others.truncate(OTHER_SETTINGS_SAMPLE);
+        let mut frames: Vec<i32> = others
+            .into_iter()
+            .filter(|(_, path)| exr::read_render_fingerprint(path).is_ok_and(|f| f != *now))
+            .map(|(f, _)| f)
             .collect();
         frames.sort_unstable();
         if !frames.is_empty() {
@@ -592,8 +605,8 @@ pub fn run<C: Space>(
     let claims = claim_layer_folders(&crowd.shot().name, job, &fingerprints)?;
     for (layer, others) in other_settings(&crowd.shot().name, job, &fingerprints) {
         warn(format!(
-            "{} holds {} frame(s) of layer {layer} rendered with other settings (first: {}): the folder will \
-             mix two renders; render every frame again, or into another folder, to keep it whole",
+            "{} holds frames of layer {layer} rendered with other settings ({} of the nearest, first {}): the \
+             folder will mix two renders; render every frame again, or into another folder, to keep it whole",
             job.out.join(&layer).display(),
             others.len(),
             others[0]
