@@ -400,7 +400,18 @@ fn assign(
                 count += 1;
                 layer[i] = current;
             }
-            current as usize + 1
+            let n = current as usize + 1;
+            if n > MAX_LAYERS {
+                return Err(Error::invalid(
+                    &input.source,
+                    format!(
+                        "a budget of {} makes {n} layers, more than {MAX_LAYERS}: raise the budget",
+                        format_bytes(*budget)
+                    ),
+                )
+                .field("layers.budget"));
+            }
+            n
         }
     };
     // Where each layer begins: the first-ranked agent of that layer.
