@@ -202,3 +202,23 @@ pub fn write_atomic(
         }
     }
 }
+
+/// Refuses an input path that is a FIFO, a device or a socket, before it
+/// is opened: reading one would block forever (a FIFO with no writer) or
+/// never end (`/dev/zero`). Regular files, folders and missing paths pass
+/// (the reader says what is wrong with those). Symlinks are followed.
+pub fn check_readable_file(path: &Path) -> Result<()> {
+    use std::os::unix::fs::FileTypeExt;
+    let Ok(meta) = std::fs::metadata(path) else { return Ok(()) };
+    let t = meta.file_type();
+    let kind = if t.is_fifo() {
+        "a FIFO (named pipe)"
+    } else if t.is_char_device() || t.is_block_device() {
+        "a device"
+    } else if t.is_socket() {
+        "a socket"
+    } else {
+        return Ok(());
+    };
+    Err(Error::invalid(path, format!("is {kind}, not a file: throng reads inputs from regular files only")))
+}

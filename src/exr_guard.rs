@@ -17,6 +17,7 @@ pub(crate) const MAX_EXR_EXPANSION: u64 = 4096;
 /// every part from the header before it reads a pixel, so a corrupt data
 /// window or channel list would otherwise ask for gigabytes.
 pub(crate) fn check_decoded_size(path: &Path) -> Result<()> {
+    crate::error::check_readable_file(path)?;
     let file_len = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
     let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| exr_error(path, e))?;
     let mut bytes = 0u64;

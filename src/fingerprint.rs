@@ -61,6 +61,7 @@ pub struct FileHash {
 
 /// Hashes a file's bytes, read in blocks of [`BLOCK_BYTES`].
 pub fn hash_file(path: &Path) -> Result<FileHash> {
+    crate::error::check_readable_file(path)?;
     let mut f = std::fs::File::open(path).at(path)?;
     let mut buf = vec![0u8; BLOCK_BYTES];
     let (mut hash, mut bytes) = (OFFSET_BASIS, 0u64);

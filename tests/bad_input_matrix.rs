@@ -400,7 +400,8 @@ matrix! {
             edit(d, "w.toml", "mesh = \"head_sphere\"", "mesh = \"head_gone\"")
         },
         CAST,
-        &["heads.glb", "head_gone", "schemes.Only.parts", "agent "],
+        // Checked when the shot is cast (issue 26 item 5), before any agent draws it.
+        &["heads.glb", "head_gone", "schemes.Only.parts[0].mesh"],
         &[],
     ),
     // ---------------------------------------------------------- wardrobe TOML

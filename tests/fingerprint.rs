@@ -248,3 +248,101 @@ fn a_manifest_fingerprinted_by_an_older_throng_is_refused_naming_the_algorithm()
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("`crc32`") && err.contains("made_from.algorithm"), "{err}");
 }
+
+/// A shot over `cache` (a file read by its own format, no columns) with
+/// `keys` in its `[cache]` table.
+fn plain_shot(dir: &Path, cache: &str, keys: &str, fps: &str, frame_offset: i32) -> PathBuf {
+    let shot = write_shot(dir, cache, keys, fps, frame_offset);
+    let text = std::fs::read_to_string(&shot).unwrap();
+    let (columns, rigs) = (text.find("[cache.columns]").unwrap(), text.find("[rigs.bipedThinA]").unwrap());
+    // The USD crowd's agents also wear the demo's tall rig.
+    let tall = format!(
+        "[rigs.bipedTallB]\nfile = \"{}\"\nschemes = {{ HighEnd = 1.0 }}\n",
+        common::repo_path("demo/rigs/bipedTallB.glb").display()
+    );
+    std::fs::write(&shot, format!("{}{tall}{}", &text[..columns], &text[rigs..])).unwrap();
+    shot
+}
+
+/// A manifest is made over `cache` in `d`; then each change in turn (a
+/// function making it, undone after) must get the manifest refused naming
+/// it. `edit_cache` changes the cache file's decoded content.
+fn refused_after_each_change(d: &Path, cache: &str, frame_offset: i32, edit_cache: &dyn Fn(&Path)) {
+    let shot = plain_shot(d, cache, "", "24.0", frame_offset);
+    let manifest = d.join("fp.layers.json");
+    let (code, out, err) = run(&["layers", s(&shot), "--out", s(&manifest)]);
+    assert_eq!(code, 0, "{cache}: {out}{err}");
+    let out = d.join("render");
+    let (code, err) = render_with(&shot, &manifest, &out);
+    assert_eq!(code, 0, "{cache}: the unchanged shot renders:\n{err}");
+    let mut refusals = Vec::new();
+    for (keys, names) in
+        [("translate = [0.5, 0.0, 0.0]", "`translate`"), ("rotate = 10.0", "`rotate`"), ("scale = 1.5", "`scale`")]
+    {
+        let shot = plain_shot(d, cache, keys, "24.0", frame_offset);
+        refusals.push((keys.to_string(), render_with(&shot, &manifest, &out), names));
+    }
+    let shot = plain_shot(d, cache, "", "25.0", frame_offset);
+    refusals.push(("frames.fps".into(), render_with(&shot, &manifest, &out), "frames.fps changed"));
+    // The cache's content.
+    let path = d.join(cache);
+    let before = std::fs::read(&path).unwrap();
+    edit_cache(&path);
+    assert_ne!(std::fs::read(&path).unwrap(), before, "{cache}: the edit changes the file");
+    let shot = plain_shot(d, cache, "", "24.0", frame_offset);
+    refusals.push(("the cache's content".into(), render_with(&shot, &manifest, &out), "changed (made_from.cache)"));
+    std::fs::write(&path, &before).unwrap();
+    // The manifest itself, edited by hand: an agent deleted from `agents`.
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let agents = m["agents"].as_array_mut().unwrap();
+    assert!(agents.len() > 1, "{cache}: the manifest ranks agents");
+    agents.remove(0);
+    std::fs::write(&manifest, serde_json::to_string_pretty(&m).unwrap()).unwrap();
+    refusals.push(("an agent deleted".into(), render_with(&shot, &manifest, &out), "made_from.content"));
+    std::fs::write(&manifest, &text).unwrap();
+
+    for (change, (code, err), names) in &refusals {
+        assert_eq!(code, &2, "{cache}: {change}: the old manifest should be refused:\n{err}");
+        assert!(
+            err.contains("stale layer manifest") && err.contains(names),
+            "{cache}: {change}: names {names}:\n{err}"
+        );
+    }
+    // Everything back as it was: current again.
+    let (code, err) = render_with(&shot, &manifest, &out);
+    assert_eq!(code, 0, "{cache}: {err}");
+}
+
+#[test]
+fn every_cache_format_is_fingerprinted_by_content_keys_and_rate() {
+    // .crowd (made from throng's own CSV), .csv, JuPedSim .sqlite, USD.
+    let dir = common::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("crowd.csv"), crowd_csv(0.0)).unwrap();
+    let (code, out, err) = run(&["cache", "convert", s(&d.join("crowd.csv")), s(&d.join("c.crowd"))]);
+    assert_eq!(code, 0, "{out}{err}");
+    refused_after_each_change(d, "c.crowd", 0, &|p| {
+        let csv = d.join("moved.csv");
+        std::fs::write(&csv, crowd_csv(0.25)).unwrap();
+        assert_eq!(run(&["cache", "convert", s(&csv), s(p)]).0, 0);
+    });
+    refused_after_each_change(d, "crowd.csv", 0, &|p| std::fs::write(p, crowd_csv(0.25)).unwrap());
+
+    std::fs::copy(common::fixture("jupedsim_small.sqlite"), d.join("j.sqlite")).unwrap();
+    refused_after_each_change(d, "j.sqlite", 0, &|p| {
+        let db = rusqlite::Connection::open(p).unwrap();
+        let n = db.execute("UPDATE trajectory_data SET pos_x = pos_x + 0.5 WHERE frame = 12", []).unwrap();
+        assert!(n > 0);
+    });
+
+    // The USD crowd holds frames 1-5: shot frame 15 (the reference) is its frame 2.
+    let usd = std::fs::read_to_string(common::fixture("usd/pointinstancer_crowd.usda")).unwrap();
+    std::fs::write(d.join("u.usda"), &usd).unwrap();
+    refused_after_each_change(d, "u.usda", -13, &|p| {
+        let text = std::fs::read_to_string(p).unwrap();
+        let moved = text.replacen("1: [(-3, 0, -2)", "1: [(-3.5, 0, -2)", 1);
+        assert_ne!(moved, text);
+        std::fs::write(p, moved).unwrap();
+    });
+}

@@ -183,6 +183,7 @@ pub fn read_with(path: impl AsRef<Path>, opts: &ImportOptions) -> Result<CrowdCa
 /// Reads a whole cache as `how` says, with the table import's report.
 pub fn import(path: impl AsRef<Path>, how: &Import) -> Result<(CrowdCache, Option<TabularReport>)> {
     let path = path.as_ref();
+    crate::error::check_readable_file(path)?;
     let format = Format::of(path)?;
     if let (Some(t), Format::Csv | Format::Tabular) = (&how.tabular, format) {
         let (crowd, report) = tabular::read(path, t)?;
@@ -250,6 +251,7 @@ impl CacheReader {
     /// frame-by-frame reading; anything else is read whole.
     pub(crate) fn open_import(path: impl AsRef<Path>, how: &Import) -> Result<CacheReader> {
         let path = path.as_ref();
+        crate::error::check_readable_file(path)?;
         if Format::of(path)? == Format::Binary && how.placement.is_identity() {
             return Ok(CacheReader::Binary(binary::BinaryReader::open(path)?));
         }

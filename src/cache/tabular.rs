@@ -673,6 +673,34 @@ struct Pose {
     cycle: Option<u16>,
 }
 
+/// Reads at most `cap` bytes of `r` into `bytes`, counted as they arrive
+/// (for gzip, as they are inflated): the buffer grows by doubling but never
+/// past `cap`, and a growth the allocator refuses is an error, not an abort.
+fn read_capped(mut r: impl Read, cap: u64, bytes: &mut Vec<u8>) -> std::io::Result<()> {
+    let cap = usize::try_from(cap).unwrap_or(usize::MAX);
+    let mut block = vec![0u8; 1 << 16];
+    while bytes.len() < cap {
+        let want = block.len().min(cap - bytes.len());
+        let n = match r.read(&mut block[..want]) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        if bytes.capacity() - bytes.len() < n {
+            let grow = (bytes.capacity().max(1 << 20) * 2).min(cap).max(bytes.len() + n) - bytes.len();
+            bytes.try_reserve_exact(grow).map_err(|_| {
+                std::io::Error::new(
+                    std::io::ErrorKind::OutOfMemory,
+                    format!("cannot hold {} bytes of text in memory", bytes.len() + grow),
+                )
+            })?;
+        }
+        bytes.extend_from_slice(&block[..n]);
+    }
+    Ok(())
+}
+
 /// Reads the file's text: gzip (by magic bytes) is decompressed; a byte
 /// order mark is dropped; at most [`MAX_INPUT_BYTES`].
 pub(crate) fn read_text(path: &Path) -> Result<String> {
@@ -684,9 +712,9 @@ pub(crate) fn read_text(path: &Path) -> Result<String> {
     let chained = std::io::Read::chain(&head[..n], raw);
     let gz = n == 2 && head == [0x1f, 0x8b];
     let read = if gz {
-        flate2::read::MultiGzDecoder::new(chained).take(MAX_INPUT_BYTES + 1).read_to_end(&mut bytes)
+        read_capped(flate2::read::MultiGzDecoder::new(chained), MAX_INPUT_BYTES + 1, &mut bytes)
     } else {
-        chained.take(MAX_INPUT_BYTES + 1).read_to_end(&mut bytes)
+        read_capped(chained, MAX_INPUT_BYTES + 1, &mut bytes)
     };
     read.map_err(
         |e| {
@@ -698,7 +726,8 @@ pub(crate) fn read_text(path: &Path) -> Result<String> {
         },
     )?;
     if bytes.len() as u64 > MAX_INPUT_BYTES {
-        return Err(Error::invalid(path, format!("more than {MAX_INPUT_BYTES} bytes of text; split the file")));
+        let what = if gz { "decompresses to more" } else { "holds more" };
+        return Err(Error::invalid(path, format!("{what} than {MAX_INPUT_BYTES} bytes of text; split the file")));
     }
     let text = String::from_utf8(bytes).map_err(|e| {
         let valid = e.utf8_error().valid_up_to();

@@ -16,7 +16,7 @@
 //! nearest its cycle frame (`casting::skin`); every pose step is posed once
 //! and shared by every agent, frame and layer on it.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use glam::{Affine3A, Quat, Vec3};
@@ -117,6 +117,43 @@ pub struct ShotCrowd<C = Rec709> {
     gltf_camera: Option<Camera>,
     /// The dome's pixels (read once), and the set glTF's own lights.
     lights: LoadedLights,
+    /// The wardrobes' part files and textures (`input_files`).
+    wardrobe_files: Vec<(String, PathBuf)>,
+}
+
+/// Refuses a name in the shot's lists that names nothing (a typo would
+/// otherwise be accepted without a word): a `culled_cycles` entry that is
+/// no cycle of the cache, an `exclude_parts` entry that is no part mesh of
+/// any wardrobe scheme, a `removed` id that is no agent of the shot's frames.
+fn check_shot_lists(
+    shot: &Shot,
+    cache: &CacheReader,
+    wardrobes: &crate::casting::wardrobe::Wardrobes,
+    casting: &crate::casting::cast::Casting,
+) -> Result<()> {
+    let bad = |key: String, msg: String| Err(crate::error::Error::invalid(&shot.path, msg).field(key));
+    let cycles = cache.cycles();
+    for (i, c) in shot.culled_cycles.iter().enumerate() {
+        if !cycles.contains(c) {
+            return bad(
+                format!("culled_cycles[{i}]"),
+                format!("`{c}` is no cycle of the cache (its cycles: {})", cycles.join(", ")),
+            );
+        }
+    }
+    let meshes: std::collections::BTreeSet<&str> =
+        wardrobes.schemes.values().flat_map(|s| s.parts.iter().map(|p| &*p.mesh)).collect();
+    for (i, m) in shot.exclude_parts.iter().enumerate() {
+        if !meshes.contains(m.as_str()) {
+            return bad(format!("exclude_parts[{i}]"), format!("`{m}` is no part mesh of the shot's wardrobes"));
+        }
+    }
+    for (i, id) in shot.removed.iter().enumerate() {
+        if casting.get(*id).is_none() {
+            return bad(format!("removed[{i}]"), format!("agent {id} is in none of the shot's frames of the cache"));
+        }
+    }
+    Ok(())
 }
 
 /// The lights that come from files: the dome's map and the set's
@@ -195,7 +232,9 @@ impl ShotCrowd {
         let mut rigs = ShotRigs::load(&shot, &wardrobes)?;
         let cast = Casting::cast(&shot, &cache, &rigs, &wardrobes)?;
         let (casting, mut warnings) = (cast.casting, cast.warnings);
+        check_shot_lists(&shot, &cache, &wardrobes, &casting)?;
         let mut assets = AssetCache::new();
+        crate::casting::dressing::check_schemes(&shot, &rigs, &wardrobes, &mut assets)?;
         let dressing = Dressing::dress(&casting, &mut rigs, &wardrobes, &mut assets)?;
         let worn = dressing.worn_pieces(&casting);
         let mut skins = PosedSkins::default();
@@ -216,7 +255,20 @@ impl ShotCrowd {
         }
         warnings.extend(rigs.warnings().cloned());
         let poses = PoseLibrary::new(assets, skins, shutter);
-        Ok(ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera, lights })
+        let wardrobe_files = wardrobes.input_files();
+        Ok(ShotCrowd {
+            shot,
+            cache,
+            rigs,
+            casting,
+            dressing,
+            poses,
+            set,
+            warnings,
+            gltf_camera,
+            lights,
+            wardrobe_files,
+        })
     }
 
     /// The same cast shot with `edit` applied to its shot, for what later
@@ -236,13 +288,35 @@ impl ShotCrowd {
         self,
         convert: impl FnOnce(&mut [Material], &mut [Texture]),
     ) -> ShotCrowd<D> {
-        let ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera, lights } = self;
+        let ShotCrowd {
+            shot,
+            cache,
+            rigs,
+            casting,
+            dressing,
+            poses,
+            set,
+            warnings,
+            gltf_camera,
+            lights,
+            wardrobe_files,
+        } = self;
         let poses = poses.convert(convert);
-        ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera, lights }
+        ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera, lights, wardrobe_files }
     }
 }
 
 impl<C> ShotCrowd<C> {
+    /// Every file the cast shot was read from, as the shot or its
+    /// wardrobes name it: the shot's own ([`Shot::input_files`]), then each
+    /// wardrobe part file and texture. What no output may be
+    /// ([`crate::output::InputFiles`]).
+    pub fn input_files(&self) -> Vec<(String, PathBuf)> {
+        let mut out = self.shot.input_files();
+        out.extend(self.wardrobe_files.iter().cloned());
+        out
+    }
+
     /// The shot.
     pub fn shot(&self) -> &Shot {
         &self.shot

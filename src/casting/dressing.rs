@@ -116,6 +116,65 @@ fn unit_cube() -> Mesh {
     m
 }
 
+/// Checks, before any agent is dressed, every part of every wardrobe scheme
+/// a slot rig of `shot` draws with a weight > 0 (parts the scheme or the
+/// shot excludes left out): its mesh is in its glTF file and is rigid, and
+/// each wardrobe material it may wear has a texture that reads as an image.
+/// A bad part is refused naming its scheme and part even when no agent
+/// happens to draw it. Loads only what dressing loads anyway (the parts'
+/// files; textures are read up to their size).
+pub(crate) fn check_schemes(
+    shot: &crate::shot::Shot,
+    rigs: &ShotRigs,
+    wardrobes: &Wardrobes,
+    assets: &mut AssetCache,
+) -> Result<()> {
+    let mut textures_seen = BTreeSet::new();
+    for (rig_name, rig) in &shot.rigs {
+        if !matches!(rigs.get(rig_name), Some(ShotRig::Slots(_))) {
+            continue;
+        }
+        for (name, _) in rig.schemes.iter().filter(|(_, w)| **w > 0.0) {
+            let Some(scheme) = wardrobes.schemes.get(name) else { continue };
+            for (i, part) in scheme.parts.iter().enumerate() {
+                let excluded = |e: &String| **e == *part.mesh;
+                if part.weight <= 0.0 || scheme.exclude.iter().any(excluded) || shot.exclude_parts.iter().any(excluded)
+                {
+                    continue;
+                }
+                let key = format!("schemes.{name}.parts[{i}]");
+                let in_scheme = |e: Error| e.or_field(format!("{key}.mesh"));
+                if assets.is_skinned_mesh(&part.file, &part.mesh).map_err(in_scheme)? {
+                    return Err(skinned_refusal(&part.file, &format!("wardrobe part `{}` ({key})", part.mesh))
+                        .field(format!("{key}.mesh")));
+                }
+                for m in part.materials.iter().filter(|m| ***m != *GLTF_MATERIAL) {
+                    let Some(texture) = wardrobes.materials.get(&**m).and_then(|s| s.base_color_texture.as_ref())
+                    else {
+                        continue;
+                    };
+                    if textures_seen.insert(texture.clone()) {
+                        check_image(texture).map_err(|e| {
+                            let material = m.rsplit('/').next().unwrap_or(m);
+                            Error::invalid(&scheme.source, format!("{e} (worn by {key} in rig `{rig_name}`)"))
+                                .field(format!("materials.{material}.base_color_texture"))
+                        })?;
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Whether `path` reads as an image (its format and size, not its pixels).
+fn check_image(path: &std::path::Path) -> Result<()> {
+    let bad = |e: String| Error::invalid(path, format!("texture is not an image throng reads: {e}"));
+    let reader = image::ImageReader::open(path).map_err(|e| Error::io(path, e))?;
+    let reader = reader.with_guessed_format().map_err(|e| bad(e.to_string()))?;
+    reader.into_dimensions().map(|_| ()).map_err(|e| bad(e.to_string()))
+}
+
 /// The library material for a wardrobe material, made once per name.
 fn wardrobe_material(
     assets: &mut AssetCache,

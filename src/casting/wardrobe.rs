@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use serde::Deserialize;
 
-use crate::error::{Error, IoContext, Result};
+use crate::error::{check_readable_file, Error, IoContext, Result};
 
 /// The part chosen for one slot.
 #[derive(Debug, Clone, PartialEq)]
@@ -196,11 +196,32 @@ pub struct Wardrobes {
 }
 
 impl Wardrobes {
+    /// Every part file and texture the wardrobes name, once each, as the
+    /// wardrobe names it (`schemes.Rich.parts[0].file`).
+    pub(crate) fn input_files(&self) -> Vec<(String, PathBuf)> {
+        let mut seen = std::collections::BTreeSet::new();
+        let mut out = Vec::new();
+        for (name, scheme) in &self.schemes {
+            for (i, part) in scheme.parts.iter().enumerate() {
+                if seen.insert(part.file.to_path_buf()) {
+                    out.push((format!("wardrobe part schemes.{name}.parts[{i}].file"), part.file.to_path_buf()));
+                }
+            }
+        }
+        for (name, m) in &self.materials {
+            if let Some(t) = m.base_color_texture.as_ref().filter(|t| seen.insert(t.to_path_buf())) {
+                out.push((format!("texture of material {name}"), t.clone()));
+            }
+        }
+        out
+    }
+
     /// Loads and validates wardrobe files; scheme names must be unique across them.
     pub fn load(paths: &[PathBuf]) -> Result<Wardrobes> {
         let mut all = Wardrobes::default();
         let mut origin: BTreeMap<String, PathBuf> = BTreeMap::new();
         for path in paths {
+            crate::error::check_readable_file(path)?;
             let text = std::fs::read_to_string(path).at(path)?;
             let file: WardrobeFile = toml::from_str(&text).map_err(|e| Error::toml(path, &text, e))?;
             if file.version != WARDROBE_VERSION {
@@ -248,6 +269,7 @@ impl Wardrobes {
                         return Err(Error::invalid(path, format!("texture not found: {}", full.display()))
                             .field(format!("materials.{name}.base_color_texture")));
                     }
+                    check_readable_file(&full).map_err(|e| e.field(format!("materials.{name}.base_color_texture")))?;
                     m.base_color_texture = Some(full);
                 }
                 all.materials.insert(format!("{}/{name}", file.name), m);
@@ -264,6 +286,7 @@ impl Wardrobes {
                         return Err(Error::invalid(path, format!("part file not found: {}", full.display()))
                             .field(format!("{key}.file")));
                     }
+                    check_readable_file(&full).map_err(|e| e.field(format!("{key}.file")))?;
                     part.file = full.into();
                     if !(part.weight >= 0.0 && part.weight.is_finite()) {
                         return Err(Error::invalid(path, format!("weight must be >= 0, got {}", part.weight))

@@ -191,6 +191,7 @@ pub fn read_plan(path: &Path) -> Result<Plan> {
     if len > MAX_PLAN_BYTES {
         return Err(Error::invalid(path, format!("{len} bytes is too large for a farm plan")));
     }
+    crate::error::check_readable_file(path)?;
     let text = std::fs::read_to_string(path).at(path)?;
     let json_err = |e: serde_json::Error| Error::invalid(path, e.to_string()).line(e.line());
     let head: Head = serde_json::from_str(&text).map_err(json_err)?;

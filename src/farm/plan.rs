@@ -72,6 +72,7 @@ pub fn write_new_plan(opts: &PlanOptions) -> Result<(PathBuf, Plan)> {
     let crowd = ShotCrowd::load(&opts.shot)?;
     let manifest = build_layers(&crowd, &LayerOverrides::default())?;
     let manifest_path = out.join(format!("{}.layers.json", crowd.shot().name));
+    crate::output::refuse_input_overwrite([plan_path.as_path(), manifest_path.as_path()], crowd.input_files())?;
     let plan = build_plan(&crowd, &manifest, &manifest_path, &out, opts, &|inputs| {
         // The manifest is fingerprinted as written, so write it first; a
         // directory of another plan must not be overwritten, so check first.

@@ -35,10 +35,7 @@ pub(crate) fn marker(plan: &Plan, task: &str, what: &str) -> PathBuf {
     plan.state_dir().join(format!("{task}.{what}"))
 }
 
-/// This machine's host name (the kernel's, no `hostname` binary needed).
-pub(crate) fn host_name() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/hostname").map(|h| h.trim().to_string()).unwrap_or_default()
-}
+pub(crate) use crate::output::host_name;
 
 fn write_json(path: &Path, v: &impl Serialize) -> Result<()> {
     write_atomic(path, |w| serde_json::to_writer(&mut *w, v).map_err(|e| Error::io(path, e.into())))
@@ -63,6 +60,8 @@ pub fn run_task(plan: &Plan, id: &str, exe: &Path, log: &mut dyn FnMut(&str)) ->
     })?;
     let state = plan.state_dir();
     std::fs::create_dir_all(&state).at(&state)?;
+    // One worker per task: a second run of the same task is refused while this one runs.
+    let _claim = crate::output::WriterLock::claim(&state, &[id.to_string()], "")?;
     let exit_path = marker(plan, id, "exit");
     let _ = std::fs::remove_file(&exit_path);
     write_json(&marker(plan, id, "started"), &Started { host: host_name(), pid: std::process::id() })?;

@@ -96,6 +96,7 @@ pub fn build_layers(crowd: &ShotCrowd, overrides: &LayerOverrides) -> Result<Man
     input.options.shared_bytes = RenderFloor::of(crowd, shutter, w as u64 * h as u64, full)?.bytes();
     let mut manifest = build_manifest(&input)?;
     manifest.made_from = Some(super::MadeFrom::of(crowd.shot())?);
+    super::made_from::seal(&mut manifest);
     Ok(manifest)
 }
 

@@ -43,6 +43,32 @@ pub struct MadeFrom {
     pub(crate) fps: f32,
     /// `cache.frame_offset`.
     pub(crate) frame_offset: i32,
+    /// The manifest's own content: every field as written, this one left
+    /// empty, so a hand edit (an agent deleted from `agents`, a layer
+    /// moved) is refused. Empty in manifests of older throngs (not checked).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub(crate) content: String,
+}
+
+/// The hash of a manifest's own content: every field as serialized, with
+/// `made_from.content` left empty (and put back).
+fn content_hash(m: &mut super::Manifest) -> String {
+    let kept = m.made_from.as_mut().map(|f| std::mem::take(&mut f.content));
+    let hash = Fingerprinter::new().value("manifest", &*m).hex();
+    if let (Some(f), Some(kept)) = (m.made_from.as_mut(), kept) {
+        f.content = kept;
+    }
+    hash
+}
+
+/// Records the finished manifest's content hash in `made_from.content`
+/// (nothing without a `made_from`). Any later change to the manifest must
+/// seal it again.
+pub(crate) fn seal(m: &mut super::Manifest) {
+    let hash = content_hash(m);
+    if let Some(f) = m.made_from.as_mut() {
+        f.content = hash;
+    }
 }
 
 /// Each import key the shot sets, by name: its value's hash. Hashing the
@@ -110,6 +136,7 @@ impl MadeFrom {
             frames: [shot.frames.start, shot.frames.end],
             fps: shot.frames.fps,
             frame_offset: shot.cache.frame_offset,
+            content: String::new(),
         })
     }
 
@@ -164,8 +191,8 @@ impl MadeFrom {
 /// Refuses a manifest (read from `path`) that is stale for `shot`. A
 /// manifest without `made_from` (made by an older throng) passes with the
 /// warning returned.
-pub fn check_current(path: &Path, manifest: &super::Manifest, shot: &Shot) -> Result<Option<String>> {
-    let Some(then) = &manifest.made_from else {
+pub fn check_current(path: &Path, manifest: &mut super::Manifest, shot: &Shot) -> Result<Option<String>> {
+    let Some(then) = manifest.made_from.clone() else {
         return Ok(Some(format!(
             "{}: the manifest records no `made_from` fingerprint (an older throng made it), so it cannot be checked \
              against the shot; run `throng layers {}` again to be safe",
@@ -174,7 +201,15 @@ pub fn check_current(path: &Path, manifest: &super::Manifest, shot: &Shot) -> Re
         )));
     };
     let now = MadeFrom::of(shot)?;
-    let changes = then.changes(&now, shot);
+    let mut changes = Vec::new();
+    if !then.content.is_empty() && content_hash(manifest) != then.content {
+        changes.push(
+            "the manifest itself was edited (its agents, layers or settings are not what throng wrote: \
+             made_from.content)"
+                .to_string(),
+        );
+    }
+    changes.extend(then.changes(&now, shot));
     if changes.is_empty() {
         return Ok(None);
     }

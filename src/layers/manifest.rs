@@ -406,6 +406,7 @@ pub fn read_manifest(path: &Path) -> Result<Manifest> {
     struct Version {
         version: u32,
     }
+    crate::error::check_readable_file(path)?;
     let text = std::fs::read_to_string(path).at(path)?;
     let json_err = |e: serde_json::Error| Error::invalid(path, e.to_string()).line(e.line());
     if !text.trim_start().starts_with('{') {

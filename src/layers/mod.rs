@@ -117,6 +117,10 @@ enum Plan {
     Budget(u64),
 }
 
+/// Most crowd layers a split may make (each is a render of every frame):
+/// checked before any per-layer list is allocated.
+pub const MAX_LAYERS: usize = 1000;
+
 /// Agents closer than this along the view axis count as behind the camera.
 const NEAR_M: f32 = 0.01;
 /// Pins may create layers, but not absurdly many by a typo.
@@ -231,6 +235,9 @@ fn prepare(input: &LayerInput) -> Result<Prepared> {
             if s.count == 0 {
                 return Err(bad("layers.count", "must be at least 1".into()));
             }
+            if s.count > MAX_LAYERS {
+                return Err(bad("layers.count", format!("{} layers: at most {MAX_LAYERS}", s.count)));
+            }
             Plan::Count(s.count)
         }
         SplitMode::Cutoffs => {
@@ -241,6 +248,12 @@ fn prepare(input: &LayerInput) -> Result<Prepared> {
                 return Err(bad(
                     "layers.cutoffs",
                     format!("cut-offs must be positive and increase, got {:?}", s.cutoffs),
+                ));
+            }
+            if s.cutoffs.len() >= MAX_LAYERS {
+                return Err(bad(
+                    "layers.cutoffs",
+                    format!("{} cut-offs make {} layers: at most {MAX_LAYERS}", s.cutoffs.len(), s.cutoffs.len() + 1),
                 ));
             }
             Plan::Cutoffs(s.cutoffs.clone())
@@ -387,7 +400,18 @@ fn assign(
                 count += 1;
                 layer[i] = current;
             }
-            current as usize + 1
+            let n = current as usize + 1;
+            if n > MAX_LAYERS {
+                return Err(Error::invalid(
+                    &input.source,
+                    format!(
+                        "a budget of {} makes {n} layers, more than {MAX_LAYERS}: raise the budget",
+                        format_bytes(*budget)
+                    ),
+                )
+                .field("layers.budget"));
+            }
+            n
         }
     };
     // Where each layer begins: the first-ranked agent of that layer.

@@ -15,7 +15,7 @@ use crate::casting::{AgentPose, Lod, ShotCrowd};
 use crate::error::{Error, Result};
 use crate::fingerprint::Fingerprinter;
 use crate::layers::Manifest;
-use crate::output::{layer_path, FULL_LAYER};
+use crate::output::{layer_path, WriterLock, FULL_LAYER};
 use crate::render::colour::{self, Colourspace};
 use crate::render::cryptomatte::{CryptoNames, NameTables};
 use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, RenderSettings};
@@ -93,6 +93,30 @@ impl RenderJob {
             passes: None,
             adaptive: None,
         }
+    }
+}
+
+impl RenderJob {
+    /// Every file the job may write for shot `shot`: each layer-frame's
+    /// EXR, and its PNG preview and Cryptomatte sidecars when asked for.
+    pub fn outputs(&self, shot: &str) -> Vec<PathBuf> {
+        let mut out = Vec::new();
+        for layer in &self.layers {
+            for &frame in &self.frames {
+                let exr_path = layer_path(&self.out, shot, layer, frame);
+                if self.png {
+                    out.push(exr_path.with_extension("png"));
+                }
+                if self.cryptomatte == CryptoOutput::Sidecar {
+                    let dir = exr_path.parent().map(std::path::Path::to_path_buf).unwrap_or_default();
+                    out.extend(
+                        crate::render::cryptomatte::MATTES.iter().map(|t| dir.join(exr::sidecar_name(&exr_path, t))),
+                    );
+                }
+                out.push(exr_path);
+            }
+        }
+        out
     }
 }
 
@@ -432,14 +456,106 @@ pub fn render_fingerprint<C>(
     f.hex()
 }
 
+/// Claims each layer folder of the job for this process
+/// ([`WriterLock`]: its files and its layer's render fingerprint), so a
+/// second render of the same frames, or of the same layer with other
+/// settings, into the same folder is refused naming this one.
+fn claim_layer_folders(
+    shot: &str,
+    job: &RenderJob,
+    fingerprints: &std::collections::HashMap<&str, String>,
+) -> Result<Vec<(String, WriterLock)>> {
+    let outputs = job.outputs(shot);
+    let mut claims = Vec::new();
+    for layer in &job.layers {
+        let dir = job.out.join(layer);
+        let names: Vec<String> = (outputs.iter())
+            .filter(|p| p.parent() == Some(dir.as_path()))
+            .filter_map(|p| Some(p.file_name()?.to_string_lossy().into_owned()))
+            .collect();
+        let settings = fingerprints.get(layer.as_str()).map_or("", String::as_str);
+        claims.push((layer.clone(), WriterLock::claim(&dir, &names, settings)?));
+    }
+    Ok(claims)
+}
+
+/// Refuses, before anything is allocated or written, an image whose film
+/// (the memory model's bytes a pixel: film, AOVs, Cryptomatte, the EXR
+/// being encoded, [`crate::layers::memory::film_bytes`]) needs more than
+/// this process may still allocate ([`crate::bench::memory_headroom`]),
+/// naming both figures.
+fn check_film_fits(w: u32, h: u32, channels: crate::layers::memory::FilmChannels) -> Result<()> {
+    let need = crate::layers::memory::film_bytes(u64::from(w) * u64::from(h), channels);
+    match crate::bench::memory_headroom() {
+        Some(free) if need > free => Err(Error::Usage(format!(
+            "a {w}x{h} image needs {} for its film alone ({} bytes a pixel: the film, its AOVs, passes, Cryptomatte \
+             and the EXR being written), more than the {} this process may still use (its address-space limit, \
+             its control group's memory limit or the memory available): render a smaller image",
+            crate::layers::format_bytes(need),
+            need / (u64::from(w) * u64::from(h)).max(1),
+            crate::layers::format_bytes(free)
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// Frames of other runs whose headers [`other_settings`] reads per layer.
+const OTHER_SETTINGS_SAMPLE: usize = 8;
+
+/// Per layer of the job, the frames already in its folder that the job
+/// does not render and whose `throng/renderFingerprint` is not this run's
+/// (read from their headers only, of the [`OTHER_SETTINGS_SAMPLE`] such
+/// frames nearest the job's first).
+fn other_settings(
+    shot: &str,
+    job: &RenderJob,
+    fingerprints: &std::collections::HashMap<&str, String>,
+) -> Vec<(String, Vec<i32>)> {
+    let rendered: std::collections::HashSet<i32> = job.frames.iter().copied().collect();
+    let mut out = Vec::new();
+    for layer in &job.layers {
+        let Ok(entries) = std::fs::read_dir(job.out.join(layer)) else { continue };
+        let prefix = format!("{shot}.{layer}.");
+        let Some(now) = fingerprints.get(layer.as_str()) else { continue };
+        let mut others: Vec<(i32, PathBuf)> = entries
+            .flatten()
+            .filter_map(|e| {
+                let name = e.file_name().to_string_lossy().into_owned();
+                let frame: i32 = name.strip_prefix(&prefix)?.strip_suffix(".exr")?.parse().ok()?;
+                (!rendered.contains(&frame)).then(|| (frame, e.path()))
+            })
+            .collect();
+        // Headers may hold large Cryptomatte manifests, and a farm task of
+        // one frame must not read a thousand: the nearest few tell.
+        let first = job.frames.iter().copied().min().unwrap_or(0);
+        others.sort_unstable_by_key(|(f, _)| ((i64::from(*f) - i64::from(first)).abs(), *f));
+        others.truncate(OTHER_SETTINGS_SAMPLE);
+        let mut frames: Vec<i32> = others
+            .into_iter()
+            .filter(|(_, path)| exr::read_render_fingerprint(path).is_ok_and(|f| f != *now))
+            .map(|(f, _)| f)
+            .collect();
+        frames.sort_unstable();
+        if !frames.is_empty() {
+            out.push((layer.clone(), frames));
+        }
+    }
+    out
+}
+
 /// Removes the temporaries that a killed run left beside this job's targets
 /// (`.<file>.<pid>.tmp`, as `write_atomic` names them, for a frame of the
-/// job in a layer of the job) whose pid is not this process. Returns them.
-pub(crate) fn remove_stale_temporaries(shot: &str, job: &RenderJob) -> Result<Vec<PathBuf>> {
+/// job in a layer of the job) whose process is gone: not this one, not
+/// alive, not another writer holding a claim on the folder (`claims`, one
+/// per layer, taken first). Returns them.
+pub(crate) fn remove_stale_temporaries(
+    shot: &str,
+    job: &RenderJob,
+    claims: &[(String, WriterLock)],
+) -> Result<Vec<PathBuf>> {
     let frames: std::collections::HashSet<i32> = job.frames.iter().copied().collect();
-    let own = std::process::id();
     let mut removed = Vec::new();
-    for layer in &job.layers {
+    for (layer, claim) in claims {
         let dir = job.out.join(layer);
         let Ok(entries) = std::fs::read_dir(&dir) else { continue };
         let prefix = format!("{shot}.{layer}.");
@@ -447,7 +563,7 @@ pub(crate) fn remove_stale_temporaries(shot: &str, job: &RenderJob) -> Result<Ve
             let name = e.file_name().to_string_lossy().into_owned();
             let Some(inner) = name.strip_prefix('.').and_then(|n| n.strip_suffix(".tmp")) else { continue };
             let Some((target, pid)) = inner.rsplit_once('.') else { continue };
-            if pid.parse::<u32>().map_or(true, |p| p == own) {
+            if pid.parse::<u32>().map_or(true, |p| claim.may_be_writing(p)) {
                 continue;
             }
             let frame = target.strip_prefix(&prefix).and_then(|r| r.split('.').next()).and_then(|f| f.parse().ok());
@@ -506,7 +622,29 @@ pub fn run<C: Space>(
             )));
         }
     }
-    let stale = remove_stale_temporaries(&crowd.shot().name, job)?;
+    let passes = job.passes_of(crowd.shot())?;
+    let groups = if passes.light_groups {
+        crate::scene::passes::LightGroups::new(&crowd.lights(), crowd.library())?.names.len()
+    } else {
+        0
+    };
+    let channels =
+        crate::layers::memory::FilmChannels { blurred: job.shutter.is_some(), passes: passes.triples(groups) as u64 };
+    check_film_fits(w, h, channels)?;
+    let fingerprints: std::collections::HashMap<&str, String> =
+        job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
+    // Held until the job returns: one writer per file and per layer's settings.
+    let claims = claim_layer_folders(&crowd.shot().name, job, &fingerprints)?;
+    for (layer, others) in other_settings(&crowd.shot().name, job, &fingerprints) {
+        warn(format!(
+            "{} holds frames of layer {layer} rendered with other settings ({} of the nearest, first {}): the \
+             folder will mix two renders; render every frame again, or into another folder, to keep it whole",
+            job.out.join(&layer).display(),
+            others.len(),
+            others[0]
+        ));
+    }
+    let stale = remove_stale_temporaries(&crowd.shot().name, job, &claims)?;
     if !stale.is_empty() {
         warn(format!(
             "removed {} stale temporary file(s) a killed render left behind (first: {})",
@@ -514,9 +652,6 @@ pub fn run<C: Space>(
             stale[0].display()
         ));
     }
-    let passes = job.passes_of(crowd.shot())?;
-    let fingerprints: std::collections::HashMap<&str, String> =
-        job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
     // BLASes are built as layer-frames need them (and kept for later frames).
     let mut blas = BlasSet::lazy(crowd.library());
     let total = job.frames.len() * job.layers.len();

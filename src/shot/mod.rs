@@ -609,6 +609,7 @@ impl Context<'_> {
     fn existing(&self, p: &Spanned<PathBuf>, key: &str) -> Result<PathBuf> {
         let full = self.base.join(p.get_ref());
         if full.exists() {
+            crate::error::check_readable_file(&full).map_err(|e| e.field(key))?;
             Ok(full)
         } else {
             Err(self.at(p.span(), key, format!("file not found: {}", full.display())))
@@ -849,8 +850,29 @@ fn check_render(render: &RenderSettings, path: &Path) -> Result<()> {
 impl Shot {
     /// Reads and validates a shot file.
     pub fn load(path: &Path) -> Result<Shot> {
+        crate::error::check_readable_file(path)?;
         let text = std::fs::read_to_string(path).at(path)?;
         Shot::parse(&text, path)
+    }
+
+    /// Every file the shot itself names, as its key names it: the shot,
+    /// the cache, each rig, each wardrobe, the set, the camera's glTF and
+    /// the dome (parts and textures come from the wardrobes:
+    /// `ShotCrowd::input_files`). What an output must never be.
+    pub fn input_files(&self) -> Vec<(String, PathBuf)> {
+        let mut out = vec![("shot".to_string(), self.path.clone()), ("cache.path".into(), self.cache.path.clone())];
+        out.extend(self.rigs.iter().map(|(name, r)| (format!("rigs.{name}.file"), r.file.clone())));
+        out.extend(self.wardrobes.iter().map(|w| ("wardrobe".to_string(), w.clone())));
+        if let Some(s) = &self.set {
+            out.push(("set.file".into(), s.file.clone()));
+        }
+        if let Some((file, _)) = &self.camera.gltf {
+            out.push(("camera.gltf".into(), file.clone()));
+        }
+        if let Some(d) = &self.lights.dome {
+            out.push(("lights.dome.file".into(), d.file.clone()));
+        }
+        out
     }
 
     /// Parses shot text; `path` names the file in errors and anchors relative paths.

@@ -278,6 +278,7 @@ impl SimScene {
     /// Reads and validates a scene file.
     pub fn load(path: impl AsRef<Path>) -> Result<SimScene> {
         let path = path.as_ref();
+        crate::error::check_readable_file(path)?;
         let text = std::fs::read_to_string(path).at(path)?;
         SimScene::parse(&text, path)
     }

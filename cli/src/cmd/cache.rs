@@ -254,6 +254,9 @@ fn run_convert(args: &CacheConvertArgs) -> Result<()> {
         )));
     }
     let how = args.import.import(&args.input)?;
+    let mut inputs = vec![("input cache".to_string(), args.input.clone())];
+    inputs.extend(args.import.gait.rig_file.iter().map(|f| ("rig file".to_string(), f.clone())));
+    throng::output::refuse_input_overwrite([args.output.as_path()], inputs)?;
     let (crowd, report) = import(&args.input, &how)?;
     write(&args.output, &crowd)?;
     let agents: HashSet<u32> = crowd.frames.iter().flat_map(|b| b.agents.iter().map(|a| a.id)).collect();

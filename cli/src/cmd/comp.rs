@@ -38,6 +38,17 @@ pub fn run(args: &CompArgs) -> Result<()> {
         super::existing_folder_of(png, "--png")?;
     }
     let manifest = args.manifest.as_deref().map(throng::layers::read_manifest).transpose()?;
+    // No output over an input: the layer EXRs stacked and the manifest.
+    let mut inputs = throng::output::InputFiles::new(
+        throng::comp::layer_files(&args.dir, args.frame, manifest.as_ref())?
+            .into_iter()
+            .map(|(layer, path)| (format!("layer {layer} EXR"), path)),
+    );
+    inputs.extend(args.manifest.iter().map(|m| ("layer manifest".to_string(), m.clone())));
+    inputs.check_all(std::iter::once(args.out.as_path()).chain(args.png.as_deref()))?;
+    // One writer per output file: held until the files are written.
+    let _claims =
+        throng::output::WriterLock::claim_files(std::iter::once(args.out.as_path()).chain(args.png.as_deref()))?;
     let comped = throng::comp::comp_frame(&args.dir, args.frame, manifest.as_ref())?;
     for w in &comped.warnings {
         eprintln!("throng: warning: {w}");

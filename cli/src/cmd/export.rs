@@ -79,6 +79,8 @@ pub fn run(args: &ExportArgs) -> Result<()> {
             crowd.shot().frames.end
         )));
     }
+    refuse_input_overwrite(args, &crowd)?;
+    let _claim = claim_out(args)?;
     // --layer: only that crowd layer's agents, from the manifest beside the shot.
     let only = layer_agents(args, &crowd)?;
     let s = throng::export::export_frame(&crowd, frame, only.as_ref(), &args.out)?;
@@ -94,6 +96,23 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         s.instanced_triangles
     );
     Ok(())
+}
+
+/// Refuses an `--out` that is one of the files the export reads: the
+/// shot's, and the manifest (given, or the one beside the shot).
+fn refuse_input_overwrite(args: &ExportArgs, crowd: &throng::casting::ShotCrowd) -> Result<()> {
+    let mut inputs = crowd.input_files();
+    let manifest = (args.manifest.clone())
+        .unwrap_or_else(|| throng::layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name));
+    if manifest.exists() {
+        inputs.push(("layer manifest".into(), manifest));
+    }
+    throng::output::refuse_input_overwrite([args.out.as_path()], inputs)
+}
+
+/// Claims `--out` for this process until the export returns (one writer per file).
+fn claim_out(args: &ExportArgs) -> Result<Vec<throng::output::WriterLock>> {
+    throng::output::WriterLock::claim_files([args.out.as_path()])
 }
 
 /// The manifest beside the shot, when `throng layers` wrote one for it.
@@ -123,6 +142,8 @@ fn run_usd(args: &ExportArgs, clock: std::time::Instant) -> Result<()> {
             (a, b)
         }
     };
+    refuse_input_overwrite(args, &crowd)?;
+    let _claim = claim_out(args)?;
     let only = layer_agents(args, &crowd)?;
     let manifest = match &args.manifest {
         Some(p) => Some(throng::layers::read_manifest(p)?),

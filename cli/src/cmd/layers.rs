@@ -53,7 +53,17 @@ impl LayersArgs {
         if self.count == Some(0) {
             return Err(Error::Usage("--count 0: at least one crowd layer".into()));
         }
+        if let Some(n) = self.count.filter(|&n| n > layers::MAX_LAYERS) {
+            return Err(Error::Usage(format!("--count {n}: at most {} crowd layers", layers::MAX_LAYERS)));
+        }
         if let Some(c) = &self.cutoffs {
+            if c.len() >= layers::MAX_LAYERS {
+                return Err(Error::Usage(format!(
+                    "--cutoffs: {} distances, at most {}",
+                    c.len(),
+                    layers::MAX_LAYERS - 1
+                )));
+            }
             if c.iter().any(|v| !(*v > 0.0 && v.is_finite())) || c.windows(2).any(|w| !(w[0] < w[1])) {
                 return Err(Error::Usage(format!(
                     "--cutoffs {c:?}: distances must be positive metres and increase, e.g. 10,25,60"
@@ -100,8 +110,12 @@ pub fn run(args: &LayersArgs) -> Result<()> {
     for w in layers::checks::check_placement(&crowd)?.warnings() {
         eprintln!("throng: warning: {w}");
     }
-    let manifest = build_layers(&crowd, &args.overrides())?;
     let out = args.out.clone().unwrap_or_else(|| layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name));
+    throng::output::refuse_input_overwrite(
+        std::iter::once(out.as_path()).chain(args.map.as_deref()),
+        crowd.input_files(),
+    )?;
+    let manifest = build_layers(&crowd, &args.overrides())?;
     layers::write_manifest(&out, &manifest)?;
     if let Some(map) = &args.map {
         layers::draw_map(&manifest, &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, map)?;

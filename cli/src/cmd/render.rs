@@ -176,7 +176,7 @@ pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
         .manifest
         .clone()
         .unwrap_or_else(|| throng::layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name));
-    let manifest = if manifest_path.exists() {
+    let mut manifest = if manifest_path.exists() {
         Some(throng::layers::read_manifest(&manifest_path)?)
     } else if args.layer == FULL_LAYER {
         None
@@ -187,7 +187,7 @@ pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
             args.shot.display()
         )));
     };
-    if let Some(m) = &manifest {
+    if let Some(m) = &mut manifest {
         if m.shot != crowd.shot().name {
             return Err(Error::invalid(
                 &manifest_path,
@@ -222,6 +222,12 @@ pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
         colourspace,
         ..RenderJob::new(layers, frames, spp, args.out.clone())
     };
+    // No output over an input: the shot's files and the manifest.
+    let mut inputs = throng::output::InputFiles::new(crowd.input_files());
+    if manifest.is_some() {
+        inputs.extend([("layer manifest".to_string(), manifest_path.clone())]);
+    }
+    inputs.check_all(job.outputs(&crowd.shot().name).iter().map(PathBuf::as_path))?;
     let progress = Progress::new(args.progress.into());
     let report = match colourspace {
         Colourspace::Rec709 => job::run(&crowd, manifest.as_ref(), &job, &progress),

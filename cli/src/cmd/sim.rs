@@ -25,6 +25,7 @@ pub struct SimArgs {
 pub fn run(args: &SimArgs) -> Result<()> {
     let clock = Instant::now();
     super::existing_folder_of(&args.out, "--out")?;
+    throng::output::refuse_input_overwrite([args.out.as_path()], [("sim scene".to_string(), args.scene.clone())])?;
     let scene = SimScene::load(&args.scene)?;
     let crowd = throng::sim::run(&scene);
     throng::cache::write(&args.out, &crowd)?;

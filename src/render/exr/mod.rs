@@ -529,6 +529,20 @@ fn read_passes(
         .collect()
 }
 
+/// The `throng/renderFingerprint` of a layer file, from its header only
+/// (empty when the file records none).
+pub fn read_render_fingerprint(path: &Path) -> Result<String> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| crate::exr_guard::exr_error(path, e))?;
+    let key = Text::new_or_none("throng/renderFingerprint");
+    let found = meta.headers.iter().find_map(|h| {
+        match key.as_ref().and_then(|k| h.own_attributes.other.get(k).or_else(|| h.shared_attributes.other.get(k))) {
+            Some(AttributeValue::Text(t)) => Some(t.to_string()),
+            _ => None,
+        }
+    });
+    Ok(found.unwrap_or_default())
+}
+
 /// Reads a file written by [`write_layer`] back (tests, resume, botinfo).
 pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
     crate::exr_guard::check_decoded_size(path)?;
