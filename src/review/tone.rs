@@ -97,9 +97,10 @@ pub(crate) fn agent_coverage(film: &Film, id: u32) -> (Vec<f32>, bool) {
     }
 }
 
-/// A coverage matte as RGBA8: warm yellow, as opaque as the coverage.
+/// A coverage matte as RGBA8: warm yellow, see-through where covered
+/// (60% at full coverage, so the agent shows beneath), clear elsewhere.
 pub(crate) fn matte_pixels(coverage: &[f32]) -> Vec<u8> {
-    coverage.iter().flat_map(|&c| [255, 214, 10, (c.clamp(0.0, 1.0) * 230.0 + 0.5) as u8]).collect()
+    coverage.iter().flat_map(|&c| [255, 214, 10, (c.clamp(0.0, 1.0) * 153.0 + 0.5) as u8]).collect()
 }
 
 /// PNG bytes of RGB8 (`channels` 3) or RGBA8 (4) pixels.
