@@ -89,10 +89,10 @@ fn fixture() -> &'static Fixture {
     })
 }
 
-/// A review server in this process on a free port: its address and stopper.
+/// A review server of the fixture in this process on a free port: its
+/// address and stopper.
 fn start(cache_bytes: u64) -> (String, Stopper) {
     let f = fixture();
-    let (tx, rx) = std::sync::mpsc::channel();
     let options = ReviewOptions {
         renders: Some(f.renders()),
         manifest: Some(f.manifest()),
@@ -100,9 +100,14 @@ fn start(cache_bytes: u64) -> (String, Stopper) {
         cache_bytes,
         ..ReviewOptions::default()
     };
+    start_shot(demo_shot(), options)
+}
+
+fn start_shot(shot: PathBuf, options: ReviewOptions) -> (String, Stopper) {
+    let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
-        let crowd = ShotCrowd::load(&demo_shot()).unwrap();
-        let review = Review::open(crowd, &demo_shot(), &options).unwrap();
+        let crowd = ShotCrowd::load(&shot).unwrap();
+        let review = Review::open(crowd, &shot, &options).unwrap();
         tx.send((review.addr().to_string(), review.stopper())).unwrap();
         review.serve();
     });
@@ -518,4 +523,49 @@ fn the_binary_prints_its_url_and_serves_until_killed() {
     let (code, _, err) = run(&["review", s(&demo_shot()), "--renders", s(empty.path()), "--port", "0"]);
     assert_eq!(code, 2);
     assert!(err.contains("--renders") && err.contains("no layer files"), "{err}");
+}
+
+/// Light passes are views of the layers that have them; without a manifest
+/// and with only the `full` layer, there is no comp and no map, and the
+/// server says so.
+#[test]
+fn light_passes_are_views_and_a_shot_without_manifest_has_no_comp() {
+    let dir = tempdir().unwrap();
+    let shot =
+        common::DemoShot { name: "pass", frames: (1001, 1002), extra: "passes = [\"all\"]", ..Default::default() }
+            .write(dir.path(), &common::two_robots(1..=2));
+    let renders = dir.path().join("r");
+    let (code, _, err) =
+        run(&["render", s(&shot), "--layer", "full", "--frames", "1001", "--progress", "off", "--out", s(&renders)]);
+    assert_eq!(code, 0, "{err}");
+    let (a, stop) =
+        start_shot(shot, ReviewOptions { renders: Some(renders.clone()), port: 0, ..ReviewOptions::default() });
+    let layers = get_ok(&a, "/api/layers?frame=1001").json();
+    assert!(layers["comp"]["error"].as_str().unwrap().contains("no comp"), "{layers}");
+    let full = &layers["layers"][0];
+    assert_eq!(full["name"], "full");
+    let views: Vec<&str> = full["views"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
+    let (film, _) = throng::render::exr::read_layer(&renders.join("full/pass.full.1001.exr")).unwrap();
+    let passes: Vec<&str> = film.passes.iter().map(|p| p.name.as_str()).collect();
+    assert!(passes.contains(&"diffuse_direct") && passes.contains(&"P"), "{passes:?}");
+    assert_eq!(&views[6..], &passes[..], "every pass of the file is a view, in file order");
+    let beauty = get(&a, "/api/image.png?frame=1001&layer=full").png().to_rgb8().into_raw();
+    for pass in &passes {
+        let img = get(&a, &format!("/api/image.png?frame=1001&layer=full&view={pass}")).png();
+        assert_eq!((img.width(), img.height()), (48, 27), "{pass}");
+        assert_ne!(img.to_rgb8().into_raw(), beauty, "{pass} is not the beauty");
+    }
+    // A pass is per layer: the comp (none here) and the map (no manifest) say why not.
+    let r = get(&a, "/api/image.png?frame=1001&layer=comp");
+    assert_eq!(r.status, 404, "{}", r.text());
+    let r = get(&a, "/api/map.png");
+    assert!(r.status == 404 && r.text().contains("manifest"), "{}", r.text());
+    let fig = get_ok(&a, "/api/figures").json();
+    assert!(fig["layers"].is_null() && fig["cast"]["agents"] == 2, "{fig}");
+    // botInfo without a manifest: no layer, as `throng botinfo` says.
+    let i = film.agent_id.iter().position(|&v| v > 0).unwrap() as u32;
+    let (x, y) = (i % film.width, i / film.width);
+    let r = get_ok(&a, &format!("/api/pick?frame=1001&layer=full&x={x}&y={y}")).json();
+    assert!(r["botinfo"][0]["layer"].is_null(), "{r}");
+    stop.stop();
 }

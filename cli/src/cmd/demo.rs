@@ -153,5 +153,6 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     if let Some(a) = manifest.agents.iter().find(|a| a.layer == 0 && !a.removed) {
         outln!("Ask about an agent: throng botinfo {} {} --frame {}", shot_path.display(), a.id, manifest.ref_frame);
     }
+    outln!("Look and click: throng review {} --renders {}", shot_path.display(), render.out.display());
     Ok(())
 }
