@@ -236,6 +236,7 @@ impl Review {
     pub fn url(&self) -> String {
         match self.addr.ip() {
             IpAddr::V4(Ipv4Addr::UNSPECIFIED) => format!("http://127.0.0.1:{}/", self.addr.port()),
+            IpAddr::V6(a) if a.is_unspecified() => format!("http://[::1]:{}/", self.addr.port()),
             _ => format!("http://{}/", self.addr),
         }
     }
@@ -677,18 +678,6 @@ impl State {
         serde_json::from_str(&text).map_err(|e| Refusal(500, format!("cannot write JSON: {e}")))
     }
 
-    /// The command line that prints the same botInfo.
-    fn command(&self, file: Option<&Path>, x: u32, y: u32) -> Option<String> {
-        let manifest = self.manifest.as_ref().map(|(_, p)| format!(" --manifest {}", p.display())).unwrap_or_default();
-        file.map(|f| {
-            format!(
-                "throng botinfo {} --exr {} --pixel {x},{y}{manifest} --json",
-                self.shot_file.display(),
-                f.display()
-            )
-        })
-    }
-
     fn pick(&self, q: &BTreeMap<String, String>) -> Answer<Body> {
         let (x, y): (u32, u32) = (need(q, "x")?, need(q, "y")?);
         let d = self.decode(q)?;
@@ -705,7 +694,7 @@ impl State {
             "y": y,
             "agent": id,
             "botinfo": botinfo,
-            "command": self.command(d.file.as_deref(), x, y),
+            "file": d.file,
         })))
     }
 

@@ -89,7 +89,7 @@ async function init() {
   loadMap();
   loadFigures();
   if (!state.frames.length) {
-    status("No renders folder: figures and map only (throng review SHOT --renders DIR).");
+    status("No renders folder: figures and map only (docs/review.md).");
     $("viewer").hidden = true;
     return;
   }
@@ -204,13 +204,21 @@ async function onClick(event) {
       return;
     }
     state.agent = r.agent;
-    showBotInfo(r.botinfo[0], r.command, "pixel " + x + "," + y + " of " + r.layer + ", frame " + r.frame);
+    showBotInfo(r.botinfo[0], botinfoCommand(r.file, x, y), "pixel " + x + "," + y + " of " + r.layer + ", frame " + r.frame);
     showMatte();
     loadMap();
     status("");
   } catch (e) {
     status(e.message, true);
   }
+}
+
+// The command line that prints the same botInfo (a layer file; the comp
+// needs throng comp's file first).
+function botinfoCommand(file, x, y) {
+  if (!file) return null;
+  const manifest = state.shot.manifest ? " --manifest " + state.shot.manifest : "";
+  return "throng botinfo " + state.shot.shot_file + " --exr " + file + " --pixel " + x + "," + y + manifest + " --json";
 }
 
 // An agent by id: its botInfo at this frame, its matte, and where it is.
@@ -316,11 +324,11 @@ async function loadFigures() {
       l.measured ? bytes(l.measured.peak_rss_bytes) : "-",
     ]);
     box.append(table(rows, ["layer", "agents", "distance", "memory (estimated)", "measured"]));
-    if (!fig.summaries.length) box.append(el("p", "Measured memory appears when render --json summaries are saved in the renders folder.", "dim"));
+    if (!fig.summaries.length) box.append(el("p", "Measured memory appears when the render's JSON summaries are saved in the renders folder (docs/review.md).", "dim"));
     const p = fig.pops_avoided;
     box.append(el("p", p.measured
       ? "Pops avoided: per-frame ranking would move " + p.agents_changed + " agents between layers (" + p.changes + " changes); fixed-frame ranking moves none."
-      : "Pops avoided: fixed-frame ranking moves no agent between layers (per-frame pops not measured: throng layers --per-frame)."));
+      : "Pops avoided: fixed-frame ranking moves no agent between layers (per-frame pops were not measured for this manifest; docs/layers.md)."));
     box.append(el("p", "Manifest: " + fig.manifest, "dim"));
   } else {
     box.append(el("p", "No layer manifest: run throng layers on the shot for layers, LOD and the map.", "dim"));
