@@ -76,6 +76,9 @@ fn fixture() -> &'static Fixture {
         ]);
         assert_eq!(code, 0, "{err}");
         std::fs::write(f.renders().join("render.json"), out).unwrap();
+        // Larger than any socket buffer: a client that never reads it must
+        // not hold up the server.
+        std::fs::write(f.renders().join("big.bin"), vec![7u8; 48 << 20]).unwrap();
         // Something outside both folders, and links to it from inside.
         let outside = f.dir.join("outside");
         std::fs::create_dir(&outside).unwrap();
@@ -571,4 +574,17 @@ fn light_passes_are_views_and_a_shot_without_manifest_has_no_comp() {
     let r = get_ok(&a, &format!("/api/pick?frame=1001&layer=full&x={x}&y={y}")).json();
     assert!(r["botinfo"][0]["layer"].is_null(), "{r}");
     stop.stop();
+}
+
+#[test]
+fn a_client_that_never_reads_holds_up_only_itself() {
+    let a = server();
+    let mut stuck = TcpStream::connect(a).unwrap();
+    stuck.write_all(format!("GET /files/renders/big.bin HTTP/1.1\r\nHost: {a}\r\n\r\n").as_bytes()).unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    let started = std::time::Instant::now();
+    assert_eq!(get_ok(a, "/api/shot").json()["shot"], "demo");
+    assert_eq!(get(a, "/api/frames").status, 200);
+    assert!(started.elapsed() < Duration::from_secs(10), "answered in {:?}", started.elapsed());
+    drop(stuck);
 }

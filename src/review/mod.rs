@@ -251,8 +251,9 @@ impl Review {
         Stopper { server: self.server.clone(), stop: self.stop.clone() }
     }
 
-    /// Answers requests, one at a time, until stopped. A request that fails
-    /// is answered with its status and message; the server carries on.
+    /// Answers requests until stopped: each worked out one at a time, its
+    /// answer written on a thread of its own. A request that fails is
+    /// answered with its status and message; the server carries on.
     pub fn serve(&self) {
         while !self.stop.load(Ordering::SeqCst) {
             let Ok(request) = self.server.recv() else {
@@ -265,8 +266,13 @@ impl Review {
             };
             let answer = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.state.answer(&request)))
                 .unwrap_or_else(|_| Err(Refusal(500, "internal error while answering this request".into())));
-            // A client that went away is no concern of the server's.
-            let _ = respond(request, answer);
+            // Written on a thread of its own, so a client that reads slowly
+            // (or never) holds up only itself; one that went away is no
+            // concern of the server's.
+            let writer = std::thread::Builder::new().name("review-respond".into());
+            let _ = writer.spawn(move || {
+                let _ = respond(request, answer);
+            });
         }
     }
 }
