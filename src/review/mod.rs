@@ -1,7 +1,8 @@
 //! `throng review`: a local web page where a lighter looks at a shot's
 //! rendered layers and clicks an agent to read its botInfo (docs/review.md).
 //!
-//! A small HTTP server (tiny_http) on one thread, read-only: the page
+//! A small HTTP server (tiny_http), read-only, answering one request at a
+//! time (each answer written on its own thread): the page
 //! (`page.html`, `page.js`, `page.css`, built into the binary), JSON about
 //! the shot, its frames and layers, PNGs tone-mapped on the server from the
 //! layer EXRs (or their comp, stacked by `comp::over`), the layer map
