@@ -7,7 +7,9 @@ the largest agent the comp shows, and checks that the botInfo panel names
 that agent's id (and the botInfo the server gives for that pixel is the one
 `throng botinfo --exr --pixel --json` prints for the same pixel of the comp
 stacked by `throng comp`), that the matte and the map loaded, that the page
-threw no error, and that the screenshot is not blank.
+threw no error, and that the screenshot is not blank; then types the next
+largest agent's id into the search box, presses Find, and checks the panel
+jumps to it.
 
 usage: review_browser.py THRONG SHOT RENDERS MANIFEST SCREENSHOT.png
 """
@@ -171,6 +173,42 @@ try:
     if layer and layer not in panel:
         fail(f"the panel does not name the agent's layer {layer}: {panel!r}")
 
+    # Search by id: type the second largest agent's id and press Find.
+    if len(agents) > 1:
+        other = agents[1]["id"]
+        box = cdp.eval(
+            "(() => { const b = document.getElementById('search-id'); b.scrollIntoView(); b.focus();"
+            " const r = document.querySelector('#search button').getBoundingClientRect();"
+            " return {x: r.left + r.width / 2, y: r.top + r.height / 2}; })()"
+        )
+        cdp("Input.insertText", text=str(other))
+        for kind in ["mouseMoved", "mousePressed", "mouseReleased"]:
+            cdp("Input.dispatchMouseEvent", type=kind, x=box["x"], y=box["y"], button="left", buttons=1 if kind == "mousePressed" else 0, clickCount=1)
+        wait_for(
+            f"the search to show agent {other}",
+            lambda: cdp.eval("document.getElementById('botinfo').dataset.agentId || ''") == str(other),
+            60,
+        )
+        found = cdp.eval("document.getElementById('botinfo').innerText")
+        if f"Robot ID {other}" not in found or "at pixel" not in found:
+            fail(f"searching {other} shows {found!r}")
+        # Back to the clicked agent for the screenshot.
+        cdp.eval("document.getElementById('image').scrollIntoView()")
+        rect = cdp.eval(
+            "(() => { const r = document.getElementById('image').getBoundingClientRect();"
+            " return {x: r.left, y: r.top, w: r.width, h: r.height, nw: document.getElementById('image').naturalWidth,"
+            " nh: document.getElementById('image').naturalHeight}; })()"
+        )
+        cx = rect["x"] + (px + 0.5) * rect["w"] / rect["nw"]
+        cy = rect["y"] + (py + 0.5) * rect["h"] / rect["nh"]
+        for kind in ["mouseMoved", "mousePressed", "mouseReleased"]:
+            cdp("Input.dispatchMouseEvent", type=kind, x=cx, y=cy, button="left", buttons=1 if kind == "mousePressed" else 0, clickCount=1)
+        wait_for(
+            f"the panel to name agent {aid} again",
+            lambda: cdp.eval("document.getElementById('botinfo').dataset.agentId || ''") == str(aid),
+            60,
+        )
+
     loaded = (
         "(() => { const m = document.getElementById('matte'), p = document.getElementById('map');"
         f" return !m.hidden && m.complete && m.naturalWidth > 0 && m.src.includes('id={aid}')"
@@ -197,7 +235,7 @@ try:
         fail(f"the page threw: {errors[:3]}")
     print(
         f"review browser: clicked agent {aid} at pixel {px},{py} of the comp; the botInfo panel shows it "
-        f"(layer {layer}), as throng botinfo --json does; screenshot {img.size[0]}x{img.size[1]}, {colours} colours"
+        f"(layer {layer}), as throng botinfo --json does; search by id found agent {agents[1]['id'] if len(agents) > 1 else '-'}; screenshot {img.size[0]}x{img.size[1]}, {colours} colours"
     )
 finally:
     if browser is not None:
