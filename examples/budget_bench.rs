@@ -231,6 +231,8 @@ fn separate(
             instances: v["instances"].as_u64().unwrap_or(0) as usize,
             peak_rss_bytes: v["peak_rss_bytes"].as_u64(),
             tlas_build_s: 0.0,
+            pass_bytes: Vec::new(),
+            file_bytes: 0,
         });
     }
     Ok(done)

@@ -538,6 +538,7 @@ fn main() {
         indirect_clamp: 0.0,
         diffuse_only: args.diffuse,
         passes: Default::default(),
+        adaptive: None,
     };
     let mut out = serde_json::json!({
         "tool": "throng peer_bench",

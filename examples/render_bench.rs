@@ -221,6 +221,7 @@ fn main() {
             indirect_clamp: 10.0,
             diffuse_only: false,
             passes: Default::default(),
+            adaptive: None,
         };
         let cpu = throng::bench::process_cpu_s();
         let (film, stats) = render_frame_with_stats(&blas, &lib, &scene, &settings, None).expect("render");

@@ -134,6 +134,7 @@ fn settings(diffuse_only: bool, max_bounces: u32) -> RenderSettings {
         indirect_clamp: 10.0,
         diffuse_only,
         passes: Default::default(),
+        adaptive: None,
     }
 }
 

@@ -77,6 +77,8 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
         compression: Default::default(),
         shutter: None,
         colourspace: Default::default(),
+        passes: None,
+        adaptive: None,
     };
     job::run(crowd, Some(manifest), &job, &job::Silent).unwrap();
 }

@@ -274,6 +274,7 @@ fn settings(spp: u32, threads: usize) -> RenderSettings {
         indirect_clamp: 10.0,
         diffuse_only: false,
         passes: Default::default(),
+        adaptive: None,
     }
 }
 

@@ -129,8 +129,12 @@ fn comps_depend_on_their_frames_layer_tasks() {
         // process or film again, as plans once did, fails this.
         let estimate = manifest.render_memory(layer).unwrap();
         let [mw, mh] = manifest.camera.image_size;
-        let moved = memory::at_pixels(estimate, mw as u64 * mh as u64, 32 * 18, false);
-        assert_eq!(moved, estimate - memory::film_bytes(960 * 540, false) + memory::film_bytes(32 * 18, false));
+        let moved = memory::at_pixels(estimate, mw as u64 * mh as u64, 32 * 18, Default::default());
+        assert_eq!(
+            moved,
+            estimate - memory::film_bytes(960 * 540, Default::default())
+                + memory::film_bytes(32 * 18, Default::default())
+        );
         assert_eq!(r.memory_bytes, moved.div_ceil(1 << 20) << 20, "{}: memory from the one model", r.id);
         assert!(r.memory_bytes < estimate, "{}: a smaller image needs less than the shot's", r.id);
         assert!(r.log.starts_with(&plan.log_dir));

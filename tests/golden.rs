@@ -121,6 +121,8 @@ fn render_with_shutter(
         compression: Default::default(),
         shutter,
         colourspace: Default::default(),
+        passes: None,
+        adaptive: None,
     };
     let done = job::run(crowd, Some(manifest), &job, &job::Silent).expect("demo renders").layers;
     done.into_iter().map(|r| (r.layer, r.path)).collect()

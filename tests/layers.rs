@@ -501,8 +501,15 @@ fn the_memory_model_counts_each_part_once() {
     assert_eq!(m.render_memory("crowd0"), Some(m.split.shared_bytes));
     assert_eq!(m.render_memory("set"), Some(m.split.shared_bytes));
     // The film (and the process) once.
-    assert_eq!(floor.bytes() - RenderFloor { pixels: 0, ..floor }.bytes(), memory::film_bytes(px, false));
-    assert_eq!(memory::at_pixels(floor.bytes(), px, 0, false), RenderFloor { pixels: 0, ..floor }.bytes());
+    assert_eq!(floor.bytes() - RenderFloor { pixels: 0, ..floor }.bytes(), memory::film_bytes(px, floor.film()));
+    assert_eq!(memory::at_pixels(floor.bytes(), px, 0, floor.film()), RenderFloor { pixels: 0, ..floor }.bytes());
+    // Passes: three more channels per pixel each, in the film once.
+    let with_passes = ShotCrowd::load(&shot).unwrap().with_shot(|s| s.render.passes = vec!["all".into()]).unwrap();
+    let passes = memory::pass_count(&with_passes).unwrap();
+    assert!(passes >= 10, "7 light paths, groups, shadow, P: {passes}");
+    let floor_passes = RenderFloor::of(&with_passes, None, px, full).unwrap();
+    assert_eq!(floor_passes.bytes() - floor.bytes(), px * passes * memory::PASS_PIXEL_BYTES);
+    assert!(build_layers(&with_passes, &unsplit).unwrap().split.shared_bytes > m.split.shared_bytes);
     // One frame's poses, not the 48 frames' the library holds; only full agents trace theirs.
     let library: u64 = crowd.library().meshes.iter().map(|m| m.triangle_count() as u64).sum();
     assert!(floor.triangles < library / 2, "{} of {library} triangles", floor.triangles);

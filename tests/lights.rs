@@ -21,6 +21,7 @@ use throng::render::film::{render_frame, Film};
 use throng::render::RenderSettings;
 use throng::scene::dome::load_dome;
 use throng::scene::lights::{Dome, Light, LightKind, SceneLights};
+use throng::scene::passes::LightPath;
 use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky};
 
 const ALBEDO: f32 = 0.5;
@@ -71,6 +72,7 @@ fn settings(spp: u32, threads: usize) -> RenderSettings {
         indirect_clamp: 0.0,
         diffuse_only: true,
         passes: Default::default(),
+        adaptive: None,
     }
 }
 
@@ -628,7 +630,7 @@ fn passes_and_light_groups_add_up_to_the_beauty() {
     let names: Vec<&str> = film.passes.iter().map(|p| p.name.as_str()).collect();
     assert!(names.contains(&"diffuse_direct") && names.contains(&"environment") && names.contains(&"P"), "{names:?}");
     assert!(names.contains(&"lg_dome") && names.contains(&"lg_lamp_a") && names.contains(&"lg_key"), "{names:?}");
-    let paths: Vec<_> = film.passes.iter().filter(|p| !p.name.starts_with("lg_") && p.name != "P").collect();
+    let paths: Vec<_> = film.passes.iter().filter(|p| LightPath::ALL.iter().any(|l| l.name() == p.name)).collect();
     let groups: Vec<_> = film.passes.iter().filter(|p| p.name.starts_with("lg_")).collect();
     assert_eq!(paths.len(), 7);
     for i in 0..film.rgba.len() {
@@ -657,4 +659,97 @@ fn passes_and_light_groups_add_up_to_the_beauty() {
     let plain = render_frame(&BlasSet::build(&lib), &lib, &scene, &s, None).expect("render");
     assert_eq!(plain.rgba, film.rgba);
     assert!(plain.passes.is_empty());
+}
+
+/// The shadow pass: a set surface's direct light that only the crowd
+/// blocks. With one bounce off (light sampling alone, no MIS), each sample's
+/// lost light is what the same sample gets once the agent is gone, so the
+/// beauty plus the shadow pass is the render without the agent, pixel by
+/// pixel (to f32 rounding); where the set itself shadows, nothing is lost
+/// to the crowd; and the beauty is the same with the pass on.
+#[test]
+fn the_shadow_pass_is_the_light_the_crowd_took_from_the_set() {
+    let point = light(LightKind::Point, Vec3::new(0.0, 3.0, 0.0), -Vec3::Y, 40.0);
+    let rect = light(LightKind::Rect { size: Vec2::new(1.0, 0.5) }, Vec3::new(0.8, 2.5, 0.4), -Vec3::Y, 15.0);
+    let grey = || Material { name: "blocker".into(), base_color: Vec3::splat(0.3), ..Default::default() };
+    // An agent's part (a shadow caster only, as in the set layer) and a
+    // piece of set overlapping its shadow.
+    let agent = (quad(0.8), grey(), Affine3A::from_translation(Vec3::new(-0.2, 1.0, 0.0)));
+    let set_piece = (quad(0.5), grey(), Affine3A::from_translation(Vec3::new(0.3, 1.5, 0.3)));
+    let (lib, mut with) = floor_scene(local(vec![point, rect]), vec![agent, set_piece]);
+    with.instances[1].agent = InstanceAgent::some(7);
+    with.instances[1].visibility = vis::SHADOW;
+    with.instances[2].visibility = vis::SHADOW;
+    let mut without = with.clone();
+    without.instances[1].visibility = 0;
+    let mut s = settings(4, 2);
+    s.passes = throng::scene::passes::PassSet::parse(&["shadow"], "render.passes").unwrap();
+    let blas = BlasSet::build(&lib);
+    let film = render_frame(&blas, &lib, &with, &s, None).expect("render");
+    let shadow = &film.passes.iter().find(|p| p.name == "shadow").expect("a shadow pass").data;
+    let clear = render_frame(&blas, &lib, &without, &s, None).expect("render");
+    let (mut lost, mut pixels_in_shadow) = (0.0f64, 0);
+    for (i, (px, lost_here)) in film.rgba.iter().zip(shadow).enumerate() {
+        let beauty = Vec3::from_slice(&px[..3]);
+        let unshadowed = Vec3::from_slice(&clear.rgba[i][..3]);
+        let s = Vec3::from(*lost_here);
+        assert!(s.min_element() >= 0.0, "pixel {i}: negative shadow {s}");
+        assert!(
+            (beauty + s - unshadowed).abs().max_element() <= 1e-5 * unshadowed.max_element() + 1e-6,
+            "pixel {i}: beauty {beauty} + shadow {s} vs without the agent {unshadowed}"
+        );
+        lost += s.x as f64;
+        pixels_in_shadow += (s.x > 0.0) as usize;
+    }
+    assert!(lost > 0.0 && pixels_in_shadow > 20, "the agent's shadow is in the pass ({pixels_in_shadow} pixels)");
+    // The set piece's own shadow stays in the beauty: with the agent gone
+    // too, the pass is empty and the beauty still darker under the piece.
+    let empty = render_frame(&blas, &lib, &without, &s, None).expect("render");
+    assert!(empty.passes[0].data.iter().all(|v| *v == [0.0; 3]), "no crowd, no crowd shadow");
+    s.passes = Default::default();
+    assert_eq!(render_frame(&blas, &lib, &with, &s, None).expect("render").rgba, film.rgba);
+}
+
+/// Adaptive sampling (docs/render.md, "Adaptive sampling"): every pixel
+/// takes between min_spp and max_spp samples, the soft shadow's penumbra
+/// more than the flat floor; the decision reads the pixel's own samples, so
+/// the image is bit-identical for any thread count, and a pixel that took n
+/// samples equals the fixed n-sample render's pixel, bit for bit.
+#[test]
+fn adaptive_sampling_stops_each_pixel_on_its_own_samples() {
+    let rect = light(LightKind::Rect { size: Vec2::new(1.5, 1.5) }, Vec3::new(0.0, 2.0, 0.0), -Vec3::Y, 8.0);
+    let grey = Material { name: "blocker".into(), base_color: Vec3::splat(0.3), ..Default::default() };
+    let blocker = (quad(1.0), grey, Affine3A::from_translation(Vec3::new(0.4, 1.0, 0.0)));
+    let (lib, scene) = floor_scene(local(vec![rect]), vec![blocker]);
+    let blas = BlasSet::build(&lib);
+    let (min, max) = (4, 64);
+    let mut s = settings(1, 1);
+    s.adaptive = Some(throng::shot::Adaptive { threshold: 0.1, min_spp: min, max_spp: max });
+    let one = render_frame(&blas, &lib, &scene, &s, None).expect("render");
+    s.threads = 2;
+    let two = render_frame(&blas, &lib, &scene, &s, None).expect("render");
+    assert_eq!((&one.rgba, &one.samples), (&two.rgba, &two.samples), "thread count changed the image");
+    let n = &one.samples;
+    assert_eq!(n.len(), one.rgba.len());
+    assert!(n.iter().all(|&k| (min..=max).contains(&k)), "{n:?}");
+    let fewest = *n.iter().min().unwrap();
+    let most = *n.iter().max().unwrap();
+    assert!(most > 4 * fewest, "noisy pixels sample longer: {fewest} to {most}");
+    let mut sorted = n.clone();
+    sorted.sort();
+    assert!(sorted[sorted.len() / 2] <= max / 2, "most pixels stop early: median {}", sorted[sorted.len() / 2]);
+    for k in [fewest, most] {
+        let fixed = render_frame(&blas, &lib, &scene, &RenderSettings { spp: k, adaptive: None, ..s.clone() }, None)
+            .expect("render");
+        assert!(fixed.samples.is_empty());
+        let matched = (0..n.len()).filter(|&i| n[i] == k).inspect(|&i| assert_eq!(one.rgba[i], fixed.rgba[i])).count();
+        assert!(matched > 0);
+    }
+    // Bad keys are refused by name.
+    s.adaptive = Some(throng::shot::Adaptive { threshold: f32::NAN, min_spp: 4, max_spp: 8 });
+    let e = render_frame(&blas, &lib, &scene, &s, None).unwrap_err().to_string();
+    assert!(e.contains("render.adaptive.threshold"), "{e}");
+    s.adaptive = Some(throng::shot::Adaptive { threshold: 0.1, min_spp: 16, max_spp: 8 });
+    let e = render_frame(&blas, &lib, &scene, &s, None).unwrap_err().to_string();
+    assert!(e.contains("render.adaptive.min_spp") && e.contains("above max_spp"), "{e}");
 }

@@ -84,6 +84,7 @@ fn settings(spp: u32, threads: usize, max_bounces: u32, diffuse_only: bool) -> R
         indirect_clamp: 0.0,
         diffuse_only,
         passes: Default::default(),
+        adaptive: None,
     }
 }
 

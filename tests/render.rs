@@ -87,6 +87,7 @@ fn settings(width: u32, height: u32, spp: u32) -> RenderSettings {
         indirect_clamp: 10.0,
         diffuse_only: false,
         passes: Default::default(),
+        adaptive: None,
     }
 }
 

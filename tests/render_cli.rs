@@ -355,3 +355,60 @@ fn output_is_byte_identical_including_header_order() {
     }
     assert!(outs[0] == outs[1], "the EXRs of --threads 1 and --threads 2 differ byte for byte");
 }
+
+/// `render.adaptive` from the shot: the file gets a `samples` channel (each
+/// pixel's count, within min and max) and says max_spp as its spp; `--spp`
+/// renders that fixed count instead, with no samples channel; bad keys exit
+/// 2 naming the key, writing nothing.
+#[test]
+fn adaptive_sampling_from_the_shot_and_its_bad_keys() {
+    let dir = common::tempdir().unwrap();
+    let shot_text = std::fs::read_to_string(demo_shot()).unwrap();
+    let edited = |tag: &str, adaptive: &str| {
+        let path = demo_shot().with_file_name(format!(".adaptive_{tag}_{}.toml", std::process::id()));
+        std::fs::write(&path, shot_text.replace("[render]\n", &format!("[render]\nadaptive = {adaptive}\n"))).unwrap();
+        path
+    };
+    let shot = edited("ok", "{ threshold = 0.05, min_spp = 2, max_spp = 16 }");
+    let out = dir.path().join("r");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["render", s(&shot), "--layer", "full", "--frames", "1024", "--resolution", "32x18"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--progress", "off", "--out", s(&out)]);
+        let out = throng(&args);
+        (out.status.code(), text(&out.stderr))
+    };
+    let (code, err) = run(&[]);
+    let exr = throng::output::layer_path(&out, "demo", "full", FRAME);
+    let (film, meta) = read_layer(&exr).unwrap();
+    let (fixed_code, fixed_err) = run(&["--spp", "3"]);
+    let (fixed, fixed_meta) = read_layer(&exr).unwrap();
+    let bad: Vec<(i32, String)> = [
+        ("nan", "{ threshold = nan, min_spp = 2, max_spp = 16 }", "render.adaptive.threshold"),
+        ("zero", "{ threshold = 0.0, min_spp = 2, max_spp = 16 }", "render.adaptive.threshold"),
+        ("order", "{ threshold = 0.1, min_spp = 32, max_spp = 16 }", "render.adaptive.min_spp"),
+        ("max", "{ threshold = 0.1, min_spp = 1, max_spp = 0 }", "render.adaptive.max_spp"),
+        ("key", "{ threshold = 0.1, min_spp = 1, max_spp = 4, step = 2 }", "step"),
+    ]
+    .iter()
+    .map(|(tag, adaptive, key)| {
+        let path = edited(tag, adaptive);
+        let o = throng(&["render", s(&path), "--layer", "full", "--out", s(&dir.path().join(tag))]);
+        let _ = std::fs::remove_file(&path);
+        let e = text(&o.stderr);
+        assert!(e.contains(key), "{tag}: {e}");
+        assert!(!dir.path().join(tag).exists(), "{tag}: wrote output");
+        (o.status.code().unwrap_or(-1), e)
+    })
+    .collect();
+    let _ = std::fs::remove_file(&shot);
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!(meta.spp, 16);
+    assert_eq!(film.samples.len(), 32 * 18);
+    assert!(film.samples.iter().all(|&n| (2..=16).contains(&n)), "{:?}", film.samples);
+    assert_eq!(fixed_code, Some(0), "{fixed_err}");
+    assert!(fixed.samples.is_empty() && fixed_meta.spp == 3);
+    for (code, e) in bad {
+        assert_eq!(code, 2, "{e}");
+    }
+}

@@ -588,3 +588,37 @@ fn a_client_that_never_reads_holds_up_only_itself() {
     assert!(started.elapsed() < Duration::from_secs(10), "answered in {:?}", started.elapsed());
     drop(stuck);
 }
+
+/// The comp offers the light passes its layers share, stacked by `comp::over`.
+#[test]
+fn the_comp_offers_the_passes_its_layers_share() {
+    let dir = tempdir().unwrap();
+    let shot =
+        common::DemoShot { name: "cpass", frames: (1001, 1002), extra: "passes = [\"all\"]", ..Default::default() }
+            .write(dir.path(), &common::two_robots(1..=2));
+    // The manifest beside the shot, where botinfo and review find it.
+    let (code, _, err) = run(&["layers", s(&shot)]);
+    assert_eq!(code, 0, "{err}");
+    let renders = dir.path().join("r");
+    let (code, _, err) =
+        run(&["render", s(&shot), "--layer", "all", "--frames", "1001", "--progress", "off", "--out", s(&renders)]);
+    assert_eq!(code, 0, "{err}");
+    let (a, stop) =
+        start_shot(shot, ReviewOptions { renders: Some(renders.clone()), port: 0, ..ReviewOptions::default() });
+    let layers = get_ok(&a, "/api/layers?frame=1001").json();
+    let views: Vec<&str> = layers["comp"]["views"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
+    assert!(views.contains(&"beauty") && views.contains(&"diffuse_direct"), "{layers}");
+    for l in layers["layers"].as_array().unwrap() {
+        for v in &views {
+            assert!(l["views"].as_array().unwrap().iter().any(|x| x == v), "{} lacks {v}", l["name"]);
+        }
+    }
+    let comp = throng::comp::comp_frame(&renders, 1001, None).unwrap();
+    let pass = comp.film.passes.iter().find(|p| p.name == "diffuse_direct").expect("the comp stacks diffuse_direct");
+    assert!(pass.data.iter().any(|p| p.iter().any(|&c| c > 0.0)));
+    for view in &views {
+        let img = get(&a, &format!("/api/image.png?frame=1001&layer=comp&view={view}")).png();
+        assert_eq!((img.width(), img.height()), (48, 27), "{view}");
+    }
+    stop.stop();
+}

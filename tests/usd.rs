@@ -383,6 +383,7 @@ intensity = 40.0
 color = [1.0, 0.8, 0.6]
 [[lights.spot]]
 name = "street lamp"
+light_group = "street"
 position = [2.0, 4.0, 0.5]
 aim = [1.5, 0.0, 0.0]
 intensity = 120.0
@@ -487,6 +488,14 @@ fn every_light_and_the_lens_export_in_usd_units_and_the_lit_export_reads_back() 
         let found = &prims[&light.name];
         assert_eq!(found.len(), if light.two_sided { 2 } else { 1 }, "{}: {found:?}", light.name);
         let p = &found[0];
+        // Each prim names its light group (its pass lg_<name>): its own, or
+        // the light's name made a channel name.
+        let group = light.light_group.clone().unwrap_or_else(|| throng::scene::passes::default_group(&light.name));
+        assert_eq!(light.name == "street lamp", group == "street", "{}: group {group}", light.name);
+        for q in found {
+            let got = stage.attribute(path(&format!("{q}.throng:lightGroup"))).get::<String>().unwrap();
+            assert_eq!(got.as_deref(), Some(group.as_str()), "{q}");
+        }
         let ty = stage.prim(path(p)).type_name().unwrap().unwrap().as_str().to_string();
         let m = light_matrix(&stage, p);
         assert!(m.abs_diff_eq(glam::Mat4::from(light.world_from_light), 1e-6), "{}: {m}", light.name);
@@ -532,6 +541,10 @@ fn every_light_and_the_lens_export_in_usd_units_and_the_lit_export_reads_back() 
     let dome = lights.dome.as_ref().unwrap();
     assert!(names.contains(&"dome".to_string()) && !names.contains(&"sky".to_string()), "a dome replaces the sky");
     assert!(near(luminance(&stage, "/World/Lights/dome"), dome.scale));
+    for (prim, group) in [("sun", "sun"), ("dome", "dome")] {
+        let got = stage.attribute(path(&format!("/World/Lights/{prim}.throng:lightGroup"))).get::<String>().unwrap();
+        assert_eq!(got.as_deref(), Some(group), "{prim}");
+    }
     assert!((float(&stage, "/World/Lights/dome.xformOp:rotateY") - 120.0).abs() < 1e-4);
     assert_eq!(value(&stage, "/World/Lights/dome.inputs:texture:format"), sdf::Value::Token("latlong".into()));
     let sdf::Value::AssetPath(asset) = value(&stage, "/World/Lights/dome.inputs:texture:file") else { panic!() };

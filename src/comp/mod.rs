@@ -18,6 +18,14 @@
 //!   `agent.id`, from the layer whose Z wins; zero where no layer hit
 //!   anything. Written when any layer has them.
 //!
+//! - Passes (docs/render.md, "Passes"): the light-path passes, light groups
+//!   and `shadow` are premultiplied like colour and stacked with the same
+//!   over, so the comp's light groups (and its light-path passes) still add
+//!   up to its beauty; `P` comes, like `agent.id`, from the layer whose Z
+//!   wins (zero where none hit). A pass is stacked only when every layer has
+//!   it: one missing from some layer would not add up, so it is left out and
+//!   named in [`Comped::warnings`].
+//!
 //! - Cryptomatte (`CryptoAgent`, `CryptoPart`, `CryptoMaterial`, any type
 //!   a layer has, matched by name): an object's coverage in a
 //!   layer is multiplied by `1 - A` of every layer in front of it (the
@@ -38,7 +46,9 @@ use crate::layers::Manifest;
 use crate::output::{crowd_layer_index, crowd_layer_name, layer_path, COMP_LAYER, FULL_LAYER, SET_LAYER};
 use crate::render::cryptomatte::Cryptomatte;
 use crate::render::exr::{self, LayerMeta};
+use crate::render::film::Pass;
 use crate::render::Film;
+use crate::scene::passes;
 
 /// One layer file read for compositing.
 #[derive(Debug, Clone)]
@@ -97,7 +107,56 @@ pub fn over(films: &[&Film]) -> Result<Film> {
         }
     }
     out.cryptomatte = over_cryptomatte(films);
+    out.passes = over_passes(films, &out.z);
     Ok(out)
+}
+
+/// The names of the passes every film has, in file order; the others.
+pub(crate) fn shared_passes(films: &[&Film]) -> (Vec<(String, [&'static str; 3])>, Vec<String>) {
+    let mut all: Vec<(String, [&'static str; 3])> = Vec::new();
+    for f in films {
+        for p in &f.passes {
+            if !all.iter().any(|(n, _)| *n == p.name) {
+                all.push((p.name.clone(), p.channels));
+            }
+        }
+    }
+    all.sort_by(|a, b| passes::file_order(&a.0).cmp(&passes::file_order(&b.0)));
+    let (shared, partial): (Vec<_>, Vec<_>) =
+        all.into_iter().partition(|(n, _)| films.iter().all(|f| f.passes.iter().any(|p| p.name == *n)));
+    (shared, partial.into_iter().map(|(n, _)| n).collect())
+}
+
+/// Stacks the passes every film has (see the module docs): over for light,
+/// the Z-winning layer's for `P`. `z` is the stacked depth.
+fn over_passes(films: &[&Film], z: &[f32]) -> Vec<Pass> {
+    let (names, _) = shared_passes(films);
+    names
+        .into_iter()
+        .map(|(name, channels)| {
+            let layers: Vec<&Pass> = films.iter().filter_map(|f| f.passes.iter().find(|p| p.name == name)).collect();
+            let mut data = vec![[0.0f32; 3]; z.len()];
+            if name == passes::POSITION {
+                for (i, out) in data.iter_mut().enumerate() {
+                    // The layer the comp's Z came from (the last, front-most, on ties).
+                    let winner = films.iter().rposition(|f| f.z[i].is_finite() && f.z[i] == z[i]);
+                    if let Some(k) = winner {
+                        *out = layers[k].data[i];
+                    }
+                }
+            } else {
+                for (f, pass) in films.iter().zip(&layers) {
+                    for (i, out) in data.iter_mut().enumerate() {
+                        let keep = 1.0 - f.rgba[i][3];
+                        for (o, v) in out.iter_mut().zip(pass.data[i]) {
+                            *o = v + keep * *o;
+                        }
+                    }
+                }
+            }
+            Pass { name, channels, data }
+        })
+        .collect()
 }
 
 /// Stacks the layers' Cryptomatte types (matched by name): an object's
@@ -358,6 +417,8 @@ pub struct Comped {
     pub meta: LayerMeta,
     /// The layers used, back to front.
     pub layers: Vec<(String, PathBuf)>,
+    /// What the comp left out and why (a pass some layers lack).
+    pub warnings: Vec<String>,
 }
 
 /// Finds, reads and stacks the layers of `frame` under `dir`.
@@ -376,7 +437,20 @@ pub fn comp_frame(dir: &Path, frame: i32, manifest: Option<&Manifest>) -> Result
     let films: Vec<&Film> = inputs.iter().map(|i| &i.film).collect();
     let film = over(&films)?;
     let meta = comp_meta(&inputs)?;
-    Ok(Comped { film, meta, layers: files })
+    let mut warnings = Vec::new();
+    for name in shared_passes(&films).1 {
+        let without: Vec<&str> = files
+            .iter()
+            .zip(&inputs)
+            .filter(|(_, i)| !i.film.passes.iter().any(|p| p.name == name))
+            .map(|((l, _), _)| l.as_str())
+            .collect();
+        warnings.push(format!(
+            "pass `{name}` left out of the comp: layer(s) {} have none (render every layer with the same passes)",
+            without.join(", ")
+        ));
+    }
+    Ok(Comped { film, meta, layers: files, warnings })
 }
 
 #[cfg(test)]

@@ -43,6 +43,7 @@ use crate::error::{write_atomic, Error, IoContext, Result};
 use crate::layers::Manifest;
 use crate::render::cryptomatte::{agent_name, part_name};
 use crate::scene::lights::{Dome, Light, LightKind, SceneLights};
+use crate::scene::passes::LightGroups;
 use crate::scene::{vis, MaterialId, MeshId};
 
 /// Most transform samples one export holds in memory (agents x frames x parts).
@@ -333,12 +334,18 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     // export, or into the .usdz package).
     let mat_names = unique_names(g.materials.iter().map(|&m| (m, material_name(&lib.materials[m as usize].name))));
     let lights = crowd.lights();
+    // The light groups a render's `lg_<name>` passes use, named on each light
+    // and emissive material (a shot with more groups than a render writes has none to name).
+    let groups = LightGroups::new(&lights, lib).ok();
     let textures = Textures::of(lib, &g.materials, lights.dome.as_deref(), encoding, out)?;
     root.def("/World/Looks", "Scope");
     for (&m, name) in &mat_names {
         let src = &lib.materials[m as usize];
         let path = format!("/World/Looks/{name}");
         let mat = root.def(&path, "Material");
+        if let Some(g) = groups.as_ref().filter(|_| src.emission.max_element() > 0.0) {
+            light_group(&mut root, mat, g, g.material(m));
+        }
         root.connect(mat, "outputs:surface", "token", &format!("{path}/PreviewSurface.outputs:surface"));
         let sh = root.def(&format!("{path}/PreviewSurface"), "Shader");
         root.uniform(sh, "info:id", "token", Value::Token("UsdPreviewSurface".into()));
@@ -457,7 +464,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     }
 
     write_camera(&mut root, crowd, &times)?;
-    write_lights(&mut root, &lights, textures.dome_asset().as_deref());
+    write_lights(&mut root, &lights, groups.as_ref(), textures.dome_asset().as_deref());
 
     // Files: per-layer files first, the root last.
     let ext = out.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default();
@@ -960,7 +967,7 @@ fn distant_light(
 
 /// One point, spot, area or distant light at `world_from_light` (shining
 /// down its -Z), named `path`.
-fn local_light(l: &mut LayerBuilder, path: &str, light: &Light, world_from_light: Affine3A) {
+fn local_light(l: &mut LayerBuilder, path: &str, light: &Light, world_from_light: Affine3A) -> PrimId {
     let p = match light.kind {
         LightKind::Distant { angular_diameter } => {
             distant_light(l, path, world_from_light, light.emission, angular_diameter)
@@ -1002,11 +1009,20 @@ fn local_light(l: &mut LayerBuilder, path: &str, light: &Light, world_from_light
         }
     };
     l.attr(p, "throng:name", "string", string(&light.name));
+    p
+}
+
+/// `throng:lightGroup` on prim `p`: the name of the light group (its pass
+/// is `lg_<name>`) the prim's light is in, for a studio renderer to match.
+fn light_group(l: &mut LayerBuilder, p: PrimId, groups: &LightGroups, group: u16) {
+    if let Some(name) = groups.names.get(group as usize) {
+        l.attr(p, "throng:lightGroup", "string", string(name));
+    }
 }
 
 /// Every light in UsdLux's units (docs/usd.md, "Lights"): the sun, the
 /// shot's and the set's lights, and the dome (with its map) or the uniform sky.
-fn write_lights(l: &mut LayerBuilder, lights: &SceneLights, dome_asset: Option<&str>) {
+fn write_lights(l: &mut LayerBuilder, lights: &SceneLights, groups: Option<&LightGroups>, dome_asset: Option<&str>) {
     l.def("/World/Lights", "Scope");
     // Prim names: the sun and the environment keep theirs, local lights
     // take their own, made unique.
@@ -1024,15 +1040,24 @@ fn write_lights(l: &mut LayerBuilder, lights: &SceneLights, dome_asset: Option<&
     if let Some(sun) = &lights.sun {
         // Down its local -Z: from the sun towards the scene.
         let rot = Quat::from_rotation_arc(Vec3::NEG_Z, -sun.direction);
-        distant_light(l, "/World/Lights/sun", Affine3A::from_quat(rot), sun.irradiance, sun.angular_diameter);
+        let p = distant_light(l, "/World/Lights/sun", Affine3A::from_quat(rot), sun.irradiance, sun.angular_diameter);
+        if let Some(g) = groups {
+            light_group(l, p, g, g.sun());
+        }
     }
     for (i, light) in lights.local.iter().enumerate() {
-        local_light(l, &format!("/World/Lights/{}", names[&(2 + 2 * i)]), light, light.world_from_light);
+        let p = local_light(l, &format!("/World/Lights/{}", names[&(2 + 2 * i)]), light, light.world_from_light);
+        let mut prims = vec![p];
         if twin(light) {
             // UsdLux's rect and disk lights emit from one face: the back
             // face is a twin turned half a turn about its local Y.
             let back = light.world_from_light * Affine3A::from_rotation_y(std::f32::consts::PI);
-            local_light(l, &format!("/World/Lights/{}", names[&(3 + 2 * i)]), light, back);
+            prims.push(local_light(l, &format!("/World/Lights/{}", names[&(3 + 2 * i)]), light, back));
+        }
+        for p in prims {
+            if let Some(g) = groups {
+                light_group(l, p, g, g.local(i));
+            }
         }
     }
     match &lights.dome {
@@ -1048,10 +1073,16 @@ fn write_lights(l: &mut LayerBuilder, lights: &SceneLights, dome_asset: Option<&
                 l.attr(p, "inputs:texture:file", "asset", Value::AssetPath(asset.into()));
             }
             l.attr(p, "inputs:texture:format", "token", Value::Token("latlong".into()));
+            if let Some(g) = groups {
+                light_group(l, p, g, g.environment());
+            }
         }
         None => {
             let p = l.def("/World/Lights/sky", "DomeLight");
             emission(l, p, lights.sky.radiance);
+            if let Some(g) = groups {
+                light_group(l, p, g, g.environment());
+            }
         }
     }
 }

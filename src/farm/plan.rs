@@ -58,6 +58,9 @@ pub(crate) const MAX_CORES: u32 = 4096;
 
 /// Bytes per pixel per layer held by a comp (every layer's film at once).
 const COMP_BYTES_PER_PIXEL: u64 = 256;
+/// Bytes per pixel per layer per three-channel pass a comp stacks (read as
+/// f32, stacked, encoded).
+const COMP_BYTES_PER_PASS_PIXEL: u64 = 24;
 
 /// Builds the plan and writes it, with its manifest, into `opts.out`.
 /// Refuses a directory that already holds a plan of other inputs, whose
@@ -136,11 +139,16 @@ fn inputs(crowd: &ShotCrowd, manifest_path: &Path) -> Result<Vec<(String, PathBu
 /// Estimated peak memory of a render task of `layer`: the manifest's
 /// estimate from the one model ([`crate::layers::memory`], which holds the
 /// process and the film already), its film moved to the task's image size.
-pub(crate) fn render_memory(manifest: &Manifest, layer: &str, [w, h]: [u32; 2], blurred: bool) -> Result<u64> {
+pub(crate) fn render_memory(
+    manifest: &Manifest,
+    layer: &str,
+    [w, h]: [u32; 2],
+    channels: memory::FilmChannels,
+) -> Result<u64> {
     let bytes =
         manifest.render_memory(layer).ok_or_else(|| Error::Usage(format!("no layer `{layer}` in the manifest")))?;
     let [mw, mh] = manifest.camera.image_size;
-    Ok(round_mib(memory::at_pixels(bytes, mw as u64 * mh as u64, w as u64 * h as u64, blurred)))
+    Ok(round_mib(memory::at_pixels(bytes, mw as u64 * mh as u64, w as u64 * h as u64, channels)))
 }
 
 /// Rounds up to whole MiB (schedulers ask in MB).
@@ -214,6 +222,7 @@ pub(crate) fn build_plan(
     let resolution = opts.resolution.unwrap_or(shot.render.resolution);
     // Tasks pass no --shutter: they blur as the shot says, as the manifest's estimate assumed.
     let blurred = render_shutter(crowd).is_some();
+    let channels = memory::FilmChannels { blurred, passes: memory::pass_count(crowd)? };
     let shot_file = std::fs::canonicalize(&shot.path).at(&shot.path)?;
     let render_dir = out.join("render");
     let log_dir = out.join("logs");
@@ -224,7 +233,7 @@ pub(crate) fn build_plan(
         for (chunk, frames) in frames.chunks(opts.chunk).enumerate() {
             let id = format!("render.{layer}.{chunk}");
             let list = frames.iter().map(|f| f.to_string()).collect::<Vec<_>>().join(",");
-            let argv = [
+            let mut argv = [
                 "throng",
                 "render",
                 &s(&shot_file),
@@ -234,8 +243,6 @@ pub(crate) fn build_plan(
                 layer,
                 "--frames",
                 &list,
-                "--spp",
-                &spp.to_string(),
                 "--resolution",
                 &format!("{}x{}", resolution[0], resolution[1]),
                 "--threads",
@@ -248,6 +255,11 @@ pub(crate) fn build_plan(
             ]
             .map(String::from)
             .to_vec();
+            // A fixed sample count, unless the shot samples adaptively and
+            // the plan was given none (a task's --spp turns adaptive off).
+            if opts.spp.is_some() || shot.render.adaptive.is_none() {
+                argv.splice(9..9, ["--spp".to_string(), spp.to_string()]);
+            }
             for &f in frames {
                 writer.insert((layer.as_str(), f), id.clone());
             }
@@ -261,7 +273,7 @@ pub(crate) fn build_plan(
                 argv,
                 outputs: frames.iter().map(|&f| layer_path(&render_dir, &shot.name, layer, f)).collect(),
                 cores: opts.cores,
-                memory_bytes: render_memory(manifest, layer, resolution, blurred)?,
+                memory_bytes: render_memory(manifest, layer, resolution, channels)?,
                 depends_on: Vec::new(),
             });
         }
@@ -296,7 +308,10 @@ pub(crate) fn build_plan(
                 outputs: vec![out_path],
                 cores: 1,
                 memory_bytes: round_mib(
-                    resolution[0] as u64 * resolution[1] as u64 * COMP_BYTES_PER_PIXEL * (layers.len() as u64 + 1)
+                    resolution[0] as u64
+                        * resolution[1] as u64
+                        * (COMP_BYTES_PER_PIXEL + channels.passes * COMP_BYTES_PER_PASS_PIXEL)
+                        * (layers.len() as u64 + 1)
                         + memory::PROCESS_BYTES,
                 ),
                 depends_on: deps,

@@ -3,8 +3,8 @@
 //! The layer budget (`layers --budget`, the manifest's `memory_bytes`) and
 //! the farm plan (Slurm `--mem`) both read it, so each part is counted once:
 //! the process, the loaded shot, the library and the BLASes one frame
-//! traces, the traced instances, the film with its AOVs, Cryptomatte and EXR
-//! encoding, and, when the shot renders with a shutter, the shutter's poses,
+//! traces, the traced instances, the film with its AOVs, passes, Cryptomatte
+//! and EXR encoding, and, when the shot renders with a shutter, the shutter's poses,
 //! deforming BLASes and motion records.
 //!
 //! Calibrated against the measured peak RSS of real renders (docs/benchmarks.md,
@@ -17,6 +17,7 @@ use std::sync::Arc;
 
 use crate::casting::{AgentDress, AgentPose, Lod, ShotCrowd};
 use crate::error::Result;
+use crate::scene::passes::{LightGroups, PassSet};
 
 /// Bytes of a render process before it loads a shot: the binary's resident
 /// pages, allocator arenas, the worker threads.
@@ -44,6 +45,10 @@ pub const DEFORM_BYTES_PER_TRIANGLE: u64 = 195;
 pub const PIXEL_BYTES: u64 = 590;
 /// Extra bytes per pixel with a shutter: the motion-vector AOV and its channels.
 pub const MOTION_PIXEL_BYTES: u64 = 30;
+/// Extra bytes per pixel per pass (a light-path pass, light group, `shadow`
+/// or `P`, three channels): the tile result and the film's f32 triple, and
+/// its three channels being encoded.
+pub const PASS_PIXEL_BYTES: u64 = 32;
 
 /// What every layer render of a shot holds whatever its agents, as counts;
 /// [`RenderFloor::bytes`] prices them.
@@ -70,6 +75,8 @@ pub struct RenderFloor {
     pub pixels: u64,
     /// Rendered with a shutter (motion blur).
     pub blurred: bool,
+    /// Three-channel passes per pixel (the shot's `render.passes`, [`pass_count`]).
+    pub passes: u64,
 }
 
 impl RenderFloor {
@@ -83,7 +90,12 @@ impl RenderFloor {
             .saturating_add(self.texture_bytes)
             .saturating_add(blas_bytes(self.triangles, self.deform_triangles))
             .saturating_add(instance_bytes(self.set_instances, self.blurred))
-            .saturating_add(film_bytes(self.pixels, self.blurred))
+            .saturating_add(film_bytes(self.pixels, self.film()))
+    }
+
+    /// What the film holds per pixel.
+    pub fn film(&self) -> FilmChannels {
+        FilmChannels { blurred: self.blurred, passes: self.passes }
     }
 
     /// The floor of `crowd` rendered with `shutter` (`None`: still frames)
@@ -192,8 +204,26 @@ impl RenderFloor {
             set_instances: crowd.set().len() as u64,
             pixels,
             blurred: shutter.is_some(),
+            passes: pass_count(crowd)?,
         })
     }
+}
+
+/// The three-channel passes a render of `crowd` writes per pixel: its shot's
+/// `render.passes`, with one per light group of its lights and materials.
+pub fn pass_count<C>(crowd: &ShotCrowd<C>) -> Result<u64> {
+    let set = PassSet::parse(&crowd.shot().render.passes, "render.passes")?;
+    let groups = if set.light_groups { LightGroups::new(&crowd.lights(), crowd.library())?.names.len() } else { 0 };
+    Ok(set.triples(groups) as u64)
+}
+
+/// What a film holds per pixel beyond its fixed AOVs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FilmChannels {
+    /// Motion vectors (rendered with a shutter).
+    pub blurred: bool,
+    /// Three-channel passes.
+    pub passes: u64,
 }
 
 /// BLAS bytes of `triangles` still and `deform_triangles` deforming triangles.
@@ -210,16 +240,17 @@ pub fn instance_bytes(instances: u64, blurred: bool) -> u64 {
     instances.saturating_mul(each)
 }
 
-/// Bytes of the film of `pixels` pixels, with motion vectors when `blurred`.
-pub fn film_bytes(pixels: u64, blurred: bool) -> u64 {
-    let each = if blurred { PIXEL_BYTES + MOTION_PIXEL_BYTES } else { PIXEL_BYTES };
+/// Bytes of the film of `pixels` pixels holding `channels`.
+pub fn film_bytes(pixels: u64, channels: FilmChannels) -> u64 {
+    let motion = if channels.blurred { MOTION_PIXEL_BYTES } else { 0 };
+    let each = PIXEL_BYTES + motion + channels.passes.saturating_mul(PASS_PIXEL_BYTES);
     pixels.saturating_mul(each)
 }
 
 /// A layer render's estimate `bytes` made at `from` pixels, rendered at `to`
 /// pixels instead (the farm plan's `--resolution`): only the film changes.
-pub fn at_pixels(bytes: u64, from: u64, to: u64, blurred: bool) -> u64 {
-    bytes.saturating_sub(film_bytes(from, blurred)).saturating_add(film_bytes(to, blurred))
+pub fn at_pixels(bytes: u64, from: u64, to: u64, channels: FilmChannels) -> u64 {
+    bytes.saturating_sub(film_bytes(from, channels)).saturating_add(film_bytes(to, channels))
 }
 
 #[cfg(test)]
@@ -238,6 +269,7 @@ mod tests {
             set_instances: 3,
             pixels: 64,
             blurred: false,
+            passes: 0,
         };
         let want = PROCESS_BYTES
             + 10 * AGENT_LOADED_BYTES
@@ -252,7 +284,11 @@ mod tests {
         assert_eq!(b.bytes() - f.bytes(), 3 * MOTION_INSTANCE_BYTES + 64 * MOTION_PIXEL_BYTES);
         // Another image size moves only the film.
         let big = RenderFloor { pixels: 6400, ..f };
-        assert_eq!(at_pixels(f.bytes(), 64, 6400, false), big.bytes());
-        assert_eq!(at_pixels(big.bytes(), 6400, 64, false), f.bytes());
+        assert_eq!(at_pixels(f.bytes(), 64, 6400, f.film()), big.bytes());
+        assert_eq!(at_pixels(big.bytes(), 6400, 64, f.film()), f.bytes());
+        // Each pass is three more channels on every pixel.
+        let passes = RenderFloor { passes: 9, ..f };
+        assert_eq!(passes.bytes() - f.bytes(), 64 * 9 * PASS_PIXEL_BYTES);
+        assert_eq!(at_pixels(passes.bytes(), 64, 6400, passes.film()), RenderFloor { pixels: 6400, ..passes }.bytes());
     }
 }

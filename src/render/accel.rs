@@ -935,12 +935,19 @@ impl<'a> Tlas<'a> {
     /// True when any instance whose visibility shares a bit with `mask`
     /// blocks the ray within (0, tmax), moving instances at `ray.time`.
     pub fn occluded(&self, ray: &WorldRay, mask: u8) -> bool {
+        self.occluded_by(ray, mask, |_| true)
+    }
+
+    /// As [`Tlas::occluded`], counting only the instances whose scene index
+    /// `counts` accepts (the shadow pass asks whether the set alone blocks a ray).
+    pub(crate) fn occluded_by(&self, ray: &WorldRay, mask: u8, counts: impl Fn(u32) -> bool) -> bool {
         let world = world_ray(ray);
         let time = ray.time;
         let visit = |r: &Ray, slot: usize| {
             let blocked = self.cluster(slot).any(|k| {
                 let inst = &self.instances[k];
                 inst.visibility & mask != 0
+                    && counts(inst.index)
                     && if inst.motion == STILL {
                         self.blas.get(inst.mesh).is_some_and(|b| {
                             let local = object_ray(&self.object_from_world(k, inst), r, r.tmax);

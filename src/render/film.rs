@@ -19,8 +19,19 @@
 //!   reads back): per pixel the top [`RANKS`] (id, coverage) pairs, ranked
 //!   from a fixed-size per-pixel accumulator over the samples in index order
 //!   (so also independent of threading).
+//! - `samples`: with adaptive sampling only (else empty), the samples each
+//!   pixel took. Every pixel takes `min_spp`; from there, after every
+//!   [`ADAPTIVE_STEP`] samples, it stops once its error is below the
+//!   threshold: the standard error of its mean luminance over that mean
+//!   (plus [`ADAPTIVE_FLOOR`], so black pixels stop at once) or the standard
+//!   error of its alpha (edges), whichever is larger; or at `max_spp`.
+//!   The decision reads the pixel's own samples alone, in index order, so
+//!   the image is the same for any thread count, and a pixel's first n
+//!   samples are those of a fixed n-sample render. Every other buffer is
+//!   the mean over the samples the pixel took.
 //! - `passes`: the light-path passes and light groups asked for (means over
-//!   all samples, like RGB, from the same samples: scene::passes), then the
+//!   all samples, like RGB, from the same samples: scene::passes), the
+//!   shadow pass (set surfaces' direct light the crowd's shadows took), then the
 //!   world position `P` of the nearest sample's first hit (never filtered,
 //!   like `z`; zero where it missed).
 
@@ -41,6 +52,62 @@ use crate::scene::{FrameScene, Library};
 /// Tile edge in pixels: small enough to balance load, large enough to keep a
 /// thread on coherent rays.
 const TILE: u32 = 16;
+
+/// Adaptive sampling checks a pixel's error every this many samples after
+/// its first `min_spp`.
+pub const ADAPTIVE_STEP: u32 = 4;
+/// Added to a pixel's mean luminance in its relative error, so that dark
+/// pixels are held to an absolute error and black ones stop at `min_spp`.
+pub const ADAPTIVE_FLOOR: f64 = 0.01;
+
+/// How many samples a pixel takes: `min` to `max`, stopping at `threshold`.
+#[derive(Clone, Copy, Debug)]
+struct SampleCount {
+    min: u32,
+    max: u32,
+    /// `None`: exactly `max` (no adaptive sampling).
+    threshold: Option<f64>,
+}
+
+impl SampleCount {
+    fn of(settings: &RenderSettings) -> SampleCount {
+        match settings.adaptive {
+            Some(a) => SampleCount { min: a.min_spp, max: a.max_spp, threshold: Some(f64::from(a.threshold)) },
+            None => SampleCount { min: settings.spp, max: settings.spp, threshold: None },
+        }
+    }
+}
+
+/// Running sums of one pixel's luminance and alpha for its error estimate.
+#[derive(Default)]
+struct ErrorEstimate {
+    lum: [f64; 2],
+    alpha: [f64; 2],
+}
+
+impl ErrorEstimate {
+    fn add(&mut self, rgb: Vec3, alpha: f32) {
+        let l = f64::from(rgb.dot(Vec3::new(0.2126, 0.7152, 0.0722)));
+        let l = if l.is_finite() { l } else { 0.0 };
+        let a = f64::from(alpha);
+        self.lum[0] += l;
+        self.lum[1] += l * l;
+        self.alpha[0] += a;
+        self.alpha[1] += a * a;
+    }
+
+    /// The larger of the relative standard error of the mean luminance and
+    /// the standard error of the mean alpha, after `n` (> 1) samples.
+    fn error(&self, n: u32) -> f64 {
+        let n = f64::from(n);
+        let se = |[s, s2]: [f64; 2]| {
+            let mean = s / n;
+            ((s2 / n - mean * mean).max(0.0) / (n - 1.0)).sqrt()
+        };
+        let mean = self.lum[0] / n;
+        (se(self.lum) / (mean.abs() + ADAPTIVE_FLOOR)).max(se(self.alpha))
+    }
+}
 
 /// Timings and ray counts of one frame.
 #[derive(Clone, Copy, Debug, Default)]
@@ -78,6 +145,8 @@ pub struct Film {
     /// Light-path passes, light groups and position, in file order; empty
     /// when none were asked for.
     pub passes: Vec<Pass>,
+    /// Samples each pixel took; empty unless rendered with adaptive sampling.
+    pub samples: Vec<u32>,
 }
 
 /// One three-channel pass of a film.
@@ -99,6 +168,9 @@ impl Pass {
             set.light_paths.iter().map(|p| (p.name().to_string(), RGB)).collect();
         if set.light_groups {
             names.extend(groups.iter().map(|g| (format!("lg_{g}"), RGB)));
+        }
+        if set.shadow {
+            names.push((crate::scene::passes::SHADOW.into(), RGB));
         }
         if set.position {
             names.push(("P".into(), ["X", "Y", "Z"]));
@@ -122,6 +194,7 @@ impl Film {
             cryptomatte: Vec::new(),
             motion: Vec::new(),
             passes: Vec::new(),
+            samples: Vec::new(),
         }
     }
 
@@ -148,6 +221,8 @@ struct Pixel {
     albedo: [f32; 3],
     agent: u32,
     motion: [f32; 2],
+    /// Samples taken.
+    samples: u32,
     /// Ranked (id, coverage) of the agent, part and material mattes (when
     /// enabled), in [`MATTES`] order.
     crypto: [[[f32; 2]; RANKS]; 3],
@@ -165,7 +240,7 @@ fn render_pixel(
     integrator: &Integrator,
     x: u32,
     y: u32,
-    spp: u32,
+    count: SampleCount,
     crypto: Option<&CryptoNames>,
     counts: &mut RayCounts,
     mut passes: Option<PassOut>,
@@ -176,7 +251,11 @@ fn render_pixel(
     // Samples summed in index order: the float result is independent of threading.
     let mut sums = [Vec3::ZERO; 7];
     let mut group_sums = vec![Vec3::ZERO; passes.as_ref().map_or(0, |p| p.split.groups.len())];
-    for s in 0..spp {
+    let mut shadow = Vec3::ZERO;
+    let mut estimate = ErrorEstimate::default();
+    let mut spp = 0;
+    for s in 0..count.max {
+        spp = s + 1;
         let split = passes.as_mut().map(|p| {
             p.split.clear();
             &mut *p.split
@@ -191,6 +270,7 @@ fn render_pixel(
                 for (sum, c) in group_sums.iter_mut().zip(&p.split.groups) {
                     *sum += *c;
                 }
+                shadow += p.split.shadow;
             }
         }
         if let Some(names) = crypto {
@@ -208,6 +288,15 @@ fn render_pixel(
         if d2 < nearest.0 {
             nearest = (d2, r);
         }
+        if let Some(threshold) = count.threshold {
+            estimate.add(r.rgb, r.alpha);
+            if spp >= count.min.max(2)
+                && (spp - count.min).is_multiple_of(ADAPTIVE_STEP)
+                && estimate.error(spp) < threshold
+            {
+                break;
+            }
+        }
     }
     let inv = 1.0 / spp as f32;
     if let Some(p) = passes {
@@ -222,6 +311,11 @@ fn render_pixel(
                 if let Some(v) = out.next() {
                     *v = (*g * inv).to_array();
                 }
+            }
+        }
+        if p.set.shadow {
+            if let Some(v) = out.next() {
+                *v = (shadow * inv).to_array();
             }
         }
         if p.set.position {
@@ -243,6 +337,7 @@ fn render_pixel(
         albedo: (albedo * inv).to_array(),
         agent: nearest.1.agent,
         motion: nearest.1.motion.to_array(),
+        samples: spp,
         crypto: ranked,
     }
 }
@@ -295,6 +390,7 @@ pub fn render_frame_with_cryptomatte(
         let group_count = groups.as_ref().map_or(0, |g| g.names.len());
         let triples = if settings.passes.any() { settings.passes.triples(group_count) } else { 0 };
         let integrator = Integrator::new(lib, scene, &tlas, settings, groups.as_ref());
+        let count = SampleCount::of(settings);
         let (w, h) = (settings.width, settings.height);
         let tiles: Vec<(u32, u32)> =
             (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE))).collect();
@@ -317,7 +413,7 @@ pub fn render_frame_with_cryptomatte(
                             split: &mut split,
                             values,
                         });
-                        pixels.push(render_pixel(&integrator, x, y, settings.spp, crypto, &mut counts, out));
+                        pixels.push(render_pixel(&integrator, x, y, count, crypto, &mut counts, out));
                     }
                 }
                 if let Some(report) = progress {
@@ -331,6 +427,9 @@ pub fn render_frame_with_cryptomatte(
         let mut film = Film::new(w, h);
         if scene.motion.is_some() {
             film.motion = vec![[0.0; 2]; film.rgba.len()];
+        }
+        if count.threshold.is_some() {
+            film.samples = vec![0; film.rgba.len()];
         }
         let mut mattes = match crypto {
             Some(_) => MATTES.iter().map(|name| Cryptomatte::new(name, w, h, RANKS)).collect(),
@@ -361,6 +460,9 @@ pub fn render_frame_with_cryptomatte(
                 if let Some(m) = film.motion.get_mut(i) {
                     *m = px.motion;
                 }
+                if let Some(n) = film.samples.get_mut(i) {
+                    *n = px.samples;
+                }
                 for (m, ranked) in mattes.iter_mut().zip(&px.crypto) {
                     m.pairs[i * RANKS..(i + 1) * RANKS].copy_from_slice(ranked);
                 }
@@ -383,7 +485,9 @@ fn check(blas: &BlasSet, lib: &Library, scene: &FrameScene, s: &RenderSettings) 
     if s.width == 0 || s.height == 0 {
         return Err(Error::Usage(format!("render resolution {}x{} is empty", s.width, s.height)));
     }
-    if s.spp == 0 {
+    if let Some(a) = &s.adaptive {
+        a.check().map_err(|(key, m)| Error::Usage(format!("{key}: {m}")))?;
+    } else if s.spp == 0 {
         return Err(Error::Usage("render spp must be at least 1".into()));
     }
     if blas.len() != lib.meshes.len() {

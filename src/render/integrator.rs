@@ -918,6 +918,20 @@ impl<'a> Integrator<'a> {
                 let shadow =
                     WorldRay { origin: offset_ray_origin(surface.p, surface.ng), direction: ls.wi, tmax, time };
                 if self.tlas.occluded(&shadow, vis::SHADOW) {
+                    // The shadow pass: direct light at a set surface that only
+                    // the crowd blocks (beauty + shadow = the set unshadowed).
+                    if let Some(split) = split.as_deref_mut().filter(|_| camera && self.settings.passes.shadow) {
+                        let set =
+                            |i: u32| self.scene.instances.get(i as usize).is_some_and(|x| x.agent.get().is_none());
+                        if self.scene.instances[hit.instance as usize].agent.get().is_none()
+                            && !self.tlas.occluded_by(&shadow, vis::SHADOW, set)
+                        {
+                            counts.shadow += 1;
+                            // Light sampling alone (no MIS): the bounce ray
+                            // that would find this light is blocked as well.
+                            split.shadow += throughput * f * wi_local.z * ls.radiance / ls.pdf;
+                        }
+                    }
                     continue;
                 }
                 // At the last vertex no BSDF ray follows to find the light: NEE alone, weight 1.

@@ -54,9 +54,25 @@ pub struct RenderJob {
     /// library must be in it (for ACEScg, [`crate::render::colour::into_acescg`]);
     /// [`run`] refuses one that is not. The job converts each frame's lights itself.
     pub colourspace: Colourspace,
+    /// Light-path passes, light groups and position to write (`None`: the
+    /// shot's `render.passes`).
+    pub passes: Option<PassSet>,
+    /// Adaptive sampling (`spp` is then not used); `None`: `spp` samples
+    /// in every pixel. `throng render` takes the shot's `render.adaptive`
+    /// unless given `--spp`.
+    pub adaptive: Option<crate::shot::Adaptive>,
 }
 
 impl RenderJob {
+    /// The passes the job writes: its own, else the shot's `render.passes`
+    /// (checked when the shot was read).
+    pub fn passes_of(&self, shot: &crate::shot::Shot) -> Result<PassSet> {
+        match &self.passes {
+            Some(p) => Ok(p.clone()),
+            None => PassSet::parse(&shot.render.passes, "render.passes"),
+        }
+    }
+
     /// A job for `layers` x `frames` at `spp` into `out`, with the defaults
     /// of `throng render`: all cores, the shot's resolution, Cryptomatte in
     /// the header, no resume, no PNG previews.
@@ -74,6 +90,8 @@ impl RenderJob {
             compression: exr::LayerCompression::Zip,
             shutter: None,
             colourspace: Colourspace::Rec709,
+            passes: None,
+            adaptive: None,
         }
     }
 }
@@ -170,6 +188,11 @@ pub struct RenderedLayer {
     pub peak_rss_bytes: Option<u64>,
     /// Seconds building the top-level tree (0 when skipped).
     pub tlas_build_s: f64,
+    /// Each pass written (light paths, light groups, shadow, P) with its
+    /// channels' bytes before compression (empty when skipped or none).
+    pub pass_bytes: Vec<(String, u64)>,
+    /// Bytes of the EXR written (0 when skipped).
+    pub file_bytes: u64,
 }
 
 /// Every rendered agent of a frame with its posed slots (world_from_slot):
@@ -390,7 +413,8 @@ pub fn render_fingerprint<C>(
         .value("seed", &shot.seed)
         .value("max_bounces", &shot.render.max_bounces)
         .value("indirect_clamp", &shot.render.indirect_clamp)
-        .value("passes", &shot.render.passes)
+        .debug("passes", &job.passes_of(shot).unwrap_or_default())
+        .debug("adaptive", &job.adaptive)
         .value("sensor_width", &shot.camera.sensor_width)
         .debug("camera keys", &shot.camera.keys)
         .debug("camera node", &shot.camera.gltf.as_ref().map(|(_, node)| node))
@@ -490,6 +514,7 @@ pub fn run<C: Space>(
             stale[0].display()
         ));
     }
+    let passes = job.passes_of(crowd.shot())?;
     let fingerprints: std::collections::HashMap<&str, String> =
         job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
     // BLASes are built as layer-frames need them (and kept for later frames).
@@ -528,6 +553,8 @@ pub fn run<C: Space>(
                     instances: 0,
                     peak_rss_bytes: None,
                     tlas_build_s: 0.0,
+                    pass_bytes: Vec::new(),
+                    file_bytes: 0,
                 });
                 observer.layer_finished(RenderProgress { frame, layer, done: out.len() - 1, total }, true);
                 continue;
@@ -578,8 +605,8 @@ pub fn run<C: Space>(
                 layer: index,
                 sky_visible: layer == FULL_LAYER || manifest.is_some_and(|m| *layer == m.set.name),
                 threads: job.threads,
-                // Checked when the shot was read.
-                passes: PassSet::parse(&crowd.shot().render.passes, "render.passes").unwrap_or_default(),
+                passes: passes.clone(),
+                adaptive: job.adaptive,
                 ..RenderSettings::default()
             };
             let pixels = (w as usize * h as usize).max(1);
@@ -618,7 +645,7 @@ pub fn run<C: Space>(
                 layer: layer.clone(),
                 frame,
                 seed: crowd.shot().seed,
-                spp: job.spp,
+                spp: job.adaptive.map_or(job.spp, |a| a.max_spp),
                 id_mapping: exr::ID_MAPPING.to_string(),
                 world_to_camera,
                 world_to_ndc,
@@ -637,6 +664,7 @@ pub fn run<C: Space>(
             if job.png {
                 exr::write_preview_png_from(&path.with_extension("png"), &film, job.colourspace)?;
             }
+            let file_bytes = std::fs::metadata(&path).map_or(0, |m| m.len());
             out.push(RenderedLayer {
                 layer: layer.clone(),
                 frame,
@@ -646,6 +674,8 @@ pub fn run<C: Space>(
                 instances: scene.instances.len(),
                 peak_rss_bytes: measured.then(crate::bench::peak_rss_bytes).flatten(),
                 tlas_build_s: stats.tlas_build.as_secs_f64(),
+                pass_bytes: exr::pass_bytes(&film),
+                file_bytes,
             });
             observer.layer_finished(at, false);
         }

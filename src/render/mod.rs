@@ -58,6 +58,8 @@ pub struct RenderSettings {
     pub diffuse_only: bool,
     /// Light-path passes, light groups and position to write (scene::passes).
     pub passes: crate::scene::passes::PassSet,
+    /// Adaptive sampling (`spp` is then not used): see [`film`]'s docs.
+    pub adaptive: Option<crate::shot::Adaptive>,
 }
 
 impl Default for RenderSettings {
@@ -75,6 +77,7 @@ impl Default for RenderSettings {
             indirect_clamp: 10.0,
             diffuse_only: false,
             passes: crate::scene::passes::PassSet::default(),
+            adaptive: None,
         }
     }
 }

@@ -387,7 +387,7 @@ fn film_bytes(f: &Film) -> u64 {
     let n = f.rgba.len() as u64;
     let crypto: u64 = f.cryptomatte.iter().map(|m| m.pairs.len() as u64 * 8 + m.manifest.len() as u64 * 64).sum();
     let passes: u64 = f.passes.iter().map(|p| p.data.len() as u64 * 12).sum();
-    n * (16 + 4 + 12 + 12 + 4) + f.motion.len() as u64 * 8 + crypto + passes
+    n * (16 + 4 + 12 + 12 + 4) + f.motion.len() as u64 * 8 + f.samples.len() as u64 * 4 + crypto + passes
 }
 
 /// A file's identity for cache keys: path, length and modification time,
@@ -653,7 +653,16 @@ impl State {
             }));
         }
         let comp = match comp {
-            Ok(order) => json!({ "layers": order }),
+            Ok(order) => {
+                // The comp stacks the passes every one of its layers has.
+                let of = |name: &String| layers.iter().find(|l| &l["name"] == name).map(|l| &l["views"]);
+                let mut views: Vec<Value> = of(&order[0]).and_then(Value::as_array).cloned().unwrap_or_default();
+                for name in &order[1..] {
+                    let here = of(name).and_then(Value::as_array);
+                    views.retain(|v| here.is_some_and(|h| h.contains(v)));
+                }
+                json!({ "layers": order, "views": views })
+            }
             Err(Refusal(_, msg)) => json!({ "error": msg }),
         };
         Ok(json_body(&json!({ "frame": frame, "layers": layers, "comp": comp })))

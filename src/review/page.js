@@ -134,7 +134,7 @@ async function loadFrame() {
 }
 
 function currentViews() {
-  if (state.layer === state.shot.comp_view) return state.shot.views;
+  if (state.layer === state.shot.comp_view) return state.layers.comp.views || state.shot.views;
   const l = state.layers.layers.find((x) => x.name === state.layer);
   return l ? l.views : state.shot.views;
 }

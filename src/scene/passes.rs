@@ -77,12 +77,16 @@ pub struct PassSet {
     pub light_paths: Vec<LightPath>,
     /// One pass per light group (`lg_<name>`).
     pub light_groups: bool,
+    /// The light the crowd's shadows took from the set (`shadow`).
+    pub shadow: bool,
     /// World position of the first hit (`P.X`, `P.Y`, `P.Z`).
     pub position: bool,
 }
 
 /// What `render.passes` and `--passes` accept besides the light-path names.
 pub const LIGHT_GROUPS: &str = "light_groups";
+/// The shadow pass's name in `render.passes` and in files.
+pub const SHADOW: &str = "shadow";
 /// The position pass's name in `render.passes`.
 pub const POSITION: &str = "P";
 /// Every pass and light group.
@@ -91,7 +95,7 @@ pub const ALL: &str = "all";
 impl PassSet {
     /// Every pass: each light path, the light groups and position.
     pub fn all() -> PassSet {
-        PassSet { light_paths: LightPath::ALL.to_vec(), light_groups: true, position: true }
+        PassSet { light_paths: LightPath::ALL.to_vec(), light_groups: true, shadow: true, position: true }
     }
 
     /// Parses pass names (`diffuse_direct`, ..., `light_groups`, `P`,
@@ -104,13 +108,14 @@ impl PassSet {
                 ALL => set = PassSet::all(),
                 LIGHT_GROUPS => set.light_groups = true,
                 POSITION => set.position = true,
+                SHADOW => set.shadow = true,
                 _ => match LightPath::ALL.iter().find(|p| p.name() == name) {
                     Some(&p) if !set.light_paths.contains(&p) => set.light_paths.push(p),
                     Some(_) => {}
                     None => {
                         let known: Vec<&str> = LightPath::ALL.iter().map(|p| p.name()).collect();
                         return Err(Error::Usage(format!(
-                            "{field}: unknown pass `{name}` (known: {}, {LIGHT_GROUPS}, {POSITION}, {ALL})",
+                            "{field}: unknown pass `{name}` (known: {}, {LIGHT_GROUPS}, {SHADOW}, {POSITION}, {ALL})",
                             known.join(", ")
                         )));
                     }
@@ -123,12 +128,26 @@ impl PassSet {
 
     /// Whether any pass is on (a render without passes does no pass work).
     pub fn any(&self) -> bool {
-        !self.light_paths.is_empty() || self.light_groups || self.position
+        !self.light_paths.is_empty() || self.light_groups || self.shadow || self.position
     }
 
     /// RGB(XYZ) channel triples per pixel the film holds for these passes.
     pub fn triples(&self, light_groups: usize) -> usize {
-        self.light_paths.len() + if self.light_groups { light_groups } else { 0 } + self.position as usize
+        self.light_paths.len()
+            + if self.light_groups { light_groups } else { 0 }
+            + self.shadow as usize
+            + self.position as usize
+    }
+}
+
+/// Where a pass goes among a file's passes: light paths in [`LightPath::ALL`]
+/// order, light groups by name, the shadow pass, then `P`.
+pub fn file_order(name: &str) -> (usize, &str) {
+    match LightPath::ALL.iter().position(|p| p.name() == name) {
+        Some(i) => (i, ""),
+        None if name == SHADOW => (LightPath::ALL.len() + 1, name),
+        None if name == POSITION => (LightPath::ALL.len() + 2, name),
+        None => (LightPath::ALL.len(), name),
     }
 }
 
@@ -201,7 +220,9 @@ impl LightGroups {
             })
             .collect();
         let mut all: BTreeMap<&str, u16> = BTreeMap::new();
-        for name in std::iter::once(&sun).chain([&environment]).chain(&local).chain(materials.iter().flatten()) {
+        // No sun, no sun group (an always-black pass); its index falls back to the environment's.
+        let sun_light = lights.sun.is_some().then_some(&sun);
+        for name in sun_light.into_iter().chain([&environment]).chain(&local).chain(materials.iter().flatten()) {
             all.insert(name, 0);
         }
         if all.len() > MAX_LIGHT_GROUPS {
@@ -217,7 +238,7 @@ impl LightGroups {
         }
         let index = |name: &str| all[name];
         Ok(LightGroups {
-            sun: index(&sun),
+            sun: index(sun_light.unwrap_or(&environment)),
             environment: index(&environment),
             local: local.iter().map(|n| index(n)).collect(),
             materials: materials.iter().map(|n| n.as_deref().map_or(u16::MAX, index)).collect(),
@@ -254,6 +275,9 @@ pub(crate) struct Split {
     pub(crate) paths: [Vec3; 7],
     /// Per light group.
     pub(crate) groups: Vec<Vec3>,
+    /// Direct light at a set surface that the crowd's shadows took away
+    /// (not part of the beauty: beauty + shadow is the set unshadowed by the crowd).
+    pub(crate) shadow: Vec3,
     /// World position of the first hit.
     pub(crate) position: Vec3,
 }
@@ -261,13 +285,14 @@ pub(crate) struct Split {
 impl Split {
     /// Empty, with room for `groups` light groups.
     pub(crate) fn new(groups: usize) -> Split {
-        Split { paths: [Vec3::ZERO; 7], groups: vec![Vec3::ZERO; groups], position: Vec3::ZERO }
+        Split { paths: [Vec3::ZERO; 7], groups: vec![Vec3::ZERO; groups], shadow: Vec3::ZERO, position: Vec3::ZERO }
     }
 
     /// Back to empty for the next sample.
     pub(crate) fn clear(&mut self) {
         self.paths = [Vec3::ZERO; 7];
         self.groups.fill(Vec3::ZERO);
+        self.shadow = Vec3::ZERO;
         self.position = Vec3::ZERO;
     }
 

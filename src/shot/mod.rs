@@ -397,6 +397,43 @@ pub struct RenderSettings {
     /// `light_groups`, `P` or `all` (scene::passes, docs/render.md).
     #[serde(default)]
     pub passes: Vec<String>,
+    /// Adaptive sampling: each pixel between `min_spp` and `max_spp`
+    /// samples, stopping once its error is below `threshold` (`spp` is then
+    /// not used; docs/render.md, "Adaptive sampling").
+    #[serde(default)]
+    pub adaptive: Option<Adaptive>,
+}
+
+/// `render.adaptive`: a pixel stops sampling once its estimated error
+/// (`render::film`'s estimator) is below `threshold`, after at least
+/// `min_spp` and at most `max_spp` samples.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Adaptive {
+    /// Relative error at which a pixel stops (e.g. 0.01).
+    pub threshold: f32,
+    /// Samples every pixel takes.
+    pub min_spp: u32,
+    /// Samples no pixel exceeds.
+    pub max_spp: u32,
+}
+
+impl Adaptive {
+    /// Checks the keys, naming the one that is wrong (`render.adaptive.<key>`).
+    pub fn check(&self) -> std::result::Result<(), (&'static str, String)> {
+        if !(self.threshold.is_finite() && self.threshold > 0.0) {
+            return Err(("render.adaptive.threshold", format!("must be a finite number > 0, got {}", self.threshold)));
+        }
+        check_spp(self.min_spp).map_err(|m| ("render.adaptive.min_spp", m))?;
+        check_spp(self.max_spp).map_err(|m| ("render.adaptive.max_spp", m))?;
+        if self.min_spp > self.max_spp {
+            return Err((
+                "render.adaptive.min_spp",
+                format!("min_spp {} is above max_spp {}", self.min_spp, self.max_spp),
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl Default for RenderSettings {
@@ -409,6 +446,7 @@ impl Default for RenderSettings {
             shutter: None,
             working_colourspace: Colourspace::Rec709,
             passes: Vec::new(),
+            adaptive: None,
         }
     }
 }
@@ -802,6 +840,9 @@ fn check_render(render: &RenderSettings, path: &Path) -> Result<()> {
     }
     crate::scene::passes::PassSet::parse(&render.passes, "render.passes")
         .map_err(|e| Error::invalid(path, e.to_string()).field("render.passes"))?;
+    if let Some(a) = &render.adaptive {
+        a.check().map_err(|(key, m)| Error::invalid(path, m).field(key))?;
+    }
     Ok(())
 }
 

@@ -39,6 +39,9 @@ pub fn run(args: &CompArgs) -> Result<()> {
     }
     let manifest = args.manifest.as_deref().map(throng::layers::read_manifest).transpose()?;
     let comped = throng::comp::comp_frame(&args.dir, args.frame, manifest.as_ref())?;
+    for w in &comped.warnings {
+        eprintln!("throng: warning: {w}");
+    }
     exr::write_layer(&args.out, &comped.film, &comped.meta)?;
     if let Some(png) = &args.png {
         exr::write_preview_png_from(png, &comped.film, comped.meta.colourspace)?;

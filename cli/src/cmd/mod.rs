@@ -42,6 +42,10 @@ pub struct Cli {
     /// The verb.
     #[command(subcommand)]
     pub verb: Verb,
+    /// Threads for every stage of this process, 1-4096: casting, posing, BVH builds, rendering and
+    /// EXR compression share one cap (default: every core). Output does not depend on it.
+    #[arg(long, global = true, value_parser = values::threads)]
+    pub threads: Option<usize>,
 }
 
 /// The verbs of DESIGN.md.
@@ -79,6 +83,9 @@ pub enum Verb {
 
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> Result<()> {
+    if let Some(n) = cli.threads {
+        cap_threads(n);
+    }
     match cli.verb {
         Verb::Demo(args) => demo::run(&args),
         Verb::Cache(verb) => cache::run(&verb),
@@ -86,7 +93,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Verb::Cast(args) => cast::run(&args),
         Verb::Botinfo(args) => botinfo::run(&args),
         Verb::Layers(args) => layers::run(&args),
-        Verb::Render(args) => render::run(&args),
+        Verb::Render(args) => render::run(&args, cli.threads),
         Verb::Comp(args) => comp::run(&args),
         Verb::Export(args) => export::run(&args),
         Verb::Review(args) => review::run(&args),
@@ -94,6 +101,16 @@ pub fn run(cli: Cli) -> Result<()> {
         Verb::Completions(args) => shell::completions(&args),
         Verb::Man(args) => shell::man(&args),
     }
+}
+
+/// Caps every thread pool of the process at `n`. Each stage runs on rayon:
+/// the global pool (casting, posing, BVH builds), the render pool and the
+/// exr crate's compression pool, and rayon sizes every pool built without
+/// an explicit size by `RAYON_NUM_THREADS`. Set here, before any pool or
+/// thread exists (so no other thread can read the environment meanwhile);
+/// the render pool gets `n` explicitly as well.
+fn cap_threads(n: usize) {
+    std::env::set_var("RAYON_NUM_THREADS", n.to_string());
 }
 
 /// An error as the command line says it: a stage's option (`Error::Setting`)
@@ -188,6 +205,19 @@ struct LayerFrameSummary {
     peak_rss_bytes: Option<u64>,
     /// Seconds building the top-level tree.
     tlas_build_s: f64,
+    /// Bytes of the EXR written.
+    file_bytes: u64,
+    /// Each pass written and its channels' bytes before compression.
+    passes: Vec<PassSummary>,
+}
+
+/// One pass of a layer file in `render --json`.
+#[derive(Debug, serde::Serialize)]
+struct PassSummary {
+    name: String,
+    /// Its channels' bytes in the file before compression (compression
+    /// works on blocks of every channel at once, so a pass has no compressed size of its own).
+    bytes: u64,
 }
 
 impl Summary {

@@ -5,12 +5,13 @@ use std::path::PathBuf;
 use clap::{Args, ValueEnum};
 
 use super::progress::{Progress, ProgressStyle};
-use super::values::{frame_list, resolution, shutter, spp, threads, FrameList, Resolution, ShutterFlag};
+use super::values::{frame_list, resolution, shutter, spp, FrameList, Resolution, ShutterFlag};
 use throng::error::{Error, Result};
 use throng::output::FULL_LAYER;
 use throng::render::colour::{self, Colourspace};
 use throng::render::exr;
 use throng::render::job::{self, CryptoOutput, RenderJob};
+use throng::scene::passes::PassSet;
 
 /// `--cryptomatte`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -113,12 +114,10 @@ pub struct RenderArgs {
     /// Shot frames, e.g. 1001-1010 or 1001,1005.
     #[arg(long, value_parser = frame_list)]
     pub frames: Option<FrameList>,
-    /// Samples per pixel, 1-65536 (default: the shot's).
+    /// Samples per pixel, 1-65536 (default: the shot's); in every pixel, overriding the shot's
+    /// `render.adaptive`.
     #[arg(long, value_parser = spp)]
     pub spp: Option<u32>,
-    /// Render threads, 1-4096 (default: all cores). Output does not depend on it.
-    #[arg(long, value_parser = threads)]
-    pub threads: Option<usize>,
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
@@ -156,10 +155,17 @@ pub struct RenderArgs {
     /// colours are linear Rec.709; acescg converts them and writes AP1 `chromaticities`.
     #[arg(long, value_enum)]
     pub colourspace: Option<ColourspaceFlag>,
+    /// Passes beyond beauty and the data passes, comma-separated: diffuse_direct, diffuse_indirect,
+    /// specular_direct, specular_indirect, transmission, emission, environment, light_groups (one
+    /// lg_<name> per light group), P (world position), shadow (the set layer's crowd shadows), or all
+    /// (default: the shot's `render.passes`).
+    #[arg(long, value_delimiter = ',', value_name = "NAME,...")]
+    pub passes: Option<Vec<String>>,
 }
 
 /// `throng render SHOT ...`: renders the asked layers and frames.
-pub fn run(args: &RenderArgs) -> Result<()> {
+/// `threads`: the process's `--threads` cap, if any.
+pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
     let clock = std::time::Instant::now();
     let shot = throng::shot::Shot::load(&args.shot)?;
     // The crowd is posed for the shutter it renders with.
@@ -201,8 +207,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         None => crowd.shot().frames.iter().collect(),
     };
     let spp = args.spp.unwrap_or(crowd.shot().render.spp);
+    let passes = args.passes.as_ref().map(|names| PassSet::parse(names, "--passes")).transpose()?;
     let job = RenderJob {
-        threads: args.threads.unwrap_or(0),
+        passes,
+        // --spp asks for a fixed count: it overrides the shot's render.adaptive.
+        adaptive: if args.spp.is_some() { None } else { crowd.shot().render.adaptive },
+        threads: threads.unwrap_or(0),
         resume: args.resume,
         png: args.png,
         resolution: args.resolution.map(|Resolution(r)| r),
@@ -234,6 +244,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 instances: d.instances as u64,
                 peak_rss_bytes: d.peak_rss_bytes,
                 tlas_build_s: d.tlas_build_s,
+                file_bytes: d.file_bytes,
+                passes: d
+                    .pass_bytes
+                    .iter()
+                    .map(|(name, bytes)| super::PassSummary { name: name.clone(), bytes: *bytes })
+                    .collect(),
             })
             .collect();
         // The per-layer resets lower VmHWM: the process peak is the largest of them.

@@ -9,9 +9,10 @@
 //! `CryptoMaterial00.R ...`, `CryptoPart00.R ...` (float) with their
 //! `cryptomatte/<key>/...` header
 //! (see [`super::cryptomatte`]), and the passes asked for
-//! ([`super::passes`]): `diffuse_direct.B diffuse_direct.G diffuse_direct.R`
-//! ... and `lg_<group>.B/G/R` (half, premultiplied like the beauty), `P.X
-//! P.Y P.Z` (float, world position).
+//! (`scene::passes`): `diffuse_direct.B diffuse_direct.G diffuse_direct.R`
+//! ... and `lg_<group>.B/G/R` and `shadow.B/G/R` (half, premultiplied like
+//! the beauty), `P.X P.Y P.Z` (float, world position); with adaptive
+//! sampling `samples` (uint, the samples each pixel took).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -30,6 +31,9 @@ use crate::exr_guard::exr_error;
 use crate::scene::Camera;
 
 pub mod mattes;
+
+/// The channel holding each pixel's sample count (adaptive sampling only).
+pub const SAMPLES_CHANNEL: &str = "samples";
 
 /// What `agent.id` means, written to `throng/idMapping`.
 pub const ID_MAPPING: &str = "agent.id = cache agent id + 1; 0 = no agent (sky, set or holdout)";
@@ -240,6 +244,12 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
         AnyChannel::new("albedo.B", vec3(&film.albedo, 2)),
         AnyChannel::new("agent.id", FlatSamples::U32(film.agent_id.clone())),
     ];
+    if !film.samples.is_empty() {
+        if film.samples.len() != w * h {
+            return Err(Error::invalid(path, "the samples channel does not match the film size"));
+        }
+        list.push(AnyChannel::new(SAMPLES_CHANNEL, FlatSamples::U32(film.samples.clone())));
+    }
     if !film.motion.is_empty() {
         if film.motion.len() != w * h {
             return Err(Error::invalid(path, "motion vectors do not match the film size"));
@@ -271,8 +281,7 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
         }
         for (c, suffix) in pass.channels.iter().enumerate() {
             let values = pass.data.iter().map(move |p| p[c]);
-            // Position needs a float's precision; light is half, like the beauty.
-            let samples = if pass.name == "P" { FlatSamples::F32(values.collect()) } else { half(values) };
+            let samples = if pass_is_float(&pass.name) { FlatSamples::F32(values.collect()) } else { half(values) };
             list.push(AnyChannel::new(text(&format!("{}.{suffix}", pass.name))?, samples));
         }
     }
@@ -473,34 +482,49 @@ pub(crate) fn sort_header_attributes(bytes: &mut [u8]) -> bool {
     }
 }
 
-/// The passes among a file's channel `names` (light paths, `lg_*`, `P`),
-/// in file order, each with its channel suffixes.
+/// Whether a pass is written as float: position needs a float's precision;
+/// light is half, like the beauty.
+fn pass_is_float(name: &str) -> bool {
+    name == crate::scene::passes::POSITION
+}
+
+/// Each pass of `film` with the bytes its channels hold in a layer file
+/// before compression (half or float samples, every pixel).
+pub fn pass_bytes(film: &Film) -> Vec<(String, u64)> {
+    let pixels = film.width as u64 * film.height as u64;
+    film.passes
+        .iter()
+        .map(|p| (p.name.clone(), pixels * p.channels.len() as u64 * if pass_is_float(&p.name) { 4 } else { 2 }))
+        .collect()
+}
+
+/// The passes among a file's channel `names` (light paths, `lg_*`,
+/// `shadow`, `P`), in file order, each with its channel suffixes.
 pub(crate) fn pass_layout(names: &[String]) -> Vec<(String, [&'static str; 3])> {
-    use crate::scene::passes::LightPath;
+    use crate::scene::passes::{file_order, LightPath, SHADOW};
     let mut passes: Vec<(String, [&'static str; 3])> = Vec::new();
     for name in names {
         let Some(layer) = name.strip_suffix(".R") else { continue };
-        if LightPath::ALL.iter().any(|p| p.name() == layer) || layer.starts_with("lg_") {
+        if LightPath::ALL.iter().any(|p| p.name() == layer) || layer.starts_with("lg_") || layer == SHADOW {
             passes.push((layer.to_string(), ["R", "G", "B"]));
         }
     }
-    // File order: light paths as listed, then light groups, then P.
-    passes.sort_by_key(|(n, _)| (LightPath::ALL.iter().position(|p| p.name() == n).unwrap_or(usize::MAX), n.clone()));
+    // File order: light paths as listed, then light groups, the shadow pass, then P.
+    passes.sort_by(|a, b| file_order(&a.0).cmp(&file_order(&b.0)));
     if names.iter().any(|n| n == "P.X") {
         passes.push(("P".into(), ["X", "Y", "Z"]));
     }
     passes
 }
 
-/// The passes among a file's `channels` (light paths, `lg_*`, `P`), in file
+/// The passes among a file's `channels` (light paths, `lg_*`, `shadow`, `P`), in file
 /// order, read with `floats`.
 fn read_passes(
     channels: impl Iterator<Item = String>,
     floats: &dyn Fn(&str) -> Result<Vec<f32>>,
 ) -> Result<Vec<super::film::Pass>> {
     let names: Vec<String> = channels.collect();
-    let passes = pass_layout(&names);
-    passes
+    pass_layout(&names)
         .into_iter()
         .map(|(name, channels)| {
             let [a, b, c] = channels.map(|s| floats(&format!("{name}.{s}")));
@@ -566,6 +590,15 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
             _ => Vec::new(),
         },
         passes: read_passes(layer.channel_data.list.iter().map(|c| c.name.to_string()), &floats)?,
+        samples: match find(SAMPLES_CHANNEL).ok().map(|c| &c.sample_data) {
+            None => Vec::new(),
+            Some(FlatSamples::U32(v)) if v.len() == n => v.clone(),
+            Some(_) => {
+                return Err(
+                    Error::invalid(path, format!("channel `{SAMPLES_CHANNEL}` is not uint")).field(SAMPLES_CHANNEL)
+                )
+            }
+        },
     };
 
     let attrs = &layer.attributes;
