@@ -77,6 +77,21 @@ class Cdp:
             fail(f"evaluating {expr!r}: {r['exceptionDetails']}")
         return r["result"].get("value")
 
+    def poll(self, expr):
+        """`eval` for waiting loops: None while the page is between documents."""
+        self.next += 1
+        me = self.next
+        self.ws.send(json.dumps({"id": me, "method": "Runtime.evaluate",
+                                 "params": {"expression": expr, "returnByValue": True}}))
+        while True:
+            msg = json.loads(self.ws.recv())
+            if msg.get("id") == me:
+                r = msg.get("result", {})
+                if "error" in msg or "exceptionDetails" in r:
+                    return None
+                return r.get("result", {}).get("value")
+            self.events.append(msg)
+
 
 server = subprocess.Popen(
     [THRONG, "review", SHOT, "--renders", RENDERS, "--manifest", MANIFEST, "--port", "0", "--frame", str(FRAME)],
@@ -128,14 +143,28 @@ try:
     cdp("Page.enable")
     cdp("Runtime.enable")
     cdp("Emulation.setDeviceMetricsOverride", width=1400, height=1000, deviceScaleFactor=1, mobile=False)
-    cdp("Page.navigate", url=url)
+    # Navigate, again if the first navigation raced the initial about:blank.
+    for attempt in range(3):
+        cdp("Page.navigate", url=url)
+        end = time.time() + 15
+        while time.time() < end and not (cdp.poll("location.href") or "").startswith(url):
+            time.sleep(0.1)
+        if (cdp.poll("location.href") or "").startswith(url):
+            break
+    else:
+        fail(f"Chromium did not open {url}")
 
     ready = (
         "(() => { const i = document.getElementById('image'), l = document.getElementById('layer'),"
         " f = document.getElementById('figures'); if (!i || !l || !f) return false;"
         " return l.value === 'comp' && i.complete && i.naturalWidth > 0 && f.textContent.includes('Agents'); })()"
     )
-    wait_for("the comp and the figures on the page", lambda: cdp.eval(ready), 120)
+    try:
+        wait_for("the comp and the figures on the page", lambda: cdp.poll(ready), 120)
+    except SystemExit:
+        print("page status:", cdp.poll("(document.getElementById('status') || {}).textContent"))
+        print("page events:", [e for e in cdp.events if e.get("method", "").startswith("Runtime.")][:5])
+        raise
     rect = cdp.eval(
         "(() => { const i = document.getElementById('image'); i.scrollIntoView(); const r = i.getBoundingClientRect();"
         " return {x: r.left, y: r.top, w: r.width, h: r.height, nw: i.naturalWidth, nh: i.naturalHeight}; })()"
