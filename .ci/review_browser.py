@@ -41,13 +41,15 @@ def get_json(url):
         return json.load(r)
 
 
-def wait_for(what, test, timeout=60.0):
+def wait_for(what, test, timeout=60.0, soft=False):
     end = time.time() + timeout
     while time.time() < end:
         v = test()
         if v:
             return v
         time.sleep(0.1)
+    if soft:
+        raise TimeoutError(what)
     fail(f"timed out waiting for {what}")
 
 
@@ -159,12 +161,29 @@ try:
         " f = document.getElementById('figures'); if (!i || !l || !f) return false;"
         " return l.value === 'comp' && i.complete && i.naturalWidth > 0 && f.textContent.includes('Agents'); })()"
     )
-    try:
-        wait_for("the comp and the figures on the page", lambda: cdp.poll(ready), 120)
-    except SystemExit:
+    def diagnose():
         print("page status:", cdp.poll("(document.getElementById('status') || {}).textContent"))
         print("page events:", [e for e in cdp.events if e.get("method", "").startswith("Runtime.")][:5])
-        raise
+        print("page resources:", cdp.poll(
+            "JSON.stringify(performance.getEntriesByType('resource').map(e => [e.name, Math.round(e.duration)]))"))
+        try:
+            print("server answers /api/layers:", str(get_json(url + f"api/layers?frame={FRAME}"))[:200])
+        except Exception as e:
+            print("server does not answer:", e)
+
+    # One reload is allowed (and reported): about 1 run in 30 here left a
+    # request of the first load pending in Chromium; docs/review.md.
+    try:
+        wait_for("the comp and the figures on the page", lambda: cdp.poll(ready), 60, soft=True)
+    except TimeoutError:
+        diagnose()
+        print("review browser: warning: the page did not finish loading in 60 s; reloading it once")
+        cdp("Page.reload", ignoreCache=True)
+        try:
+            wait_for("the comp and the figures on the page after a reload", lambda: cdp.poll(ready), 60)
+        except SystemExit:
+            diagnose()
+            raise
     rect = cdp.eval(
         "(() => { const i = document.getElementById('image'); i.scrollIntoView(); const r = i.getBoundingClientRect();"
         " return {x: r.left, y: r.top, w: r.width, h: r.height, nw: i.naturalWidth, nh: i.naturalHeight}; })()"
