@@ -63,6 +63,7 @@ fn main() -> throng::error::Result<()> {
                 std::env::var("MAP_H").ok().and_then(|v| v.parse().ok()).unwrap_or(900),
             ),
             set_bounds: set,
+            highlight: None,
         },
         std::path::Path::new(out),
     )

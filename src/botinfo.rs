@@ -2,6 +2,7 @@
 //! parts, distance, layer), as the Robots lighters' botInfo tool printed it.
 
 use std::fmt::Write as _;
+use std::path::Path;
 
 use serde::Serialize;
 
@@ -18,6 +19,8 @@ pub struct BotInfo {
     pub id: u32,
     /// Rig.
     pub(crate) rig: String,
+    /// The rig's kind: `slots` (rigid parts on nodes) or `skinned`.
+    pub(crate) kind: &'static str,
     /// Cycle at the frame.
     pub(crate) cycle: String,
     /// Cycle frame at the frame.
@@ -86,6 +89,10 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
         out.push(BotInfo {
             id,
             rig: cast.rig.to_string(),
+            kind: match crowd.rigs().get(&cast.rig) {
+                Some(crate::casting::ShotRig::Skinned(_)) => "skinned",
+                _ => "slots",
+            },
             cycle: crowd.cycle_name(a).to_string(),
             cycle_frame: a.cycle_frame,
             shot_frame: frame,
@@ -105,6 +112,59 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
     Ok(out)
 }
 
+/// The layer manifest botinfo reads for a shot when none is named:
+/// `<shot dir>/<shot>.layers.json`, when it exists and is this shot's.
+pub fn shot_manifest(crowd: &ShotCrowd) -> Result<Option<Manifest>> {
+    let path = crate::layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name);
+    if !path.exists() {
+        return Ok(None);
+    }
+    let manifest = crate::layers::read_manifest(&path)?;
+    Ok((manifest.shot == crowd.shot().name).then_some(manifest))
+}
+
+/// What `throng botinfo` says of agents at a shot frame: [`bot_info`], with
+/// each agent's layer and LOD from `manifest` when it is this shot's.
+/// `throng review`'s botInfo panel is this same call.
+pub fn bot_info_with_layers(
+    crowd: &ShotCrowd,
+    ids: &[u32],
+    frame: i32,
+    manifest: Option<&Manifest>,
+) -> Result<Vec<BotInfo>> {
+    let f = crowd.shot().frames;
+    if !f.contains(frame) {
+        return Err(Error::Usage(format!(
+            "frame {frame} is outside shot {} ({}-{})",
+            crowd.shot().name,
+            f.start,
+            f.end
+        )));
+    }
+    let mut infos = bot_info(crowd, ids, frame)?;
+    if let Some(m) = manifest.filter(|m| m.shot == crowd.shot().name) {
+        add_layers(&mut infos, m);
+    }
+    Ok(infos)
+}
+
+/// The agent at pixel `(x, y)` of a rendered image's `agent.id` channel
+/// (`width` x `height`, row-major, cache id + 1, 0 = none): `None` for the
+/// set or sky. `what` names the image in the error for a pixel outside it.
+pub fn agent_at_pixel(agent_id: &[u32], width: u32, height: u32, x: u32, y: u32, what: &Path) -> Result<Option<u32>> {
+    if x >= width || y >= height {
+        return Err(Error::Usage(format!(
+            "pixel {x},{y} is outside {} ({width}x{height}; 0,0 is the top-left pixel)",
+            what.display()
+        )));
+    }
+    let i = y as usize * width as usize + x as usize;
+    match agent_id.get(i) {
+        Some(&id) => Ok(id.checked_sub(1)),
+        None => Err(Error::invalid(what, "the agent.id channel is shorter than the image").field("agent.id")),
+    }
+}
+
 /// Fills in each agent's layer and LOD from a layer manifest.
 pub fn add_layers(infos: &mut [BotInfo], manifest: &Manifest) {
     for b in infos {
@@ -119,7 +179,7 @@ pub fn add_layers(infos: &mut [BotInfo], manifest: &Manifest) {
 pub fn format_bot_info(b: &BotInfo) -> String {
     let mut o = String::new();
     let _ = writeln!(o, "Robot ID  {}", b.id);
-    let _ = writeln!(o, "Rig       {}", b.rig);
+    let _ = writeln!(o, "Rig       {}  ({})", b.rig, b.kind);
     let _ = writeln!(o, "Cycle     {}", b.cycle);
     let _ = writeln!(o, "Frame     {:.2}  (cycle frame at shot frame {})", b.cycle_frame, b.shot_frame);
     let _ = writeln!(o, "Scheme    {}", b.scheme);

@@ -27,6 +27,7 @@ pub mod fingerprint; // the one change detector (FNV-1a 64): files in blocks, na
 pub mod layers; // a cast crowd -> the layer manifest (membership, LOD, visibility) and its map
 pub mod output; // names of rendered files and layers, shared by render and comp
 pub mod render; // a cast crowd + manifest -> path-traced multi-channel EXR layers
+pub mod review; // a shot's renders, manifest and botInfo -> a local read-only web page (`throng review`)
 pub mod scene; // the shared vocabulary: meshes, materials, instances, visibility, camera, lights; glTF loading
 pub mod shot; // the shot file (TOML) -> a checked `Shot`: frames, camera, rigs, wardrobes, render and layer settings
 pub mod sim; // a steering scene -> a cache (the reference crowd simulation) // process figures (CPU time, peak RSS) for the benchmark examples

@@ -306,3 +306,16 @@ impl Drop for WriterLock {
         }
     }
 }
+
+/// The frame of a layer file named as [`layer_path`] names it
+/// (`<shot>.<layer>.<frame:04>.exr`), `None` for any other name.
+pub(crate) fn layer_file_frame(file_name: &str, shot: &str, layer: &str) -> Option<i32> {
+    let digits = file_name.strip_prefix(shot)?.strip_prefix('.')?.strip_prefix(layer)?.strip_prefix('.')?;
+    let digits = digits.strip_suffix(".exr")?;
+    if digits.len() < 4 || !digits.bytes().all(|b| b.is_ascii_digit() || b == b'-') {
+        return None;
+    }
+    let frame: i32 = digits.parse().ok()?;
+    // Only the spelling layer_path gives (so each frame has one file).
+    (format!("{frame:04}") == digits).then_some(frame)
+}

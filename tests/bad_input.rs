@@ -290,7 +290,8 @@ fn a_closed_stdout_ends_quietly_with_status_0() {
 
 #[test]
 fn every_verb_takes_version() {
-    for verb in ["render", "comp", "layers", "botinfo", "cast", "export", "demo", "sim", "completions", "man"] {
+    for verb in ["render", "comp", "layers", "botinfo", "cast", "export", "demo", "sim", "review", "completions", "man"]
+    {
         let (code, out, err) = run(&[verb, "--version"]);
         assert_eq!(code, 0, "{verb} --version: {err}");
         assert!(out.contains(env!("CARGO_PKG_VERSION")), "{verb}: {out}");

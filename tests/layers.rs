@@ -406,17 +406,20 @@ fn map_decodes_as_png_of_the_requested_size() {
     let mut settings = count(3);
     settings.pins = vec![Pin { agent: 5, layer: 0 }];
     let m = build_manifest(&input(agents, settings)).unwrap();
-    let opts =
-        MapOptions { size: (1200, 700), set_bounds: Some((Vec3::new(-40.0, 0.0, -40.0), Vec3::new(40.0, 20.0, 40.0))) };
+    let opts = MapOptions {
+        size: (1200, 700),
+        set_bounds: Some((Vec3::new(-40.0, 0.0, -40.0), Vec3::new(40.0, 20.0, 40.0))),
+        ..Default::default()
+    };
     let png = render_map(&m, &opts).unwrap();
     let img = image::load_from_memory_with_format(&png, image::ImageFormat::Png).unwrap();
     assert_eq!((img.width(), img.height()), (1200, 700));
     let dir = common::tempdir().unwrap();
     let path = dir.path().join("map.png");
-    draw_map(&m, &MapOptions { size: (400, 240), set_bounds: None }, &path).unwrap();
+    draw_map(&m, &MapOptions { size: (400, 240), set_bounds: None, ..Default::default() }, &path).unwrap();
     let img = image::open(&path).unwrap();
     assert_eq!((img.width(), img.height()), (400, 240));
-    assert!(render_map(&m, &MapOptions { size: (0, 10), set_bounds: None }).is_err());
+    assert!(render_map(&m, &MapOptions { size: (0, 10), set_bounds: None, ..Default::default() }).is_err());
 }
 
 #[test]

@@ -23,11 +23,13 @@ pub struct MapOptions {
     /// The set's bounds (min, max), for the top-down panel; agents' and the
     /// camera's bounds when `None`.
     pub set_bounds: Option<(Vec3, Vec3)>,
+    /// An agent to mark with rings on both panels (`throng review`'s pick).
+    pub highlight: Option<u32>,
 }
 
 impl Default for MapOptions {
     fn default() -> Self {
-        MapOptions { size: (1600, 900), set_bounds: None }
+        MapOptions { size: (1600, 900), set_bounds: None, highlight: None }
     }
 }
 
@@ -39,6 +41,7 @@ const TEXT: Rgba = [225, 228, 232, 255];
 const DIM: Rgba = [140, 146, 154, 255];
 const WHITE: Rgba = [255, 255, 255, 255];
 const REMOVED: Rgba = [20, 20, 20, 255];
+const HIGHLIGHT: Rgba = [255, 214, 10, 255];
 
 /// Layer colours, nearest first: warm near, cool far.
 const PALETTE: [Rgba; 8] = [
@@ -214,7 +217,7 @@ pub fn render_map(m: &Manifest, opts: &MapOptions) -> Result<Vec<u8>> {
     cv.rect(right.0, right.1, panel_w, panel_h, PANEL, None);
 
     top_down(&mut cv, m, opts, left, (panel_w, panel_h), s, lh);
-    camera_view(&mut cv, m, right, (panel_w, panel_h), s, lh);
+    camera_view(&mut cv, m, opts, right, (panel_w, panel_h), s, lh);
     legend(&mut cv, m, pad, bottom + pad, s, lh, shown, more);
 
     cv.pm.encode_png().map_err(|e| Error::Usage(format!("cannot encode the layer map: {e}")))
@@ -320,6 +323,12 @@ fn top_down(cv: &mut Canvas, m: &Manifest, opts: &MapOptions, at: (f32, f32), si
             cv.cross(p.x, p.y, dot + 1.0, WHITE, 1.0, clip);
         }
     }
+    // The highlighted agent: a yellow ring in a dark one, on top of every dot.
+    if let Some(a) = opts.highlight.and_then(|id| m.agent(id)) {
+        let p = to_px(a.position[0], a.position[2]);
+        cv.circle(p.x, p.y, dot + 7.0, [0, 0, 0, 255], Some(5.0), clip);
+        cv.circle(p.x, p.y, dot + 7.0, HIGHLIGHT, Some(2.5), clip);
+    }
     for (lx, ly, label, col) in labels {
         let (tw, th) = (font::text_width(&label, s) as f32, ((font::H + 1) * s) as f32);
         cv.rect(lx - 2.0, ly - 2.0, tw + 4.0, th + 3.0, [28, 30, 34, 210], clip);
@@ -330,7 +339,7 @@ fn top_down(cv: &mut Canvas, m: &Manifest, opts: &MapOptions, at: (f32, f32), si
     cv.text(c.x + 6.0 * s as f32, c.y - 3.0 * s as f32, s, "CAMERA", WHITE);
 }
 
-fn camera_view(cv: &mut Canvas, m: &Manifest, at: (f32, f32), size: (f32, f32), s: u32, lh: f32) {
+fn camera_view(cv: &mut Canvas, m: &Manifest, opts: &MapOptions, at: (f32, f32), size: (f32, f32), s: u32, lh: f32) {
     let (w, h) = (cv.pm.width(), cv.pm.height());
     let pad = (6 * s) as f32;
     let [iw, ih] = m.camera.image_size;
@@ -382,6 +391,16 @@ fn camera_view(cv: &mut Canvas, m: &Manifest, at: (f32, f32), size: (f32, f32), 
         }
         if a.pinned {
             cv.stroke_rect(x - 0.5 * bw - 1.5, y0 - 1.5, bw + 3.0, bh + 3.0, WHITE, 1.0, clip);
+        }
+    }
+    if let Some(a) = opts.highlight.and_then(|id| m.agent(id)) {
+        let foot = Vec3::from(a.position);
+        if let (Some(pf), Some(ph)) = (m.camera.project(foot), m.camera.project(foot + Vec3::Y * a.height_m)) {
+            let (x, y0, y1) = (fx + pf.0 * k, fy + ph.1 * k, fy + pf.1 * k);
+            let bh = (y1 - y0).max(1.0);
+            let bw = (0.28 * bh).max(1.5);
+            cv.stroke_rect(x - 0.5 * bw - 4.0, y0 - 4.0, bw + 8.0, bh + 8.0, [0, 0, 0, 255], 4.0, clip);
+            cv.stroke_rect(x - 0.5 * bw - 4.0, y0 - 4.0, bw + 8.0, bh + 8.0, HIGHLIGHT, 2.5, clip);
         }
     }
     cv.stroke_rect(fx, fy, fw, fh, DIM, 1.0, None);

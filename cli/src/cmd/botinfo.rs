@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::values::{pixel, Pixel};
-use throng::botinfo::{add_layers, bot_info, format_bot_info};
+use throng::botinfo::{agent_at_pixel, bot_info_with_layers, format_bot_info, shot_manifest};
 use throng::error::{Error, Result};
 
 /// `throng botinfo`.
@@ -27,6 +27,9 @@ pub struct BotinfoArgs {
     /// Rendered layer to pick from.
     #[arg(long)]
     pub exr: Option<PathBuf>,
+    /// Layer manifest for each agent's layer and LOD (default: <shot dir>/<shot>.layers.json when it exists).
+    #[arg(long)]
+    pub manifest: Option<PathBuf>,
 }
 
 /// `throng botinfo`: by ids, or by `--exr FILE --pixel X,Y` (the agent at
@@ -48,14 +51,6 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
                     meta.shot
                 )));
             };
-            if x >= film.width || y >= film.height {
-                return Err(Error::Usage(format!(
-                    "pixel {x},{y} is outside {} ({}x{}; 0,0 is the top-left pixel)",
-                    exr_path.display(),
-                    film.width,
-                    film.height
-                )));
-            }
             if args.frame.is_some_and(|f| f != meta.frame) {
                 return Err(Error::Usage(format!(
                     "--frame {} disagrees with {}, which is frame {}",
@@ -64,12 +59,11 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
                     meta.frame
                 )));
             }
-            let id = film.agent_id[film.index(x, y)];
-            if id == 0 {
+            let Some(id) = agent_at_pixel(&film.agent_id, film.width, film.height, x, y, exr_path)? else {
                 outln!("no agent at pixel {x},{y} (set or sky) in {} frame {}", exr_path.display(), meta.frame);
                 return Ok(());
-            }
-            Some((shot.clone(), id - 1, meta, exr_path.clone(), (x, y)))
+            };
+            Some((shot.clone(), id, meta, exr_path.clone(), (x, y)))
         }
         _ => None,
     };
@@ -93,22 +87,23 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
         }
         None => (args.ids.clone(), args.frame.unwrap_or(crowd.shot().frames.start)),
     };
-    if !crowd.shot().frames.contains(frame) {
-        return Err(Error::Usage(format!(
-            "frame {frame} is outside shot {} ({}-{})",
-            crowd.shot().name,
-            crowd.shot().frames.start,
-            crowd.shot().frames.end
-        )));
-    }
-    let mut infos = bot_info(&crowd, &ids, frame)?;
-    let manifest_path = throng::layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name);
-    if manifest_path.exists() {
-        let manifest = throng::layers::read_manifest(&manifest_path)?;
-        if manifest.shot == crowd.shot().name {
-            add_layers(&mut infos, &manifest);
+    let manifest = match &args.manifest {
+        Some(path) => {
+            let m = throng::layers::read_manifest(path)?;
+            if m.shot != crowd.shot().name {
+                return Err(Error::Usage(format!(
+                    "--manifest {} is for shot `{}`, not {} (shot `{}`)",
+                    path.display(),
+                    m.shot,
+                    shot.display(),
+                    crowd.shot().name
+                )));
+            }
+            Some(m)
         }
-    }
+        None => shot_manifest(&crowd)?,
+    };
+    let infos = bot_info_with_layers(&crowd, &ids, frame, manifest.as_ref())?;
     if args.json {
         outln!("{}", super::to_json(&infos)?);
     } else {

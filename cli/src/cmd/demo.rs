@@ -79,7 +79,11 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let manifest_path = out.join(format!("{}.layers.json", crowd.shot().name));
     throng::layers::write_manifest(&manifest_path, &manifest)?;
     let map = out.join("layers_map.png");
-    throng::layers::draw_map(&manifest, &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, &map)?;
+    throng::layers::draw_map(
+        &manifest,
+        &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd), ..Default::default() },
+        &map,
+    )?;
     outln!(
         "  layers   {} crowd layers + set, ranked at frame {}: 0 pops fixed (per-frame ranking would pop {} agents)  [{:.2} s]",
         manifest.layers.len(),
@@ -149,5 +153,6 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     if let Some(a) = manifest.agents.iter().find(|a| a.layer == 0 && !a.removed) {
         outln!("Ask about an agent: throng botinfo {} {} --frame {}", shot_path.display(), a.id, manifest.ref_frame);
     }
+    outln!("Look and click: throng review {} --renders {}", shot_path.display(), render.out.display());
     Ok(())
 }

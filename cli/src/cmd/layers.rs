@@ -118,7 +118,11 @@ pub fn run(args: &LayersArgs) -> Result<()> {
     let manifest = build_layers(&crowd, &args.overrides())?;
     layers::write_manifest(&out, &manifest)?;
     if let Some(map) = &args.map {
-        layers::draw_map(&manifest, &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd) }, map)?;
+        layers::draw_map(
+            &manifest,
+            &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd), ..Default::default() },
+            map,
+        )?;
     }
     if args.json {
         outln!("{}", super::to_json(&manifest.summary_json())?);

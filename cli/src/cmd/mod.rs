@@ -30,6 +30,7 @@ pub mod farm;
 pub mod layers;
 mod progress;
 pub mod render;
+pub mod review;
 pub mod shell;
 pub mod sim;
 mod values;
@@ -69,6 +70,8 @@ pub enum Verb {
     Comp(comp::CompArgs),
     /// Write one frame of the shot as glTF (.glb).
     Export(export::ExportArgs),
+    /// A local web page of the shot's layers: click an agent to read its botInfo.
+    Review(review::ReviewArgs),
     /// Plan, submit and follow a shot on a render farm (Slurm) or local workers.
     #[command(subcommand)]
     Farm(farm::FarmVerb),
@@ -93,6 +96,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Verb::Render(args) => render::run(&args, cli.threads),
         Verb::Comp(args) => comp::run(&args),
         Verb::Export(args) => export::run(&args),
+        Verb::Review(args) => review::run(&args),
         Verb::Farm(verb) => farm::run(&verb),
         Verb::Completions(args) => shell::completions(&args),
         Verb::Man(args) => shell::man(&args),

@@ -95,3 +95,12 @@ pub fn shutter(s: &str) -> Result<ShutterFlag, String> {
     throng::shot::check_shutter([open, close]).map_err(bad)?;
     Ok(ShutterFlag(Some([open, close])))
 }
+
+/// A byte size such as `512MB` or `2GiB` (`review --cache`); at least 16 MiB.
+pub fn bytes(s: &str) -> Result<u64, String> {
+    let b = throng::shot::parse_bytes(s)?;
+    if b < 16 << 20 {
+        return Err(format!("`{s}` is too small: at least 16MiB"));
+    }
+    Ok(b)
+}

@@ -498,16 +498,12 @@ pub fn pass_bytes(film: &Film) -> Vec<(String, u64)> {
         .collect()
 }
 
-/// The passes among a file's `channels` (light paths, `lg_*`, `shadow`, `P`), in file
-/// order, read with `floats`.
-fn read_passes(
-    channels: impl Iterator<Item = String>,
-    floats: &dyn Fn(&str) -> Result<Vec<f32>>,
-) -> Result<Vec<super::film::Pass>> {
+/// The passes among a file's channel `names` (light paths, `lg_*`,
+/// `shadow`, `P`), in file order, each with its channel suffixes.
+pub(crate) fn pass_layout(names: &[String]) -> Vec<(String, [&'static str; 3])> {
     use crate::scene::passes::{file_order, LightPath, SHADOW};
-    let names: Vec<String> = channels.collect();
     let mut passes: Vec<(String, [&'static str; 3])> = Vec::new();
-    for name in &names {
+    for name in names {
         let Some(layer) = name.strip_suffix(".R") else { continue };
         if LightPath::ALL.iter().any(|p| p.name() == layer) || layer.starts_with("lg_") || layer == SHADOW {
             passes.push((layer.to_string(), ["R", "G", "B"]));
@@ -519,6 +515,16 @@ fn read_passes(
         passes.push(("P".into(), ["X", "Y", "Z"]));
     }
     passes
+}
+
+/// The passes among a file's `channels` (light paths, `lg_*`, `shadow`, `P`), in file
+/// order, read with `floats`.
+fn read_passes(
+    channels: impl Iterator<Item = String>,
+    floats: &dyn Fn(&str) -> Result<Vec<f32>>,
+) -> Result<Vec<super::film::Pass>> {
+    let names: Vec<String> = channels.collect();
+    pass_layout(&names)
         .into_iter()
         .map(|(name, channels)| {
             let [a, b, c] = channels.map(|s| floats(&format!("{name}.{s}")));
@@ -653,6 +659,17 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
     Ok((film, meta))
 }
 
+/// The size and channel names of an EXR's first part, from its header
+/// alone (no pixels decoded): what `throng review` lists before it decodes.
+pub(crate) fn read_channel_names(path: &Path) -> Result<(u32, u32, Vec<String>)> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| exr_error(path, e))?;
+    let Some(header) = meta.headers.first() else {
+        return Err(Error::invalid(path, "EXR has no parts"));
+    };
+    let names = header.channels.list.iter().map(|c| lossy(&c.name)).collect();
+    Ok((header.layer_size.width() as u32, header.layer_size.height() as u32, names))
+}
+
 /// One part (layer) of an EXR as plain data: what the Cryptomatte decoder needs.
 #[derive(Clone, Debug, Default)]
 pub struct RawPart {
@@ -708,7 +725,7 @@ pub fn read_parts(path: &Path, keep: impl Fn(&str) -> bool) -> Result<Vec<RawPar
 }
 
 /// sRGB transfer function (IEC 61966-2-1).
-fn srgb_encode(linear: f32) -> u8 {
+pub(crate) fn srgb_encode(linear: f32) -> u8 {
     let c = linear.clamp(0.0, 1.0);
     let v = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
     (v * 255.0 + 0.5) as u8

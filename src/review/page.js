@@ -1,0 +1,338 @@
+// throng review: the page. Plain JavaScript, no build step, no external
+// assets; everything it shows comes from this server's /api/ (docs/review.md).
+"use strict";
+
+const $ = (id) => document.getElementById(id);
+const state = { shot: null, frames: [], frame: null, layers: null, layer: null, comp: [], on: new Set(), agent: null };
+
+function status(msg, error) {
+  const s = $("status");
+  s.textContent = msg || "";
+  s.className = error ? "error" : "";
+}
+
+async function api(path) {
+  const r = await fetch(path);
+  const body = await r.json().catch(() => ({ error: r.statusText }));
+  if (!r.ok) throw new Error(body.error || r.statusText);
+  return body;
+}
+
+function el(tag, text, cls) {
+  const e = document.createElement(tag);
+  if (text !== undefined && text !== null) e.textContent = String(text);
+  if (cls) e.className = cls;
+  return e;
+}
+
+function bytes(b) {
+  if (b === null || b === undefined) return "-";
+  const units = ["B", "KiB", "MiB", "GiB", "TiB"];
+  let i = 0;
+  while (b >= 1024 && i < units.length - 1) { b /= 1024; i++; }
+  return (i ? b.toFixed(2) : b) + " " + units[i];
+}
+
+function table(rows, head) {
+  const t = el("table");
+  if (head) {
+    const tr = el("tr");
+    head.forEach((h) => tr.append(el("th", h)));
+    t.append(tr);
+  }
+  for (const row of rows) {
+    const tr = el("tr");
+    row.forEach((c, i) => tr.append(el(i === 0 && !head ? "th" : "td", c)));
+    t.append(tr);
+  }
+  return t;
+}
+
+// The query naming the image shown: frame, layer, and the comp's layers.
+function imageQuery() {
+  let q = "frame=" + encodeURIComponent(state.frame) + "&layer=" + encodeURIComponent(state.layer);
+  if (state.layer === state.shot.comp_view) {
+    q += "&layers=" + encodeURIComponent(state.comp.filter((l) => state.on.has(l)).join(","));
+  }
+  return q;
+}
+
+async function init() {
+  try {
+    state.shot = await api("/api/shot");
+  } catch (e) {
+    status("cannot read the shot: " + e.message, true);
+    return;
+  }
+  const s = state.shot;
+  $("shot-name").textContent = s.shot + " (" + s.shot_file + ")";
+  document.title = "throng review: " + s.shot;
+  state.frames = s.rendered_frames;
+  const slider = $("frame");
+  slider.max = Math.max(0, state.frames.length - 1);
+  slider.value = Math.max(0, state.frames.indexOf(s.start_frame));
+  slider.addEventListener("input", () => { state.frame = state.frames[+slider.value]; loadFrame(); });
+  $("layer").addEventListener("change", () => { state.layer = $("layer").value; showLayer(); });
+  $("view").addEventListener("change", refreshImage);
+  $("exposure").addEventListener("input", () => { $("exposure-label").textContent = $("exposure").value; refreshImage(); });
+  $("stage").addEventListener("click", onClick);
+  $("search").addEventListener("submit", (e) => {
+    e.preventDefault();
+    const id = $("search-id").value.trim();
+    if (id !== "") selectAgent(+id);
+  });
+  $("image").addEventListener("load", () => { status(""); placeMarker(); });
+  $("image").addEventListener("error", async () => {
+    try { await api($("image").src.replace(location.origin, "")); } catch (e) { status(e.message, true); }
+  });
+  $("map").addEventListener("error", () => { $("map").hidden = true; $("map-note").textContent = "No layer map: the shot has no layer manifest (run throng layers)."; });
+  loadMap();
+  loadFigures();
+  if (!state.frames.length) {
+    status("No renders folder: figures and map only (docs/review.md).");
+    $("viewer").hidden = true;
+    return;
+  }
+  state.frame = state.frames[+slider.value];
+  await loadFrame();
+}
+
+async function loadFrame() {
+  $("frame-label").textContent = state.frame;
+  status("loading frame " + state.frame + "...");
+  try {
+    state.layers = await api("/api/layers?frame=" + state.frame);
+  } catch (e) {
+    status(e.message, true);
+    return;
+  }
+  const sel = $("layer");
+  const names = state.layers.layers.map((l) => l.name);
+  state.comp = state.layers.comp.layers || [];
+  sel.textContent = "";
+  if (state.comp.length) sel.append(new Option("comp: " + state.comp.slice().reverse().join(" over "), state.shot.comp_view));
+  names.forEach((n) => sel.append(new Option(n, n)));
+  if (!state.layer || (state.layer !== state.shot.comp_view && !names.includes(state.layer)) || (state.layer === state.shot.comp_view && !state.comp.length)) {
+    state.layer = state.comp.length ? state.shot.comp_view : names[0];
+    state.on = new Set(state.comp);
+  }
+  sel.value = state.layer;
+  const list = $("toggle-list");
+  list.textContent = "";
+  for (const l of state.comp) {
+    const label = el("label");
+    const box = el("input");
+    box.type = "checkbox";
+    box.checked = state.on.has(l);
+    box.dataset.layer = l;
+    box.addEventListener("change", () => { if (box.checked) state.on.add(l); else state.on.delete(l); refreshImage(); });
+    label.append(box, " " + l);
+    list.append(label);
+  }
+  if (state.layers.comp.error) status(state.layers.comp.error);
+  await showLayer();
+}
+
+function currentViews() {
+  if (state.layer === state.shot.comp_view) return state.layers.comp.views || state.shot.views;
+  const l = state.layers.layers.find((x) => x.name === state.layer);
+  return l ? l.views : state.shot.views;
+}
+
+async function showLayer() {
+  $("toggles").hidden = state.layer !== state.shot.comp_view;
+  const view = $("view");
+  const was = view.value || "beauty";
+  view.textContent = "";
+  currentViews().forEach((v) => view.append(new Option(v, v)));
+  view.value = currentViews().includes(was) ? was : "beauty";
+  await refreshImage();
+}
+
+async function refreshImage() {
+  if (!state.layers) return;
+  const q = imageQuery();
+  $("image").src = "/api/image.png?" + q + "&view=" + encodeURIComponent($("view").value) + "&exposure=" + $("exposure").value;
+  loadVisible(q);
+  if (state.agent !== null) await selectAgent(state.agent, true);
+}
+
+async function loadVisible(q) {
+  const list = $("visible-list");
+  try {
+    const r = await api("/api/agents?" + q);
+    list.textContent = "";
+    for (const a of r.agents.slice(0, 15)) {
+      const li = el("li");
+      const link = el("a", "agent " + a.id);
+      link.href = "#";
+      link.dataset.agent = a.id;
+      link.addEventListener("click", (e) => { e.preventDefault(); selectAgent(a.id); });
+      li.append(link, " " + a.pixels + " px");
+      list.append(li);
+    }
+    if (!r.agents.length) list.append(el("li", "no agents in this image", "dim"));
+  } catch (e) {
+    list.textContent = "";
+  }
+}
+
+function pixelOf(event) {
+  const img = $("image");
+  const r = img.getBoundingClientRect();
+  const x = Math.floor((event.clientX - r.left) * img.naturalWidth / r.width);
+  const y = Math.floor((event.clientY - r.top) * img.naturalHeight / r.height);
+  return [Math.min(Math.max(x, 0), img.naturalWidth - 1), Math.min(Math.max(y, 0), img.naturalHeight - 1)];
+}
+
+async function onClick(event) {
+  if (!$("image").naturalWidth) return;
+  const [x, y] = pixelOf(event);
+  try {
+    const r = await api("/api/pick?" + imageQuery() + "&x=" + x + "&y=" + y);
+    state.marker = [x, y];
+    placeMarker();
+    if (r.agent === null) {
+      state.agent = null;
+      const b = $("botinfo");
+      b.textContent = "";
+      b.removeAttribute("data-agent-id");
+      b.append(el("p", "No agent at pixel " + x + "," + y + " of " + r.layer + " (set or sky)."));
+      $("matte").hidden = true;
+      loadMap();
+      status("");
+      return;
+    }
+    state.agent = r.agent;
+    showBotInfo(r.botinfo[0], botinfoCommand(r.file, x, y), "pixel " + x + "," + y + " of " + r.layer + ", frame " + r.frame);
+    showMatte();
+    loadMap();
+    status("");
+  } catch (e) {
+    status(e.message, true);
+  }
+}
+
+// The command line that prints the same botInfo (a layer file; the comp
+// needs throng comp's file first).
+function botinfoCommand(file, x, y) {
+  if (!file) return null;
+  const manifest = state.shot.manifest ? " --manifest " + state.shot.manifest : "";
+  return "throng botinfo " + state.shot.shot_file + " --exr " + file + " --pixel " + x + "," + y + manifest + " --json";
+}
+
+// An agent by id: its botInfo at this frame, its matte, and where it is.
+async function selectAgent(id, quiet) {
+  try {
+    const r = await api("/api/agent?" + imageQuery() + "&id=" + id);
+    state.agent = id;
+    state.marker = r.pixel;
+    placeMarker();
+    const where = r.pixel ? "at pixel " + r.pixel.join(",") + " (" + r.pixels + " px) of " + state.layer : "not visible in " + state.layer;
+    showBotInfo(r.botinfo[0], null, "frame " + r.frame + ", " + where);
+    showMatte();
+    loadMap();
+    if (!quiet) status("");
+  } catch (e) {
+    if (!quiet) status(e.message, true);
+    else { $("botinfo").textContent = e.message; $("botinfo").removeAttribute("data-agent-id"); $("matte").hidden = true; }
+  }
+}
+
+function placeMarker() {
+  const m = $("marker");
+  const img = $("image");
+  if (!state.marker || !img.naturalWidth) { m.hidden = true; return; }
+  const [x, y] = state.marker;
+  m.style.left = ((x + 0.5) / img.naturalWidth * 100) + "%";
+  m.style.top = ((y + 0.5) / img.naturalHeight * 100) + "%";
+  m.hidden = false;
+}
+
+function showMatte() {
+  const m = $("matte");
+  m.src = "/api/matte.png?" + imageQuery() + "&id=" + state.agent;
+  m.hidden = false;
+}
+
+function loadMap() {
+  const img = $("map");
+  img.hidden = false;
+  $("map-note").textContent = state.agent !== null ? "Agent " + state.agent + " is ringed in yellow." : "";
+  img.src = "/api/map.png" + (state.agent !== null ? "?agent=" + state.agent : "");
+}
+
+function showBotInfo(b, command, where) {
+  const box = $("botinfo");
+  box.textContent = "";
+  box.dataset.agentId = b.id;
+  box.append(el("p", "Robot ID " + b.id, "big"));
+  box.append(el("p", where, "dim"));
+  const f = (v, d) => (typeof v === "number" ? v.toFixed(d) : v);
+  const rows = [
+    ["Rig", b.rig + " (" + b.kind + ")"],
+    ["Cycle", b.cycle],
+    ["Cycle frame", f(b.cycle_frame, 2) + " at shot frame " + b.shot_frame],
+    ["Scheme", b.scheme],
+    ["Height scale", f(b.height_scale, 3) + (b.seated ? " (seated)" : "")],
+    ["Layer", b.layer === null ? "- (no manifest)" : b.layer + (b.removed ? " REMOVED" : "")],
+    ["LOD", b.lod === null ? "-" : b.lod],
+    ["Position", b.position.map((v) => v.toFixed(2)).join(" ")],
+    ["Heading", f(b.heading_deg, 1) + " deg"],
+    ["Distance", f(b.distance, 2) + " m"],
+  ];
+  if (b.pose) rows.push(["Pose", b.pose + " (shared by every agent on it)"]);
+  box.append(table(rows));
+  box.append(el("h2", "Parts and materials"));
+  box.append(table(b.parts.map((p) => [p.slot, p.mesh || "-", p.material || "-"]), ["slot", "mesh", "material"]));
+  if (command) {
+    box.append(el("p", "The same, on the command line:", "dim"));
+    box.append(el("code", command));
+  }
+}
+
+async function loadFigures() {
+  const box = $("figures");
+  let fig;
+  try {
+    fig = await api("/api/figures");
+  } catch (e) {
+    box.textContent = e.message;
+    return;
+  }
+  box.textContent = "";
+  const c = fig.cast;
+  const cast = [
+    ["Agents", c.agents],
+    ["Part instances", c.part_instances],
+    ["Unique parts", c.unique_parts],
+    ["Unique materials", c.unique_materials],
+    ["Unique geometry", bytes(c.unique_geometry_bytes)],
+    ["If copied per agent", bytes(c.copied_geometry_bytes)],
+  ];
+  if (c.skinned) {
+    cast.push(["Skinned agents", c.skinned.agents], ["Unique poses", c.skinned.unique_poses]);
+  }
+  box.append(el("h2", "Casting"), table(cast));
+  if (fig.layers) {
+    box.append(el("h2", "Layers (ranked at frame " + fig.ref_frame + ")"));
+    const rows = fig.layers.map((l) => [
+      l.name,
+      l.agents,
+      l.distance_min_m === undefined || l.distance_min_m === null ? "" : l.distance_min_m.toFixed(1) + "-" + l.distance_max_m.toFixed(1) + " m",
+      bytes(l.estimated_bytes),
+      l.measured ? bytes(l.measured.peak_rss_bytes) : "-",
+    ]);
+    box.append(table(rows, ["layer", "agents", "distance", "memory (estimated)", "measured"]));
+    if (!fig.summaries.length) box.append(el("p", "Measured memory appears when the render's JSON summaries are saved in the renders folder (docs/review.md).", "dim"));
+    const p = fig.pops_avoided;
+    box.append(el("p", p.measured
+      ? "Pops avoided: per-frame ranking would move " + p.agents_changed + " agents between layers (" + p.changes + " changes); fixed-frame ranking moves none."
+      : "Pops avoided: fixed-frame ranking moves no agent between layers (per-frame pops were not measured for this manifest; docs/layers.md)."));
+    box.append(el("p", "Manifest: " + fig.manifest, "dim"));
+  } else {
+    box.append(el("p", "No layer manifest: run throng layers on the shot for layers, LOD and the map.", "dim"));
+  }
+}
+
+init();
