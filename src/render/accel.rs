@@ -457,16 +457,6 @@ struct TlasInstance {
     cutout: bool,
 }
 
-/// How a TLAS visit enters a still instance: its object-from-world
-/// transform (aligned columns, used as they are) beside its BLAS, so the
-/// visit reads one 80-byte record instead of a transform array and the
-/// BLAS set's lazy cell.
-struct Leaf<'a> {
-    object_from_world: Affine3A,
-    /// `None` when the mesh has no BLAS (never the case for a kept instance).
-    blas: Option<&'a Blas>,
-}
-
 /// From this many instances on, each agent's parts share one TLAS leaf:
 /// below it, a tree over parts traces faster; above it, memory and build
 /// time per part dominate (a million robots are eleven million parts).
@@ -542,12 +532,11 @@ pub struct Tlas<'a> {
     blas: &'a BlasSet,
     /// The frame scene's instances (transforms of agent-leaf trees).
     source: &'a [Instance],
-    /// Per entry of `instances`, what a visit needs to enter it, in one
-    /// record: object from world and the BLAS. Empty in a tree of agent
-    /// leaves, where each visit looks the BLAS up and inverts the scene
-    /// instance's transform instead (80 bytes fewer for each of millions
+    /// Object from world per entry of `instances`, column-major 3x4; empty
+    /// in a tree of agent leaves, where each visit inverts the scene
+    /// instance's transform instead (48 bytes fewer for each of millions
     /// of parts, for an inverse per visit).
-    leaves: Vec<Leaf<'a>>,
+    inverses: Vec<[f32; 12]>,
     tree: TlasTree,
     /// Instances grouped by cluster, clusters in TLAS slot order.
     instances: Vec<TlasInstance>,
@@ -772,7 +761,7 @@ impl<'a> Tlas<'a> {
         // Lay clusters out in slot order: one fewer indirection per visit.
         let source = instances;
         let mut instances = Vec::with_capacity(member.len());
-        let mut leaves = Vec::with_capacity(if by_agent { 0 } else { member.len() });
+        let mut inverses = Vec::with_capacity(if by_agent { 0 } else { member.len() });
         let mut clusters = Vec::with_capacity(order.len());
         for &c in &order {
             let (_, start, len) = runs[c as usize];
@@ -781,8 +770,7 @@ impl<'a> Tlas<'a> {
                 let i = member[j as usize];
                 let inst = &source[i as usize];
                 if !by_agent {
-                    leaves
-                        .push(Leaf { object_from_world: inst.world_from_object.inverse(), blas: blas.get(inst.mesh) });
+                    inverses.push(inst.world_from_object.inverse().to_cols_array());
                 }
                 instances.push(TlasInstance {
                     index: i,
@@ -799,7 +787,7 @@ impl<'a> Tlas<'a> {
         Tlas {
             blas,
             source,
-            leaves,
+            inverses,
             tree,
             instances,
             clusters,
@@ -851,12 +839,12 @@ impl<'a> Tlas<'a> {
         self.instances.is_empty()
     }
 
-    /// The BLAS and object from world of still instance `instances[k]`.
-    #[inline(always)]
-    fn still_leaf(&self, k: usize, inst: &TlasInstance) -> Option<(&'a Blas, Affine3A)> {
-        match self.leaves.get(k) {
-            Some(l) => Some((l.blas?, l.object_from_world)),
-            None => Some((self.blas.get(inst.mesh)?, self.source[inst.index as usize].world_from_object.inverse())),
+    /// Object from world of `instances[k]`.
+    #[inline]
+    fn object_from_world(&self, k: usize, inst: &TlasInstance) -> Affine3A {
+        match self.inverses.get(k) {
+            Some(m) => Affine3A::from_cols_array(m),
+            None => self.source[inst.index as usize].world_from_object.inverse(),
         }
     }
 
@@ -936,8 +924,8 @@ impl<'a> Tlas<'a> {
                     continue;
                 }
                 let hit = if inst.motion == STILL {
-                    let Some((b, object_from_world)) = self.still_leaf(k, inst) else { continue };
-                    let local = object_ray(&object_from_world, r, closest);
+                    let Some(b) = self.blas.get(inst.mesh) else { continue };
+                    let local = object_ray(&self.object_from_world(k, inst), r, closest);
                     match inst.cutout.then(|| self.holes_of(inst, r)).flatten() {
                         None => b.intersect(w, local),
                         Some(holes) => b.intersect_cut(w, local, &holes),
@@ -966,8 +954,8 @@ impl<'a> Tlas<'a> {
         let inst = &self.instances[best.0];
         let slot = best.1 as usize;
         let (uv, triangle) = if inst.motion == STILL {
-            let (b, object_from_world) = self.still_leaf(best.0, inst)?;
-            let local = object_ray(&object_from_world, &world, world.tmax);
+            let b = self.blas.get(inst.mesh)?;
+            let local = object_ray(&self.object_from_world(best.0, inst), &world, world.tmax);
             (b.tris[slot].compute_barycentric(&local), b.triangle_index[slot])
         } else {
             let mv = &self.moving[inst.motion as usize];
@@ -1005,8 +993,8 @@ impl<'a> Tlas<'a> {
                 inst.visibility & mask != 0
                     && counts(inst.index)
                     && if inst.motion == STILL {
-                        self.still_leaf(k, inst).is_some_and(|(b, object_from_world)| {
-                            let local = object_ray(&object_from_world, r, r.tmax);
+                        self.blas.get(inst.mesh).is_some_and(|b| {
+                            let local = object_ray(&self.object_from_world(k, inst), r, r.tmax);
                             match inst.cutout.then(|| self.holes_of(inst, r)).flatten() {
                                 None => b.occluded(w, local),
                                 Some(holes) => b.occluded_cut(w, local, &holes),
