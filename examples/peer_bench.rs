@@ -52,6 +52,7 @@ use throng::render::bsdf::{sample_cosine_hemisphere, ShadingFrame};
 use throng::render::exr::{camera_matrices, write_layer, write_preview_png, LayerMeta, ID_MAPPING};
 use throng::render::film::render_frame_with_stats;
 use throng::render::integrator::{offset_ray_origin, CameraRays};
+use throng::render::wide::Traversal;
 use throng::render::{BlasSet, RenderSettings};
 use throng::scene::dome::load_dome;
 use throng::scene::gltf::{AssetCache, LUMENS_PER_WATT};
@@ -470,6 +471,18 @@ fn main() {
             std::process::exit(2);
         }
     };
+    // A/B switch for the BVH traversal in one binary (benchmarks only):
+    // THRONG_TRAVERSAL=obvhs|scalar|wide (default wide).
+    let traversal = match std::env::var("THRONG_TRAVERSAL").as_deref() {
+        Ok("obvhs") => Traversal::Obvhs,
+        Ok("scalar") => Traversal::Scalar,
+        Ok("wide") | Err(_) => Traversal::Wide,
+        Ok(other) => {
+            eprintln!("peer_bench: THRONG_TRAVERSAL={other}: expected obvhs, scalar or wide");
+            std::process::exit(2);
+        }
+    };
+    throng::render::wide::set_traversal(traversal);
     let t_all = Instant::now();
     let cpu0 = throng::bench::process_cpu_s();
     let loaded = match (&args.scene, args.synthetic) {
@@ -542,6 +555,7 @@ fn main() {
     };
     let mut out = serde_json::json!({
         "tool": "throng peer_bench",
+        "traversal": throng::render::wide::kernel_name(traversal),
         "scene": args.scene.as_ref().map(|p| p.display().to_string()),
         "synthetic_agents": args.synthetic,
         "res": [args.res.0, args.res.1], "spp": args.spp, "max_bounces": args.bounces, "threads": threads,

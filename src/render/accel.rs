@@ -1,7 +1,9 @@
 //! Two-level ray acceleration: one BLAS per unique mesh (object space, built
 //! once per run and shared by every frame and layer) and a TLAS over the
-//! instances' world bounds (rebuilt per frame). The only file that names
-//! obvhs, so the BVH library can change without touching the integrator.
+//! instances' world bounds (rebuilt per frame). With `wide` (which walks
+//! obvhs' compressed 8-wide nodes with our own SIMD node test), the only
+//! files that name obvhs, so the BVH library can change without touching
+//! the integrator.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
@@ -24,6 +26,7 @@ use rayon::prelude::*;
 
 use super::integrator::surface_alpha;
 use super::sampler::hash_words;
+use super::wide::{dispatch, Kernel, Traversal, Walk};
 use crate::scene::{AlphaMode, Instance, Library, Material, Mesh, SceneMotion};
 
 /// Bottom-level BVH of one mesh, in object space.
@@ -90,29 +93,46 @@ impl Blas {
     }
 
     /// Closest hit in object space: (BVH slot, t).
-    #[inline]
-    fn intersect(&self, ray: Ray) -> Option<(u32, f32)> {
-        let mut hit = RayHit::none();
-        self.bvh
-            .ray_traverse(ray, &mut hit, |r, s| intersect_triangle(&self.tris[s], r))
-            .then_some((hit.primitive_id, hit.t))
+    #[inline(always)]
+    fn intersect<W: Walk>(&self, w: W, ray: Ray) -> Option<(u32, f32)> {
+        w.closest(&self.bvh, ray, |r, s| intersect_triangle(&self.tris[s], r))
     }
 
-    #[inline]
-    fn occluded(&self, ray: Ray) -> bool {
-        !self.bvh.ray_traverse_miss(ray, |r, s| intersect_triangle(&self.tris[s], r))
+    #[inline(always)]
+    fn occluded<W: Walk>(&self, w: W, ray: Ray) -> bool {
+        w.any(&self.bvh, ray, |r, s| intersect_triangle(&self.tris[s], r))
     }
 
     /// As [`Blas::intersect`], skipping the hits `holes` cuts out.
-    fn intersect_cut(&self, ray: Ray, holes: &Holes) -> Option<(u32, f32)> {
-        let mut hit = RayHit::none();
-        self.bvh
-            .ray_traverse(ray, &mut hit, |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]))
-            .then_some((hit.primitive_id, hit.t))
+    #[inline(always)]
+    fn intersect_cut<W: Walk>(&self, w: W, ray: Ray, holes: &Holes) -> Option<(u32, f32)> {
+        w.closest(&self.bvh, ray, |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]))
     }
 
-    fn occluded_cut(&self, ray: Ray, holes: &Holes) -> bool {
-        !self.bvh.ray_traverse_miss(ray, |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]))
+    #[inline(always)]
+    fn occluded_cut<W: Walk>(&self, w: W, ray: Ray, holes: &Holes) -> bool {
+        w.any(&self.bvh, ray, |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]))
+    }
+
+    /// Closest hit in object space, (BVH slot, t), walked with `traversal`
+    /// (tests compare the kernels).
+    #[doc(hidden)]
+    pub fn intersect_with(&self, traversal: Traversal, origin: Vec3, direction: Vec3, tmax: f32) -> Option<(u32, f32)> {
+        let ray = Ray::new(origin.into(), (direction + Vec3::ZERO).into(), 0.0, tmax);
+        dispatch!(Kernel::detect(traversal), w => self.intersect(w, ray))
+    }
+
+    /// True when the ray meets the mesh within (0, tmax), walked with `traversal`.
+    #[doc(hidden)]
+    pub fn occluded_with(&self, traversal: Traversal, origin: Vec3, direction: Vec3, tmax: f32) -> bool {
+        let ray = Ray::new(origin.into(), (direction + Vec3::ZERO).into(), 0.0, tmax);
+        dispatch!(Kernel::detect(traversal), w => self.occluded(w, ray))
+    }
+
+    /// World-space bounds of the mesh's valid triangles (`None` when empty).
+    #[doc(hidden)]
+    pub fn object_bounds(&self) -> Option<(Vec3, Vec3)> {
+        (!self.is_empty()).then(|| (self.bvh.total_aabb.min.into(), self.bvh.total_aabb.max.into()))
     }
 
     /// Runs obvhs' structural checks (panics on a broken tree; tests only).
@@ -195,32 +215,24 @@ impl DeformBlas {
         RtTriangle::new(a[0].lerp(b[0], w), a[1].lerp(b[1], w), a[2].lerp(b[2], w))
     }
 
-    #[inline]
-    fn intersect(&self, ray: Ray, w: f32) -> Option<(u32, f32)> {
-        let mut hit = RayHit::none();
-        self.bvh
-            .ray_traverse(ray, &mut hit, |r, s| intersect_triangle(&self.triangle(s, w), r))
-            .then_some((hit.primitive_id, hit.t))
+    #[inline(always)]
+    fn intersect<W: Walk>(&self, k: W, ray: Ray, w: f32) -> Option<(u32, f32)> {
+        k.closest(&self.bvh, ray, |r, s| intersect_triangle(&self.triangle(s, w), r))
     }
 
-    #[inline]
-    fn occluded(&self, ray: Ray, w: f32) -> bool {
-        !self.bvh.ray_traverse_miss(ray, |r, s| intersect_triangle(&self.triangle(s, w), r))
+    #[inline(always)]
+    fn occluded<W: Walk>(&self, k: W, ray: Ray, w: f32) -> bool {
+        k.any(&self.bvh, ray, |r, s| intersect_triangle(&self.triangle(s, w), r))
     }
 
-    fn intersect_cut(&self, ray: Ray, w: f32, holes: &Holes) -> Option<(u32, f32)> {
-        let mut hit = RayHit::none();
-        self.bvh
-            .ray_traverse(ray, &mut hit, |r, s| {
-                holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s])
-            })
-            .then_some((hit.primitive_id, hit.t))
+    #[inline(always)]
+    fn intersect_cut<W: Walk>(&self, k: W, ray: Ray, w: f32, holes: &Holes) -> Option<(u32, f32)> {
+        k.closest(&self.bvh, ray, |r, s| holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s]))
     }
 
-    fn occluded_cut(&self, ray: Ray, w: f32, holes: &Holes) -> bool {
-        !self
-            .bvh
-            .ray_traverse_miss(ray, |r, s| holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s]))
+    #[inline(always)]
+    fn occluded_cut<W: Walk>(&self, k: W, ray: Ray, w: f32, holes: &Holes) -> bool {
+        k.any(&self.bvh, ray, |r, s| holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s]))
     }
 }
 
@@ -537,6 +549,8 @@ pub struct Tlas<'a> {
     /// The library, where a tree has instances with alpha holes (`None`:
     /// every surface is solid).
     holes: Option<&'a Library>,
+    /// The tree walk ([`super::wide`]): [`super::wide::traversal`] at build.
+    kernel: Kernel,
     /// Wall time of the build.
     pub build_time: Duration,
 }
@@ -780,6 +794,7 @@ impl<'a> Tlas<'a> {
             aabbs,
             moving,
             holes: None,
+            kernel: Kernel::detect(super::wide::traversal()),
             build_time: start.elapsed(),
         }
     }
@@ -800,6 +815,18 @@ impl<'a> Tlas<'a> {
         }
         self.build_time += start.elapsed();
         self
+    }
+
+    /// The same tree walked with `traversal` (tests force each kernel).
+    #[doc(hidden)]
+    pub fn with_traversal(mut self, traversal: Traversal) -> Tlas<'a> {
+        self.kernel = Kernel::detect(traversal);
+        self
+    }
+
+    /// Name of the kernel this tree is walked with: "obvhs", "scalar" or "avx2".
+    pub fn kernel_name(&self) -> &'static str {
+        self.kernel.name()
     }
 
     /// Number of instances in the tree.
@@ -828,30 +855,37 @@ impl<'a> Tlas<'a> {
     }
 
     /// The closest hit of one moving instance at `time`: (BVH slot, t).
-    #[inline]
-    fn intersect_moving(&self, inst: &TlasInstance, r: &Ray, tmax: f32, time: f32) -> Option<(u32, f32)> {
+    #[inline(always)]
+    fn intersect_moving<W: Walk>(
+        &self,
+        w: W,
+        inst: &TlasInstance,
+        r: &Ray,
+        tmax: f32,
+        time: f32,
+    ) -> Option<(u32, f32)> {
         let mv = &self.moving[inst.motion as usize];
         let local = transform_ray(&mv.object_from_world(time)?, r, tmax);
         let holes = if inst.cutout { self.holes_of(inst, r) } else { None };
         match (&mv.deform, &holes) {
-            (Some((d, _)), None) => d.intersect(local, mv.weight(time)),
-            (Some((d, _)), Some(h)) => d.intersect_cut(local, mv.weight(time), h),
-            (None, None) => self.blas.get(inst.mesh)?.intersect(local),
-            (None, Some(h)) => self.blas.get(inst.mesh)?.intersect_cut(local, h),
+            (Some((d, _)), None) => d.intersect(w, local, mv.weight(time)),
+            (Some((d, _)), Some(h)) => d.intersect_cut(w, local, mv.weight(time), h),
+            (None, None) => self.blas.get(inst.mesh)?.intersect(w, local),
+            (None, Some(h)) => self.blas.get(inst.mesh)?.intersect_cut(w, local, h),
         }
     }
 
-    #[inline]
-    fn occluded_moving(&self, inst: &TlasInstance, r: &Ray, time: f32) -> bool {
+    #[inline(always)]
+    fn occluded_moving<W: Walk>(&self, w: W, inst: &TlasInstance, r: &Ray, time: f32) -> bool {
         let mv = &self.moving[inst.motion as usize];
         let Some(object_from_world) = mv.object_from_world(time) else { return false };
         let local = transform_ray(&object_from_world, r, r.tmax);
         let holes = if inst.cutout { self.holes_of(inst, r) } else { None };
         match (&mv.deform, &holes) {
-            (Some((d, _)), None) => d.occluded(local, mv.weight(time)),
-            (Some((d, _)), Some(h)) => d.occluded_cut(local, mv.weight(time), h),
-            (None, None) => self.blas.get(inst.mesh).is_some_and(|b| b.occluded(local)),
-            (None, Some(h)) => self.blas.get(inst.mesh).is_some_and(|b| b.occluded_cut(local, h)),
+            (Some((d, _)), None) => d.occluded(w, local, mv.weight(time)),
+            (Some((d, _)), Some(h)) => d.occluded_cut(w, local, mv.weight(time), h),
+            (None, None) => self.blas.get(inst.mesh).is_some_and(|b| b.occluded(w, local)),
+            (None, Some(h)) => self.blas.get(inst.mesh).is_some_and(|b| b.occluded_cut(w, local, h)),
         }
     }
 
@@ -871,6 +905,11 @@ impl<'a> Tlas<'a> {
     /// Closest hit among instances whose visibility shares a bit with `mask`.
     /// Moving instances are met where they are at `ray.time`.
     pub fn intersect(&self, ray: &WorldRay, mask: u8) -> Option<Hit> {
+        dispatch!(self.kernel, w => self.intersect_in(w, ray, mask))
+    }
+
+    #[inline(always)]
+    fn intersect_in<W: Walk>(&self, w: W, ray: &WorldRay, mask: u8) -> Option<Hit> {
         let world = world_ray(ray);
         let time = ray.time;
         // (instance position, BLAS slot) of the closest hit so far.
@@ -888,11 +927,11 @@ impl<'a> Tlas<'a> {
                     let Some(b) = self.blas.get(inst.mesh) else { continue };
                     let local = object_ray(&self.object_from_world(k, inst), r, closest);
                     match inst.cutout.then(|| self.holes_of(inst, r)).flatten() {
-                        None => b.intersect(local),
-                        Some(holes) => b.intersect_cut(local, &holes),
+                        None => b.intersect(w, local),
+                        Some(holes) => b.intersect_cut(w, local, &holes),
                     }
                 } else {
-                    self.intersect_moving(inst, r, closest, time)
+                    self.intersect_moving(w, inst, r, closest, time)
                 };
                 if let Some((s, t)) = hit {
                     if t < closest {
@@ -902,16 +941,16 @@ impl<'a> Tlas<'a> {
             }
             found
         };
-        let mut hit = RayHit::none();
         let found = match &self.tree {
-            TlasTree::Empty => false,
+            TlasTree::Empty => None,
             // `visit` moves into whichever arm runs, so it inlines into the traversal.
-            TlasTree::Bvh2(bvh) => bvh.ray_traverse(world, &mut hit, visit),
-            TlasTree::CwBvh(bvh) => bvh.ray_traverse(world, &mut hit, visit),
+            TlasTree::Bvh2(bvh) => {
+                let mut hit = RayHit::none();
+                bvh.ray_traverse(world, &mut hit, visit).then_some(hit.t)
+            }
+            TlasTree::CwBvh(bvh) => w.closest(bvh, world, visit).map(|(_, t)| t),
         };
-        if !found || best.0 == usize::MAX {
-            return None;
-        }
+        let t = found.filter(|_| best.0 != usize::MAX)?;
         let inst = &self.instances[best.0];
         let slot = best.1 as usize;
         let (uv, triangle) = if inst.motion == STILL {
@@ -929,7 +968,7 @@ impl<'a> Tlas<'a> {
                 }
             }
         };
-        Some(Hit { instance: inst.index, triangle, t: hit.t, u: uv.x, v: uv.y })
+        Some(Hit { instance: inst.index, triangle, t, u: uv.x, v: uv.y })
     }
 
     /// True when any instance whose visibility shares a bit with `mask`
@@ -941,6 +980,11 @@ impl<'a> Tlas<'a> {
     /// As [`Tlas::occluded`], counting only the instances whose scene index
     /// `counts` accepts (the shadow pass asks whether the set alone blocks a ray).
     pub(crate) fn occluded_by(&self, ray: &WorldRay, mask: u8, counts: impl Fn(u32) -> bool) -> bool {
+        dispatch!(self.kernel, w => self.occluded_in(w, ray, mask, &counts))
+    }
+
+    #[inline(always)]
+    fn occluded_in<W: Walk>(&self, w: W, ray: &WorldRay, mask: u8, counts: &impl Fn(u32) -> bool) -> bool {
         let world = world_ray(ray);
         let time = ray.time;
         let visit = |r: &Ray, slot: usize| {
@@ -952,12 +996,12 @@ impl<'a> Tlas<'a> {
                         self.blas.get(inst.mesh).is_some_and(|b| {
                             let local = object_ray(&self.object_from_world(k, inst), r, r.tmax);
                             match inst.cutout.then(|| self.holes_of(inst, r)).flatten() {
-                                None => b.occluded(local),
-                                Some(holes) => b.occluded_cut(local, &holes),
+                                None => b.occluded(w, local),
+                                Some(holes) => b.occluded_cut(w, local, &holes),
                             }
                         })
                     } else {
-                        self.occluded_moving(inst, r, time)
+                        self.occluded_moving(w, inst, r, time)
                     }
             });
             // Any value below tmax stops the walk.
@@ -970,7 +1014,7 @@ impl<'a> Tlas<'a> {
         match &self.tree {
             TlasTree::Empty => false,
             TlasTree::Bvh2(bvh) => !bvh.ray_traverse_miss(world, visit),
-            TlasTree::CwBvh(bvh) => !bvh.ray_traverse_miss(world, visit),
+            TlasTree::CwBvh(bvh) => w.any(bvh, world, visit),
         }
     }
 

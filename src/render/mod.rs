@@ -21,6 +21,7 @@ pub mod integrator;
 pub mod job;
 pub(crate) mod lights;
 pub(crate) mod sampler;
+pub mod wide;
 
 pub use accel::{BlasSet, Tlas};
 pub use film::{render_frame, Film};

@@ -1,0 +1,414 @@
+//! Our own traversal of obvhs' compressed 8-wide BVH nodes (`CwBvh`, the
+//! BLASes and the TLAS): the same nodes, the same walk order and the same
+//! tie rules as obvhs' `ray_traverse` / `ray_traverse_miss`, but the eight
+//! child boxes of a node are tested in one 8-lane operation where the CPU
+//! has AVX2 (chosen at run time, so one portable binary uses what the node
+//! has), with a portable scalar kernel everywhere else.
+//!
+//! Bit-identical on every path: both kernels do the same IEEE f32
+//! operations in the same order, each rounded on its own (a multiply, then
+//! an add: Rust never contracts them into a fused multiply-add, and neither
+//! kernel calls one), `max(a, b)` is `a > b ? a : b` and `min(a, b)` is
+//! `a < b ? a : b` on both (the semantics of the x86 instructions, NaN
+//! included), and the hit mask is built from the same per-child booleans in
+//! the same order. What differs is only how many lanes run at once.
+//! `tests/wide.rs` forces each path on random rays over the demo's meshes
+//! and checks the closest hits (t and primitive) and any-hit answers agree,
+//! with each other and with obvhs' own traversal.
+//!
+//! Safe: SIMD dispatch goes through `pulp` (its `V3` token proves AVX2 and
+//! its intrinsics are safe functions), so the crate's `forbid(unsafe_code)`
+//! holds.
+
+use std::sync::atomic::{AtomicU8, Ordering};
+
+use obvhs::cwbvh::{node::CwBvhNode, CwBvh};
+use obvhs::ray::Ray;
+
+/// Which BVH traversal the trees use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Traversal {
+    /// obvhs' own `ray_traverse` (its node test is two 4-wide SSE halves).
+    Obvhs,
+    /// Ours, one child box at a time: the portable kernel.
+    Scalar,
+    /// Ours, the widest kernel this CPU has (8-wide AVX2; the scalar
+    /// kernel where AVX2 is absent).
+    Wide,
+}
+
+/// The traversal trees built from now on use (the default, [`Traversal::Wide`], unless
+/// a benchmark has chosen another with [`set_traversal`]).
+static CHOSEN: AtomicU8 = AtomicU8::new(2);
+
+/// Chooses the traversal of the trees built from now on, process-wide: for
+/// benchmarks comparing kernels in one binary. Renders are the same on
+/// every choice (see the module notes).
+#[doc(hidden)]
+pub fn set_traversal(t: Traversal) {
+    CHOSEN.store(t as u8, Ordering::Relaxed);
+}
+
+/// The traversal chosen by [`set_traversal`] (default [`Traversal::Wide`]).
+pub fn traversal() -> Traversal {
+    match CHOSEN.load(Ordering::Relaxed) {
+        0 => Traversal::Obvhs,
+        1 => Traversal::Scalar,
+        _ => Traversal::Wide,
+    }
+}
+
+/// The kernel `t` resolves to on this CPU: "obvhs", "scalar" or "avx2".
+pub fn kernel_name(t: Traversal) -> &'static str {
+    Kernel::detect(t).name()
+}
+
+/// A resolved kernel: [`Traversal`] with the CPU's features detected.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Kernel {
+    Obvhs,
+    Scalar,
+    #[cfg(target_arch = "x86_64")]
+    Avx2(pulp::x86::V3),
+}
+
+impl Kernel {
+    /// The kernel for `t` on this CPU.
+    pub(crate) fn detect(t: Traversal) -> Kernel {
+        match t {
+            Traversal::Obvhs => Kernel::Obvhs,
+            Traversal::Scalar => Kernel::Scalar,
+            #[cfg(target_arch = "x86_64")]
+            Traversal::Wide => pulp::x86::V3::try_new().map_or(Kernel::Scalar, Kernel::Avx2),
+            #[cfg(not(target_arch = "x86_64"))]
+            Traversal::Wide => Kernel::Scalar,
+        }
+    }
+
+    /// Name of the kernel, for reports.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Kernel::Obvhs => "obvhs",
+            Kernel::Scalar => "scalar",
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx2(_) => "avx2",
+        }
+    }
+}
+
+/// A tree walk: closest hit and any hit over a `CwBvh`, with the primitive
+/// test a closure of (ray with the current tmax, primitive slot) giving the
+/// hit distance (infinity on a miss), as obvhs' `ray_traverse` takes.
+pub(crate) trait Walk: Copy {
+    /// The closest primitive slot and its `t` below `ray.tmax`.
+    fn closest(self, bvh: &CwBvh, ray: Ray, prim: impl FnMut(&Ray, usize) -> f32) -> Option<(u32, f32)>;
+    /// True when any primitive gives a `t` below `ray.tmax`.
+    fn any(self, bvh: &CwBvh, ray: Ray, prim: impl FnMut(&Ray, usize) -> f32) -> bool;
+}
+
+/// obvhs' own traversal.
+#[derive(Clone, Copy)]
+pub(crate) struct ObvhsWalk;
+
+impl Walk for ObvhsWalk {
+    #[inline(always)]
+    fn closest(self, bvh: &CwBvh, ray: Ray, prim: impl FnMut(&Ray, usize) -> f32) -> Option<(u32, f32)> {
+        let mut hit = obvhs::ray::RayHit::none();
+        bvh.ray_traverse(ray, &mut hit, prim).then_some((hit.primitive_id, hit.t))
+    }
+
+    #[inline(always)]
+    fn any(self, bvh: &CwBvh, ray: Ray, prim: impl FnMut(&Ray, usize) -> f32) -> bool {
+        !bvh.ray_traverse_miss(ray, prim)
+    }
+}
+
+/// Our traversal with node test `T`.
+#[derive(Clone, Copy)]
+pub(crate) struct OurWalk<T>(pub T);
+
+impl<T: NodeTest> Walk for OurWalk<T> {
+    #[inline(always)]
+    fn closest(self, bvh: &CwBvh, ray: Ray, mut prim: impl FnMut(&Ray, usize) -> f32) -> Option<(u32, f32)> {
+        let mut r = ray;
+        let mut best = None;
+        walk(self.0, bvh, &mut r, |r, slot| {
+            let t = prim(r, slot as usize);
+            if t < r.tmax {
+                best = Some((slot, t));
+                r.tmax = t;
+            }
+            false
+        });
+        best
+    }
+
+    #[inline(always)]
+    fn any(self, bvh: &CwBvh, ray: Ray, mut prim: impl FnMut(&Ray, usize) -> f32) -> bool {
+        let mut r = ray;
+        walk(self.0, bvh, &mut r, |r, slot| prim(r, slot as usize) < r.tmax)
+    }
+}
+
+/// The child-box test of one node: the hit mask obvhs' `intersect_ray`
+/// gives (internal children in the high byte, by traversal priority; leaf
+/// primitives in the low 24 bits).
+pub(crate) trait NodeTest: Copy {
+    fn hits(self, node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32;
+}
+
+/// obvhs' lower bound on a child's entry distance (its `EPSILON`, private there).
+const ENTRY_EPSILON: f32 = 0.0001;
+
+/// `a > b ? a : b`: x86 `maxps`' rule, NaN included, on every kernel.
+#[inline(always)]
+fn max(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// `a < b ? a : b`: x86 `minps`' rule.
+#[inline(always)]
+fn min(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// The per-node ray terms: the ray moved into the node's quantised grid
+/// (extent times inverse direction, and the grid origin's distance).
+#[inline(always)]
+fn node_ray(node: &CwBvhNode, ray: &Ray) -> ([f32; 3], [f32; 3]) {
+    let e = node.e.map(|e| f32::from_bits((e as u32) << 23));
+    let inv = ray.inv_direction;
+    let (o, p) = (ray.origin, node.p);
+    ([e[0] * inv.x, e[1] * inv.y, e[2] * inv.z], [(p.x - o.x) * inv.x, (p.y - o.y) * inv.y, (p.z - o.z) * inv.z])
+}
+
+/// The near and far planes of each axis for the ray's direction signs.
+#[inline(always)]
+fn planes<'n>(node: &'n CwBvhNode, ray: &Ray) -> [(&'n [u8; 8], &'n [u8; 8]); 3] {
+    let pick = |neg: bool, lo, hi| if neg { (hi, lo) } else { (lo, hi) };
+    [
+        pick(ray.direction.x < 0.0, &node.child_min_x, &node.child_max_x),
+        pick(ray.direction.y < 0.0, &node.child_min_y, &node.child_max_y),
+        pick(ray.direction.z < 0.0, &node.child_min_z, &node.child_max_z),
+    ]
+}
+
+/// The node hit mask from the 8-bit mask of children whose box the ray meets.
+#[inline(always)]
+fn hit_mask(node: &CwBvhNode, oct_inv4: u32, mut boxes: u32) -> u32 {
+    let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+    let mut mask = 0;
+    while boxes != 0 {
+        let child = boxes.trailing_zeros() * 8;
+        boxes &= boxes - 1;
+        mask |= (((child_bits8 >> child) as u32) & 0xff) << (((bit_index8 >> child) as u32) & 0xff);
+    }
+    mask
+}
+
+/// One child at a time: the portable kernel.
+#[derive(Clone, Copy)]
+pub(crate) struct ScalarTest;
+
+impl NodeTest for ScalarTest {
+    #[inline(always)]
+    fn hits(self, node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
+        let (dir, org) = node_ray(node, ray);
+        let [(nx, fx), (ny, fy), (nz, fz)] = planes(node, ray);
+        let mut boxes = 0u32;
+        for c in 0..8 {
+            let near = [nx[c] as f32 * dir[0] + org[0], ny[c] as f32 * dir[1] + org[1], nz[c] as f32 * dir[2] + org[2]];
+            let far = [fx[c] as f32 * dir[0] + org[0], fy[c] as f32 * dir[1] + org[1], fz[c] as f32 * dir[2] + org[2]];
+            let tmin = max(max(near[0], max(near[1], near[2])), ENTRY_EPSILON);
+            let tmax = min(min(far[0], min(far[1], far[2])), ray.tmax);
+            boxes |= ((tmin <= tmax) as u32) << c;
+        }
+        hit_mask(node, oct_inv4, boxes)
+    }
+}
+
+/// All eight children in one AVX2 operation per step.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+pub(crate) struct Avx2Test(pub pulp::x86::V3);
+
+#[cfg(target_arch = "x86_64")]
+impl NodeTest for Avx2Test {
+    #[inline(always)]
+    fn hits(self, node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
+        let s = self.0;
+        s.vectorize(
+            #[inline(always)]
+            || {
+                use pulp::{f32x8, u8x16};
+                let (dir, org) = node_ray(node, ray);
+                let [(nx, fx), (ny, fy), (nz, fz)] = planes(node, ray);
+                // Eight u8 planes widened to eight f32 lanes (exact: 0..=255).
+                let lanes = |q: &[u8; 8]| -> f32x8 {
+                    let bytes: u8x16 = pulp::bytemuck::cast([u64::from_le_bytes(*q), 0u64]);
+                    s.convert_i32x8_to_f32x8(s.convert_u8x16_to_i32x8(bytes))
+                };
+                let axis = |q: &[u8; 8], k: usize| {
+                    s.add_f32x8(s.mul_f32x8(lanes(q), s.splat_f32x8(dir[k])), s.splat_f32x8(org[k]))
+                };
+                let (near_x, far_x) = (axis(nx, 0), axis(fx, 0));
+                let (near_y, far_y) = (axis(ny, 1), axis(fy, 1));
+                let (near_z, far_z) = (axis(nz, 2), axis(fz, 2));
+                // max_f32x8 is maxps (a > b ? a : b), min_f32x8 minps: as `max` / `min` above.
+                let tmin = s.max_f32x8(s.max_f32x8(near_x, s.max_f32x8(near_y, near_z)), s.splat_f32x8(ENTRY_EPSILON));
+                let tmax = s.min_f32x8(s.min_f32x8(far_x, s.min_f32x8(far_y, far_z)), s.splat_f32x8(ray.tmax));
+                let met: std::arch::x86_64::__m256 = pulp::bytemuck::cast(s.cmp_le_f32x8(tmin, tmax));
+                let boxes = s.avx._mm256_movemask_ps(met) as u32;
+                hit_mask(node, oct_inv4, boxes)
+            },
+        )
+    }
+}
+
+/// Runs `$body` with `$w` bound to the [`Walk`] of `$kernel`; on AVX2, inside
+/// pulp's `vectorize`, so the whole query (tree walks, triangle tests) is
+/// compiled with the features the kernel has and its node tests inline.
+macro_rules! dispatch {
+    ($kernel:expr, $w:ident => $body:expr) => {
+        match $kernel {
+            $crate::render::wide::Kernel::Obvhs => {
+                let $w = $crate::render::wide::ObvhsWalk;
+                $body
+            }
+            $crate::render::wide::Kernel::Scalar => {
+                let $w = $crate::render::wide::OurWalk($crate::render::wide::ScalarTest);
+                $body
+            }
+            #[cfg(target_arch = "x86_64")]
+            $crate::render::wide::Kernel::Avx2(v3) => v3.vectorize(
+                #[inline(always)]
+                || {
+                    let $w = $crate::render::wide::OurWalk($crate::render::wide::Avx2Test(v3));
+                    $body
+                },
+            ),
+        }
+    };
+}
+pub(crate) use dispatch;
+
+/// obvhs' traversal order code for a direction: which child octant is near.
+#[inline(always)]
+fn octant_inv4(d: glam::Vec3A) -> u32 {
+    (if d.x < 0.0 { 0 } else { 0x04040404 })
+        | (if d.y < 0.0 { 0 } else { 0x02020202 })
+        | (if d.z < 0.0 { 0 } else { 0x01010101 })
+}
+
+/// obvhs' traversal stack depth; as there, a full stack overwrites its top.
+const STACK: usize = 32;
+
+/// The walk of obvhs' `traverse!` macro over `bvh` with node test `test`:
+/// node groups by priority, leaf primitives high bit first. `prim` gets the
+/// ray (whose tmax it may lower) and a primitive slot, and returns true to
+/// stop the walk. True when `prim` stopped it.
+#[inline(always)]
+fn walk<T: NodeTest>(test: T, bvh: &CwBvh, ray: &mut Ray, mut prim: impl FnMut(&mut Ray, u32) -> bool) -> bool {
+    if bvh.nodes.is_empty() {
+        return false;
+    }
+    let oct_inv4 = octant_inv4(ray.direction);
+    let mut stack = [(0u32, 0u32); STACK];
+    let mut depth = 0usize;
+    // (base index, hit bits) of the node group and of the primitive group.
+    let mut group = (0u32, 0x8000_0000u32);
+    let mut prims = (0u32, 0u32);
+    loop {
+        while prims.1 != 0 {
+            let local = 31 - prims.1.leading_zeros();
+            prims.1 &= !(1 << local);
+            if prim(ray, prims.0 + local) {
+                return true;
+            }
+        }
+        if group.1 & 0xff00_0000 != 0 {
+            let hits = group.1;
+            let offset = 31 - hits.leading_zeros();
+            group.1 &= !(1 << offset);
+            if group.1 & 0xff00_0000 != 0 {
+                stack[depth] = group;
+                depth = (depth + 1).min(STACK - 1);
+            }
+            let slot = (offset - 24) ^ (oct_inv4 & 0xff);
+            let relative = (hits & !(u32::MAX << slot)).count_ones();
+            let node = &bvh.nodes[(group.0 + relative) as usize];
+            let mask = test.hits(node, ray, oct_inv4);
+            group = (node.child_base_idx, (mask & 0xff00_0000) | node.imask as u32);
+            prims = (node.primitive_base_idx, mask & 0x00ff_ffff);
+        } else {
+            group = (0, 0);
+        }
+        if prims.1 == 0 && group.1 & 0xff00_0000 == 0 {
+            if depth == 0 {
+                return false;
+            }
+            depth -= 1;
+            group = stack[depth];
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use obvhs::{cwbvh::builder::build_cwbvh_from_tris, triangle::Triangle, BvhBuildParams};
+
+    /// A small deterministic generator (no dependency): xorshift.
+    fn rng(state: &mut u64) -> f32 {
+        *state ^= *state << 13;
+        *state ^= *state >> 7;
+        *state ^= *state << 17;
+        (*state >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    #[test]
+    fn every_kernel_walks_a_random_soup_as_obvhs_does() {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let v = |s: &mut u64| glam::Vec3A::new(rng(s), rng(s), rng(s)) * 10.0 - 5.0;
+        let tris: Vec<Triangle> = (0..2000)
+            .map(|_| {
+                let a = v(&mut s);
+                Triangle { v0: a, v1: a + v(&mut s) * 0.1, v2: a + v(&mut s) * 0.1 }
+            })
+            .collect();
+        let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut std::time::Duration::default());
+        let order = bvh.primitive_indices.clone();
+        let prim = |r: &Ray, s: usize| tris[order[s] as usize].intersect(r);
+        let kernels = [Kernel::detect(Traversal::Wide), Kernel::Scalar];
+        let mut met = 0;
+        for _ in 0..4000 {
+            let ray = Ray::new(v(&mut s), v(&mut s).normalize(), 0.0, 3.0 + rng(&mut s) * 10.0);
+            let want = ObvhsWalk.closest(&bvh, ray, prim);
+            let want_any = ObvhsWalk.any(&bvh, ray, prim);
+            met += want.is_some() as u32;
+            for k in kernels {
+                let (got, any) = match k {
+                    Kernel::Scalar => {
+                        (OurWalk(ScalarTest).closest(&bvh, ray, prim), OurWalk(ScalarTest).any(&bvh, ray, prim))
+                    }
+                    #[cfg(target_arch = "x86_64")]
+                    Kernel::Avx2(v3) => {
+                        (OurWalk(Avx2Test(v3)).closest(&bvh, ray, prim), OurWalk(Avx2Test(v3)).any(&bvh, ray, prim))
+                    }
+                    Kernel::Obvhs => unreachable!(),
+                };
+                assert_eq!(got.map(|(p, t)| (p, t.to_bits())), want.map(|(p, t)| (p, t.to_bits())), "{}", k.name());
+                assert_eq!(any, want_any, "{}", k.name());
+            }
+        }
+        assert!(met > 400, "too few rays met the soup ({met}) for the test to mean anything");
+    }
+}
