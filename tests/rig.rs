@@ -429,3 +429,15 @@ fn malformed_slots_are_errors() {
     let err = broken_rig(|j| j["nodes"][4]["children"] = serde_json::json!([0]));
     assert!(err.contains("cycle") || err.contains("ancestor") || err.contains("parent"), "{err}");
 }
+
+#[test]
+fn a_proxy_box_too_large_for_any_part_is_refused_naming_the_node() {
+    let dir = common::tempdir().unwrap();
+    let text = std::fs::read_to_string(fixture("rig_small.gltf")).unwrap();
+    let huge = text.replacen("0.25,\n      0.1,\n      0.12", "1e38,\n      0.1,\n      0.12", 1);
+    assert_ne!(huge, text, "the fixture's hips proxy_box max");
+    let path = dir.path().join("huge.gltf");
+    std::fs::write(&path, huge).unwrap();
+    let err = Rig::load(&path).map(|_| ()).unwrap_err().to_string();
+    assert!(err.contains("huge.gltf") && err.contains("proxy_box") && err.contains("file units"), "{err}");
+}

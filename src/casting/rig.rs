@@ -516,6 +516,10 @@ pub(crate) fn has_slots(file: &GltfFile) -> bool {
     })
 }
 
+/// Largest coordinate, and side, of a slot's `proxy_box`, in the rig file's
+/// units (a millimetre rig stands some 1800 units tall).
+pub(crate) const MAX_PROXY_EXTENT: f32 = 1.0e6;
+
 /// Reads a node's slot extras; `None` when the node is not a slot.
 fn read_slot(file: &GltfFile, node: &gltf::Node) -> Result<Option<Slot>> {
     let Some(raw) = node.extras() else { return Ok(None) };
@@ -540,6 +544,14 @@ fn read_slot(file: &GltfFile, node: &gltf::Node) -> Result<Option<Slot>> {
             let (lo, hi) = (corner("min")?, corner("max")?);
             if lo.cmpgt(hi).any() {
                 return Err(ctx(format!("proxy_box min {lo} exceeds max {hi}")));
+            }
+            // A box this large is no body part (a typo or a corrupt file):
+            // its extent would overflow and it would vanish from the trace.
+            if (hi - lo).max_element() > MAX_PROXY_EXTENT || lo.abs().max(hi.abs()).max_element() > MAX_PROXY_EXTENT {
+                return Err(ctx(format!(
+                    "proxy_box from {lo} to {hi} reaches past {MAX_PROXY_EXTENT} file units: no part of an agent is \
+                     that large (a mistyped or corrupt box)"
+                )));
             }
             (lo, hi)
         }
