@@ -201,7 +201,7 @@ try:
         60,
     )
     panel = cdp.eval("document.getElementById('botinfo').innerText")
-    if shown != str(aid) or f"Robot ID {aid}" not in panel:
+    if shown != str(aid) or f"Agent ID {aid}" not in panel:
         fail(f"clicked agent {aid} at pixel {px},{py} but the panel says {shown!r}: {panel!r}")
     for want in ["Rig", "Cycle", "Scheme", "Layer", "Parts and materials"]:
         if want not in panel:
@@ -238,7 +238,7 @@ try:
             60,
         )
         found = cdp.eval("document.getElementById('botinfo').innerText")
-        if f"Robot ID {other}" not in found or "at pixel" not in found:
+        if f"Agent ID {other}" not in found or "at pixel" not in found:
             fail(f"searching {other} shows {found!r}")
         # Back to the clicked agent for the screenshot.
         cdp.eval("document.getElementById('image').scrollIntoView()")

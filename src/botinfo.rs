@@ -15,7 +15,7 @@ use crate::layers::Manifest;
 /// Everything botinfo says about one agent.
 #[derive(Debug, Serialize)]
 pub struct BotInfo {
-    /// Cache id ("Robot ID").
+    /// Cache id ("Agent ID").
     pub id: u32,
     /// Rig.
     pub(crate) rig: String,
@@ -63,26 +63,40 @@ pub(crate) fn nearest_ids(existing: impl Iterator<Item = u32>, id: u32, n: usize
 
 /// The botInfo block of agents at a frame.
 pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInfo>> {
+    let (found, missing) = bot_info_each(crowd, ids, frame)?;
+    match missing.into_iter().next() {
+        Some(e) => Err(e),
+        None => Ok(found),
+    }
+}
+
+/// As [`bot_info`], for every id on its own: the agents found, in the
+/// order asked, and for each id that is not there (not in the shot, or
+/// not at `frame`) the error saying so.
+pub fn bot_info_each(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<(Vec<BotInfo>, Vec<Error>)> {
     let block = crowd.agents_at(frame)?;
     let camera = crowd.camera(frame)?;
     let mut out = Vec::new();
+    let mut missing = Vec::new();
     for &id in ids {
         let Some(cast) = crowd.cast(id) else {
             let near = nearest_ids(crowd.casting().ids(), id, 5);
-            return Err(Error::Usage(format!(
+            missing.push(Error::Usage(format!(
                 "agent {id} is not in shot {} (frames {}-{}); nearest ids: {}",
                 crowd.shot().name,
                 crowd.shot().frames.start,
                 crowd.shot().frames.end,
                 near.iter().map(u32::to_string).collect::<Vec<_>>().join(", ")
             )));
+            continue;
         };
         let rec: Option<&AgentSample> = block.agents.iter().find(|a| a.id == id);
         let Some(a) = rec else {
-            return Err(Error::setting(
+            missing.push(Error::setting(
                 "frame",
                 format!("agent {id} is in shot {} but not at frame {frame}; try another frame", crowd.shot().name),
             ));
+            continue;
         };
         let height = crowd.agent_height(id).unwrap_or(1.8);
         let (distance, _, _) = crate::layers::measure(&camera, crowd.shot().render.resolution[1], a.position, height);
@@ -109,7 +123,7 @@ pub fn bot_info(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<Vec<BotInf
             pose: crowd.pose_key(a),
         });
     }
-    Ok(out)
+    Ok((out, missing))
 }
 
 /// The layer manifest botinfo reads for a shot when none is named:
@@ -132,6 +146,20 @@ pub fn bot_info_with_layers(
     frame: i32,
     manifest: Option<&Manifest>,
 ) -> Result<Vec<BotInfo>> {
+    let (found, missing) = bot_info_with_layers_each(crowd, ids, frame, manifest)?;
+    match missing.into_iter().next() {
+        Some(e) => Err(e),
+        None => Ok(found),
+    }
+}
+
+/// As [`bot_info_with_layers`], for every id on its own ([`bot_info_each`]).
+pub fn bot_info_with_layers_each(
+    crowd: &ShotCrowd,
+    ids: &[u32],
+    frame: i32,
+    manifest: Option<&Manifest>,
+) -> Result<(Vec<BotInfo>, Vec<Error>)> {
     let f = crowd.shot().frames;
     if !f.contains(frame) {
         return Err(Error::Usage(format!(
@@ -141,11 +169,11 @@ pub fn bot_info_with_layers(
             f.end
         )));
     }
-    let mut infos = bot_info(crowd, ids, frame)?;
+    let (mut infos, missing) = bot_info_each(crowd, ids, frame)?;
     if let Some(m) = manifest.filter(|m| m.shot == crowd.shot().name) {
         add_layers(&mut infos, m);
     }
-    Ok(infos)
+    Ok((infos, missing))
 }
 
 /// The agent at pixel `(x, y)` of a rendered image's `agent.id` channel
@@ -178,7 +206,7 @@ pub fn add_layers(infos: &mut [BotInfo], manifest: &Manifest) {
 /// The aligned, botInfo-style block.
 pub fn format_bot_info(b: &BotInfo) -> String {
     let mut o = String::new();
-    let _ = writeln!(o, "Robot ID  {}", b.id);
+    let _ = writeln!(o, "Agent ID  {}", b.id);
     let _ = writeln!(o, "Rig       {}  ({})", b.rig, b.kind);
     let _ = writeln!(o, "Cycle     {}", b.cycle);
     let _ = writeln!(o, "Frame     {:.2}  (cycle frame at shot frame {})", b.cycle_frame, b.shot_frame);

@@ -421,7 +421,7 @@ fn comp_and_botinfo_on_the_command_line() {
     let pixel = format!("{},{}", i as u32 % film.width, i as u32 / film.width);
     let (ok, stdout, stderr) = throng(&["botinfo", SHOT, "--exr", out.to_str().unwrap(), "--pixel", &pixel]);
     assert!(ok, "{stderr}");
-    assert!(stdout.contains("Robot ID  2") && stdout.contains("Rig       bipedTallB"), "{stdout}");
+    assert!(stdout.contains("Agent ID  2") && stdout.contains("Rig       bipedTallB"), "{stdout}");
     assert!(stdout.contains("Cycle     IdleA"), "{stdout}");
 
     // Sky (top-left corner): no agent.

@@ -66,7 +66,7 @@ fn botinfo_prints_the_block_and_names_nearest_ids() {
     let shot = shot.to_str().unwrap();
     let (code, out, err) = throng(&["botinfo", shot, "142", "--frame", "1010"]);
     assert_eq!(code, 0, "{err}");
-    for key in ["Robot ID  142", "Rig", "Cycle", "Frame", "Scheme", "Height", "Distance", "head"] {
+    for key in ["Agent ID  142", "Rig", "Cycle", "Frame", "Scheme", "Height", "Distance", "head"] {
         assert!(out.contains(key), "missing {key} in\n{out}");
     }
     let (code, _, err) = throng(&["botinfo", shot, "99999"]);
@@ -76,6 +76,16 @@ fn botinfo_prints_the_block_and_names_nearest_ids() {
     assert_eq!(code, 0);
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v[0]["id"], 142);
+    // Several ids, one unknown: every agent found is printed, the unknown
+    // one is named, and the exit status says something was missing.
+    let (code, out, err) = throng(&["botinfo", shot, "142", "99999", "100", "--frame", "1010"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(out.contains("Agent ID  142") && out.contains("Agent ID  100"), "{out}");
+    assert!(err.contains("agent 99999 is not in shot demo") && err.contains("1 of 3 agents not found"), "{err}");
+    let (code, out, _) = throng(&["botinfo", shot, "142", "99999", "--json"]);
+    assert_eq!(code, 2);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!((v.as_array().unwrap().len(), &v[0]["id"]), (1, &serde_json::json!(142)));
 }
 
 #[test]

@@ -266,7 +266,7 @@ function showBotInfo(b, command, where) {
   const box = $("botinfo");
   box.textContent = "";
   box.dataset.agentId = b.id;
-  box.append(el("p", "Robot ID " + b.id, "big"));
+  box.append(el("p", "Agent ID " + b.id, "big"));
   box.append(el("p", where, "dim"));
   const f = (v, d) => (typeof v === "number" ? v.toFixed(d) : v);
   const rows = [

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::values::{pixel, Pixel};
-use throng::botinfo::{agent_at_pixel, bot_info_with_layers, format_bot_info, shot_manifest};
+use throng::botinfo::{agent_at_pixel, bot_info_with_layers_each, format_bot_info, shot_manifest};
 use throng::error::{Error, Result};
 
 /// `throng botinfo`.
@@ -103,7 +103,11 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
         }
         None => shot_manifest(&crowd)?,
     };
-    let infos = bot_info_with_layers(&crowd, &ids, frame, manifest.as_ref())?;
+    // Every agent found is printed; each one that is not is named after them.
+    let (infos, mut missing) = bot_info_with_layers_each(&crowd, &ids, frame, manifest.as_ref())?;
+    if infos.is_empty() && !missing.is_empty() {
+        return Err(missing.remove(0));
+    }
     if args.json {
         outln!("{}", super::to_json(&infos)?);
     } else {
@@ -112,6 +116,17 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
         }
         let blocks: Vec<String> = infos.iter().map(format_bot_info).collect();
         out!("{}", blocks.join("\n"));
+    }
+    if let Some(first) = missing.first() {
+        for e in &missing {
+            eprintln!("throng: error: {}", super::wording(e));
+        }
+        return Err(Error::Usage(format!(
+            "{} of {} agents not found (first: {})",
+            missing.len(),
+            ids.len(),
+            super::wording(first)
+        )));
     }
     Ok(())
 }
