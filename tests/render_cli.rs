@@ -412,3 +412,39 @@ fn adaptive_sampling_from_the_shot_and_its_bad_keys() {
         assert_eq!(code, 2, "{e}");
     }
 }
+
+/// Interfaces say what they do: `render --json` gives `layer_frames: []`
+/// when every frame was skipped as complete (not no key at all), and
+/// `export --help` describes USD too and offers no `.usdc` it would refuse.
+#[test]
+fn json_and_help_say_what_the_verbs_do() {
+    let dir = common::tempdir().unwrap();
+    let out = dir.path().join("r");
+    let shot = demo_shot();
+    let args = [
+        "render",
+        s(&shot),
+        "--layer",
+        "full",
+        "--frames",
+        "1024",
+        "--spp",
+        "1",
+        "--resolution",
+        "16x9",
+        "--resume",
+        "--progress",
+        "off",
+        "--json",
+        "--out",
+        s(&out),
+    ];
+    let first: serde_json::Value = serde_json::from_str(&ok(&args)).unwrap();
+    assert_eq!(first["layer_frames"].as_array().map(Vec::len), Some(1), "{first}");
+    let again: serde_json::Value = serde_json::from_str(&ok(&args)).unwrap();
+    assert_eq!(again["layer_frames"], serde_json::json!([]), "{again}");
+    assert_eq!(again["files_skipped"].as_array().map(Vec::len), Some(1), "{again}");
+    let help = ok(&["export", "--help"]);
+    assert!(help.contains("USD") && help.contains("glTF"), "{help}");
+    assert!(!help.contains(".usdc /") && help.contains(".usdc is refused"), "{help}");
+}

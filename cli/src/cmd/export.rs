@@ -12,7 +12,7 @@ use throng::error::{Error, Result};
 pub enum ExportFormat {
     /// One frame as binary glTF (`--frame`).
     Glb,
-    /// A frame range as USD (`--frames`; .usda, .usdc, .usd or .usdz by the --out extension).
+    /// A frame range as USD (`--frames`; .usda, .usd (text) or .usdz by the --out extension; .usdc is refused).
     Usd,
 }
 
@@ -51,7 +51,7 @@ pub struct ExportArgs {
     /// Only this layer's agents.
     #[arg(long)]
     pub layer: Option<String>,
-    /// Output .glb, or .usda / .usdc / .usd / .usdz.
+    /// Output .glb, or .usda / .usd / .usdz.
     #[arg(long)]
     pub out: PathBuf,
     /// Print a machine-readable summary instead of the line.

@@ -68,7 +68,7 @@ pub enum Verb {
     Render(render::RenderArgs),
     /// Stack a frame's layers back into one image.
     Comp(comp::CompArgs),
-    /// Write one frame of the shot as glTF (.glb).
+    /// Write one frame of the shot as glTF (.glb), or a frame range as USD (.usda, .usd, .usdz).
     Export(export::ExportArgs),
     /// A local web page of the shot's layers: click an agent to read its botInfo.
     Review(review::ReviewArgs),
@@ -189,9 +189,10 @@ struct Summary {
     instances: u64,
     /// Peak resident memory of the process, bytes (null where /proc is missing).
     peak_rss_bytes: Option<u64>,
-    /// `render`: each layer-frame rendered, with its own measured peak memory.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    layer_frames: Vec<LayerFrameSummary>,
+    /// `render`: each layer-frame rendered, with its own measured peak
+    /// memory (`[]` when every one was skipped as complete); absent for other verbs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    layer_frames: Option<Vec<LayerFrameSummary>>,
 }
 
 /// One rendered layer-frame in the `render --json` summary.
@@ -234,7 +235,7 @@ impl Summary {
             seconds: clock.elapsed().as_secs_f64(),
             instances,
             peak_rss_bytes: throng::bench::peak_rss_bytes(),
-            layer_frames: Vec::new(),
+            layer_frames: None,
         }
     }
     fn print(&self) -> Result<()> {

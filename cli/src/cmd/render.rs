@@ -240,24 +240,25 @@ pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
         let instances = done.iter().map(|d| d.instances as u64).sum();
         let mut summary = super::Summary::new("render", clock, instances, written);
         summary.files_skipped = done.iter().filter(|d| d.skipped).map(|d| d.path.clone()).collect();
-        summary.layer_frames = done
-            .iter()
-            .filter(|d| !d.skipped)
-            .map(|d| super::LayerFrameSummary {
-                layer: d.layer.clone(),
-                frame: d.frame,
-                seconds: d.seconds,
-                instances: d.instances as u64,
-                peak_rss_bytes: d.peak_rss_bytes,
-                tlas_build_s: d.tlas_build_s,
-                file_bytes: d.file_bytes,
-                passes: d
-                    .pass_bytes
-                    .iter()
-                    .map(|(name, bytes)| super::PassSummary { name: name.clone(), bytes: *bytes })
-                    .collect(),
-            })
-            .collect();
+        summary.layer_frames = Some(
+            done.iter()
+                .filter(|d| !d.skipped)
+                .map(|d| super::LayerFrameSummary {
+                    layer: d.layer.clone(),
+                    frame: d.frame,
+                    seconds: d.seconds,
+                    instances: d.instances as u64,
+                    peak_rss_bytes: d.peak_rss_bytes,
+                    tlas_build_s: d.tlas_build_s,
+                    file_bytes: d.file_bytes,
+                    passes: d
+                        .pass_bytes
+                        .iter()
+                        .map(|(name, bytes)| super::PassSummary { name: name.clone(), bytes: *bytes })
+                        .collect(),
+                })
+                .collect(),
+        );
         // The per-layer resets lower VmHWM: the process peak is the largest of them.
         summary.peak_rss_bytes = done.iter().filter_map(|d| d.peak_rss_bytes).chain(summary.peak_rss_bytes).max();
         return summary.print();
