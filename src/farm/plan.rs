@@ -234,33 +234,19 @@ pub(crate) fn build_plan(
         for (chunk, frames) in frames.chunks(opts.chunk).enumerate() {
             let id = format!("render.{layer}.{chunk}");
             let list = frames.iter().map(|f| f.to_string()).collect::<Vec<_>>().join(",");
-            let mut argv = [
-                "throng",
-                "render",
-                &s(&shot_file),
-                "--manifest",
-                &s(manifest_path),
-                "--layer",
-                layer,
-                "--frames",
-                &list,
-                "--resolution",
-                &format!("{}x{}", resolution[0], resolution[1]),
-                "--threads",
-                &opts.cores.to_string(),
-                "--resume",
-                "--progress",
-                "plain",
-                "--out",
-                &s(&render_dir),
-            ]
-            .map(String::from)
-            .to_vec();
+            let spp_text = spp.to_string();
             // A fixed sample count, unless the shot samples adaptively and
             // the plan was given none (a task's --spp turns adaptive off).
-            if opts.spp.is_some() || shot.render.adaptive.is_none() {
-                argv.splice(9..9, ["--spp".to_string(), spp.to_string()]);
-            }
+            let fixed: &[&str] =
+                if opts.spp.is_some() || shot.render.adaptive.is_none() { &["--spp", &spp_text] } else { &[] };
+            let size = format!("{}x{}", resolution[0], resolution[1]);
+            let cores = opts.cores.to_string();
+            let (shot_arg, manifest_arg, out_arg) = (s(&shot_file), s(manifest_path), s(&render_dir));
+            let head =
+                ["throng", "render", &shot_arg, "--manifest", &manifest_arg, "--layer", layer, "--frames", &list];
+            let tail =
+                ["--resolution", &size, "--threads", &cores, "--resume", "--progress", "plain", "--out", &out_arg];
+            let argv: Vec<String> = head.iter().chain(fixed).chain(&tail).map(|a| a.to_string()).collect();
             for &f in frames {
                 writer.insert((layer.as_str(), f), id.clone());
             }

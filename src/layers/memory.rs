@@ -209,10 +209,16 @@ impl RenderFloor {
     }
 }
 
-/// The three-channel passes a render of `crowd` writes per pixel: its shot's
-/// `render.passes`, with one per light group of its lights and materials.
+/// The three-channel passes a render of `crowd` writes per pixel with its
+/// shot's `render.passes` ([`pass_count_of`]).
 pub fn pass_count<C>(crowd: &ShotCrowd<C>) -> Result<u64> {
-    let set = PassSet::parse(&crowd.shot().render.passes, "render.passes")?;
+    pass_count_of(crowd, &PassSet::parse(&crowd.shot().render.passes, "render.passes")?)
+}
+
+/// The three-channel passes a render of `crowd` writing `set` (the shot's
+/// passes, or a job's own) holds per pixel: one per light group of its
+/// lights and materials when `set` has the light groups.
+pub fn pass_count_of<C>(crowd: &ShotCrowd<C>, set: &PassSet) -> Result<u64> {
     let groups = if set.light_groups { LightGroups::new(&crowd.lights(), crowd.library())?.names.len() } else { 0 };
     Ok(set.triples(groups) as u64)
 }

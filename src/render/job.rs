@@ -623,13 +623,10 @@ pub fn run<C: Space>(
         }
     }
     let passes = job.passes_of(crowd.shot())?;
-    let groups = if passes.light_groups {
-        crate::scene::passes::LightGroups::new(&crowd.lights(), crowd.library())?.names.len()
-    } else {
-        0
+    let channels = crate::layers::memory::FilmChannels {
+        blurred: job.shutter.is_some(),
+        passes: crate::layers::memory::pass_count_of(crowd, &passes)?,
     };
-    let channels =
-        crate::layers::memory::FilmChannels { blurred: job.shutter.is_some(), passes: passes.triples(groups) as u64 };
     check_film_fits(w, h, channels)?;
     let fingerprints: std::collections::HashMap<&str, String> =
         job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();

@@ -117,16 +117,11 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
         let blocks: Vec<String> = infos.iter().map(format_bot_info).collect();
         out!("{}", blocks.join("\n"));
     }
-    if let Some(first) = missing.first() {
+    if !missing.is_empty() {
         for e in &missing {
             eprintln!("throng: error: {}", super::wording(e));
         }
-        return Err(Error::Usage(format!(
-            "{} of {} agents not found (first: {})",
-            missing.len(),
-            ids.len(),
-            super::wording(first)
-        )));
+        return Err(Error::Usage(format!("{} of {} agents not found (named above)", missing.len(), ids.len())));
     }
     Ok(())
 }
