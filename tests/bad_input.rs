@@ -101,6 +101,11 @@ fn frames_outside_the_cache_render_empty_when_the_shot_asks_with_a_warning() {
     let shot = shot_with(dir.path(), &rows(), (1001, 1004), "outside_cache = \"empty\"");
     let (_, err) = succeeds(&["layers", s(&shot), "--out", s(&dir.path().join("bad.layers.json"))]);
     assert!(err.contains("warning") && err.contains("1004") && err.contains("no agents"), "{err}");
+    // A pipeline's --strict makes the warning an error, and no manifest is written.
+    let strict = dir.path().join("strict.layers.json");
+    let err = fails(&["layers", s(&shot), "--strict", "--out", s(&strict)]);
+    assert!(err.contains("error") && err.contains("1004") && err.contains("--strict"), "{err}");
+    assert!(!strict.exists());
 }
 
 // ------------------------------------------------ item 3: ids, pins, wardrobes

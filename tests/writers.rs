@@ -169,3 +169,26 @@ fn a_run_beside_frames_of_other_settings_says_the_folder_will_mix() {
     assert!(err.contains("rendered with other settings") && err.contains("will mix two renders"), "{err}");
     assert!(err.contains(s(&out.join("crowd0"))), "{err}");
 }
+
+#[test]
+fn strict_turns_the_mixing_warning_into_an_error_before_anything_is_written() {
+    let dir = common::tempdir().unwrap();
+    let d = dir.path();
+    let shot = shot(d, 1);
+    let out = d.join("render");
+    // Nothing to warn about: --strict changes nothing.
+    let mut args = render_args(&shot, &out, "1001-1002", "1");
+    args.push("--strict");
+    let (code, o, err) = run(&args);
+    assert_eq!(code, 0, "{o}{err}");
+    let before = files(&out);
+    assert!(!before.is_empty());
+    // Other settings beside them: an error naming the folder, exit 2, no new frame.
+    let mut args = render_args(&shot, &out, "1004", "2");
+    args.insert(0, "--strict");
+    let (code, _, err) = run(&args);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("error") && err.contains("will mix two renders") && err.contains("--strict"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(files(&out), before, "a strict run that refused left files behind");
+}

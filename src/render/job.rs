@@ -149,8 +149,12 @@ pub trait RenderObserver: Sync {
     fn pixels(&self, _at: RenderProgress<'_>, _fraction: f64) {}
     /// A layer-frame is finished: written, or `skipped` as already complete (resume).
     fn layer_finished(&self, _at: RenderProgress<'_>, _skipped: bool) {}
-    /// Something legal but worth telling the lighter (also kept in [`RenderReport::warnings`]).
-    fn warning(&self, _text: &str) {}
+    /// Something legal but worth telling the lighter (also kept in
+    /// [`RenderReport::warnings`]). An error ends the job there, before it
+    /// writes anything more: a pipeline that treats warnings as errors.
+    fn warning(&self, _text: &str) -> Result<()> {
+        Ok(())
+    }
 }
 
 /// An observer that reports nothing.
@@ -600,9 +604,10 @@ pub fn run<C: Space>(
         )));
     }
     let mut warnings = Vec::new();
-    let mut warn = |text: String| {
-        observer.warning(&text);
+    let mut warn = |text: String| -> Result<()> {
+        let told = observer.warning(&text);
         warnings.push(text);
+        told
     };
     let [w, h] = job.resolution.unwrap_or(crowd.shot().render.resolution);
     for layer in &job.layers {
@@ -639,7 +644,7 @@ pub fn run<C: Space>(
             job.out.join(&layer).display(),
             others.len(),
             others[0]
-        ));
+        ))?;
     }
     let stale = remove_stale_temporaries(&crowd.shot().name, job, &claims)?;
     if !stale.is_empty() {
@@ -647,7 +652,7 @@ pub fn run<C: Space>(
             "removed {} stale temporary file(s) a killed render left behind (first: {})",
             stale.len(),
             stale[0].display()
-        ));
+        ))?;
     }
     // BLASes are built as layer-frames need them (and kept for later frames).
     let mut blas = BlasSet::lazy(crowd.library());
@@ -670,7 +675,7 @@ pub fn run<C: Space>(
                              (renderFingerprint {}, now {fingerprint}: spp, resolution, seed, camera, lights, shutter, colourspace, Cryptomatte, compression or manifest differ)",
                             path.display(),
                             if meta.render_fingerprint.is_empty() { "none" } else { &meta.render_fingerprint },
-                        ));
+                        ))?;
                         false
                     }
                     Err(_) => false,

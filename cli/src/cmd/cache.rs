@@ -226,7 +226,7 @@ fn run_info(args: &CacheInfoArgs) -> Result<()> {
         });
     }
     for w in &info.warnings {
-        eprintln!("throng: warning: {w}");
+        super::warn(w)?;
     }
     if args.json {
         outln!("{}", super::to_json(&info)?);
@@ -277,7 +277,7 @@ fn run_convert(args: &CacheConvertArgs) -> Result<()> {
         outln!("import: {}", describe_table(o, r));
     }
     for w in throng::cache::bounds_warnings(&crowd) {
-        eprintln!("throng: warning: {w}");
+        super::warn(&w)?;
     }
     Ok(())
 }

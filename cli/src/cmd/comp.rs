@@ -51,7 +51,7 @@ pub fn run(args: &CompArgs) -> Result<()> {
         throng::output::WriterLock::claim_files(std::iter::once(args.out.as_path()).chain(args.png.as_deref()))?;
     let comped = throng::comp::comp_frame(&args.dir, args.frame, manifest.as_ref())?;
     for w in &comped.warnings {
-        eprintln!("throng: warning: {w}");
+        super::warn(w)?;
     }
     exr::write_layer(&args.out, &comped.film, &comped.meta)?;
     if let Some(png) = &args.png {

@@ -108,7 +108,7 @@ pub fn run(args: &LayersArgs) -> Result<()> {
     let crowd = super::load_crowd(&args.shot)?;
     args.check(crowd.shot())?;
     for w in layers::checks::check_placement(&crowd)?.warnings() {
-        eprintln!("throng: warning: {w}");
+        super::warn(&w)?;
     }
     let out = args.out.clone().unwrap_or_else(|| layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name));
     throng::output::refuse_input_overwrite(

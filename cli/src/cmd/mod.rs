@@ -46,6 +46,23 @@ pub struct Cli {
     /// EXR compression share one cap (default: every core). Output does not depend on it.
     #[arg(long, global = true, value_parser = values::threads)]
     pub threads: Option<usize>,
+    /// Treat every warning as an error, for pipelines: the command stops at the first one with exit
+    /// status 2, before it writes anything more (an output already written stays).
+    #[arg(long, global = true)]
+    pub strict: bool,
+}
+
+/// Whether warnings are errors (`--strict`), set once before the verb runs.
+static STRICT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Tells the user something legal but surprising on stderr; under
+/// `--strict` it is an error instead, which the caller returns at once.
+pub(crate) fn warn(text: &dyn std::fmt::Display) -> Result<()> {
+    if STRICT.load(std::sync::atomic::Ordering::Relaxed) {
+        return Err(throng::error::Error::Usage(format!("{text} (a warning, an error under --strict)")));
+    }
+    eprintln!("throng: warning: {text}");
+    Ok(())
 }
 
 /// The verbs of DESIGN.md.
@@ -86,6 +103,7 @@ pub fn run(cli: Cli) -> Result<()> {
     if let Some(n) = cli.threads {
         cap_threads(n);
     }
+    STRICT.store(cli.strict, std::sync::atomic::Ordering::Relaxed);
     match cli.verb {
         Verb::Demo(args) => demo::run(&args),
         Verb::Cache(verb) => cache::run(&verb),
@@ -163,7 +181,7 @@ fn load_crowd(shot: &std::path::Path) -> Result<throng::casting::ShotCrowd> {
 fn cast_shot(shot: throng::shot::Shot, shutter: Option<[f32; 2]>) -> Result<throng::casting::ShotCrowd> {
     let crowd = throng::casting::ShotCrowd::open(shot, shutter)?;
     for w in crowd.warnings() {
-        eprintln!("throng: warning: {w}");
+        warn(w)?;
     }
     Ok(crowd)
 }

@@ -121,10 +121,10 @@ impl RenderObserver for Progress {
             *last = Instant::now();
         }
     }
-    fn warning(&self, text: &str) {
+    fn warning(&self, text: &str) -> throng::error::Result<()> {
         if self.style == ProgressStyle::Bar {
             eprintln!();
         }
-        eprintln!("throng: warning: {text}");
+        super::warn(&text)
     }
 }

@@ -195,7 +195,7 @@ pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
             ));
         }
         if let Some(warning) = throng::layers::check_current(&manifest_path, m, crowd.shot())? {
-            eprintln!("throng: warning: {warning}");
+            super::warn(&warning)?;
         }
     }
     let layers = match (args.layer.as_str(), &manifest) {
