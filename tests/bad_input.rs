@@ -403,3 +403,13 @@ fn compression_is_chosen_and_lossless_by_default() {
     assert_eq!(films[0].cryptomatte, films[2].cryptomatte);
     let _ = throng(&["--version"]);
 }
+
+#[test]
+fn a_layer_map_into_a_missing_folder_is_refused_like_every_other_output() {
+    let dir = common::tempdir().unwrap();
+    let shot = shot_with(dir.path(), &rows(), (1001, 1003), "");
+    let (m, missing) = (dir.path().join("m.layers.json"), dir.path().join("nope").join("map.png"));
+    let err = fails(&["layers", s(&shot), "--out", s(&m), "--map", s(&missing)]);
+    assert!(err.contains("--map") && err.contains("nope"), "{err}");
+    assert!(!dir.path().join("nope").exists() && !m.exists());
+}

@@ -105,6 +105,9 @@ pub fn run(args: &LayersArgs) -> Result<()> {
     if let Some(out) = &args.out {
         super::existing_folder_of(out, "--out")?;
     }
+    if let Some(map) = &args.map {
+        super::existing_folder_of(map, "--map")?;
+    }
     let crowd = super::load_crowd(&args.shot)?;
     args.check(crowd.shot())?;
     for w in layers::checks::check_placement(&crowd)?.warnings() {
