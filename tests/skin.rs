@@ -76,6 +76,69 @@ fn simple_skin_matches_positions_worked_by_hand() {
     assert_close(mid, Vec3::new(-0.25, 0.75, 0.0), "middle at 90 degrees");
 }
 
+/// SimpleSkin with a rigid mesh (its own vertices, no weights) on a node
+/// one metre up joint 1 (the rotating one), and the same mesh on a
+/// top-level node outside the skeleton.
+fn simple_skin_with_a_rigid_limb(dir: &Path) -> PathBuf {
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(simple_skin("SimpleSkin.gltf")).unwrap()).unwrap();
+    doc["meshes"].as_array_mut().unwrap().push(serde_json::json!({
+        "name": "limb", "primitives": [{ "attributes": { "POSITION": 1 }, "indices": 0 }]
+    }));
+    let nodes = doc["nodes"].as_array_mut().unwrap();
+    nodes.push(serde_json::json!({ "name": "limb", "mesh": 1, "translation": [0.0, 1.0, 0.0] }));
+    nodes.push(serde_json::json!({ "name": "floor", "mesh": 1 }));
+    doc["nodes"][2]["children"] = serde_json::json!([3]);
+    doc["scenes"][0]["nodes"] = serde_json::json!([0, 1, 4]);
+    // Buffers are data URIs, so the copy stands alone.
+    let file = dir.join("limb.gltf");
+    std::fs::write(&file, serde_json::to_string(&doc).unwrap()).unwrap();
+    file
+}
+
+#[test]
+fn a_mesh_parented_to_a_joint_follows_it_rigidly() {
+    let dir = common::tempdir().unwrap();
+    let path = simple_skin_with_a_rigid_limb(dir.path());
+    let rig = load(&path, SkinOptions { pose_step: Some(6.0), ..Default::default() });
+    // The limb stands on joint 1: up to 1 + 1 + 2 m in the rest pose.
+    assert!((rig.height() - 4.0).abs() < 1e-5, "rest height {}", rig.height());
+    assert!(rig.warnings().iter().any(|w| w.contains("`floor`") && w.contains("left out")), "{:?}", rig.warnings());
+    let cycle = rig.cycle_index("#0").unwrap();
+    let key1 = 2.0 * 0.383f32.atan2(0.924);
+    for (step, angle) in
+        [(0, 0.0), (1, key1 / 2.0), (2, key1), (4, std::f32::consts::FRAC_PI_2), (16, -std::f32::consts::FRAC_PI_2)]
+    {
+        let joints = rig.step_joints(cycle, step);
+        // Piece 0 is the skin, piece 1 the limb: joint 1's transform,
+        // (0, 1, 0) then the rotation, applied to (0, 1, 0) + v.
+        let skin = rig.pose_piece(0, &joints, "t");
+        let limb = rig.pose_piece(1, &joints, "t");
+        let r = Quat::from_rotation_z(angle);
+        for (i, (v, w1)) in simple_skin_vertices().into_iter().enumerate() {
+            assert_close(skin.positions[i], hand_posed(v, w1, angle), &format!("skin, step {step} vertex {i}"));
+            let want = Vec3::new(0.0, 1.0, 0.0) + r * (Vec3::new(0.0, 1.0, 0.0) + v);
+            assert_close(limb.positions[i], want, &format!("limb, step {step} vertex {i}"));
+        }
+    }
+}
+
+#[test]
+fn a_shot_casts_the_joint_parented_mesh_with_the_skin() {
+    let dir = common::tempdir().unwrap();
+    let file = simple_skin_with_a_rigid_limb(dir.path());
+    let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
+    let text = std::fs::read_to_string(&shot).unwrap();
+    let figure = common::shared_asset("gltf/RiggedFigure/RiggedFigure.gltf");
+    std::fs::write(&shot, text.replace(&figure.display().to_string(), &file.display().to_string())).unwrap();
+    let (code, out, err) = common::run(&["cast".as_ref(), shot.as_os_str(), "--json".as_ref()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("`floor`") && err.contains("left out"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let text = v.to_string();
+    assert!(text.contains("limb"), "the limb is cast: {text}");
+}
+
 #[test]
 fn second_joint_set_counts_and_unnormalised_weights_warn_once() {
     // The multi-joint-set file repeats JOINTS_0/WEIGHTS_0 as JOINTS_1/WEIGHTS_1:

@@ -222,6 +222,36 @@ impl SkinnedRig {
             let part = rig.load_part(&file, &canonical, &mesh_ref)?;
             delivered.push((slot, mesh_ref, part));
         }
+        // Meshes on nodes under a joint, not skinned (robot limbs, a held
+        // prop): each moves rigidly with its node, as a piece bound wholly
+        // to that node, so posing, proxies, blur and instancing treat it
+        // like a skinned one.
+        let joints: std::collections::HashSet<usize> =
+            file.doc.skins().flat_map(|s| s.joints().map(|j| j.index()).collect::<Vec<_>>()).collect();
+        for node in file.doc.nodes() {
+            let (Some(mesh), None) = (node.mesh(), node.skin()) else { continue };
+            // Named by its node (a mesh may hang on several), by index where
+            // that name is a skinned mesh's too.
+            let name = node
+                .name()
+                .map(str::to_string)
+                .filter(|n| !rig.parts.contains_key(&(rig.canonical.clone(), n.clone())))
+                .unwrap_or_else(|| format!("#node{}", node.index()));
+            let mut at = Some(node.index());
+            while let Some(n) = at.filter(|n| !joints.contains(n)) {
+                at = rig.animated.hierarchy.nodes.get(n).and_then(|h| h.parent);
+            }
+            if at.is_none() {
+                rig.warnings.push(format!(
+                    "{}: mesh node `{name}` is neither skinned nor under a joint of the skeleton: left out",
+                    file.path.display()
+                ));
+                continue;
+            }
+            let canonical = rig.canonical.clone();
+            let part = rig.load_rigid_part(&file, &canonical, node.index(), &mesh, &name)?;
+            delivered.push((name.clone(), name, part));
+        }
         if delivered.is_empty() {
             return Err(file.err("the file has a skin but no node that uses it with a mesh"));
         }
@@ -345,6 +375,53 @@ impl SkinnedRig {
         }
         if gmesh.weights().is_some() || gmesh.primitives().any(|p| p.morph_targets().len() > 0) {
             self.warnings.push(format!("{label}: morph targets are ignored (skinning only)"));
+        }
+        self.part_list.push(SkinPart { pieces });
+        let i = self.part_list.len() - 1;
+        self.parts.insert(key, i);
+        Ok(i)
+    }
+
+    /// The mesh `gmesh` of node `node` (named `name`), not skinned, as a
+    /// part whose every vertex follows that node alone: one influence of
+    /// weight 1, an identity bind (the vertices are in the node's space).
+    fn load_rigid_part(
+        &mut self,
+        file: &GltfFile,
+        canonical: &Path,
+        node: usize,
+        gmesh: &gltf::Mesh,
+        name: &str,
+    ) -> Result<usize> {
+        let key = (canonical.to_path_buf(), name.to_string());
+        if let Some(&i) = self.parts.get(&key) {
+            return Ok(i);
+        }
+        let label = format!("{}#{name}", file.path.display());
+        let single = gmesh.primitives().len() == 1;
+        let mut pieces = Vec::new();
+        for prim in gmesh.primitives() {
+            let piece_name = if single { label.clone() } else { format!("{label}/{}", prim.index()) };
+            let mesh = read_primitive(file, gmesh, &prim, piece_name)?;
+            let mut one = [(0u16, 0.0f32); MAX_INFLUENCES];
+            one[0].1 = 1.0;
+            let bounds = mesh
+                .positions
+                .iter()
+                .fold(None, |b: Option<(Vec3, Vec3)>, &p| Some(b.map_or((p, p), |(lo, hi)| (lo.min(p), hi.max(p)))));
+            self.pieces.push(SkinPiece {
+                influences: vec![one; mesh.positions.len()],
+                mesh,
+                joint_nodes: vec![node],
+                inverse_bind: vec![Affine3A::IDENTITY],
+                file: file.path.clone(),
+                material: prim.material().index(),
+                joint_boxes: vec![bounds],
+            });
+            pieces.push(self.pieces.len() - 1);
+        }
+        if gmesh.weights().is_some() || gmesh.primitives().any(|p| p.morph_targets().len() > 0) {
+            self.warnings.push(format!("{label}: morph targets are ignored (rigid on its joint)"));
         }
         self.part_list.push(SkinPart { pieces });
         let i = self.part_list.len() - 1;
