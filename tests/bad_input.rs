@@ -311,8 +311,14 @@ fn completions_and_man_pages() {
     for shell in ["bash", "zsh", "fish"] {
         let (out, _) = succeeds(&["completions", shell]);
         assert!(out.contains("throng") && out.contains("render"), "{shell}");
+        // Only what a user types: not the engines' hidden `farm run-task`;
+        // the global flags are offered.
+        assert!(!out.contains("run-task") && out.contains("strict") && out.contains("threads"), "{shell}");
     }
     fails(&["completions", "tcsh"]);
+    // So does the farm's help.
+    let (help, _) = succeeds(&["farm", "--help"]);
+    assert!(!help.contains("run-task") && help.contains("submit"), "{help}");
     let (man, _) = succeeds(&["man"]);
     assert!(man.contains(".TH") && man.contains("throng"), "{man}");
     let dir = common::tempdir().unwrap();
