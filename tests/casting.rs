@@ -287,3 +287,85 @@ fn instance_counts_are_what_posing_places() {
     }
     assert!(slots > 0 && skinned > 0, "{slots} slot-rig and {skinned} skinned agents");
 }
+
+/// World bounds of every Full-LOD instance of every agent at the first frame, sorted per agent.
+fn instance_bounds(crowd: &ShotCrowd) -> Vec<(u32, Vec<[f32; 6]>)> {
+    let f = crowd.shot().frames.start;
+    let block = crowd.agents_at(f).unwrap();
+    let lib = crowd.library();
+    let mut out = Vec::new();
+    for a in &block.agents {
+        let mut insts = Vec::new();
+        crowd.agent_instances(a, Lod::Full, throng::scene::vis::ALL, &mut insts).unwrap();
+        let mut boxes: Vec<[f32; 6]> = insts
+            .iter()
+            .map(|i| {
+                let (lo, hi) = lib.meshes[i.mesh as usize].bounds();
+                let (mut wlo, mut whi) = (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY);
+                for c in 0..8 {
+                    let p = glam::Vec3::select(glam::BVec3::new(c & 1 != 0, c & 2 != 0, c & 4 != 0), hi, lo);
+                    let w = i.world_from_object.transform_point3(p);
+                    (wlo, whi) = (wlo.min(w), whi.max(w));
+                }
+                [wlo.x, wlo.y, wlo.z, whi.x, whi.y, whi.z]
+            })
+            .collect();
+        boxes.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        out.push((a.id, boxes));
+    }
+    out
+}
+
+#[test]
+fn a_part_modelled_facing_minus_z_is_turned_by_its_forward_key() {
+    // The demo wears the Kenney alien from a copy turned 180 degrees about Y
+    // (its parts face -Z). The original with `forward = "-z"` dresses every
+    // agent as the turned copy does, to a millimetre (the copy went through
+    // its own float rounding).
+    let dir = common::tempdir().unwrap();
+    let stock = common::repo_path("wardrobes/kenney_alien.toml");
+    let original = common::repo_path("demo/parts/kenney_alien.glb");
+    let text = std::fs::read_to_string(&stock).unwrap();
+    let turned = format!("file = \"{}\"\nforward = \"-z\"", original.display());
+    let text = text.replace("file = \"../demo/parts/kenney_alien_facing_z.glb\"", &turned);
+    assert!(text.contains("forward"), "{text}");
+    let copy = dir.path().join("kenney_alien.toml");
+    std::fs::write(&copy, text).unwrap();
+    let with_key = load_with(|shot, _| {
+        for w in &mut shot.wardrobes {
+            if w.ends_with("kenney_alien.toml") {
+                *w = copy.clone();
+            }
+        }
+    });
+    let a = instance_bounds(&ShotCrowd::load(&demo_shot()).unwrap());
+    let b = instance_bounds(&with_key);
+    assert_eq!(a.len(), b.len());
+    let mut aliens = 0;
+    for ((id, x), (_, y)) in a.iter().zip(&b) {
+        assert_eq!(x.len(), y.len(), "agent {id}");
+        for (p, q) in x.iter().zip(y) {
+            assert!(p.iter().zip(q).all(|(u, v)| (u - v).abs() < 1e-3), "agent {id}: {p:?} vs {q:?}");
+        }
+        aliens += 1;
+    }
+    assert!(aliens > 0);
+    // Without the key the original walks backwards: its parts' bounds differ.
+    let without = load_with(|shot, _| {
+        let text = std::fs::read_to_string(&copy).unwrap().replace("forward = \"-z\"\n", "");
+        let plain = dir.path().join("plain.toml");
+        std::fs::write(&plain, text).unwrap();
+        for w in &mut shot.wardrobes {
+            if w.ends_with("kenney_alien.toml") {
+                *w = plain.clone();
+            }
+        }
+    });
+    assert_ne!(instance_bounds(&without), a, "the key must matter");
+    // Along up is refused, naming the part.
+    let bad = std::fs::read_to_string(&copy).unwrap().replacen("forward = \"-z\"", "forward = \"+y\"", 1);
+    let bad_path = dir.path().join("bad.toml");
+    std::fs::write(&bad_path, bad).unwrap();
+    let err = Wardrobes::load(&[bad_path]).unwrap_err().to_string();
+    assert!(err.contains("bad.toml") && err.contains("parts[0].forward") && err.contains("along up"), "{err}");
+}

@@ -330,6 +330,7 @@ impl Casting {
                             mesh: mesh.as_str().into(),
                             material: GLTF_MATERIAL.into(),
                             uniform: false,
+                            facing: glam::Quat::IDENTITY,
                         })),
                     })
                     .collect();

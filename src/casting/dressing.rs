@@ -215,7 +215,7 @@ struct Memo {
     /// Each skinned part (and material) resolved to its (piece, material) list.
     skin_parts: HashMap<SharedKey, Vec<(usize, MaterialId)>>,
     /// Fit index by (rig, slot, first mesh).
-    fit_index: HashMap<(usize, usize, MeshId), u32>,
+    fit_index: HashMap<(usize, usize, MeshId, [u32; 4]), u32>,
 }
 
 impl Dressing {
@@ -288,21 +288,33 @@ impl Dressing {
             };
             let Some(&(first_mesh, _)) = pieces.first() else { continue };
             let slot = &rig.slots()[slot_index];
-            let fit = *memo.fit_index.entry((address(&cast.rig), slot_index, first_mesh)).or_insert_with(|| {
-                // Fit the whole part (all its pieces) to the box.
-                let lib = assets.library();
-                let (lo, hi) = pieces
-                    .iter()
-                    .map(|&(m, _)| lib.meshes[m as usize].bounds())
-                    .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
-                    .unwrap_or((Vec3::ZERO, Vec3::ZERO));
-                let size = (slot.proxy_max - slot.proxy_min).max(Vec3::splat(1e-4));
-                self.fits.push(PartFit {
-                    slot_from_part: fit_part(lo, hi, slot.proxy_min, slot.proxy_max, part.uniform),
-                    slot_from_proxy: Affine3A::from_scale_rotation_translation(size, Quat::IDENTITY, slot.proxy_min),
+            let facing = part.facing;
+            let turned = facing.to_array().map(f32::to_bits);
+            let fit =
+                *memo.fit_index.entry((address(&cast.rig), slot_index, first_mesh, turned)).or_insert_with(|| {
+                    // Fit the whole part (all its pieces), turned to face +Z, to
+                    // the box. The turn is by whole axes, so the turned corners
+                    // bound the turned mesh exactly.
+                    let lib = assets.library();
+                    let (lo, hi) = pieces
+                        .iter()
+                        .map(|&(m, _)| lib.meshes[m as usize].bounds())
+                        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+                        .unwrap_or((Vec3::ZERO, Vec3::ZERO));
+                    let (a, b) = (facing * lo, facing * hi);
+                    let (lo, hi) = (a.min(b), a.max(b));
+                    let size = (slot.proxy_max - slot.proxy_min).max(Vec3::splat(1e-4));
+                    self.fits.push(PartFit {
+                        slot_from_part: fit_part(lo, hi, slot.proxy_min, slot.proxy_max, part.uniform)
+                            * Affine3A::from_quat(facing),
+                        slot_from_proxy: Affine3A::from_scale_rotation_translation(
+                            size,
+                            Quat::IDENTITY,
+                            slot.proxy_min,
+                        ),
+                    });
+                    self.fits.len() as u32 - 1
                 });
-                self.fits.len() as u32 - 1
-            });
             for (i, &(mesh, material)) in pieces.iter().enumerate() {
                 parts.push(DressedPart { slot: slot_index as u32, mesh, material, fit, proxy: i == 0 });
             }

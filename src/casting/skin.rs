@@ -150,7 +150,7 @@ fn axis_vector(a: Axis) -> Vec3 {
 }
 
 /// The rotation taking the file's `up` to +Y and `forward` to +Z.
-fn orientation(path: &Path, up: Axis, forward: Axis) -> Result<Quat> {
+pub(crate) fn orientation(path: &Path, up: Axis, forward: Axis) -> Result<Quat> {
     let (u, f) = (axis_vector(up), axis_vector(forward));
     if u.dot(f).abs() > 0.5 {
         return Err(

@@ -39,6 +39,9 @@ pub struct CastPart {
     pub(crate) material: Arc<str>,
     /// Scaled uniformly (heads) rather than per axis.
     pub uniform: bool,
+    /// Turns the mesh's own up and forward onto the slot's +Y and +Z
+    /// (the part's `up` and `forward`; identity by default).
+    pub(crate) facing: glam::Quat,
 }
 
 /// The wardrobe file version this build reads.
@@ -99,6 +102,16 @@ pub(crate) struct PartSpec {
     /// Optional weights for `materials` (default uniform).
     #[serde(default)]
     pub(crate) material_weights: Option<Vec<f32>>,
+    /// The mesh's up axis (default +y), as a skinned rig's `up`.
+    #[serde(default)]
+    pub(crate) up: Option<crate::shot::Axis>,
+    /// The way the mesh faces (default +z), as a skinned rig's `forward`:
+    /// a part modelled facing -z is turned to face the agent's way.
+    #[serde(default)]
+    pub(crate) forward: Option<crate::shot::Axis>,
+    /// The rotation `up` and `forward` make (resolved on load).
+    #[serde(skip)]
+    pub(crate) facing: glam::Quat,
     /// The cast part for each material, made once on load and shared by
     /// every agent that draws it.
     #[serde(skip)]
@@ -119,6 +132,7 @@ impl PartSpec {
                 mesh: self.mesh.clone(),
                 material: self.materials.get(m).cloned().unwrap_or_else(|| GLTF_MATERIAL.into()),
                 uniform,
+                facing: self.facing,
             })
         })
     }
@@ -288,6 +302,14 @@ impl Wardrobes {
                     }
                     check_readable_file(&full).map_err(|e| e.field(format!("{key}.file")))?;
                     part.file = full.into();
+                    if part.up.is_some() || part.forward.is_some() {
+                        let (up, forward) = (
+                            part.up.unwrap_or(crate::shot::Axis::PosY),
+                            part.forward.unwrap_or(crate::shot::Axis::PosZ),
+                        );
+                        part.facing = crate::casting::skin::orientation(path, up, forward)
+                            .map_err(|e| e.field(format!("{key}.forward")))?;
+                    }
                     if !(part.weight >= 0.0 && part.weight.is_finite()) {
                         return Err(Error::invalid(path, format!("weight must be >= 0, got {}", part.weight))
                             .field(format!("{key}.weight")));
