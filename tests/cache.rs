@@ -714,3 +714,45 @@ fn timings_on_real_file() {
     eprintln!("read whole .crowd ({} frames): {:?}", all.frames.len(), t.elapsed());
     assert_eq!(all, crowd);
 }
+
+/// Issue 27 item 7: no imported recording turns faster than the turn rate
+/// between consecutive frames (tables at the shot's 24 fps, JuPedSim at its 25).
+#[test]
+fn imported_recordings_turn_no_faster_than_a_person() {
+    use throng::cache::tabular::{self, Preset, TabularOptions, TabularSpec};
+    let fixtures = common::fixture("tabular");
+    let check = |crowd: &CrowdCache, fps: f32, rate_deg: f32, what: &str| {
+        let step = rate_deg.to_radians() / fps;
+        let mut last: std::collections::HashMap<u32, (i32, f32)> = Default::default();
+        let mut pairs = 0;
+        for b in &crowd.frames {
+            for a in &b.agents {
+                if let Some((f, h)) = last.get(&a.id).copied().filter(|(f, _)| f + 1 == b.frame) {
+                    let d =
+                        (a.heading - h + std::f32::consts::PI).rem_euclid(std::f32::consts::TAU) - std::f32::consts::PI;
+                    assert!(d.abs() <= step + 1e-4, "{what}: agent {} turns {d} rad at frame {f}->{}", a.id, b.frame);
+                    pairs += 1;
+                }
+                last.insert(a.id, (b.frame, a.heading));
+            }
+        }
+        assert!(pairs > 0, "{what}: no consecutive frames checked");
+    };
+    for (file, preset) in [("petrack_cm.txt", Preset::PeTrack), ("eth_obsmat.txt", Preset::Eth)] {
+        for rate in [None, Some(90.0)] {
+            let spec = TabularSpec { preset: Some(preset), turn_rate: rate, ..Default::default() };
+            let o = TabularOptions::resolve(&spec, 24.0).unwrap();
+            let (crowd, _) = tabular::read(&fixtures.join(file), &o).unwrap();
+            check(&crowd, 24.0, rate.unwrap_or(360.0), file);
+        }
+    }
+    let real = common::shared_asset("crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
+    for (file, rate) in [(common::fixture("jupedsim_small.sqlite"), 360.0), (real.clone(), 360.0), (real, 90.0)] {
+        let opts = ImportOptions::default().with_turn_rate(Some(rate)).unwrap();
+        let crowd = cache::read_with(&file, &opts).unwrap();
+        check(&crowd, 25.0, rate, &file.display().to_string());
+    }
+    // A rate that is no rate is refused, naming the key.
+    let e = ImportOptions::default().with_turn_rate(Some(0.0)).unwrap_err().to_string();
+    assert!(e.contains("turn_rate"), "{e}");
+}

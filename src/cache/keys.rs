@@ -272,6 +272,8 @@ import_keys! {
     heading_window: Option<f32> => Number, Motion;
     /// Speed (m/s) below which the heading is held and the idle cycle plays.
     hold_speed: Option<f32> => Number, Motion;
+    /// Fastest heading change, degrees per second (a person's turn) [default: 360].
+    turn_rate: Option<f32> => Number, Motion;
     /// Rig given to every imported agent (without a rig column) [default: bipedThinA].
     rig: Option<String> => Text, Names;
     /// Walk cycle given to every imported agent (without a cycle column) [default: WalkA].

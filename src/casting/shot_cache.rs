@@ -104,7 +104,8 @@ pub(crate) fn shot_import(shot: &Shot) -> Result<Import> {
         o.gaits = gaits(&o.cycle)?;
         return Ok(Import { tabular: Some(o), ..Default::default() });
     }
-    let mut jupedsim = ImportOptions { rig: rig.clone(), cycle: walk.clone(), ..Default::default() };
+    let mut jupedsim =
+        ImportOptions { rig: rig.clone(), cycle: walk.clone(), ..Default::default() }.with_turn_rate(spec.turn_rate)?;
     if format == Format::JuPedSim {
         if let Some(r) = shot.rigs.get(&rig) {
             let g = gaits(&walk)?.get(&rig).copied();

@@ -125,9 +125,9 @@ impl ImportArgs {
         let (rig, cycle) = self.names();
         let g = &self.gait;
         // The flags are checked before the rig file is read.
-        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, None)?;
+        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, None)?.with_turn_rate(self.keys.turn_rate)?;
         let clip = g.rig_file.as_deref().map(|f| import_clip(f, &rig, &cycle)).transpose()?;
-        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, clip)
+        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, clip)?.with_turn_rate(self.keys.turn_rate)
     }
 
     /// How to read `input`: a table when its extension or the layout flags
