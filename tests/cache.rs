@@ -756,3 +756,24 @@ fn imported_recordings_turn_no_faster_than_a_person() {
     let e = ImportOptions::default().with_turn_rate(Some(0.0)).unwrap_err().to_string();
     assert!(e.contains("turn_rate"), "{e}");
 }
+
+/// Issue 27 item 7: a JuPedSim import refuses each table key it cannot
+/// apply, naming it (it used to ignore them), and applies the ones it can.
+#[test]
+fn jupedsim_refuses_the_keys_it_cannot_apply() {
+    let dir = common::tempdir().unwrap();
+    let out_path = dir.path().join("j.crowd");
+    for (flag, value) in
+        [("--hold-speed", "0.5"), ("--heading", "motion"), ("--idle-cycle", "IdleA"), ("--units", "cm")]
+    {
+        let out = throng(&["cache", "convert", s(&fixture()), s(&out_path), flag, value]);
+        assert_eq!(out.status.code(), Some(2), "{flag}");
+        assert_has(&String::from_utf8(out.stderr).unwrap(), &[flag, "JuPedSim", "cannot apply"]);
+        assert!(!out_path.exists(), "{flag}: no output");
+    }
+    let out = throng(&["cache", "convert", s(&fixture()), s(&out_path), "--turn-rate", "90", "--rotate", "90"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let spec = cache::TabularSpec { hold_speed: Some(0.5), ..Default::default() };
+    assert_eq!(spec.jupedsim_refuses().map(|r| r.0), Some("hold_speed"));
+    assert_eq!(cache::TabularSpec { turn_rate: Some(90.0), ..Default::default() }.jupedsim_refuses(), None);
+}

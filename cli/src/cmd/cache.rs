@@ -143,6 +143,11 @@ impl ImportArgs {
         }
         let table = format == Format::Tabular || (format == Format::Csv && spec.describes_layout());
         if !table {
+            if format == Format::JuPedSim {
+                if let Some(refused) = spec.jupedsim_refuses() {
+                    return Err(flag((refused.0.to_string(), refused.1)));
+                }
+            }
             let jupedsim = if format == Format::JuPedSim { self.options()? } else { ImportOptions::default() };
             return Ok(Import { jupedsim, tabular: None, placement });
         }
