@@ -777,3 +777,43 @@ fn jupedsim_refuses_the_keys_it_cannot_apply() {
     assert_eq!(spec.jupedsim_refuses().map(|r| r.0), Some("hold_speed"));
     assert_eq!(cache::TabularSpec { turn_rate: Some(90.0), ..Default::default() }.jupedsim_refuses(), None);
 }
+
+/// Issue 27 item 7: `cache info` warns, naming the likely unit, when speeds
+/// or spacing are not a person's.
+#[test]
+fn info_warns_of_speeds_and_spacing_people_do_not_have() {
+    let crowd = |spacing: f32, speed: f32| CrowdCache {
+        rigs: vec!["bipedThinA".into()],
+        cycles: vec!["WalkA".into()],
+        frames: (0..30)
+            .map(|f| FrameBlock {
+                frame: f,
+                agents: (0..12)
+                    .map(|i| AgentSample {
+                        id: i,
+                        position: Vec3::new(i as f32 * spacing, 0.0, f as f32 * speed / 24.0),
+                        heading: 0.0,
+                        rig: 0,
+                        cycle: 0,
+                        cycle_frame: 0.0,
+                        flags: 0,
+                    })
+                    .collect(),
+            })
+            .collect(),
+    };
+    assert_eq!(cache::bounds_warnings(&crowd(1.0, 1.4)), Vec::<String>::new());
+    let close = cache::bounds_warnings(&crowd(0.1, 1.4));
+    assert!(close.len() == 1 && close[0].contains("closer than 0.2 m"), "{close:?}");
+    let fast = cache::bounds_warnings(&crowd(1.0, 140.0));
+    assert!(fast.iter().any(|w| w.contains("median walking speed 140") && w.contains("centimetres")), "{fast:?}");
+    let slow = cache::bounds_warnings(&crowd(1.0, 0.05));
+    assert!(slow.iter().any(|w| w.contains("median walking speed 0.050")), "{slow:?}");
+    // The PeTrack fixture read in metres, not its centimetres: `cache info` says so.
+    let petrack = common::fixture("tabular").join("petrack_cm.txt");
+    let out = throng(&["cache", "info", s(&petrack), "--preset", "petrack", "--units", "m"]);
+    assert!(out.status.success());
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["median walking speed 100", "centimetres"]);
+    let out = throng(&["cache", "info", s(&petrack), "--preset", "petrack"]);
+    assert!(!String::from_utf8(out.stderr).unwrap().contains("walking speed"));
+}
