@@ -714,3 +714,106 @@ fn timings_on_real_file() {
     eprintln!("read whole .crowd ({} frames): {:?}", all.frames.len(), t.elapsed());
     assert_eq!(all, crowd);
 }
+
+/// Issue 27 item 7: no imported recording turns faster than the turn rate
+/// between consecutive frames (tables at the shot's 24 fps, JuPedSim at its 25).
+#[test]
+fn imported_recordings_turn_no_faster_than_a_person() {
+    use throng::cache::tabular::{self, Preset, TabularOptions, TabularSpec};
+    let fixtures = common::fixture("tabular");
+    let check = |crowd: &CrowdCache, fps: f32, rate_deg: f32, what: &str| {
+        let step = rate_deg.to_radians() / fps;
+        let mut last: std::collections::HashMap<u32, (i32, f32)> = Default::default();
+        let mut pairs = 0;
+        for b in &crowd.frames {
+            for a in &b.agents {
+                if let Some((f, h)) = last.get(&a.id).copied().filter(|(f, _)| f + 1 == b.frame) {
+                    let d =
+                        (a.heading - h + std::f32::consts::PI).rem_euclid(std::f32::consts::TAU) - std::f32::consts::PI;
+                    assert!(d.abs() <= step + 1e-4, "{what}: agent {} turns {d} rad at frame {f}->{}", a.id, b.frame);
+                    pairs += 1;
+                }
+                last.insert(a.id, (b.frame, a.heading));
+            }
+        }
+        assert!(pairs > 0, "{what}: no consecutive frames checked");
+    };
+    for (file, preset) in [("petrack_cm.txt", Preset::PeTrack), ("eth_obsmat.txt", Preset::Eth)] {
+        for rate in [None, Some(90.0)] {
+            let spec = TabularSpec { preset: Some(preset), turn_rate: rate, ..Default::default() };
+            let o = TabularOptions::resolve(&spec, 24.0).unwrap();
+            let (crowd, _) = tabular::read(&fixtures.join(file), &o).unwrap();
+            check(&crowd, 24.0, rate.unwrap_or(360.0), file);
+        }
+    }
+    let real = common::shared_asset("crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
+    for (file, rate) in [(common::fixture("jupedsim_small.sqlite"), 360.0), (real.clone(), 360.0), (real, 90.0)] {
+        let opts = ImportOptions::default().with_turn_rate(Some(rate)).unwrap();
+        let crowd = cache::read_with(&file, &opts).unwrap();
+        check(&crowd, 25.0, rate, &file.display().to_string());
+    }
+    // A rate that is no rate is refused, naming the key.
+    let e = ImportOptions::default().with_turn_rate(Some(0.0)).unwrap_err().to_string();
+    assert!(e.contains("turn_rate"), "{e}");
+}
+
+/// Issue 27 item 7: a JuPedSim import refuses each table key it cannot
+/// apply, naming it (it used to ignore them), and applies the ones it can.
+#[test]
+fn jupedsim_refuses_the_keys_it_cannot_apply() {
+    let dir = common::tempdir().unwrap();
+    let out_path = dir.path().join("j.crowd");
+    for (flag, value) in
+        [("--hold-speed", "0.5"), ("--heading", "motion"), ("--idle-cycle", "IdleA"), ("--units", "cm")]
+    {
+        let out = throng(&["cache", "convert", s(&fixture()), s(&out_path), flag, value]);
+        assert_eq!(out.status.code(), Some(2), "{flag}");
+        assert_has(&String::from_utf8(out.stderr).unwrap(), &[flag, "JuPedSim", "cannot apply"]);
+        assert!(!out_path.exists(), "{flag}: no output");
+    }
+    let out = throng(&["cache", "convert", s(&fixture()), s(&out_path), "--turn-rate", "90", "--rotate", "90"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let spec = cache::TabularSpec { hold_speed: Some(0.5), ..Default::default() };
+    assert_eq!(spec.jupedsim_refuses().map(|r| r.0), Some("hold_speed"));
+    assert_eq!(cache::TabularSpec { turn_rate: Some(90.0), ..Default::default() }.jupedsim_refuses(), None);
+}
+
+/// Issue 27 item 7: `cache info` warns, naming the likely unit, when speeds
+/// or spacing are not a person's.
+#[test]
+fn info_warns_of_speeds_and_spacing_people_do_not_have() {
+    let crowd = |spacing: f32, speed: f32| CrowdCache {
+        rigs: vec!["bipedThinA".into()],
+        cycles: vec!["WalkA".into()],
+        frames: (0..30)
+            .map(|f| FrameBlock {
+                frame: f,
+                agents: (0..12)
+                    .map(|i| AgentSample {
+                        id: i,
+                        position: Vec3::new(i as f32 * spacing, 0.0, f as f32 * speed / 24.0),
+                        heading: 0.0,
+                        rig: 0,
+                        cycle: 0,
+                        cycle_frame: 0.0,
+                        flags: 0,
+                    })
+                    .collect(),
+            })
+            .collect(),
+    };
+    assert_eq!(cache::bounds_warnings(&crowd(1.0, 1.4)), Vec::<String>::new());
+    let close = cache::bounds_warnings(&crowd(0.1, 1.4));
+    assert!(close.len() == 1 && close[0].contains("closer than 0.2 m"), "{close:?}");
+    let fast = cache::bounds_warnings(&crowd(1.0, 140.0));
+    assert!(fast.iter().any(|w| w.contains("median walking speed 140") && w.contains("centimetres")), "{fast:?}");
+    let slow = cache::bounds_warnings(&crowd(1.0, 0.05));
+    assert!(slow.iter().any(|w| w.contains("median walking speed 0.050")), "{slow:?}");
+    // The PeTrack fixture read in metres, not its centimetres: `cache info` says so.
+    let petrack = common::fixture("tabular").join("petrack_cm.txt");
+    let out = throng(&["cache", "info", s(&petrack), "--preset", "petrack", "--units", "m"]);
+    assert!(out.status.success());
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["median walking speed 100", "centimetres"]);
+    let out = throng(&["cache", "info", s(&petrack), "--preset", "petrack"]);
+    assert!(!String::from_utf8(out.stderr).unwrap().contains("walking speed"));
+}

@@ -1,7 +1,7 @@
 //! What a cache holds: frame range, agent counts, rigs, cycles and bounds
 //! (`throng cache info` prints it).
 
-use std::collections::{BTreeMap, HashSet};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fmt::Write as _;
 
 use serde::Serialize;
@@ -114,6 +114,100 @@ pub(crate) fn bounds_warning(b: &Bounds, agents: usize) -> Option<String> {
     None
 }
 
+/// Plausible median walking speed of people, m/s.
+pub(crate) const PLAUSIBLE_SPEED: (f32, f32) = (0.2, 3.0);
+/// Closest two people stand, metres.
+pub(crate) const MIN_SPACING: f32 = 0.2;
+/// Frames the spacing check samples, evenly spread (bounds its cost).
+const SPACING_FRAMES: usize = 32;
+/// Most speed samples kept for the median.
+const MAX_SPEED_SAMPLES: usize = 4_000_000;
+
+/// Speeds and spacing of people, gathered frame by frame for [`Plausible::warnings`].
+#[derive(Default)]
+pub(crate) struct Plausible {
+    last: HashMap<u32, (i32, glam::Vec3)>,
+    speeds: Vec<f32>,
+    checked: usize,
+    crowded: usize,
+}
+
+impl Plausible {
+    /// Adds one frame; `sample` says whether its spacing is checked. Speeds
+    /// count frames at the shot's 24 fps; only moving agents count.
+    pub(crate) fn add(&mut self, block: &super::FrameBlock, sample: bool) {
+        for a in block.agents.iter().filter(|a| !a.seated() && !a.hidden()) {
+            if let Some((f, p)) = self.last.insert(a.id, (block.frame, a.position)) {
+                let d = (a.position - p).with_y(0.0).length();
+                if f + 1 == block.frame && d > 1e-6 && self.speeds.len() < MAX_SPEED_SAMPLES {
+                    self.speeds.push(d * super::jupedsim::SHOT_FPS);
+                }
+            }
+        }
+        if !sample || block.agents.len() < MIN_AGENTS_FOR_SPREAD {
+            return;
+        }
+        // A grid of MIN_SPACING cells: a closer neighbour is in the 3 x 3 cells around.
+        let cell = |p: glam::Vec3| ((p.x / MIN_SPACING).floor() as i64, (p.z / MIN_SPACING).floor() as i64);
+        let mut grid: HashMap<(i64, i64), Vec<glam::Vec3>> = HashMap::new();
+        for a in &block.agents {
+            grid.entry(cell(a.position)).or_default().push(a.position);
+        }
+        for a in &block.agents {
+            let (cx, cz) = cell(a.position);
+            self.checked += 1;
+            let near = (-1..=1).flat_map(|dx| (-1..=1).map(move |dz| (cx + dx, cz + dz))).any(|c| {
+                grid.get(&c).is_some_and(|ps| {
+                    ps.iter().any(|q| {
+                        let d = (*q - a.position).with_y(0.0).length();
+                        d > 0.0 && d < MIN_SPACING
+                    })
+                })
+            });
+            self.crowded += usize::from(near);
+        }
+    }
+
+    /// Which frames of `frames` the spacing check samples.
+    pub(crate) fn sampled(frames: usize, i: usize) -> bool {
+        frames <= SPACING_FRAMES || i.is_multiple_of(frames.div_ceil(SPACING_FRAMES))
+    }
+
+    /// Warnings naming the likely unit when speeds or spacing are not a person's.
+    pub(crate) fn warnings(mut self) -> Vec<String> {
+        let mut out = Vec::new();
+        if self.speeds.len() >= 20 {
+            let mid = self.speeds.len() / 2;
+            let median = *self.speeds.select_nth_unstable_by(mid, f32::total_cmp).1;
+            let (lo, hi) = PLAUSIBLE_SPEED;
+            let unit = if median > hi * 300.0 {
+                Some("millimetres? set units = \"mm\"")
+            } else if median > hi * 10.0 {
+                Some("centimetres? set units = \"cm\"")
+            } else if median > hi {
+                Some("feet? set units = \"ft\"; or a wrong source_fps")
+            } else if median < lo {
+                Some("metres read as a smaller unit? check units")
+            } else {
+                None
+            };
+            if let Some(unit) = unit {
+                out.push(format!(
+                    "median walking speed {median:.3} m/s (at 24 fps), outside the {lo}-{hi} m/s of people: is the data in {unit}"
+                ));
+            }
+        }
+        if self.checked > 0 && self.crowded * 10 > self.checked {
+            out.push(format!(
+                "{} of {} sampled agents stand closer than {MIN_SPACING} m to another: closer than people stand; \
+                 is the data in a smaller unit than it is read in (metres read as centimetres?)",
+                self.crowded, self.checked
+            ));
+        }
+        out
+    }
+}
+
 /// [`bounds_warning`] for a crowd in memory.
 pub fn bounds_warnings(crowd: &CrowdCache) -> Vec<String> {
     let mut ids = HashSet::new();
@@ -125,7 +219,13 @@ pub fn bounds_warnings(crowd: &CrowdCache) -> Vec<String> {
         b.min = glam::Vec3::from(b.min).min(a.position).to_array();
         b.max = glam::Vec3::from(b.max).max(a.position).to_array();
     }
-    bounds.and_then(|b| bounds_warning(&b, ids.len())).into_iter().collect()
+    let mut plausible = Plausible::default();
+    for (i, f) in crowd.frames.iter().enumerate() {
+        plausible.add(f, Plausible::sampled(crowd.frames.len(), i));
+    }
+    let mut out: Vec<String> = bounds.and_then(|b| bounds_warning(&b, ids.len())).into_iter().collect();
+    out.extend(plausible.warnings());
+    out
 }
 
 /// Summarises a cache, reading one frame at a time.
@@ -140,8 +240,10 @@ pub fn info(reader: &CacheReader) -> Result<CacheInfo> {
     let (mut total, mut seated_frames, mut hidden_frames) = (0u64, 0u64, 0u64);
     let (mut min_n, mut max_n) = (usize::MAX, 0);
     let mut bounds: Option<Bounds> = None;
-    for &f in frames {
+    let mut plausible = Plausible::default();
+    for (i, &f) in frames.iter().enumerate() {
         let block = reader.read_frame(f)?;
+        plausible.add(&block, Plausible::sampled(frames.len(), i));
         min_n = min_n.min(block.agents.len());
         max_n = max_n.max(block.agents.len());
         for a in &block.agents {
@@ -197,7 +299,12 @@ pub fn info(reader: &CacheReader) -> Result<CacheInfo> {
         hidden_agent_frames: hidden_frames,
         rigs: counts(reader.rigs(), &rig_frames, &rig_agents),
         cycles: counts(reader.cycles(), &cycle_frames, &cycle_agents),
-        warnings: bounds.as_ref().and_then(|b| bounds_warning(b, ids.len())).into_iter().collect(),
+        warnings: bounds
+            .as_ref()
+            .and_then(|b| bounds_warning(b, ids.len()))
+            .into_iter()
+            .chain(plausible.warnings())
+            .collect(),
         bounds,
         import: None,
     })

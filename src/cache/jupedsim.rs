@@ -35,6 +35,7 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use rusqlite::{Connection, OpenFlags};
 
+use super::tabular::{turn_toward, DEFAULT_TURN_RATE};
 use super::{validate, AgentSample, CrowdCache, FrameBlock};
 use crate::error::{Error, IoContext, Result};
 
@@ -73,6 +74,8 @@ pub struct ImportOptions {
     /// The cycle as read from `--rig-file`; `stride` and `cycle_length`
     /// override it.
     pub rig_clip: Option<RigClip>,
+    /// Fastest heading change, degrees per second ([`DEFAULT_TURN_RATE`]).
+    pub turn_rate: f32,
 }
 
 impl Default for ImportOptions {
@@ -83,6 +86,7 @@ impl Default for ImportOptions {
             stride: None,
             cycle_length: None,
             rig_clip: None,
+            turn_rate: DEFAULT_TURN_RATE,
         }
     }
 }
@@ -97,9 +101,24 @@ impl ImportOptions {
         cycle_length: Option<f32>,
         rig_clip: Option<RigClip>,
     ) -> Result<ImportOptions> {
-        let opts = ImportOptions { rig: rig.to_string(), cycle: cycle.to_string(), stride, cycle_length, rig_clip };
+        let opts = ImportOptions {
+            rig: rig.to_string(),
+            cycle: cycle.to_string(),
+            stride,
+            cycle_length,
+            rig_clip,
+            turn_rate: DEFAULT_TURN_RATE,
+        };
         opts.check()?;
         Ok(opts)
+    }
+
+    /// These options turning at most `turn_rate` degrees per second
+    /// (`None`: [`DEFAULT_TURN_RATE`]), checked.
+    pub fn with_turn_rate(mut self, turn_rate: Option<f32>) -> Result<ImportOptions> {
+        self.turn_rate = turn_rate.unwrap_or(DEFAULT_TURN_RATE);
+        self.check()?;
+        Ok(self)
     }
 
     /// Metres per cycle: `--stride`, else the rig clip's, else [`DEFAULT_STRIDE`].
@@ -131,7 +150,9 @@ impl ImportOptions {
     }
 
     fn check(&self) -> Result<()> {
-        for (v, option) in [(self.stride(), "stride"), (self.cycle_length(), "cycle_length")] {
+        for (v, option) in
+            [(self.stride(), "stride"), (self.cycle_length(), "cycle_length"), (self.turn_rate, "turn_rate")]
+        {
             if !(v.is_finite() && v > 0.0) {
                 return Err(Error::setting(option, format!("must be a positive number, not {v}")));
             }
@@ -157,8 +178,12 @@ fn heading_of(dx: f64, dy: f64) -> Option<f64> {
     (dx.hypot(dy) > 1e-9).then(|| dx.atan2(-dy))
 }
 
-/// Headings for one agent's samples (see the module comment).
-fn headings(s: &[Sample]) -> Vec<f32> {
+/// Frames per second of the file when its metadata does not say.
+pub(crate) const DEFAULT_JUPEDSIM_FPS: f64 = 25.0;
+
+/// Headings for one agent's samples (see the module comment), turning at
+/// most `step` radians per frame (frames apart count as many frames).
+fn headings(s: &[Sample], step: f64) -> Vec<f32> {
     let motion = |a: &Sample, b: &Sample| heading_of(b.x - a.x, b.y - a.y);
     let mut h: Vec<Option<f64>> = s
         .iter()
@@ -181,7 +206,18 @@ fn headings(s: &[Sample]) -> Vec<f32> {
         *v = v.or(next);
         next = *v;
     }
-    h.into_iter().map(|v| v.unwrap_or(0.0) as f32).collect()
+    let mut prev: Option<(i32, f64)> = None;
+    s.iter()
+        .zip(h)
+        .map(|(p, v)| {
+            let mut v = v.unwrap_or(0.0);
+            if let Some((f, q)) = prev {
+                v = turn_toward(q, v, step * f64::from(p.frame.saturating_sub(f).max(1)));
+            }
+            prev = Some((p.frame, v));
+            v as f32
+        })
+        .collect()
 }
 
 /// Cycle frames for one agent: start phase from the id, then distance.
@@ -229,20 +265,29 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
             Error::invalid(path, "no `trajectory_data` table: not a JuPedSim trajectory file").field("trajectory_data")
         );
     }
+    let mut fps = DEFAULT_JUPEDSIM_FPS;
     if has_table(&conn, path, "metadata")? {
-        let version: Option<String> = conn
-            .query_row("SELECT value FROM metadata WHERE key = 'version'", [], |r| r.get(0))
-            .map(Some)
-            .or_else(|e| match e {
-                rusqlite::Error::QueryReturnedNoRows => Ok(None),
-                e => Err(e),
-            })
-            .map_err(sql_err(path))?;
-        if let Some(v) = version.filter(|v| !matches!(v.trim(), "1" | "2")) {
+        let meta = |key: &str| -> Result<Option<String>> {
+            conn.query_row("SELECT value FROM metadata WHERE key = ?1", [key], |r| r.get::<_, String>(0))
+                .map(Some)
+                .or_else(|e| match e {
+                    rusqlite::Error::QueryReturnedNoRows => Ok(None),
+                    e => Err(e),
+                })
+                .map_err(sql_err(path))
+        };
+        if let Some(v) = meta("version")?.filter(|v| !matches!(v.trim(), "1" | "2")) {
             return Err(Error::invalid(path, format!("JuPedSim database version {v}; throng reads versions 1 and 2"))
                 .field("metadata.version"));
         }
+        if let Some(v) = meta("fps")? {
+            fps =
+                v.trim().parse::<f64>().ok().filter(|f| f.is_finite() && *f > 0.0).ok_or_else(|| {
+                    Error::invalid(path, format!("fps `{v}` is not a frame rate")).field("metadata.fps")
+                })?;
+        }
     }
+    let step = f64::from(opts.turn_rate).to_radians() / fps;
 
     // Rows by agent, then frame, so each trajectory is walked in order.
     let mut stmt = conn
@@ -286,7 +331,7 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
     let (stride, length) = (f64::from(opts.stride()), f64::from(opts.cycle_length()));
     let mut frames: BTreeMap<i32, Vec<AgentSample>> = BTreeMap::new();
     for (id, s) in &agents {
-        let hs = headings(s);
+        let hs = headings(s, step);
         let cs = cycle_frames(*id, s, stride, length);
         for ((p, heading), cycle_frame) in s.iter().zip(hs).zip(cs) {
             frames.entry(p.frame).or_default().push(AgentSample {

@@ -272,6 +272,8 @@ import_keys! {
     heading_window: Option<f32> => Number, Motion;
     /// Speed (m/s) below which the heading is held and the idle cycle plays.
     hold_speed: Option<f32> => Number, Motion;
+    /// Fastest heading change, degrees per second (a person's turn) [default: 360].
+    turn_rate: Option<f32> => Number, Motion;
     /// Rig given to every imported agent (without a rig column) [default: bipedThinA].
     rig: Option<String> => Text, Names;
     /// Walk cycle given to every imported agent (without a cycle column) [default: WalkA].
@@ -286,7 +288,27 @@ import_keys! {
     scale: Option<f32> => Number, Placement;
 }
 
+/// The keys a JuPedSim import applies: its format, names, turn rate and placement.
+const JUPEDSIM_KEYS: [&str; 7] = ["preset", "rig", "cycle", "turn_rate", "translate", "rotate", "scale"];
+
 impl TabularSpec {
+    /// The first key set here that a JuPedSim import cannot apply (it reads
+    /// metres at the file's frames, headings from the file's orientation,
+    /// and has no idle cycle), with why; `None` when it applies them all.
+    pub fn jupedsim_refuses(&self) -> Option<(&'static str, String)> {
+        self.set_keys().find(|k| !JUPEDSIM_KEYS.contains(&k.name)).map(|k| {
+            (
+                k.name,
+                format!(
+                    "a JuPedSim file cannot apply `{}`: it is read in metres at its own frames, with headings from \
+                     its orientation and no idle cycle; only {} apply",
+                    k.name,
+                    JUPEDSIM_KEYS.join(", ")
+                ),
+            )
+        })
+    }
+
     /// The spec from command-line values ([`Key::parse`]), deserialized as a
     /// shot's `[cache]` table is. Errors give the message.
     pub fn from_values(values: impl IntoIterator<Item = (&'static str, KeyValue)>) -> Result<TabularSpec, String> {

@@ -46,6 +46,11 @@ pub(crate) const DEFAULT_MAX_GAP: f32 = 1.0;
 pub(crate) const DEFAULT_HEADING_WINDOW: f32 = 0.5;
 /// Default speed (m/s) below which the heading is held.
 pub(crate) const DEFAULT_HOLD_SPEED: f32 = 0.25;
+/// Default fastest turn, degrees per second: a person turning on the spot
+/// takes about half a second for an about-turn (180 degrees), and turns
+/// slower while walking, so 360 deg/s never slows a real turn but stops a
+/// one-frame snap (a held heading resuming in a new direction).
+pub(crate) const DEFAULT_TURN_RATE: f32 = 360.0;
 
 macro_rules! named_enum {
     ($(#[$m:meta])* $name:ident { $($(#[$vm:meta])* $v:ident = [$($s:literal),+]),+ $(,)? }) => {
@@ -447,6 +452,8 @@ pub struct TabularOptions {
     pub heading_window: f32,
     /// Speed (m/s) below which the heading is held.
     pub hold_speed: f32,
+    /// Fastest heading change, degrees per second.
+    pub turn_rate: f32,
     /// Rig for every agent without a rig column.
     pub rig: String,
     /// Walk cycle.
@@ -479,6 +486,7 @@ impl Default for TabularOptions {
             heading: HeadingFrom::Auto,
             heading_window: DEFAULT_HEADING_WINDOW,
             hold_speed: DEFAULT_HOLD_SPEED,
+            turn_rate: DEFAULT_TURN_RATE,
             rig: "bipedThinA".into(),
             cycle: "WalkA".into(),
             idle_cycle: None,
@@ -531,6 +539,7 @@ impl TabularOptions {
             heading: keys.heading.unwrap_or(d.heading),
             heading_window: keys.heading_window.unwrap_or(d.heading_window),
             hold_speed: keys.hold_speed.unwrap_or(d.hold_speed),
+            turn_rate: keys.turn_rate.unwrap_or(d.turn_rate),
             placement: keys.placement(),
             rig: keys.rig.unwrap_or(d.rig),
             cycle: keys.cycle.unwrap_or(d.cycle),
@@ -558,6 +567,9 @@ impl TabularOptions {
             if !(v.is_finite() && v >= 0.0) {
                 return err(k, format!("must be a number >= 0, not {v}"));
             }
+        }
+        if !(self.turn_rate.is_finite() && self.turn_rate > 0.0) {
+            return err("turn_rate", format!("must be a number of degrees per second > 0, not {}", self.turn_rate));
         }
         for (name, k) in [(&self.rig, "rig"), (&self.cycle, "cycle")] {
             check_name(name).map_err(|m| (k.to_string(), m))?;
@@ -805,7 +817,13 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
     for (&id, track) in &tracks.agents {
         let runs = resample(track, fps, max_gap);
         report.gaps += track.windows(2).filter(|w| w[1].t - w[0].t > max_gap).count();
-        let (headings, moving) = headings(&runs, heading_from, window_half, f64::from(o.hold_speed), fps);
+        let (mut headings, moving) = headings(&runs, heading_from, window_half, f64::from(o.hold_speed), fps);
+        let step = f64::from(o.turn_rate).to_radians() / fps;
+        let mut start = 0;
+        for run in &runs {
+            limit_turn(&mut headings[start..start + run.len()], step);
+            start += run.len();
+        }
         for (k, a) in walk_cycles(id, &runs, &headings, &moving, o, &tracks) {
             frames.entry(k).or_default().push(a);
             report.agent_frames += 1;
@@ -1237,6 +1255,33 @@ fn headings(
     (headings, moving)
 }
 
+/// Limits one agent's run of headings (radians, one per consecutive frame)
+/// to turn at most `step` radians a frame, the shorter way round: a turn
+/// faster than a person can make is spread over the frames that follow.
+/// Per agent and in frame order, so no other agent changes the result.
+/// Unknown headings are left for the caller's fill.
+pub(crate) fn limit_turn(headings: &mut [Option<f64>], step: f64) {
+    let mut prev: Option<f64> = None;
+    for h in headings.iter_mut() {
+        if let (Some(p), Some(v)) = (prev, h.as_mut()) {
+            *v = turn_toward(p, *v, step);
+        }
+        if h.is_some() {
+            prev = *h;
+        }
+    }
+}
+
+/// `from` turned toward `to` (radians) by at most `step`, the shorter way.
+pub(crate) fn turn_toward(from: f64, to: f64, step: f64) -> f64 {
+    let d = wrap(to - from);
+    if d.abs() > step {
+        wrap(from + d.clamp(-step, step))
+    } else {
+        to
+    }
+}
+
 /// Stage 5: one agent's records, (cache frame, sample): the walk cycle frame
 /// follows distance walked / the rig's stride; standing agents play the
 /// idle cycle when one is named.
@@ -1387,6 +1432,24 @@ mod tests {
         assert_eq!(n.names, ["WalkA", "IdleA"]);
         assert_eq!((n.intern("RunA"), n.intern("WalkA")), (Ok(2), Ok(0)));
         assert!(n.intern("").is_err());
+    }
+
+    #[test]
+    fn turn_limit_spreads_a_snap_the_shorter_way() {
+        let step = 0.1;
+        // An about-turn (0 -> 3.0 rad) and a turn across +-pi (3.0 -> -3.0: 0.28 rad the short way).
+        let mut h = vec![Some(0.0), Some(3.0), Some(3.0), None, Some(3.0), Some(-3.0), Some(-3.0), Some(-3.0)];
+        limit_turn(&mut h, step);
+        let v: Vec<f64> = h.iter().flatten().copied().collect();
+        assert!((v[0] - 0.0).abs() < 1e-12 && (v[1] - 0.1).abs() < 1e-12 && (v[2] - 0.2).abs() < 1e-12);
+        assert_eq!(h[3], None, "unknown headings stay unknown");
+        for w in v.windows(2) {
+            assert!(wrap(w[1] - w[0]).abs() <= step + 1e-12, "{w:?}");
+        }
+        // Slow turns pass unchanged, including across +-pi.
+        assert_eq!(turn_toward(3.1, -3.1, 0.1), -3.1);
+        assert!((turn_toward(3.1, -3.0, 0.1) - wrap(3.2)).abs() < 1e-12);
+        assert_eq!(turn_toward(1.0, 1.05, 0.1), 1.05);
     }
 
     #[test]

@@ -104,8 +104,12 @@ pub(crate) fn shot_import(shot: &Shot) -> Result<Import> {
         o.gaits = gaits(&o.cycle)?;
         return Ok(Import { tabular: Some(o), ..Default::default() });
     }
-    let mut jupedsim = ImportOptions { rig: rig.clone(), cycle: walk.clone(), ..Default::default() };
+    let mut jupedsim =
+        ImportOptions { rig: rig.clone(), cycle: walk.clone(), ..Default::default() }.with_turn_rate(spec.turn_rate)?;
     if format == Format::JuPedSim {
+        if let Some((k, m)) = spec.jupedsim_refuses() {
+            return Err(key_err((k.to_string(), m)));
+        }
         if let Some(r) = shot.rigs.get(&rig) {
             let g = gaits(&walk)?.get(&rig).copied();
             jupedsim.rig_clip =

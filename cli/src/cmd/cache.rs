@@ -125,9 +125,9 @@ impl ImportArgs {
         let (rig, cycle) = self.names();
         let g = &self.gait;
         // The flags are checked before the rig file is read.
-        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, None)?;
+        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, None)?.with_turn_rate(self.keys.turn_rate)?;
         let clip = g.rig_file.as_deref().map(|f| import_clip(f, &rig, &cycle)).transpose()?;
-        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, clip)
+        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, clip)?.with_turn_rate(self.keys.turn_rate)
     }
 
     /// How to read `input`: a table when its extension or the layout flags
@@ -143,6 +143,11 @@ impl ImportArgs {
         }
         let table = format == Format::Tabular || (format == Format::Csv && spec.describes_layout());
         if !table {
+            if format == Format::JuPedSim {
+                if let Some(refused) = spec.jupedsim_refuses() {
+                    return Err(flag((refused.0.to_string(), refused.1)));
+                }
+            }
             let jupedsim = if format == Format::JuPedSim { self.options()? } else { ImportOptions::default() };
             return Ok(Import { jupedsim, tabular: None, placement });
         }
