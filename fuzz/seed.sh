@@ -17,7 +17,8 @@ fi
 C=fuzz/corpus
 S=$(mktemp -d)
 trap 'rm -rf "$S"' EXIT
-for t in cache_reader csv_import shot_toml wardrobe_toml gltf_load layer_manifest exr_reader; do
+for t in cache_reader csv_import shot_toml wardrobe_toml gltf_load layer_manifest exr_reader \
+    usd_crowd jupedsim_sqlite sim_scene farm_plan rig_skin; do
     mkdir -p "$C/$t"
 done
 asset() { # copy an asset if present: asset SRC DEST
@@ -117,6 +118,61 @@ for comp in zip none piz b44 zips; do
 done
 cp golden/figure.crowd0.1024.exr golden/figure.full.1024.exr "$C/exr_reader/"
 cp tests/fixtures/cryptomatte/*.exr "$C/exr_reader/"
+
+# usd_crowd: the USD fixtures (an exported shot is far past 64 KiB).
+cp tests/fixtures/usd/*.usda "$C/usd_crowd/"
+
+# jupedsim_sqlite: the small JuPedSim fixture (45 KB), and the same file
+# vacuumed after dropping all but its first frames.
+cp tests/fixtures/jupedsim_small.sqlite "$C/jupedsim_sqlite/"
+python3 - tests/fixtures/jupedsim_small.sqlite "$C/jupedsim_sqlite/first_frames.sqlite" <<'EOF2'
+import shutil, sqlite3, sys
+shutil.copy(sys.argv[1], sys.argv[2])
+db = sqlite3.connect(sys.argv[2])
+try:
+    db.execute("DELETE FROM trajectory_data WHERE frame > (SELECT MIN(frame) + 3 FROM trajectory_data)")
+    db.commit()
+    db.execute("VACUUM")
+except sqlite3.Error as e:
+    print(f"seed.sh: first_frames.sqlite left whole ({e})", file=sys.stderr)
+db.close()
+EOF2
+
+# sim_scene: the demo scene, whole and cut to 4 frames without warmup (so
+# the target steps it), and each scene body in tests/sim.rs under the header
+# and cycles its tests put above them.
+cp demo/sim/demo.toml "$C/sim_scene/demo.toml"
+python3 - "$C/sim_scene" demo/sim/demo.toml tests/sim.rs <<'EOF2'
+import re, sys, hashlib
+out = sys.argv[1]
+demo = open(sys.argv[2]).read()
+demo = re.sub(r"(?m)^end = \d+", "end = 4", re.sub(r"(?m)^warmup = \d+", "warmup = 0", demo))
+open(f"{out}/demo_short.toml", "w").write(demo)
+text = open(sys.argv[3]).read()
+bodies = re.findall(r'r#"(.*?)"#', text, re.S)
+cycles = next((b for b in bodies if b.lstrip().startswith("[cycles.")), "")
+head = "version = 1\nseed = 7\n[frames]\nstart = 1\nend = 24\n"
+for body in bodies:
+    if body is cycles:
+        continue
+    scene = body if "version = 1" in body else head + cycles + body
+    name = hashlib.sha1(scene.encode()).hexdigest()[:12]
+    open(f"{out}/inline-{name}.toml", "w").write(scene)
+EOF2
+
+# farm_plan: plans of the stack shot (every layer, the set layer alone); their
+# fingerprints name the repository's files, so they open.
+q farm plan tests/fixtures/stack_shot/shot.toml --out "$S/farm-all"
+cp "$S/farm-all/plan.json" "$C/farm_plan/stack.plan.json"
+q farm plan tests/fixtures/stack_shot/shot.toml --layers set --out "$S/farm-set"
+cp "$S/farm-set/plan.json" "$C/farm_plan/stack_set.plan.json"
+
+# rig_skin: the slot rigs, and the skinned and rigged glTFs packed above.
+cp demo/rigs/bipedThinA.glb demo/rigs/bipedTallB.glb "$C/rig_skin/"
+for f in rig_small.gltf rig_small.glb SimpleSkin.gltf SimpleSkin-multi-joint-set.gltf RiggedFigure.glb \
+    InterpolationTest.glb alien.glb; do
+    [ -f "$C/gltf_load/$f" ] && cp "$C/gltf_load/$f" "$C/rig_skin/"
+done
 
 for t in "$C"/*/; do
     echo "$(basename "$t"): $(find "$t" -type f | wc -l) seeds, $(du -sk "$t" | cut -f1) KiB"
