@@ -309,6 +309,7 @@ mod tests {
         ("heading", "motion", r#""motion""#),
         ("heading_window", "1.5", "1.5"),
         ("hold_speed", "0.5", "0.5"),
+        ("turn_rate", "90", "90"),
         ("rig", "bipedTallB", r#""bipedTallB""#),
         ("cycle", "RunA", r#""RunA""#),
         ("idle_cycle", "IdleA", r#""IdleA""#),
