@@ -205,13 +205,16 @@ pub fn write_atomic(
 
 /// Refuses an input path that is a FIFO, a device or a socket, before it
 /// is opened: reading one would block forever (a FIFO with no writer) or
-/// never end (`/dev/zero`). Regular files, folders and missing paths pass
-/// (the reader says what is wrong with those). Symlinks are followed.
+/// never end (`/dev/zero`). A folder is refused too: readers such as SQLite
+/// would call it a "disk I/O error". Regular files and missing paths pass
+/// (the reader says what is wrong with a missing one). Symlinks are followed.
 pub fn check_readable_file(path: &Path) -> Result<()> {
     use std::os::unix::fs::FileTypeExt;
     let Ok(meta) = std::fs::metadata(path) else { return Ok(()) };
     let t = meta.file_type();
-    let kind = if t.is_fifo() {
+    let kind = if t.is_dir() {
+        "a folder"
+    } else if t.is_fifo() {
         "a FIFO (named pipe)"
     } else if t.is_char_device() || t.is_block_device() {
         "a device"

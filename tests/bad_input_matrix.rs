@@ -272,6 +272,22 @@ matrix! {
         &["shot.toml", "camera.keys", "focal length"],
         &[],
     ),
+    shot_camera_position_nan_names_key_and_component => c(
+        "shot [camera]",
+        "position y NaN",
+        |d| edit(d, "shot.toml", "position = [0.0, 1.6, 9.0]", "position = [0.0, nan, 9.0]"),
+        CAST,
+        &["shot.toml", "camera.keys[0].position[1]", "position y is NaN"],
+        &[],
+    ),
+    shot_camera_aim_overflowing_f32_names_key_and_component => c(
+        "shot [camera]",
+        "aim z 1e39 (infinite in f32)",
+        |d| edit(d, "shot.toml", "aim = [0.0, 0.9, 0.0]", "aim = [0.0, 0.9, 1e39]"),
+        CAST,
+        &["shot.toml", "camera.keys[0].aim[2]", "aim z is inf"],
+        &[],
+    ),
     shot_lights_sun_intensity_minus_3 => c(
         "shot [lights]",
         "sun intensity -3",
@@ -1207,7 +1223,7 @@ fn check(test: &str, case: &Case) {
 
 #[test]
 fn the_matrix_keeps_every_case() {
-    assert_eq!(cases().len(), 94);
+    assert_eq!(cases().len(), 96);
 }
 
 /// The table of every case, as issue 15 closed with: written to

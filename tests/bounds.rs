@@ -135,3 +135,29 @@ fn fifos_devices_and_sockets_are_refused_as_inputs() {
         refused(d, args, &[says, "regular files only"]);
     }
 }
+
+/// A folder where a file belongs is named as a folder, not left to the
+/// reader (SQLite called it a "disk I/O error").
+#[test]
+fn folders_are_refused_where_files_belong() {
+    let dir = common::tempdir().unwrap();
+    let d = dir.path();
+    let shot = DemoShot::default().write(d, &two_robots(1..=3));
+    for folder in ["trajectories.sqlite", "folder.crowd", "folder.csv", "folder.toml", "folder.exr", "folder.json"] {
+        std::fs::create_dir(d.join(folder)).unwrap();
+    }
+    let text = std::fs::read_to_string(&shot).unwrap();
+    std::fs::write(d.join("folder_cache.toml"), text.replace("path = \"c.csv\"", "path = \"folder.crowd\"")).unwrap();
+    let cases: &[&[&str]] = &[
+        &["cache", "info", "trajectories.sqlite"],
+        &["cache", "info", "folder.csv"],
+        &["layers", "folder.toml"],
+        &["layers", "folder_cache.toml"],
+        &["render", "shot.toml", "--manifest", "folder.json", "--frames", "1001", "--out", "o"],
+        &["botinfo", "shot.toml", "--exr", "folder.exr", "--pixel", "1,1"],
+        &["farm", "status", "folder.json"],
+    ];
+    for args in cases {
+        refused(d, args, &["a folder, not a file"]);
+    }
+}

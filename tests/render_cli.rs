@@ -448,3 +448,41 @@ fn json_and_help_say_what_the_verbs_do() {
     assert!(help.contains("USD") && help.contains("glTF"), "{help}");
     assert!(!help.contains(".usdc /") && help.contains(".usdc is refused"), "{help}");
 }
+
+/// A Unicode shot name (the docs allow one) renders, names its files, is
+/// written to the EXR header as UTF-8 (what OpenEXR's tools and Cryptomatte
+/// read), reads back the same, and `--resume` and botinfo recognise it.
+#[test]
+fn a_unicode_shot_name_round_trips_through_the_exr_header() {
+    let tmp = common::tempdir().expect("temp dir");
+    let shot = common::figure_shot(tmp.path(), &common::five_walkers(), "");
+    let name = "plaza_ünïcødé_✓";
+    let toml = std::fs::read_to_string(&shot).unwrap().replacen("name = \"figure\"", &format!("name = \"{name}\""), 1);
+    std::fs::write(&shot, toml).unwrap();
+    let out = tmp.path().join("out");
+    let args = [
+        "render",
+        s(&shot),
+        "--layer",
+        "full",
+        "--frames",
+        "1020",
+        "--spp",
+        "1",
+        "--resolution",
+        "16x9",
+        "--out",
+        s(&out),
+    ];
+    ok(&args);
+    let exr = out.join("full").join(format!("{name}.full.1020.exr"));
+    let bytes = std::fs::read(&exr).unwrap_or_else(|e| panic!("{}: {e}", exr.display()));
+    let header = exr_header(&bytes);
+    assert_eq!(attr(&header, "throng/shot").2, name.as_bytes(), "throng/shot holds the name's UTF-8 bytes");
+    let (_, meta) = read_layer(&exr).expect("reads back");
+    assert_eq!(meta.shot, name);
+    let again = ok(&[&args[..], &["--resume"]].concat());
+    assert!(again.contains("(1 skipped as complete)"), "--resume knows its own frame:\n{again}");
+    let said = ok(&["botinfo", s(&shot), "--exr", s(&exr), "--pixel", "8,4"]);
+    assert!(!said.contains("is from shot"), "botinfo takes the EXR as this shot's:\n{said}");
+}

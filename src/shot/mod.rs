@@ -740,6 +740,24 @@ impl CameraFile {
     /// `[camera]` -> keys sorted by frame (each finite, one per frame), or a glTF node.
     fn check(&self, cx: &Context) -> Result<CameraSpec> {
         let path = cx.path;
+        // Checked in file order so the error names the key as written.
+        for (i, k) in self.keys.iter().enumerate() {
+            let named = [("frame", &[k.frame][..]), ("position", &k.position[..]), ("aim", &k.aim[..])];
+            for (key, values) in named {
+                if let Some((c, v)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                    let (field, what) = match values.len() {
+                        1 => (format!("camera.keys[{i}].{key}"), key.to_string()),
+                        _ => (format!("camera.keys[{i}].{key}[{c}]"), format!("{key} {}", ["x", "y", "z"][c])),
+                    };
+                    let msg = format!(
+                        "camera key {} (frame {}): {what} is {v}; every value must be a finite number",
+                        i + 1,
+                        k.frame
+                    );
+                    return Err(Error::invalid(path, msg).field(field));
+                }
+            }
+        }
         let mut keys = self.keys.clone();
         keys.sort_by(|a, b| a.frame.total_cmp(&b.frame));
         let gltf = match (&self.gltf, &self.node) {
@@ -757,11 +775,6 @@ impl CameraFile {
             return Err(Error::invalid(path, format!("two camera keys at frame {}", w[0].frame)).field("camera.keys"));
         }
         for k in &keys {
-            let finite = k.frame.is_finite() && k.position.iter().chain(&k.aim).all(|v| v.is_finite());
-            if !finite {
-                return Err(Error::invalid(path, format!("camera key at frame {}: a value is not finite", k.frame))
-                    .field("camera.keys"));
-            }
             if !(k.focal_length > 0.0 && k.focal_length.is_finite()) || Vec3::from(k.position) == Vec3::from(k.aim) {
                 return Err(Error::invalid(
                     path,

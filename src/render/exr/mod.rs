@@ -176,11 +176,6 @@ pub fn camera_matrices(camera: &Camera, width: u32, height: u32, near: f32, far:
     (exr_camera_from_world.to_cols_array(), (ndc_from_camera * exr_camera_from_world).to_cols_array())
 }
 
-fn text(s: &str) -> Result<Text> {
-    // Text::from(&str) panics on non-Latin-1; names come from user files.
-    Text::new_or_none(s).ok_or_else(|| Error::Usage(format!("`{s}` cannot be written to an EXR header (not Latin-1)")))
-}
-
 fn half(values: impl Iterator<Item = f32>) -> FlatSamples {
     // Clamp so very bright samples (the sun disc) stay finite in half.
     FlatSamples::F16(values.map(|v| f16::from_f32(v.clamp(-65504.0, 65504.0))).collect())
@@ -212,9 +207,12 @@ pub(crate) fn sidecar_name(exr_path: &Path, type_name: &str) -> String {
     format!("{stem}.{type_name}.json")
 }
 
-/// Text from UTF-8 bytes (Cryptomatte names and manifests are UTF-8;
-/// OpenEXR text attributes are byte strings).
-fn utf8_text(s: &str) -> Text {
+/// Text as UTF-8 bytes. OpenEXR text attributes and channel names are byte
+/// strings; Cryptomatte and OpenEXR's own tools read them as UTF-8, so a
+/// Unicode shot or agent name round-trips (the exr crate's `Text::from`
+/// would panic on it, and `new_or_none` keeps Latin-1 only). Read back with
+/// `lossy`.
+fn text(s: &str) -> Text {
     Text::from_slice_unchecked(s.as_bytes())
 }
 
@@ -271,7 +269,7 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
                 } else {
                     vec![0.0; w * h]
                 };
-                list.push(AnyChannel::new(utf8_text(&format!("{}{level:02}.{c}", m.name)), FlatSamples::F32(values)));
+                list.push(AnyChannel::new(text(&format!("{}{level:02}.{c}", m.name)), FlatSamples::F32(values)));
             }
         }
     }
@@ -282,35 +280,35 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
         for (c, suffix) in pass.channels.iter().enumerate() {
             let values = pass.data.iter().map(move |p| p[c]);
             let samples = if pass_is_float(&pass.name) { FlatSamples::F32(values.collect()) } else { half(values) };
-            list.push(AnyChannel::new(text(&format!("{}.{suffix}", pass.name))?, samples));
+            list.push(AnyChannel::new(text(&format!("{}.{suffix}", pass.name)), samples));
         }
     }
     let channels = AnyChannels::sort(SmallVec::from_vec(list));
 
-    let mut attrs = LayerAttributes::named(text(&meta.layer)?);
-    attrs.software_name = Some(text(&format!("throng {}", env!("CARGO_PKG_VERSION")))?);
+    let mut attrs = LayerAttributes::named(text(&meta.layer));
+    attrs.software_name = Some(text(&format!("throng {}", env!("CARGO_PKG_VERSION"))));
     attrs.near_clip_plane = Some(meta.near);
     attrs.far_clip_plane = Some(meta.far);
     attrs.world_to_camera = Some(meta.world_to_camera);
     attrs.world_to_normalized_device = Some(meta.world_to_ndc);
     let mut put = |k: &str, v: AttributeValue| -> Result<()> {
-        attrs.other.insert(text(k)?, v);
+        attrs.other.insert(text(k), v);
         Ok(())
     };
-    put("throng/shot", AttributeValue::Text(text(&meta.shot)?))?;
-    put("throng/layer", AttributeValue::Text(text(&meta.layer)?))?;
+    put("throng/shot", AttributeValue::Text(text(&meta.shot)))?;
+    put("throng/layer", AttributeValue::Text(text(&meta.layer)))?;
     put("throng/frame", AttributeValue::I32(meta.frame))?;
-    put("throng/seed", AttributeValue::Text(text(&meta.seed.to_string())?))?;
+    put("throng/seed", AttributeValue::Text(text(&meta.seed.to_string())))?;
     put("throng/spp", AttributeValue::I32(meta.spp.min(i32::MAX as u32) as i32))?;
-    put("throng/zConvention", AttributeValue::Text(text("cameraDepth")?))?;
-    put("throng/idMapping", AttributeValue::Text(text(&meta.id_mapping)?))?;
-    put("throng/colorspace", AttributeValue::Text(text(colour::header_name(meta.colourspace))?))?;
+    put("throng/zConvention", AttributeValue::Text(text("cameraDepth")))?;
+    put("throng/idMapping", AttributeValue::Text(text(&meta.id_mapping)))?;
+    put("throng/colorspace", AttributeValue::Text(text(colour::header_name(meta.colourspace))))?;
     if !meta.render_fingerprint.is_empty() {
-        put("throng/renderFingerprint", AttributeValue::Text(text(&meta.render_fingerprint)?))?;
+        put("throng/renderFingerprint", AttributeValue::Text(text(&meta.render_fingerprint)))?;
     }
     if let Some([open, close]) = meta.shutter {
         put("throng/shutter", AttributeValue::FloatVec2(exr::math::Vec2(open, close)))?;
-        put("throng/motionConvention", AttributeValue::Text(text(MOTION_CONVENTION)?))?;
+        put("throng/motionConvention", AttributeValue::Text(text(MOTION_CONVENTION)))?;
     }
     if meta.fps > 0.0 && meta.fps.is_finite() {
         attrs.frames_per_second = Some(fps_rational(meta.fps));
@@ -318,7 +316,7 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
     for m in &film.cryptomatte {
         let key = m.key();
         let mut put_utf8 = |field: &str, v: &str| {
-            attrs.other.insert(utf8_text(&format!("cryptomatte/{key}/{field}")), AttributeValue::Text(utf8_text(v)));
+            attrs.other.insert(text(&format!("cryptomatte/{key}/{field}")), AttributeValue::Text(text(v)));
         };
         put_utf8("name", &m.name);
         put_utf8("hash", cryptomatte::HASH);
@@ -542,7 +540,7 @@ pub fn read_render_fingerprint(path: &Path) -> Result<String> {
     let key = Text::new_or_none("throng/renderFingerprint");
     let found = meta.headers.iter().find_map(|h| {
         match key.as_ref().and_then(|k| h.own_attributes.other.get(k).or_else(|| h.shared_attributes.other.get(k))) {
-            Some(AttributeValue::Text(t)) => Some(t.to_string()),
+            Some(AttributeValue::Text(t)) => Some(lossy(t)),
             _ => None,
         }
     });
@@ -568,7 +566,7 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
             .channel_data
             .list
             .iter()
-            .find(|c| c.name.to_string() == name)
+            .find(|c| lossy(&c.name) == name)
             .ok_or_else(|| Error::invalid(path, format!("channel `{name}` is missing")).field(name.to_string()))
     };
     let floats = |name: &str| -> Result<Vec<f32>> {
@@ -603,7 +601,7 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
             (Ok(u), Ok(v)) => u.iter().zip(&v).map(|(&u, &v)| [u, v]).collect(),
             _ => Vec::new(),
         },
-        passes: read_passes(layer.channel_data.list.iter().map(|c| c.name.to_string()), &floats)?,
+        passes: read_passes(layer.channel_data.list.iter().map(|c| lossy(&c.name)), &floats)?,
         samples: match find(SAMPLES_CHANNEL).ok().map(|c| &c.sample_data) {
             None => Vec::new(),
             Some(FlatSamples::U32(v)) if v.len() == n => v.clone(),
@@ -620,7 +618,7 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
         attrs.other.get(&Text::new_or_none(k)?).or_else(|| image.attributes.other.get(&Text::new_or_none(k)?))
     };
     let get_text = |k: &str| match other(k) {
-        Some(AttributeValue::Text(t)) => Ok(t.to_string()),
+        Some(AttributeValue::Text(t)) => Ok(lossy(t)),
         _ => Err(Error::invalid(path, format!("header attribute `{k}` is missing or not text")).field(k.to_string())),
     };
     let get_i32 = |k: &str| match other(k) {
