@@ -203,6 +203,22 @@ pub fn write_atomic(
     }
 }
 
+/// A file's (device, inode): the same for every name of one file (hard
+/// links, symlinks followed). `None` when it does not exist.
+pub(crate) fn file_id(path: &Path) -> Option<(u64, u64)> {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()))
+}
+
+/// Whether two paths name one file (hard links and symlinks too); paths
+/// that do not exist are one file when they are spelled the same.
+pub(crate) fn same_file(a: &Path, b: &Path) -> bool {
+    match (file_id(a), file_id(b)) {
+        (Some(a), Some(b)) => a == b,
+        _ => a == b,
+    }
+}
+
 /// Refuses an input path that is a FIFO, a device or a socket, before it
 /// is opened: reading one would block forever (a FIFO with no writer) or
 /// never end (`/dev/zero`). A folder is refused too: readers such as SQLite

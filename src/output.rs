@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::error::{Error, Result};
+use crate::error::{file_id, Error, Result};
 
 /// The render that needs no manifest: the set and every agent, fully visible.
 pub const FULL_LAYER: &str = "full";
@@ -43,13 +43,6 @@ struct Input {
     path: PathBuf,
     id: Option<(u64, u64)>,
     canonical: Option<PathBuf>,
-}
-
-/// A file's (device, inode): the same for every name of one file (hard
-/// links, symlinks followed). `None` when it does not exist.
-fn file_id(path: &Path) -> Option<(u64, u64)> {
-    use std::os::unix::fs::MetadataExt;
-    std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()))
 }
 
 /// A path that may not exist yet, made absolute through its existing

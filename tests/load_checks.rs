@@ -2,7 +2,8 @@
 //! of every wardrobe scheme the shot's rigs draw from, and the textures of
 //! the materials those parts may wear, are checked when the shot is cast,
 //! even when no agent happens to draw them; and a name in `culled_cycles`,
-//! `exclude_parts` or `removed` that names nothing is refused.
+//! `exclude_parts` or `removed` that names nothing is refused; and a slot
+//! rig file is the rig the shot says it is.
 
 mod common;
 
@@ -80,4 +81,37 @@ fn list_entries_that_name_nothing_are_refused() {
         .unwrap();
     let (code, out, err) = run(&["cast", s(&shot)]);
     assert_eq!(code, 0, "{out}{err}");
+}
+
+/// A slot rig's file names its rig (its top node). Two rigs whose files are
+/// swapped cast as each other, so that is refused naming the key; a file
+/// under a name that is no rig of the shot is legal, with a warning that
+/// `--strict` turns into an error.
+#[test]
+fn a_rig_file_swapped_for_another_rigs_is_refused() {
+    let dir = common::tempdir().unwrap();
+    let d = dir.path();
+    let shot = DemoShot::default().write(d, &two_robots(1..=3));
+    let text = std::fs::read_to_string(&shot).unwrap();
+    let demo = common::repo_path("demo").display().to_string();
+    let tall = format!("\n[rigs.bipedTallB]\nfile = \"{demo}/rigs/bipedTallB.glb\"\nschemes = {{ HighEnd = 1.0 }}\n");
+    let both = text.replacen("\n[set]", &format!("{tall}\n[set]"), 1);
+    std::fs::write(&shot, &both).unwrap();
+    let (code, out, err) = run(&["cast", s(&shot)]);
+    assert_eq!(code, 0, "the two rigs as they are:\n{out}{err}");
+    assert!(!err.contains("names its rig"), "{err}");
+
+    let swapped =
+        both.replace("rigs/bipedThinA.glb", "rigs/SWAP").replace("rigs/bipedTallB.glb", "rigs/bipedThinA.glb");
+    std::fs::write(&shot, swapped.replace("rigs/SWAP", "rigs/bipedTallB.glb")).unwrap();
+    refused(&shot, &["bipedThinA.glb", "rigs.bipedTallB.file", "is rig `bipedThinA`", "are the two files swapped"]);
+
+    // One file under a name of its own: cast, with a warning.
+    let renamed = both.replace("[rigs.bipedTallB]", "[rigs.tallHero]");
+    std::fs::write(&shot, renamed).unwrap();
+    let (code, out, err) = run(&["cast", s(&shot)]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(err.contains("rigs.tallHero.file") && err.contains("names its rig `bipedTallB`"), "{err}");
+    let (code, _, err) = run(&["--strict", "cast", s(&shot)]);
+    assert_eq!(code, 2, "--strict refuses the warning:\n{err}");
 }

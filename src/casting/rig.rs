@@ -474,6 +474,15 @@ impl Rig {
         self.shape.root
     }
 
+    /// The rig's own name: its top node, the parent of `root`, when the
+    /// file names one (docs/wardrobes.md "Rig glTF").
+    pub(crate) fn name_in_file(&self) -> Option<&str> {
+        let h = &self.shape.hierarchy;
+        let top = h.nodes.get(self.shape.root)?.parent.and_then(|p| h.nodes.get(p))?;
+        // Unnamed nodes are labelled `#index`.
+        (!top.name.starts_with('#')).then_some(top.name.as_str())
+    }
+
     /// All cycles, in file order.
     pub(crate) fn cycles(&self) -> &[Cycle] {
         &self.cycles
@@ -644,15 +653,12 @@ impl Pose {
 /// the cache does not name one rig and walk at another's stride.
 pub fn import_clip(file: &Path, rig: &str, cycle: &str) -> Result<RigClip> {
     let r = Rig::load(file)?;
-    let h = r.hierarchy();
-    if let Some(top) = h.nodes.get(r.root()).and_then(|n| n.parent).and_then(|p| h.nodes.get(p)) {
-        if top.name != rig {
-            return Err(Error::invalid(
-                file,
-                format!("this is rig `{}` but the import names rig `{rig}`; import it as rig `{}`", top.name, top.name),
-            )
-            .field("rig"));
-        }
+    if let Some(top) = r.name_in_file().filter(|&top| top != rig) {
+        return Err(Error::invalid(
+            file,
+            format!("this is rig `{top}` but the import names rig `{rig}`; import it as rig `{top}`"),
+        )
+        .field("rig"));
     }
     let c = r.cycle(cycle).map_err(|e| e.field("cycle"))?;
     let (stride, cycle_length) = (c.stride(), c.frames(SHOT_FPS));

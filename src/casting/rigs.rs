@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use crate::casting::rig::Rig;
 use crate::casting::skin::{is_skinned_rig, SkinnedRig};
 use crate::casting::wardrobe::Wardrobes;
-use crate::error::{Error, Result};
+use crate::error::{same_file, Error, Result};
 use crate::shot::Shot;
 
 /// One rig of the shot.
@@ -57,6 +57,8 @@ impl ShotRig {
 #[derive(Debug, Clone, Default)]
 pub struct ShotRigs {
     rigs: BTreeMap<String, (ShotRig, f32)>,
+    /// What loading noticed but accepted (a slot rig named otherwise in its file).
+    warnings: Vec<String>,
 }
 
 impl ShotRigs {
@@ -80,7 +82,8 @@ impl ShotRigs {
             };
             rigs.insert(name.clone(), (rig, height));
         }
-        Ok(ShotRigs { rigs })
+        let warnings = check_rig_names(shot, &rigs)?;
+        Ok(ShotRigs { rigs, warnings })
     }
 
     /// The rig named `name`.
@@ -116,8 +119,44 @@ impl ShotRigs {
         }
     }
 
-    /// What loading the skinned characters noticed but accepted, in rig order.
+    /// What loading the rigs noticed but accepted, in rig order.
     pub(crate) fn warnings(&self) -> impl Iterator<Item = &String> {
-        self.iter().filter_map(|(_, rig)| rig.skinned()).flat_map(|r| r.warnings().iter())
+        let skinned = self.iter().filter_map(|(_, rig)| rig.skinned()).flat_map(|r| r.warnings().iter());
+        self.warnings.iter().chain(skinned)
     }
+}
+
+/// Checks each slot rig file against the rig the shot says it is. A slot
+/// rig's file names its rig (its top node); a file that names another rig
+/// of this shot, loaded there from another file, is a swap and is refused
+/// (both rigs would cast, pose and stride as each other without a word). A
+/// name that is no rig of the shot is legal (one file under two names, a
+/// renamed rig) but surprising: a warning. Skinned characters' files carry
+/// no rig name; their clips and joints are checked as they load.
+fn check_rig_names(shot: &Shot, rigs: &BTreeMap<String, (ShotRig, f32)>) -> Result<Vec<String>> {
+    let mut warnings = Vec::new();
+    for (name, (rig, _)) in rigs {
+        let ShotRig::Slots(rig) = rig else { continue };
+        let Some(in_file) = rig.name_in_file().filter(|n| n != name) else { continue };
+        let file = &shot.rigs[name].file;
+        match shot.rigs.get(in_file) {
+            Some(other) if !same_file(&other.file, file) => {
+                return Err(Error::invalid(
+                    file,
+                    format!(
+                        "this file is rig `{in_file}` (its top node), which the shot loads for `rigs.{in_file}` from {}; \
+                         rig `{name}` would cast and walk as `{in_file}`: are the two files swapped?",
+                        other.file.display()
+                    ),
+                )
+                .field(format!("rigs.{name}.file")));
+            }
+            Some(_) => {}
+            None => warnings.push(format!(
+                "{}: field `rigs.{name}.file`: the file names its rig `{in_file}` (its top node), not `{name}`",
+                file.display()
+            )),
+        }
+    }
+    Ok(warnings)
 }
