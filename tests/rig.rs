@@ -441,3 +441,20 @@ fn a_proxy_box_too_large_for_any_part_is_refused_naming_the_node() {
     let err = Rig::load(&path).map(|_| ()).unwrap_err().to_string();
     assert!(err.contains("huge.gltf") && err.contains("proxy_box") && err.contains("file units"), "{err}");
 }
+
+#[test]
+fn a_proxy_box_far_larger_than_the_rest_of_its_rig_is_named() {
+    let rig = Rig::load(fixture("rig_small.gltf")).unwrap();
+    assert!(rig.oversized_slots().is_empty(), "the fixture's boxes are of a size");
+    // The hips box 30 m wide: legal (it is under the refusal bound), surprising.
+    let dir = common::tempdir().unwrap();
+    let text = std::fs::read_to_string(fixture("rig_small.gltf")).unwrap();
+    let wide = text.replacen("0.25,\n      0.1,\n      0.12", "30.0,\n      0.1,\n      0.12", 1);
+    let path = dir.path().join("wide.gltf");
+    std::fs::write(&path, wide).unwrap();
+    let rig = Rig::load(&path).unwrap();
+    let found: Vec<(&str, f32)> = rig.oversized_slots().iter().map(|(s, side, _)| (s.name.as_str(), *side)).collect();
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert_eq!(found[0].0, "hips");
+    assert!((found[0].1 - 30.25).abs() < 1e-3, "side {}", found[0].1);
+}

@@ -130,16 +130,24 @@ fn non_finite_camera_keys_are_refused() {
         let end = GOOD.find("[lights.sun]").unwrap();
         format!("{}{}", &GOOD[..start], &GOOD[end..]).replace(from, to)
     };
-    for (from, to) in [
-        ("frame = 1001", "frame = nan"),
-        ("frame = 1001", "frame = -inf"),
-        ("position = [0.0, 1.0, 10.0]", "position = [0.0, inf, 10.0]"),
-        ("aim = [0.0, 1.0, 0.0]", "aim = [nan, 1.0, 0.0]"),
-        ("focal_length = 35.0", "focal_length = inf"),
+    // Each names the key, and the component of a vector.
+    for (from, to, says) in [
+        ("frame = 1001", "frame = nan", "field `camera.keys[0].frame`: camera key 1 (frame NaN): frame is NaN"),
+        ("frame = 1001", "frame = -inf", "field `camera.keys[0].frame`"),
+        ("position = [0.0, 1.0, 10.0]", "position = [0.0, inf, 10.0]", "field `camera.keys[0].position[1]`"),
+        (
+            "aim = [0.0, 1.0, 0.0]",
+            "aim = [nan, 1.0, 0.0]",
+            "field `camera.keys[0].aim[0]`: camera key 1 (frame 1001): aim x is NaN",
+        ),
+        (
+            "focal_length = 35.0",
+            "focal_length = inf",
+            "field `camera.keys`: camera key at frame 1001: focal length must be > 0",
+        ),
     ] {
         let err = parse(d.path(), &one_key(from, to)).unwrap_err();
-        assert!(err.contains("shot.toml") && err.contains("field `camera.keys`"), "{to}: {err}");
-        assert!(err.contains("not finite") || err.contains("focal length must be > 0"), "{to}: {err}");
+        assert!(err.contains("shot.toml") && err.contains(says), "{to}: {err}");
     }
     parse(d.path(), &one_key("", "")).unwrap().keyed_camera(1001.5).unwrap();
 }

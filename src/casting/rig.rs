@@ -515,6 +515,43 @@ impl Rig {
     }
 }
 
+impl Rig {
+    /// Slots whose proxy box, posed at rest, is more than
+    /// [`OVERSIZED_PROXY`] times the median slot's largest side (rigs of
+    /// three or more slots): legal, but no body part is that much larger
+    /// than the rest (a box in the wrong units, or a typo). Each with its
+    /// side and the median, in metres.
+    pub fn oversized_slots(&self) -> Vec<(&Slot, f32, f32)> {
+        let sides: Vec<(usize, f32)> = self
+            .rest_pose()
+            .slot_transforms()
+            .into_iter()
+            .map(|(i, m)| {
+                let s = &self.slots()[i];
+                let corners = crate::scene::box_corners(s.proxy_min, s.proxy_max).map(|p| m.transform_point3(p));
+                let lo = corners.iter().copied().fold(Vec3::INFINITY, Vec3::min);
+                let hi = corners.iter().copied().fold(Vec3::NEG_INFINITY, Vec3::max);
+                (i, (hi - lo).max_element())
+            })
+            .collect();
+        if sides.len() < 3 {
+            return Vec::new();
+        }
+        let mut sorted: Vec<f32> = sides.iter().map(|&(_, side)| side).collect();
+        sorted.sort_by(f32::total_cmp);
+        let median = sorted[sorted.len() / 2];
+        sides
+            .into_iter()
+            .filter(|&(_, side)| side > OVERSIZED_PROXY * median)
+            .map(|(i, side)| (&self.slots()[i], side, median))
+            .collect()
+    }
+}
+
+/// How many times the median slot's side a proxy box may be before loading
+/// warns of it.
+pub const OVERSIZED_PROXY: f32 = 10.0;
+
 /// Whether any node of the file is a slot (extras with a `"slot"` key):
 /// what tells a slot rig from a skinned character when both have a skin.
 pub(crate) fn has_slots(file: &GltfFile) -> bool {

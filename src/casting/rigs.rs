@@ -82,7 +82,7 @@ impl ShotRigs {
             };
             rigs.insert(name.clone(), (rig, height));
         }
-        let warnings = check_rig_names(shot, &rigs)?;
+        let warnings = check_slot_rigs(shot, &rigs)?;
         Ok(ShotRigs { rigs, warnings })
     }
 
@@ -126,17 +126,27 @@ impl ShotRigs {
     }
 }
 
-/// Checks each slot rig file against the rig the shot says it is. A slot
+/// Checks each slot rig file: proxy boxes far larger than the rest of the
+/// rig (a warning), and that it is the rig the shot says it is. A slot
 /// rig's file names its rig (its top node); a file that names another rig
 /// of this shot, loaded there from another file, is a swap and is refused
 /// (both rigs would cast, pose and stride as each other without a word). A
 /// name that is no rig of the shot is legal (one file under two names, a
 /// renamed rig) but surprising: a warning. Skinned characters' files carry
 /// no rig name; their clips and joints are checked as they load.
-fn check_rig_names(shot: &Shot, rigs: &BTreeMap<String, (ShotRig, f32)>) -> Result<Vec<String>> {
+fn check_slot_rigs(shot: &Shot, rigs: &BTreeMap<String, (ShotRig, f32)>) -> Result<Vec<String>> {
     let mut warnings = Vec::new();
     for (name, (rig, _)) in rigs {
         let ShotRig::Slots(rig) = rig else { continue };
+        for (slot, side, median) in rig.oversized_slots() {
+            warnings.push(format!(
+                "{}: field `rigs.{name}.file`: slot `{}`'s proxy box is {side:.3} m across, more than {} times \
+                 the rig's median slot ({median:.3} m): is it in the wrong units?",
+                shot.rigs[name].file.display(),
+                slot.name,
+                crate::casting::rig::OVERSIZED_PROXY
+            ));
+        }
         let Some(in_file) = rig.name_in_file().filter(|n| n != name) else { continue };
         let file = &shot.rigs[name].file;
         match shot.rigs.get(in_file) {
