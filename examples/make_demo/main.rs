@@ -62,7 +62,7 @@ fn shot_toml() -> String {
     s.push_str(
         "\n[rigs.walker]\nfile = \"rigs/walker.glb\"\nkind = \"skinned\"\n\
          cycles = { WalkA = \"Walk\", WalkB = \"Walk\", IdleA = \"Idle\" }\n\
-         root = \"hips\"\npose_step = 1.0\nschemes = { Walkers = 1.0 }\nslots = [\"body\", \"head\"]\n\
+         root = \"hips\"\nschemes = { Walkers = 1.0 }\nslots = [\"body\", \"head\"]\n\
          height_jitter = 0.1\n",
     );
     s.push_str("\n[set]\nfile = \"set/set.glb\"\n");

@@ -25,12 +25,15 @@
 //! or out mid-shutter.
 //!
 //! Rigid parts (slot rigs) are posed from their clips at the exact cycle
-//! frame of each key. Skinned agents use the shared pose steps: the keys are
-//! the steps just below and above the cycle frames the shutter spans, and the
-//! mesh blends between those two posed meshes with a weight that runs
-//! linearly over the shutter (exact piecewise-linear pose interpolation when
-//! the shutter stays within one step, which a 180-degree shutter does for a
-//! `pose_step` of at least half a frame). Agents at the same keys share the
+//! frame of each key. Skinned agents use the shared pose steps: when the
+//! shutter stays within one step, the keys are the steps just below and
+//! above it and the mesh blends between those two posed meshes with a weight
+//! that runs linearly over the shutter (exact piecewise-linear pose
+//! interpolation); when it spans more (steps shorter than the shutter, as
+//! `pose_error_max` chooses for fast clips), the keys are the steps nearest
+//! open and close, each within the pose error bound of its exact pose, with
+//! the blend running from one to the other (a shutter shorter than a step
+//! that straddles one still blends the two steps around it). Agents at the same keys share the
 //! same posed meshes, as pose instancing does for still frames. A crowd
 //! built for a shutter ([`ShotCrowd::open`] with it) has every step that
 //! shutter needs posed, once, in its pose library ([`shutter_steps`]).
@@ -196,7 +199,6 @@ fn skin_keys(skinned: (&Arc<str>, &SkinnedRig), cycle_name: &str, c0: f32, c1: f
         let step = (lo.rem_euclid(steps as f32) as u32).min(steps);
         return Some((rig_name.clone(), cycle, step, step, [0.0; 2]));
     }
-    let w = |x: f32| ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
     let wrap = |k: f32| -> u32 {
         // Poses 0..=steps exist; past the end the cycle starts again.
         let k = k as i64;
@@ -207,6 +209,18 @@ fn skin_keys(skinned: (&Arc<str>, &SkinnedRig), cycle_name: &str, c0: f32, c1: f
             k.rem_euclid(n) as u32
         }
     };
+    let (n0, n1) = (x0.round(), x1.round());
+    if hi - lo > 1.0 && n0 != n1 {
+        // The shutter spans more than one step and its ends are nearest
+        // different steps: blending the steps around it would put open and
+        // close on a chord longer than the shutter, which a joint reversing
+        // within it leaves far behind. Key the steps nearest open and close
+        // instead, so each is its still-frame pose (within pose_error_max of
+        // the exact pose) and the blend runs between. (A shutter shorter
+        // than a step that straddles one blends the two steps around it.)
+        return Some((rig_name.clone(), cycle, wrap(n0), wrap(n1), [0.0, 1.0]));
+    }
+    let w = |x: f32| ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
     Some((rig_name.clone(), cycle, wrap(lo), wrap(hi), [w(x0), w(x1)]))
 }
 
@@ -353,5 +367,33 @@ mod tests {
         assert!((s.position.x + 0.25).abs() < 1e-6);
         let s = sample_at(&a, None, None, 0.25, Some(24.0));
         assert_eq!(s, a);
+    }
+
+    /// Keys of a shutter over RiggedFigure's walk cut into `pose_step`-frame steps.
+    fn figure_keys(pose_step: f32, c0: f32, c1: f32) -> (u32, u32, [f32; 2]) {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../shared/assets/gltf/RiggedFigure/RiggedFigure.gltf");
+        let options = crate::shot::SkinOptions { pose_step: Some(pose_step), ..Default::default() };
+        let rig = SkinnedRig::load(&file, &options, 24.0).expect("RiggedFigure loads");
+        let name: Arc<str> = "figure".into();
+        let (_, _, k0, k1, w) = skin_keys((&name, &rig), "#0", c0, c1).expect("keys");
+        (k0, k1, w)
+    }
+
+    #[test]
+    fn a_shutter_within_one_step_blends_the_steps_around_it() {
+        // Steps of 1 frame: 4.25..4.75 lies within step 4..5.
+        assert_eq!(figure_keys(1.0, 4.25, 4.75), (4, 5, [0.25, 0.75]));
+        // Straddling step 5 with a shutter shorter than a step: 4..6, as before.
+        assert_eq!(figure_keys(1.0, 4.75, 5.25), (4, 6, [0.375, 0.625]));
+    }
+
+    #[test]
+    fn a_shutter_over_several_steps_keys_the_steps_nearest_open_and_close() {
+        // Steps of 0.25 frames: open at step 16.8, close at 18.8 (of 120).
+        assert_eq!(figure_keys(0.25, 4.2, 4.7), (17, 19, [0.0, 1.0]));
+        // Across the cycle's end (30 frames): from step 119.6 to 121.6, nearest
+        // 120 (the end pose) and 122, step 2 of the next cycle.
+        assert_eq!(figure_keys(0.25, 29.9, 30.4), (120, 2, [0.0, 1.0]));
     }
 }

@@ -17,17 +17,24 @@
 //! a clip is that cycle's stride, as the `root` node is for slot rigs.
 //!
 //! Pose instancing: a cycle of `length` frames is cut into `steps` equal
-//! steps of about `pose_step` frames (`steps + 1` poses: a clip that does
-//! not loop seamlessly ends on its own pose); an agent is posed at the step nearest
-//! its cycle frame, so every agent on the same (mesh, cycle, step) shares one
-//! posed mesh. The error this costs is at most the vertex displacement over
-//! half a step, which [`SkinnedRig::quantisation_error`] measures.
+//! steps (`steps + 1` poses: a clip that does not loop seamlessly ends on its
+//! own pose); an agent is posed at the step nearest its cycle frame, so every
+//! agent on the same (mesh, cycle, step) shares one posed mesh. The error
+//! this costs, measured by [`SkinnedRig::pose_error`], is the largest vertex
+//! distance between the exact pose and the snapped step (still frames) or
+//! the blend of the two steps around it (motion blur). Unless the shot gives
+//! `pose_step`, each clip's steps are chosen at load, from the file's own
+//! meshes: one a frame ([`DEFAULT_POSE_STEP`]) when that holds the error to
+//! `pose_error_max` on the rig's tallest agent, else about the fewest that
+//! do, found by measuring. Deterministic, and the same for every agent,
+//! wardrobe and thread count.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use glam::{Affine3A, Mat3, Mat4, Quat, Vec3};
 use gltf::accessor::{DataType, Dimensions};
+use rayon::prelude::*;
 
 use crate::casting::rig::{Animated, Trs};
 use crate::error::{Error, Result};
@@ -37,9 +44,12 @@ use crate::shot::{Axis, SkinOptions};
 
 /// Most influences per vertex (JOINTS_0/WEIGHTS_0 and JOINTS_1/WEIGHTS_1).
 pub(crate) const MAX_INFLUENCES: usize = 8;
-/// Pose step in cycle frames when the shot gives none (see docs/wardrobes.md
-/// for the displacement it costs on the demo character).
+/// The coarsest pose step, in cycle frames, chosen when the shot gives no
+/// `pose_step` (finer where a clip moves faster than `pose_error_max` allows).
 pub(crate) const DEFAULT_POSE_STEP: f32 = 1.0;
+/// Where within each step the exact pose is compared with the snapped and
+/// blended ones (fractions of a step).
+const ERROR_SAMPLES: [f32; 3] = [0.25, 0.5, 0.75];
 /// Most pose steps one cycle may be cut into (bounds posed geometry).
 pub(crate) const MAX_STEPS_PER_CYCLE: u32 = 1024;
 /// Weight sums further than this from 1 are renormalised with a warning.
@@ -86,6 +96,11 @@ pub struct SkinCycle {
     pub stride: f32,
     /// Steps the cycle is cut into for pose instancing.
     pub steps: u32,
+    /// Whether `steps` was chosen for `pose_error_max` (not from `pose_step`).
+    pub chosen: bool,
+    /// Pose error in metres at `steps`, on the rig's tallest agent, over the
+    /// file's own meshes ([`SkinnedRig::pose_error`]).
+    pub error: f32,
 }
 
 /// A skinned character loaded from glTF.
@@ -105,7 +120,9 @@ pub struct SkinnedRig {
     delivered: Vec<(String, String, usize)>,
     height: f32,
     fps: f32,
-    pose_step: f32,
+    pose_step: Option<f32>,
+    pose_error_max: f32,
+    max_height_scale: f32,
     warnings: Vec<String>,
 }
 
@@ -203,7 +220,9 @@ impl SkinnedRig {
             delivered: Vec::new(),
             height: 0.0,
             fps,
-            pose_step: options.pose_step.unwrap_or(DEFAULT_POSE_STEP),
+            pose_step: options.pose_step,
+            pose_error_max: options.pose_error_max,
+            max_height_scale: options.max_height_scale,
             warnings: Vec::new(),
         };
 
@@ -302,30 +321,139 @@ impl SkinnedRig {
                 cycles.push((c.name.clone(), i));
             }
         }
+        // Pose steps per clip (cycles sharing a clip share its steps),
+        // measured on the file's own meshes.
+        let own: Vec<usize> =
+            rig.delivered.iter().flat_map(|(_, _, part)| rig.part_list[*part].pieces.iter().copied()).collect();
+        let mut per_clip: BTreeMap<usize, (u32, bool, f32)> = BTreeMap::new();
         for (name, clip) in cycles {
             let clip_name = rig.animated.clips[clip].name.clone();
             let stride = match options.strides.get(&name) {
                 Some(&s) => s,
                 None => rig.root_travel(clip),
             };
-            let length = rig.animated.clips[clip].duration() * fps;
-            let steps = if length > 0.0 {
-                let s = (length / rig.pose_step).round();
-                if !(s.is_finite() && s <= MAX_STEPS_PER_CYCLE as f32) {
-                    return Err(file
-                        .err(format!(
-                            "pose_step {} cuts cycle `{name}` ({length:.1} frames) into more than {MAX_STEPS_PER_CYCLE} poses",
-                            rig.pose_step
-                        ))
-                        .field("pose_step"));
+            let (steps, chosen, error) = match per_clip.get(&clip) {
+                Some(&known) => known,
+                None => {
+                    let known = rig.clip_steps(&file, &own, clip, &name)?;
+                    per_clip.insert(clip, known);
+                    known
                 }
-                (s as u32).max(1)
-            } else {
-                1
             };
-            rig.cycles.push(SkinCycle { name, clip, clip_name, stride, steps });
+            rig.cycles.push(SkinCycle { name, clip, clip_name, stride, steps, chosen, error });
         }
         Ok(rig)
+    }
+
+    /// Pose steps of clip `clip` (first played as cycle `name`): from the
+    /// shot's `pose_step`, with a warning when that misses `pose_error_max`,
+    /// else steps no coarser than [`DEFAULT_POSE_STEP`] whose pose error on
+    /// `pieces` is within it (the first count tried that is; a warning when
+    /// even [`MAX_STEPS_PER_CYCLE`] is not). Returns (steps, chosen, error at
+    /// the tallest agent).
+    fn clip_steps(&mut self, file: &GltfFile, pieces: &[usize], clip: usize, name: &str) -> Result<(u32, bool, f32)> {
+        let length = self.animated.clips[clip].duration() * self.fps;
+        if !(length > 0.0 && length.is_finite()) {
+            return Ok((1, self.pose_step.is_none(), 0.0));
+        }
+        let clip_name = self.animated.clips[clip].name.clone();
+        let bound = self.pose_error_max;
+        let error = |rig: &Self, steps: u32| rig.clip_error(pieces, clip, steps) * rig.max_height_scale;
+        let mm = |m: f32| format!("{:.1} mm", m * 1000.0);
+        if let Some(step) = self.pose_step {
+            let s = (length / step).round();
+            if !(s.is_finite() && s <= MAX_STEPS_PER_CYCLE as f32) {
+                return Err(file
+                    .err(format!(
+                        "pose_step {step} cuts cycle `{name}` ({length:.1} frames) into more than {MAX_STEPS_PER_CYCLE} poses"
+                    ))
+                    .field("pose_step"));
+            }
+            let steps = (s as u32).max(1);
+            let e = error(self, steps);
+            if e > bound {
+                self.warnings.push(format!(
+                    "{}: clip `{clip_name}` (cycle `{name}`): pose_step {step} gives a pose error of {} on the tallest agent, \
+                     above pose_error_max {}; leave pose_step out to have the step chosen, or make it about {:.2} frames",
+                    self.path.display(),
+                    mm(e),
+                    mm(bound),
+                    step * bound / e
+                ));
+            }
+            return Ok((steps, false, e));
+        }
+        // The error shrinks about as the step does: a try asks for the steps
+        // that would just meet the bound (2% more), and at least one more;
+        // a try after a miss (the error shrinks slower, or the clip jumps)
+        // for at least a quarter more, so the tries stay few.
+        let first = ((length / DEFAULT_POSE_STEP).round() as u32).clamp(1, MAX_STEPS_PER_CYCLE);
+        let (mut steps, first_error) = (first, error(self, first));
+        let mut e = first_error;
+        let mut growth = 1.0;
+        while e > bound && steps < MAX_STEPS_PER_CYCLE {
+            let want = (steps as f64 * ((e / bound) as f64 * 1.02).max(growth)).ceil();
+            steps = (want.min(MAX_STEPS_PER_CYCLE as f64) as u32).max(steps + 1).min(MAX_STEPS_PER_CYCLE);
+            e = error(self, steps);
+            growth = 1.25;
+        }
+        if e > bound {
+            // Not even halved at the finest: the clip jumps (a STEP sampler,
+            // a cut), which finer steps cannot follow; they would only cost
+            // posed geometry, so one a frame it is.
+            let jumps = e > first_error * 0.5;
+            self.warnings.push(format!(
+                "{}: clip `{clip_name}` (cycle `{name}`): pose error {} on the tallest agent even at {MAX_STEPS_PER_CYCLE} steps, \
+                 above pose_error_max {}; {}",
+                self.path.display(),
+                mm(e),
+                mm(bound),
+                if jumps {
+                    format!("the clip jumps, so it keeps one pose a frame ({first} steps, {})", mm(first_error))
+                } else {
+                    "the character moves very fast for its size: raise pose_error_max".to_string()
+                }
+            ));
+            if jumps {
+                return Ok((first, true, first_error));
+            }
+        }
+        Ok((steps, true, e))
+    }
+
+    /// The pose error, metres in rig space (before height jitter), of
+    /// `pieces` posed on clip `clip` cut into `steps` steps: the largest
+    /// vertex distance, at a quarter, half and three quarters of each step,
+    /// between the exact pose and the step an agent snaps to (either, at the
+    /// half) and the two steps' blend motion blur uses.
+    fn clip_error(&self, pieces: &[usize], clip: usize, steps: u32) -> f32 {
+        let pose = |x: f32| -> Vec<Vec<Vec3>> {
+            let joints = self.clip_joints(clip, self.clip_time(clip, steps, x));
+            pieces.iter().map(|&p| self.skin_positions(p, &joints)).collect()
+        };
+        // f32::max is exact in any order: the same for every thread count.
+        (0..steps)
+            .into_par_iter()
+            .map(|q| {
+                let (a, b) = (pose(q as f32), pose(q as f32 + 1.0));
+                let mut worst = 0.0f32;
+                for s in ERROR_SAMPLES {
+                    let exact = pose(q as f32 + s);
+                    for ((a, b), exact) in a.iter().zip(&b).zip(&exact) {
+                        for ((a, b), x) in a.iter().zip(b).zip(exact) {
+                            worst = worst.max(x.distance(a.lerp(*b, s)));
+                            if s <= 0.5 {
+                                worst = worst.max(x.distance(*a));
+                            }
+                            if s >= 0.5 {
+                                worst = worst.max(x.distance(*b));
+                            }
+                        }
+                    }
+                }
+                worst
+            })
+            .reduce(|| 0.0, f32::max)
     }
 
     /// Reads glTF mesh `mesh_ref` (a name, or `#index`) of `file` as a part,
@@ -647,6 +775,10 @@ impl SkinnedRig {
     pub fn piece(&self, i: usize) -> &SkinPiece {
         &self.pieces[i]
     }
+    /// How many pieces are loaded (the file's own, then worn parts of other files).
+    pub fn piece_count(&self) -> usize {
+        self.pieces.len()
+    }
     /// Warnings from loading (weights renormalised, morph targets ignored).
     pub fn warnings(&self) -> &[String] {
         &self.warnings
@@ -696,18 +828,17 @@ impl SkinnedRig {
         ((frame.rem_euclid(length) / step).round() as u32).min(c.steps)
     }
 
-    /// Clip time in seconds of a fractional step of a cycle.
-    fn step_time(&self, cycle: usize, step: f32) -> f32 {
-        let c = &self.cycles[cycle];
-        let clip = &self.animated.clips[c.clip];
-        clip.start + step * (self.cycle_frames(cycle) / c.steps as f32) / self.fps
+    /// Clip time in seconds of fractional step `step` of clip `clip` cut into `steps`.
+    fn clip_time(&self, clip: usize, steps: u32, step: f32) -> f32 {
+        let clip = &self.animated.clips[clip];
+        clip.start + step * clip.duration() / steps as f32
     }
 
-    /// `rig_from_node` for every node at clip time `t` of a cycle, root
+    /// `rig_from_node` for every node at time `t` of clip `clip`, root
     /// motion removed.
-    fn joints_at_time(&self, cycle: usize, t: f32) -> Vec<Affine3A> {
+    fn clip_joints(&self, clip: usize, t: f32) -> Vec<Affine3A> {
         let mut local = self.animated.hierarchy.rest_pose();
-        self.animated.clips[self.cycles[cycle].clip].apply(t, &mut local);
+        self.animated.clips[clip].apply(t, &mut local);
         let mut joints = self.joints_at(&local);
         if let Some(root) = self.root {
             let o = joints[root].translation;
@@ -721,7 +852,8 @@ impl SkinnedRig {
 
     /// `rig_from_node` for every node at a pose step.
     pub fn step_joints(&self, cycle: usize, step: u32) -> Vec<Affine3A> {
-        self.joints_at_time(cycle, self.step_time(cycle, step as f32))
+        let c = &self.cycles[cycle];
+        self.clip_joints(c.clip, self.clip_time(c.clip, c.steps, step as f32))
     }
 
     /// Skin matrices of a piece for node transforms `joints`.
@@ -783,22 +915,17 @@ impl SkinnedRig {
         format!("{}/{}of{}", c.clip_name, step, c.steps)
     }
 
-    /// The largest vertex displacement, metres (rig space, before height
-    /// jitter), between a piece posed at a step and posed half a step away:
-    /// the worst error pose quantisation makes on this cycle.
-    pub(crate) fn quantisation_error(&self, piece: usize, cycle: usize) -> f32 {
-        let steps = self.cycles[cycle].steps;
-        let at: Vec<Vec<Vec3>> = (0..=steps).map(|q| self.skin_positions(piece, &self.step_joints(cycle, q))).collect();
-        let mut worst = 0.0f32;
-        for q in 0..steps as usize {
-            // Halfway between steps q and q + 1: farthest from both.
-            let half = self.skin_positions(piece, &self.joints_at_time(cycle, self.step_time(cycle, q as f32 + 0.5)));
-            for near in [&at[q], &at[q + 1]] {
-                for (a, b) in near.iter().zip(&half) {
-                    worst = worst.max(a.distance(*b));
-                }
-            }
-        }
-        worst
+    /// The pose error, metres, of `pieces` on cycle `cycle` at its steps, on
+    /// the rig's tallest agent (rig-space error times the largest height
+    /// scale): the largest vertex distance between the exact pose and the
+    /// snapped step or the blend of the steps around it.
+    pub(crate) fn pose_error(&self, pieces: &[usize], cycle: usize) -> f32 {
+        let c = &self.cycles[cycle];
+        self.clip_error(pieces, c.clip, c.steps) * self.max_height_scale
+    }
+
+    /// The shot's bound on pose error, metres on the tallest agent.
+    pub(crate) fn pose_error_max(&self) -> f32 {
+        self.pose_error_max
     }
 }

@@ -1,7 +1,7 @@
 //! The casting table and its instancing figures: what `throng cast` prints,
 //! botinfo's part rows, and the demo's summary.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 
 use serde::Serialize;
@@ -72,10 +72,35 @@ pub struct SkinStats {
     /// Bytes of one posed copy per skinned agent: what one frame costs
     /// without pose sharing.
     pub(crate) posed_per_agent_bytes: usize,
-    /// Largest vertex displacement, metres (before height jitter), between a
-    /// pose step and the exact pose halfway to the next step, over the
-    /// pieces and cycles the shot uses.
+    /// Largest pose error, metres, over the clips below.
     pub worst_quantisation_error_m: f32,
+    /// Per clip played: its pose step and measured error.
+    pub clips: Vec<ClipPoseStats>,
+}
+
+/// The pose step of one clip of a skinned rig and the error it costs.
+#[derive(Debug, Serialize)]
+pub struct ClipPoseStats {
+    /// Rig.
+    pub rig: String,
+    /// The clip.
+    pub clip: String,
+    /// Cache cycles that play it.
+    pub cycles: Vec<String>,
+    /// Clip length in shot frames.
+    pub frames: f32,
+    /// Steps the clip is cut into (`steps + 1` poses).
+    pub steps: u32,
+    /// Frames per step.
+    pub step_frames: f32,
+    /// Whether the step was chosen for `pose_error_max` (else the shot's `pose_step`).
+    pub chosen: bool,
+    /// Largest vertex error, metres, on the rig's tallest agent, between the
+    /// exact pose and the snapped step or the blend of the steps around it,
+    /// over the pieces the shot poses on this clip.
+    pub error_m: f32,
+    /// The shot's `pose_error_max`, metres.
+    pub bound_m: f32,
 }
 
 /// One agent's row: its scheme, height, and part and material per slot.
@@ -155,18 +180,34 @@ fn skin_stats(crowd: &ShotCrowd) -> Option<SkinStats> {
     let posed_bytes =
         |rig: &str, piece: usize| skins.first_mesh(rig, piece).map_or(0, |m| lib.meshes[m as usize].bytes());
     let mut per_agent = 0;
-    let mut used: BTreeSet<(String, usize, usize)> = BTreeSet::new();
+    let mut used: BTreeMap<(String, usize), BTreeSet<usize>> = BTreeMap::new();
     for ((rig, piece, cycle, _), _) in skins.meshes() {
-        used.insert((rig.to_string(), *piece, *cycle));
+        used.entry((rig.to_string(), *cycle)).or_default().insert(*piece);
     }
     for &(id, parts) in &skinned {
         let Some(cast) = crowd.cast(id) else { continue };
         per_agent += parts.iter().map(|p| posed_bytes(&cast.rig, p.piece)).sum::<usize>();
     }
-    let worst = used
+    let clips: Vec<ClipPoseStats> = used
         .iter()
-        .filter_map(|(rig, piece, cycle)| Some(crowd.rigs().skinned(rig)?.quantisation_error(*piece, *cycle)))
-        .fold(0.0f32, f32::max);
+        .filter_map(|((name, cycle), pieces)| {
+            let rig = crowd.rigs().skinned(name)?;
+            let c = &rig.cycles()[*cycle];
+            let pieces: Vec<usize> = pieces.iter().copied().collect();
+            Some(ClipPoseStats {
+                rig: name.clone(),
+                clip: c.clip_name.clone(),
+                cycles: rig.cycles().iter().filter(|o| o.clip == c.clip).map(|o| o.name.clone()).collect(),
+                frames: rig.cycle_frames(*cycle),
+                steps: c.steps,
+                step_frames: rig.cycle_frames(*cycle) / c.steps as f32,
+                chosen: c.chosen,
+                error_m: rig.pose_error(&pieces, *cycle),
+                bound_m: rig.pose_error_max(),
+            })
+        })
+        .collect();
+    let worst = clips.iter().map(|c| c.error_m).fold(0.0f32, f32::max);
     Some(SkinStats {
         agents: skinned.len(),
         unique_poses: skins.step_count(),
@@ -174,6 +215,7 @@ fn skin_stats(crowd: &ShotCrowd) -> Option<SkinStats> {
         posed_geometry_bytes: skins.meshes().map(|(_, m)| lib.meshes[m as usize].bytes()).sum(),
         posed_per_agent_bytes: per_agent,
         worst_quantisation_error_m: worst,
+        clips,
     })
 }
 
@@ -202,7 +244,24 @@ pub fn format_stats(s: &CastStats) -> String {
             writeln!(o, "unique poses         {}  ({} posed meshes, one BLAS each)", k.unique_poses, k.posed_meshes);
         let _ = writeln!(o, "posed geometry       {}", mib(k.posed_geometry_bytes));
         let _ = writeln!(o, "one copy per agent   {}  per frame, without pose sharing", mib(k.posed_per_agent_bytes));
-        let _ = writeln!(o, "worst pose error     {:.2} mm", k.worst_quantisation_error_m * 1000.0);
+        let _ =
+            writeln!(o, "worst pose error     {:.2} mm  (on the tallest agent)", k.worst_quantisation_error_m * 1000.0);
+        for c in &k.clips {
+            let _ = writeln!(
+                o,
+                "  {} {} ({}): {:.1} frames in {} steps of {:.3} frames ({}), error {:.2} mm of {:.2} mm{}",
+                c.rig,
+                c.clip,
+                c.cycles.join(", "),
+                c.frames,
+                c.steps,
+                c.step_frames,
+                if c.chosen { "chosen" } else { "pose_step" },
+                c.error_m * 1000.0,
+                c.bound_m * 1000.0,
+                if c.error_m > c.bound_m { "  ABOVE pose_error_max" } else { "" }
+            );
+        }
     }
     o
 }

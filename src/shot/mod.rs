@@ -227,6 +227,10 @@ pub enum Axis {
     NegZ,
 }
 
+/// Largest pose error of a skinned rig, metres, when the shot gives no
+/// `pose_error_max` (docs/wardrobes.md, "Pose instancing").
+pub const DEFAULT_POSE_ERROR_MAX: f32 = 0.02;
+
 /// How a skinned character file maps onto throng's agents.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SkinOptions {
@@ -242,8 +246,14 @@ pub struct SkinOptions {
     pub root: Option<String>,
     /// Metres per cycle by cache cycle name, overriding the root joint's travel.
     pub strides: BTreeMap<String, f32>,
-    /// Pose instancing step in cycle frames (default `skin::DEFAULT_POSE_STEP`).
+    /// Pose instancing step in cycle frames; `None`: chosen per clip for `pose_error_max`.
     pub pose_step: Option<f32>,
+    /// Largest pose error in metres on the rig's tallest agent (default
+    /// [`DEFAULT_POSE_ERROR_MAX`]): the bound chosen steps hold.
+    pub pose_error_max: f32,
+    /// The largest height scale an agent of the rig gets (`1 + height_jitter`):
+    /// pose error grows with it.
+    pub max_height_scale: f32,
     /// Slot names for wardrobes (default: one per skinned mesh node of the file).
     pub slots: Option<Vec<String>>,
 }
@@ -258,6 +268,8 @@ impl Default for SkinOptions {
             root: None,
             strides: BTreeMap::new(),
             pose_step: None,
+            pose_error_max: DEFAULT_POSE_ERROR_MAX,
+            max_height_scale: 1.0,
             slots: None,
         }
     }
@@ -524,6 +536,7 @@ struct ShotFile {
     no_scale_cycles: Vec<String>,
     #[serde(default)]
     exclude_parts: Vec<String>,
+    pose_error_max: Option<Spanned<f32>>,
     frames: Spanned<Frames>,
     cache: CacheTable,
     #[serde(default)]
@@ -555,6 +568,7 @@ struct RigFile {
     #[serde(default)]
     strides: BTreeMap<String, f32>,
     pose_step: Option<Spanned<f32>>,
+    pose_error_max: Option<Spanned<f32>>,
     slots: Option<Vec<String>>,
 }
 
@@ -568,6 +582,7 @@ impl RigFile {
             || self.root.is_some()
             || !self.strides.is_empty()
             || self.pose_step.is_some()
+            || self.pose_error_max.is_some()
             || self.slots.is_some()
     }
 }
@@ -660,9 +675,19 @@ fn check_cache(raw: &CacheTable, frames: &Frames, cx: &Context) -> Result<CacheR
     Ok(CacheRef { path: cx.existing(&raw.path, "cache.path")?, frame_offset: offset, import })
 }
 
+/// A `pose_error_max` (metres): finite and > 0, else an error naming `key`.
+fn check_pose_error_max(raw: &Spanned<f32>, key: &str, cx: &Context) -> Result<f32> {
+    let m = *raw.get_ref();
+    if m > 0.0 && m.is_finite() {
+        Ok(m)
+    } else {
+        Err(cx.at(raw.span(), key, format!("must be a positive number of metres, got {m}")))
+    }
+}
+
 impl RigFile {
-    /// `[rigs.NAME]` -> a checked rig.
-    fn check(&self, name: &str, cx: &Context) -> Result<RigRef> {
+    /// `[rigs.NAME]` -> a checked rig; `pose_error_max` is the shot's (checked).
+    fn check(&self, name: &str, cx: &Context, pose_error_max: f32) -> Result<RigRef> {
         let rig = self;
         let jitter = rig.height_jitter.as_ref().map_or(default_jitter(), |j| *j.get_ref());
         if !(0.0..1.0).contains(&jitter) {
@@ -685,7 +710,7 @@ impl RigFile {
             return Err(cx.at(
                 rig.file.span(),
                 &format!("rigs.{name}.kind"),
-                "cycles, up, forward, scale, root, strides, pose_step and slots are for `kind = \"skinned\"` rigs"
+                "cycles, up, forward, scale, root, strides, pose_step, pose_error_max and slots are for `kind = \"skinned\"` rigs"
                     .into(),
             ));
         }
@@ -705,6 +730,10 @@ impl RigFile {
                 ));
             }
         }
+        let pose_error_max = match &rig.pose_error_max {
+            Some(spanned) => check_pose_error_max(spanned, &format!("rigs.{name}.pose_error_max"), cx)?,
+            None => pose_error_max,
+        };
         for (cycle, s) in &rig.strides {
             if !(*s >= 0.0 && s.is_finite()) {
                 return Err(cx.at(
@@ -730,6 +759,8 @@ impl RigFile {
                 root: rig.root.clone(),
                 strides: rig.strides.clone(),
                 pose_step,
+                pose_error_max,
+                max_height_scale: 1.0 + jitter,
                 slots: rig.slots.clone(),
             },
         })
@@ -906,9 +937,13 @@ impl Shot {
         let frames = check_frames(&file.frames, &cx)?;
         let cache = check_cache(&file.cache, &frames, &cx)?;
         let wardrobes = file.wardrobes.iter().map(|w| cx.existing(w, "wardrobes")).collect::<Result<Vec<_>>>()?;
+        let pose_error_max = match &file.pose_error_max {
+            Some(raw) => check_pose_error_max(raw, "pose_error_max", &cx)?,
+            None => DEFAULT_POSE_ERROR_MAX,
+        };
         let mut rigs = BTreeMap::new();
         for (name, rig) in &file.rigs {
-            rigs.insert(name.clone(), rig.check(name, &cx)?);
+            rigs.insert(name.clone(), rig.check(name, &cx, pose_error_max)?);
         }
         let set = match &file.set {
             Some(s) => Some(SetRef { file: cx.existing(&s.file, "set.file")? }),
@@ -1141,13 +1176,19 @@ mod tests {
 
     #[test]
     fn rig_section_checks_jitter_kind_and_skin_keys() {
-        let check = |text: &str| toml::from_str::<RigFile>(text).unwrap().check("r", &cx(text));
+        let check = |text: &str| toml::from_str::<RigFile>(text).unwrap().check("r", &cx(text), DEFAULT_POSE_ERROR_MAX);
         let e = err(check("file = \"Cargo.toml\"\nheight_jitter = 1.5"));
         assert!(e.contains("s.toml:2") && e.contains("rigs.r.height_jitter"), "{e}");
         assert!(err(check("file = \"Cargo.toml\"\nkind = \"slots\"\nroot = \"hips\"")).contains("rigs.r.kind"));
         assert!(err(check("file = \"Cargo.toml\"\nslots = []")).contains("at least one slot"));
         let rig = check("file = \"Cargo.toml\"\nscale = 0.01").unwrap();
         assert_eq!((rig.height_jitter, rig.skin.scale), (0.1, 0.01));
+        // The pose error bound: the shot's unless the rig gives its own; the tallest agent is 1 + jitter.
+        assert_eq!((rig.skin.pose_error_max, rig.skin.max_height_scale), (DEFAULT_POSE_ERROR_MAX, 1.1));
+        let rig = check("file = \"Cargo.toml\"\npose_error_max = 0.005\nheight_jitter = 0.0").unwrap();
+        assert_eq!((rig.skin.pose_error_max, rig.skin.max_height_scale), (0.005, 1.0));
+        let e = err(check("file = \"Cargo.toml\"\npose_error_max = -1.0"));
+        assert!(e.contains("s.toml:2") && e.contains("rigs.r.pose_error_max"), "{e}");
     }
 
     #[test]
