@@ -566,7 +566,8 @@ fn import_args(rig: &str, cycle: &str, rig_file: Option<&str>) -> ImportFlags {
 
 fn options(f: &ImportFlags) -> throng::error::Result<ImportOptions> {
     ImportOptions::new(&f.rig, &f.cycle, f.stride, f.cycle_length, None)?;
-    let clip = f.rig_file.as_deref().map(|p| throng::casting::rig::import_clip(p, &f.rig, &f.cycle)).transpose()?;
+    let clip =
+        f.rig_file.as_deref().map(|p| throng::casting::rig::import_clip(p, &f.rig, &f.cycle, None)).transpose()?;
     ImportOptions::new(&f.rig, &f.cycle, f.stride, f.cycle_length, clip)
 }
 
@@ -585,6 +586,90 @@ fn assert_feet_planted(crowd: &CrowdCache, stride: f32, length: f32) {
         }
     }
     assert!(checked > 100, "{checked} moving agent-frames");
+}
+
+/// A skinned character as the import's rig: stride from its root joint's
+/// travel, length from the clip, its options as the shot's `[rigs.X]` keys
+/// (library) or the `--rig-*` flags (command line).
+#[test]
+fn skinned_rig_file_gives_stride_and_length() {
+    use throng::casting::rig::import_clip;
+    use throng::shot::SkinOptions;
+    let walker = Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/rigs/walker.glb");
+    let figure = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/assets/gltf/RiggedFigure/RiggedFigure.gltf");
+    let hips = SkinOptions {
+        root: Some("hips".into()),
+        cycles: [("WalkA".to_string(), "Walk".to_string())].into(),
+        ..Default::default()
+    };
+    // The demo shot's walker: WalkA plays Walk, hips 1.4 m in 32 frames.
+    let clip = import_clip(&walker, "walker", "WalkA", Some(&hips)).unwrap();
+    let o = ImportOptions::new("walker", "WalkA", None, None, Some(clip)).unwrap();
+    assert!((o.stride() - 1.4).abs() < 1e-3 && (o.cycle_length() - 32.0).abs() < 1e-3, "{}", o.describe());
+    // Detected as skinned without options; with no root joint the walk does not walk.
+    let e = err_text(import_clip(&walker, "walker", "Walk", None));
+    assert_has(&e, &["walker.glb", "field `cycle`", "cycle `Walk` walks 0 m in 32 frames", "root"]);
+    let e = err_text(import_clip(&walker, "walker", "Idle", Some(&hips)));
+    assert_has(&e, &["walker.glb", "cycle `Idle` walks 0 m in 48 frames"]);
+    let e = err_text(import_clip(&walker, "walker", "RunZ", Some(&hips)));
+    assert_has(&e, &["walker.glb", "no cycle `RunZ`", "WalkA (clip Walk)"]);
+    // RiggedFigure (clip #0, 30 frames) has no joint that travels.
+    let torso = SkinOptions { root: Some("torso_joint_1".into()), ..Default::default() };
+    let e = err_text(import_clip(&figure, "figure", "#0", Some(&torso)));
+    assert_has(&e, &["RiggedFigure.gltf", "cycle `#0` walks 0 m in 30 frames"]);
+
+    // The command line: --rig-root and --rig-cycle are the shot's `root` and `cycles`.
+    let out = throng(&[
+        "cache",
+        "info",
+        s(&fixture()),
+        "--rig",
+        "walker",
+        "--cycle",
+        "WalkA",
+        "--rig-file",
+        s(&walker),
+        "--rig-root",
+        "hips",
+        "--rig-cycle",
+        "WalkA=Walk",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!((v["import"]["stride"].as_f64().unwrap() - 1.4).abs() < 1e-3, "{v}");
+    assert!((v["import"]["cycle_length"].as_f64().unwrap() - 32.0).abs() < 1e-3, "{v}");
+    let dir = common::tempdir().unwrap();
+    let outp = dir.path().join("w.crowd");
+    let out = throng(&[
+        "cache",
+        "convert",
+        s(&fixture()),
+        s(&outp),
+        "--rig",
+        "walker",
+        "--cycle",
+        "Walk",
+        "--rig-file",
+        s(&walker),
+        "--rig-root",
+        "hips",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_feet_planted(&cache::read(&outp).unwrap(), 1.4, 32.0);
+    // No root: exit 2 naming the file and the cycle, and nothing written.
+    let none = dir.path().join("none.crowd");
+    let out = throng(&["cache", "convert", s(&fixture()), s(&none), "--cycle", "Walk", "--rig-file", s(&walker)]);
+    assert_eq!(out.status.code(), Some(2));
+    assert_has(&String::from_utf8_lossy(&out.stderr), &["walker.glb", "cycle `Walk` walks 0 m"]);
+    assert!(!none.exists());
+    // The --rig-* flags need --rig-file and read well-formed values.
+    let input = fixture();
+    for bad in [&["--rig-root", "hips"][..], &["--rig-file", s(&walker), "--rig-cycle", "Walk"]] {
+        let mut args = vec!["cache", "info", s(&input)];
+        args.extend_from_slice(bad);
+        assert_eq!(throng(&args).status.code(), Some(2), "{bad:?}");
+    }
 }
 
 #[test]

@@ -408,6 +408,46 @@ fn cycle_advance_matches_each_rigs_stride() {
     assert!(pos(&c, 60, 1).distance(pos(&c, 0, 1)) > pos(&c, 60, 0).distance(pos(&c, 0, 0)) + 0.1);
 }
 
+/// Skinned characters in `[rigs]`, keyed as the shot keys them: the demo's
+/// walker walks at its Walk clip's hips travel (feet planted), the shared
+/// RiggedFigure (clip `#0`, no travelling joint) at its given `strides`.
+#[test]
+fn skinned_rigs_time_cycles_from_their_clips() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let walker = root.join("demo/rigs/walker.glb");
+    let figure = root.join("../shared/assets/gltf/RiggedFigure/RiggedFigure.gltf");
+    let text = format!(
+        "version = 1\nseed = 7\n[frames]\nstart = 1\nend = 80\n\
+         [rigs.walker]\nfile = {:?}\nkind = \"skinned\"\nroot = \"hips\"\ncycles = {{ WalkA = \"Walk\" }}\n\
+         [rigs.figure]\nfile = {:?}\nkind = \"skinned\"\ncycles = {{ WalkA = \"#0\" }}\nstrides = {{ WalkA = 0.9 }}\n\
+         [cycles.WalkA]\n\
+         [[agents]]\nid = 1\nposition = [0.0, 0.0]\nrig = \"walker\"\ncycle = \"WalkA\"\ncycle_frame = 0.0\n\
+         [[agents]]\nid = 2\nposition = [4.0, 0.0]\nrig = \"figure\"\ncycle = \"WalkA\"\ncycle_frame = 0.0\n",
+        walker.display().to_string(),
+        figure.display().to_string(),
+    );
+    let scene = SimScene::parse(&text, "skinned.toml").unwrap_or_else(|e| panic!("{e}"));
+    let r = |n: &str| scene.rigs.iter().position(|x| x == n).unwrap() as u16;
+    let (w, f) = (scene.timing(r("walker"), 0), scene.timing(r("figure"), 0));
+    // The demo's explicit walker timing (demo/sim/demo.toml) is what the file gives.
+    assert!((w.length - 32.0).abs() < 1e-3 && (w.stride - 1.4).abs() < 1e-3, "{w:?}");
+    assert!((f.length - 30.0).abs() < 1e-3 && f.stride == 0.9, "{f:?}");
+    assert!(scene.rig_files[r("walker") as usize].as_ref().unwrap().ends_with("walker.glb"));
+    // Each agent's cycle advances by its distance over its rig's stride: feet do not slide.
+    let c = run(&scene);
+    for (k, t) in [(0, w), (1, f)] {
+        let mut walked = 0.0;
+        for fr in 1..c.frames.len() {
+            let (a, b) = (&c.frames[fr - 1].agents[k], &c.frames[fr].agents[k]);
+            let adv = (b.cycle_frame - a.cycle_frame).rem_euclid(t.length);
+            let dist = pos(&c, fr, k).distance(pos(&c, fr - 1, k));
+            assert!((adv * t.stride / t.length - dist).abs() < 1e-4, "agent {k} frame {fr}: {adv} frames for {dist} m");
+            walked += dist;
+        }
+        assert!(walked > 50.0 * t.stride / t.length, "agent {k} walks: {walked} m");
+    }
+}
+
 #[test]
 fn rig_files_precedence_and_errors() {
     let walker = |rig: &str, cycle: &str| {

@@ -34,6 +34,7 @@ use gltf::accessor::{DataType, Dimensions};
 use crate::cache::jupedsim::{RigClip, SHOT_FPS};
 use crate::error::{Error, Result};
 use crate::scene::gltf::{check_accessor, node_label, out_of_range, quat_from_gltf, read_mesh, GltfFile};
+use crate::shot::SkinOptions;
 
 /// A translation, rotation and scale (glTF node transform order T * R * S).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -685,10 +686,17 @@ impl Pose {
 }
 
 /// The walk cycle a trajectory import takes its stride and cycle length from.
-/// Reads cycle `cycle` of the rig in `file`. The rig's name (its top
+/// Reads cycle `cycle` of the rig in `file`. A slot rig's name (its top
 /// node, the parent of `root`) must be `rig` when the file gives one, so
-/// the cache does not name one rig and walk at another's stride.
-pub fn import_clip(file: &Path, rig: &str, cycle: &str) -> Result<RigClip> {
+/// the cache does not name one rig and walk at another's stride. A skinned
+/// character (`skin` given, or detected: a skin and no slots) walks as a
+/// shot's skinned rig with those options does (`shot_cache::file_gait`):
+/// stride from its root joint's travel or `strides`, length from the clip.
+pub fn import_clip(file: &Path, rig: &str, cycle: &str, skin: Option<&SkinOptions>) -> Result<RigClip> {
+    if crate::casting::shot_cache::is_skinned_file(file, skin)? {
+        let g = crate::casting::shot_cache::file_gait(file, skin, cycle, None)?;
+        return Ok(RigClip { file: file.to_path_buf(), stride: g.stride, cycle_length: g.cycle_length });
+    }
     let r = Rig::load(file)?;
     if let Some(top) = r.name_in_file().filter(|&top| top != rig) {
         return Err(Error::invalid(

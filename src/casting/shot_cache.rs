@@ -13,7 +13,7 @@ use crate::cache::{CacheReader, Format, Import, ImportOptions, TabularOptions};
 use crate::casting::rig::Rig;
 use crate::casting::skin::{is_skinned_rig, SkinnedRig};
 use crate::error::{Error, Result};
-use crate::shot::Shot;
+use crate::shot::{RigRef, Shot, SkinOptions};
 
 /// A rig's gait from its glTF: the walk cycle's stride and length, and the
 /// idle cycle's length (frames at 24 fps, the unit of cycle frames). A walk
@@ -48,11 +48,7 @@ pub fn gait(file: &Path, walk: &str, idle: Option<&str>) -> Result<Gait> {
 /// travel, or the shot's `strides`) and length; `None` when it has no such
 /// cycle. A walk whose stride is 0 (no root, no given stride) is refused.
 fn skinned_gait(rig: &SkinnedRig, walk: &str, idle: Option<&str>) -> Result<Option<Gait>> {
-    let Ok(c) = rig.cycle_index(walk) else { return Ok(None) };
-    // Cycles on one clip share its poses (`cycle_index` gives the first of
-    // them), not their strides: the walk's own is its `strides` entry.
-    let own = rig.cycles().iter().find(|x| x.name == walk).map_or(rig.cycles()[c].stride, |x| x.stride);
-    let (stride, cycle_length) = (own, rig.cycle_frames(c));
+    let Ok((stride, cycle_length)) = rig.cycle_timing(walk) else { return Ok(None) };
     if !(stride.is_finite() && stride > 0.0 && cycle_length.is_finite() && cycle_length > 0.0) {
         return Err(Error::invalid(
             rig.path(),
@@ -67,6 +63,40 @@ fn skinned_gait(rig: &SkinnedRig, walk: &str, idle: Option<&str>) -> Result<Opti
         None => Gait::default().idle_length,
     };
     Ok(Some(Gait { stride, cycle_length, idle_length }))
+}
+
+/// Whether the rig in `file` is read as a skinned character: `skin` given
+/// says so, else it is detected as a shot's rig without `kind` is (a skin
+/// and no slots).
+pub(crate) fn is_skinned_file(file: &Path, skin: Option<&SkinOptions>) -> Result<bool> {
+    if skin.is_some() {
+        return Ok(true);
+    }
+    let rig = RigRef {
+        file: file.to_path_buf(),
+        schemes: BTreeMap::new(),
+        height_jitter: 0.0,
+        kind: None,
+        skin: SkinOptions::default(),
+    };
+    is_skinned_rig(&rig)
+}
+
+/// A rig file's gait outside a shot (a trajectory import's `rig_file`): a
+/// slot rig's as [`gait`] reads it, or a skinned character's with `skin`
+/// (its `[rigs.X]` options: root joint, cycle -> clip map, strides, scale,
+/// axes), as the shot's skinned rigs walk. `skin` `None` detects the kind;
+/// a detected skinned rig takes the default options (each clip is a cycle
+/// of its own name; no root joint, so its walk needs `root` or a stride).
+pub fn file_gait(file: &Path, skin: Option<&SkinOptions>, walk: &str, idle: Option<&str>) -> Result<Gait> {
+    if !is_skinned_file(file, skin)? {
+        return gait(file, walk, idle);
+    }
+    let default = SkinOptions::default();
+    let rig = SkinnedRig::load(file, skin.unwrap_or(&default), SHOT_FPS)?;
+    rig.cycle_index(walk).map_err(|e| e.field("cycle"))?;
+    skinned_gait(&rig, walk, idle)?
+        .ok_or_else(|| Error::invalid(file, format!("skinned rig has no cycle `{walk}`")).field("cycle"))
 }
 
 /// How the shot's cache becomes a crowd: the `[cache]` keys over their
@@ -127,7 +157,6 @@ pub fn open(shot: &Shot) -> Result<CacheReader> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shot::SkinOptions;
 
     /// Two cache cycles on one clip keep their own strides (they share poses only).
     #[test]

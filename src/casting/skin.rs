@@ -805,6 +805,15 @@ impl SkinnedRig {
         })
     }
 
+    /// Stride (metres) and length (frames) of cache cycle `name`. Cycles on
+    /// one clip share its poses ([`SkinnedRig::cycle_index`] gives the first
+    /// of them), not their strides: each keeps its own `strides` entry.
+    pub fn cycle_timing(&self, name: &str) -> Result<(f32, f32)> {
+        let c = self.cycle_index(name)?;
+        let own = self.cycles.iter().find(|x| x.name == name).map_or(self.cycles[c].stride, |x| x.stride);
+        Ok((own, self.cycle_frames(c)))
+    }
+
     /// Length of a cycle in frames.
     pub fn cycle_frames(&self, cycle: usize) -> f32 {
         self.animated.clips[self.cycles[cycle].clip].duration() * self.fps

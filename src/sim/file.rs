@@ -20,7 +20,10 @@ use super::{
     AgentSpec, Cycle, CycleTiming, Model, Obstacle, SimScene, Target, Wall, WallShape, Weights, DEFAULT_FPS,
     MAX_AGENTS, MAX_FRAMES, MAX_RIG_CYCLES, MAX_TARGETS,
 };
+use crate::casting::rig::Rig;
+use crate::casting::skin::{is_skinned_rig, SkinnedRig};
 use crate::error::{Error, Result};
+use crate::shot::{Axis, RigKind, RigRef, SkinOptions};
 
 /// Parses and checks scene text; `path` names it in messages.
 pub(super) fn parse(text: &str, path: &Path) -> Result<SimScene> {
@@ -52,7 +55,7 @@ struct RawScene {
     #[serde(default)]
     model: RawModel,
     #[serde(default)]
-    rigs: BTreeMap<String, PathBuf>,
+    rigs: BTreeMap<String, RawRig>,
     cycles: BTreeMap<String, RawCycle>,
     #[serde(default)]
     targets: Vec<RawTarget>,
@@ -86,6 +89,113 @@ struct RawModel {
     min_speed: Option<f32>,
     agent_radius: Option<f32>,
     chase: Option<bool>,
+}
+
+/// A `[rigs]` entry: a glTF path, or a table mirroring a shot's
+/// `[rigs.NAME]` timing keys (`file`, `kind`, and for a skinned character
+/// `root`, `cycles`, `strides`, `scale`, `up`, `forward`).
+enum RawRig {
+    File(PathBuf),
+    Table(RawRigTable),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRigTable {
+    file: PathBuf,
+    kind: Option<RigKind>,
+    #[serde(default)]
+    cycles: BTreeMap<String, String>,
+    up: Option<Axis>,
+    forward: Option<Axis>,
+    scale: Option<f32>,
+    root: Option<String>,
+    #[serde(default)]
+    strides: BTreeMap<String, f32>,
+}
+
+impl<'de> Deserialize<'de> for RawRig {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<RawRig, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = RawRig;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str(
+                    "a rig glTF path, or a table with `file` (and a skinned rig's `kind`, `root`, `cycles`, ...)",
+                )
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> std::result::Result<RawRig, E> {
+                Ok(RawRig::File(v.into()))
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> std::result::Result<RawRig, A::Error> {
+                RawRigTable::deserialize(serde::de::value::MapAccessDeserializer::new(map)).map(RawRig::Table)
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+impl RawRig {
+    /// The entry of rig `name` -> its file (relative to `base`) and kind,
+    /// checked as the shot checks `[rigs.NAME]`.
+    fn check(&self, name: &str, base: &Path, path: &Path) -> Result<RigRef> {
+        let t = match self {
+            RawRig::File(f) => {
+                return Ok(RigRef {
+                    file: base.join(f),
+                    schemes: BTreeMap::new(),
+                    height_jitter: 0.0,
+                    kind: None,
+                    skin: SkinOptions::default(),
+                })
+            }
+            RawRig::Table(t) => t,
+        };
+        let f = format!("rigs.{name}");
+        let skin_keys = !t.cycles.is_empty()
+            || t.up.is_some()
+            || t.forward.is_some()
+            || t.scale.is_some()
+            || t.root.is_some()
+            || !t.strides.is_empty();
+        check(
+            path,
+            !(t.kind == Some(RigKind::Slots) && skin_keys),
+            format!("{f}.kind"),
+            "cycles, up, forward, scale, root and strides are for `kind = \"skinned\"` rigs",
+        )?;
+        let d = SkinOptions::default();
+        let scale = t.scale.unwrap_or(d.scale);
+        check(
+            path,
+            scale > 0.0 && scale.is_finite(),
+            format!("{f}.scale"),
+            format!("must be a positive number, got {scale}"),
+        )?;
+        for (cycle, st) in &t.strides {
+            check(
+                path,
+                *st >= 0.0 && st.is_finite(),
+                format!("{f}.strides.{cycle}"),
+                format!("stride must be >= 0 metres, got {st}"),
+            )?;
+        }
+        Ok(RigRef {
+            file: base.join(&t.file),
+            schemes: BTreeMap::new(),
+            height_jitter: 0.0,
+            kind: t.kind.or(skin_keys.then_some(RigKind::Skinned)),
+            skin: SkinOptions {
+                cycles: t.cycles.clone(),
+                up: t.up.unwrap_or(d.up),
+                forward: t.forward.unwrap_or(d.forward),
+                scale,
+                root: t.root.clone(),
+                strides: t.strides.clone(),
+                ..d
+            },
+        })
+    }
 }
 
 #[derive(Deserialize)]
@@ -214,9 +324,10 @@ fn resolve(raw: RawScene, path: &Path) -> Result<SimScene> {
         .collect::<Result<_>>()?;
     let walls =
         raw.walls.iter().enumerate().map(|(i, w)| w.check(&format!("walls[{i}]"), path)).collect::<Result<_>>()?;
-    let (rigs, rig_files) = check_rigs(&raw, cycles.len(), path)?;
+    let (rigs, rig_refs) = check_rigs(&raw, cycles.len(), path)?;
     let reach = reachable(&raw, &rigs, &cycles);
-    let timings = timings(path, frames.fps, &rigs, &rig_files, &cycles, &reach)?;
+    let timings = timings(path, frames.fps, &rigs, &rig_refs, &cycles, &reach)?;
+    let rig_files = rig_refs.into_iter().map(|r| r.map(|r| r.file)).collect();
     // Every section but the agents, which are checked against it.
     let mut scene = SimScene {
         path: path.to_path_buf(),
@@ -442,9 +553,9 @@ impl RawWall {
 }
 
 /// The rigs: every name the agents and spawns mention, sorted, with its
-/// file from `[rigs]` (relative to the scene file's folder) or none. At
-/// most [`MAX_RIG_CYCLES`] (rig, cycle) pairs with `ncycles` cycles.
-fn check_rigs(raw: &RawScene, ncycles: usize, path: &Path) -> Result<(Vec<String>, Vec<Option<PathBuf>>)> {
+/// entry from `[rigs]` (file relative to the scene file's folder) or none.
+/// At most [`MAX_RIG_CYCLES`] (rig, cycle) pairs with `ncycles` cycles.
+fn check_rigs(raw: &RawScene, ncycles: usize, path: &Path) -> Result<(Vec<String>, Vec<Option<RigRef>>)> {
     let mut names: BTreeSet<&str> = raw.agents.iter().map(|a| a.rig.as_str()).collect();
     for s in &raw.spawn {
         names.extend(s.rigs.keys().map(String::as_str));
@@ -461,7 +572,8 @@ fn check_rigs(raw: &RawScene, ncycles: usize, path: &Path) -> Result<(Vec<String
     )?;
     let rigs: Vec<String> = names.iter().map(|s| s.to_string()).collect();
     let base = path.parent().unwrap_or(Path::new(""));
-    let files = rigs.iter().map(|r| raw.rigs.get(r).map(|f| base.join(f))).collect();
+    let files =
+        rigs.iter().map(|r| raw.rigs.get(r).map(|e| e.check(r, base, path)).transpose()).collect::<Result<_>>()?;
     Ok((rigs, files))
 }
 
@@ -512,27 +624,27 @@ fn timings(
     path: &Path,
     fps: f32,
     rigs: &[String],
-    rig_files: &[Option<PathBuf>],
+    rig_refs: &[Option<RigRef>],
     cycles: &[Cycle],
     reach: &BTreeMap<(u16, u16), String>,
 ) -> Result<Vec<CycleTiming>> {
     let stand_in = CycleTiming { length: 1.0, stride: 0.0 };
     let mut out = vec![stand_in; rigs.len() * cycles.len()];
-    let mut loaded: Vec<Option<crate::casting::rig::Rig>> = vec![None; rigs.len()];
+    let mut loaded: Vec<Option<Loaded>> = (0..rigs.len()).map(|_| None).collect();
     let mut explicit_used = vec![false; cycles.len()];
     for (&(r, c), key) in reach {
         let (rig_name, cycle) = (&rigs[r as usize], &cycles[c as usize]);
-        let timing = match &rig_files[r as usize] {
-            Some(file) => {
-                let rig: &crate::casting::rig::Rig = match &mut loaded[r as usize] {
+        let timing = match &rig_refs[r as usize] {
+            Some(rig_ref) => {
+                let file = &rig_ref.file;
+                let rig: &Loaded = match &mut loaded[r as usize] {
                     Some(rig) => rig,
-                    slot @ None => slot.insert(crate::casting::rig::Rig::load(file).map_err(|e| {
+                    slot @ None => slot.insert(Loaded::load(rig_ref, fps).map_err(|e| {
                         Error::invalid(path, format!("rig `{rig_name}`: {e}")).field(format!("rigs.{rig_name}"))
                     })?),
                 };
-                let Some(clip) = rig.cycles().iter().find(|k| k.name() == cycle.name) else {
-                    let names: Vec<&str> = rig.cycles().iter().map(|k| k.name()).collect();
-                    return Err(Error::invalid(
+                let no_cycle = |names: Vec<String>| {
+                    Error::invalid(
                         path,
                         format!(
                             "rig `{rig_name}` ({}) has no cycle `{}` (its cycles: {})",
@@ -541,9 +653,40 @@ fn timings(
                             names.join(", ")
                         ),
                     )
-                    .field(key.clone()));
+                    .field(key.clone())
                 };
-                let t = CycleTiming { length: clip.frames(fps), stride: clip.stride() };
+                let t = match rig {
+                    Loaded::Slot(rig) => {
+                        let Some(clip) = rig.cycles().iter().find(|k| k.name() == cycle.name) else {
+                            return Err(no_cycle(rig.cycles().iter().map(|k| k.name().to_string()).collect()));
+                        };
+                        CycleTiming { length: clip.frames(fps), stride: clip.stride() }
+                    }
+                    Loaded::Skinned(rig) => {
+                        let Ok((stride, length)) = rig.cycle_timing(&cycle.name) else {
+                            let names = rig.cycles().iter().map(|k| format!("{} (clip {})", k.name, k.clip_name));
+                            return Err(no_cycle(names.collect()));
+                        };
+                        // Without a root joint a skinned clip's travel is not
+                        // measured: 0 would make a walk a walk on the spot.
+                        let given = rig_ref.skin.strides.contains_key(&cycle.name);
+                        if rig_ref.skin.root.is_none() && !given {
+                            return Err(Error::invalid(
+                                path,
+                                format!(
+                                    "skinned rig `{rig_name}` ({}) has no `root` joint, so cycle `{}` has no stride: \
+                                     name its root joint (`rigs.{rig_name}.root`) or give `rigs.{rig_name}.strides.{}` \
+                                     (used by {key})",
+                                    file.display(),
+                                    cycle.name,
+                                    cycle.name
+                                ),
+                            )
+                            .field(format!("rigs.{rig_name}")));
+                        }
+                        CycleTiming { length, stride }
+                    }
+                };
                 let what = format!("rig `{rig_name}` ({}) cycle `{}`", file.display(), cycle.name);
                 check(
                     path,
@@ -581,7 +724,7 @@ fn timings(
     for (c, cycle) in cycles.iter().enumerate() {
         let on_files: Vec<&str> = reach
             .keys()
-            .filter(|&&(r, k)| k as usize == c && rig_files[r as usize].is_some())
+            .filter(|&&(r, k)| k as usize == c && rig_refs[r as usize].is_some())
             .map(|&(r, _)| rigs[r as usize].as_str())
             .collect();
         for (k, given) in [("length", cycle.length.is_some()), ("stride", cycle.stride.is_some())] {
@@ -599,6 +742,24 @@ fn timings(
         }
     }
     Ok(out)
+}
+
+/// A `[rigs]` file as loaded for its clips' timing.
+enum Loaded {
+    Slot(Rig),
+    Skinned(Box<SkinnedRig>),
+}
+
+impl Loaded {
+    /// A slot rig, or a skinned character (declared, or detected as a shot
+    /// detects one) with its options, its clips sampled at `fps`.
+    fn load(rig: &RigRef, fps: f32) -> Result<Loaded> {
+        Ok(if is_skinned_rig(rig)? {
+            Loaded::Skinned(Box::new(SkinnedRig::load(&rig.file, &rig.skin, fps)?))
+        } else {
+            Loaded::Slot(Rig::load(&rig.file)?)
+        })
+    }
 }
 
 impl RawWeights {
@@ -1017,6 +1178,7 @@ mod tests {
         );
         let (rigs, files) = check_rigs(&scene, 2, Path::new("shots/s.toml")).unwrap();
         assert_eq!(rigs, ["alpha", "mid", "zed"]);
+        let files: Vec<Option<PathBuf>> = files.into_iter().map(|r| r.map(|r| r.file)).collect();
         assert_eq!(files, [None, None, Some(PathBuf::from("shots/rigs/zed.glb"))]);
         assert_eq!(rig_index(&rigs, "mid"), 1);
         assert_eq!(
@@ -1073,8 +1235,67 @@ mod tests {
             "s.toml: field `cycles.W.length`: rig `r` has no file in [rigs], so `W` needs an explicit length \
              (used by agents[3].cycle)"
         );
-        let e = err(timings(path(), 24.0, &rigs, &[Some("nope/r.glb".into())], &cycles, &reach));
+        let e = err(timings(path(), 24.0, &rigs, &[slot("nope/r.glb")], &cycles, &reach));
         assert!(e.starts_with("s.toml: field `rigs.r`: rig `r`: ") && e.contains("nope/r.glb"), "{e}");
+    }
+
+    /// A `[rigs]` entry that is a bare path.
+    fn slot(file: impl AsRef<Path>) -> Option<RigRef> {
+        Some(RawRig::File(file.as_ref().into()).check("r", Path::new(""), path()).unwrap())
+    }
+
+    #[test]
+    fn skinned_rig_tables_time_cycles_from_their_clips() {
+        let walker = Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/rigs/walker.glb");
+        let entry = |keys: &str| -> Result<Option<RigRef>> {
+            let text = format!("file = {:?}\n{keys}", walker.display().to_string());
+            raw::<RawRig>(&text).check("walker", Path::new(""), path()).map(Some)
+        };
+        let rigs = ["walker".to_string()];
+        let cycles = check_cycles(&raw("[IdleA]\n[WalkA]"), path()).unwrap();
+        let reach: BTreeMap<(u16, u16), String> =
+            [((0, 0), "agents[1].cycle".to_string()), ((0, 1), "agents[0].cycle".to_string())].into();
+        // As the demo shot declares it: WalkA plays Walk (32 frames, hips 1.4 m), IdleA Idle.
+        let shot_keys = "kind = \"skinned\"\nroot = \"hips\"\ncycles = { WalkA = \"Walk\", IdleA = \"Idle\" }";
+        let r = entry(shot_keys).unwrap();
+        let t = timings(path(), 24.0, &rigs, std::slice::from_ref(&r), &cycles, &reach).unwrap();
+        let skinned = SkinnedRig::load(&walker, &r.as_ref().unwrap().skin, 24.0).unwrap();
+        let timing = |c: &str| skinned.cycle_timing(c).unwrap();
+        assert_eq!(t[1], CycleTiming { length: timing("WalkA").1, stride: timing("WalkA").0 });
+        assert!((t[1].length - 32.0).abs() < 1e-3 && (t[1].stride - 1.4).abs() < 1e-3, "{:?}", t[1]);
+        assert_eq!(t[0], CycleTiming { length: timing("IdleA").1, stride: 0.0 });
+        assert!((t[0].length - 48.0).abs() < 1e-3, "{:?}", t[0]);
+        // The clip is sampled at the scene's rate; `strides` wins over the root's travel.
+        let t = timings(path(), 30.0, &rigs, &[r], &cycles, &reach).unwrap();
+        assert!((t[1].length - 40.0).abs() < 1e-3, "{:?}", t[1]);
+        let r = entry(&format!("{shot_keys}\nstrides = {{ WalkA = 1.2 }}")).unwrap();
+        assert_eq!(timings(path(), 24.0, &rigs, &[r], &cycles, &reach).unwrap()[1].stride, 1.2);
+
+        // Skin keys alone make it skinned; without a root a cycle needs its stride.
+        let r = entry("cycles = { WalkA = \"Walk\", IdleA = \"Idle\" }").unwrap();
+        let e = err(timings(path(), 24.0, &rigs, &[r], &cycles, &reach));
+        assert!(e.starts_with("s.toml: field `rigs.walker`: skinned rig `walker`") && e.contains("`IdleA`"), "{e}");
+        assert!(e.contains("rigs.walker.root") && e.contains("rigs.walker.strides.IdleA"), "{e}");
+        // A bare path is detected as skinned (no root, so the same error).
+        let walk = check_cycles(&raw("[Walk]"), path()).unwrap();
+        let first: BTreeMap<(u16, u16), String> = [((0, 0), "agents[0].cycle".to_string())].into();
+        let e = err(timings(path(), 24.0, &rigs, &[slot(&walker)], &walk, &first));
+        assert!(e.contains("has no `root` joint, so cycle `Walk` has no stride"), "{e}");
+        // A cycle the file lacks lists the cycles and their clips.
+        let r = entry("root = \"hips\"").unwrap();
+        let e = err(timings(path(), 24.0, &rigs, &[r], &cycles, &reach));
+        assert!(
+            e.contains("agents[1].cycle") && e.contains("no cycle `IdleA`") && e.contains("Walk (clip Walk)"),
+            "{e}"
+        );
+        // A bad root joint names the rig entry and lists the joints.
+        let r = entry("root = \"nope\"").unwrap();
+        let e = err(timings(path(), 24.0, &rigs, &[r], &cycles, &reach));
+        assert!(e.starts_with("s.toml: field `rigs.walker`") && e.contains("hips"), "{e}");
+        // Keys checked as the shot checks them.
+        assert!(err(entry("kind = \"slots\"\nroot = \"hips\"")).contains("`rigs.walker.kind`"));
+        assert!(err(entry("scale = 0")).contains("`rigs.walker.scale`"));
+        assert!(err(entry("strides = { WalkA = -1 }")).contains("`rigs.walker.strides.WalkA`"));
     }
 
     #[test]
@@ -1085,15 +1306,15 @@ mod tests {
         let rigs = ["bipedThinA".to_string()];
         let reach: BTreeMap<(u16, u16), String> = [((0, 0), "agents[0].cycle".to_string())].into();
         let cycles = check_cycles(&raw("[WalkA]"), path()).unwrap();
-        let t = timings(path(), 30.0, &rigs, &[Some(file.clone())], &cycles, &reach).unwrap();
+        let t = timings(path(), 30.0, &rigs, &[slot(&file)], &cycles, &reach).unwrap();
         assert_eq!(t, [CycleTiming { length: walk.frames(30.0), stride: walk.stride() }]);
         assert!(t[0].moves() && t[0].length > 1.0);
 
         let explicit = check_cycles(&raw("[WalkA]\nlength = 3"), path()).unwrap();
-        let e = err(timings(path(), 30.0, &rigs, &[Some(file.clone())], &explicit, &reach));
+        let e = err(timings(path(), 30.0, &rigs, &[slot(&file)], &explicit, &reach));
         assert!(e.starts_with("s.toml: field `cycles.WalkA.length`: every rig on `WalkA` (bipedThinA)"), "{e}");
         let missing = check_cycles(&raw("[NoSuch]"), path()).unwrap();
-        let e = err(timings(path(), 30.0, &rigs, &[Some(file)], &missing, &reach));
+        let e = err(timings(path(), 30.0, &rigs, &[slot(&file)], &missing, &reach));
         assert!(e.starts_with("s.toml: field `agents[0].cycle`: rig `bipedThinA`") && e.contains("no cycle `NoSuch`"));
     }
 

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use clap::error::ErrorKind;
 use clap::{Arg, ArgMatches, Args, Command, FromArgMatches, Subcommand};
+use serde::Deserialize;
 
 use throng::cache::keys::{Key, KeyKind, KeyValue, KEYS};
 use throng::cache::tabular::{Gait, Preset};
@@ -13,8 +14,9 @@ use throng::cache::{
     TabularSpec,
 };
 use throng::casting::rig::import_clip;
-use throng::casting::shot_cache::gait;
+use throng::casting::shot_cache::file_gait;
 use throng::error::{Error, Result};
+use throng::shot::{Axis, SkinOptions};
 
 /// `throng cache ...`.
 #[derive(Debug, Subcommand)]
@@ -75,9 +77,51 @@ pub struct GaitArgs {
     /// travel) from; its rig name must match --rig. --stride and --cycle-length override it.
     #[arg(long)]
     pub rig_file: Option<PathBuf>,
+    /// Skinned --rig-file: the joint whose travel is root motion (its Z travel
+    /// is the stride), as a shot's `root` key. Any --rig-* flag below reads
+    /// the file as a skinned character (one is detected without them).
+    #[arg(long, value_name = "JOINT", requires = "rig_file")]
+    pub rig_root: Option<String>,
+    /// Skinned --rig-file: the clip a cache cycle plays, CYCLE=CLIP (repeat
+    /// it; a shot's `cycles` key). Unmapped cycles play the clip of their name.
+    #[arg(long, value_name = "CYCLE=CLIP", value_parser = cycle_clip, requires = "rig_file")]
+    pub rig_cycle: Vec<(String, String)>,
+    /// Skinned --rig-file: metres per file unit (0.01 for centimetres), as a shot's `scale`.
+    #[arg(long, value_name = "M", value_parser = positive, requires = "rig_file")]
+    pub rig_scale: Option<f32>,
+    /// Skinned --rig-file: the direction the character faces in the file
+    /// (+x, -x, +y, -y, +z, -z; default +z), as a shot's `forward`.
+    #[arg(long, value_name = "AXIS", value_parser = axis, allow_hyphen_values = true, requires = "rig_file")]
+    pub rig_forward: Option<Axis>,
+    /// Skinned --rig-file: the file's up axis (default +y), as a shot's `up`.
+    #[arg(long, value_name = "AXIS", value_parser = axis, allow_hyphen_values = true, requires = "rig_file")]
+    pub rig_up: Option<Axis>,
     /// Frames per second of the cache written (the shot's rate).
     #[arg(long, default_value_t = 24.0, value_parser = super::values::fps)]
     pub fps: f32,
+}
+
+/// `CYCLE=CLIP` of `--rig-cycle`.
+fn cycle_clip(text: &str) -> std::result::Result<(String, String), String> {
+    match text.split_once('=') {
+        Some((c, k)) if !c.is_empty() && !k.is_empty() => Ok((c.to_string(), k.to_string())),
+        _ => Err(format!("`{text}`: give CYCLE=CLIP, e.g. WalkA=Walk")),
+    }
+}
+
+/// A positive finite number.
+fn positive(text: &str) -> std::result::Result<f32, String> {
+    match text.parse::<f32>() {
+        Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
+        _ => Err(format!("`{text}`: give a positive number")),
+    }
+}
+
+/// An axis as a shot writes it: `+x` ... `-z`.
+fn axis(text: &str) -> std::result::Result<Axis, String> {
+    use serde::de::{value::StrDeserializer, IntoDeserializer};
+    let d: StrDeserializer<serde::de::value::Error> = text.into_deserializer();
+    Axis::deserialize(d).map_err(|_| format!("`{text}`: give one of +x, -x, +y, -y, +z, -z"))
 }
 
 /// The flag of an import key: `--source-fps` for `source_fps`, its value
@@ -120,13 +164,34 @@ impl ImportArgs {
         (self.keys.rig.clone().unwrap_or(d.rig), self.keys.cycle.clone().unwrap_or(d.cycle))
     }
 
+    /// The skinned-rig options the `--rig-*` flags give (`None`: none given,
+    /// the file's kind is detected).
+    fn skin(&self) -> Option<SkinOptions> {
+        let g = &self.gait;
+        let given = g.rig_root.is_some()
+            || !g.rig_cycle.is_empty()
+            || g.rig_scale.is_some()
+            || g.rig_forward.is_some()
+            || g.rig_up.is_some();
+        let d = SkinOptions::default();
+        given.then(|| SkinOptions {
+            cycles: g.rig_cycle.iter().cloned().collect(),
+            up: g.rig_up.unwrap_or(d.up),
+            forward: g.rig_forward.unwrap_or(d.forward),
+            scale: g.rig_scale.unwrap_or(d.scale),
+            root: g.rig_root.clone(),
+            ..d
+        })
+    }
+
     /// The import options these flags ask for (reads `--rig-file`).
     fn options(&self) -> Result<ImportOptions> {
         let (rig, cycle) = self.names();
         let g = &self.gait;
         // The flags are checked before the rig file is read.
         ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, None)?.with_turn_rate(self.keys.turn_rate)?;
-        let clip = g.rig_file.as_deref().map(|f| import_clip(f, &rig, &cycle)).transpose()?;
+        let skin = self.skin();
+        let clip = g.rig_file.as_deref().map(|f| import_clip(f, &rig, &cycle, skin.as_ref())).transpose()?;
         ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, clip)?.with_turn_rate(self.keys.turn_rate)
     }
 
@@ -157,7 +222,9 @@ impl ImportArgs {
         let mut o = TabularOptions::resolve(spec, self.gait.fps).map_err(flag)?;
         let jp = self.options()?;
         let idle_length = match (&self.gait.rig_file, &spec.idle_cycle) {
-            (Some(f), Some(_)) => gait(f, &self.names().1, spec.idle_cycle.as_deref())?.idle_length,
+            (Some(f), Some(_)) => {
+                file_gait(f, self.skin().as_ref(), &self.names().1, spec.idle_cycle.as_deref())?.idle_length
+            }
             _ => Gait::default().idle_length,
         };
         o.default_gait = Gait { stride: jp.stride(), cycle_length: jp.cycle_length(), idle_length };
