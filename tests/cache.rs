@@ -657,6 +657,30 @@ fn skinned_rig_file_gives_stride_and_length() {
     ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert_feet_planted(&cache::read(&outp).unwrap(), 1.4, 32.0);
+    // A table import takes the walk and the idle cycle's length from the skinned rig too.
+    let table = common::fixture("tabular/eth_obsmat.txt");
+    let out = throng(&[
+        "cache",
+        "info",
+        s(&table),
+        "--preset",
+        "eth-ucy",
+        "--rig",
+        "walker",
+        "--cycle",
+        "Walk",
+        "--idle-cycle",
+        "Idle",
+        "--rig-file",
+        s(&walker),
+        "--rig-root",
+        "hips",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_has(
+        &String::from_utf8(out.stdout).unwrap(),
+        &["rig walker, cycle Walk, stride 1.4 m, cycle length 32 frames"],
+    );
     // No root: exit 2 naming the file and the cycle, and nothing written.
     let none = dir.path().join("none.crowd");
     let out = throng(&["cache", "convert", s(&fixture()), s(&none), "--cycle", "Walk", "--rig-file", s(&walker)]);
