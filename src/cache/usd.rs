@@ -601,12 +601,24 @@ pub(crate) fn coverage(path: &Path, cache_frame: i32) -> Option<String> {
     None
 }
 
-/// The prim's `xformOpOrder`.
+/// The prim's `xformOpOrder`. Each entry must name an attribute (a USD
+/// namespaced identifier, after any `!invert!`) or be `!resetXformStack!`:
+/// openusd composes whatever path it is given, and some never end.
 fn xform_ops(ctx: &Ctx, prim: &str) -> Result<Vec<String>> {
-    Ok(match ctx.value(prim, "xformOpOrder", 0.0)? {
+    let ops: Vec<String> = match ctx.value(prim, "xformOpOrder", 0.0)? {
         Some(Value::TokenVec(v)) => v.iter().map(|t| t.as_str().to_string()).collect(),
         _ => Vec::new(),
-    })
+    };
+    for op in &ops {
+        let attr = op.strip_prefix("!invert!").unwrap_or(op);
+        if op != "!resetXformStack!" && !sdf::Path::is_valid_namespace_identifier(attr) {
+            return Err(ctx.err(
+                &format!("{prim}.xformOpOrder"),
+                format!("<{prim}.xformOpOrder> lists {op:?}, which is not an attribute name"),
+            ));
+        }
+    }
+    Ok(ops)
 }
 
 /// The prims whose ops make `prim`'s world matrix, `prim` first, up to the
