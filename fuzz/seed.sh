@@ -139,25 +139,63 @@ db.close()
 EOF2
 
 # sim_scene: the demo scene, whole and cut to 4 frames without warmup (so
-# the target steps it), and each scene body in tests/sim.rs under the header
-# and cycles its tests put above them.
+# the target steps it), and small scenes as tests/sim.rs builds them (its
+# header and cycles above one body each: obstacles still and moving, walls,
+# goals, weights, chase, spawn, cycle changes, seated agents, rig files).
 cp demo/sim/demo.toml "$C/sim_scene/demo.toml"
-python3 - "$C/sim_scene" demo/sim/demo.toml tests/sim.rs <<'EOF2'
-import re, sys, hashlib
+python3 - "$C/sim_scene" demo/sim/demo.toml <<'EOF2'
+import re, sys
 out = sys.argv[1]
 demo = open(sys.argv[2]).read()
 demo = re.sub(r"(?m)^end = \d+", "end = 4", re.sub(r"(?m)^warmup = \d+", "warmup = 0", demo))
 open(f"{out}/demo_short.toml", "w").write(demo)
-text = open(sys.argv[3]).read()
-bodies = re.findall(r'r#"(.*?)"#', text, re.S)
-cycles = next((b for b in bodies if b.lstrip().startswith("[cycles.")), "")
+cycles = """[cycles.WalkA]
+length = 32
+stride = 1.5
+[cycles.WalkB]
+length = 28
+stride = 1.2
+[cycles.IdleA]
+length = 48
+stride = 0
+[cycles.SitA]
+length = 48
+stride = 0
+"""
+def walker(i, x, z, h=0.0, extra=""):
+    return (f'[[agents]]\nid = {i}\nposition = [{x}, {z}]\nheading_deg = {h}\nrig = "bipedThinA"\n'
+            f'cycle = "WalkA"\ncycle_frame = 0.0\n{extra}\n')
+bodies = {
+    "obstacle": '[[targets]]\nname = "t"\nposition = [0.0, 6.0]\nradius = 0.5\n' + walker(1, 0.0, 0.0)
+        + "[[obstacles]]\ncenter = [-0.3, 2.5]\nradius = 0.5\n",
+    "moving_obstacle": '[[targets]]\nname = "n"\nposition = [0.0, 8.0]\nradius = 0.5\n' + walker(1, 0.0, 0.0)
+        + "[[obstacles]]\nradius = 0.6\npath = [{ frame = 1, center = [3.0, 3.0] }, { frame = 121, center = [-3.0, 3.0] }]\n",
+    "head_on": '[[targets]]\nname = "n"\nposition = [0.0, 9.0]\nradius = 0.5\n[[targets]]\nname = "s"\nposition = [0.0, -3.0]\nradius = 0.5\n'
+        + walker(1, 0.0, 0.0, 0.0, 'targets = ["n"]') + walker(2, 0.0, 6.0, 180.0, 'targets = ["s"]'),
+    "chase": '[model]\nchase = true\n[[targets]]\nname = "far"\nposition = [0.0, 200.0]\n'
+        + "".join(walker(k + 1, 0.01 if k % 2 == 0 else -0.01, k * 0.7) for k in range(6)),
+    "walls": walker(1, 0.1, 0.0, 0.0, "weights = { walls = 0.0 }") + walker(2, 50.1, 0.0)
+        + '[[walls]]\nfrom = [-2.0, 3.0]\nto = [2.0, 3.0]\n[[walls]]\nname = "w"\nfrom = [48.0, 3.0]\nto = [52.0, 3.0]\nradius = 0.25\n'
+        + '[[walls]]\npoint = [0.0, -5.0]\nnormal = [0.0, 1.0]\n',
+    "spawn_weights": '[[targets]]\nname = "a"\nposition = [0.0, 20.0]\n[[targets]]\nname = "b"\nposition = [0.0, -20.0]\n'
+        + "[[obstacles]]\ncenter = [0.0, 0.0]\nradius = 1.0\n"
+        + "[[spawn]]\ncount = 20\nfirst_id = 10\nmin = [-8.0, -8.0]\nmax = [8.0, 8.0]\nheading_jitter_deg = 180\n"
+        + "rigs = { bipedThinA = 1 }\ncycles = { WalkA = 1 }\n"
+        + '[[agents]]\nid = 1\nposition = [0.3, -1.6]\nrig = "bipedThinA"\ncycle = "WalkA"\n'
+        + "weights = { targets = 4.0, obstacles = 0.0, walls = 0.0, agents = 0.0 }\n",
+    "seated_next": walker(1, 0.0, 0.0) + '[[agents]]\nid = 2\nposition = [2.0, 0.0]\nrig = "bipedThinA"\ncycle = "SitA"\nseated = true\n',
+}
 head = "version = 1\nseed = 7\n[frames]\nstart = 1\nend = 24\n"
-for body in bodies:
-    if body is cycles:
-        continue
-    scene = body if "version = 1" in body else head + cycles + body
-    name = hashlib.sha1(scene.encode()).hexdigest()[:12]
-    open(f"{out}/inline-{name}.toml", "w").write(scene)
+for name, body in bodies.items():
+    c = cycles
+    if name == "seated_next":
+        c = c.replace("stride = 1.5\n", "stride = 1.5\nnext = { WalkA = 2, WalkB = 1, IdleA = 1 }\n", 1)
+    open(f"{out}/{name}.toml", "w").write(head + c + body)
+open(f"{out}/rigs.toml", "w").write(head + '[rigs]\nbipedThinA = "../rigs/bipedThinA.glb"\nbipedTallB = "../rigs/bipedTallB.glb"\n'
+    + "[cycles.WalkA]\n[cycles.WalkB]\n"
+    + "".join(f'[[agents]]\nid = {k + 1}\nposition = [{4.0 * k}, 0.0]\nrig = "{r}"\ncycle = "{c}"\ncycle_frame = 0.0\n'
+              f"[[obstacles]]\ncenter = [{4.0 * k + 0.3}, 3.0]\nradius = 0.4\n"
+              for k, (r, c) in enumerate([("bipedThinA", "WalkA"), ("bipedTallB", "WalkA"), ("bipedThinA", "WalkB"), ("bipedTallB", "WalkB")])))
 EOF2
 
 # farm_plan: plans of the stack shot (every layer, the set layer alone); their

@@ -409,6 +409,13 @@ fn malformed_animation_data_is_an_error() {
         j["bufferViews"][view]["byteStride"] = 4.into();
     });
     assert!(err.contains("stride"), "{err}");
+    // A channel targeting a node past the end, or no known property: gltf's
+    // validation leaves channel targets unchecked and its accessors unwrap
+    // them (found by the rig_skin fuzzer, docs/fuzzing.md).
+    let err = broken_rig(|j| j["animations"][0]["channels"][0]["target"]["node"] = 999.into());
+    assert!(err.contains("animation `WalkA` channel 0 targets node 999, but the file has"), "{err}");
+    let err = broken_rig(|j| j["animations"][0]["channels"][1]["target"]["path"] = "rotatio".into());
+    assert!(err.contains("animation `WalkA` channel 1 targets no known property"), "{err}");
 }
 
 #[test]

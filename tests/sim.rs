@@ -645,6 +645,18 @@ fn same_seed_same_crowd_any_thread_count() {
 // ---------------------------------------------------------------------------
 
 #[test]
+fn agents_astronomically_far_apart_are_stepped() {
+    // Found by the sim_scene fuzzer (docs/fuzzing.md): an agent 1e37 m away
+    // made the neighbour grid's cell count wrap to 0 and `sim::run` panic.
+    let far = walker(4, 12.0, 7.0, 0.0, "").replace("[12, 7]", "[12.0, 0.01e39]");
+    assert!(far.contains("0.01e39"), "{far}");
+    let body = format!("{}{far}", walker(1, 0.0, 0.0, 0.0, ""));
+    let c = run(&scene((1, 24), &body));
+    assert_eq!(c.frames.len(), 24);
+    assert!(pos(&c, 23, 0).y > 1.0, "the near agent walks on: {:?}", pos(&c, 23, 0));
+}
+
+#[test]
 fn spawn_regions_fill_their_rectangle() {
     let s = big_scene(5);
     assert_eq!(s.agents.len(), 1500);

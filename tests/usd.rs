@@ -340,6 +340,39 @@ fn bad_usd_crowds_name_file_prim_and_frame() {
 }
 
 #[test]
+fn prim_names_prototypes_and_xform_ops_that_are_not_usd_names_are_refused() {
+    // Found by the usd_crowd fuzzer (docs/fuzzing.md): openusd takes these as
+    // they come, and `/a}` is its own parent there, so composing it overflowed
+    // the stack (a prototype or a prim named `a}`) or never ended (an xform op
+    // `a}`, whose time samples were asked for), and so did traversal (a root
+    // prim named "").
+    let dir = common::tempdir().unwrap();
+    let crowd = |name: &str, proto: &str| {
+        format!(
+            "{HEAD}def Xform \"{name}\"\n{{\n    def PointInstancer \"crowd\"\n    {{\n        int64[] ids = [1]\n        \
+             point3f[] positions = [(0, 0, 0)]\n        rel prototypes = <{proto}>\n    }}\n}}\n"
+        )
+    };
+    let (code, err) = bad(dir.path(), "proto.usda", &crowd("World", "}"));
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("proto.usda") && err.contains("/World/crowd.prototypes") && err.contains("not a prim path"),
+        "{err}"
+    );
+    let (code, err) = bad(dir.path(), "brace.usda", &crowd("a}", "/a}/crowd"));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("brace.usda") && err.contains("`/a}`") && err.contains("not a USD identifier"), "{err}");
+    let (code, err) = bad(dir.path(), "empty_name.usda", &crowd("", "/x"));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("empty_name.usda") && err.contains("\"\"") && err.contains("not a USD identifier"), "{err}");
+    let op = crowd("World", "/World/crowd")
+        .replace("def Xform \"World\"\n{\n", "def Xform \"World\"\n{\n    uniform token[] xformOpOrder = [\"a}\"]\n");
+    let (code, err) = bad(dir.path(), "op.usda", &op);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("op.usda") && err.contains("/World.xformOpOrder") && err.contains("\"a}\""), "{err}");
+}
+
+#[test]
 fn usd_export_refuses_bad_requests() {
     let dir = common::tempdir().unwrap();
     let shot = demo_shot();

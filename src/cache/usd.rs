@@ -213,6 +213,7 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
     }
     let stage = Stage::open(text).map_err(|e| Error::invalid(path, format!("cannot open the USD stage: {e:#}")))?;
     let ctx = Ctx { path, stage };
+    check_prim_names(&ctx)?;
     if let Some(e) = ctx.stage.composition_errors().first() {
         return Err(Error::invalid(path, format!("USD composition error: {e}")));
     }
@@ -270,6 +271,12 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
         let rel = ctx.stage.relationship(ctx.sdf_path(&format!("{pi}.prototypes"))?);
         let protos = rel.targets().unwrap_or_default();
         for t in &protos {
+            if !is_prim_path(t.as_str()) {
+                return Err(ctx.err(
+                    &format!("{pi}.prototypes"),
+                    format!("PointInstancer <{pi}>: prototype <{}> is not a prim path", t.as_str()),
+                ));
+            }
             if !ctx.stage.prim(t.clone()).is_valid().unwrap_or(false) {
                 return Err(ctx.err(
                     &format!("{pi}.prototypes"),
@@ -481,6 +488,37 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
     Ok(crowd)
 }
 
+/// Errors when a prim in the stage's layers has a name that is not a USD
+/// identifier (`""`, `a}`): openusd takes such names as they come, and a
+/// path like `/a}` is its own parent there, so composing or traversing it
+/// never ends.
+fn check_prim_names(ctx: &Ctx) -> Result<()> {
+    for id in ctx.stage.layer_identifiers() {
+        let Some(layer) = ctx.stage.layer(&id) else { continue };
+        let data = layer.data();
+        let mut specs = data.spec_paths();
+        specs.sort_by(|a, b| a.as_str().cmp(b.as_str()));
+        for spec in &specs {
+            let Ok(Some(children)) = data.try_field(spec, sdf::ChildrenKey::PrimChildren.as_str()) else { continue };
+            let Value::TokenVec(names) = children.as_ref() else { continue };
+            if let Some(bad) = names.iter().find(|n| !sdf::Path::is_valid_identifier(n.as_str())) {
+                let parent = spec.as_str().trim_end_matches('/');
+                return Err(ctx.err(
+                    &format!("{parent}/{}", bad.as_str()),
+                    format!("prim name {:?} under <{}> is not a USD identifier", bad.as_str(), spec.as_str()),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Whether `p` is an absolute prim path of USD identifiers (`/World/body`),
+/// as a PointInstancer's prototypes must be.
+fn is_prim_path(p: &str) -> bool {
+    p.strip_prefix('/').is_some_and(|rest| rest.split('/').all(sdf::Path::is_valid_identifier))
+}
+
 /// The crowd's prims: PointInstancers, and prims carrying
 /// `primvars:throng:agentId`. Neither: an error naming the file.
 fn find_crowd(ctx: &Ctx) -> Result<(Vec<String>, Vec<String>)> {
@@ -563,12 +601,24 @@ pub(crate) fn coverage(path: &Path, cache_frame: i32) -> Option<String> {
     None
 }
 
-/// The prim's `xformOpOrder`.
+/// The prim's `xformOpOrder`. Each entry must name an attribute (a USD
+/// namespaced identifier, after any `!invert!`) or be `!resetXformStack!`:
+/// openusd composes whatever path it is given, and some never end.
 fn xform_ops(ctx: &Ctx, prim: &str) -> Result<Vec<String>> {
-    Ok(match ctx.value(prim, "xformOpOrder", 0.0)? {
+    let ops: Vec<String> = match ctx.value(prim, "xformOpOrder", 0.0)? {
         Some(Value::TokenVec(v)) => v.iter().map(|t| t.as_str().to_string()).collect(),
         _ => Vec::new(),
-    })
+    };
+    for op in &ops {
+        let attr = op.strip_prefix("!invert!").unwrap_or(op);
+        if op != "!resetXformStack!" && !sdf::Path::is_valid_namespace_identifier(attr) {
+            return Err(ctx.err(
+                &format!("{prim}.xformOpOrder"),
+                format!("<{prim}.xformOpOrder> lists {op:?}, which is not an attribute name"),
+            ));
+        }
+    }
+    Ok(ops)
 }
 
 /// The prims whose ops make `prim`'s world matrix, `prim` first, up to the

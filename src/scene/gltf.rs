@@ -66,6 +66,23 @@ impl GltfFile {
                 }
             }
         }
+        // Nor does it check an animation channel's target (gltf-json 1.4.1
+        // validates only its sampler), whose node and path gltf unwraps.
+        let nodes = document.as_json().nodes.len();
+        for (a, anim) in document.as_json().animations.iter().enumerate() {
+            for (c, channel) in anim.channels.iter().enumerate() {
+                let target = &channel.target;
+                let problem = if target.node.value() >= nodes {
+                    format!("targets node {}, but the file has {nodes}", target.node.value())
+                } else if matches!(target.path, gltf::json::validation::Checked::Invalid) {
+                    "targets no known property (translation, rotation, scale or weights)".to_string()
+                } else {
+                    continue;
+                };
+                let name = anim.name.as_deref().map_or(format!("#{a}"), |n| format!("`{n}`"));
+                return Err(Error::invalid(path, format!("animation {name} channel {c} {problem}")));
+            }
+        }
         let document = gltf::Document::from_json(document.into_json()).map_err(invalid)?;
         let base = path.parent().unwrap_or(Path::new("."));
         let mut buffers = Vec::new();

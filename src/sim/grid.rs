@@ -38,10 +38,12 @@ impl Grid {
             return Grid { origin: Vec2::ZERO, cell: 1.0, nx: 1, nz: 1, starts: vec![0, 0], items: Vec::new() };
         }
         let mut cell = if cell.is_finite() && cell > 0.0 { cell } else { 1.0 };
-        let span = hi - lo;
+        // In f64, and saturating: points 1e37 m apart (or at -3e38 and +3e38,
+        // whose span overflows f32) still give a count the loop below halves.
+        let span = hi.as_dvec2() - lo.as_dvec2();
         let dims = |cell: f32| {
-            let nx = (span.x / cell).floor() as usize + 1;
-            let nz = (span.y / cell).floor() as usize + 1;
+            let nx = ((span.x / f64::from(cell)).floor() as usize).saturating_add(1);
+            let nz = ((span.y / f64::from(cell)).floor() as usize).saturating_add(1);
             (nx, nz)
         };
         let (mut nx, mut nz) = dims(cell);
@@ -155,6 +157,21 @@ mod tests {
         let mut got = Vec::new();
         grid.for_each_near(Vec2::ZERO, 1.0, |i| got.push(i));
         assert!(got.contains(&2));
+    }
+
+    #[test]
+    fn spans_past_usize_and_f32_cap_cells() {
+        // Found by the sim_scene fuzzer (docs/fuzzing.md): an agent at z = 1e37
+        // made the cell count wrap to 0 and `build` index past its cells.
+        for points in
+            [vec![Vec2::ZERO, Vec2::new(12.0, 1e37)], vec![Vec2::new(-3e38, -3e38), Vec2::new(3e38, 3e38), Vec2::ZERO]]
+        {
+            let grid = Grid::build(&points, 0.6);
+            assert!(grid.nx >= 1 && grid.nz >= 1 && grid.nx * grid.nz <= MAX_CELLS);
+            let mut got = Vec::new();
+            grid.for_each_near(Vec2::ZERO, 1.0, |i| got.push(i));
+            assert!(got.contains(&0) || got.contains(&2), "{got:?}");
+        }
     }
 
     #[test]
