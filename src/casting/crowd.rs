@@ -121,6 +121,34 @@ pub struct ShotCrowd<C = Rec709> {
     wardrobe_files: Vec<(String, PathBuf)>,
 }
 
+/// How many times the rig's median slot a proxy box may be before it is
+/// called far larger than a body part.
+const PROXY_SURPRISE: f32 = 20.0;
+
+/// Warnings for a slot rig's proxy boxes far larger than its other slots'
+/// (legal, but a box of 1 km on a walking robot is a unit slip or a corrupt
+/// file: it swallows the crowd at proxy LOD).
+fn oversized_proxies(shot: &Shot, name: &str, rig: &crate::casting::rig::Rig) -> Vec<String> {
+    let side = |s: &crate::casting::rig::Slot| (s.proxy_max - s.proxy_min).max_element();
+    let mut sides: Vec<f32> = rig.slots().iter().map(side).collect();
+    sides.sort_by(f32::total_cmp);
+    let Some(&median) = sides.get(sides.len() / 2) else { return Vec::new() };
+    let file = shot.rigs.get(name).map(|r| r.file.display().to_string()).unwrap_or_default();
+    rig.slots()
+        .iter()
+        .filter(|s| median > 0.0 && side(s) > PROXY_SURPRISE * median)
+        .map(|s| {
+            format!(
+                "{file}: field `rigs.{name}.file`: slot `{}`'s proxy box is {} file units on its longest side, {:.0} times \
+                 the rig's median slot ({median}): far larger than a body part (a unit slip or a corrupt box?)",
+                s.name,
+                side(s),
+                side(s) / median
+            )
+        })
+        .collect()
+}
+
 /// Refuses a name in the shot's lists that names nothing (a typo would
 /// otherwise be accepted without a word): a `culled_cycles` entry that is
 /// no cycle of the cache, an `exclude_parts` entry that is no part mesh of
@@ -262,6 +290,11 @@ impl ShotCrowd {
             }
         }
         warnings.extend(rigs.warnings().cloned());
+        for (name, rig) in rigs.iter() {
+            if let crate::casting::rigs::ShotRig::Slots(rig) = rig {
+                warnings.extend(oversized_proxies(&shot, name, rig));
+            }
+        }
         let poses = PoseLibrary::new(assets, skins, shutter);
         let wardrobe_files = wardrobes.input_files();
         Ok(ShotCrowd {
