@@ -257,8 +257,8 @@ pub struct Table<'a> {
 }
 
 /// Runs every case of `cases` ((test, case, why it is ignored)) one after
-/// another and writes the table; fails naming every case that failed and
-/// is not ignored.
+/// another and writes the table, failing ignored cases listed under it;
+/// fails naming every case that failed and is not ignored.
 pub fn write_table(h: &Harness, t: &Table, cases: &[(&str, Case, Option<&str>)]) {
     let temp = super::tempdir().unwrap();
     let mut table = if t.expected_column {
@@ -272,7 +272,7 @@ pub fn write_table(h: &Harness, t: &Table, cases: &[(&str, Case, Option<&str>)])
              |---|---|---|---|---|---|---|---|\n",
         )
     };
-    let mut failures = Vec::new();
+    let (mut failures, mut known) = (Vec::new(), Vec::new());
     for (i, (test, case, ignored)) in cases.iter().enumerate() {
         let o = run_case(h, case, &case_dir(temp.path(), test));
         let cmd: Vec<String> = match case.body {
@@ -299,11 +299,13 @@ pub fn write_table(h: &Harness, t: &Table, cases: &[(&str, Case, Option<&str>)])
             result.replace('|', "\\|")
         )
         .unwrap();
-        if !o.problems.is_empty() && ignored.is_none() {
-            failures.push(format!("{test}: {}", o.problems.join("; ")));
+        match (o.problems.is_empty(), ignored) {
+            (true, _) => {}
+            (false, None) => failures.push(format!("{test}: {}", o.problems.join("; "))),
+            (false, Some(why)) => known.push(format!("- `{test}` ({}): {why}", case.kind)),
         }
     }
-    let passed = cases.len() - failures.len();
+    let passed = cases.len() - failures.len() - known.len();
     let mut kinds: Vec<(&str, usize)> = Vec::new();
     for (_, case, _) in cases {
         match kinds.iter_mut().find(|k| k.0 == case.kind) {
@@ -312,7 +314,15 @@ pub fn write_table(h: &Harness, t: &Table, cases: &[(&str, Case, Option<&str>)])
         }
     }
     let kinds: Vec<String> = kinds.iter().map(|(k, n)| format!("{k} {n}")).collect();
-    writeln!(table, "\n{}", (t.summary)(cases.len(), &kinds.join(", "), passed, failures.len())).unwrap();
+    writeln!(table, "\n{}", (t.summary)(cases.len(), &kinds.join(", "), passed, failures.len() + known.len())).unwrap();
+    if !known.is_empty() {
+        writeln!(
+            table,
+            "\nFailing and ignored (known: findings not fixed yet, or fixes under way):\n\n{}",
+            known.join("\n")
+        )
+        .unwrap();
+    }
     let md = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(t.md);
     std::fs::write(&md, &table).unwrap();
     if let Ok(p) = std::env::var("THRONG_MATRIX_MD") {
