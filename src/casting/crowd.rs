@@ -295,6 +295,18 @@ impl ShotCrowd {
                 warnings.extend(oversized_proxies(&shot, name, rig));
             }
         }
+        // A scheme of no parts is legal (every slot left empty) but dresses its agents in nothing.
+        for (name, r) in &shot.rigs {
+            for (scheme, _) in r.schemes.iter().filter(|(_, w)| **w > 0.0) {
+                if let Some(s) = wardrobes.schemes.get(scheme).filter(|s| s.parts.is_empty()) {
+                    warnings.push(format!(
+                        "{}: field `schemes.{scheme}`: the scheme has no parts, so the agents of rig `{name}` cast in \
+                         it wear nothing",
+                        s.source.display()
+                    ));
+                }
+            }
+        }
         let poses = PoseLibrary::new(assets, skins, shutter);
         let wardrobe_files = wardrobes.input_files();
         Ok(ShotCrowd {
