@@ -169,14 +169,6 @@ fn check_shot_lists(
             );
         }
     }
-    for (i, c) in shot.no_scale_cycles.iter().enumerate() {
-        if !cycles.contains(c) {
-            return bad(
-                format!("no_scale_cycles[{i}]"),
-                format!("`{c}` is no cycle of the cache (its cycles: {})", cycles.join(", ")),
-            );
-        }
-    }
     let meshes: std::collections::BTreeSet<&str> =
         wardrobes.schemes.values().flat_map(|s| s.parts.iter().map(|p| &*p.mesh)).collect();
     for (i, m) in shot.exclude_parts.iter().enumerate() {
