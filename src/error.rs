@@ -195,7 +195,10 @@ pub fn write_atomic(
         Ok(())
     })();
     match result {
-        Ok(()) => std::fs::rename(&tmp, path).at(path),
+        // A failed rename (the output is a folder) leaves no temporary either.
+        Ok(()) => std::fs::rename(&tmp, path).at(path).inspect_err(|_| {
+            let _ = std::fs::remove_file(&tmp);
+        }),
         Err(e) => {
             let _ = std::fs::remove_file(&tmp);
             Err(e)

@@ -45,6 +45,14 @@ struct Input {
     canonical: Option<PathBuf>,
 }
 
+/// What makes two output paths one file: its (device, inode) when it
+/// exists, its canonical path.
+#[derive(Debug, PartialEq, Eq, Hash)]
+enum OutputKey {
+    Id((u64, u64)),
+    Path(PathBuf),
+}
+
 /// A path that may not exist yet, made absolute through its existing
 /// folder (symlinked folders resolved), so two spellings of one path compare equal.
 fn canonical(path: &Path) -> Option<PathBuf> {
@@ -93,9 +101,27 @@ impl InputFiles {
         }
     }
 
-    /// Refuses the first of `outputs` that is one of the inputs.
+    /// Refuses the first of `outputs` that is one of the inputs, and an
+    /// output that is the same file as an earlier one (`--out m.json --map
+    /// m.json`: the second write would replace the first).
     pub fn check_all<'a>(&self, outputs: impl IntoIterator<Item = &'a Path>) -> Result<()> {
-        outputs.into_iter().try_for_each(|o| self.check(o))
+        let mut seen: std::collections::HashMap<OutputKey, &Path> = std::collections::HashMap::new();
+        for o in outputs {
+            self.check(o)?;
+            let keys = [file_id(o).map(OutputKey::Id), canonical(o).map(OutputKey::Path)];
+            if let Some(first) = keys.iter().flatten().find_map(|k| seen.get(k)) {
+                return Err(Error::Usage(format!(
+                    "refusing to write {} twice: it is the same file as {}, which this command also writes \
+                     (give each output its own name)",
+                    o.display(),
+                    first.display()
+                )));
+            }
+            for k in keys.into_iter().flatten() {
+                seen.insert(k, o);
+            }
+        }
+        Ok(())
     }
 }
 

@@ -91,7 +91,11 @@ impl KeyKind {
     /// The text as the value a shot's table would hold.
     fn value(self, text: &str) -> Result<toml::Value, String> {
         use toml::Value;
-        let number = |t: &str| t.trim().parse::<f32>().map_err(|e| e.to_string());
+        let number = |t: &str| match t.trim().parse::<f32>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            Ok(v) => Err(format!("must be a finite number, not {v}")),
+            Err(e) => Err(e.to_string()),
+        };
         Ok(match self {
             KeyKind::Text => Value::String(text.to_string()),
             KeyKind::Bool => Value::Boolean(text.parse().map_err(|_| format!("`{text}`: expected true or false"))?),

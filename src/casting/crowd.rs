@@ -124,10 +124,14 @@ pub struct ShotCrowd<C = Rec709> {
 /// Refuses a name in the shot's lists that names nothing (a typo would
 /// otherwise be accepted without a word): a `culled_cycles` entry that is
 /// no cycle of the cache, an `exclude_parts` entry that is no part mesh of
-/// any wardrobe scheme, a `removed` id that is no agent of the shot's frames.
+/// any wardrobe scheme, a `removed` id that is no agent of the shot's frames,
+/// a `no_scale_cycles` entry that is neither a cycle of the cache nor one any
+/// rig of the shot can play (a shot may list a seated cycle its cache does
+/// not use yet, as the demo's generator does).
 fn check_shot_lists(
     shot: &Shot,
     cache: &CacheReader,
+    rigs: &ShotRigs,
     wardrobes: &crate::casting::wardrobe::Wardrobes,
     casting: &crate::casting::cast::Casting,
 ) -> Result<()> {
@@ -138,6 +142,14 @@ fn check_shot_lists(
             return bad(
                 format!("culled_cycles[{i}]"),
                 format!("`{c}` is no cycle of the cache (its cycles: {})", cycles.join(", ")),
+            );
+        }
+    }
+    for (i, c) in shot.no_scale_cycles.iter().enumerate() {
+        if !cycles.contains(c) && rigs.iter().all(|(_, rig)| rig.lacks_cycle(c).is_some()) {
+            return bad(
+                format!("no_scale_cycles[{i}]"),
+                format!("`{c}` is no cycle of the cache ({}) or of any rig of the shot", cycles.join(", ")),
             );
         }
     }
@@ -232,7 +244,7 @@ impl ShotCrowd {
         let mut rigs = ShotRigs::load(&shot, &wardrobes)?;
         let cast = Casting::cast(&shot, &cache, &rigs, &wardrobes)?;
         let (casting, mut warnings) = (cast.casting, cast.warnings);
-        check_shot_lists(&shot, &cache, &wardrobes, &casting)?;
+        check_shot_lists(&shot, &cache, &rigs, &wardrobes, &casting)?;
         let mut assets = AssetCache::new();
         crate::casting::dressing::check_schemes(&shot, &rigs, &wardrobes, &mut assets)?;
         let dressing = Dressing::dress(&casting, &mut rigs, &wardrobes, &mut assets)?;
@@ -254,6 +266,18 @@ impl ShotCrowd {
             }
         }
         warnings.extend(rigs.warnings().cloned());
+        // A scheme of no parts is legal (every slot left empty) but dresses its agents in nothing.
+        for (name, r) in &shot.rigs {
+            for (scheme, _) in r.schemes.iter().filter(|(_, w)| **w > 0.0) {
+                if let Some(s) = wardrobes.schemes.get(scheme).filter(|s| s.parts.is_empty()) {
+                    warnings.push(format!(
+                        "{}: field `schemes.{scheme}`: the scheme has no parts, so the agents of rig `{name}` cast in \
+                         it wear nothing",
+                        s.source.display()
+                    ));
+                }
+            }
+        }
         let poses = PoseLibrary::new(assets, skins, shutter);
         let wardrobe_files = wardrobes.input_files();
         Ok(ShotCrowd {

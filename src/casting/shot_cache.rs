@@ -134,8 +134,13 @@ pub(crate) fn shot_import(shot: &Shot) -> Result<Import> {
         o.gaits = gaits(&o.cycle)?;
         return Ok(Import { tabular: Some(o), ..Default::default() });
     }
-    let mut jupedsim =
-        ImportOptions { rig: rig.clone(), cycle: walk.clone(), ..Default::default() }.with_turn_rate(spec.turn_rate)?;
+    // A refusal names the shot's key (`cache.turn_rate`), not a flag.
+    let mut jupedsim = ImportOptions { rig: rig.clone(), cycle: walk.clone(), ..Default::default() }
+        .with_turn_rate(spec.turn_rate)
+        .map_err(|e| match e {
+            Error::Setting { option, msg } => key_err((option.to_string(), msg)),
+            e => e,
+        })?;
     if format == Format::JuPedSim {
         if let Some((k, m)) = spec.jupedsim_refuses() {
             return Err(key_err((k.to_string(), m)));

@@ -288,6 +288,13 @@ impl Wardrobes {
                 }
                 all.materials.insert(format!("{}/{name}", file.name), m);
             }
+            // A uniform slot no part of the wardrobe fills scales nothing: a typo.
+            for (i, slot) in file.uniform_slots.iter().enumerate() {
+                if !file.schemes.values().any(|s| s.parts.iter().any(|p| p.slot == *slot)) {
+                    return Err(Error::invalid(path, format!("`{slot}` is the slot of no part of this wardrobe"))
+                        .field(format!("uniform_slots[{i}]")));
+                }
+            }
             for (name, mut scheme) in file.schemes {
                 if let Some(prev) = origin.get(&name) {
                     return Err(Error::invalid(path, format!("scheme `{name}` is also defined in {}", prev.display()))

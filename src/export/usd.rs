@@ -469,6 +469,15 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     // Files: per-layer files first, the root last.
     let ext = out.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default();
     let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    // No output over an input: a texture folder or a layer file beside
+    // `out` may be a file the shot reads (the shot itself, a texture).
+    if encoding != UsdEncoding::Usdz {
+        let mut outputs: Vec<PathBuf> = textures.files.values().map(|(rel, _)| out.with_file_name(rel)).collect();
+        outputs.extend(textures.dome.iter().map(|(rel, _)| out.with_file_name(rel)));
+        outputs.extend(layer_files.keys().map(|layer| out.with_file_name(format!("{stem}.{layer}.{ext}"))));
+        outputs.push(out.to_path_buf());
+        crate::output::InputFiles::new(crowd.input_files()).check_all(outputs.iter().map(PathBuf::as_path))?;
+    }
     let mut files = Vec::new();
     let mut bytes = 0u64;
     let mut prims = root.prim_count();

@@ -48,6 +48,8 @@ impl GltfFile {
     /// Reads and parses `path` (`.gltf` with external or embedded buffers, or `.glb`).
     pub fn open(path: impl AsRef<Path>) -> Result<GltfFile> {
         let path = path.as_ref();
+        // A FIFO or a device (a rig named by `--rig-file`) would block or never end.
+        crate::error::check_readable_file(path)?;
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         let invalid = |e: gltf::Error| Error::invalid(path, format!("not a valid glTF file: {e}"));
         let gltf::Gltf { document, mut blob } = gltf::Gltf::from_slice_without_validation(&bytes).map_err(invalid)?;

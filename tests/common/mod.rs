@@ -3,6 +3,8 @@
 //! only part of it.
 #![allow(dead_code)]
 
+pub mod matrix;
+
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

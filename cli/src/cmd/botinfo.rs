@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::values::{pixel, Pixel};
-use throng::botinfo::{agent_at_pixel, bot_info_with_layers_each, format_bot_info, shot_manifest};
+use throng::botinfo::{agent_at_pixel, bot_info_with_layers_each, format_bot_info};
 use throng::error::{Error, Result};
 
 /// `throng botinfo`.
@@ -89,7 +89,7 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
     };
     let manifest = match &args.manifest {
         Some(path) => {
-            let m = throng::layers::read_manifest(path)?;
+            let m = super::read_current_manifest(path, crowd.shot())?;
             if m.shot != crowd.shot().name {
                 return Err(Error::Usage(format!(
                     "--manifest {} is for shot `{}`, not {} (shot `{}`)",
@@ -101,7 +101,7 @@ pub fn run(args: &BotinfoArgs) -> Result<()> {
             }
             Some(m)
         }
-        None => shot_manifest(&crowd)?,
+        None => super::beside_manifest(&crowd)?,
     };
     // Every agent found is printed; each one that is not is named after them.
     let (infos, mut missing) = bot_info_with_layers_each(&crowd, &ids, frame, manifest.as_ref())?;

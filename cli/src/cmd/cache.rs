@@ -207,6 +207,10 @@ impl ImportArgs {
             return Err(Error::Usage(format!("{}: --preset jupedsim reads .sqlite files", input.display())));
         }
         let table = format == Format::Tabular || (format == Format::Csv && spec.describes_layout());
+        // The gait and turn-rate flags are checked whatever the format uses.
+        let (rig, cycle) = self.names();
+        ImportOptions::new(&rig, &cycle, self.gait.stride, self.gait.cycle_length, None)?
+            .with_turn_rate(spec.turn_rate)?;
         if !table {
             if format == Format::JuPedSim {
                 if let Some(refused) = spec.jupedsim_refuses() {

@@ -77,8 +77,23 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let t = Instant::now();
     let manifest = build_layers(&crowd, &LayerOverrides { per_frame: true, ..Default::default() })?;
     let manifest_path = out.join(format!("{}.layers.json", crowd.shot().name));
-    throng::layers::write_manifest(&manifest_path, &manifest)?;
     let map = out.join("layers_map.png");
+    let glb = out.join(format!("{}.{}.glb", crowd.shot().name, manifest.ref_frame));
+    let f = crowd.shot().frames;
+    let mut layers = job::all_layers(&manifest);
+    layers.push(FULL_LAYER.to_string());
+    let render = RenderJob {
+        png: true,
+        shutter,
+        colourspace: crowd.shot().render.working_colourspace,
+        ..RenderJob::new(layers, vec![f.start, manifest.ref_frame, f.end], args.spp, out.join("render"))
+    };
+    // No output over an input: `--out` beside the shot may hold it, its cache or its rigs.
+    let outputs = render.outputs(&crowd.shot().name);
+    throng::output::InputFiles::new(crowd.input_files()).check_all(
+        [manifest_path.as_path(), map.as_path(), glb.as_path()].into_iter().chain(outputs.iter().map(PathBuf::as_path)),
+    )?;
+    throng::layers::write_manifest(&manifest_path, &manifest)?;
     throng::layers::draw_map(
         &manifest,
         &MapOptions { size: (1600, 900), set_bounds: set_bounds(&crowd), ..Default::default() },
@@ -93,7 +108,6 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     );
 
     let t = Instant::now();
-    let glb = out.join(format!("{}.{}.glb", crowd.shot().name, manifest.ref_frame));
     let s = throng::export::export_frame(&crowd, manifest.ref_frame, None, &glb)?;
     outln!(
         "  export   {} agents, {} mesh nodes sharing {} meshes  [{:.2} s]",
@@ -105,16 +119,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 
     let t = Instant::now();
     let (shot_name, [w, h]) = (crowd.shot().name.clone(), crowd.shot().render.resolution);
-    let colourspace = crowd.shot().render.working_colourspace;
-    let f = crowd.shot().frames;
-    let mut layers = job::all_layers(&manifest);
-    layers.push(FULL_LAYER.to_string());
-    let render = RenderJob {
-        png: true,
-        shutter,
-        colourspace,
-        ..RenderJob::new(layers, vec![f.start, manifest.ref_frame, f.end], args.spp, out.join("render"))
-    };
+    let colourspace = render.colourspace;
     let progress = super::progress::Progress::new(super::progress::ProgressStyle::Auto);
     // The render's working colourspace converts the library's colours (the
     // glTF export above wrote them as authored, linear Rec.709).

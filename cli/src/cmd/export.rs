@@ -115,16 +115,6 @@ fn claim_out(args: &ExportArgs) -> Result<Vec<throng::output::WriterLock>> {
     throng::output::WriterLock::claim_files([args.out.as_path()])
 }
 
-/// The manifest beside the shot, when `throng layers` wrote one for it.
-fn beside_manifest(crowd: &throng::casting::ShotCrowd) -> Result<Option<throng::layers::Manifest>> {
-    let path = throng::layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name);
-    if !path.exists() {
-        return Ok(None);
-    }
-    let m = throng::layers::read_manifest(&path)?;
-    Ok((m.shot == crowd.shot().name).then_some(m))
-}
-
 /// `--format usd`.
 fn run_usd(args: &ExportArgs, clock: std::time::Instant) -> Result<()> {
     use throng::export::usd::{export_usd, Instancing, UsdExportOptions};
@@ -146,8 +136,8 @@ fn run_usd(args: &ExportArgs, clock: std::time::Instant) -> Result<()> {
     let _claim = claim_out(args)?;
     let only = layer_agents(args, &crowd)?;
     let manifest = match &args.manifest {
-        Some(p) => Some(throng::layers::read_manifest(p)?),
-        None => beside_manifest(&crowd)?,
+        Some(p) => Some(super::read_current_manifest(p, crowd.shot())?),
+        None => super::beside_manifest(&crowd)?,
     };
     let opts = UsdExportOptions {
         only: only.as_ref(),
@@ -195,7 +185,7 @@ fn layer_agents(
                     args.shot.display()
                 )));
             }
-            let m = throng::layers::read_manifest(&path)?;
+            let m = super::read_current_manifest(&path, crowd.shot())?;
             Some(m.layer_agents(layer).map_err(|names| {
                 Error::Usage(format!("no crowd layer `{layer}` in {} (layers: {})", path.display(), names.join(", ")))
             })?)

@@ -47,8 +47,8 @@ pub struct PlanArgs {
     /// Cores per render task (its `--threads`; output does not depend on it).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub cores: u32,
-    /// Extra attempts of a failed task.
-    #[arg(long, default_value_t = 1)]
+    /// Extra attempts of a failed task, 0-100.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=100))]
     pub retries: u32,
     /// Plan directory: plan.json, the manifest, render/, logs/, farm/.
     #[arg(long)]

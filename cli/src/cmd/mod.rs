@@ -65,6 +65,33 @@ pub(crate) fn warn(text: &dyn std::fmt::Display) -> Result<()> {
     Ok(())
 }
 
+/// Reads the layer manifest at `path`; one of `shot` is refused when it is
+/// stale (`layers::check_current`; one an older throng made passes with a
+/// warning). One of another shot is left to the caller to refuse.
+pub(crate) fn read_current_manifest(
+    path: &std::path::Path,
+    shot: &throng::shot::Shot,
+) -> Result<throng::layers::Manifest> {
+    let mut m = throng::layers::read_manifest(path)?;
+    if m.shot == shot.name {
+        if let Some(warning) = throng::layers::check_current(path, &mut m, shot)? {
+            warn(&warning)?;
+        }
+    }
+    Ok(m)
+}
+
+/// The manifest beside the shot when `throng layers` wrote one for it
+/// (checked by [`read_current_manifest`]).
+pub(crate) fn beside_manifest(crowd: &throng::casting::ShotCrowd) -> Result<Option<throng::layers::Manifest>> {
+    let path = throng::layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name);
+    if !path.exists() {
+        return Ok(None);
+    }
+    let m = read_current_manifest(&path, crowd.shot())?;
+    Ok((m.shot == crowd.shot().name).then_some(m))
+}
+
 /// The verbs of DESIGN.md.
 #[derive(Debug, Subcommand)]
 pub enum Verb {

@@ -27,6 +27,10 @@ pub fn run(args: &SimArgs) -> Result<()> {
     super::existing_folder_of(&args.out, "--out")?;
     throng::output::refuse_input_overwrite([args.out.as_path()], [("sim scene".to_string(), args.scene.clone())])?;
     let scene = SimScene::load(&args.scene)?;
+    // The rig files the scene reads, too.
+    let rigs = scene.rigs.iter().zip(&scene.rig_files);
+    let rig_files = rigs.filter_map(|(name, f)| Some((format!("rigs.{name}"), f.clone()?)));
+    throng::output::refuse_input_overwrite([args.out.as_path()], rig_files)?;
     let crowd = throng::sim::run(&scene);
     throng::cache::write(&args.out, &crowd)?;
     if args.json {
