@@ -493,7 +493,6 @@ matrix! {
     stale_manifest_after_the_camera_moved => c("stale manifest", "the camera moved (layers rank by distance)",
         |d| { layered(d); edit(d, "shot.toml", "position = [0.0, 1.6, 9.0]", "position = [5.0, 1.6, -9.0]") },
         CROWD0, &["stale layer manifest", "camera"], &["o"]),
-    #[ignore = "finding: the manifest's made_from leaves out the shot's [layers] keys, so a render after they change uses the old split without a word"]
     stale_manifest_after_the_layer_count_changed => c("stale manifest", "layers.count changed", |d| { layered(d); edit(d, "shot.toml", "count = 2", "count = 1") },
         CROWD0, &["stale layer manifest", "count"], &["o"]),
     stale_manifest_after_the_frame_range_changed => c("stale manifest", "frames.end changed", |d| { layered(d); edit(d, "shot.toml", "end = 1003", "end = 1002") },
@@ -501,10 +500,8 @@ matrix! {
     stale_manifest_after_height_jitter_changed => c("stale manifest", "height_jitter changed",
         |d| { layered(d); edit(d, "shot.toml", "schemes = { HighEnd = 1.0 }", "schemes = { HighEnd = 1.0 }\nheight_jitter = 0.5") },
         CROWD0, &["stale layer manifest", "height_jitter"], &["o"]),
-    #[ignore = "finding: the manifest's made_from leaves out the shot's [layers] keys, so a render after they change uses the old split without a word"]
     stale_manifest_after_a_pin => c("stale manifest", "layers.pins changed", |d| { layered(d); edit(d, "shot.toml", "count = 2", "count = 2\npins = [{ agent = 1, layer = 1 }]") },
         CROWD0, &["stale layer manifest", "pins"], &["o"]),
-    #[ignore = "finding: the manifest's made_from leaves out the shot's [layers] keys, so a render after they change uses the old split without a word"]
     stale_manifest_after_lod_threshold_changed => c("stale manifest", "layers.lod_full_min_px changed", |d| { layered(d); edit(d, "shot.toml", "count = 2", "count = 2\nlod_full_min_px = 500.0") },
         CROWD0, &["stale layer manifest", "lod_full_min_px"], &["o"]),
     stale_manifest_after_outside_cache_changed => legal("stale manifest", "frames.outside_cache changed: moves no agent (docs/layers.md)",

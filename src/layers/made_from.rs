@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 use crate::cache::tabular::TabularSpec;
 use crate::error::{Error, Result};
 use crate::fingerprint::{self, Fingerprinter};
-use crate::shot::Shot;
+use crate::shot::{LayerSettings, Shot};
 
 /// The fingerprint recorded in a manifest.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -36,6 +36,14 @@ pub struct MadeFrom {
     /// The camera (keys or glTF node, sensor) and the shot's resolution, which
     /// decide distances and LOD.
     pub(crate) camera: String,
+    /// The shot's `[layers]` table as written (split, count, cut-offs,
+    /// budget, reference frame, pins, LOD and visibility keys). A manifest
+    /// made with flags over it (`layers --count`) records the shot's table,
+    /// so it stays current until the shot's own keys change. Empty in
+    /// manifests of older throngs (not checked).
+    /// Each key's debug form hashed, so the refusal names it.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub(crate) layers: BTreeMap<String, String>,
     /// Shot frames `[start, end]`.
     pub frames: [i32; 2],
     /// `frames.fps`, the rate a tabular cache is resampled to.
@@ -89,6 +97,25 @@ fn cache_keys(import: &TabularSpec) -> BTreeMap<String, String> {
         .collect()
 }
 
+/// Each `[layers]` key of the shot, by name: its value's hash. Destructured
+/// whole, so a key added to [`LayerSettings`] does not compile until it is
+/// fingerprinted here.
+fn layer_keys(layers: &LayerSettings) -> BTreeMap<String, String> {
+    let LayerSettings { split, count, cutoffs, budget, ref_frame, pins, lod_full_min_px, proxy_shadow_casters } =
+        layers;
+    let keys: [(&str, &dyn std::fmt::Debug); 8] = [
+        ("split", split),
+        ("count", count),
+        ("cutoffs", cutoffs),
+        ("budget", budget),
+        ("ref_frame", ref_frame),
+        ("pins", pins),
+        ("lod_full_min_px", lod_full_min_px),
+        ("proxy_shadow_casters", proxy_shadow_casters),
+    ];
+    keys.into_iter().map(|(k, v)| (k.to_string(), Fingerprinter::new().debug(k, v).hex())).collect()
+}
+
 /// An import key in the shot's words (`placement` is three keys).
 fn cache_key_words(key: &str) -> String {
     match key {
@@ -133,6 +160,7 @@ impl MadeFrom {
             cache_keys: cache_keys(&shot.cache.import),
             casting: casting.hex(),
             camera: camera.hex(),
+            layers: layer_keys(&shot.layers),
             frames: [shot.frames.start, shot.frames.end],
             fps: shot.frames.fps,
             frame_offset: shot.cache.frame_offset,
@@ -168,6 +196,18 @@ impl MadeFrom {
         }
         if self.camera != now.camera {
             out.push("the camera or the shot's resolution changed (made_from.camera)".into());
+        }
+        if !self.layers.is_empty() {
+            let changed: Vec<String> = now
+                .layers
+                .iter()
+                .filter(|(k, v)| self.layers.get(*k) != Some(*v))
+                .map(|(k, _)| format!("`{k}`"))
+                .collect();
+            if !changed.is_empty() {
+                let noun = if changed.len() == 1 { "key" } else { "keys" };
+                out.push(format!("the [layers] {noun} {} changed (made_from.layers)", changed.join(", ")));
+            }
         }
         if self.frames != now.frames {
             out.push(format!(
