@@ -347,6 +347,64 @@ fn engine_errors_are_one_message_and_exit_2() {
     );
 }
 
+/// The process id `farm submit` records in the plan's state folder while it
+/// holds the plan (`None` once `child` has ended without one).
+fn submit_holder(plan_out: &Path, child: &mut std::process::Child) -> Option<u64> {
+    let writers = plan_out.join("farm/state/.throng-writers");
+    let clock = std::time::Instant::now();
+    loop {
+        let text = std::fs::read_to_string(&writers).unwrap_or_default();
+        let pid = text
+            .lines()
+            .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+            .find(|w| w["targets"].as_array().is_some_and(|t| t.iter().any(|t| t == "submit")))
+            .and_then(|w| w["pid"].as_u64());
+        if pid.is_some() || child.try_wait().unwrap().is_some() || clock.elapsed().as_secs() > 30 {
+            return pid;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
+#[test]
+fn a_second_slurm_submit_while_the_first_submits_is_refused_naming_it() {
+    let tmp = common::tempdir().unwrap();
+    let plan = plan_demo(&demo_shot(), &tmp.path().join("farm"), &[]);
+    // A slow sbatch (and no squeue: nothing queued yet), so the first submit is still submitting.
+    let fake = tmp.path().join("fake-slurm");
+    std::fs::create_dir_all(&fake).unwrap();
+    let sbatch = fake.join("sbatch");
+    std::fs::write(&sbatch, "#!/bin/sh\n/bin/sleep 0.3\necho 4242\n").unwrap();
+    std::fs::set_permissions(&sbatch, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    let submit = |piped: bool| {
+        let mut c = Command::new(common::bin());
+        c.args(["farm", "submit", s(&plan), "--engine", "slurm"]).env("PATH", &fake);
+        if piped {
+            c.stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped());
+        }
+        c
+    };
+    let mut first = submit(true).spawn().unwrap();
+    let holder = submit_holder(&tmp.path().join("farm"), &mut first).expect("the first submit claims the plan");
+    let second = submit(false).output().unwrap();
+    let err = common::text(&second.stderr);
+    assert_eq!(second.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("is being submitted by another throng")
+            && err.contains(&format!("is being written by throng process {holder} on "))
+            && err.lines().count() == 1,
+        "{err}"
+    );
+    let first = first.wait_with_output().unwrap();
+    let out = common::text(&first.stdout);
+    assert_eq!(first.status.code(), Some(0), "{out}{}", common::text(&first.stderr));
+    assert!(out.contains("submitted render.set array") && out.contains("slurm job 4242"), "{out}");
+    // Once the first has ended, a submit runs again (no squeue to ask here,
+    // so what is not done is submitted again).
+    let again = submit(false).output().unwrap();
+    assert_eq!(again.status.code(), Some(0), "{}", common::text(&again.stderr));
+}
+
 #[test]
 fn json_summaries_and_plain_progress() {
     let tmp = common::tempdir().unwrap();

@@ -466,9 +466,36 @@ matrix! {
     two_sims_into_one_cache => then(custom("two writers", "two sims into one .crowd", sim_scene,
         |d| two_at_once(d, &["sim", "{d}/sim.toml", "--out", "{d}/s.crowd"], &["sim", "{d}/sim.toml", "--out", "{d}/s.crowd"]), &["s.crowd"]),
         |d, _| succeeds(d, &["cache", "info", "s.crowd"])),
-    #[ignore = "finding: a second local submit of a plan being submitted runs its tasks, which lose the farm/state lock and count as failed (exit 2, 1 task(s) failed, status may say failed) instead of refusing up front naming the first"]
-    two_farm_submits_of_one_plan => then(custom("two writers", "two local farm submits of one plan at once", planned,
-        |d| two_at_once(d, &["farm", "submit", "{d}/farm/plan.json", "--engine", "local"], &["farm", "submit", "{d}/farm/plan.json", "--engine", "local"]), &["farm"]),
+    two_farm_submits_of_one_plan => then(custom("two writers", "a second local farm submit while the first runs: refused up front naming it", planned,
+        |d| {
+            let submit = ["farm", "submit", "{d}/farm/plan.json", "--engine", "local"];
+            let mut first = start(d, &submit);
+            // The second starts once the first holds the plan (its claim in farm/farm/state).
+            let (clock, writers) = (std::time::Instant::now(), d.join("farm/farm/state/.throng-writers"));
+            let holder = loop {
+                let text = std::fs::read_to_string(&writers).unwrap_or_default();
+                let pid = text.lines().filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+                    .find(|w| w["targets"].as_array().is_some_and(|t| t.iter().any(|t| t == "submit")))
+                    .and_then(|w| w["pid"].as_u64());
+                if let Some(pid) = pid { break Some(pid); }
+                if first.try_wait().unwrap().is_some() || clock.elapsed().as_secs() > 30 { break None; }
+                std::thread::sleep(std::time::Duration::from_millis(5));
+            };
+            let second = holder.map(|_| start(d, &submit).wait_with_output().unwrap());
+            let first = first.wait_with_output().unwrap();
+            let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+            let (code1, err1) = (first.status.code().unwrap_or(-1), text(&first.stderr));
+            let Some((holder, second)) = holder.zip(second) else {
+                return Ran { code: 1, stdout: text(&first.stdout), stderr: format!("the first submit (exit {code1}) never claimed farm/farm/state: {err1}") };
+            };
+            let (code2, err2) = (second.status.code().unwrap_or(-1), text(&second.stderr));
+            let refused = code2 == 2 && err2.contains(&format!("is being written by throng process {holder} on "));
+            Ran {
+                code: if code1 == 0 && refused { 0 } else { 1 },
+                stdout: format!("{}\n{}", text(&first.stdout), text(&second.stdout)),
+                stderr: format!("[first: exit {code1}] {err1}[second: exit {code2}, refused naming {holder}: {refused}] {err2}"),
+            }
+        }, &["farm"]),
         |d, _| succeeds(d, &["farm", "status", "farm/plan.json"])),
     two_man_runs_into_one_folder => then(custom("two writers", "two man --out into one folder", |d| mkdir(d, "man"),
         |d| two_at_once(d, &["man", "--out", "{d}/man"], &["man", "--out", "{d}/man"]), &["man"]),

@@ -37,6 +37,8 @@ pub fn run_local(plan: &Plan, plan_path: &Path, exe: &Path, workers: usize, say:
     if workers == 0 || workers > MAX_WORKERS {
         return Err(Error::setting("workers", format!("must be 1 to {MAX_WORKERS}")));
     }
+    // One submit of the plan at a time (held until the last task ends).
+    let _claim = plan.claim_submit()?;
     let clock = Instant::now();
     let todo: Vec<&Task> = tasks_to_run(plan, &task_done);
     let mut report = LocalReport { skipped: plan.tasks.len() - todo.len(), ..Default::default() };

@@ -26,6 +26,10 @@ pub use plan::{write_new_plan, PlanOptions};
 pub use run::run_task;
 pub use status::{plan_status, TaskState, TaskStatus};
 
+/// What a submit claims in the plan's state folder (no task has this id:
+/// ids are `render.<layer>.<chunk>` and `comp.<frame>`).
+pub(crate) const SUBMIT_CLAIM: &str = "submit";
+
 /// `format` of a plan file.
 pub(crate) const PLAN_FORMAT: &str = "throng-farm-plan";
 /// The plan file version this throng reads and writes.
@@ -145,6 +149,21 @@ impl Plan {
     /// Per-task state markers written by `farm run-task`.
     pub(crate) fn state_dir(&self) -> PathBuf {
         self.farm_dir().join("state")
+    }
+
+    /// Claims the plan for one submit ([`crate::output::WriterLock`] on
+    /// [`SUBMIT_CLAIM`] in the state folder), held while the submit runs or
+    /// submits its tasks: a second submit of the same plan meanwhile is
+    /// refused up front, naming the first's process. The tasks' own claims
+    /// (`run-task`: its task id in the same folder) name other files, so
+    /// the submit's workers are not refused by it.
+    pub(crate) fn claim_submit(&self) -> Result<crate::output::WriterLock> {
+        crate::output::WriterLock::claim(&self.state_dir(), &[SUBMIT_CLAIM.to_string()], "").map_err(|e| match e {
+            Error::Usage(m) => {
+                Error::Usage(format!("the plan of shot {} is being submitted by another throng: {m}", self.shot))
+            }
+            e => e,
+        })
     }
 
     /// Tasks by id.

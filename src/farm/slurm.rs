@@ -109,6 +109,9 @@ fn mem_mb(bytes: u64) -> u64 {
 
 /// Submits what is not done; prints nothing (the verb prints the report).
 pub fn submit(plan: &Plan, plan_path: &Path, exe: &Path) -> Result<SubmitReport> {
+    // One submit of the plan at a time (held while it reads what is queued
+    // and submits the rest, so two submits never queue the same tasks).
+    let _claim = plan.claim_submit()?;
     let mut sub = read_submission(plan).unwrap_or(Submission { engine: "slurm".into(), jobs: BTreeMap::new() });
     // Jobs of an earlier submission still queued or running stay; the
     // rest of what is not done is submitted again.
