@@ -200,7 +200,8 @@ impl Writer {
 /// The claim of one process on an output folder: while it is held, no other
 /// throng process writes the same files there, or writes there with other
 /// settings. Taken by `render` (each layer folder), `comp` and `export`
-/// (the output's folder) and a farm task (its state folder); released when
+/// (the output's folder), a farm task (its state folder, by task id) and a farm
+/// submit (the same folder, as `submit`); released when
 /// dropped. A process killed without releasing leaves its line in
 /// [`WRITERS_FILE`], which the next claim drops once that process is gone.
 ///
