@@ -17,7 +17,7 @@ mod common;
 
 use std::path::Path;
 
-use common::matrix::{self, append, c, edit, ok, Case, Harness, Table};
+use common::matrix::{self, append, c, edit, ok, sqlite, Case, Harness, Table, JUPEDSIM_OK};
 use common::repo_path;
 
 fn demo(rel: &str) -> String {
@@ -76,17 +76,6 @@ fn tri_gltf(dir: &Path, extra: &str, material: &str, count: u32) {
     std::fs::write(dir.join("set.gltf"), json).unwrap();
     edit(dir, "shot.toml", &demo("set/set.glb"), "set.gltf");
 }
-
-/// A JuPedSim trajectory file `dir/j.sqlite` made by `sql`.
-fn sqlite(dir: &Path, sql: &str) {
-    let db = rusqlite::Connection::open(dir.join("j.sqlite")).unwrap();
-    db.execute_batch(sql).unwrap();
-}
-
-const JUPEDSIM_OK: &str = "CREATE TABLE metadata(key TEXT, value TEXT);
-INSERT INTO metadata VALUES ('version', '1'), ('fps', '25');
-CREATE TABLE trajectory_data(frame INTEGER, id INTEGER, pos_x REAL, pos_y REAL, ori_x REAL, ori_y REAL);
-INSERT INTO trajectory_data VALUES (0, 1, 0.0, 0.0, 1.0, 0.0), (1, 1, 0.05, 0.0, 1.0, 0.0);";
 
 /// A rendered layer set and its manifest for frame 1001 (in `dir/r`).
 fn rendered(dir: &Path) {

@@ -25,7 +25,7 @@ use std::io::Write as _;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
-use common::matrix::{self, append, args_in, c, edit, ok, Case, Harness, Ran, Table};
+use common::matrix::{self, append, args_in, c, edit, ok, sqlite, Case, Harness, Ran, Table, JUPEDSIM_OK};
 use common::repo_path;
 
 /// A 4 GB address space, 60 s of CPU and 60 s of wall clock: a runaway or a
@@ -186,17 +186,6 @@ fn png_header(w: u32, h: u32) -> Vec<u8> {
     b.extend_from_slice(&crc32fast::hash(&ihdr).to_be_bytes());
     b
 }
-
-/// A JuPedSim trajectory file `dir/j.sqlite` made by `sql`; the shot reads it.
-fn sqlite(d: &Path, sql: &str) {
-    let db = rusqlite::Connection::open(d.join("j.sqlite")).unwrap();
-    db.execute_batch(sql).unwrap();
-}
-
-const JUPEDSIM_OK: &str = "CREATE TABLE metadata(key TEXT, value TEXT);
-INSERT INTO metadata VALUES ('version', '1'), ('fps', '25');
-CREATE TABLE trajectory_data(frame INTEGER, id INTEGER, pos_x REAL, pos_y REAL, ori_x REAL, ori_y REAL);
-INSERT INTO trajectory_data VALUES (0, 1, 0.0, 0.0, 1.0, 0.0), (1, 1, 0.05, 0.0, 1.0, 0.0);";
 
 /// A case that must succeed (exit 0), changing only `writes`.
 fn legal(

@@ -330,3 +330,15 @@ pub fn write_table(h: &Harness, t: &Table, cases: &[(&str, Case, Option<&str>)])
     }
     assert!(failures.is_empty(), "{} of {} cases failed:\n{}", failures.len(), cases.len(), failures.join("\n"));
 }
+
+/// A JuPedSim trajectory file `dir/j.sqlite` made by `sql`.
+pub fn sqlite(dir: &Path, sql: &str) {
+    let db = rusqlite::Connection::open(dir.join("j.sqlite")).unwrap();
+    db.execute_batch(sql).unwrap();
+}
+
+/// A small valid JuPedSim file's SQL: one agent over two frames at 25 fps.
+pub const JUPEDSIM_OK: &str = "CREATE TABLE metadata(key TEXT, value TEXT);
+INSERT INTO metadata VALUES ('version', '1'), ('fps', '25');
+CREATE TABLE trajectory_data(frame INTEGER, id INTEGER, pos_x REAL, pos_y REAL, ori_x REAL, ori_y REAL);
+INSERT INTO trajectory_data VALUES (0, 1, 0.0, 0.0, 1.0, 0.0), (1, 1, 0.05, 0.0, 1.0, 0.0);";
