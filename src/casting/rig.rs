@@ -694,7 +694,7 @@ impl Pose {
 /// stride from its root joint's travel or `strides`, length from the clip.
 pub fn import_clip(file: &Path, rig: &str, cycle: &str, skin: Option<&SkinOptions>) -> Result<RigClip> {
     if crate::casting::shot_cache::is_skinned_file(file, skin)? {
-        let g = crate::casting::shot_cache::file_gait(file, skin, cycle, None)?;
+        let g = crate::casting::shot_cache::skinned_file_gait(file, skin, cycle, None)?;
         return Ok(RigClip { file: file.to_path_buf(), stride: g.stride, cycle_length: g.cycle_length });
     }
     let r = Rig::load(file)?;

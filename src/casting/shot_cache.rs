@@ -13,7 +13,7 @@ use crate::cache::{CacheReader, Format, Import, ImportOptions, TabularOptions};
 use crate::casting::rig::Rig;
 use crate::casting::skin::{is_skinned_rig, SkinnedRig};
 use crate::error::{Error, Result};
-use crate::shot::{RigRef, Shot, SkinOptions};
+use crate::shot::{Shot, SkinOptions};
 
 /// A rig's gait from its glTF: the walk cycle's stride and length, and the
 /// idle cycle's length (frames at 24 fps, the unit of cycle frames). A walk
@@ -69,17 +69,10 @@ fn skinned_gait(rig: &SkinnedRig, walk: &str, idle: Option<&str>) -> Result<Opti
 /// says so, else it is detected as a shot's rig without `kind` is (a skin
 /// and no slots).
 pub(crate) fn is_skinned_file(file: &Path, skin: Option<&SkinOptions>) -> Result<bool> {
-    if skin.is_some() {
-        return Ok(true);
+    match skin {
+        Some(_) => Ok(true),
+        None => crate::casting::skin::is_skinned_file(file),
     }
-    let rig = RigRef {
-        file: file.to_path_buf(),
-        schemes: BTreeMap::new(),
-        height_jitter: 0.0,
-        kind: None,
-        skin: SkinOptions::default(),
-    };
-    is_skinned_rig(&rig)
 }
 
 /// A rig file's gait outside a shot (a trajectory import's `rig_file`): a
@@ -89,11 +82,23 @@ pub(crate) fn is_skinned_file(file: &Path, skin: Option<&SkinOptions>) -> Result
 /// a detected skinned rig takes the default options (each clip is a cycle
 /// of its own name; no root joint, so its walk needs `root` or a stride).
 pub fn file_gait(file: &Path, skin: Option<&SkinOptions>, walk: &str, idle: Option<&str>) -> Result<Gait> {
-    if !is_skinned_file(file, skin)? {
-        return gait(file, walk, idle);
+    match is_skinned_file(file, skin)? {
+        true => skinned_file_gait(file, skin, walk, idle),
+        false => gait(file, walk, idle),
     }
+}
+
+/// The gait of a file known to be a skinned character (`skin` `None`: the
+/// default options).
+pub(crate) fn skinned_file_gait(
+    file: &Path,
+    skin: Option<&SkinOptions>,
+    walk: &str,
+    idle: Option<&str>,
+) -> Result<Gait> {
     let default = SkinOptions::default();
     let rig = SkinnedRig::load(file, skin.unwrap_or(&default), SHOT_FPS)?;
+    // The error lists the rig's cycles; past it the walk is there.
     rig.cycle_index(walk).map_err(|e| e.field("cycle"))?;
     skinned_gait(&rig, walk, idle)?
         .ok_or_else(|| Error::invalid(file, format!("skinned rig has no cycle `{walk}`")).field("cycle"))

@@ -136,11 +136,15 @@ pub(crate) fn is_skinned(file: &GltfFile) -> bool {
 pub(crate) fn is_skinned_rig(rig: &crate::shot::RigRef) -> Result<bool> {
     match rig.kind {
         Some(k) => Ok(k == crate::shot::RigKind::Skinned),
-        None => {
-            let file = GltfFile::open(&rig.file)?;
-            Ok(is_skinned(&file) && !crate::casting::rig::has_slots(&file))
-        }
+        None => is_skinned_file(&rig.file),
     }
+}
+
+/// Whether a rig file with no `kind` is a skinned character: it has a skin
+/// and no slots.
+pub(crate) fn is_skinned_file(path: &Path) -> Result<bool> {
+    let file = GltfFile::open(path)?;
+    Ok(is_skinned(&file) && !crate::casting::rig::has_slots(&file))
 }
 
 /// The error for a skinned file used where rigid geometry is expected.

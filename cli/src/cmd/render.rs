@@ -176,8 +176,8 @@ pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
         .manifest
         .clone()
         .unwrap_or_else(|| throng::layers::default_manifest_path(&crowd.shot().path, &crowd.shot().name));
-    let mut manifest = if manifest_path.exists() {
-        Some(throng::layers::read_manifest(&manifest_path)?)
+    let manifest = if manifest_path.exists() {
+        Some(super::read_current_manifest(&manifest_path, crowd.shot())?)
     } else if args.layer == FULL_LAYER {
         None
     } else {
@@ -187,15 +187,12 @@ pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
             args.shot.display()
         )));
     };
-    if let Some(m) = &mut manifest {
+    if let Some(m) = &manifest {
         if m.shot != crowd.shot().name {
             return Err(Error::invalid(
                 &manifest_path,
                 format!("manifest is for shot `{}`, not `{}`", m.shot, crowd.shot().name),
             ));
-        }
-        if let Some(warning) = throng::layers::check_current(&manifest_path, m, crowd.shot())? {
-            super::warn(&warning)?;
         }
     }
     let layers = match (args.layer.as_str(), &manifest) {
