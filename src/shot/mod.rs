@@ -685,6 +685,17 @@ fn check_pose_error_max(raw: &Spanned<f32>, key: &str, cx: &Context) -> Result<f
     }
 }
 
+/// The first bad value among a skinned rig's `scale` and `strides`, as
+/// `[rigs.NAME]` and a sim scene's `[rigs]` table both take them: (the key
+/// under the rig, the message).
+pub(crate) fn skin_value_problem(scale: f32, strides: &BTreeMap<String, f32>) -> Option<(String, String)> {
+    if !(scale > 0.0 && scale.is_finite()) {
+        return Some(("scale".into(), format!("must be a positive number, got {scale}")));
+    }
+    let (cycle, s) = strides.iter().find(|(_, s)| !(**s >= 0.0 && s.is_finite()))?;
+    Some((format!("strides.{cycle}"), format!("stride must be >= 0 metres, got {s}")))
+}
+
 impl RigFile {
     /// `[rigs.NAME]` -> a checked rig; `pose_error_max` is the shot's (checked).
     fn check(&self, name: &str, cx: &Context, pose_error_max: f32) -> Result<RigRef> {
@@ -716,9 +727,12 @@ impl RigFile {
         }
         let defaults = SkinOptions::default();
         let scale = rig.scale.as_ref().map_or(defaults.scale, |s| *s.get_ref());
-        if !(scale > 0.0 && scale.is_finite()) {
-            let span = rig.scale.as_ref().map_or(rig.file.span(), |s| s.span());
-            return Err(cx.at(span, &format!("rigs.{name}.scale"), format!("must be a positive number, got {scale}")));
+        if let Some((key, msg)) = skin_value_problem(scale, &rig.strides) {
+            let span = match (key.as_str(), &rig.scale) {
+                ("scale", Some(s)) => s.span(),
+                _ => rig.file.span(),
+            };
+            return Err(cx.at(span, &format!("rigs.{name}.{key}"), msg));
         }
         let pose_step = rig.pose_step.as_ref().map(|s| *s.get_ref());
         if let (Some(s), Some(spanned)) = (pose_step, &rig.pose_step) {
@@ -734,15 +748,6 @@ impl RigFile {
             Some(spanned) => check_pose_error_max(spanned, &format!("rigs.{name}.pose_error_max"), cx)?,
             None => pose_error_max,
         };
-        for (cycle, s) in &rig.strides {
-            if !(*s >= 0.0 && s.is_finite()) {
-                return Err(cx.at(
-                    rig.file.span(),
-                    &format!("rigs.{name}.strides.{cycle}"),
-                    format!("stride must be >= 0 metres, got {s}"),
-                ));
-            }
-        }
         if rig.slots.as_ref().is_some_and(|s| s.is_empty()) {
             return Err(cx.at(rig.file.span(), &format!("rigs.{name}.slots"), "give at least one slot".into()));
         }

@@ -166,19 +166,8 @@ impl RawRig {
         )?;
         let d = SkinOptions::default();
         let scale = t.scale.unwrap_or(d.scale);
-        check(
-            path,
-            scale > 0.0 && scale.is_finite(),
-            format!("{f}.scale"),
-            format!("must be a positive number, got {scale}"),
-        )?;
-        for (cycle, st) in &t.strides {
-            check(
-                path,
-                *st >= 0.0 && st.is_finite(),
-                format!("{f}.strides.{cycle}"),
-                format!("stride must be >= 0 metres, got {st}"),
-            )?;
+        if let Some((key, msg)) = crate::shot::skin_value_problem(scale, &t.strides) {
+            return Err(Error::invalid(path, msg).field(format!("{f}.{key}")));
         }
         Ok(RigRef {
             file: base.join(&t.file),
