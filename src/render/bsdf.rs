@@ -138,6 +138,14 @@ impl Bsdf {
         Bsdf { diffuse: base_color.clamp(Vec3::ZERO, Vec3::ONE), f0: Vec3::ZERO, alpha: 1.0, lambert: true }
     }
 
+    /// Whether the specular lobe is narrow enough that light reaching it
+    /// must be looked up sharply: GGX alpha 0.1 (roughness 0.32) spreads a
+    /// reflection over about 10 degrees, several of the dome's blocks
+    /// (render::dome::Lookup); below it the blocks would show.
+    pub(crate) fn is_sharp(&self) -> bool {
+        !self.lambert && self.alpha < 0.1
+    }
+
     /// GGX normal distribution.
     #[inline]
     fn d(&self, h: Vec3) -> f32 {

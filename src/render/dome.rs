@@ -5,7 +5,10 @@
 //! +Y; then u = (pi - atan2(-d'.z, d'.x)) / (2 pi), v = acos(d'.y) / pi, with
 //! v = 0 the top row. At `rotate` 0 the image centre faces +X.
 //!
-//! Radiance is bilinear between texel centres (wrapping in u, clamped in v).
+//! Radiance is bilinear between texel centres (wrapping in u, clamped in v)
+//! for what is seen sharply ([`Lookup::Bilinear`]); light on rough surfaces
+//! takes the rest of the dome (all but its sun) as each block's mean
+//! ([`Lookup::Blocks`], see there).
 //! Sampling is piecewise constant over blocks of texel cells (one cell per
 //! block up to [`REST_MAX_COLUMNS`] texels across, square blocks of a power
 //! of two beyond): a block is picked with probability proportional to the
@@ -21,7 +24,7 @@ use std::f32::consts::PI;
 use std::f64::consts::PI as PI64;
 use std::sync::Arc;
 
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 
 use super::bsdf::luminance;
 use crate::scene::lights::Dome;
@@ -35,6 +38,34 @@ pub(crate) enum DomePart {
     Sun,
     /// Every other cell (the whole dome when it has no sun).
     Rest,
+}
+
+/// How finely a direction's radiance is looked up. Light reaching a rough
+/// surface (next-event estimation there, and the BSDF rays weighed against
+/// it) takes the rest of the dome as its blocks' mean radiance
+/// ([`Lookup::Blocks`]): constant where the sampling density is, so every
+/// such sample carries the same light over its pdf but for colour, and one
+/// fetch from a table of 16 bytes per block (512 KiB at most, which stays
+/// in cache where a 1k map's texels, 6 MiB, missed it on every lookup).
+/// A block is at most 1/256 of the map across (1.4 degrees), far narrower
+/// than a rough lobe. What is seen sharply, camera rays and mirror-like
+/// lobes, is [`Lookup::Bilinear`]. The sun is bilinear in both: its own
+/// distribution follows that.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Lookup {
+    /// Bilinear between texel centres.
+    Bilinear,
+    /// The rest of the dome as its blocks' mean radiance.
+    Blocks,
+}
+
+/// One block of the rest's distribution: the mean radiance of its cells
+/// that are not the sun's, and its solid-angle density within the rest.
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(16))]
+struct Block {
+    radiance: [f32; 3],
+    pdf: f32,
 }
 
 /// Cells brighter than this many times the dome's mean radiance may be its sun.
@@ -156,11 +187,19 @@ pub struct DomeSampler {
     /// search walks; the sun's cells weigh nothing here: they are the sun
     /// part's).
     row_cdf: Vec<f32>,
-    /// Each block's solid-angle density within the rest, kept apart so a
-    /// small block's density is not the difference of two large sums.
-    block_pdf: Vec<f32>,
+    /// Each block's mean radiance and solid-angle density within the rest
+    /// (kept apart from the running sums, so a small block's density is not
+    /// the difference of two large ones).
+    block: Vec<Block>,
+    /// The blocks that hold a sun cell (sorted): a draw there may land on
+    /// the sun, which is the sun part's.
+    sun_blocks: Vec<u32>,
     /// Running sums (inclusive) of the block row totals, top row first.
     marginal_cdf: Vec<f64>,
+    /// Guides ([`guide`]) to the marginal, and to each row's running sums
+    /// (one per block across, row-major).
+    marginal_guide: Vec<u16>,
+    row_guide: Vec<u16>,
     /// cos(theta) at each row boundary, `height + 1` values from +1 (zenith).
     cos_theta: Vec<f64>,
     /// The sun, when the dome has one.
@@ -171,15 +210,14 @@ impl DomeSampler {
     /// Builds the lookup and the sampling distributions of `dome`.
     pub fn new(dome: Arc<Dome>) -> DomeSampler {
         let (w, h) = (dome.width as usize, dome.height as usize);
-        let texel_luminance = |i: usize, j: usize| luminance(dome.texels[j * w + i] * dome.scale).max(0.0);
+        let texel = |i: usize, j: usize| (dome.texels[j * w + i] * dome.scale).max(Vec3::ZERO);
         // The mean of a bilinear interpolant over a texel's cell weighs the
         // texel and its neighbours 1/8, 3/4, 1/8 along each axis.
-        let mut across = vec![0f32; w * h];
+        let mut across = vec![Vec3::ZERO; w * h];
         for j in 0..h {
             for i in 0..w {
                 let (left, right) = ((i + w - 1) % w, (i + 1) % w);
-                across[j * w + i] =
-                    (texel_luminance(left, j) + 6.0 * texel_luminance(i, j) + texel_luminance(right, j)) / 8.0;
+                across[j * w + i] = (texel(left, j) + 6.0 * texel(i, j) + texel(right, j)) / 8.0;
             }
         }
         let cos_theta: Vec<f64> = (0..=h).map(|j| (PI64 * j as f64 / h as f64).cos()).collect();
@@ -190,15 +228,18 @@ impl DomeSampler {
                 2.0 * ((a + b) / 2.0).sin() * ((b - a) / 2.0).sin() * 2.0 * PI64 / w as f64
             })
             .collect();
-        // Cell weights: mean luminance x solid angle.
+        // Each cell's mean radiance, and its weight: mean luminance x solid angle.
+        let mut cell_mean = vec![Vec3::ZERO; w * h];
         let mut weights = vec![0f64; w * h];
         for j in 0..h {
             let (up, down) = (j.saturating_sub(1), (j + 1).min(h - 1));
             for i in 0..w {
-                let mean = (across[up * w + i] + 6.0 * across[j * w + i] + across[down * w + i]) as f64 / 8.0;
-                weights[j * w + i] = mean * cell_solid_angle[j];
+                let mean = (across[up * w + i] + 6.0 * across[j * w + i] + across[down * w + i]) / 8.0;
+                cell_mean[j * w + i] = mean;
+                weights[j * w + i] = luminance(mean).max(0.0) as f64 * cell_solid_angle[j];
             }
         }
+        drop(across);
         let mut sun_cells = find_sun(&weights, &cell_solid_angle, w);
         let window = SunWindow::around(&sun_cells, w);
         if window.is_none() {
@@ -213,11 +254,24 @@ impl DomeSampler {
         }
         let blocks = (w.div_ceil(1 << block_shift), h.div_ceil(1 << block_shift));
         let mut row_cdf = vec![0f64; blocks.0 * blocks.1];
+        // Per block: the sum of its rest cells' mean radiance x solid angle, and their solid angle.
+        let mut light = vec![(DVec3::ZERO, 0f64); row_cdf.len()];
+        let mut sun_blocks = Vec::new();
         for j in 0..h {
             for i in 0..w {
-                row_cdf[(j >> block_shift) * blocks.0 + (i >> block_shift)] += weights[j * w + i];
+                let b = (j >> block_shift) * blocks.0 + (i >> block_shift);
+                if weights[j * w + i] == 0.0 && sun_cells.binary_search(&((j * w + i) as u32)).is_ok() {
+                    sun_blocks.push(b as u32);
+                    continue;
+                }
+                row_cdf[b] += weights[j * w + i];
+                light[b].0 += cell_mean[j * w + i].as_dvec3() * cell_solid_angle[j];
+                light[b].1 += cell_solid_angle[j];
             }
         }
+        drop(cell_mean);
+        sun_blocks.sort_unstable();
+        sun_blocks.dedup();
         let mut marginal_cdf = vec![0f64; blocks.1];
         let mut rest_total = 0f64;
         for (row, running) in row_cdf.chunks(blocks.0).zip(&mut marginal_cdf) {
@@ -225,14 +279,17 @@ impl DomeSampler {
             *running = rest_total;
         }
         let block_span = |block: usize, cells: usize| (block << block_shift)..((block + 1) << block_shift).min(cells);
-        let mut block_pdf = vec![0f32; row_cdf.len()];
+        let mut block = vec![Block::default(); row_cdf.len()];
         let mut conditional = vec![0f32; row_cdf.len()];
-        for (b, &weight) in row_cdf.iter().enumerate() {
+        for (b, (&weight, &(sum, rest_solid_angle))) in row_cdf.iter().zip(&light).enumerate() {
             let (rows, columns) = (block_span(b / blocks.0, h), block_span(b % blocks.0, w));
             let solid_angle =
                 (cos_theta[rows.start] - cos_theta[rows.end]) * 2.0 * PI64 * columns.len() as f64 / w as f64;
             if rest_total > 0.0 {
-                block_pdf[b] = (weight / (rest_total * solid_angle)) as f32;
+                block[b].pdf = (weight / (rest_total * solid_angle)) as f32;
+            }
+            if rest_solid_angle > 0.0 {
+                block[b].radiance = (sum / rest_solid_angle).as_vec3().to_array();
             }
         }
         for (row, cdf) in row_cdf.chunks(blocks.0).zip(conditional.chunks_mut(blocks.0)) {
@@ -250,8 +307,11 @@ impl DomeSampler {
             sin_rotate,
             block_shift,
             blocks,
+            marginal_guide: guide(&marginal_cdf, rest_total, blocks.1),
+            row_guide: conditional.chunks(blocks.0).flat_map(|row| guide(row, 1.0, blocks.0)).collect(),
             row_cdf: conditional,
-            block_pdf,
+            block,
+            sun_blocks,
             marginal_cdf,
             cos_theta,
             sun: Sun::default(),
@@ -354,13 +414,54 @@ impl DomeSampler {
         self.lookup(self.uv(dir))
     }
 
-    /// [`DomeSampler::radiance`] and [`DomeSampler::part_pdf`] of `dir`,
-    /// mapping it once (what a ray escaping into the dome needs).
-    pub(crate) fn radiance_and_pdf(&self, dir: Vec3) -> (Vec3, DomePart, f32) {
+    /// The radiance of `dir`, looked up as `lookup` says, its part and its
+    /// density within that part (what a ray escaping into the dome needs),
+    /// mapping it once.
+    pub(crate) fn radiance_and_pdf(&self, dir: Vec3, lookup: Lookup) -> (Vec3, DomePart, f32) {
         let (d, uv) = self.in_map(dir);
-        let radiance = self.lookup(uv);
-        let (part, pdf) = self.pdf_at(d.y, uv, radiance);
-        (radiance, part, pdf)
+        self.at(d.y, uv, lookup)
+    }
+
+    /// [`DomeSampler::radiance_and_pdf`] of the direction at map coordinates
+    /// `uv` whose cos(theta) in the dome's frame is `cos_theta`.
+    fn at(&self, cos_theta: f32, uv: Vec2, lookup: Lookup) -> (Vec3, DomePart, f32) {
+        let (w, h) = (self.dome.width as usize, self.dome.height as usize);
+        let column = ((uv.x * w as f32) as usize).min(w - 1);
+        let row = ((uv.y * h as f32) as usize).min(h - 1);
+        if self.is_sun(row, column) {
+            let radiance = self.lookup(uv);
+            let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+            return (radiance, DomePart::Sun, self.sun_pdf(radiance, sin_theta));
+        }
+        let block = self.block[(row >> self.block_shift) * self.blocks.0 + (column >> self.block_shift)];
+        let radiance = match lookup {
+            Lookup::Bilinear => self.lookup(uv),
+            Lookup::Blocks => Vec3::from_array(block.radiance),
+        };
+        (radiance, DomePart::Rest, block.pdf)
+    }
+
+    /// The solid-angle density of the sun part at a direction of radiance
+    /// `radiance` and sin(theta) `sin_theta` in the dome's frame: in map
+    /// coordinates luminance / its integral, per solid angle divided by
+    /// d omega / (du dv) = 2 pi^2 sin(theta).
+    fn sun_pdf(&self, radiance: Vec3, sin_theta: f32) -> f32 {
+        let pdf = luminance(radiance).max(0.0) as f64 / (self.sun.uv_total * 2.0 * PI64 * PI64 * sin_theta as f64);
+        if pdf.is_finite() {
+            pdf as f32
+        } else {
+            0.0
+        }
+    }
+
+    /// Whether cell (`row`, `column`) is one of the sun's.
+    fn is_sun(&self, row: usize, column: usize) -> bool {
+        let window = self.sun.window;
+        let w = self.dome.width as usize;
+        // Most directions are far from the sun: its window first.
+        row.wrapping_sub(window.row) < window.rows
+            && (column + w - window.column) % w < window.columns
+            && self.sun.cells.binary_search(&((row * w + column) as u32)).is_ok()
     }
 
     /// Samples a direction towards the whole dome from two uniform numbers
@@ -378,15 +479,15 @@ impl DomeSampler {
         } else {
             (DomePart::Rest, Vec2::new(u.x, (u.y - sun_share) / (1.0 - sun_share)))
         };
-        let (dir, radiance, _) = self.sample_part(part, u)?;
+        let (dir, radiance, _) = self.sample_part(part, u, Lookup::Bilinear)?;
         let pdf = self.pdf(dir);
         (pdf > 0.0).then_some((dir, radiance, pdf))
     }
 
     /// Samples a direction towards one part of the dome: (direction, its
-    /// radiance, its solid-angle pdf within the part). None when the part
-    /// has no light.
-    pub(crate) fn sample_part(&self, part: DomePart, u: Vec2) -> Option<(Vec3, Vec3, f32)> {
+    /// radiance looked up as `lookup` says, its solid-angle pdf within the
+    /// part). None when the part has no light.
+    pub(crate) fn sample_part(&self, part: DomePart, u: Vec2, lookup: Lookup) -> Option<(Vec3, Vec3, f32)> {
         let u = u.clamp(Vec2::ZERO, Vec2::splat(1.0 - f32::EPSILON));
         let (w, h) = (self.dome.width as usize, self.dome.height as usize);
         // cos(theta) and the map's u of the direction: uniform in both is
@@ -398,13 +499,25 @@ impl DomeSampler {
                     return None;
                 }
                 let bw = self.blocks.0;
-                let (block_row, along_row) = pick(&self.marginal_cdf, u.y as f64 * rest_total);
-                let cdf = &self.row_cdf[block_row * bw..(block_row + 1) * bw];
-                let (block_column, along_column) = pick(cdf, u.x);
+                let (block_row, along_row) =
+                    pick_guided(&self.marginal_cdf, &self.marginal_guide, u.y as f64 * rest_total, rest_total);
+                let row = block_row * bw..(block_row + 1) * bw;
+                let (block_column, along_column) =
+                    pick_guided(&self.row_cdf[row.clone()], &self.row_guide[row], u.x, 1.0);
                 let (rows, columns) = (self.block_span(block_row, h), self.block_span(block_column, w));
                 let (top, bottom) = (self.cos_theta[rows.start], self.cos_theta[rows.end]);
                 let map_u = (columns.start as f64 + along_column * columns.len() as f64) / w as f64;
-                (top + along_row * (bottom - top), map_u)
+                let cos_theta = top + along_row * (bottom - top);
+                let b = (block_row * bw + block_column) as u32;
+                if lookup == Lookup::Blocks && self.sun_blocks.binary_search(&b).is_err() {
+                    // The block is all rest: its radiance and density, no map lookup.
+                    let block = self.block[b as usize];
+                    let (cos_theta, map_u) = (cos_theta as f32, map_u as f32);
+                    let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+                    let dir = self.world_from_dome(sin_theta, cos_theta, map_u);
+                    return (block.pdf > 0.0).then_some((dir, Vec3::from_array(block.radiance), block.pdf));
+                }
+                (cos_theta, map_u)
             }
             DomePart::Sun => {
                 let total = *self.sun.marginal.last()?;
@@ -419,7 +532,14 @@ impl DomeSampler {
                 let row = (window.row + qr / 2) as f64 + ((qr % 2) as f64 + down as f64) / 2.0;
                 let column = (window.column + qc / 2) % w;
                 let map_u = (column as f64 + ((qc % 2) as f64 + across as f64) / 2.0) / w as f64;
-                ((PI64 * row / h as f64).cos(), map_u)
+                // A sun cell by construction (other quadrants weigh nothing),
+                // with its map coordinates at hand: no search, no acos.
+                let cos_theta = (PI64 * row / h as f64).cos() as f32;
+                let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+                let dir = self.world_from_dome(sin_theta, cos_theta, map_u as f32);
+                let radiance = self.lookup(Vec2::new(map_u as f32, (row / h as f64) as f32));
+                let pdf = self.sun_pdf(radiance, sin_theta);
+                return (pdf > 0.0).then_some((dir, radiance, pdf));
             }
         };
         let (cos_theta, map_u) = (cos_theta as f32, map_u as f32);
@@ -429,8 +549,7 @@ impl DomeSampler {
         // ray leaving in `dir` finds (render::lights MIS), but for a sample on
         // a cell's edge that the direction's rounding puts across it.
         let uv = Vec2::new(map_u, cos_theta.clamp(-1.0, 1.0).acos() / PI);
-        let radiance = self.lookup(uv);
-        let (found, pdf) = self.pdf_at(cos_theta, uv, radiance);
+        let (radiance, found, pdf) = self.at(cos_theta, uv, lookup);
         (found == part && pdf > 0.0).then_some((dir, radiance, pdf))
     }
 
@@ -447,31 +566,9 @@ impl DomeSampler {
     /// The part of the dome in direction `dir`, and the solid-angle density
     /// with which [`DomeSampler::sample_part`] of that part picks it.
     pub(crate) fn part_pdf(&self, dir: Vec3) -> (DomePart, f32) {
-        let (d, uv) = self.in_map(dir);
-        self.pdf_at(d.y, uv, self.lookup(uv))
-    }
-
-    /// [`DomeSampler::part_pdf`] of the direction at map coordinates `uv`
-    /// whose cos(theta) in the dome's frame is `cos_theta` and whose
-    /// radiance is `radiance` (the sun's density follows it).
-    fn pdf_at(&self, cos_theta: f32, uv: Vec2, radiance: Vec3) -> (DomePart, f32) {
-        let (w, h) = (self.dome.width as usize, self.dome.height as usize);
-        let column = ((uv.x * w as f32) as usize).min(w - 1);
-        let row = ((uv.y * h as f32) as usize).min(h - 1);
-        if self.sun.cells.binary_search(&((row * w + column) as u32)).is_ok() {
-            // Density in map coordinates: luminance / its integral; per solid
-            // angle divided by d omega / (du dv) = 2 pi^2 sin(theta).
-            let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt() as f64;
-            let pdf = luminance(radiance).max(0.0) as f64 / (self.sun.uv_total * 2.0 * PI64 * PI64 * sin_theta);
-            return (DomePart::Sun, if pdf.is_finite() { pdf as f32 } else { 0.0 });
-        }
-        let rest_total = self.part_power(DomePart::Rest);
-        if rest_total <= 0.0 {
-            return (DomePart::Rest, 0.0);
-        }
-        let (block_row, block_column) = (row >> self.block_shift, column >> self.block_shift);
-        let b = block_row * self.blocks.0 + block_column;
-        (DomePart::Rest, self.block_pdf[b])
+        // The density does not depend on the lookup: the cheaper one.
+        let (_, part, pdf) = self.radiance_and_pdf(dir, Lookup::Blocks);
+        (part, pdf)
     }
 
     /// The cells (rows or columns, of `cells` in all) of block row or column `block`.
@@ -545,11 +642,43 @@ fn find_sun(weights: &[f64], cell_solid_angle: &[f64], w: usize) -> Vec<u32> {
 /// total)), and where in it `target` falls (0..1). Never a bin of weight 0.
 fn pick<T: Into<f64> + Copy + PartialOrd>(cdf: &[T], target: T) -> (usize, f64) {
     let i = cdf.partition_point(|&c| c <= target).min(cdf.len() - 1);
+    within(cdf, i, target)
+}
+
+/// Where in bin `i` of `cdf` `target` falls (0..1).
+fn within<T: Into<f64> + Copy>(cdf: &[T], i: usize, target: T) -> (usize, f64) {
     let (target, high) = (target.into(), cdf[i].into());
     let low = if i == 0 { 0.0 } else { cdf[i - 1].into() };
     let weight = high - low;
     let along = if weight > 0.0 { ((target - low) / weight).clamp(0.0, 1.0) } else { 0.5 };
     (i, along)
+}
+
+/// A guide to an inclusive running sum over `total` (Devroye's guide
+/// table): entry k is the bin [`pick`] finds for target k / n of the total,
+/// so [`pick_guided`] starts there and walks a bin or two, where a binary
+/// search's chain of dependent loads was a tenth of an HDRI render.
+fn guide<T: Into<f64> + Copy + PartialOrd>(cdf: &[T], total: f64, n: usize) -> Vec<u16> {
+    (0..n)
+        .map(|k| {
+            let target = k as f64 / n as f64 * total;
+            cdf.partition_point(|&c| c.into() <= target).min(cdf.len() - 1) as u16
+        })
+        .collect()
+}
+
+/// [`pick`] by a [`guide`] of `cdf` over `total`: the same bin, always
+/// (it walks from the guide's bin to the first running sum above `target`).
+fn pick_guided<T: Into<f64> + Copy + PartialOrd>(cdf: &[T], guide: &[u16], target: T, total: f64) -> (usize, f64) {
+    let k = ((target.into() / total * guide.len() as f64) as usize).min(guide.len() - 1);
+    let mut i = guide[k] as usize;
+    while i > 0 && cdf[i - 1] > target {
+        i -= 1;
+    }
+    while i + 1 < cdf.len() && cdf[i] <= target {
+        i += 1;
+    }
+    within(cdf, i, target)
 }
 
 #[cfg(test)]
@@ -760,7 +889,8 @@ mod tests {
         for part in [DomePart::Sun, DomePart::Rest] {
             let mut across_an_edge = 0;
             for k in 0..2000 {
-                let (dir, radiance, pdf) = s.sample_part(part, Vec2::new(random(k, 0), random(k, 1))).unwrap();
+                let (dir, radiance, pdf) =
+                    s.sample_part(part, Vec2::new(random(k, 0), random(k, 1)), Lookup::Bilinear).unwrap();
                 // The sun's density follows its radiance, which the ray's
                 // direction may find a rounding away.
                 let (found, ray_pdf) = s.part_pdf(dir);
@@ -811,7 +941,8 @@ mod tests {
         let n = 1u32 << 14;
         let (mut light, mut least, mut most) = (0f64, f64::MAX, 0f64);
         for k in 0..n {
-            let (dir, radiance, pdf) = s.sample_part(DomePart::Sun, Vec2::new(random(k, 0), random(k, 1))).unwrap();
+            let (dir, radiance, pdf) =
+                s.sample_part(DomePart::Sun, Vec2::new(random(k, 0), random(k, 1)), Lookup::Bilinear).unwrap();
             let uv = s.uv(dir);
             let x = (uv.x * w as f32) as u32;
             assert!((x <= 1 || x >= w - 2) && (59..63).contains(&((uv.y * h as f32) as u32)), "{uv}");
@@ -842,7 +973,8 @@ mod tests {
         let mut counts = vec![0u32; bw * bh];
         let mut light = Vec3::ZERO;
         for k in 0..n {
-            let (dir, radiance, pdf) = s.sample_part(DomePart::Rest, Vec2::new(random(k, 4), random(k, 5))).unwrap();
+            let (dir, radiance, pdf) =
+                s.sample_part(DomePart::Rest, Vec2::new(random(k, 4), random(k, 5)), Lookup::Bilinear).unwrap();
             light += radiance / pdf;
             let uv = s.uv(dir);
             let (i, j) = ((uv.x * w as f32) as usize / 4, (uv.y * h as f32) as usize / 4);
@@ -868,6 +1000,93 @@ mod tests {
         let fine = quadrature(&s, 2048, |d| s.radiance(d));
         let error = (light / n as f32 / fine - 1.0).abs().max_element();
         assert!(error < 0.01, "{} vs {fine}", light / n as f32);
+    }
+
+    /// Light for rough surfaces ([`Lookup::Blocks`]): every rest sample
+    /// carries the rest's whole power over its pdf (in luminance), a ray
+    /// leaving in a sample's direction finds the same radiance and density
+    /// (so MIS weighs one function), and the estimator integrates the same
+    /// light as the bilinear map's.
+    #[test]
+    fn blocks_light_rough_surfaces_with_the_maps_light() {
+        let w = 1024u32;
+        let sky = |x: u32, y: u32| {
+            let (fx, fy) = (x as f32 / 1024.0, y as f32 / 512.0);
+            let smooth = Vec3::new(0.3 + 0.2 * (6.0 * fx).sin(), 0.4 + 0.3 * fy, 0.5 + 0.1 * (9.0 * fy).cos());
+            let base = smooth + Vec3::splat(if (x / 16 + y / 16).is_multiple_of(2) { 2.0 } else { 0.0 });
+            // A sun of 3 x 2 texels, its cells a part of their own.
+            if (600..603).contains(&x) && (150..152).contains(&y) {
+                base + Vec3::new(1e5, 0.9e5, 0.8e5)
+            } else {
+                base
+            }
+        };
+        let s = DomeSampler::new(dome(w, sky, 0.9));
+        assert_eq!(s.parts().collect::<Vec<_>>(), [DomePart::Sun, DomePart::Rest]);
+        assert!(!s.sun_blocks.is_empty());
+        let rest = s.part_power(DomePart::Rest);
+        let n = 1u32 << 18;
+        let (mut light, mut across_an_edge, mut spread) = (Vec3::ZERO, 0, (f64::MAX, 0f64));
+        for k in 0..n {
+            let u = Vec2::new(random(k, 6), random(k, 7));
+            let Some((dir, radiance, pdf)) = s.sample_part(DomePart::Rest, u, Lookup::Blocks) else { continue };
+            light += radiance / pdf;
+            let each = luminance(radiance) as f64 / pdf as f64;
+            spread = (spread.0.min(each), spread.1.max(each));
+            let (ray, part, ray_pdf) = s.radiance_and_pdf(dir, Lookup::Blocks);
+            across_an_edge += (part != DomePart::Rest || ray != radiance || ray_pdf != pdf) as u32;
+        }
+        assert!(across_an_edge < n / 5_000, "{across_an_edge} samples disagree with what their ray finds");
+        // Blocks that hold a sun cell carry more per sample (their rest is
+        // smaller than the block), every other block exactly the whole rest.
+        assert!((spread.0 / rest - 1.0).abs() < 1e-4, "{spread:?} vs {rest}");
+        // The rest's texels with sin(theta), in f64, as a lighter would add them up.
+        let mut texels = DVec3::ZERO;
+        for j in 0..w / 2 {
+            let theta = PI64 * (j as f64 + 0.5) / (w / 2) as f64;
+            for i in (0..w).filter(|&i| !s.is_sun(j as usize, i as usize)) {
+                texels += sky(i, j).as_dvec3() * theta.sin() * 2.0 * PI64 * PI64 / (w * w / 2) as f64;
+            }
+        }
+        let error = (light.as_dvec3() / n as f64 / texels - 1.0).abs().max_element();
+        assert!(error < 0.005, "{} vs {texels}", light / n as f32);
+        // The sun part is bilinear under either lookup.
+        for k in 0..200 {
+            let u = Vec2::new(random(k, 8), random(k, 9));
+            let bilinear = s.sample_part(DomePart::Sun, u, Lookup::Bilinear);
+            assert_eq!(bilinear.map(|x| x.1), s.sample_part(DomePart::Sun, u, Lookup::Blocks).map(|x| x.1));
+        }
+    }
+
+    /// The guided pick finds the bin the binary search finds, for every
+    /// target, across empty bins and bins that hold many guide entries.
+    #[test]
+    fn a_guided_pick_is_the_binary_search() {
+        for (n, seed) in [(1usize, 0u32), (7, 1), (256, 2), (300, 3)] {
+            let weights: Vec<f32> = (0..n as u32)
+                .map(|i| if random(i, seed) < 0.3 { 0.0 } else { random(i, seed + 10).powi(6) * 100.0 })
+                .collect();
+            let mut sum = 0f32;
+            let cdf: Vec<f32> = weights
+                .iter()
+                .map(|w| {
+                    sum += w;
+                    sum
+                })
+                .collect();
+            let total = sum as f64;
+            if !(total > 0.0) {
+                continue;
+            }
+            let g = guide(&cdf, total, n.min(64));
+            for k in 0..20_000 {
+                let target = (random(k, seed + 20) as f64 * total) as f32;
+                assert_eq!(pick_guided(&cdf, &g, target, total), pick(&cdf, target), "n {n} target {target}");
+            }
+            for &edge in &cdf {
+                assert_eq!(pick_guided(&cdf, &g, edge, total), pick(&cdf, edge));
+            }
+        }
     }
 
     #[test]

@@ -14,6 +14,7 @@ use glam::{Affine3A, Mat3A, Vec2, Vec3, Vec4};
 
 use super::accel::{Hit, Tlas, WorldRay};
 use super::bsdf::{sample_concentric_disk, Bsdf, Dielectric, ShadingFrame};
+use super::dome::Lookup;
 use super::lights::LightSampler;
 use super::sampler::Sampler;
 use super::RenderSettings;
@@ -692,6 +693,10 @@ impl<'a> Integrator<'a> {
         let mut prev_group_pick = 1.0f32;
         // The last bounce was a delta lobe (glass): what the ray finds has MIS weight 1.
         let mut prev_delta = false;
+        // How the dome is looked up for what the ray finds (render::dome::Lookup):
+        // as the last vertex's next-event estimation looked it up, so MIS weighs
+        // one radiance; sharply from the camera and after a delta lobe.
+        let mut prev_lookup = Lookup::Bilinear;
         // Absorption per metre of the volume the ray travels in (zero: none).
         let mut medium = Vec3::ZERO;
         // Product of the (n_t / n_i)^2 refraction divided the throughput by (Russian roulette undoes it).
@@ -733,7 +738,7 @@ impl<'a> Integrator<'a> {
                     if self.settings.sky_visible
                         && (self.scene.lights.dome.is_none() || self.lights.dome_camera_visible())
                     {
-                        let environment = match self.lights.dome(dir) {
+                        let environment = match self.lights.dome(dir, Lookup::Bilinear) {
                             Some((l, _)) => l,
                             None => self.scene.lights.sky.radiance,
                         };
@@ -750,7 +755,7 @@ impl<'a> Integrator<'a> {
                         out.alpha = 1.0;
                     }
                 } else {
-                    let environment = match self.lights.dome(dir) {
+                    let environment = match self.lights.dome(dir, prev_lookup) {
                         Some((l, pdf)) => l * bsdf_weight(prev_delta, prev_bsdf_pdf, pdf * prev_group_pick),
                         None => self.scene.lights.sky.radiance,
                     };
@@ -859,6 +864,7 @@ impl<'a> Integrator<'a> {
                     };
                 }
                 prev_delta = true;
+                prev_lookup = Lookup::Bilinear;
                 prev_bsdf_pdf = 0.0;
                 sampler.set_dimension(base + 5);
                 if !survives_roulette(&mut throughput, eta_scale, depth, sampler) {
@@ -882,6 +888,7 @@ impl<'a> Integrator<'a> {
             // bounce, one ray to one group picked uniformly. The first group
             // draws from this bounce's dimensions (its pick only among
             // several lights), the others from streams of their own.
+            let lookup = if bsdf.is_sharp() { Lookup::Bilinear } else { Lookup::Blocks };
             let groups = self.lights.groups();
             let (first, count) = if camera || groups.len() < 2 {
                 (0, groups.len())
@@ -903,7 +910,7 @@ impl<'a> Integrator<'a> {
                 } else {
                     sampler.extra_light(group as u32, depth)
                 };
-                let Some(ls) = self.lights.sample(group, surface.p, u_pick, u_light) else { continue };
+                let Some(ls) = self.lights.sample(group, surface.p, u_pick, u_light, lookup) else { continue };
                 if ls.wi.dot(surface.ng) <= 0.0 {
                     continue;
                 }
@@ -978,6 +985,7 @@ impl<'a> Integrator<'a> {
             prev_bsdf_pdf = bs.pdf;
             prev_group_pick = group_pick;
             prev_delta = false;
+            prev_lookup = lookup;
             if !survives_roulette(&mut throughput, eta_scale, depth, sampler) {
                 break;
             }

@@ -26,7 +26,7 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3};
 
 use super::bsdf::{luminance, sample_concentric_disk, ShadingFrame};
-use super::dome::{DomePart, DomeSampler};
+use super::dome::{DomePart, DomeSampler, Lookup};
 use super::integrator::surface_emission;
 use crate::scene::lights::{Light, LightKind, SceneLights};
 use crate::scene::passes::LightGroups;
@@ -424,7 +424,15 @@ impl<'a> LightSampler<'a> {
 
     /// A light sample of `group` for a shading point at `p`: the light
     /// picked by `u_pick`, a point on it by `u`.
-    pub(crate) fn sample(&self, group: LightGroup, p: Vec3, u_pick: f32, u: Vec2) -> Option<LightSample> {
+    /// `lookup`: how the dome's radiance is looked up for this shading point.
+    pub(crate) fn sample(
+        &self,
+        group: LightGroup,
+        p: Vec3,
+        u_pick: f32,
+        u: Vec2,
+        lookup: Lookup,
+    ) -> Option<LightSample> {
         let t = self.table(group);
         if t.sources.is_empty() {
             return None;
@@ -441,7 +449,7 @@ impl<'a> LightSampler<'a> {
             }
             Source::Dome(part) => {
                 let (dome, _) = self.dome.as_ref()?;
-                let (wi, radiance, pdf) = dome.sample_part(*part, u)?;
+                let (wi, radiance, pdf) = dome.sample_part(*part, u, lookup)?;
                 Some(LightSample { wi, distance: f32::INFINITY, radiance, pdf: pdf * pick, delta: false, group })
             }
             Source::Local(light) => sample_local(light, p, u).map(|s| LightSample { pdf: s.pdf * pick, ..s }),
@@ -500,11 +508,11 @@ impl<'a> LightSampler<'a> {
         }
     }
 
-    /// The dome's radiance in direction `d` and its NEE pdf (including the
-    /// pick); `None` without a dome.
-    pub(crate) fn dome(&self, d: Vec3) -> Option<(Vec3, f32)> {
+    /// The dome's radiance in direction `d` (looked up as `lookup` says) and
+    /// its NEE pdf (including the pick); `None` without a dome.
+    pub(crate) fn dome(&self, d: Vec3, lookup: Lookup) -> Option<(Vec3, f32)> {
         let (dome, index) = self.dome.as_ref()?;
-        let (radiance, part, pdf) = dome.radiance_and_pdf(d);
+        let (radiance, part, pdf) = dome.radiance_and_pdf(d, lookup);
         let pick = self.pmf.get(index[part as usize] as usize).copied().unwrap_or(0.0);
         Some((radiance, pdf * pick))
     }
