@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use crate::casting::rig::Rig;
-use crate::casting::skin::{is_skinned_rig, SkinnedRig};
+use crate::casting::skin::{is_character_rig, SkinnedRig};
 use crate::casting::wardrobe::Wardrobes;
 use crate::error::{same_file, Error, Result};
 use crate::shot::Shot;
@@ -66,11 +66,8 @@ impl ShotRigs {
     pub(crate) fn load(shot: &Shot, wardrobes: &Wardrobes) -> Result<ShotRigs> {
         let mut rigs = BTreeMap::new();
         for (name, r) in &shot.rigs {
-            let rig = if is_skinned_rig(r)? {
-                ShotRig::Skinned(
-                    SkinnedRig::load(&r.file, &r.skin, shot.frames.fps)
-                        .map_err(|e| e.field_prefix(&format!("rigs.{name}")).or_field(format!("rigs.{name}.file")))?,
-                )
+            let rig = if is_character_rig(r)? {
+                ShotRig::Skinned(SkinnedRig::load_shot_rig(name, r, shot.frames.fps)?)
             } else {
                 ShotRig::Slots(Rig::load(&r.file).map_err(|e| e.or_field(format!("rigs.{name}.file")))?)
             };
