@@ -450,3 +450,50 @@ fn bad_rigid_rigs_are_refused_naming_file_rig_and_field() {
         assert!(!err.contains("panicked"), "{what}: {err}");
     }
 }
+
+#[test]
+fn a_wardrobe_repaints_a_car_and_its_parts_ride_their_slots_nodes() {
+    let dir = common::tempdir().unwrap();
+    let shot = car_shot(dir.path(), 2.0, "schemes = { Cars = 1.0 }");
+    let car = dir.path().join("car.glb");
+    let mut wardrobe = String::from(
+        "version = 1\nname = \"w\"\n[materials.red]\nbase_color = [0.9, 0.1, 0.1]\n[materials.blue]\nbase_color = [0.1, 0.2, 0.9]\n\
+         [schemes.Cars]\n",
+    );
+    wardrobe.push_str(&format!(
+        "[[schemes.Cars.parts]]\nslot = \"body\"\nfile = \"{}\"\nmesh = \"body\"\nmaterials = [\"red\", \"blue\"]\n",
+        car.display()
+    ));
+    for (wheel, _, _) in WHEELS {
+        wardrobe.push_str(&format!(
+            "[[schemes.Cars.parts]]\nslot = \"{wheel}\"\nfile = \"{}\"\nmesh = \"tyre\"\n",
+            car.display()
+        ));
+    }
+    std::fs::write(dir.path().join("w.toml"), wardrobe).unwrap();
+    let text = std::fs::read_to_string(&shot).unwrap().replace("wardrobes = []", "wardrobes = [\"w.toml\"]");
+    std::fs::write(&shot, text).unwrap();
+    let dressed = ShotCrowd::load(&shot).unwrap();
+    let plain = ShotCrowd::load(&car_shot(common::tempdir().unwrap().path(), 2.0, "")).unwrap();
+    let instances = |c: &ShotCrowd| {
+        let block = c.agents_at(12).unwrap();
+        let mut out = Vec::new();
+        c.agent_instances(&block.agents[0], Lod::Full, vis::ALL, &mut out).unwrap();
+        out.iter()
+            .map(|i| {
+                let m = &c.library().meshes[i.mesh as usize];
+                (m.positions.clone(), c.library().materials[i.material as usize].name.clone())
+            })
+            .collect::<Vec<_>>()
+    };
+    let (a, b) = (instances(&dressed), instances(&plain));
+    assert_eq!(a.len(), 5);
+    // Same geometry where it was (the wardrobe's parts ride the same nodes)...
+    for ((pa, _), (pb, _)) in a.iter().zip(&b) {
+        assert_eq!(pa.len(), pb.len());
+        assert!(pa.iter().zip(pb).all(|(x, y)| x.distance(*y) < 1e-5));
+    }
+    // ... in the wardrobe's paint.
+    assert!(a[0].1 == "w/red" || a[0].1 == "w/blue", "body wears {}", a[0].1);
+    assert!(b[0].1.ends_with("#paint"), "{}", b[0].1);
+}

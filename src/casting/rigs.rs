@@ -1,5 +1,6 @@
 //! The shot's rigs, loaded once: each a slot rig (rigid parts on nodes) or a
-//! skinned character, one closed kind per rig so every stage matches on it.
+//! character posed from its node animation (skinned, or rigid: meshes riding
+//! their nodes), one closed kind per rig so every stage matches on it.
 
 use std::collections::BTreeMap;
 
@@ -15,7 +16,8 @@ use crate::shot::Shot;
 pub enum ShotRig {
     /// Rigid nodes with part slots (the frankenbot).
     Slots(Rig),
-    /// A skinned character: skinned meshes on a skeleton, posed at shared steps.
+    /// A character posed at shared steps: skinned meshes on a skeleton, or
+    /// (`kind = "rigid"`) meshes on animated nodes ([`SkinnedRig::is_rigid`]).
     Skinned(SkinnedRig),
 }
 

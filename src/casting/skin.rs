@@ -9,6 +9,16 @@
 //!   with JOINTS_0/WEIGHTS_0 and JOINTS_1/WEIGHTS_1 (up to 8 influences);
 //! - normals use the inverse transpose of the blended matrix.
 //!
+//! A rigid character (`kind = "rigid"`, or a file with neither a skin nor
+//! slots: a multi-part character, a vehicle) is the special case with no
+//! skin: every mesh node of the file is a piece bound wholly to its node (one
+//! influence of weight 1, an identity bind), as a mesh under a skinned
+//! character's joint is, so posing, proxies, motion blur, pose instancing and
+//! export treat the two alike. Its clips are node animations (TRS channels,
+//! STEP, LINEAR or CUBICSPLINE, sampled by [`crate::casting::rig::Channel`]);
+//! a cycle with no stride given and no `root` takes the distance its wheels
+//! roll ([`crate::casting::wheels`]).
+//!
 //! Rig space is throng's agent space: Y up, facing +Z, metres, feet on y = 0.
 //! `rig_from_file` rotates the file's up and forward axes onto +Y and +Z,
 //! scales by the shot's `scale` and lifts the rest pose's lowest vertex to
@@ -316,6 +326,11 @@ impl SkinnedRig {
             Some(s) => s.clone(),
             None => delivered.iter().map(|(s, _, _)| s.clone()).collect(),
         };
+        if rigid {
+            for slot in &rig.slots {
+                rig.slot_node(slot)?;
+            }
+        }
         rig.delivered = delivered;
 
         // Ground and height from the rest pose of the delivered meshes.
@@ -770,15 +785,50 @@ impl SkinnedRig {
         })
     }
 
-    /// The part for a wardrobe's `file` + `mesh` (a name or `#index`),
-    /// loading it on first use.
-    pub(crate) fn part(&mut self, file: &Path, mesh_ref: &str) -> Result<usize> {
+    /// The part for a wardrobe's `file` + `mesh` (a name or `#index`) worn
+    /// in `slot`, loading it on first use. A rigid rig's part rides the
+    /// slot's node, modelled in that node's space as the node's own mesh is.
+    pub(crate) fn part(&mut self, file: &Path, mesh_ref: &str, slot: &str) -> Result<usize> {
         let canonical = std::fs::canonicalize(file).map_err(|e| Error::io(file, e))?;
-        if let Some(&i) = self.parts.get(&(canonical.clone(), mesh_ref.to_string())) {
+        // The rig's own mesh on its own node (what an agent wears as delivered).
+        let own = self.delivered.iter().find(|(s, m, _)| s == slot && m == mesh_ref);
+        if let (true, Some(&(_, _, part))) = (self.rigid && canonical == self.canonical, own) {
+            return Ok(part);
+        }
+        let name = match self.rigid {
+            true => format!("{mesh_ref} on {slot}"),
+            false => mesh_ref.to_string(),
+        };
+        if let Some(&i) = self.parts.get(&(canonical.clone(), name.clone())) {
             return Ok(i);
         }
         let gltf = GltfFile::open(file)?;
-        self.load_part(&gltf, &canonical, mesh_ref)
+        if !self.rigid {
+            return self.load_part(&gltf, &canonical, mesh_ref);
+        }
+        let node = self.slot_node(slot)?;
+        let gmesh = match mesh_ref.strip_prefix('#').and_then(|i| i.parse::<usize>().ok()) {
+            Some(i) => gltf.doc.meshes().nth(i).ok_or_else(|| {
+                gltf.err(format!("no mesh #{i}; the file has {} meshes", gltf.doc.meshes().len())).field("mesh")
+            })?,
+            None => gltf.mesh_by_name(mesh_ref)?,
+        };
+        self.load_rigid_part(&gltf, &canonical, node, &gmesh, &name)
+    }
+
+    /// The node a rigid rig's slot names (a node name, or `#node<index>`).
+    fn slot_node(&self, slot: &str) -> Result<usize> {
+        let by_index = slot.strip_prefix("#node").and_then(|i| i.parse::<usize>().ok());
+        by_index
+            .filter(|&i| i < self.animated.hierarchy.nodes.len())
+            .or_else(|| self.animated.hierarchy.find(slot))
+            .ok_or_else(|| {
+                Error::invalid(
+                    &self.path,
+                    format!("slot `{slot}` is no node of this rigid rig: a rigid rig's slots are its nodes, by name"),
+                )
+                .field("slots")
+            })
     }
 
     /// `rig_from_node` of every node for local transforms `local` (before root-motion removal).
