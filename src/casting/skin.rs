@@ -224,10 +224,16 @@ impl SkinnedRig {
         }
         let animated = Animated::from_file(&file)?;
         if rigid && animated.clips.is_empty() {
-            return Err(file.err(
-                "a rigid rig plays its node animation, but the file has no animation; a still mesh is a wardrobe part \
-                 or a set object",
-            ));
+            return Err(file.err(match options.rigid {
+                Some(_) => {
+                    "declared `kind = \"rigid\"`, but the file has no animation: a rigid rig plays its node \
+                            animation as cycles (a still mesh is a wardrobe part or a set object)"
+                }
+                None => {
+                    "the file is no rig: it has no slots (a slot rig's nodes with \"slot\" extras, under a \
+                         `root` node), no skin (a skinned character) and no animation (a rigid one)"
+                }
+            }));
         }
         let root = match &options.root {
             Some(name) => Some(animated.hierarchy.find(name).ok_or_else(|| {
