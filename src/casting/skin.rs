@@ -49,7 +49,7 @@ use rayon::prelude::*;
 use crate::casting::rig::{Animated, Trs};
 use crate::casting::wheels;
 use crate::error::{Error, Result};
-use crate::scene::gltf::{check_accessor, out_of_range, read_primitive, GltfFile};
+use crate::scene::gltf::{check_accessor, lift_decals, out_of_range, read_primitive, GltfFile};
 use crate::scene::Mesh;
 use crate::shot::{Axis, SkinOptions};
 
@@ -601,9 +601,13 @@ impl SkinnedRig {
         let label = format!("{}#{name}", file.path.display());
         let single = gmesh.primitives().len() == 1;
         let mut pieces = Vec::new();
+        let mut meshes = Vec::new();
         for prim in gmesh.primitives() {
             let piece_name = if single { label.clone() } else { format!("{label}/{}", prim.index()) };
-            let mesh = read_primitive(file, gmesh, &prim, piece_name)?;
+            meshes.push(read_primitive(file, gmesh, &prim, piece_name)?);
+        }
+        lift_decals(&mut meshes);
+        for (prim, mesh) in gmesh.primitives().zip(meshes) {
             let mut one = [(0u16, 0.0f32); MAX_INFLUENCES];
             one[0].1 = 1.0;
             let bounds = mesh
