@@ -290,34 +290,6 @@ fn instance_counts_are_what_posing_places() {
     assert!(slots > 0 && skinned > 0, "{slots} slot-rig and {skinned} skinned agents");
 }
 
-/// World bounds of every Full-LOD instance of every agent at the first frame, sorted per agent.
-fn instance_bounds(crowd: &ShotCrowd) -> Vec<(u32, Vec<[f32; 6]>)> {
-    let f = crowd.shot().frames.start;
-    let block = crowd.agents_at(f).unwrap();
-    let lib = crowd.library();
-    let mut out = Vec::new();
-    for a in &block.agents {
-        let mut insts = Vec::new();
-        crowd.agent_instances(a, Lod::Full, throng::scene::vis::ALL, &mut insts).unwrap();
-        let mut boxes: Vec<[f32; 6]> = insts
-            .iter()
-            .map(|i| {
-                let (lo, hi) = lib.meshes[i.mesh as usize].bounds();
-                let (mut wlo, mut whi) = (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY);
-                for c in 0..8 {
-                    let p = glam::Vec3::select(glam::BVec3::new(c & 1 != 0, c & 2 != 0, c & 4 != 0), hi, lo);
-                    let w = i.world_from_object.transform_point3(p);
-                    (wlo, whi) = (wlo.min(w), whi.max(w));
-                }
-                [wlo.x, wlo.y, wlo.z, whi.x, whi.y, whi.z]
-            })
-            .collect();
-        boxes.sort_by(|a, b| a.partial_cmp(b).unwrap());
-        out.push((a.id, boxes));
-    }
-    out
-}
-
 /// For every walking Kenney alien at the first frame: its face decal's
 /// centre minus its head's centre, dotted with its direction of travel
 /// (positive: the face looks where it walks).
