@@ -329,8 +329,8 @@ pose_step = 0.125
 sensor_width = 36.0
 [[camera.keys]]
 frame = 1
-position = [6.0, 2.0, 2.0]
-aim = [0.0, 0.5, 1.0]
+position = [5.0, 2.5, 1.5]
+aim = [0.0, 0.5, -1.4]
 focal_length = 35.0
 [render]
 resolution = [96, 54]
@@ -386,10 +386,19 @@ fn a_car_renders_exports_and_blurs() {
         "12".as_ref(),
         "--shutter".as_ref(),
         "-0.25,0.25".as_ref(),
+        "--png".as_ref(),
+        "--resolution".as_ref(),
+        "320x180".as_ref(),
+        "--spp".as_ref(),
+        "16".as_ref(),
         "--out".as_ref(),
         dir.path().join("renders").as_os_str(),
     ]);
     assert_eq!(code, 0, "{out}\n{err}");
+    // Kept for looking at: target/tmp/rigid_car.png (the car blurred at 3 m/s).
+    let png = dir.path().join("renders/full/cars.full.0012.png");
+    let png = if png.exists() { png } else { dir.path().join("renders/full/cars.full.12.png") };
+    std::fs::copy(&png, Path::new(env!("CARGO_TARGET_TMPDIR")).join("rigid_car.png")).unwrap();
     let (code, out, err) = common::run(&[
         "export".as_ref(),
         shot.as_os_str(),
