@@ -72,7 +72,7 @@ cp wardrobes/*.toml "$C/wardrobe_toml/"
 # gltf_load: binary files as they are; JSON files minified, and those with
 # an external buffer packed into a .glb (the fuzzer writes one file only).
 cp tests/fixtures/KenneyAlien/alien.glb demo/set/set.glb demo/parts/torsos.glb \
-    demo/parts/kenney_alien_facing_z.glb demo/rigs/bipedThinA.glb "$C/gltf_load/"
+    demo/parts/heads.glb demo/rigs/bipedThinA.glb "$C/gltf_load/"
 python3 - "$C/gltf_load" tests/fixtures/rig_small.gltf tests/fixtures/set_small.gltf \
     tests/fixtures/InterpolationTest/InterpolationTest.gltf \
     "$ASSETS/gltf/SimpleSkin/SimpleSkin.gltf" "$ASSETS/gltf/SimpleSkin/SimpleSkin-multi-joint-set.gltf" \

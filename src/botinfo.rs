@@ -19,7 +19,7 @@ pub struct BotInfo {
     pub id: u32,
     /// Rig.
     pub(crate) rig: String,
-    /// The rig's kind: `slots` (rigid parts on nodes) or `skinned`.
+    /// The rig's kind: `slots` (rigid parts on nodes), `skinned` or `rigid`.
     pub(crate) kind: &'static str,
     /// Cycle at the frame.
     pub(crate) cycle: String,
@@ -104,7 +104,7 @@ pub fn bot_info_each(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<(Vec<
             id,
             rig: cast.rig.to_string(),
             kind: match crowd.rigs().get(&cast.rig) {
-                Some(crate::casting::ShotRig::Skinned(_)) => "skinned",
+                Some(crate::casting::ShotRig::Skinned(rig)) => rig.kind(),
                 _ => "slots",
             },
             cycle: crowd.cycle_name(a).to_string(),

@@ -99,7 +99,14 @@ impl Error {
             err = err.line(line);
             let key = text.lines().nth(line - 1).and_then(|l| l.split_once('=')).map(|(k, _)| k.trim());
             if let Some(key) = key.filter(|k| !k.is_empty() && !k.starts_with('[')) {
-                err = err.field(key.trim_matches('"'));
+                // Under the table it sits in (`rigs.walker.forward`), where
+                // that is a plain `[table]`: an array's `[[table]]` has no index here.
+                let table = text.lines().take(line - 1).map(str::trim).filter(|l| l.starts_with('[')).last();
+                let table = table.filter(|t| !t.starts_with("[[")).and_then(|t| t.strip_prefix('[')?.split(']').next());
+                err = err.field(match table.map(str::trim) {
+                    Some(t) if !t.is_empty() => format!("{t}.{}", key.trim_matches('"')),
+                    _ => key.trim_matches('"').to_string(),
+                });
             }
         }
         err

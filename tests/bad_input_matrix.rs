@@ -46,6 +46,14 @@ fn crowd_cache(dir: &Path) -> Vec<u8> {
     std::fs::read(dir.join("c.crowd")).unwrap()
 }
 
+/// The shot's rig is Khronos InterpolationTest (shared assets) declared
+/// `kind = "rigid"`, with `keys` more keys of its table.
+fn rigid_rig(dir: &Path, keys: &str) {
+    let file = common::shared_asset("gltf/InterpolationTest/InterpolationTest.gltf").display().to_string();
+    edit(dir, "shot.toml", &demo("rigs/bipedThinA.glb"), &file);
+    edit(dir, "shot.toml", "schemes = { HighEnd = 1.0 }", &format!("kind = \"rigid\"\n{keys}"));
+}
+
 /// Sets header field `offset` (u32) of a `.crowd` and fixes the header CRC.
 fn patch_header(bytes: &mut [u8], offset: usize, value: u32) {
     bytes[offset..offset + 4].copy_from_slice(&value.to_le_bytes());
@@ -453,6 +461,52 @@ matrix! {
         },
         CAST,
         &["rig.glb"],
+        &[],
+    ),
+    rig_file_kind_rigid_on_a_skinned_character => c(
+        "rig file",
+        "kind rigid on a skinned character",
+        |d| {
+            edit(d, "shot.toml", &demo("rigs/bipedThinA.glb"), &demo("rigs/walker.glb"));
+            edit(d, "shot.toml", "schemes = { HighEnd = 1.0 }", "kind = \"rigid\"")
+        },
+        CAST,
+        &["walker.glb", "rigs.bipedThinA.kind", "skin"],
+        &[],
+    ),
+    rig_file_kind_rigid_on_a_file_without_animation => c(
+        "rig file",
+        "kind rigid on a file without animation",
+        |d| {
+            edit(d, "shot.toml", &demo("rigs/bipedThinA.glb"), &demo("set/set.glb"));
+            edit(d, "shot.toml", "schemes = { HighEnd = 1.0 }", "kind = \"rigid\"")
+        },
+        CAST,
+        &["set.glb", "rigs.bipedThinA.file", "no animation"],
+        &[],
+    ),
+    rig_file_rigid_cycle_maps_to_a_missing_clip => c(
+        "rig file",
+        "rigid cycle maps to a missing clip",
+        |d| rigid_rig(d, "cycles = { IdleA = \"Fly\" }"),
+        CAST,
+        &["InterpolationTest.gltf", "rigs.bipedThinA.cycles.IdleA", "Fly"],
+        &[],
+    ),
+    rig_file_rigid_forward_along_up => c(
+        "rig file",
+        "rigid forward along up",
+        |d| rigid_rig(d, "forward = \"+y\""),
+        CAST,
+        &["InterpolationTest.gltf", "rigs.bipedThinA.forward", "along up"],
+        &[],
+    ),
+    rig_file_rigid_forward_not_an_axis => c(
+        "rig file",
+        "rigid forward not an axis",
+        |d| rigid_rig(d, "forward = \"north\""),
+        CAST,
+        &["shot.toml", "rigs.bipedThinA.forward", "+z"],
         &[],
     ),
     // ---------------------------------------------------------- binary cache
@@ -1051,7 +1105,7 @@ const HARNESS: Harness = Harness {
 
 #[test]
 fn the_matrix_keeps_every_case() {
-    assert_eq!(cases().len(), 94);
+    assert_eq!(cases().len(), 99);
 }
 
 /// The table of every case, as issue 15 closed with: written to

@@ -36,7 +36,9 @@ fn heads_are_uniform_and_inside_their_box() {
         for p in parts {
             let (lo, hi) = crowd.library().meshes[p.mesh as usize].bounds();
             let fit = crowd.dressing().fit(p.fit).slot_from_part;
-            let (a, b) = (fit.transform_point3(lo), fit.transform_point3(hi));
+            // A part turned by its `forward` (whole axes) swaps corners: take both.
+            let (p0, p1) = (fit.transform_point3(lo), fit.transform_point3(hi));
+            let (a, b) = (p0.min(p1), p0.max(p1));
             let e = by_slot.entry(p.slot as usize).or_insert((a, b, fit));
             e.0 = e.0.min(a);
             e.1 = e.1.max(b);
@@ -288,84 +290,93 @@ fn instance_counts_are_what_posing_places() {
     assert!(slots > 0 && skinned > 0, "{slots} slot-rig and {skinned} skinned agents");
 }
 
-/// World bounds of every Full-LOD instance of every agent at the first frame, sorted per agent.
-fn instance_bounds(crowd: &ShotCrowd) -> Vec<(u32, Vec<[f32; 6]>)> {
+/// For every walking Kenney alien at the first frame: its face decal's
+/// centre minus its head's centre, dotted with its direction of travel
+/// (positive: the face looks where it walks).
+fn alien_faces(crowd: &ShotCrowd) -> Vec<f32> {
     let f = crowd.shot().frames.start;
-    let block = crowd.agents_at(f).unwrap();
+    let (now, next) = (crowd.agents_at(f).unwrap(), crowd.agents_at(f + 1).unwrap());
     let lib = crowd.library();
+    let centre = |i: &throng::scene::Instance| {
+        let (lo, hi) = lib.meshes[i.mesh as usize].bounds();
+        i.world_from_object.transform_point3((lo + hi) / 2.0)
+    };
     let mut out = Vec::new();
-    for a in &block.agents {
+    for a in &now.agents {
+        let Some(b) = next.agents.iter().find(|b| b.id == a.id) else { continue };
+        let travel = (b.position - a.position) * glam::Vec3::new(1.0, 0.0, 1.0);
+        if travel.length() < 0.01 {
+            continue;
+        }
         let mut insts = Vec::new();
         crowd.agent_instances(a, Lod::Full, throng::scene::vis::ALL, &mut insts).unwrap();
-        let mut boxes: Vec<[f32; 6]> = insts
-            .iter()
-            .map(|i| {
-                let (lo, hi) = lib.meshes[i.mesh as usize].bounds();
-                let (mut wlo, mut whi) = (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY);
-                for c in 0..8 {
-                    let p = glam::Vec3::select(glam::BVec3::new(c & 1 != 0, c & 2 != 0, c & 4 != 0), hi, lo);
-                    let w = i.world_from_object.transform_point3(p);
-                    (wlo, whi) = (wlo.min(w), whi.max(w));
-                }
-                [wlo.x, wlo.y, wlo.z, whi.x, whi.y, whi.z]
-            })
-            .collect();
-        boxes.sort_by(|a, b| a.partial_cmp(b).unwrap());
-        out.push((a.id, boxes));
+        let named = |suffix: &str| insts.iter().find(|i| lib.meshes[i.mesh as usize].name.ends_with(suffix));
+        let (Some(head), Some(eyes)) = (named("#Mesh head/0"), named("#Mesh head/2")) else { continue };
+        out.push((centre(eyes) - centre(head)).dot(travel.normalize()));
     }
     out
 }
 
 #[test]
 fn a_part_modelled_facing_minus_z_is_turned_by_its_forward_key() {
-    // The demo wears the Kenney alien from a copy turned 180 degrees about Y
-    // (its parts face -Z). The original with `forward = "-z"` dresses every
-    // agent as the turned copy does, to a millimetre (the copy went through
-    // its own float rounding).
-    let dir = common::tempdir().unwrap();
+    // The demo wears the original Kenney alien, which faces -Z, with
+    // `forward = "-z"`: every walking alien looks where it walks.
     let stock = common::repo_path("wardrobes/kenney_alien.toml");
-    let original = common::repo_path("demo/parts/kenney_alien.glb");
     let text = std::fs::read_to_string(&stock).unwrap();
-    let turned = format!("file = \"{}\"\nforward = \"-z\"", original.display());
-    let text = text.replace("file = \"../demo/parts/kenney_alien_facing_z.glb\"", &turned);
-    assert!(text.contains("forward"), "{text}");
-    let copy = dir.path().join("kenney_alien.toml");
-    std::fs::write(&copy, text).unwrap();
-    let with_key = load_with(|shot, _| {
-        for w in &mut shot.wardrobes {
-            if w.ends_with("kenney_alien.toml") {
-                *w = copy.clone();
-            }
-        }
-    });
-    let a = instance_bounds(&ShotCrowd::load(&demo_shot()).unwrap());
-    let b = instance_bounds(&with_key);
-    assert_eq!(a.len(), b.len());
-    let mut aliens = 0;
-    for ((id, x), (_, y)) in a.iter().zip(&b) {
-        assert_eq!(x.len(), y.len(), "agent {id}");
-        for (p, q) in x.iter().zip(y) {
-            assert!(p.iter().zip(q).all(|(u, v)| (u - v).abs() < 1e-3), "agent {id}: {p:?} vs {q:?}");
-        }
-        aliens += 1;
-    }
-    assert!(aliens > 0);
-    // Without the key the original walks backwards: its parts' bounds differ.
+    assert!(text.contains("kenney_alien.glb\"") && text.contains("forward = \"-z\""), "{text}");
+    let demo = ShotCrowd::load(&demo_shot()).unwrap();
+    let faces = alien_faces(&demo);
+    assert!(!faces.is_empty(), "the demo has walking aliens");
+    assert!(faces.iter().all(|&d| d > 0.05), "faces ahead: {faces:?}");
+    // Without the key the original walks backwards.
+    let dir = common::tempdir().unwrap();
+    let plain = dir.path().join("plain.toml");
+    let original = common::repo_path("demo/parts/kenney_alien.glb").display().to_string();
+    let unkeyed = text.replace("forward = \"-z\"\n", "").replace("../demo/parts/kenney_alien.glb", &original);
+    std::fs::write(&plain, unkeyed).unwrap();
     let without = load_with(|shot, _| {
-        let text = std::fs::read_to_string(&copy).unwrap().replace("forward = \"-z\"\n", "");
-        let plain = dir.path().join("plain.toml");
-        std::fs::write(&plain, text).unwrap();
         for w in &mut shot.wardrobes {
             if w.ends_with("kenney_alien.toml") {
                 *w = plain.clone();
             }
         }
     });
-    assert_ne!(instance_bounds(&without), a, "the key must matter");
+    let backwards = alien_faces(&without);
+    assert_eq!(backwards.len(), faces.len());
+    assert!(backwards.iter().all(|&d| d < -0.05), "faces behind: {backwards:?}");
     // Along up is refused, naming the part.
-    let bad = std::fs::read_to_string(&copy).unwrap().replacen("forward = \"-z\"", "forward = \"+y\"", 1);
+    let bad =
+        text.replacen("forward = \"-z\"", "forward = \"+y\"", 1).replace("../demo/parts/kenney_alien.glb", &original);
     let bad_path = dir.path().join("bad.toml");
     std::fs::write(&bad_path, bad).unwrap();
     let err = Wardrobes::load(&[bad_path]).unwrap_err().to_string();
     assert!(err.contains("bad.toml") && err.contains("parts[0].forward") && err.contains("along up"), "{err}");
+}
+
+#[test]
+fn face_decals_are_lifted_off_the_head_they_lie_on() {
+    // The alien's eyes and mouth (primitives 1 and 2 of `Mesh head`) lie in
+    // the head's front plane, z = -0.5; loading lifts them 1/1000 of the
+    // head's size (1.46 m across) out of it, towards -Z; the head itself
+    // and every other vertex stay as the file gives them.
+    let path = common::repo_path("demo/parts/kenney_alien.glb");
+    let (doc, buffers, _) = gltf::import(&path).unwrap();
+    let head = doc.meshes().find(|m| m.name() == Some("Mesh head")).unwrap();
+    let mut assets = throng::scene::gltf::AssetCache::new();
+    let loaded = assets.mesh_primitives(&path, "Mesh head").unwrap();
+    let lib = assets.library();
+    let size = 2.0 * 0.730_769_2;
+    for (prim, (mesh, _)) in head.primitives().zip(&loaded) {
+        let raw: Vec<glam::Vec3> =
+            prim.reader(|b| Some(&buffers[b.index()].0[..])).read_positions().unwrap().map(glam::Vec3::from).collect();
+        let lift = if prim.index() == 0 { 0.0 } else { -size * 1e-3 };
+        for (got, want) in lib.meshes[*mesh as usize].positions.iter().zip(&raw) {
+            let d = *got - *want;
+            assert!(
+                d.x.abs() < 1e-7 && d.y.abs() < 1e-7 && (d.z - lift).abs() < 1e-6,
+                "primitive {}: {d}",
+                prim.index()
+            );
+        }
+    }
 }

@@ -168,5 +168,5 @@ fn a_wardrobe_type_error_names_file_line_and_key() {
     let path = dir.path().join("robots.toml");
     std::fs::write(&path, broken).unwrap();
     let err = throng::casting::wardrobe::Wardrobes::load(&[path]).unwrap_err().to_string();
-    assert!(err.contains(&format!("robots.toml:{line}")) && err.contains("`roughness`"), "{err}");
+    assert!(err.contains(&format!("robots.toml:{line}")) && err.contains("`materials.chrome.roughness`"), "{err}");
 }

@@ -7,7 +7,7 @@
 //! cargo run --example make_demo
 //! ```
 //!
-//! Writes under the crate root: demo/parts/{heads,torsos,limbs,kenney_alien_facing_z}.glb,
+//! Writes under the crate root: demo/parts/{heads,torsos,limbs}.glb,
 //! demo/rigs/{bipedThinA,bipedTallB,walker}.glb, demo/set/set.glb, demo/shot.toml,
 //! wardrobes/{robots,kenney_alien,walkers}.toml, wardrobes/textures/hazard.png.
 //! demo/parts/kenney_alien.glb (the CC0 original) is an input, not an output.
@@ -142,7 +142,6 @@ fn run() -> Result<()> {
     set::write_set(&demo.join("set/set.glb"))?;
     println!("set/set.glb");
 
-    wardrobe::write_kenney_turned(&root.join(wardrobe::KENNEY_SOURCE), &root.join(wardrobe::KENNEY_TURNED))?;
     let wardrobes = root.join("wardrobes");
     std::fs::create_dir_all(wardrobes.join("textures")).map_err(|e| Error::io(&wardrobes, e))?;
     let hazard = wardrobes.join(wardrobe::HAZARD_TEXTURE);

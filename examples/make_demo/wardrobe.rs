@@ -1,10 +1,9 @@
 //! Wardrobes (SPEC "Wardrobe files"): robots.toml from our generated parts,
-//! kenney_alien.toml from the Kenney alien (turned to face +Z).
+//! kenney_alien.toml from the Kenney alien (the original, `forward = "-z"`).
 
 use std::fmt::Write as _;
 use std::path::Path;
 use throng::error::{write_atomic, Error, IoContext, Result};
-use throng::export::glb::{GlbBuilder, MaterialDesc, MeshData, NodeDesc};
 
 use crate::parts::Part;
 
@@ -306,9 +305,9 @@ pub fn hazard_png() -> Result<Vec<u8>> {
 }
 
 /// The Kenney alien's six part meshes and the slots they fill. Its parts
-/// face -Z, so the wardrobe uses a copy turned 180 degrees about Y.
+/// face -Z: the wardrobe wears the original with `forward = "-z"` (and
+/// throng lifts its face decals off the head, docs/wardrobes.md).
 pub const KENNEY_SOURCE: &str = "demo/parts/kenney_alien.glb";
-pub const KENNEY_TURNED: &str = "demo/parts/kenney_alien_facing_z.glb";
 /// (slot, mesh): whole arms and legs fill both segments of a limb; there is
 /// no hips part, so the scheme leaves `hips` empty.
 pub const KENNEY_SLOTS: [(&str, &str); 10] = [
@@ -329,105 +328,22 @@ pub fn kenney_toml() -> String {
     let mut s = String::from(HEADER);
     s.push_str(
         "# Parts: Kenney \"Space Kit\" alien (CC0 1.0), see ../demo/parts/kenney_alien.SOURCE.md.\n\
-         # The meshes keep their own glTF materials (\"gltf\"). The alien has no hips part,\n\
+         # The original file, modelled facing -Z (`forward`). The meshes keep their own\n\
+         # glTF materials (\"gltf\"). The alien has no hips part,\n\
          # so the scheme has no candidates for the `hips` slot.\n",
     );
     s.push_str("version = 1\nname = \"kenney_alien\"\nuniform_slots = [\"head\"]\n");
     s.push_str("\n[schemes.KenneyAlien]\nexclude = []\n");
-    let file = format!("../{KENNEY_TURNED}");
+    let file = format!("../{KENNEY_SOURCE}");
     for (slot, mesh) in KENNEY_SLOTS {
         push_entry(
             &mut s,
             "KenneyAlien",
             &Entry { slot, file: &file, mesh, weight: 1.0, materials: &["gltf"], material_weights: None },
         );
+        s.push_str("forward = \"-z\"\n");
     }
     s
-}
-
-/// Rewrites the Kenney alien facing +Z (SPEC: parts face +Z): every mesh
-/// turned 180 degrees about Y, materials and the node layout kept.
-pub fn write_kenney_turned(src: &Path, dst: &Path) -> Result<()> {
-    let (doc, buffers, _) = gltf::import(src).map_err(|e| Error::invalid(src, format!("cannot read glTF: {e}")))?;
-    let mut glb = GlbBuilder::new();
-    glb.set_generator("throng examples/make_demo.rs (Kenney alien turned to face +Z)");
-    let mut materials = Vec::new();
-    for m in doc.materials() {
-        let pbr = m.pbr_metallic_roughness();
-        let mut desc = MaterialDesc::new(m.name().unwrap_or("material"), pbr.base_color_factor())
-            .pbr(pbr.metallic_factor(), pbr.roughness_factor());
-        desc.double_sided = m.double_sided();
-        materials.push(glb.add_material(&desc));
-    }
-    // (+ 0.0 turns -0.0 into 0.0 for tidy JSON.)
-    let turn = |p: [f32; 3]| [-p[0] + 0.0, p[1], -p[2] + 0.0];
-    let mut meshes = Vec::new();
-    for mesh in doc.meshes() {
-        let name = mesh.name().unwrap_or("mesh").to_string();
-        let mut id = None;
-        for prim in mesh.primitives() {
-            let r = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-            let positions: Vec<[f32; 3]> = r
-                .read_positions()
-                .ok_or_else(|| Error::invalid(src, "primitive without POSITION").field(name.clone()))?
-                .map(turn)
-                .collect();
-            let mut data = MeshData {
-                normals: r.read_normals().map(|n| n.map(turn).collect()).unwrap_or_default(),
-                uvs: r.read_tex_coords(0).map(|t| t.into_f32().collect()).unwrap_or_default(),
-                indices: match r.read_indices() {
-                    Some(i) => i.into_u32().collect(),
-                    None => (0..positions.len() as u32).collect(),
-                },
-                positions,
-                ..Default::default()
-            };
-            nudge_decal(&mut data);
-            let mat = prim.material().index().and_then(|i| materials.get(i).copied());
-            match id {
-                None => id = Some(glb.add_mesh(&name, &data, mat)?),
-                Some(m) => glb.add_primitive(m, &data, mat)?,
-            }
-        }
-        meshes.push(id);
-    }
-    // Same hierarchy as the source, mirrored through the Y axis.
-    let mut ids = Vec::new();
-    for node in doc.nodes() {
-        let (t, r, sc) = node.transform().decomposed();
-        // Conjugate by the half turn: R T R^-1 (a uniform or axis scale is unchanged).
-        let half_turn = glam::Quat::from_rotation_y(std::f32::consts::PI);
-        let r = (half_turn * glam::Quat::from_array(r) * half_turn.inverse()).normalize().to_array();
-        let mut desc = NodeDesc::new(node.name().unwrap_or("node")).translation(turn(t)).rotation(r).scale(sc);
-        if let Some(m) = node.mesh().and_then(|m| meshes.get(m.index()).copied().flatten()) {
-            desc = desc.mesh(m);
-        }
-        ids.push(glb.add_node(desc)?);
-    }
-    for node in doc.nodes() {
-        for c in node.children() {
-            glb.add_child(ids[node.index()], ids[c.index()])?;
-        }
-    }
-    glb.write(dst)
-}
-
-/// How far a flat face decal is lifted off the surface it lies on (mesh units).
-const DECAL_LIFT: f32 = 0.002;
-
-/// The alien's face decals (eyes, mouth) are flat primitives lying exactly in
-/// the head's front plane; coplanar surfaces give a ray tracer speckles, so
-/// lift any primitive that is flat in Z a hair along its normal.
-fn nudge_decal(m: &mut MeshData) {
-    let (lo, hi) = m.bounds();
-    if hi[2] - lo[2] > 1e-6 || m.normals.is_empty() {
-        return;
-    }
-    let nz: f32 = m.normals.iter().map(|n| n[2]).sum();
-    let dz = DECAL_LIFT * nz.signum();
-    for p in &mut m.positions {
-        p[2] += dz;
-    }
 }
 
 /// Mesh names in a .glb (to check that a wardrobe names real meshes).

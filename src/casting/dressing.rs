@@ -389,7 +389,7 @@ fn dress_skinned(
         // and glTF materials touch the file system.
         let key = (address(&cast.rig), address(&part.file), address(&part.mesh), address(&part.material));
         if let std::collections::hash_map::Entry::Vacant(slot) = memo.skin_parts.entry(key) {
-            let part_index = rig.part(&part.file, &part.mesh).map_err(|e| e.agent(cast.id))?;
+            let part_index = rig.part(&part.file, &part.mesh, &slot_cast.slot).map_err(|e| e.agent(cast.id))?;
             let mut list = Vec::new();
             for &piece in &rig.part_at(part_index).pieces.clone() {
                 let material = if *part.material == *GLTF_MATERIAL {

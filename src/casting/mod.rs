@@ -16,6 +16,7 @@ pub mod shot_cache;
 pub mod skin;
 pub mod table;
 pub mod wardrobe;
+pub(crate) mod wheels;
 
 pub use cast::{cast_agent, uniform, AgentCast, Casting, RigCasting, SlotCast};
 pub use crowd::{AgentPose, Lod, ShotCrowd};

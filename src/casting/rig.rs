@@ -689,11 +689,11 @@ impl Pose {
 /// Reads cycle `cycle` of the rig in `file`. A slot rig's name (its top
 /// node, the parent of `root`) must be `rig` when the file gives one, so
 /// the cache does not name one rig and walk at another's stride. A skinned
-/// character (`skin` given, or detected: a skin and no slots) walks as a
+/// or rigid character (`skin` given, or detected: no slots) walks as a
 /// shot's skinned rig with those options does (`shot_cache::file_gait`):
 /// stride from its root joint's travel or `strides`, length from the clip.
 pub fn import_clip(file: &Path, rig: &str, cycle: &str, skin: Option<&SkinOptions>) -> Result<RigClip> {
-    if crate::casting::shot_cache::is_skinned_file(file, skin)? {
+    if crate::casting::shot_cache::is_character_file(file, skin)? {
         let g = crate::casting::shot_cache::skinned_file_gait(file, skin, cycle, None)?;
         return Ok(RigClip { file: file.to_path_buf(), stride: g.stride, cycle_length: g.cycle_length });
     }

@@ -1,10 +1,11 @@
 //! The shot's rigs, loaded once: each a slot rig (rigid parts on nodes) or a
-//! skinned character, one closed kind per rig so every stage matches on it.
+//! character posed from its node animation (skinned, or rigid: meshes riding
+//! their nodes), one closed kind per rig so every stage matches on it.
 
 use std::collections::BTreeMap;
 
 use crate::casting::rig::Rig;
-use crate::casting::skin::{is_skinned_rig, SkinnedRig};
+use crate::casting::skin::{is_character_rig, SkinnedRig};
 use crate::casting::wardrobe::Wardrobes;
 use crate::error::{same_file, Error, Result};
 use crate::shot::Shot;
@@ -15,7 +16,8 @@ use crate::shot::Shot;
 pub enum ShotRig {
     /// Rigid nodes with part slots (the frankenbot).
     Slots(Rig),
-    /// A skinned character: skinned meshes on a skeleton, posed at shared steps.
+    /// A character posed at shared steps: skinned meshes on a skeleton, or
+    /// (`kind = "rigid"`) meshes on animated nodes ([`SkinnedRig::is_rigid`]).
     Skinned(SkinnedRig),
 }
 
@@ -66,11 +68,8 @@ impl ShotRigs {
     pub(crate) fn load(shot: &Shot, wardrobes: &Wardrobes) -> Result<ShotRigs> {
         let mut rigs = BTreeMap::new();
         for (name, r) in &shot.rigs {
-            let rig = if is_skinned_rig(r)? {
-                ShotRig::Skinned(
-                    SkinnedRig::load(&r.file, &r.skin, shot.frames.fps)
-                        .map_err(|e| e.field_prefix(&format!("rigs.{name}")).or_field(format!("rigs.{name}.file")))?,
-                )
+            let rig = if is_character_rig(r)? {
+                ShotRig::Skinned(SkinnedRig::load_shot_rig(name, r, shot.frames.fps)?)
             } else {
                 ShotRig::Slots(Rig::load(&r.file).map_err(|e| e.or_field(format!("rigs.{name}.file")))?)
             };

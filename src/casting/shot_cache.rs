@@ -11,7 +11,7 @@ use crate::cache::jupedsim::{RigClip, SHOT_FPS};
 use crate::cache::tabular::Gait;
 use crate::cache::{CacheReader, Format, Import, ImportOptions, TabularOptions};
 use crate::casting::rig::Rig;
-use crate::casting::skin::{is_skinned_rig, SkinnedRig};
+use crate::casting::skin::{is_character_rig, SkinnedRig};
 use crate::error::{Error, Result};
 use crate::shot::{Shot, SkinOptions};
 
@@ -65,24 +65,25 @@ fn skinned_gait(rig: &SkinnedRig, walk: &str, idle: Option<&str>) -> Result<Opti
     Ok(Some(Gait { stride, cycle_length, idle_length }))
 }
 
-/// Whether the rig in `file` is read as a skinned character: `skin` given
-/// says so, else it is detected as a shot's rig without `kind` is (a skin
-/// and no slots).
-pub(crate) fn is_skinned_file(file: &Path, skin: Option<&SkinOptions>) -> Result<bool> {
+/// Whether the rig in `file` is read as a character (skinned or rigid):
+/// `skin` given says so, else it is detected as a shot's rig without `kind`
+/// is (no slots).
+pub(crate) fn is_character_file(file: &Path, skin: Option<&SkinOptions>) -> Result<bool> {
     match skin {
         Some(_) => Ok(true),
-        None => crate::casting::skin::is_skinned_file(file),
+        None => crate::casting::skin::is_character_file(file),
     }
 }
 
 /// A rig file's gait outside a shot (a trajectory import's `rig_file`): a
 /// slot rig's as [`gait`] reads it, or a skinned character's with `skin`
 /// (its `[rigs.X]` options: root joint, cycle -> clip map, strides, scale,
-/// axes), as the shot's skinned rigs walk. `skin` `None` detects the kind;
-/// a detected skinned rig takes the default options (each clip is a cycle
+/// axes), as the shot's skinned rigs walk; a rigid one (no skin) likewise,
+/// its stride from its wheels where it has them. `skin` `None` detects the
+/// kind; a detected character takes the default options (each clip is a cycle
 /// of its own name; no root joint, so its walk needs `root` or a stride).
 pub fn file_gait(file: &Path, skin: Option<&SkinOptions>, walk: &str, idle: Option<&str>) -> Result<Gait> {
-    match is_skinned_file(file, skin)? {
+    match is_character_file(file, skin)? {
         true => skinned_file_gait(file, skin, walk, idle),
         false => gait(file, walk, idle),
     }
@@ -116,8 +117,8 @@ pub(crate) fn shot_import(shot: &Shot) -> Result<Import> {
     let gaits = |walk: &str| -> Result<BTreeMap<String, Gait>> {
         let mut out = BTreeMap::new();
         for (name, r) in &shot.rigs {
-            if is_skinned_rig(r)? {
-                let rig = SkinnedRig::load(&r.file, &r.skin, SHOT_FPS)?;
+            if is_character_rig(r)? {
+                let rig = SkinnedRig::load_shot_rig(name, r, SHOT_FPS)?;
                 if let Some(g) = skinned_gait(&rig, walk, spec.idle_cycle.as_deref())? {
                     out.insert(name.clone(), g);
                 }

@@ -9,6 +9,16 @@
 //!   with JOINTS_0/WEIGHTS_0 and JOINTS_1/WEIGHTS_1 (up to 8 influences);
 //! - normals use the inverse transpose of the blended matrix.
 //!
+//! A rigid character (`kind = "rigid"`, or a file with neither a skin nor
+//! slots: a multi-part character, a vehicle) is the special case with no
+//! skin: every mesh node of the file is a piece bound wholly to its node (one
+//! influence of weight 1, an identity bind), as a mesh under a skinned
+//! character's joint is, so posing, proxies, motion blur, pose instancing and
+//! export treat the two alike. Its clips are node animations (TRS channels,
+//! STEP, LINEAR or CUBICSPLINE, sampled by [`crate::casting::rig::Channel`]);
+//! a cycle with no stride given and no `root` takes the distance its wheels
+//! roll ([`crate::casting::wheels`]).
+//!
 //! Rig space is throng's agent space: Y up, facing +Z, metres, feet on y = 0.
 //! `rig_from_file` rotates the file's up and forward axes onto +Y and +Z,
 //! scales by the shot's `scale` and lifts the rest pose's lowest vertex to
@@ -37,8 +47,9 @@ use gltf::accessor::{DataType, Dimensions};
 use rayon::prelude::*;
 
 use crate::casting::rig::{Animated, Trs};
+use crate::casting::wheels;
 use crate::error::{Error, Result};
-use crate::scene::gltf::{check_accessor, out_of_range, read_primitive, GltfFile};
+use crate::scene::gltf::{check_accessor, lift_decals, out_of_range, read_primitive, GltfFile};
 use crate::scene::Mesh;
 use crate::shot::{Axis, SkinOptions};
 
@@ -109,6 +120,8 @@ pub struct SkinnedRig {
     path: PathBuf,
     /// `path` canonicalised: parts are keyed by it, so two spellings of one file are one file.
     canonical: PathBuf,
+    /// No skin: every mesh rides its own node (`kind = "rigid"`).
+    rigid: bool,
     animated: Animated,
     rig_from_file: Affine3A,
     root: Option<usize>,
@@ -131,20 +144,22 @@ pub(crate) fn is_skinned(file: &GltfFile) -> bool {
     file.doc.skins().len() > 0
 }
 
-/// Whether a shot's rig is a skinned character: its `kind`, else detected
-/// from the file (a skin and no slot extras).
-pub(crate) fn is_skinned_rig(rig: &crate::shot::RigRef) -> Result<bool> {
+/// Whether a shot's rig is a character posed from its node animation
+/// (skinned or rigid, a [`SkinnedRig`]) rather than a slot rig: its `kind`,
+/// else detected from the file ([`is_character_file`]).
+pub(crate) fn is_character_rig(rig: &crate::shot::RigRef) -> Result<bool> {
     match rig.kind {
-        Some(k) => Ok(k == crate::shot::RigKind::Skinned),
-        None => is_skinned_file(&rig.file),
+        Some(k) => Ok(k != crate::shot::RigKind::Slots),
+        None => is_character_file(&rig.file),
     }
 }
 
-/// Whether a rig file with no `kind` is a skinned character: it has a skin
-/// and no slots.
-pub(crate) fn is_skinned_file(path: &Path) -> Result<bool> {
+/// Whether a rig file with no `kind` is a character (skinned or rigid): no
+/// node has slot extras. A skin then makes it skinned, else it is rigid
+/// (meshes on animated nodes: the Kenney alien, a car).
+pub(crate) fn is_character_file(path: &Path) -> Result<bool> {
     let file = GltfFile::open(path)?;
-    Ok(is_skinned(&file) && !crate::casting::rig::has_slots(&file))
+    Ok(!crate::casting::rig::has_slots(&file))
 }
 
 /// The error for a skinned file used where rigid geometry is expected.
@@ -189,21 +204,51 @@ impl SkinnedRig {
     /// clip is also available under its own name.
     pub fn load(path: &Path, options: &SkinOptions, fps: f32) -> Result<SkinnedRig> {
         let file = GltfFile::open(path)?;
-        if !is_skinned(&file) {
-            return Err(
-                file.err("declared `kind = \"skinned\"` but the file has no skin; a rigid slot rig needs no kind")
-            );
+        let rigid = options.rigid.unwrap_or(!is_skinned(&file));
+        if !rigid && !is_skinned(&file) {
+            return Err(file
+                .err(
+                    "declared `kind = \"skinned\"` but the file has no skin; meshes on animated nodes are \
+                     `kind = \"rigid\"`, and a slot rig needs no kind",
+                )
+                .field("kind"));
+        }
+        if rigid && is_skinned(&file) {
+            return Err(file
+                .err(format!(
+                    "declared `kind = \"rigid\"` but the file has a skin ({} skins): a skinned character is \
+                     `kind = \"skinned\"`",
+                    file.doc.skins().len()
+                ))
+                .field("kind"));
         }
         let animated = Animated::from_file(&file)?;
+        if rigid && animated.clips.is_empty() {
+            return Err(file.err(match options.rigid {
+                Some(_) => {
+                    "declared `kind = \"rigid\"`, but the file has no animation: a rigid rig plays its node \
+                            animation as cycles (a still mesh is a wardrobe part or a set object)"
+                }
+                None => {
+                    "the file is no rig: it has no slots (a slot rig's nodes with \"slot\" extras, under a \
+                         `root` node), no skin (a skinned character) and no animation (a rigid one)"
+                }
+            }));
+        }
         let root = match &options.root {
             Some(name) => Some(animated.hierarchy.find(name).ok_or_else(|| {
-                let joints: Vec<&str> = file
-                    .doc
-                    .skins()
-                    .flat_map(|s| s.joints().map(|j| j.index()))
-                    .filter_map(|i| animated.hierarchy.nodes.get(i).map(|n| n.name.as_str()))
-                    .collect();
-                file.err(format!("no joint named `{name}` for root motion; joints: {}", joints.join(", ")))
+                // A rigid rig's every node may carry root motion; a skinned one's joints.
+                let joints: Vec<&str> = match rigid {
+                    true => animated.hierarchy.nodes.iter().map(|n| n.name.as_str()).collect(),
+                    false => file
+                        .doc
+                        .skins()
+                        .flat_map(|s| s.joints().map(|j| j.index()))
+                        .filter_map(|i| animated.hierarchy.nodes.get(i).map(|n| n.name.as_str()))
+                        .collect(),
+                };
+                let what = if rigid { "node" } else { "joint" };
+                file.err(format!("no {what} named `{name}` for root motion; {what}s: {}", joints.join(", ")))
                     .field("root")
             })?),
             None => None,
@@ -213,6 +258,7 @@ impl SkinnedRig {
         let mut rig = SkinnedRig {
             path: path.to_path_buf(),
             canonical,
+            rigid,
             animated,
             rig_from_file: Affine3A::from_scale_rotation_translation(Vec3::splat(options.scale), orient, Vec3::ZERO),
             root,
@@ -260,8 +306,9 @@ impl SkinnedRig {
                 .map(str::to_string)
                 .filter(|n| !rig.parts.contains_key(&(rig.canonical.clone(), n.clone())))
                 .unwrap_or_else(|| format!("#node{}", node.index()));
+            // A rigid rig's every mesh node is a part (its wheels, its body).
             let mut at = Some(node.index());
-            while let Some(n) = at.filter(|n| !joints.contains(n)) {
+            while let Some(n) = at.filter(|n| !rigid && !joints.contains(n)) {
                 at = rig.animated.hierarchy.nodes.get(n).and_then(|h| h.parent);
             }
             if at.is_none() {
@@ -276,12 +323,20 @@ impl SkinnedRig {
             delivered.push((name.clone(), name, part));
         }
         if delivered.is_empty() {
-            return Err(file.err("the file has a skin but no node that uses it with a mesh"));
+            return Err(file.err(match rigid {
+                true => "a rigid rig poses its nodes' meshes, but no node of the file has a mesh",
+                false => "the file has a skin but no node that uses it with a mesh",
+            }));
         }
         rig.slots = match &options.slots {
             Some(s) => s.clone(),
             None => delivered.iter().map(|(s, _, _)| s.clone()).collect(),
         };
+        if rigid {
+            for slot in &rig.slots {
+                rig.slot_node(slot)?;
+            }
+        }
         rig.delivered = delivered;
 
         // Ground and height from the rest pose of the delivered meshes.
@@ -296,7 +351,7 @@ impl SkinnedRig {
             }
         }
         if !(lo.is_finite() && hi > lo) {
-            return Err(file.err("the skinned meshes have no height in the rest pose"));
+            return Err(file.err(format!("the {} meshes have no height in the rest pose", rig.kind())));
         }
         rig.rig_from_file = Affine3A::from_translation(Vec3::new(0.0, -lo, 0.0)) * rig.rig_from_file;
         rig.height = hi - lo;
@@ -330,10 +385,18 @@ impl SkinnedRig {
         let own: Vec<usize> =
             rig.delivered.iter().flat_map(|(_, _, part)| rig.part_list[*part].pieces.iter().copied()).collect();
         let mut per_clip: BTreeMap<usize, (u32, bool, f32)> = BTreeMap::new();
+        let mut rolls: BTreeMap<usize, f32> = BTreeMap::new();
         for (name, clip) in cycles {
             let clip_name = rig.animated.clips[clip].name.clone();
             let stride = match options.strides.get(&name) {
                 Some(&s) => s,
+                None if rig.root.is_none() && rig.rigid => match rolls.get(&clip) {
+                    Some(&s) => s,
+                    None => {
+                        let s = rig.wheel_stride(&own, clip);
+                        *rolls.entry(clip).or_insert(s)
+                    }
+                },
                 None => rig.root_travel(clip),
             };
             let (steps, chosen, error) = match per_clip.get(&clip) {
@@ -347,6 +410,12 @@ impl SkinnedRig {
             rig.cycles.push(SkinCycle { name, clip, clip_name, stride, steps, chosen, error });
         }
         Ok(rig)
+    }
+
+    /// Loads the shot's rig `name` (`[rigs.NAME]`), its errors' fields under `rigs.NAME`.
+    pub(crate) fn load_shot_rig(name: &str, rig: &crate::shot::RigRef, fps: f32) -> Result<SkinnedRig> {
+        SkinnedRig::load(&rig.file, &rig.skin, fps)
+            .map_err(|e| e.field_prefix(&format!("rigs.{name}")).or_field(format!("rigs.{name}.file")))
     }
 
     /// Pose steps of clip `clip` (first played as cycle `name`): from the
@@ -532,9 +601,13 @@ impl SkinnedRig {
         let label = format!("{}#{name}", file.path.display());
         let single = gmesh.primitives().len() == 1;
         let mut pieces = Vec::new();
+        let mut meshes = Vec::new();
         for prim in gmesh.primitives() {
             let piece_name = if single { label.clone() } else { format!("{label}/{}", prim.index()) };
-            let mesh = read_primitive(file, gmesh, &prim, piece_name)?;
+            meshes.push(read_primitive(file, gmesh, &prim, piece_name)?);
+        }
+        lift_decals(&mut meshes);
+        for (prim, mesh) in gmesh.primitives().zip(meshes) {
             let mut one = [(0u16, 0.0f32); MAX_INFLUENCES];
             one[0].1 = 1.0;
             let bounds = mesh
@@ -722,20 +795,79 @@ impl SkinnedRig {
         })
     }
 
-    /// The part for a wardrobe's `file` + `mesh` (a name or `#index`),
-    /// loading it on first use.
-    pub(crate) fn part(&mut self, file: &Path, mesh_ref: &str) -> Result<usize> {
+    /// The part for a wardrobe's `file` + `mesh` (a name or `#index`) worn
+    /// in `slot`, loading it on first use. A rigid rig's part rides the
+    /// slot's node, modelled in that node's space as the node's own mesh is.
+    pub(crate) fn part(&mut self, file: &Path, mesh_ref: &str, slot: &str) -> Result<usize> {
         let canonical = std::fs::canonicalize(file).map_err(|e| Error::io(file, e))?;
-        if let Some(&i) = self.parts.get(&(canonical.clone(), mesh_ref.to_string())) {
+        // The rig's own mesh on its own node (what an agent wears as delivered).
+        let own = self.delivered.iter().find(|(s, m, _)| s == slot && m == mesh_ref);
+        if let (true, Some(&(_, _, part))) = (self.rigid && canonical == self.canonical, own) {
+            return Ok(part);
+        }
+        let name = match self.rigid {
+            true => format!("{mesh_ref} on {slot}"),
+            false => mesh_ref.to_string(),
+        };
+        if let Some(&i) = self.parts.get(&(canonical.clone(), name.clone())) {
             return Ok(i);
         }
         let gltf = GltfFile::open(file)?;
-        self.load_part(&gltf, &canonical, mesh_ref)
+        if !self.rigid {
+            return self.load_part(&gltf, &canonical, mesh_ref);
+        }
+        let node = self.slot_node(slot)?;
+        let gmesh = match mesh_ref.strip_prefix('#').and_then(|i| i.parse::<usize>().ok()) {
+            Some(i) => gltf.doc.meshes().nth(i).ok_or_else(|| {
+                gltf.err(format!("no mesh #{i}; the file has {} meshes", gltf.doc.meshes().len())).field("mesh")
+            })?,
+            None => gltf.mesh_by_name(mesh_ref)?,
+        };
+        self.load_rigid_part(&gltf, &canonical, node, &gmesh, &name)
+    }
+
+    /// The node a rigid rig's slot names (a node name, or `#node<index>`).
+    fn slot_node(&self, slot: &str) -> Result<usize> {
+        let by_index = slot.strip_prefix("#node").and_then(|i| i.parse::<usize>().ok());
+        by_index
+            .filter(|&i| i < self.animated.hierarchy.nodes.len())
+            .or_else(|| self.animated.hierarchy.find(slot))
+            .ok_or_else(|| {
+                Error::invalid(
+                    &self.path,
+                    format!("slot `{slot}` is no node of this rigid rig: a rigid rig's slots are its nodes, by name"),
+                )
+                .field("slots")
+            })
     }
 
     /// `rig_from_node` of every node for local transforms `local` (before root-motion removal).
     fn joints_at(&self, local: &[Trs]) -> Vec<Affine3A> {
         self.animated.hierarchy.compose(local).into_iter().map(|m| self.rig_from_file * m).collect()
+    }
+
+    /// The distance a rigid rig's wheels roll over clip `clip`
+    /// ([`crate::casting::wheels`]; 0 without wheels), warning of wheels
+    /// that would roll another distance.
+    fn wheel_stride(&mut self, pieces: &[usize], clip: usize) -> f32 {
+        let c = &self.animated.clips[clip];
+        let joints = self.clip_joints(clip, c.start);
+        let meshes: Vec<(usize, Vec<Vec3>)> =
+            pieces.iter().map(|&p| (self.pieces[p].joint_nodes[0], self.skin_positions(p, &joints))).collect();
+        let found = wheels::wheels(c, &self.animated.hierarchy, &joints, &meshes);
+        let Some((stride, sliding)) = wheels::stride(&found) else { return 0.0 };
+        let name = |n: usize| self.animated.hierarchy.nodes[n].name.clone();
+        for w in sliding {
+            self.warnings.push(format!(
+                "{}: clip `{}`: wheel `{}` rolls {:.3} m a cycle, wheel `{}` (which sets the stride) {stride:.3} m: it slides",
+                self.path.display(),
+                c.name,
+                name(w.node),
+                w.roll(),
+                name(found[0].node)
+            ));
+        }
+        stride
     }
 
     /// The root joint's rig-space Z travel over clip `clip`.
@@ -766,6 +898,18 @@ impl SkinnedRig {
     /// Standing height in metres (rest pose, before height jitter).
     pub fn height(&self) -> f32 {
         self.height
+    }
+    /// Whether the character is rigid (meshes on animated nodes, no skin).
+    pub fn is_rigid(&self) -> bool {
+        self.rigid
+    }
+    /// The kind, as the shot's `kind` names it.
+    pub(crate) fn kind(&self) -> &'static str {
+        if self.rigid {
+            "rigid"
+        } else {
+            "skinned"
+        }
     }
     /// Cycles, mapped names first.
     pub fn cycles(&self) -> &[SkinCycle] {
@@ -802,7 +946,8 @@ impl SkinnedRig {
             Error::invalid(
                 &self.path,
                 format!(
-                    "skinned rig has no cycle `{name}`; cycles: {} (map cache cycles to clips with `cycles = {{ {name} = \"CLIP\" }}`)",
+                    "{} rig has no cycle `{name}`; cycles: {} (map cache cycles to clips with `cycles = {{ {name} = \"CLIP\" }}`)",
+                    self.kind(),
                     names.join(", ")
                 ),
             )

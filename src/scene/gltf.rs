@@ -358,6 +358,63 @@ pub(crate) fn out_of_range(acc: &Accessor) -> String {
     format!("accessor {} reaches outside its buffer", acc.index())
 }
 
+/// How far a decal is lifted off the face it lies on, as a fraction of its
+/// mesh's largest extent (the Kenney alien's eyes: 1.5 mm on a 1.5 m head).
+pub(crate) const DECAL_LIFT: f32 = 1e-3;
+
+/// Lifts decals off the faces they lie on, so a ray tracer does not speckle
+/// between two coplanar surfaces (z-fighting). A decal is a flat primitive
+/// of a mesh (every vertex on one plane) lying on a triangle of another
+/// primitive of the same mesh that faces the same way (a face decal: eyes
+/// and mouth drawn on a head). It moves along its facing by [`DECAL_LIFT`]
+/// of the mesh's size; nothing else changes.
+pub(crate) fn lift_decals(primitives: &mut [Mesh]) {
+    if primitives.len() < 2 {
+        return;
+    }
+    let (lo, hi) = primitives
+        .iter()
+        .filter(|m| !m.positions.is_empty())
+        .map(Mesh::bounds)
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(a, b), (c, d)| (a.min(c), b.max(d)));
+    let size = (hi - lo).max_element();
+    if !(size > 0.0 && size.is_finite()) {
+        return;
+    }
+    let eps = size * 1e-5;
+    // Each flat primitive's plane: its first proper triangle's normal (the
+    // way its winding faces) and offset.
+    let plane = |m: &Mesh| -> Option<(Vec3, f32)> {
+        let n = m.indices.chunks_exact(3).find_map(|t| {
+            let [a, b, c] = [0, 1, 2].map(|k| m.positions.get(t[k] as usize).copied());
+            let (a, b, c) = (a?, b?, c?);
+            (b - a).cross(c - a).try_normalize()
+        })?;
+        let d = n.dot(*m.positions.first()?);
+        m.positions.iter().all(|p| (n.dot(*p) - d).abs() <= eps).then_some((n, d))
+    };
+    let lifts: Vec<Option<Vec3>> = (0..primitives.len())
+        .map(|i| {
+            let (n, d) = plane(&primitives[i])?;
+            let on_face = primitives.iter().enumerate().filter(|&(j, _)| j != i).any(|(_, other)| {
+                other.indices.chunks_exact(3).any(|t| {
+                    let [a, b, c] = [0, 1, 2].map(|k| other.positions.get(t[k] as usize).copied().unwrap_or(Vec3::NAN));
+                    let facing = (b - a).cross(c - a).try_normalize().is_some_and(|m| m.dot(n) > 0.999);
+                    facing && [a, b, c].iter().all(|p| (n.dot(*p) - d).abs() <= eps)
+                })
+            });
+            on_face.then_some(n * DECAL_LIFT * size)
+        })
+        .collect();
+    for (m, lift) in primitives.iter_mut().zip(lifts) {
+        if let Some(lift) = lift {
+            for p in &mut m.positions {
+                *p += lift;
+            }
+        }
+    }
+}
+
 /// Reads one glTF mesh primitive (triangles only) into a [`Mesh`] named `name`.
 pub(crate) fn read_primitive(file: &GltfFile, mesh: &gltf::Mesh, prim: &gltf::Primitive, name: String) -> Result<Mesh> {
     let ctx = |msg: String| file.err(format!("mesh {} primitive {}: {msg}", mesh_label(mesh), prim.index()));
@@ -588,22 +645,27 @@ impl AssetCache {
         let gmesh = file.doc.meshes().nth(index).ok_or_else(|| file.err(format!("no mesh #{index}")))?;
         let label = gmesh.name().map(str::to_string).unwrap_or_else(|| format!("mesh{index}"));
         let single = gmesh.primitives().len() == 1;
+        let key = |prim: usize| MeshKey::Primitive(src.key.clone(), index, prim);
+        if gmesh.primitives().any(|p| !self.meshes.contains_key(&key(p.index()))) {
+            // Read together, so decals are lifted off the faces they lie on.
+            let mut meshes = Vec::new();
+            for prim in gmesh.primitives() {
+                let name = if single {
+                    format!("{}#{label}", src.shown)
+                } else {
+                    format!("{}#{label}/{}", src.shown, prim.index())
+                };
+                meshes.push(read_primitive(&file, &gmesh, &prim, name)?);
+            }
+            lift_decals(&mut meshes);
+            for (prim, mesh) in gmesh.primitives().zip(meshes) {
+                let id = self.push_mesh(mesh);
+                self.meshes.insert(key(prim.index()), id);
+            }
+        }
         let mut out = Vec::new();
         for prim in gmesh.primitives() {
-            let key = MeshKey::Primitive(src.key.clone(), index, prim.index());
-            let mesh = match self.meshes.get(&key) {
-                Some(&id) => id,
-                None => {
-                    let name = if single {
-                        format!("{}#{label}", src.shown)
-                    } else {
-                        format!("{}#{label}/{}", src.shown, prim.index())
-                    };
-                    let id = self.push_mesh(read_primitive(&file, &gmesh, &prim, name)?);
-                    self.meshes.insert(key, id);
-                    id
-                }
-            };
+            let mesh = self.meshes[&key(prim.index())];
             let material = self.material_of(src, prim.material().index())?;
             out.push((mesh, material));
         }

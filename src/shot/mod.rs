@@ -188,9 +188,10 @@ pub struct RigRef {
     pub schemes: BTreeMap<String, f32>,
     /// Height jitter: scale drawn uniformly from 1 +/- this.
     pub height_jitter: f32,
-    /// `kind`: `None` detects it from the file (a skin and no slots: skinned).
+    /// `kind`: `None` detects it from the file (slots: a slot rig; else a
+    /// skin: skinned; else rigid).
     pub(crate) kind: Option<RigKind>,
-    /// Options of a skinned character (defaults for slot rigs, which ignore them).
+    /// Options of a skinned or rigid character (defaults for slot rigs, which ignore them).
     pub skin: SkinOptions,
 }
 
@@ -202,6 +203,20 @@ pub(crate) enum RigKind {
     Slots,
     /// A skinned mesh on a skeleton.
     Skinned,
+    /// Meshes on a node hierarchy with node animation, no skin (a
+    /// multi-part character, a vehicle): each mesh moves with its node.
+    Rigid,
+}
+
+impl RigKind {
+    /// A character's `rigid` option for a declared kind (`None`: detected from the file).
+    pub(crate) fn rigid(kind: Option<RigKind>) -> Option<bool> {
+        match kind {
+            Some(RigKind::Rigid) => Some(true),
+            Some(RigKind::Skinned) => Some(false),
+            _ => None,
+        }
+    }
 }
 
 /// A coordinate axis of a source file.
@@ -231,9 +246,12 @@ pub enum Axis {
 /// `pose_error_max` (docs/wardrobes.md, "Pose instancing").
 pub const DEFAULT_POSE_ERROR_MAX: f32 = 0.02;
 
-/// How a skinned character file maps onto throng's agents.
+/// How a skinned or rigid character file maps onto throng's agents.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SkinOptions {
+    /// Whether the character is rigid (`kind = "rigid"`: meshes on animated
+    /// nodes, no skin) or skinned; `None`: a skin in the file says skinned.
+    pub rigid: Option<bool>,
     /// Cache cycle name -> clip name (or `#index` for unnamed clips).
     pub cycles: BTreeMap<String, String>,
     /// The file's up axis (default +y; a Z-up parent node in the file is respected anyway).
@@ -261,6 +279,7 @@ pub struct SkinOptions {
 impl Default for SkinOptions {
     fn default() -> Self {
         SkinOptions {
+            rigid: None,
             cycles: BTreeMap::new(),
             up: Axis::PosY,
             forward: Axis::PosZ,
@@ -721,7 +740,8 @@ impl RigFile {
             return Err(cx.at(
                 rig.file.span(),
                 &format!("rigs.{name}.kind"),
-                "cycles, up, forward, scale, root, strides, pose_step, pose_error_max and slots are for `kind = \"skinned\"` rigs"
+                "cycles, up, forward, scale, root, strides, pose_step, pose_error_max and slots are for `kind = \"skinned\"` \
+                 and `kind = \"rigid\"` rigs"
                     .into(),
             ));
         }
@@ -757,6 +777,7 @@ impl RigFile {
             height_jitter: jitter,
             kind: rig.kind,
             skin: SkinOptions {
+                rigid: RigKind::rigid(rig.kind),
                 cycles: rig.cycles.clone(),
                 up: rig.up.unwrap_or(defaults.up),
                 forward: rig.forward.unwrap_or(defaults.forward),

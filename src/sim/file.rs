@@ -21,7 +21,7 @@ use super::{
     MAX_AGENTS, MAX_FRAMES, MAX_RIG_CYCLES, MAX_TARGETS,
 };
 use crate::casting::rig::Rig;
-use crate::casting::skin::{is_skinned_rig, SkinnedRig};
+use crate::casting::skin::{is_character_rig, SkinnedRig};
 use crate::error::{Error, Result};
 use crate::shot::{Axis, RigKind, RigRef, SkinOptions};
 
@@ -162,7 +162,7 @@ impl RawRig {
             path,
             !(t.kind == Some(RigKind::Slots) && skin_keys),
             format!("{f}.kind"),
-            "cycles, up, forward, scale, root and strides are for `kind = \"skinned\"` rigs",
+            "cycles, up, forward, scale, root and strides are for `kind = \"skinned\"` and `kind = \"rigid\"` rigs",
         )?;
         let d = SkinOptions::default();
         let scale = t.scale.unwrap_or(d.scale);
@@ -175,6 +175,7 @@ impl RawRig {
             height_jitter: 0.0,
             kind: t.kind.or(skin_keys.then_some(RigKind::Skinned)),
             skin: SkinOptions {
+                rigid: RigKind::rigid(t.kind),
                 cycles: t.cycles.clone(),
                 up: t.up.unwrap_or(d.up),
                 forward: t.forward.unwrap_or(d.forward),
@@ -743,7 +744,7 @@ impl Loaded {
     /// A slot rig, or a skinned character (declared, or detected as a shot
     /// detects one) with its options, its clips sampled at `fps`.
     fn load(rig: &RigRef, fps: f32) -> Result<Loaded> {
-        Ok(if is_skinned_rig(rig)? {
+        Ok(if is_character_rig(rig)? {
             Loaded::Skinned(Box::new(SkinnedRig::load(&rig.file, &rig.skin, fps)?))
         } else {
             Loaded::Slot(Rig::load(&rig.file)?)
