@@ -308,3 +308,20 @@ fn props_are_named_in_cryptomatte_botinfo_and_export() {
     let text = std::fs::read_to_string(&usd).unwrap();
     assert!(text.contains(&format!("\"{name}\"")), "{name} in the usda");
 }
+
+#[test]
+fn a_prop_on_a_joint_the_character_lacks_is_refused_naming_it() {
+    let dir = common::tempdir().unwrap();
+    let shot = walker_shot(dir.path(), &walker_wardrobe("").replace("joint = \"hand_r\"", "joint = \"claw\""), 2);
+    let (code, out, err) = common::run(&["cast".as_ref(), shot.as_os_str()]);
+    assert_eq!(code, 2, "{out}{err}");
+    for want in ["w.toml", "schemes.Carry.props[0].joint", "prop `ball`", "claw", "hand_r"] {
+        assert!(err.contains(want), "`{want}` in: {err}");
+    }
+    // On a skinned character a prop hangs on a joint, not a slot.
+    let wardrobe = walker_wardrobe("").replace("joint = \"hand_r\"", "slot = \"body\"");
+    std::fs::write(dir.path().join("w.toml"), wardrobe).unwrap();
+    let (code, _, err) = common::run(&["cast".as_ref(), shot.as_os_str()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("schemes.Carry.props[0]") && err.contains("joint"), "{err}");
+}
