@@ -325,3 +325,16 @@ fn a_prop_on_a_joint_the_character_lacks_is_refused_naming_it() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("schemes.Carry.props[0]") && err.contains("joint"), "{err}");
 }
+
+#[test]
+fn the_demo_walkers_carry_bags_and_cups() {
+    let w = Wardrobes::load(&[common::repo_path("wardrobes/walkers.toml")]).unwrap();
+    let slots: Vec<std::sync::Arc<str>> = vec!["body".into(), "head".into()];
+    let schemes = BTreeMap::from([("Walkers".to_string(), 1.0f32)]);
+    let rig = RigCasting { name: "walker".into(), slots: &slots, schemes: &schemes, height_jitter: 0.1 };
+    let casts: Vec<_> = (1..=1200).map(|id| cast_agent(1234, id, &rig, &w, &[], false).unwrap()).collect();
+    let count = |name: &str| casts.iter().filter(|c| c.props.iter().any(|p| &*p.name == name)).count() as f64 / 1200.0;
+    assert!((count("bag") - 1.0 / 3.0).abs() < 0.05, "bags {}", count("bag"));
+    assert!((count("cup") - 0.25).abs() < 0.05, "cups {}", count("cup"));
+    assert!(casts.iter().any(|c| c.props.is_empty()), "some carry nothing");
+}
