@@ -338,3 +338,29 @@ fn the_demo_walkers_carry_bags_and_cups() {
     assert!((count("cup") - 0.25).abs() < 0.05, "cups {}", count("cup"));
     assert!(casts.iter().any(|c| c.props.is_empty()), "some carry nothing");
 }
+
+#[test]
+fn a_prop_blurs_with_its_joint() {
+    use throng::render::job::{self, RenderJob};
+    let dir = common::tempdir().unwrap();
+    let shot = walker_shot(dir.path(), &walker_wardrobe(""), 4);
+    let shutter = [-0.5, 0.5];
+    let crowd = ShotCrowd::open(throng::shot::Shot::load(&shot).unwrap(), Some(shutter)).unwrap();
+    let carrier = crowd.casting().iter().find(|c| !c.props.is_empty()).expect("a carrier").id;
+    let manifest = throng::layers::build_layers(&crowd, &Default::default()).unwrap();
+    let run = |threads: usize, shutter: Option<[f32; 2]>, out: &Path| {
+        let job =
+            RenderJob { threads, shutter, ..RenderJob::new(vec!["full".into()], vec![1002], 4, out.to_path_buf()) };
+        let done = job::run(&crowd, Some(&manifest), &job, &job::Silent).unwrap().layers;
+        let mattes = throng::render::exr::mattes::read(&done[0].path).unwrap();
+        let name = format!("agent_{carrier}/ball");
+        let m = mattes.iter().find(|m| m.manifest.contains_key(&name)).expect("the ball's matte");
+        m.matte(&name)
+    };
+    let a = run(1, Some(shutter), &dir.path().join("a"));
+    let b = run(2, Some(shutter), &dir.path().join("b"));
+    let still = run(2, None, &dir.path().join("s"));
+    assert_eq!(a, b, "the blurred ball is the same on any thread count");
+    assert!(a.iter().any(|&c| c > 0.0), "the ball is on screen blurred");
+    assert_ne!(a, still, "the ball's matte smears under motion blur");
+}
