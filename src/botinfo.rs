@@ -1,5 +1,5 @@
 //! botInfo: everything known about one agent at a frame (rig, cycle, scheme,
-//! parts, distance, layer), as the Robots lighters' botInfo tool printed it.
+//! parts, props, distance, layer), as the Robots lighters' botInfo tool printed it.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -7,7 +7,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::cache::AgentSample;
-use crate::casting::table::{cast_row, PartRow};
+use crate::casting::table::{cast_row, PartRow, PropRow};
 use crate::casting::ShotCrowd;
 use crate::error::{Error, Result};
 use crate::layers::Manifest;
@@ -47,6 +47,8 @@ pub struct BotInfo {
     pub(crate) lod: Option<String>,
     /// Parts per slot.
     pub(crate) parts: Vec<PartRow>,
+    /// The props it carries, each with what it hangs on.
+    pub(crate) props: Vec<PropRow>,
     /// The shared pose a skinned agent plays (`rig/cycle/<step>of<steps>`);
     /// absent for slot rigs.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -98,6 +100,7 @@ pub fn bot_info_each(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<(Vec<
             ));
             continue;
         };
+        let row = cast_row(crowd, cast);
         let height = crowd.agent_height(id).unwrap_or(1.8);
         let (distance, _, _) = crate::layers::measure(&camera, crowd.shot().render.resolution[1], a.position, height);
         out.push(BotInfo {
@@ -119,7 +122,8 @@ pub fn bot_info_each(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<(Vec<
             removed: crowd.shot().removed.contains(&id),
             layer: None,
             lod: None,
-            parts: cast_row(crowd, cast).parts,
+            parts: row.parts,
+            props: row.props,
             pose: crowd.pose_key(a),
         });
     }
@@ -232,6 +236,13 @@ pub fn format_bot_info(b: &BotInfo) -> String {
             p.mesh.as_deref().unwrap_or("-"),
             p.material.as_deref().unwrap_or("-")
         );
+    }
+    if !b.props.is_empty() {
+        let _ = writeln!(o, "Props");
+        for p in &b.props {
+            let _ =
+                writeln!(o, "  {:<12} {:<22} {:<22} {}", p.name, p.mesh, p.material.as_deref().unwrap_or("-"), p.on);
+        }
     }
     o
 }

@@ -39,6 +39,17 @@ fn use_wardrobe(dir: &Path) {
     common::wear_heads(&dir.join("shot.toml"), "w.toml");
 }
 
+/// The shot wears `w.toml`, whose scheme `Only` also hangs prop `drink` (a
+/// demo head mesh) on the robot's `lower_arm_r` slot, then `keys`.
+fn with_prop(dir: &Path, keys: &str) {
+    use_wardrobe(dir);
+    let heads = demo("parts/heads.glb");
+    let prop = format!(
+        "\n[[schemes.Only.props]]\nname = \"drink\"\nslot = \"lower_arm_r\"\nfile = \"{heads}\"\nmesh = \"head_can\"\n{keys}\n"
+    );
+    append(dir, "w.toml", &prop);
+}
+
 /// The base cache as a `.crowd` in `dir/c.crowd`, and the shot reading it.
 fn crowd_cache(dir: &Path) -> Vec<u8> {
     ok(dir, &["cache", "convert", "c.csv", "c.crowd"]);
@@ -430,6 +441,63 @@ matrix! {
         },
         CAST,
         &["w.toml", "material_weights"],
+        &[],
+    ),
+    wardrobe_prop_on_a_slot_the_rig_lacks => c(
+        "wardrobe",
+        "prop on a slot the rig lacks",
+        |d| {
+            with_prop(d, "");
+            edit(d, "w.toml", "slot = \"lower_arm_r\"", "slot = \"tail\"")
+        },
+        CAST,
+        &["w.toml", "schemes.Only.props[0].slot", "drink", "tail"],
+        &[],
+    ),
+    wardrobe_prop_on_a_joint_of_a_slot_rig => c(
+        "wardrobe",
+        "prop on a joint of a slot rig",
+        |d| {
+            with_prop(d, "");
+            edit(d, "w.toml", "slot = \"lower_arm_r\"", "joint = \"hand_r\"")
+        },
+        CAST,
+        &["w.toml", "schemes.Only.props[0].joint", "drink", "slot rig"],
+        &[],
+    ),
+    wardrobe_prop_mesh_missing_from_its_gltf => c(
+        "wardrobe",
+        "prop mesh missing from its glTF",
+        |d| {
+            with_prop(d, "");
+            edit(d, "w.toml", "mesh = \"head_can\"", "mesh = \"cup_gone\"")
+        },
+        CAST,
+        &["w.toml", "heads.glb", "cup_gone", "drink", "schemes.Only.props[0].mesh"],
+        &[],
+    ),
+    wardrobe_prop_weight_negative => c(
+        "wardrobe",
+        "prop weight -1",
+        |d| with_prop(d, "weight = -1.0"),
+        CAST,
+        &["w.toml", "schemes.Only.props[0].weight", "drink"],
+        &[],
+    ),
+    wardrobe_prop_group_of_zero_weights => c(
+        "wardrobe",
+        "prop group whose weights are all 0",
+        |d| with_prop(d, "group = \"hand\"\nweight = 0.0\n[[schemes.Only.props]]\ngroup = \"hand\"\nname = \"none\"\nweight = 0.0"),
+        CAST,
+        &["w.toml", "schemes.Only.props[0].weight", "prop group `hand`"],
+        &[],
+    ),
+    wardrobe_prop_offset_nan => c(
+        "wardrobe",
+        "prop offset NaN",
+        |d| with_prop(d, "offset = [0.0, nan, 0.0]"),
+        CAST,
+        &["w.toml", "schemes.Only.props[0].offset", "drink"],
         &[],
     ),
     // ---------------------------------------------------------- rig files
@@ -1105,7 +1173,7 @@ const HARNESS: Harness = Harness {
 
 #[test]
 fn the_matrix_keeps_every_case() {
-    assert_eq!(cases().len(), 99);
+    assert_eq!(cases().len(), 105);
 }
 
 /// The table of every case, as issue 15 closed with: written to

@@ -7,7 +7,7 @@
 //! cargo run --example make_demo
 //! ```
 //!
-//! Writes under the crate root: demo/parts/{heads,torsos,limbs}.glb,
+//! Writes under the crate root: demo/parts/{heads,torsos,limbs,props}.glb,
 //! demo/rigs/{bipedThinA,bipedTallB,walker}.glb, demo/set/set.glb, demo/shot.toml,
 //! wardrobes/{robots,kenney_alien,walkers}.toml, wardrobes/textures/hazard.png.
 //! demo/parts/kenney_alien.glb (the CC0 original) is an input, not an output.
@@ -99,7 +99,9 @@ fn check_wardrobe(wardrobe: &Path, text: &str) -> Result<()> {
     let dir = wardrobe.parent().unwrap_or(Path::new("."));
     let schemes = doc.get("schemes").and_then(|s| s.as_table()).cloned().unwrap_or_default();
     for (name, scheme) in schemes {
-        for part in scheme.get("parts").and_then(|p| p.as_array()).cloned().unwrap_or_default() {
+        let parts = scheme.get("parts").and_then(|p| p.as_array()).cloned().unwrap_or_default();
+        let props = scheme.get("props").and_then(|p| p.as_array()).cloned().unwrap_or_default();
+        for part in parts.iter().chain(props.iter().filter(|p| p.get("file").is_some())) {
             let file = part.get("file").and_then(|f| f.as_str()).unwrap_or("");
             let mesh = part.get("mesh").and_then(|m| m.as_str()).unwrap_or("");
             if !wardrobe::mesh_names(&dir.join(file))?.iter().any(|m| m == mesh) {
@@ -117,7 +119,8 @@ fn run() -> Result<()> {
     let heads = parts::heads();
     let torsos = parts::torsos();
     let limbs = parts::limbs();
-    for (file, list) in [("heads.glb", &heads), ("torsos.glb", &torsos), ("limbs.glb", &limbs)] {
+    let props = parts::props();
+    for (file, list) in [("heads.glb", &heads), ("torsos.glb", &torsos), ("limbs.glb", &limbs), ("props.glb", &props)] {
         parts::write_parts(&demo.join("parts").join(file), list)?;
         let tris: Vec<String> = list.iter().map(|p| format!("{} {}", p.name, p.mesh.triangle_count())).collect();
         println!("parts/{file}: {}", tris.join(", "));

@@ -224,6 +224,19 @@ pub fn limbs() -> Vec<Part> {
     out
 }
 
+/// Props the walkers carry (wardrobes/walkers.toml `props`), in metres as
+/// they hang from the hand joint's origin: a paper bag whose handle is at
+/// y = 0, hanging down, and a cup standing on y = 0.
+pub fn props() -> Vec<Part> {
+    let bag = merge(&[
+        cuboid([-0.13, -0.36, -0.05], [0.13, -0.06, 0.05]),
+        stick([0.0, -0.06, -0.04], [0.0, 0.0, -0.02], 0.008, 6),
+        stick([0.0, -0.06, 0.04], [0.0, 0.0, 0.02], 0.008, 6),
+    ]);
+    let cup = merge(&[cone(0.032, 0.0, 0.042, 0.13, 16), cylinder(0.044, 0.13, 0.145, 16)]);
+    vec![part("bag", flat_shade(&bag)), part("cup", cup)]
+}
+
 /// Writes parts as a row of nodes (one per mesh, spaced along X) so a glTF
 /// viewer shows them side by side.
 pub fn write_parts(path: &std::path::Path, parts: &[Part]) -> Result<()> {

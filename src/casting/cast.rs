@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use crate::cache::CacheReader;
 use crate::casting::rigs::{ShotRig, ShotRigs};
-use crate::casting::wardrobe::{CastPart, Scheme, Wardrobes, GLTF_MATERIAL};
+use crate::casting::wardrobe::{CastPart, CastProp, Scheme, Wardrobes, GLTF_MATERIAL};
 use crate::error::{Error, Result};
 use crate::shot::Shot;
 
@@ -96,6 +96,20 @@ pub struct AgentCast {
     pub(crate) scaled: bool,
     /// Parts per rig slot, in rig slot order.
     pub slots: Vec<SlotCast>,
+    /// The props drawn (groups that drew `none` left out), in group name order.
+    /// A prop's part index (Cryptomatte, export) follows the slots': `slots.len() + i`.
+    pub props: Vec<Arc<CastProp>>,
+}
+
+impl AgentCast {
+    /// The name of part `part`: a slot's, then a prop's (`slots.len() + i`).
+    pub(crate) fn part_name(&self, part: u16) -> Option<&str> {
+        let part = part as usize;
+        match self.slots.get(part) {
+            Some(s) => Some(&s.slot),
+            None => self.props.get(part - self.slots.len()).map(|p| &*p.name),
+        }
+    }
 }
 
 /// What casting needs to know about one rig.
@@ -159,7 +173,29 @@ pub fn cast_agent(
         height_scale: height_scale(seed, id, rig.height_jitter, never_scale),
         scaled: !never_scale,
         slots,
+        props: draw_props(seed, id, scheme),
     })
+}
+
+/// One prop or none per prop group of `scheme`, each group from its own
+/// draws (`prop/<group>`, `prop_material/<group>`), so a group added or
+/// removed changes no other draw.
+fn draw_props(seed: u64, id: u32, scheme: &Scheme) -> Vec<Arc<CastProp>> {
+    let mut props = Vec::new();
+    for g in &scheme.prop_groups {
+        let w: Vec<f32> = g.entries.iter().map(|&(_, w)| w).collect();
+        let Some(pick) = weighted_pick(&w, uniform_hashed(seed, id, fnv1a_from(fnv1a("prop/"), &g.name))) else {
+            continue;
+        };
+        let prop = &scheme.props[g.entries[pick].0];
+        if prop.is_none() {
+            continue;
+        }
+        let u = uniform_hashed(seed, id, fnv1a_from(fnv1a("prop_material/"), &g.name));
+        let m = weighted_pick(&prop.material_weight_list(), u).unwrap_or(0);
+        props.extend(prop.cast.get(m).or(prop.cast.first()).cloned());
+    }
+    props
 }
 
 /// The scheme name of agents that wear their character as delivered.
@@ -182,6 +218,7 @@ pub(crate) fn cast_delivered(
         height_scale: height_scale(seed, id, rig.height_jitter, never_scale),
         scaled: !never_scale,
         slots: parts,
+        props: Vec::new(),
     }
 }
 

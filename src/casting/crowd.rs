@@ -517,12 +517,12 @@ impl<C> ShotCrowd<C> {
                 let Some(AgentDress::Slots(parts)) = self.dressing.get(id) else { return };
                 let proxy_mesh = self.dressing.proxy_mesh();
                 for p in parts {
-                    let (slot, fit) = (p.slot as usize, self.dressing.fit(p.fit));
+                    let (slot, fit, part) = (p.slot as usize, self.dressing.fit(p.fit), p.part as usize);
                     let world_from_slot = slots[slot];
                     match lod {
-                        Lod::Full => out.push(instance(p.mesh, p.material, world_from_slot * fit.slot_from_part, slot)),
+                        Lod::Full => out.push(instance(p.mesh, p.material, world_from_slot * fit.slot_from_part, part)),
                         Lod::Proxy if p.proxy => {
-                            out.push(instance(proxy_mesh, p.material, world_from_slot * fit.slot_from_proxy, slot))
+                            out.push(instance(proxy_mesh, p.material, world_from_slot * fit.slot_from_proxy, part))
                         }
                         Lod::Proxy => {}
                     }
@@ -560,10 +560,10 @@ impl<C> ShotCrowd<C> {
         }
     }
 
-    /// The name of part `part` (a cast slot) of an agent, for Cryptomatte
-    /// and export node names.
+    /// The name of part `part` (a cast slot, or a prop after them) of an
+    /// agent, for Cryptomatte and export node names.
     pub(crate) fn slot_name(&self, id: u32, part: u16) -> Option<&str> {
-        self.casting.get(id)?.slots.get(part as usize).map(|s| &*s.slot)
+        self.casting.get(id)?.part_name(part)
     }
 
     /// The pose key a skinned agent plays at a frame: `<rig>/<cycle>/<step>of<steps>`.

@@ -11,7 +11,7 @@ use glam::{Affine3A, Quat, Vec3};
 use crate::casting::cast::{fit_part, AgentCast, Casting};
 use crate::casting::rigs::{ShotRig, ShotRigs};
 use crate::casting::skin::skinned_refusal;
-use crate::casting::wardrobe::{Wardrobes, GLTF_MATERIAL};
+use crate::casting::wardrobe::{PropAt, Wardrobes, GLTF_MATERIAL};
 use crate::casting::Lod;
 use crate::error::{Error, Result};
 use crate::scene::gltf::AssetCache;
@@ -21,8 +21,11 @@ use crate::scene::{Material, MaterialId, Mesh, MeshId};
 /// which shared fit places it in its slot. 20 bytes: a million agents keep eleven each.
 #[derive(Debug, Clone, Copy)]
 pub struct DressedPart {
-    /// Index into the rig's slots.
+    /// Index into the rig's slots (where it is posed).
     pub slot: u32,
+    /// Its part index (Cryptomatte, export): the slot, or for a prop
+    /// `slots + i` ([`crate::casting::AgentCast::props`]).
+    pub(crate) part: u16,
     /// The part mesh.
     pub mesh: MeshId,
     /// The part's material.
@@ -46,7 +49,7 @@ pub struct PartFit {
 /// One skinned piece a skinned agent wears.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SkinDress {
-    /// Index into the agent's cast slots.
+    /// Its part index: a cast slot, or a prop after them (`slots + i`).
     pub(crate) slot: usize,
     /// Index into the rig's pieces ([`crate::casting::skin::SkinnedRig::piece`]).
     pub(crate) piece: usize,
@@ -64,10 +67,11 @@ pub enum AgentDress {
 }
 
 impl AgentDress {
-    /// The material worn in cast slot `slot` (its first piece's), if any.
+    /// The material worn as part `slot` (a cast slot, or a prop after the
+    /// slots; its first piece's), if any.
     pub(crate) fn material_in_slot(&self, slot: usize) -> Option<MaterialId> {
         match self {
-            AgentDress::Slots(parts) => parts.iter().find(|p| p.slot as usize == slot).map(|p| p.material),
+            AgentDress::Slots(parts) => parts.iter().find(|p| p.part as usize == slot).map(|p| p.material),
             AgentDress::Skinned(pieces) => pieces.iter().find(|p| p.slot == slot).map(|p| p.material),
         }
     }
@@ -131,6 +135,7 @@ pub(crate) fn check_schemes(
 ) -> Result<()> {
     let mut textures_seen = BTreeSet::new();
     for (rig_name, rig) in &shot.rigs {
+        check_props(rig, wardrobes, assets)?;
         if !matches!(rigs.get(rig_name), Some(ShotRig::Slots(_))) {
             continue;
         }
@@ -161,6 +166,25 @@ pub(crate) fn check_schemes(
                         })?;
                     }
                 }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Checks every prop of every scheme `rig` draws with a weight > 0: its
+/// mesh is in its glTF file and is rigid. The error names the wardrobe
+/// file, scheme, prop and field (`schemes.S.props[0].mesh`).
+fn check_props(rig: &crate::shot::RigRef, wardrobes: &Wardrobes, assets: &mut AssetCache) -> Result<()> {
+    for (name, _) in rig.schemes.iter().filter(|(_, w)| **w > 0.0) {
+        let Some(scheme) = wardrobes.schemes.get(name) else { continue };
+        for (i, prop) in scheme.props.iter().enumerate() {
+            let (Some(file), Some(mesh)) = (&prop.file, &prop.mesh) else { continue };
+            let key = format!("schemes.{name}.props[{i}].mesh");
+            let in_wardrobe =
+                |e: Error| Error::invalid(&scheme.source, format!("prop `{}`: {e}", prop.name)).field(key.clone());
+            if assets.is_skinned_mesh(file, mesh).map_err(in_wardrobe)? {
+                return Err(skinned_refusal(file, &format!("prop `{}` ({key})", prop.name)).field(key));
             }
         }
     }
@@ -204,6 +228,9 @@ fn wardrobe_material(
     Ok(m)
 }
 
+/// A rigid part's (mesh, material) pieces.
+type Pieces = Vec<(MeshId, MaterialId)>;
+
 /// The memos of one dressing run: each wardrobe part resolved, each fit
 /// computed and each material made once, however many agents wear them.
 #[derive(Default)]
@@ -211,11 +238,44 @@ struct Memo {
     /// Library materials by wardrobe material name.
     materials: HashMap<String, MaterialId>,
     /// Each rigid part (and material) resolved to its (mesh, material) pieces.
-    parts: HashMap<SharedKey, Vec<(MeshId, MaterialId)>>,
+    parts: HashMap<SharedKey, Pieces>,
     /// Each skinned part (and material) resolved to its (piece, material) list.
     skin_parts: HashMap<SharedKey, Vec<(usize, MaterialId)>>,
     /// Fit index by (rig, slot, first mesh).
     fit_index: HashMap<(usize, usize, MeshId, [u32; 4]), u32>,
+    /// A slot-rig prop's fit by (rig, slot, first mesh, offset).
+    prop_fits: HashMap<(usize, usize, MeshId, [u32; 12]), u32>,
+    /// Each skinned prop (rig, cast prop) resolved to its (piece, material) list.
+    skin_props: HashMap<(usize, usize), Vec<(usize, MaterialId)>>,
+}
+
+/// The (mesh, material) pieces of a rigid wardrobe part or prop (`file`,
+/// `mesh`, `material`), resolved once ([`Memo::parts`]): one piece per
+/// primitive when it wears its own glTF materials (a multi-material mesh),
+/// otherwise one mesh, one material. A skinned mesh is refused (`what`
+/// names it).
+fn rigid_pieces<'m>(
+    assets: &mut AssetCache,
+    (parts, materials): (&'m mut HashMap<SharedKey, Pieces>, &mut HashMap<String, MaterialId>),
+    wardrobes: &Wardrobes,
+    (file, mesh, material): (&Arc<std::path::Path>, &Arc<str>, &Arc<str>),
+    what: impl Fn() -> String,
+) -> Result<&'m [(MeshId, MaterialId)]> {
+    let key = (0, address(file), address(mesh), address(material));
+    let slot = match parts.entry(key) {
+        std::collections::hash_map::Entry::Occupied(known) => return Ok(known.into_mut()),
+        std::collections::hash_map::Entry::Vacant(slot) => slot,
+    };
+    if assets.is_skinned_mesh(file, mesh)? {
+        return Err(skinned_refusal(file, &what()));
+    }
+    let pieces: Pieces = if **material == *GLTF_MATERIAL {
+        assets.mesh_primitives(file, mesh)?
+    } else {
+        let mesh = assets.mesh(file, mesh)?;
+        vec![(mesh, wardrobe_material(assets, materials, wardrobes, material)?)]
+    };
+    Ok(slot.insert(pieces))
 }
 
 impl Dressing {
@@ -263,29 +323,15 @@ impl Dressing {
             // Resolved once per wardrobe part and material (keyed by the
             // wardrobe's shared strings, so a lookup hashes three words,
             // not a path): whether it is skinned, and its (mesh, material) pieces.
-            let key = (0, address(&part.file), address(&part.mesh), address(&part.material));
-            let pieces = match memo.parts.get(&key) {
-                Some(p) => p,
-                None => {
-                    if assets.is_skinned_mesh(&part.file, &part.mesh).map_err(|e| part_err(e, &cast.scheme))? {
-                        return Err(skinned_refusal(
-                            &part.file,
-                            &format!("wardrobe part `{}` (slot `{}`)", part.mesh, slot_cast.slot),
-                        )
-                        .agent(id)
-                        .field(format!("schemes.{}.parts", cast.scheme)));
-                    }
-                    // A part wearing its own glTF materials keeps one piece per
-                    // primitive (a multi-material mesh); otherwise one mesh, one material.
-                    let pieces: Vec<(MeshId, MaterialId)> = if *part.material == *GLTF_MATERIAL {
-                        assets.mesh_primitives(&part.file, &part.mesh).map_err(|e| part_err(e, &cast.scheme))?
-                    } else {
-                        let mesh = assets.mesh(&part.file, &part.mesh).map_err(|e| part_err(e, &cast.scheme))?;
-                        vec![(mesh, wardrobe_material(assets, &mut memo.materials, wardrobes, &part.material)?)]
-                    };
-                    memo.parts.entry(key).or_insert(pieces)
-                }
-            };
+            let what = || format!("wardrobe part `{}` (slot `{}`)", part.mesh, slot_cast.slot);
+            let pieces = rigid_pieces(
+                assets,
+                (&mut memo.parts, &mut memo.materials),
+                wardrobes,
+                (&part.file, &part.mesh, &part.material),
+                what,
+            )
+            .map_err(|e| part_err(e, &cast.scheme))?;
             let Some(&(first_mesh, _)) = pieces.first() else { continue };
             let slot = &rig.slots()[slot_index];
             let facing = part.facing;
@@ -316,7 +362,52 @@ impl Dressing {
                     self.fits.len() as u32 - 1
                 });
             for (i, &(mesh, material)) in pieces.iter().enumerate() {
-                parts.push(DressedPart { slot: slot_index as u32, mesh, material, fit, proxy: i == 0 });
+                let part = slot_index as u16;
+                parts.push(DressedPart { slot: slot_index as u32, part, mesh, material, fit, proxy: i == 0 });
+            }
+        }
+        // Props hang on their slot at their offset, their own size; the
+        // proxy is the box of their bounds.
+        for (k, prop) in cast.props.iter().enumerate() {
+            let PropAt::Slot(slot_name) = &prop.at else { continue };
+            let Some(slot_index) = rig.slots().iter().position(|s| *s.name == **slot_name) else { continue };
+            let what = || format!("prop `{}` (slot `{slot_name}`)", prop.name);
+            let pieces = rigid_pieces(
+                assets,
+                (&mut memo.parts, &mut memo.materials),
+                wardrobes,
+                (&prop.file, &prop.mesh, &prop.material),
+                what,
+            )
+            .map_err(|e| e.agent(id).or_field(format!("schemes.{}.props", cast.scheme)))?;
+            let Some(&(first_mesh, _)) = pieces.first() else { continue };
+            let offset = prop.offset.to_cols_array().map(f32::to_bits);
+            let key = (address(&cast.rig), slot_index, first_mesh, offset);
+            let fit = match memo.prop_fits.get(&key) {
+                Some(&f) => f,
+                None => {
+                    // The slot's rest scale taken out: offsets and props in metres.
+                    let (scale, _, _) = rig.rest_pose().slot_transforms()[slot_index].1.to_scale_rotation_translation();
+                    let slot_from_prop = Affine3A::from_scale(Vec3::ONE / scale.max(Vec3::splat(1e-12))) * prop.offset;
+                    let lib = assets.library();
+                    let (lo, hi) = (pieces.iter())
+                        .map(|&(m, _)| lib.meshes[m as usize].bounds())
+                        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+                        .unwrap_or((Vec3::ZERO, Vec3::ZERO));
+                    let size = (hi - lo).max(Vec3::splat(1e-4));
+                    self.fits.push(PartFit {
+                        slot_from_part: slot_from_prop,
+                        slot_from_proxy: slot_from_prop
+                            * Affine3A::from_scale_rotation_translation(size, Quat::IDENTITY, lo),
+                    });
+                    let f = self.fits.len() as u32 - 1;
+                    memo.prop_fits.insert(key, f);
+                    f
+                }
+            };
+            let part = (cast.slots.len() + k) as u16;
+            for (i, &(mesh, material)) in pieces.iter().enumerate() {
+                parts.push(DressedPart { slot: slot_index as u32, part, mesh, material, fit, proxy: i == 0 });
             }
         }
         parts.shrink_to_fit();
@@ -404,6 +495,30 @@ fn dress_skinned(
         }
         for &(piece, material) in &memo.skin_parts[&key] {
             pieces.push(SkinDress { slot: slot_index, piece, material });
+        }
+    }
+    // Props on joints: pieces bound wholly to their joint, posed and
+    // instanced with the skin (one per cast prop, shared by its wearers).
+    for (k, prop) in cast.props.iter().enumerate() {
+        let PropAt::Joint(joint) = &prop.at else { continue };
+        let key = (address(&cast.rig), Arc::as_ptr(prop) as usize);
+        if let std::collections::hash_map::Entry::Vacant(slot) = memo.skin_props.entry(key) {
+            let in_scheme = |e: Error| e.agent(cast.id).or_field(format!("schemes.{}.props", cast.scheme));
+            let part = rig.prop_part(&prop.file, &prop.mesh, joint, prop.offset).map_err(in_scheme)?;
+            let mut list = Vec::new();
+            for &piece in &rig.part_at(part).pieces.clone() {
+                let material = if *prop.material == *GLTF_MATERIAL {
+                    let p = rig.piece(piece);
+                    assets.gltf_material_at(&p.file, p.material)?
+                } else {
+                    wardrobe_material(assets, &mut memo.materials, wardrobes, &prop.material)?
+                };
+                list.push((piece, material));
+            }
+            slot.insert(list);
+        }
+        for &(piece, material) in &memo.skin_props[&key] {
+            pieces.push(SkinDress { slot: cast.slots.len() + k, piece, material });
         }
     }
     pieces.shrink_to_fit();

@@ -74,6 +74,8 @@ impl ShotRigs {
                 ShotRig::Slots(Rig::load(&r.file).map_err(|e| e.or_field(format!("rigs.{name}.file")))?)
             };
             wardrobes.check_slots(name, &r.schemes, &rig.slot_names())?;
+            let joints = rig.skinned().map(SkinnedRig::joint_names);
+            wardrobes.check_props(name, &r.schemes, &rig.slot_names(), joints.as_deref())?;
             // Measured once: a slot rig's height poses its rest pose.
             let height = match &rig {
                 ShotRig::Slots(rig) => rig.height(),

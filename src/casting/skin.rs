@@ -599,11 +599,27 @@ impl SkinnedRig {
             return Ok(i);
         }
         let label = format!("{}#{name}", file.path.display());
+        let i = self.rigid_pieces(file, gmesh, node, Affine3A::IDENTITY, &label)?;
+        self.parts.insert(key, i);
+        Ok(i)
+    }
+
+    /// Every primitive of `gmesh` as a piece bound wholly to node `node`
+    /// (one influence of weight 1), its vertices in that node's space by
+    /// `bind`: a new part, whose index is returned.
+    fn rigid_pieces(
+        &mut self,
+        file: &GltfFile,
+        gmesh: &gltf::Mesh,
+        node: usize,
+        bind: Affine3A,
+        label: &str,
+    ) -> Result<usize> {
         let single = gmesh.primitives().len() == 1;
         let mut pieces = Vec::new();
         let mut meshes = Vec::new();
         for prim in gmesh.primitives() {
-            let piece_name = if single { label.clone() } else { format!("{label}/{}", prim.index()) };
+            let piece_name = if single { label.to_string() } else { format!("{label}/{}", prim.index()) };
             meshes.push(read_primitive(file, gmesh, &prim, piece_name)?);
         }
         lift_decals(&mut meshes);
@@ -613,12 +629,13 @@ impl SkinnedRig {
             let bounds = mesh
                 .positions
                 .iter()
-                .fold(None, |b: Option<(Vec3, Vec3)>, &p| Some(b.map_or((p, p), |(lo, hi)| (lo.min(p), hi.max(p)))));
+                .map(|&p| bind.transform_point3(p))
+                .fold(None, |b: Option<(Vec3, Vec3)>, p| Some(b.map_or((p, p), |(lo, hi)| (lo.min(p), hi.max(p)))));
             self.pieces.push(SkinPiece {
                 influences: vec![one; mesh.positions.len()],
                 mesh,
                 joint_nodes: vec![node],
-                inverse_bind: vec![Affine3A::IDENTITY],
+                inverse_bind: vec![bind],
                 file: file.path.clone(),
                 material: prim.material().index(),
                 joint_boxes: vec![bounds],
@@ -629,7 +646,36 @@ impl SkinnedRig {
             self.warnings.push(format!("{label}: morph targets are ignored (rigid on its joint)"));
         }
         self.part_list.push(SkinPart { pieces });
-        let i = self.part_list.len() - 1;
+        Ok(self.part_list.len() - 1)
+    }
+
+    /// A wardrobe prop: mesh `mesh` of `file` hung on joint `joint` at
+    /// `joint_from_prop` (metres, in the joint's frame with its rest-pose
+    /// scale taken out, so the rig's `scale` and a scaled armature leave the
+    /// prop its size), bound wholly to the joint as a joint-attached mesh
+    /// is; loaded once per (file, mesh, joint, offset).
+    pub(crate) fn prop_part(
+        &mut self,
+        file: &Path,
+        mesh: &str,
+        joint: &str,
+        joint_from_prop: Affine3A,
+    ) -> Result<usize> {
+        let node = (self.animated.hierarchy.find(joint))
+            .ok_or_else(|| Error::invalid(&self.path, format!("no joint `{joint}` to hang a prop on")))?;
+        let canonical = std::fs::canonicalize(file).map_err(|e| Error::io(file, e))?;
+        let bits: Vec<String> = joint_from_prop.to_cols_array().iter().map(|v| format!("{:x}", v.to_bits())).collect();
+        let key = (canonical, format!("{mesh}@{joint}/{}", bits.join(",")));
+        if let Some(&i) = self.parts.get(&key) {
+            return Ok(i);
+        }
+        let rest = self.joints_at(&self.animated.hierarchy.rest_pose())[node];
+        let (scale, _, _) = rest.to_scale_rotation_translation();
+        let unscale = Affine3A::from_scale(Vec3::ONE / scale.max(Vec3::splat(1e-12)));
+        let gltf = GltfFile::open(file)?;
+        let gmesh = gltf.mesh_by_name(mesh)?;
+        let label = format!("{}#{mesh}@{joint}", gltf.path.display());
+        let i = self.rigid_pieces(&gltf, &gmesh, node, unscale * joint_from_prop, &label)?;
         self.parts.insert(key, i);
         Ok(i)
     }
@@ -885,6 +931,17 @@ impl SkinnedRig {
     /// The file.
     pub(crate) fn path(&self) -> &Path {
         &self.path
+    }
+    /// Names of the joints of the file's own skins (and the nodes its
+    /// joint-attached meshes hang on), in node order: what a prop may hang on.
+    pub(crate) fn joint_names(&self) -> Vec<&str> {
+        let mut nodes: Vec<usize> = (self.delivered.iter())
+            .flat_map(|(_, _, part)| self.part_list[*part].pieces.iter())
+            .flat_map(|&p| self.pieces[p].joint_nodes.iter().copied())
+            .collect();
+        nodes.sort_unstable();
+        nodes.dedup();
+        nodes.iter().filter_map(|&n| self.animated.hierarchy.nodes.get(n)).map(|n| n.name.as_str()).collect()
     }
     /// Slot names casting fills (one skinned mesh each).
     pub(crate) fn slots(&self) -> &[String] {

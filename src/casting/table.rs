@@ -6,6 +6,7 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
+use super::wardrobe::PropAt;
 use super::{AgentCast, AgentDress, ShotCrowd};
 
 /// One part row of the casting table.
@@ -17,6 +18,21 @@ pub(crate) struct PartRow {
     pub(crate) mesh: Option<String>,
     /// glTF file of the mesh.
     pub(crate) file: Option<String>,
+    /// Material name.
+    pub(crate) material: Option<String>,
+}
+
+/// One prop an agent carries.
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct PropRow {
+    /// The prop's name (its Cryptomatte part `agent_<id>/<name>`).
+    pub(crate) name: String,
+    /// What it hangs on: `joint <name>` or `slot <name>`.
+    pub(crate) on: String,
+    /// Mesh name.
+    pub(crate) mesh: String,
+    /// glTF file of the mesh.
+    pub(crate) file: String,
     /// Material name.
     pub(crate) material: Option<String>,
 }
@@ -36,6 +52,8 @@ pub struct CastRow {
     pub(crate) scaled: bool,
     /// Parts per slot.
     pub(crate) parts: Vec<PartRow>,
+    /// The props it carries (none drawn: empty).
+    pub(crate) props: Vec<PropRow>,
 }
 
 /// Instancing figures for `throng cast --stats`.
@@ -120,6 +138,21 @@ pub fn cast_row(crowd: &ShotCrowd, c: &AgentCast) -> CastRow {
             }
         })
         .collect();
+    let props = (c.props.iter().enumerate())
+        .map(|(i, p)| {
+            let material = crowd.dressing().get(c.id).and_then(|d| d.material_in_slot(c.slots.len() + i));
+            PropRow {
+                name: p.name.to_string(),
+                on: match &p.at {
+                    PropAt::Joint(j) => format!("joint {j}"),
+                    PropAt::Slot(s) => format!("slot {s}"),
+                },
+                mesh: p.mesh.to_string(),
+                file: p.file.display().to_string(),
+                material: material.map(|m| lib.materials[m as usize].name.clone()),
+            }
+        })
+        .collect();
     CastRow {
         id: c.id,
         rig: c.rig.to_string(),
@@ -127,6 +160,7 @@ pub fn cast_row(crowd: &ShotCrowd, c: &AgentCast) -> CastRow {
         height_scale: c.height_scale,
         scaled: c.scaled,
         parts,
+        props,
     }
 }
 

@@ -44,6 +44,37 @@ pub struct CastPart {
     pub(crate) facing: glam::Quat,
 }
 
+/// Where a prop hangs: a joint of a skinned character or a slot of a slot rig.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PropAt {
+    /// A joint (any node of the skeleton) of a skinned character.
+    Joint(Arc<str>),
+    /// A slot of a slot rig.
+    Slot(Arc<str>),
+}
+
+/// A prop an agent carries: one material variant of one wardrobe prop,
+/// shared (`Arc`) by every agent that draws it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CastProp {
+    /// The prop's name: its Cryptomatte part `agent_<id>/<name>`.
+    pub name: Arc<str>,
+    /// The joint or slot it hangs on.
+    pub at: PropAt,
+    /// glTF file.
+    pub(crate) file: Arc<Path>,
+    /// Mesh name in the file.
+    pub mesh: Arc<str>,
+    /// Qualified wardrobe material or `gltf`.
+    pub(crate) material: Arc<str>,
+    /// `frame_from_prop`: the prop's `rotate` then its `offset`, metres, in
+    /// the joint's or slot's frame with that frame's rest scale taken out.
+    pub(crate) offset: glam::Affine3A,
+}
+
+/// The prop name that means "no prop" in its group.
+pub(crate) const NO_PROP: &str = "none";
+
 /// The wardrobe file version this build reads.
 pub(crate) const WARDROBE_VERSION: u32 = 1;
 
@@ -143,6 +174,69 @@ impl PartSpec {
     }
 }
 
+/// A candidate prop (`[[schemes.NAME.props]]`), or "no prop" (`name = "none"`).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct PropSpec {
+    /// Cryptomatte and botinfo name; `none` is the group's "no prop".
+    pub(crate) name: Arc<str>,
+    /// One prop (or none) is drawn per group; default: the prop's name.
+    #[serde(default)]
+    pub(crate) group: Option<String>,
+    /// Joint it hangs on (skinned rigs).
+    #[serde(default)]
+    pub(crate) joint: Option<Arc<str>>,
+    /// Slot it hangs on (slot rigs).
+    #[serde(default)]
+    pub(crate) slot: Option<Arc<str>>,
+    /// glTF file (resolved to absolute on load).
+    #[serde(default)]
+    pub(crate) file: Option<Arc<Path>>,
+    /// Mesh name inside the file.
+    #[serde(default)]
+    pub(crate) mesh: Option<Arc<str>>,
+    /// Relative weight in its group.
+    #[serde(default = "one")]
+    pub(crate) weight: f32,
+    /// Material variants (wardrobe material names, or "gltf").
+    #[serde(default)]
+    pub(crate) materials: Option<Vec<Arc<str>>>,
+    /// Optional weights for `materials`.
+    #[serde(default)]
+    pub(crate) material_weights: Option<Vec<f32>>,
+    /// Translation in the joint's or slot's frame, metres.
+    #[serde(default)]
+    pub(crate) offset: Option<[f32; 3]>,
+    /// Degrees about the frame's X, then Y, then Z axis.
+    #[serde(default)]
+    pub(crate) rotate: Option<[f32; 3]>,
+    /// The cast prop for each material (made on load; empty for `none`).
+    #[serde(skip)]
+    pub(crate) cast: Vec<Arc<CastProp>>,
+}
+
+impl PropSpec {
+    /// Whether this entry is its group's "no prop".
+    pub(crate) fn is_none(&self) -> bool {
+        *self.name == *NO_PROP
+    }
+
+    /// The weight of each material variant.
+    pub(crate) fn material_weight_list(&self) -> Vec<f32> {
+        let n = self.materials.as_ref().map_or(1, Vec::len);
+        self.material_weights.clone().unwrap_or_else(|| vec![1.0; n])
+    }
+}
+
+/// The props one draw chooses between: entries of a scheme's `props` by index.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct PropGroup {
+    /// The group's name, the key of its draw (`prop/<group>`).
+    pub(crate) name: String,
+    /// Indices into the scheme's `props` (`none` entries included), with their weights.
+    pub(crate) entries: Vec<(usize, f32)>,
+}
+
 /// A scheme: candidate parts per slot.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -153,6 +247,12 @@ pub struct Scheme {
     /// Candidate parts.
     #[serde(default)]
     pub(crate) parts: Vec<PartSpec>,
+    /// Candidate props, by group (docs/wardrobes.md "Props").
+    #[serde(default)]
+    pub(crate) props: Vec<PropSpec>,
+    /// `props` gathered by group, in group name order (set on load).
+    #[serde(skip)]
+    pub(crate) prop_groups: Vec<PropGroup>,
     /// The scheme's name (set on load), shared by every agent cast in it.
     #[serde(skip)]
     pub(crate) name: Arc<str>,
@@ -350,6 +450,7 @@ impl Wardrobes {
                         }
                     }
                 }
+                scheme.prop_groups = load_props(path, base, &file.name, &name, &mut scheme.props, &all.materials)?;
                 for part in &mut scheme.parts {
                     let uniform = file.uniform_slots.contains(&part.slot);
                     part.cast = (0..part.materials.len()).map(|m| part.cast_part(m, uniform)).collect();
@@ -388,8 +489,190 @@ impl Wardrobes {
         Ok(())
     }
 
+    /// Refuses a prop that rig `rig` cannot carry, in any scheme it draws
+    /// with a weight > 0: on a joint the rig lacks (`joints`: a skinned
+    /// character's joints, `None` for a slot rig), a slot it lacks, the
+    /// wrong kind of anchor for the rig, or named as one of its slots (the
+    /// Cryptomatte names `agent_<id>/<name>` would collide).
+    pub(crate) fn check_props(
+        &self,
+        rig: &str,
+        schemes: &BTreeMap<String, f32>,
+        slots: &[&str],
+        joints: Option<&[&str]>,
+    ) -> Result<()> {
+        for (name, _) in schemes.iter().filter(|(_, w)| **w > 0.0) {
+            let Some(scheme) = self.schemes.get(name) else { continue };
+            for (i, prop) in scheme.props.iter().enumerate().filter(|(_, p)| !p.is_none()) {
+                let key = format!("schemes.{name}.props[{i}]");
+                let bad = |field: &str, msg: String| {
+                    Err(Error::invalid(&scheme.source, format!("prop `{}`: {msg}", prop.name))
+                        .field(format!("{key}.{field}")))
+                };
+                if slots.contains(&&*prop.name) {
+                    return bad(
+                        "name",
+                        format!("rig `{rig}` has a slot of that name; a prop's name must differ from its rig's slots"),
+                    );
+                }
+                match (joints, &prop.joint, &prop.slot) {
+                    (Some(joints), Some(joint), _) if !joints.contains(&&**joint) => {
+                        return bad(
+                            "joint",
+                            format!("rig `{rig}` has no joint `{joint}`; its joints: {}", joints.join(", ")),
+                        )
+                    }
+                    (Some(_), None, _) => {
+                        return bad("slot", format!("rig `{rig}` is a skinned character: hang the prop on a `joint`"))
+                    }
+                    (None, _, Some(slot)) if !slots.contains(&&**slot) => {
+                        return bad(
+                            "slot",
+                            format!("rig `{rig}` has no slot `{slot}`; its slots: {}", slots.join(", ")),
+                        )
+                    }
+                    (None, Some(_), _) => {
+                        return bad("joint", format!("rig `{rig}` is a slot rig: hang the prop on a `slot`"))
+                    }
+                    _ => {}
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Every slot any scheme dresses.
     pub fn slots(&self) -> BTreeSet<&str> {
         self.schemes.values().flat_map(|s| s.parts.iter().map(|p| p.slot.as_str())).collect()
     }
+}
+
+/// Checks and resolves a scheme's props (`props`, of scheme `scheme` in
+/// wardrobe `wardrobe` of file `path`, relative to `base`) and gathers them
+/// by group, in group name order. Each refusal names the prop and its field.
+fn load_props(
+    path: &Path,
+    base: &Path,
+    wardrobe: &str,
+    scheme: &str,
+    props: &mut [PropSpec],
+    materials: &BTreeMap<String, MaterialSpec>,
+) -> Result<Vec<PropGroup>> {
+    let mut groups: BTreeMap<String, Vec<(usize, f32)>> = BTreeMap::new();
+    let mut names = BTreeSet::new();
+    for (i, prop) in props.iter_mut().enumerate() {
+        let key = format!("schemes.{scheme}.props[{i}]");
+        let bad = |field: &str, msg: String| {
+            Error::invalid(path, format!("prop `{}`: {msg}", prop.name)).field(format!("{key}.{field}"))
+        };
+        if prop.name.is_empty() || prop.name.contains('/') {
+            return Err(bad("name", "give a name without `/` (it names the prop in Cryptomatte)".into()));
+        }
+        if !(prop.weight >= 0.0 && prop.weight.is_finite()) {
+            return Err(bad("weight", format!("weight must be a finite number >= 0, got {}", prop.weight)));
+        }
+        let group = match (&prop.group, prop.is_none()) {
+            (Some(g), _) => g.clone(),
+            (None, false) => prop.name.to_string(),
+            (None, true) => {
+                return Err(bad("group", "a `none` entry is the no-prop of a group: give its `group`".into()))
+            }
+        };
+        groups.entry(group).or_default().push((i, prop.weight));
+        if prop.is_none() {
+            let extra = [
+                ("joint", prop.joint.is_some()),
+                ("slot", prop.slot.is_some()),
+                ("file", prop.file.is_some()),
+                ("mesh", prop.mesh.is_some()),
+                ("materials", prop.materials.is_some()),
+                ("material_weights", prop.material_weights.is_some()),
+                ("offset", prop.offset.is_some()),
+                ("rotate", prop.rotate.is_some()),
+            ];
+            if let Some((field, _)) = extra.iter().find(|(_, set)| *set) {
+                return Err(bad(field, "a `none` entry takes only `group` and `weight`".into()));
+            }
+            continue;
+        }
+        if !names.insert(prop.name.clone()) {
+            return Err(bad("name", format!("another prop of scheme `{scheme}` has this name")));
+        }
+        let at = match (&prop.joint, &prop.slot) {
+            (Some(j), None) => PropAt::Joint(j.clone()),
+            (None, Some(s)) => PropAt::Slot(s.clone()),
+            (Some(_), Some(_)) => return Err(bad("slot", "give `joint` or `slot`, not both".into())),
+            (None, None) => {
+                return Err(bad("joint", "give the `joint` (skinned rigs) or `slot` (slot rigs) it hangs on".into()))
+            }
+        };
+        let Some(file) = &prop.file else { return Err(bad("file", "give the glTF `file` of its mesh".into())) };
+        let Some(mesh) = prop.mesh.clone() else { return Err(bad("mesh", "give its `mesh` (a mesh name)".into())) };
+        let full = base.join(file);
+        if !full.exists() {
+            return Err(bad("file", format!("prop file not found: {}", full.display())));
+        }
+        check_readable_file(&full).map_err(|e| e.field(format!("{key}.file")))?;
+        let file: Arc<Path> = full.into();
+        prop.file = Some(file.clone());
+        let (offset, rotate) = (prop.offset.unwrap_or_default(), prop.rotate.unwrap_or_default());
+        for (field, v) in [("offset", offset), ("rotate", rotate)] {
+            if !v.iter().all(|c| c.is_finite()) {
+                return Err(bad(field, format!("{field} must be finite numbers, got {v:?}")));
+            }
+        }
+        let [x, y, z] = rotate.map(f32::to_radians);
+        let turn = glam::Quat::from_rotation_z(z) * glam::Quat::from_rotation_y(y) * glam::Quat::from_rotation_x(x);
+        let offset = glam::Affine3A::from_rotation_translation(turn, glam::Vec3::from(offset));
+        let variants = prop.materials.get_or_insert_with(gltf_only);
+        if variants.is_empty() {
+            return Err(bad("materials", "needs at least one material".into()));
+        }
+        if let Some(w) = &prop.material_weights {
+            if w.len() != variants.len()
+                || w.iter().any(|x| !(*x >= 0.0 && x.is_finite()))
+                || w.iter().all(|x| *x == 0.0)
+            {
+                return Err(bad("material_weights", "needs one weight >= 0 per material, not all 0".into()));
+            }
+        }
+        for m in variants.iter_mut() {
+            if **m != *GLTF_MATERIAL {
+                let q = format!("{wardrobe}/{m}");
+                if !materials.contains_key(&q) {
+                    return Err(bad("materials", format!("unknown material `{m}`")));
+                }
+                *m = q.into();
+            }
+        }
+        let cast = variants
+            .iter()
+            .map(|material| {
+                Arc::new(CastProp {
+                    name: prop.name.clone(),
+                    at: at.clone(),
+                    file: file.clone(),
+                    mesh: mesh.clone(),
+                    material: material.clone(),
+                    offset,
+                })
+            })
+            .collect();
+        prop.cast = cast;
+    }
+    let mut out = Vec::new();
+    for (name, entries) in groups {
+        if entries.iter().all(|&(_, w)| w == 0.0) {
+            let (first, _) = entries[0];
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "every entry of prop group `{name}` has weight 0, so none could be drawn (give one a weight > 0)"
+                ),
+            )
+            .field(format!("schemes.{scheme}.props[{first}].weight")));
+        }
+        out.push(PropGroup { name, entries });
+    }
+    Ok(out)
 }

@@ -184,14 +184,14 @@ pub enum CryptoOutput {
     Sidecar,
 }
 
-/// The Cryptomatte names of a frame scene's instances: slot names from each
-/// agent's rig, set objects from the set file's nodes
+/// The Cryptomatte names of a frame scene's instances: slot and prop names
+/// from each agent's cast, set objects from the set file's nodes
 /// ([`ShotCrowd::set_names`]), materials from the library.
 pub(crate) fn crypto_names<'a, C>(crowd: &'a ShotCrowd<C>, scene: &'a FrameScene) -> CryptoNames<'a> {
     let tables = NameTables { materials: &crowd.library().materials, set_objects: crowd.set_names() };
     CryptoNames::new(&scene.instances, &tables, |agent| {
-        let slots = &crowd.cast(agent)?.slots;
-        Some(move |part: u16| slots.get(part as usize).map(|s| &*s.slot))
+        let cast = crowd.cast(agent)?;
+        Some(move |part: u16| cast.part_name(part))
     })
 }
 

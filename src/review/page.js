@@ -285,6 +285,10 @@ function showBotInfo(b, command, where) {
   box.append(table(rows));
   box.append(el("h2", "Parts and materials"));
   box.append(table(b.parts.map((p) => [p.slot, p.mesh || "-", p.material || "-"]), ["slot", "mesh", "material"]));
+  if (b.props && b.props.length) {
+    box.append(el("h2", "Props"));
+    box.append(table(b.props.map((p) => [p.name, p.mesh, p.material || "-", p.on]), ["prop", "mesh", "material", "on"]));
+  }
   if (command) {
     box.append(el("p", "The same, on the command line:", "dim"));
     box.append(el("code", command));

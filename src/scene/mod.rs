@@ -370,7 +370,8 @@ pub struct Instance {
     pub world_from_object: Affine3A,
     /// Cache agent id; none for the set.
     pub agent: InstanceAgent,
-    /// Slot index within the agent's rig; for the set, the index of the set
+    /// Part index within the agent: its rig slot, or a prop after the slots
+    /// (`crate::casting::AgentCast::props`); for the set, the index of the set
     /// object (the glTF node placing it) in the shot's set object names
     /// (`ShotCrowd::set_names()`, what Cryptomatte calls it).
     pub part: u16,

@@ -56,7 +56,7 @@ pub fn run(args: &CastArgs) -> Result<()> {
         out!("{}", format_stats(&cast_stats(&crowd)));
         return Ok(());
     }
-    outln!("{:>6}  {:<12} {:<20} {:>6}  {:<16} parts", "id", "rig", "scheme", "height", "head");
+    outln!("{:>6}  {:<12} {:<20} {:>6}  {:<16} {:<6} props", "id", "rig", "scheme", "height", "head", "parts");
     // Straight from the casting: the table row's paths and names are for --json.
     for cast in crowd.casting().iter() {
         let head = cast
@@ -66,15 +66,16 @@ pub fn run(args: &CastArgs) -> Result<()> {
             .and_then(|s| s.part.as_ref())
             .map_or("-", |p| &*p.mesh);
         let filled = cast.slots.iter().filter(|s| s.part.is_some()).count();
+        let props: Vec<&str> = cast.props.iter().map(|p| &*p.name).collect();
         outln!(
-            "{:>6}  {:<12} {:<20} {:>6.3}  {:<16} {}/{}",
+            "{:>6}  {:<12} {:<20} {:>6.3}  {:<16} {:<6} {}",
             cast.id,
             cast.rig,
             cast.scheme,
             cast.height_scale,
             head,
-            filled,
-            cast.slots.len()
+            format!("{filled}/{}", cast.slots.len()),
+            if props.is_empty() { "-".to_string() } else { props.join(",") }
         );
     }
     Ok(())
