@@ -366,6 +366,13 @@ fn a_cars_wheels_spin_at_speed_over_radius() {
     assert!((turned - 2.0 * per_frame).abs() < 0.07, "turned {turned}, want {}", 2.0 * per_frame);
     // The body does not turn with the wheels.
     assert!(crowd.warnings().iter().all(|w| !w.contains("slides")), "{:?}", crowd.warnings());
+    // `cast --stats` counts the cars as rigid, not skinned.
+    let stats = throng::casting::table::cast_stats(&crowd);
+    let posed = stats.skinned.as_ref().expect("the cars are posed from their node animation");
+    assert!(posed.agents > 0 && posed.rigid_agents == posed.agents, "{posed:?}");
+    let text = throng::casting::table::format_stats(&stats);
+    assert!(text.contains(&format!("rigid agents         {}", posed.agents)), "{text}");
+    assert!(text.contains("skinned agents       0"), "{text}");
 }
 
 #[test]

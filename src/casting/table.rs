@@ -76,11 +76,14 @@ pub struct CastStats {
     pub skinned: Option<SkinStats>,
 }
 
-/// Pose instancing figures of a shot's skinned agents.
+/// Pose instancing figures of a shot's agents posed from node animation:
+/// skinned and rigid rigs, which share the pose machinery.
 #[derive(Debug, Serialize)]
 pub struct SkinStats {
-    /// Agents on skinned rigs.
+    /// Agents on skinned or rigid rigs.
     pub agents: usize,
+    /// Of them, agents on rigid rigs (meshes riding their nodes).
+    pub rigid_agents: usize,
     /// Unique poses taken in the shot's frames: (rig, cycle, pose step).
     pub unique_poses: usize,
     /// Posed meshes built (one per piece per pose), each with one BLAS.
@@ -198,7 +201,7 @@ pub fn cast_stats(crowd: &ShotCrowd) -> CastStats {
     }
 }
 
-/// Pose instancing figures, `None` without skinned agents.
+/// Pose instancing figures, `None` without skinned or rigid agents.
 fn skin_stats(crowd: &ShotCrowd) -> Option<SkinStats> {
     let skinned: Vec<(u32, &[crate::casting::SkinDress])> = (crowd.dressing().iter())
         .filter_map(|(id, d)| match d {
@@ -242,8 +245,12 @@ fn skin_stats(crowd: &ShotCrowd) -> Option<SkinStats> {
         })
         .collect();
     let worst = clips.iter().map(|c| c.error_m).fold(0.0f32, f32::max);
+    let rigid_agents = (skinned.iter())
+        .filter(|(id, _)| crowd.cast(*id).and_then(|c| crowd.rigs().skinned(&c.rig)).is_some_and(|r| r.is_rigid()))
+        .count();
     Some(SkinStats {
         agents: skinned.len(),
+        rigid_agents,
         unique_poses: skins.step_count(),
         posed_meshes: skins.mesh_count(),
         posed_geometry_bytes: skins.meshes().map(|(_, m)| lib.meshes[m as usize].bytes()).sum(),
@@ -273,7 +280,10 @@ pub fn format_stats(s: &CastStats) -> String {
         s.copied_geometry_bytes as f64 / s.unique_geometry_bytes.max(1) as f64
     );
     if let Some(k) = &s.skinned {
-        let _ = writeln!(o, "skinned agents       {}", k.agents);
+        let _ = writeln!(o, "skinned agents       {}", k.agents - k.rigid_agents);
+        if k.rigid_agents > 0 {
+            let _ = writeln!(o, "rigid agents         {}", k.rigid_agents);
+        }
         let _ =
             writeln!(o, "unique poses         {}  ({} posed meshes, one BLAS each)", k.unique_poses, k.posed_meshes);
         let _ = writeln!(o, "posed geometry       {}", mib(k.posed_geometry_bytes));
