@@ -513,3 +513,21 @@ fn a_wardrobe_repaints_a_car_and_its_parts_ride_their_slots_nodes() {
     assert!(a[0].1 == "w/red" || a[0].1 == "w/blue", "body wears {}", a[0].1);
     assert!(b[0].1.ends_with("#paint"), "{}", b[0].1);
 }
+
+#[test]
+fn a_part_turned_by_forward_on_a_rigid_rig_is_refused_not_ignored() {
+    let dir = common::tempdir().unwrap();
+    let shot = car_shot(dir.path(), 2.0, "schemes = { Cars = 1.0 }");
+    let car = dir.path().join("car.glb");
+    let wardrobe = format!(
+        "version = 1\nname = \"w\"\n[schemes.Cars]\n[[schemes.Cars.parts]]\nslot = \"body\"\nfile = \"{}\"\nmesh = \"body\"\nforward = \"-z\"\n",
+        car.display()
+    );
+    std::fs::write(dir.path().join("w.toml"), wardrobe).unwrap();
+    let text = std::fs::read_to_string(&shot).unwrap().replace("wardrobes = []", "wardrobes = [\"w.toml\"]");
+    std::fs::write(&shot, text).unwrap();
+    let err = ShotCrowd::load(&shot).err().expect("refused").to_string();
+    for want in ["w.toml", "schemes.Cars.parts[0].forward", "rig `car`", "the shot"] {
+        assert!(err.contains(want), "`{want}` missing from: {err}");
+    }
+}

@@ -73,7 +73,7 @@ impl ShotRigs {
             } else {
                 ShotRig::Slots(Rig::load(&r.file).map_err(|e| e.or_field(format!("rigs.{name}.file")))?)
             };
-            wardrobes.check_slots(name, &r.schemes, &rig.slot_names())?;
+            wardrobes.check_slots(name, &r.schemes, &rig.slot_names(), rig.skinned().is_some())?;
             let joints = rig.skinned().map(SkinnedRig::joint_names);
             wardrobes.check_props(name, &r.schemes, &rig.slot_names(), joints.as_deref())?;
             // Measured once: a slot rig's height poses its rest pose.

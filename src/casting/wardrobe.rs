@@ -468,7 +468,16 @@ impl Wardrobes {
 
     /// Refuses a part for a slot that rig `rig` (with `slots`) lacks, in any
     /// scheme the rig draws with a weight > 0: such a part could never be worn.
-    pub fn check_slots(&self, rig: &str, schemes: &BTreeMap<String, f32>, slots: &[&str]) -> Result<()> {
+    /// `character`: the rig is skinned or rigid, whose parts ride their
+    /// nodes as modelled, so a part's `up` and `forward` (which turn a mesh
+    /// onto a slot rig's slot) would be ignored: refused instead.
+    pub fn check_slots(
+        &self,
+        rig: &str,
+        schemes: &BTreeMap<String, f32>,
+        slots: &[&str],
+        character: bool,
+    ) -> Result<()> {
         for (name, _) in schemes.iter().filter(|(_, w)| **w > 0.0) {
             let Some(scheme) = self.schemes.get(name) else { continue };
             for (i, part) in scheme.parts.iter().enumerate() {
@@ -483,6 +492,19 @@ impl Wardrobes {
                         ),
                     )
                     .field(format!("schemes.{name}.parts[{i}].slot")));
+                }
+                if character && (part.up.is_some() || part.forward.is_some()) {
+                    let field = if part.forward.is_some() { "forward" } else { "up" };
+                    return Err(Error::invalid(
+                        &scheme.source,
+                        format!(
+                            "part `{}` turns with `up`/`forward`, but rig `{rig}` (used with scheme `{name}`) is a \
+                             skinned or rigid character, whose parts ride their joints or nodes as modelled; turn the \
+                             rig with its own `forward` and `up` in the shot",
+                            part.mesh
+                        ),
+                    )
+                    .field(format!("schemes.{name}.parts[{i}].{field}")));
                 }
             }
         }
