@@ -531,3 +531,21 @@ fn a_part_turned_by_forward_on_a_rigid_rig_is_refused_not_ignored() {
         assert!(err.contains(want), "`{want}` missing from: {err}");
     }
 }
+
+#[test]
+fn a_skinned_mesh_worn_on_a_rigid_rig_is_refused_not_drawn_in_its_bind_pose() {
+    let dir = common::tempdir().unwrap();
+    let shot = car_shot(dir.path(), 2.0, "schemes = { Cars = 1.0 }");
+    let walker = common::repo_path("demo/rigs/walker.glb");
+    let wardrobe = format!(
+        "version = 1\nname = \"w\"\n[schemes.Cars]\n[[schemes.Cars.parts]]\nslot = \"body\"\nfile = \"{}\"\nmesh = \"#0\"\n",
+        walker.display()
+    );
+    std::fs::write(dir.path().join("w.toml"), wardrobe).unwrap();
+    let text = std::fs::read_to_string(&shot).unwrap().replace("wardrobes = []", "wardrobes = [\"w.toml\"]");
+    std::fs::write(&shot, text).unwrap();
+    let err = ShotCrowd::load(&shot).err().expect("refused").to_string();
+    for want in ["walker.glb", "mesh `#0` is skinned", "mesh"] {
+        assert!(err.contains(want), "`{want}` missing from: {err}");
+    }
+}

@@ -536,12 +536,7 @@ impl SkinnedRig {
         if let Some(&i) = self.parts.get(&key) {
             return Ok(i);
         }
-        let gmesh = match mesh_ref.strip_prefix('#').and_then(|i| i.parse::<usize>().ok()) {
-            Some(i) => file.doc.meshes().nth(i).ok_or_else(|| {
-                file.err(format!("no mesh #{i}; the file has {} meshes", file.doc.meshes().len())).field("mesh")
-            })?,
-            None => file.mesh_by_name(mesh_ref)?,
-        };
+        let gmesh = file.mesh_by_ref(mesh_ref)?;
         // Known under its other spelling (name or `#index`)?
         for other in [format!("#{}", gmesh.index())].into_iter().chain(gmesh.name().map(str::to_string)) {
             if let Some(&i) = self.parts.get(&(canonical.to_path_buf(), other)) {
@@ -863,12 +858,16 @@ impl SkinnedRig {
             return self.load_part(&gltf, &canonical, mesh_ref);
         }
         let node = self.slot_node(slot)?;
-        let gmesh = match mesh_ref.strip_prefix('#').and_then(|i| i.parse::<usize>().ok()) {
-            Some(i) => gltf.doc.meshes().nth(i).ok_or_else(|| {
-                gltf.err(format!("no mesh #{i}; the file has {} meshes", gltf.doc.meshes().len())).field("mesh")
-            })?,
-            None => gltf.mesh_by_name(mesh_ref)?,
-        };
+        let gmesh = gltf.mesh_by_ref(mesh_ref)?;
+        // A skinned mesh would be drawn in its bind pose on the node: refused, as on a slot rig.
+        if gltf.doc.nodes().any(|n| n.skin().is_some() && n.mesh().is_some_and(|m| m.index() == gmesh.index())) {
+            return Err(gltf
+                .err(format!(
+                    "mesh `{mesh_ref}` is skinned; a rigid rig's parts ride their slot's node (`{slot}`) rigidly: \
+                     wear it on a skinned rig, or export it without its skin"
+                ))
+                .field("mesh"));
+        }
         self.load_rigid_part(&gltf, &canonical, node, &gmesh, &name)
     }
 
@@ -934,7 +933,11 @@ impl SkinnedRig {
     }
     /// Names of the joints of the file's own skins (and the nodes its
     /// joint-attached meshes hang on), in node order: what a prop may hang on.
+    /// A rigid rig's props may hang on any named node, as its parts do.
     pub(crate) fn joint_names(&self) -> Vec<&str> {
+        if self.rigid {
+            return self.animated.hierarchy.nodes.iter().map(|n| n.name.as_str()).filter(|n| !n.is_empty()).collect();
+        }
         let mut nodes: Vec<usize> = (self.delivered.iter())
             .flat_map(|(_, _, part)| self.part_list[*part].pieces.iter())
             .flat_map(|&p| self.pieces[p].joint_nodes.iter().copied())

@@ -141,6 +141,16 @@ impl GltfFile {
         Err(self.err(format!("no mesh named `{name}`; meshes in this file: {}", list(&names))))
     }
 
+    /// The mesh a wardrobe names: `#index` or a name (field `mesh` on error).
+    pub(crate) fn mesh_by_ref(&self, mesh_ref: &str) -> Result<gltf::Mesh<'_>> {
+        match mesh_ref.strip_prefix('#').and_then(|i| i.parse::<usize>().ok()) {
+            Some(i) => self.doc.meshes().nth(i).ok_or_else(|| {
+                self.err(format!("no mesh #{i}; the file has {} meshes", self.doc.meshes().len())).field("mesh")
+            }),
+            None => self.mesh_by_name(mesh_ref),
+        }
+    }
+
     /// The node named `name`; the error lists the node names in the file.
     pub(crate) fn node_by_name(&self, name: &str) -> Result<gltf::Node<'_>> {
         if let Some(node) = self.doc.nodes().find(|n| n.name() == Some(name)) {
