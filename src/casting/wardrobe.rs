@@ -402,13 +402,7 @@ impl Wardrobes {
                 }
                 for (i, part) in scheme.parts.iter_mut().enumerate() {
                     let key = format!("schemes.{name}.parts[{i}]");
-                    let full = base.join(&part.file);
-                    if !full.exists() {
-                        return Err(Error::invalid(path, format!("part file not found: {}", full.display()))
-                            .field(format!("{key}.file")));
-                    }
-                    check_readable_file(&full).map_err(|e| e.field(format!("{key}.file")))?;
-                    part.file = full.into();
+                    part.file = wardrobe_file(path, base, &part.file, &key)?.into();
                     if part.up.is_some() || part.forward.is_some() {
                         let (up, forward) = (
                             part.up.unwrap_or(crate::shot::Axis::PosY),
@@ -421,34 +415,8 @@ impl Wardrobes {
                         return Err(Error::invalid(path, format!("weight must be >= 0, got {}", part.weight))
                             .field(format!("{key}.weight")));
                     }
-                    if part.materials.is_empty() {
-                        return Err(
-                            Error::invalid(path, "needs at least one material").field(format!("{key}.materials"))
-                        );
-                    }
-                    if let Some(w) = &part.material_weights {
-                        if w.len() != part.materials.len() || w.iter().any(|x| !(*x >= 0.0 && x.is_finite())) {
-                            return Err(Error::invalid(path, "needs one weight >= 0 per material")
-                                .field(format!("{key}.material_weights")));
-                        }
-                        if w.iter().all(|x| *x == 0.0) {
-                            return Err(Error::invalid(
-                                path,
-                                "every material weight is 0, so no material could be drawn (give one a weight > 0)",
-                            )
-                            .field(format!("{key}.material_weights")));
-                        }
-                    }
-                    for m in &mut part.materials {
-                        if **m != *GLTF_MATERIAL {
-                            let q = format!("{}/{m}", file.name);
-                            if !all.materials.contains_key(&q) {
-                                return Err(Error::invalid(path, format!("unknown material `{m}`"))
-                                    .field(format!("{key}.materials")));
-                            }
-                            *m = q.into();
-                        }
-                    }
+                    let weights = part.material_weights.as_deref();
+                    check_materials(path, &key, "", &file.name, &all.materials, &mut part.materials, weights)?;
                 }
                 scheme.prop_groups = load_props(path, base, &file.name, &name, &mut scheme.props, &all.materials)?;
                 for part in &mut scheme.parts {
@@ -572,6 +540,56 @@ impl Wardrobes {
 /// Checks and resolves a scheme's props (`props`, of scheme `scheme` in
 /// wardrobe `wardrobe` of file `path`, relative to `base`) and gathers them
 /// by group, in group name order. Each refusal names the prop and its field.
+/// A wardrobe entry's glTF `file` (relative to the wardrobe), checked to
+/// exist and be a readable file; errors name `{key}.file`.
+fn wardrobe_file(path: &Path, base: &Path, file: &Path, key: &str) -> Result<PathBuf> {
+    let full = base.join(file);
+    if !full.exists() {
+        return Err(Error::invalid(path, format!("file not found: {}", full.display())).field(format!("{key}.file")));
+    }
+    check_readable_file(&full).map_err(|e| e.field(format!("{key}.file")))?;
+    Ok(full)
+}
+
+/// Checks a part's or prop's `materials` and `material_weights` (at least
+/// one material, one finite weight >= 0 each, not all 0) and qualifies each
+/// wardrobe material as `{wardrobe}/{name}`; `what` starts each message.
+fn check_materials(
+    path: &Path,
+    key: &str,
+    what: &str,
+    wardrobe: &str,
+    materials: &BTreeMap<String, MaterialSpec>,
+    variants: &mut [Arc<str>],
+    weights: Option<&[f32]>,
+) -> Result<()> {
+    let bad = |field: &str, msg: &str| Error::invalid(path, format!("{what}{msg}")).field(format!("{key}.{field}"));
+    if variants.is_empty() {
+        return Err(bad("materials", "needs at least one material"));
+    }
+    if let Some(w) = weights {
+        if w.len() != variants.len() || w.iter().any(|x| !(*x >= 0.0 && x.is_finite())) {
+            return Err(bad("material_weights", "needs one weight >= 0 per material"));
+        }
+        if w.iter().all(|x| *x == 0.0) {
+            return Err(bad(
+                "material_weights",
+                "every material weight is 0, so no material could be drawn (give one a weight > 0)",
+            ));
+        }
+    }
+    for m in variants.iter_mut() {
+        if **m != *GLTF_MATERIAL {
+            let q = format!("{wardrobe}/{m}");
+            if !materials.contains_key(&q) {
+                return Err(bad("materials", &format!("unknown material `{m}`")));
+            }
+            *m = q.into();
+        }
+    }
+    Ok(())
+}
+
 fn load_props(
     path: &Path,
     base: &Path,
@@ -630,12 +648,7 @@ fn load_props(
         };
         let Some(file) = &prop.file else { return Err(bad("file", "give the glTF `file` of its mesh".into())) };
         let Some(mesh) = prop.mesh.clone() else { return Err(bad("mesh", "give its `mesh` (a mesh name)".into())) };
-        let full = base.join(file);
-        if !full.exists() {
-            return Err(bad("file", format!("prop file not found: {}", full.display())));
-        }
-        check_readable_file(&full).map_err(|e| e.field(format!("{key}.file")))?;
-        let file: Arc<Path> = full.into();
+        let file: Arc<Path> = wardrobe_file(path, base, file, &key)?.into();
         prop.file = Some(file.clone());
         let (offset, rotate) = (prop.offset.unwrap_or_default(), prop.rotate.unwrap_or_default());
         for (field, v) in [("offset", offset), ("rotate", rotate)] {
@@ -647,26 +660,8 @@ fn load_props(
         let turn = glam::Quat::from_rotation_z(z) * glam::Quat::from_rotation_y(y) * glam::Quat::from_rotation_x(x);
         let offset = glam::Affine3A::from_rotation_translation(turn, glam::Vec3::from(offset));
         let variants = prop.materials.get_or_insert_with(gltf_only);
-        if variants.is_empty() {
-            return Err(bad("materials", "needs at least one material".into()));
-        }
-        if let Some(w) = &prop.material_weights {
-            if w.len() != variants.len()
-                || w.iter().any(|x| !(*x >= 0.0 && x.is_finite()))
-                || w.iter().all(|x| *x == 0.0)
-            {
-                return Err(bad("material_weights", "needs one weight >= 0 per material, not all 0".into()));
-            }
-        }
-        for m in variants.iter_mut() {
-            if **m != *GLTF_MATERIAL {
-                let q = format!("{wardrobe}/{m}");
-                if !materials.contains_key(&q) {
-                    return Err(bad("materials", format!("unknown material `{m}`")));
-                }
-                *m = q.into();
-            }
-        }
+        let what = format!("prop `{}`: ", prop.name);
+        check_materials(path, &key, &what, wardrobe, materials, variants, prop.material_weights.as_deref())?;
         let cast = variants
             .iter()
             .map(|material| {
