@@ -199,6 +199,29 @@ fn check_image(path: &std::path::Path) -> Result<()> {
     reader.into_dimensions().map(|_| ()).map_err(|e| bad(e.to_string()))
 }
 
+/// Each piece of skinned-rig part `part` with its material: the glTF's own
+/// (`material` is [`GLTF_MATERIAL`]) or the wardrobe's `material`.
+fn piece_materials(
+    rig: &crate::casting::skin::SkinnedRig,
+    part: usize,
+    material: &str,
+    assets: &mut AssetCache,
+    made: &mut HashMap<String, MaterialId>,
+    wardrobes: &Wardrobes,
+) -> Result<Vec<(usize, MaterialId)>> {
+    let mut list = Vec::new();
+    for &piece in &rig.part_at(part).pieces {
+        let material = if *material == *GLTF_MATERIAL {
+            let p = rig.piece(piece);
+            assets.gltf_material_at(&p.file, p.material)?
+        } else {
+            wardrobe_material(assets, made, wardrobes, material)?
+        };
+        list.push((piece, material));
+    }
+    Ok(list)
+}
+
 /// The library material for a wardrobe material, made once per name.
 fn wardrobe_material(
     assets: &mut AssetCache,
@@ -481,16 +504,8 @@ fn dress_skinned(
         let key = (address(&cast.rig), address(&part.file), address(&part.mesh), address(&part.material));
         if let std::collections::hash_map::Entry::Vacant(slot) = memo.skin_parts.entry(key) {
             let part_index = rig.part(&part.file, &part.mesh, &slot_cast.slot).map_err(|e| e.agent(cast.id))?;
-            let mut list = Vec::new();
-            for &piece in &rig.part_at(part_index).pieces.clone() {
-                let material = if *part.material == *GLTF_MATERIAL {
-                    let p = rig.piece(piece);
-                    assets.gltf_material_at(&p.file, p.material)?
-                } else {
-                    wardrobe_material(assets, &mut memo.materials, wardrobes, &part.material)?
-                };
-                list.push((piece, material));
-            }
+            let list = piece_materials(rig, part_index, &part.material, assets, &mut memo.materials, wardrobes)
+                .map_err(|e| e.agent(cast.id))?;
             slot.insert(list);
         }
         for &(piece, material) in &memo.skin_parts[&key] {
@@ -505,16 +520,8 @@ fn dress_skinned(
         if let std::collections::hash_map::Entry::Vacant(slot) = memo.skin_props.entry(key) {
             let in_scheme = |e: Error| e.agent(cast.id).or_field(format!("schemes.{}.props", cast.scheme));
             let part = rig.prop_part(&prop.file, &prop.mesh, joint, prop.offset).map_err(in_scheme)?;
-            let mut list = Vec::new();
-            for &piece in &rig.part_at(part).pieces.clone() {
-                let material = if *prop.material == *GLTF_MATERIAL {
-                    let p = rig.piece(piece);
-                    assets.gltf_material_at(&p.file, p.material)?
-                } else {
-                    wardrobe_material(assets, &mut memo.materials, wardrobes, &prop.material)?
-                };
-                list.push((piece, material));
-            }
+            let list = piece_materials(rig, part, &prop.material, assets, &mut memo.materials, wardrobes)
+                .map_err(in_scheme)?;
             slot.insert(list);
         }
         for &(piece, material) in &memo.skin_props[&key] {
