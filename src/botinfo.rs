@@ -31,6 +31,9 @@ pub struct BotInfo {
     pub(crate) scheme: String,
     /// Height scale.
     pub(crate) height_scale: f32,
+    /// The body it plays, when its rig has proportions (docs/wardrobes.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub(crate) body: Option<BodyRow>,
     /// Foot position.
     pub(crate) position: [f32; 3],
     /// Heading in degrees.
@@ -53,6 +56,17 @@ pub struct BotInfo {
     /// absent for slot rigs.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub(crate) pose: Option<String>,
+}
+
+/// An agent's body: which of the rig's bodies, and its draws.
+#[derive(Debug, Clone, serde::Serialize)]
+pub(crate) struct BodyRow {
+    /// Body index, 1 to `of` (0: as modelled, a seated or no-scale agent).
+    pub(crate) index: u16,
+    /// Bodies the rig draws.
+    pub(crate) of: u16,
+    /// Per joint group: (group, length factor, girth factor).
+    pub(crate) groups: Vec<(String, f32, f32)>,
 }
 
 /// Ids closest to `id` among those that exist, for "did you mean".
@@ -115,6 +129,11 @@ pub fn bot_info_each(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<(Vec<
             shot_frame: frame,
             scheme: cast.scheme.to_string(),
             height_scale: cast.height_scale,
+            body: crowd.rigs().skinned(&cast.rig).filter(|r| r.body_count() > 0).map(|r| BodyRow {
+                index: cast.body,
+                of: r.body_count(),
+                groups: r.body(cast.body).map(|b| b.draws.clone()).unwrap_or_default(),
+            }),
             position: a.position.to_array(),
             heading_deg: a.heading.to_degrees(),
             distance,
@@ -216,6 +235,18 @@ pub fn format_bot_info(b: &BotInfo) -> String {
     let _ = writeln!(o, "Frame     {:.2}  (cycle frame at shot frame {})", b.cycle_frame, b.shot_frame);
     let _ = writeln!(o, "Scheme    {}", b.scheme);
     let _ = writeln!(o, "Height    {:.3}{}", b.height_scale, if b.seated { "  (seated)" } else { "" });
+    if let Some(body) = &b.body {
+        let groups: Vec<String> =
+            body.groups.iter().map(|(g, l, w)| format!("{g} length {l:.3} girth {w:.3}")).collect();
+        match body.index {
+            0 => {
+                let _ = writeln!(o, "Body      as modelled  (of {}: seated or no-scale)", body.of);
+            }
+            i => {
+                let _ = writeln!(o, "Body      {i} of {}  {}", body.of, groups.join(", "));
+            }
+        }
+    }
     let _ = writeln!(o, "Position  {:.2} {:.2} {:.2}", b.position[0], b.position[1], b.position[2]);
     let _ = writeln!(o, "Heading   {:.1} deg", b.heading_deg);
     let _ = writeln!(o, "Distance  {:.2} m", b.distance);

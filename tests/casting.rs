@@ -74,7 +74,8 @@ fn height_scales_are_uniform_within_range() {
     let wardrobes = Wardrobes::load(&shot.wardrobes).unwrap();
     let (name, rig) = shot.rigs.iter().next().unwrap();
     let slots: Vec<std::sync::Arc<str>> = vec!["head".into()];
-    let rc = RigCasting { name: name.as_str().into(), slots: &slots, schemes: &rig.schemes, height_jitter: 0.1 };
+    let rc =
+        RigCasting { name: name.as_str().into(), slots: &slots, schemes: &rig.schemes, height_jitter: 0.1, bodies: 0 };
     let n = 10_000;
     let mut h: Vec<f64> =
         (1..=n).map(|id| cast_agent(shot.seed, id, &rc, &wardrobes, &[], false).unwrap().height_scale as f64).collect();

@@ -145,7 +145,7 @@ fn a_prop_on_a_joint_moves_with_that_joint() {
     for frame in [1001, 1003] {
         let block = crowd.agents_at(frame).unwrap();
         let a = block.agents.iter().find(|a| a.id == carrier.id).unwrap();
-        let AgentPose::Skinned { world_from_rig, cycle, step } = crowd.agent_pose(a).unwrap() else { panic!() };
+        let AgentPose::Skinned { world_from_rig, cycle, step, .. } = crowd.agent_pose(a).unwrap() else { panic!() };
         let mut insts = Vec::new();
         crowd.agent_instances(a, Lod::Full, vis::ALL, &mut insts).unwrap();
         // Parts are the slots (0, 1); the prop is part 2.
@@ -218,7 +218,7 @@ fn a_prop_on_a_slot_moves_with_that_slot() {
 fn cast_all(wardrobes: &Wardrobes, n: u32) -> Vec<throng::casting::AgentCast> {
     let slots: Vec<std::sync::Arc<str>> = vec!["body".into(), "head".into()];
     let schemes = BTreeMap::from([("Carry".to_string(), 1.0f32)]);
-    let rig = RigCasting { name: "walker".into(), slots: &slots, schemes: &schemes, height_jitter: 0.1 };
+    let rig = RigCasting { name: "walker".into(), slots: &slots, schemes: &schemes, height_jitter: 0.1, bodies: 0 };
     (1..=n).map(|id| cast_agent(9, id, &rig, wardrobes, &[], false).unwrap()).collect()
 }
 
@@ -331,7 +331,7 @@ fn the_demo_walkers_carry_bags_and_cups() {
     let w = Wardrobes::load(&[common::repo_path("wardrobes/walkers.toml")]).unwrap();
     let slots: Vec<std::sync::Arc<str>> = vec!["body".into(), "head".into()];
     let schemes = BTreeMap::from([("Walkers".to_string(), 1.0f32)]);
-    let rig = RigCasting { name: "walker".into(), slots: &slots, schemes: &schemes, height_jitter: 0.1 };
+    let rig = RigCasting { name: "walker".into(), slots: &slots, schemes: &schemes, height_jitter: 0.1, bodies: 0 };
     let casts: Vec<_> = (1..=1200).map(|id| cast_agent(1234, id, &rig, &w, &[], false).unwrap()).collect();
     let count = |name: &str| casts.iter().filter(|c| c.props.iter().any(|p| &*p.name == name)).count() as f64 / 1200.0;
     assert!((count("bag") - 1.0 / 3.0).abs() < 0.05, "bags {}", count("bag"));

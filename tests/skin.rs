@@ -234,7 +234,7 @@ fn removing_an_agent_changes_no_other_agents_cast_or_pose() {
                 let block = c.agents_at(f).unwrap();
                 let s = *block.agents.iter().find(|s| s.id == id).unwrap();
                 match c.agent_pose(&s).unwrap() {
-                    AgentPose::Skinned { world_from_rig, cycle, step } => (world_from_rig, cycle, step),
+                    AgentPose::Skinned { world_from_rig, cycle, step, .. } => (world_from_rig, cycle, step),
                     AgentPose::Slots(_) => panic!("a skinned agent"),
                 }
             };

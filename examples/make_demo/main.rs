@@ -65,6 +65,16 @@ fn shot_toml() -> String {
          root = \"hips\"\nschemes = { Walkers = 1.0 }\nslots = [\"body\", \"head\"]\n\
          height_jitter = 0.1\n",
     );
+    // Body proportions: four bodies of leg, arm and torso length and girth,
+    // the head never stretched; strides follow the legs.
+    s.push_str(
+        "\n[rigs.walker.proportions]\nbodies = 4\nhead = [\"head\"]\nlegs = \"legs\"\n\
+         [rigs.walker.proportions.groups.legs]\njoints = [\"thigh_l\", \"shin_l\", \"thigh_r\", \"shin_r\"]\n\
+         length = 0.06\ngirth = 0.12\n\
+         [rigs.walker.proportions.groups.arms]\n\
+         joints = [\"upper_arm_l\", \"forearm_l\", \"upper_arm_r\", \"forearm_r\"]\nlength = 0.05\ngirth = 0.15\n\
+         [rigs.walker.proportions.groups.torso]\njoints = [\"spine\", \"chest\"]\nlength = 0.04\ngirth = 0.12\n",
+    );
     s.push_str("\n[set]\nfile = \"set/set.glb\"\n");
     let _ = write!(s, "\n[camera]\nsensor_width = {SENSOR_WIDTH:?}\n");
     for (frame, pos, aim, focal) in CAMERA_KEYS {

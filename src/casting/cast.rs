@@ -6,7 +6,7 @@
 //! hash(seed, agent id, purpose), never from a shared sequence, so adding,
 //! removing or reordering agents changes no other agent.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -14,7 +14,7 @@ use glam::{Affine3A, Quat, Vec3};
 use rayon::prelude::*;
 
 use crate::cache::CacheReader;
-use crate::casting::rigs::{ShotRig, ShotRigs};
+use crate::casting::rigs::ShotRigs;
 use crate::casting::wardrobe::{CastPart, CastProp, Scheme, Wardrobes, GLTF_MATERIAL};
 use crate::error::{Error, Result};
 use crate::shot::Shot;
@@ -94,6 +94,9 @@ pub struct AgentCast {
     pub height_scale: f32,
     /// Whether the height jitter applies (false for seated and no-scale agents).
     pub(crate) scaled: bool,
+    /// The body it plays (`casting::body`): 0, the rig as modelled, for a
+    /// rig without proportions and for seated and no-scale agents.
+    pub body: u16,
     /// Parts per rig slot, in rig slot order.
     pub slots: Vec<SlotCast>,
     /// The props drawn (groups that drew `none` left out), in group name order.
@@ -123,6 +126,8 @@ pub struct RigCasting<'a> {
     pub schemes: &'a std::collections::BTreeMap<String, f32>,
     /// Height jitter fraction.
     pub height_jitter: f32,
+    /// Bodies the rig's proportions drew (0: none, every agent as modelled).
+    pub bodies: u16,
 }
 
 /// Casts one agent; an error says what is wrong with the shot or wardrobes
@@ -172,6 +177,7 @@ pub fn cast_agent(
         scheme: scheme.name.clone(),
         height_scale: height_scale(seed, id, rig.height_jitter, never_scale),
         scaled: !never_scale,
+        body: draw_body(seed, id, rig.bodies, never_scale),
         slots,
         props: draw_props(seed, id, scheme),
     })
@@ -217,6 +223,7 @@ pub(crate) fn cast_delivered(
         scheme: DELIVERED_SCHEME.into(),
         height_scale: height_scale(seed, id, rig.height_jitter, never_scale),
         scaled: !never_scale,
+        body: draw_body(seed, id, rig.bodies, never_scale),
         slots: parts,
         props: Vec::new(),
     }
@@ -232,6 +239,16 @@ fn height_scale(seed: u64, id: u32, jitter: f32, never_scale: bool) -> f32 {
     } else {
         jittered
     }
+}
+
+/// One of `bodies` (1 to `bodies`), or 0 (as modelled) without bodies or
+/// for an agent that is never scaled; drawn from (seed, id) alone.
+fn draw_body(seed: u64, id: u32, bodies: u16, never_scale: bool) -> u16 {
+    let u = uniform(seed, id, "body");
+    if bodies == 0 || never_scale {
+        return 0;
+    }
+    1 + ((u * f64::from(bodies)) as u16).min(bodies - 1)
 }
 
 /// The transform that fits a part mesh (bounds `mesh_lo..mesh_hi`) to its
@@ -264,15 +281,13 @@ pub struct Casting {
     agents: BTreeMap<u32, AgentCast>,
 }
 
-/// A skinned pose step an agent takes: (rig, cycle index, pose step).
-pub(crate) type PoseStep = (Arc<str>, usize, u32);
+/// A skinned pose step an agent takes: (rig, body, cycle index, pose step).
+pub(crate) type PoseStep = (Arc<str>, u16, usize, u32);
 
 /// What [`Casting::cast`] gives besides the casting.
 pub(crate) struct CastOutcome {
     /// Every agent cast.
     pub(crate) casting: Casting,
-    /// Every pose step a visible skinned agent takes in the shot's frames.
-    pub(crate) still_steps: BTreeSet<PoseStep>,
     /// What casting noticed but accepted (shot frames outside the cache).
     pub(crate) warnings: Vec<String>,
 }
@@ -280,8 +295,8 @@ pub(crate) struct CastOutcome {
 impl Casting {
     /// Casts every agent that appears in the shot's frames: reads the
     /// frames once (each agent's rig at its first appearance, whether it is
-    /// ever seated or on a no-scale cycle, the pose steps skinned agents
-    /// take), refuses a cycle an agent's rig lacks, then casts every agent.
+    /// ever seated or on a no-scale cycle), refuses a cycle an agent's rig
+    /// lacks, then casts every agent.
     pub(crate) fn cast(
         shot: &Shot,
         cache: &CacheReader,
@@ -293,8 +308,6 @@ impl Casting {
             never_scale: bool,
         }
         let mut seen: BTreeMap<u32, Seen> = BTreeMap::new();
-        // Poses by (rig, cycle, step): bounded by the rigs' cycles and steps, whatever the agent count.
-        let mut still_steps: BTreeSet<PoseStep> = BTreeSet::new();
         let mut outside: Vec<i32> = Vec::new();
         for f in shot.frames.iter() {
             let cf = shot.cache.cache_frame(f);
@@ -308,19 +321,7 @@ impl Casting {
                 let cycle = cache.cycles().get(a.cycle as usize).map(String::as_str).unwrap_or("");
                 let rig_name = cache.rigs().get(a.rig as usize).map(String::as_str).unwrap_or("");
                 // A cycle the agent's rig lacks would only fail when posed; say so now.
-                let missing = match rigs.get(rig_name) {
-                    Some(ShotRig::Skinned(rig)) => match rig.cycle_index(cycle) {
-                        Ok(c) => {
-                            if !a.hidden() {
-                                still_steps.insert((rig_name.into(), c, rig.step_of(c, a.cycle_frame)));
-                            }
-                            None
-                        }
-                        Err(e) => Some(e),
-                    },
-                    Some(rig) => rig.lacks_cycle(cycle),
-                    None => None,
-                };
+                let missing = rigs.get(rig_name).and_then(|rig| rig.lacks_cycle(cycle));
                 if let Some(e) = missing {
                     return Err(Error::invalid(cache.path(), format!("rig `{rig_name}`: {e}"))
                         .frame(f as i64)
@@ -400,6 +401,7 @@ impl Casting {
                         slots: slot_names,
                         schemes: &rig_ref.schemes,
                         height_jitter: rig_ref.height_jitter,
+                        bodies: rigs.skinned(rig_name).map_or(0, |r| r.body_count()),
                     };
                     Some(match delivered.get(rig_name) {
                         Some(parts) => Ok(cast_delivered(shot.seed, id, &rc, parts.clone(), s.never_scale)),
@@ -414,7 +416,7 @@ impl Casting {
             let cast = cast?;
             agents.insert(cast.id, cast);
         }
-        Ok(CastOutcome { casting: Casting { agents }, still_steps, warnings })
+        Ok(CastOutcome { casting: Casting { agents }, warnings })
     }
 
     /// Agent `id`'s cast (`None`: it is not in the shot's frames).

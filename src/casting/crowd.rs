@@ -26,6 +26,7 @@ use crate::casting::cast::{AgentCast, Casting};
 use crate::casting::dressing::{AgentDress, Dressing};
 use crate::casting::poses::{PoseLibrary, PosedSkins};
 use crate::casting::rigs::{ShotRig, ShotRigs};
+use crate::casting::timing::CycleTiming;
 use crate::casting::wardrobe::Wardrobes;
 use crate::error::{Error, Result};
 use crate::scene::dome::load_dome;
@@ -54,6 +55,8 @@ pub enum AgentPose {
     Skinned {
         /// World from rig space (position, heading, height scale).
         world_from_rig: Affine3A,
+        /// The agent's body (`casting::body`; 0 as modelled).
+        body: u16,
         /// Cycle index in the skinned rig.
         cycle: usize,
         /// Pose step of that cycle.
@@ -110,6 +113,8 @@ pub struct ShotCrowd<C = Rec709> {
     casting: Casting,
     dressing: Dressing,
     poses: PoseLibrary<C>,
+    /// The cycle frames agents play where their stride is not the cache's.
+    timing: CycleTiming,
     set: ShotSet,
     /// What loading noticed but accepted (weights renormalised, morph targets ignored).
     warnings: Vec<String>,
@@ -249,8 +254,10 @@ impl ShotCrowd {
         crate::casting::dressing::check_schemes(&shot, &rigs, &wardrobes, &mut assets)?;
         let dressing = Dressing::dress(&casting, &mut rigs, &wardrobes, &mut assets)?;
         let worn = dressing.worn_pieces(&casting);
+        let timing = CycleTiming::new(&shot, &cache, &casting, &rigs)?;
         let mut skins = PosedSkins::default();
-        skins.pose(&cast.still_steps, &worn, &rigs, &mut assets);
+        let still = crate::casting::motion::still_steps(&shot, &cache, &casting, &rigs, &timing)?;
+        skins.pose(&still, &worn, &rigs, &mut assets);
         let set = ShotSet::load(&shot, &mut assets, &mut warnings)?;
         let lights = LoadedLights::load(&shot, &mut assets)?;
         let gltf_camera = match &shot.camera.gltf {
@@ -261,7 +268,7 @@ impl ShotCrowd {
         // whether the shot is posed for a shutter or not.
         if let Some(shutter) = shutter {
             if rigs.any_skinned() {
-                let steps = crate::casting::motion::shutter_steps(&shot, &cache, &casting, &rigs, shutter)?;
+                let steps = crate::casting::motion::shutter_steps(&shot, &cache, &casting, &rigs, &timing, shutter)?;
                 skins.pose(&steps, &worn, &rigs, &mut assets);
             }
         }
@@ -287,6 +294,7 @@ impl ShotCrowd {
             casting,
             dressing,
             poses,
+            timing,
             set,
             warnings,
             gltf_camera,
@@ -319,6 +327,7 @@ impl ShotCrowd {
             casting,
             dressing,
             poses,
+            timing,
             set,
             warnings,
             gltf_camera,
@@ -326,7 +335,20 @@ impl ShotCrowd {
             wardrobe_files,
         } = self;
         let poses = poses.convert(convert);
-        ShotCrowd { shot, cache, rigs, casting, dressing, poses, set, warnings, gltf_camera, lights, wardrobe_files }
+        ShotCrowd {
+            shot,
+            cache,
+            rigs,
+            casting,
+            dressing,
+            poses,
+            timing,
+            set,
+            warnings,
+            gltf_camera,
+            lights,
+            wardrobe_files,
+        }
     }
 }
 
@@ -419,7 +441,12 @@ impl<C> ShotCrowd<C> {
         if self.cache.frames().binary_search(&cf).is_err() {
             return Ok(FrameBlock { frame: cf, agents: Vec::new() });
         }
-        self.cache.read_frame(cf)
+        self.timing.read(&self.cache, cf)
+    }
+
+    /// The cycle frames agents play where their stride is not the cache's.
+    pub(crate) fn timing(&self) -> &CycleTiming {
+        &self.timing
     }
 
     /// Only the cache frames the shot reads (they keep their cache numbers),
@@ -450,7 +477,11 @@ impl<C> ShotCrowd<C> {
     /// height scale (`None` for an agent that was not cast).
     pub(crate) fn agent_height(&self, id: u32) -> Option<f32> {
         let cast = self.casting.get(id)?;
-        Some(self.rigs.height(&cast.rig)? * cast.height_scale)
+        let height = match self.rigs.skinned(&cast.rig) {
+            Some(rig) => rig.body_height(cast.body),
+            None => self.rigs.height(&cast.rig)?,
+        };
+        Some(height * cast.height_scale)
     }
 
     /// Whether an agent record is rendered at all (not removed, hidden or on a culled cycle).
@@ -473,6 +504,7 @@ impl<C> ShotCrowd<C> {
                 let cycle = rig.cycle_index(self.cycle_name(a)).map_err(rig_err)?;
                 Ok(AgentPose::Skinned {
                     world_from_rig: world_from_agent,
+                    body: cast.body,
                     cycle,
                     step: rig.step_of(cycle, a.cycle_frame),
                 })
@@ -528,7 +560,7 @@ impl<C> ShotCrowd<C> {
                     }
                 }
             }
-            &AgentPose::Skinned { world_from_rig, cycle, step } => {
+            &AgentPose::Skinned { world_from_rig, body, cycle, step } => {
                 let Some(cast) = self.casting.get(id) else { return };
                 let Some(rig) = self.rigs.skinned(&cast.rig) else { return };
                 let Some(AgentDress::Skinned(pieces)) = self.dressing.get(id) else { return };
@@ -537,12 +569,12 @@ impl<C> ShotCrowd<C> {
                     match lod {
                         Lod::Full => {
                             // Every step the shot's frames (and shutter) take was posed at load.
-                            if let Some(mesh) = skins.mesh(&cast.rig, d.piece, cycle, step) {
+                            if let Some(mesh) = skins.mesh(&cast.rig, d.piece, body, cycle, step) {
                                 out.push(instance(mesh, d.material, world_from_rig, d.slot));
                             }
                         }
                         Lod::Proxy => {
-                            let Some(joints) = skins.joints(&cast.rig, cycle, step) else {
+                            let Some(joints) = skins.joints(&cast.rig, body, cycle, step) else {
                                 continue;
                             };
                             let piece = rig.piece(d.piece);
@@ -550,7 +582,9 @@ impl<C> ShotCrowd<C> {
                                 let Some((lo, hi)) = *b else { continue };
                                 let size = (hi - lo).max(Vec3::splat(1e-4));
                                 let box_from_cube = Affine3A::from_scale_rotation_translation(size, Quat::IDENTITY, lo);
-                                let world = world_from_rig * joints[piece.joint_nodes[j]] * box_from_cube;
+                                let node = piece.joint_nodes[j];
+                                let bone = if piece.proportioned { rig.bone(body, node) } else { Affine3A::IDENTITY };
+                                let world = world_from_rig * joints[node] * bone * box_from_cube;
                                 out.push(instance(self.dressing.proxy_mesh(), d.material, world, d.slot));
                             }
                         }
@@ -566,12 +600,16 @@ impl<C> ShotCrowd<C> {
         self.casting.get(id)?.part_name(part)
     }
 
-    /// The pose key a skinned agent plays at a frame: `<rig>/<cycle>/<step>of<steps>`.
+    /// The pose key a skinned agent plays at a frame: `<rig>[/body<b>]/<cycle>/<step>of<steps>`.
     pub(crate) fn pose_key(&self, a: &AgentSample) -> Option<String> {
         let cast = self.casting.get(a.id)?;
         let rig = self.rigs.skinned(&cast.rig)?;
         let cycle = rig.cycle_index(self.cycle_name(a)).ok()?;
-        Some(format!("{}/{}", cast.rig, rig.pose_name(cycle, rig.step_of(cycle, a.cycle_frame))))
+        let pose = rig.pose_name(cycle, rig.step_of(cycle, a.cycle_frame));
+        Some(match cast.body {
+            0 => format!("{}/{pose}", cast.rig),
+            b => format!("{}/body{b}/{pose}", cast.rig),
+        })
     }
 
     /// Every rendered agent at a shot frame, fully visible, at `lod(agent id)`.

@@ -5,6 +5,7 @@
 //! [`PoseLibrary`] (every mesh, and every skinned pose step still frames and
 //! the shutter take); and from them any frame's posed instances.
 
+pub(crate) mod body;
 pub(crate) mod cast;
 pub(crate) mod crowd;
 pub(crate) mod dressing;
@@ -15,6 +16,7 @@ pub(crate) mod rigs;
 pub mod shot_cache;
 pub mod skin;
 pub mod table;
+pub(crate) mod timing;
 pub mod wardrobe;
 pub(crate) mod wheels;
 

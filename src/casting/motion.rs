@@ -46,6 +46,7 @@ use crate::casting::cast::{Casting, PoseStep};
 use crate::casting::crowd::{cycle_name, AgentPose, ShotCrowd};
 use crate::casting::rigs::ShotRigs;
 use crate::casting::skin::SkinnedRig;
+use crate::casting::timing::CycleTiming;
 use crate::error::Result;
 use crate::scene::Camera;
 use crate::shot::Shot;
@@ -87,11 +88,11 @@ fn block_map(block: Option<FrameBlock>) -> HashMap<u32, AgentSample> {
 }
 
 impl Neighbours {
-    fn read(shot: &Shot, cache: &CacheReader, shot_frame: i32) -> Result<Neighbours> {
+    fn read(shot: &Shot, cache: &CacheReader, timing: &CycleTiming, shot_frame: i32) -> Result<Neighbours> {
         let cf = shot.cache.cache_frame(shot_frame);
         let read = |f: Option<i32>| -> Result<Option<FrameBlock>> {
             match f {
-                Some(f) if cache.frames().binary_search(&f).is_ok() => Ok(Some(cache.read_frame(f)?)),
+                Some(f) if cache.frames().binary_search(&f).is_ok() => Ok(Some(timing.read(cache, f)?)),
                 _ => Ok(None),
             }
         };
@@ -169,10 +170,10 @@ pub(crate) fn sample_at(
 /// (rig, cycle, step at open, step at close, blend weights): see [`skin_keys`].
 type SkinKeys = (Arc<str>, usize, u32, u32, [f32; 2]);
 
-/// The skinned character an agent plays, with its shared rig name.
-fn skinned_of<'a>(casting: &'a Casting, rigs: &'a ShotRigs, id: u32) -> Option<(&'a Arc<str>, &'a SkinnedRig)> {
-    let rig_name = &casting.get(id)?.rig;
-    Some((rig_name, rigs.skinned(rig_name)?))
+/// The skinned character an agent plays, with its shared rig name and its body.
+fn skinned_of<'a>(casting: &'a Casting, rigs: &'a ShotRigs, id: u32) -> Option<(&'a Arc<str>, &'a SkinnedRig, u16)> {
+    let cast = casting.get(id)?;
+    Some((&cast.rig, rigs.skinned(&cast.rig)?, cast.body))
 }
 
 /// A skinned agent's shutter keys: (cycle, step at open, step at close, the
@@ -237,18 +238,20 @@ impl MotionFrame {
     /// every rendered agent at shutter open and close.
     pub fn new<C>(crowd: &ShotCrowd<C>, frame: i32, shutter: [f32; 2]) -> Result<MotionFrame> {
         let block = crowd.agents_at(frame)?;
-        let near = Neighbours::read(crowd.shot(), crowd.cache(), frame)?;
+        let near = Neighbours::read(crowd.shot(), crowd.cache(), crowd.timing(), frame)?;
         let mut agents = Vec::with_capacity(block.agents.len());
         for a in block.agents.iter().filter(|a| crowd.renders(a)) {
             let length = cycle_length(crowd, a);
             let (prev, next) = (near.prev.get(&a.id), near.next.get(&a.id));
             let [s0, s1] = shutter.map(|s| sample_at(a, prev, next, s, length));
-            let keys = skinned_of(crowd.casting(), crowd.rigs(), a.id)
-                .and_then(|skinned| skin_keys(skinned, crowd.cycle_name(a), s0.cycle_frame, s1.cycle_frame));
+            let skinned = skinned_of(crowd.casting(), crowd.rigs(), a.id);
+            let keys = skinned.and_then(|(name, rig, body)| {
+                Some((body, skin_keys((name, rig), crowd.cycle_name(a), s0.cycle_frame, s1.cycle_frame)?))
+            });
             let motion = match keys {
-                Some((_, cycle, k0, k1, weight)) => AgentMotion {
-                    open: AgentPose::Skinned { world_from_rig: crowd.world_from_agent(&s0), cycle, step: k0 },
-                    close: AgentPose::Skinned { world_from_rig: crowd.world_from_agent(&s1), cycle, step: k1 },
+                Some((body, (_, cycle, k0, k1, weight))) => AgentMotion {
+                    open: AgentPose::Skinned { world_from_rig: crowd.world_from_agent(&s0), body, cycle, step: k0 },
+                    close: AgentPose::Skinned { world_from_rig: crowd.world_from_agent(&s1), body, cycle, step: k1 },
                     deform: (k0 != k1).then_some(weight),
                 },
                 None => AgentMotion { open: crowd.agent_pose(&s0)?, close: crowd.agent_pose(&s1)?, deform: None },
@@ -260,6 +263,35 @@ impl MotionFrame {
     }
 }
 
+/// Every pose step a visible skinned agent takes on the shot's still
+/// frames, at the cycle frames it plays: bounded by the rigs' bodies, cycles
+/// and steps, whatever the agent count.
+pub(crate) fn still_steps(
+    shot: &Shot,
+    cache: &CacheReader,
+    casting: &Casting,
+    rigs: &ShotRigs,
+    timing: &CycleTiming,
+) -> Result<BTreeSet<PoseStep>> {
+    let mut steps: BTreeSet<PoseStep> = BTreeSet::new();
+    if !rigs.any_skinned() {
+        return Ok(steps);
+    }
+    for f in shot.frames.iter() {
+        let cf = shot.cache.cache_frame(f);
+        if cache.frames().binary_search(&cf).is_err() {
+            continue;
+        }
+        for a in timing.read(cache, cf)?.agents.iter().filter(|a| !a.hidden()) {
+            let Some((name, rig, body)) = skinned_of(casting, rigs, a.id) else { continue };
+            if let Ok(cycle) = rig.cycle_index(cycle_name(cache, a)) {
+                steps.insert((name.clone(), body, cycle, rig.step_of(cycle, a.cycle_frame)));
+            }
+        }
+    }
+    Ok(steps)
+}
+
 /// Every skinned pose step that `shutter` needs over the shot's frames
 /// (its open and close keys for every visible skinned agent): what a crowd
 /// built for that shutter poses beside the still steps.
@@ -268,11 +300,12 @@ pub(crate) fn shutter_steps(
     cache: &CacheReader,
     casting: &Casting,
     rigs: &ShotRigs,
+    timing: &CycleTiming,
     shutter: [f32; 2],
 ) -> Result<BTreeSet<PoseStep>> {
     let mut needed: BTreeSet<PoseStep> = BTreeSet::new();
     for f in shot.frames.iter() {
-        for (_, open, close) in shutter_keys_at(shot, cache, casting, rigs, f, shutter)? {
+        for (_, open, close) in shutter_keys_at(shot, cache, casting, rigs, timing, f, shutter)? {
             needed.insert(open);
             needed.insert(close);
         }
@@ -290,6 +323,7 @@ pub(crate) fn shutter_keys_at(
     cache: &CacheReader,
     casting: &Casting,
     rigs: &ShotRigs,
+    timing: &CycleTiming,
     f: i32,
     shutter: [f32; 2],
 ) -> Result<Vec<(u32, PoseStep, PoseStep)>> {
@@ -297,17 +331,17 @@ pub(crate) fn shutter_keys_at(
     if cache.frames().binary_search(&cf).is_err() {
         return Ok(Vec::new());
     }
-    let block = cache.read_frame(cf)?;
-    let near = Neighbours::read(shot, cache, f)?;
+    let block = timing.read(cache, cf)?;
+    let near = Neighbours::read(shot, cache, timing, f)?;
     let mut keys = Vec::new();
     for a in block.agents.iter().filter(|a| !a.hidden()) {
-        let Some(skinned) = skinned_of(casting, rigs, a.id) else { continue };
+        let Some((name, rig, body)) = skinned_of(casting, rigs, a.id) else { continue };
         let length = length_of(shot, cache, casting, rigs, a);
         let (prev, next) = (near.prev.get(&a.id), near.next.get(&a.id));
         let [s0, s1] = shutter.map(|s| sample_at(a, prev, next, s, length));
-        if let Some((rig, cycle, k0, k1, _)) = skin_keys(skinned, cycle_name(cache, a), s0.cycle_frame, s1.cycle_frame)
-        {
-            keys.push((a.id, (rig.clone(), cycle, k0), (rig, cycle, k1)));
+        let keys_of = skin_keys((name, rig), cycle_name(cache, a), s0.cycle_frame, s1.cycle_frame);
+        if let Some((rig, cycle, k0, k1, _)) = keys_of {
+            keys.push((a.id, (rig.clone(), body, cycle, k0), (rig, body, cycle, k1)));
         }
     }
     Ok(keys)
@@ -318,9 +352,9 @@ pub fn moves(m: &MotionFrame) -> bool {
     let eq = |a: &AgentPose, b: &AgentPose| match (a, b) {
         (AgentPose::Slots(x), AgentPose::Slots(y)) => x == y,
         (
-            AgentPose::Skinned { world_from_rig: x, cycle: c, step: s },
-            AgentPose::Skinned { world_from_rig: y, cycle: d, step: t },
-        ) => x == y && c == d && s == t,
+            AgentPose::Skinned { world_from_rig: x, body: b, cycle: c, step: s },
+            AgentPose::Skinned { world_from_rig: y, body: e, cycle: d, step: t },
+        ) => x == y && b == e && c == d && s == t,
         _ => false,
     };
     m.agents.iter().any(|(_, a)| !eq(&a.open, &a.close))

@@ -19,9 +19,9 @@ use crate::shot::Colourspace;
 /// Posed geometry of skinned agents, one entry per pose step used.
 #[derive(Debug, Default)]
 pub struct PosedSkins {
-    /// (rig, piece, cycle, step) -> the posed mesh.
-    meshes: BTreeMap<(Arc<str>, usize, usize, u32), MeshId>,
-    /// `rig_from_node` of every rig node at each pose step (for proxy boxes).
+    /// (rig, piece, body, cycle, step) -> the posed mesh.
+    meshes: BTreeMap<(Arc<str>, usize, u16, usize, u32), MeshId>,
+    /// `rig_from_node` of every rig node at each pose step of each body (for proxy boxes).
     joints: BTreeMap<PoseStep, Vec<Affine3A>>,
 }
 
@@ -37,40 +37,44 @@ impl PosedSkins {
         rigs: &ShotRigs,
         assets: &mut AssetCache,
     ) {
-        for key @ (rig_name, cycle, step) in steps {
+        for key @ (rig_name, body, cycle, step) in steps {
             if self.joints.contains_key(key) {
                 continue;
             }
             let Some((rig_key, pieces)) = worn.get_key_value(&**rig_name) else { continue };
             let Some(rig) = rigs.skinned(rig_name) else { continue };
-            let joints = rig.step_joints(*cycle, *step);
+            let joints = rig.body_step_joints(*body, *cycle, *step);
+            let pose = match body {
+                0 => rig.pose_name(*cycle, *step),
+                b => format!("{}/body{b}", rig.pose_name(*cycle, *step)),
+            };
             for &piece in pieces {
-                let mesh = rig.pose_piece(piece, &joints, &rig.pose_name(*cycle, *step));
-                self.meshes.insert((rig_key.clone(), piece, *cycle, *step), assets.add_mesh(mesh));
+                let mesh = rig.pose_body_piece(*body, piece, &joints, &pose);
+                self.meshes.insert((rig_key.clone(), piece, *body, *cycle, *step), assets.add_mesh(mesh));
             }
-            self.joints.insert((rig_key.clone(), *cycle, *step), joints);
+            self.joints.insert((rig_key.clone(), *body, *cycle, *step), joints);
         }
     }
 
-    /// The mesh of `piece` of `rig` posed at (`cycle`, `step`).
-    pub(crate) fn mesh(&self, rig: &Arc<str>, piece: usize, cycle: usize, step: u32) -> Option<MeshId> {
-        self.meshes.get(&(rig.clone(), piece, cycle, step)).copied()
+    /// The mesh of `piece` of `rig` posed at (`cycle`, `step`) on body `body`.
+    pub(crate) fn mesh(&self, rig: &Arc<str>, piece: usize, body: u16, cycle: usize, step: u32) -> Option<MeshId> {
+        self.meshes.get(&(rig.clone(), piece, body, cycle, step)).copied()
     }
 
-    /// `rig_from_node` of every node of `rig` at (`cycle`, `step`).
-    pub(crate) fn joints(&self, rig: &Arc<str>, cycle: usize, step: u32) -> Option<&[Affine3A]> {
-        self.joints.get(&(rig.clone(), cycle, step)).map(Vec::as_slice)
+    /// `rig_from_node` of every node of `rig` at (`cycle`, `step`) on body `body`.
+    pub(crate) fn joints(&self, rig: &Arc<str>, body: u16, cycle: usize, step: u32) -> Option<&[Affine3A]> {
+        self.joints.get(&(rig.clone(), body, cycle, step)).map(Vec::as_slice)
     }
 
-    /// Every posed mesh: ((rig, piece, cycle, step), mesh), in key order.
-    pub(crate) fn meshes(&self) -> impl Iterator<Item = (&(Arc<str>, usize, usize, u32), MeshId)> {
+    /// Every posed mesh: ((rig, piece, body, cycle, step), mesh), in key order.
+    pub(crate) fn meshes(&self) -> impl Iterator<Item = (&(Arc<str>, usize, u16, usize, u32), MeshId)> {
         self.meshes.iter().map(|(k, &m)| (k, m))
     }
 
-    /// The first posed mesh of `piece` of `rig` (any cycle and step).
+    /// The first posed mesh of `piece` of `rig` (any body, cycle and step).
     pub(crate) fn first_mesh(&self, rig: &str, piece: usize) -> Option<MeshId> {
         self.meshes
-            .range((Arc::<str>::from(rig), piece, 0, 0)..)
+            .range((Arc::<str>::from(rig), piece, 0, 0, 0)..)
             .find(|(k, _)| *k.0 == *rig && k.1 == piece)
             .map(|(_, &m)| m)
     }

@@ -129,6 +129,26 @@ impl Hierarchy {
         }
         world
     }
+
+    /// [`Hierarchy::compose`] with every node's offset from its parent
+    /// scaled by the parent's `bone` (a body's proportions,
+    /// `casting::body`): a lengthened bone carries its children out with it
+    /// without stretching them.
+    pub(crate) fn compose_scaled(&self, local: &[Trs], bone: &[glam::Mat3]) -> Vec<Affine3A> {
+        let mut world = vec![Affine3A::IDENTITY; self.nodes.len()];
+        for &i in &self.order {
+            let mut trs = local.get(i).copied().unwrap_or(self.nodes[i].rest);
+            let parent = self.nodes[i].parent;
+            if let Some(b) = parent.and_then(|p| bone.get(p)) {
+                trs.translation = *b * trs.translation;
+            }
+            world[i] = match parent {
+                Some(p) => world[p] * trs.affine(),
+                None => trs.affine(),
+            };
+        }
+        world
+    }
 }
 
 /// Which node property a channel drives.

@@ -46,6 +46,14 @@ impl ShotRig {
         }
     }
 
+    /// Stride in metres of cycle `name` (`None` if the rig lacks it).
+    pub(crate) fn cycle_stride(&self, name: &str) -> Option<f32> {
+        match self {
+            ShotRig::Slots(rig) => rig.cycle(name).ok().map(|c| c.stride()),
+            ShotRig::Skinned(rig) => rig.cycle_timing(name).ok().map(|(stride, _)| stride),
+        }
+    }
+
     /// The skinned character, for a skinned rig.
     pub(crate) fn skinned(&self) -> Option<&SkinnedRig> {
         match self {
@@ -69,7 +77,18 @@ impl ShotRigs {
         let mut rigs = BTreeMap::new();
         for (name, r) in &shot.rigs {
             let rig = if is_character_rig(r)? {
-                ShotRig::Skinned(SkinnedRig::load_shot_rig(name, r, shot.frames.fps)?)
+                let mut rig = SkinnedRig::load_shot_rig(name, r, shot.frames.fps)?;
+                if let Some(p) = &r.proportions {
+                    rig.draw_bodies(name, p, shot.seed)?;
+                }
+                ShotRig::Skinned(rig)
+            } else if r.proportions.is_some() {
+                return Err(Error::invalid(
+                    &r.file,
+                    "is a slot rig: proportions are for skinned and rigid characters (a slot rig's parts are fitted \
+                     to its slots)",
+                )
+                .field(format!("rigs.{name}.proportions")));
             } else {
                 ShotRig::Slots(Rig::load(&r.file).map_err(|e| e.or_field(format!("rigs.{name}.file")))?)
             };

@@ -46,6 +46,7 @@ use glam::{Affine3A, Mat3, Mat4, Quat, Vec3};
 use gltf::accessor::{DataType, Dimensions};
 use rayon::prelude::*;
 
+use crate::casting::body::{self, Body};
 use crate::casting::rig::{Animated, Trs};
 use crate::casting::wheels;
 use crate::error::{Error, Result};
@@ -85,6 +86,9 @@ pub struct SkinPiece {
     /// Per skin joint: bounds, in joint space, of the vertices weighted
     /// mostly to that joint (`None` for joints that dominate no vertex).
     pub(crate) joint_boxes: Vec<Option<(Vec3, Vec3)>>,
+    /// Whether a body's proportions stretch it (false for props, which a
+    /// hand carries at their own size).
+    pub(crate) proportioned: bool,
 }
 
 /// A skinned mesh a wardrobe can choose: every primitive of one glTF mesh.
@@ -136,6 +140,8 @@ pub struct SkinnedRig {
     pose_step: Option<f32>,
     pose_error_max: f32,
     max_height_scale: f32,
+    /// Bodies 1 and up (`casting::body`); body 0, the rig as modelled, is not stored.
+    bodies: Vec<Body>,
     warnings: Vec<String>,
 }
 
@@ -273,6 +279,7 @@ impl SkinnedRig {
             pose_step: options.pose_step,
             pose_error_max: options.pose_error_max,
             max_height_scale: options.max_height_scale,
+            bodies: Vec::new(),
             warnings: Vec::new(),
         };
 
@@ -340,16 +347,7 @@ impl SkinnedRig {
         rig.delivered = delivered;
 
         // Ground and height from the rest pose of the delivered meshes.
-        let rest = rig.joints_at(&rig.animated.hierarchy.rest_pose());
-        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-        for (_, _, part) in &rig.delivered {
-            for &p in &rig.part_list[*part].pieces {
-                for v in rig.skin_positions(p, &rest) {
-                    lo = lo.min(v.y);
-                    hi = hi.max(v.y);
-                }
-            }
-        }
+        let (lo, hi) = rig.rest_span(0);
         if !(lo.is_finite() && hi > lo) {
             return Err(file.err(format!("the {} meshes have no height in the rest pose", rig.kind())));
         }
@@ -594,14 +592,15 @@ impl SkinnedRig {
             return Ok(i);
         }
         let label = format!("{}#{name}", file.path.display());
-        let i = self.rigid_pieces(file, gmesh, node, Affine3A::IDENTITY, &label)?;
+        let i = self.rigid_pieces(file, gmesh, node, Affine3A::IDENTITY, &label, true)?;
         self.parts.insert(key, i);
         Ok(i)
     }
 
     /// Every primitive of `gmesh` as a piece bound wholly to node `node`
     /// (one influence of weight 1), its vertices in that node's space by
-    /// `bind`: a new part, whose index is returned.
+    /// `bind`: a new part, whose index is returned. `proportioned`: whether
+    /// a body's proportions stretch it (a prop keeps its size).
     fn rigid_pieces(
         &mut self,
         file: &GltfFile,
@@ -609,6 +608,7 @@ impl SkinnedRig {
         node: usize,
         bind: Affine3A,
         label: &str,
+        proportioned: bool,
     ) -> Result<usize> {
         let single = gmesh.primitives().len() == 1;
         let mut pieces = Vec::new();
@@ -634,6 +634,7 @@ impl SkinnedRig {
                 file: file.path.clone(),
                 material: prim.material().index(),
                 joint_boxes: vec![bounds],
+                proportioned,
             });
             pieces.push(self.pieces.len() - 1);
         }
@@ -670,7 +671,7 @@ impl SkinnedRig {
         let gltf = GltfFile::open(file)?;
         let gmesh = gltf.mesh_by_name(mesh)?;
         let label = format!("{}#{mesh}@{joint}", gltf.path.display());
-        let i = self.rigid_pieces(&gltf, &gmesh, node, unscale * joint_from_prop, &label)?;
+        let i = self.rigid_pieces(&gltf, &gmesh, node, unscale * joint_from_prop, &label, false)?;
         self.parts.insert(key, i);
         Ok(i)
     }
@@ -833,6 +834,7 @@ impl SkinnedRig {
             file: file.path.clone(),
             material: prim.material().index(),
             joint_boxes,
+            proportioned: true,
         })
     }
 
@@ -889,6 +891,95 @@ impl SkinnedRig {
     /// `rig_from_node` of every node for local transforms `local` (before root-motion removal).
     fn joints_at(&self, local: &[Trs]) -> Vec<Affine3A> {
         self.animated.hierarchy.compose(local).into_iter().map(|m| self.rig_from_file * m).collect()
+    }
+
+    /// [`Self::joints_at`] on body `body`: each node's offset from its
+    /// parent scaled by the parent's bone. Body 0 is `joints_at` itself.
+    fn body_joints_at(&self, body: u16, local: &[Trs]) -> Vec<Affine3A> {
+        let Some(b) = self.body(body) else { return self.joints_at(local) };
+        self.animated.hierarchy.compose_scaled(local, &b.bone).into_iter().map(|m| self.rig_from_file * m).collect()
+    }
+
+    /// [`Self::body_joints_at`] lifted so the lowest point of the file's own
+    /// meshes is where the modelled body's is in the same pose: longer legs
+    /// stand on the ground, not in it, at every step of a walk.
+    fn grounded_joints_at(&self, body: u16, local: &[Trs]) -> Vec<Affine3A> {
+        let mut joints = self.body_joints_at(body, local);
+        if body == 0 {
+            return joints;
+        }
+        let (modelled, _) = self.span_at(0, &self.joints_at(local));
+        let (lowest, _) = self.span_at(body, &joints);
+        let lift = modelled - lowest;
+        if lift.is_finite() {
+            let up = Affine3A::from_translation(Vec3::new(0.0, lift, 0.0));
+            for j in &mut joints {
+                *j = up * *j;
+            }
+        }
+        joints
+    }
+
+    /// Body `body` (`None` for body 0, the rig as modelled, or past the bodies).
+    pub(crate) fn body(&self, body: u16) -> Option<&Body> {
+        self.bodies.get(usize::from(body).checked_sub(1)?)
+    }
+
+    /// How many bodies the rig's agents draw from (0: every agent has the modelled body).
+    pub fn body_count(&self) -> u16 {
+        self.bodies.len() as u16
+    }
+
+    /// The stride factor of body `body` (1 for the modelled body).
+    pub fn body_stride(&self, body: u16) -> f32 {
+        self.body(body).map_or(1.0, |b| b.stride)
+    }
+
+    /// Node `node`'s bone scale on body `body`, as a transform of the node's frame.
+    pub(crate) fn bone(&self, body: u16, node: usize) -> Affine3A {
+        self.body(body).map_or(Affine3A::IDENTITY, |b| Affine3A::from_mat3(b.bone[node]))
+    }
+
+    /// The lowest and highest rig-space Y of the file's own meshes in the
+    /// rest pose of body `body` (infinite when it has none).
+    fn rest_span(&self, body: u16) -> (f32, f32) {
+        self.span_at(body, &self.body_joints_at(body, &self.animated.hierarchy.rest_pose()))
+    }
+
+    /// The lowest and highest rig-space Y of the file's own meshes posed by
+    /// `joints` of body `body` (infinite when it has none).
+    fn span_at(&self, body: u16, joints: &[Affine3A]) -> (f32, f32) {
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for (_, _, part) in &self.delivered {
+            for &p in &self.part_list[*part].pieces {
+                let skin = self.skin_matrices(body, p, joints);
+                for (v, inf) in self.pieces[p].mesh.positions.iter().zip(&self.pieces[p].influences) {
+                    let y = Self::blend(&skin, inf).transform_point3(*v).y;
+                    lo = lo.min(y);
+                    hi = hi.max(y);
+                }
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Draws the rig's bodies for `[rigs.NAME.proportions]` with the shot's
+    /// seed and measures each one's standing height.
+    pub(crate) fn draw_bodies(&mut self, name: &str, spec: &crate::shot::Proportions, seed: u64) -> Result<()> {
+        self.bodies = body::draw(&self.path, name, spec, seed, &self.animated.hierarchy)
+            .map_err(|e| e.field_prefix(&format!("rigs.{name}")))?;
+        for b in 1..=self.body_count() {
+            let (lo, hi) = self.rest_span(b);
+            if let Some(body) = self.bodies.get_mut(usize::from(b) - 1) {
+                body.height = if hi > lo { hi - lo } else { self.height };
+            }
+        }
+        Ok(())
+    }
+
+    /// Standing height in metres of body `body` (rest pose, before height jitter).
+    pub fn body_height(&self, body: u16) -> f32 {
+        self.body(body).map_or(self.height, |b| b.height)
     }
 
     /// The distance a rigid rig's wheels roll over clip `clip`
@@ -1055,9 +1146,14 @@ impl SkinnedRig {
     /// `rig_from_node` for every node at time `t` of clip `clip`, root
     /// motion removed.
     fn clip_joints(&self, clip: usize, t: f32) -> Vec<Affine3A> {
+        self.body_clip_joints(0, clip, t)
+    }
+
+    /// [`Self::clip_joints`] on body `body`.
+    fn body_clip_joints(&self, body: u16, clip: usize, t: f32) -> Vec<Affine3A> {
         let mut local = self.animated.hierarchy.rest_pose();
         self.animated.clips[clip].apply(t, &mut local);
-        let mut joints = self.joints_at(&local);
+        let mut joints = self.grounded_joints_at(body, &local);
         if let Some(root) = self.root {
             let o = joints[root].translation;
             let strip = Affine3A::from_translation(Vec3::new(-o.x, 0.0, -o.z));
@@ -1070,14 +1166,26 @@ impl SkinnedRig {
 
     /// `rig_from_node` for every node at a pose step.
     pub fn step_joints(&self, cycle: usize, step: u32) -> Vec<Affine3A> {
-        let c = &self.cycles[cycle];
-        self.clip_joints(c.clip, self.clip_time(c.clip, c.steps, step as f32))
+        self.body_step_joints(0, cycle, step)
     }
 
-    /// Skin matrices of a piece for node transforms `joints`.
-    fn skin_matrices(&self, piece: usize, joints: &[Affine3A]) -> Vec<Affine3A> {
+    /// [`Self::step_joints`] on body `body`.
+    pub fn body_step_joints(&self, body: u16, cycle: usize, step: u32) -> Vec<Affine3A> {
+        let c = &self.cycles[cycle];
+        self.body_clip_joints(body, c.clip, self.clip_time(c.clip, c.steps, step as f32))
+    }
+
+    /// Skin matrices of a piece for node transforms `joints` of body `body`
+    /// (a proportioned piece's joints stretched by their bones).
+    fn skin_matrices(&self, body: u16, piece: usize, joints: &[Affine3A]) -> Vec<Affine3A> {
         let p = &self.pieces[piece];
-        p.joint_nodes.iter().zip(&p.inverse_bind).map(|(&n, ibm)| joints[n] * *ibm).collect()
+        let bones = self.body(body).filter(|_| p.proportioned);
+        (p.joint_nodes.iter().zip(&p.inverse_bind))
+            .map(|(&n, ibm)| match bones {
+                Some(b) => joints[n] * Affine3A::from_mat3(b.bone[n]) * *ibm,
+                None => joints[n] * *ibm,
+            })
+            .collect()
     }
 
     /// Blended matrix of one vertex.
@@ -1092,7 +1200,7 @@ impl SkinnedRig {
     }
 
     fn skin_positions(&self, piece: usize, joints: &[Affine3A]) -> Vec<Vec3> {
-        let skin = self.skin_matrices(piece, joints);
+        let skin = self.skin_matrices(0, piece, joints);
         let p = &self.pieces[piece];
         p.mesh
             .positions
@@ -1105,7 +1213,12 @@ impl SkinnedRig {
     /// A piece posed by node transforms `joints`: positions blended,
     /// normals by the inverse transpose. Named `<piece>@<pose>`.
     pub fn pose_piece(&self, piece: usize, joints: &[Affine3A], pose: &str) -> Mesh {
-        let skin = self.skin_matrices(piece, joints);
+        self.pose_body_piece(0, piece, joints, pose)
+    }
+
+    /// [`Self::pose_piece`] on body `body`, `joints` from [`Self::body_step_joints`].
+    pub fn pose_body_piece(&self, body: u16, piece: usize, joints: &[Affine3A], pose: &str) -> Mesh {
+        let skin = self.skin_matrices(body, piece, joints);
         let p = &self.pieces[piece];
         let mut out = Mesh {
             name: format!("{}@{pose}", p.mesh.name),

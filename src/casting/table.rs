@@ -218,7 +218,7 @@ fn skin_stats(crowd: &ShotCrowd) -> Option<SkinStats> {
         |rig: &str, piece: usize| skins.first_mesh(rig, piece).map_or(0, |m| lib.meshes[m as usize].bytes());
     let mut per_agent = 0;
     let mut used: BTreeMap<(String, usize), BTreeSet<usize>> = BTreeMap::new();
-    for ((rig, piece, cycle, _), _) in skins.meshes() {
+    for ((rig, piece, _, cycle, _), _) in skins.meshes() {
         used.entry((rig.to_string(), *cycle)).or_default().insert(*piece);
     }
     for &(id, parts) in &skinned {

@@ -133,12 +133,12 @@ impl RenderFloor {
         };
         let mut mesh_bytes: u64 = lib.meshes.iter().map(|m| m.bytes() as u64).sum();
         let (mut triangles, mut deform_triangles) = (fixed_tris, 0u64);
-        let mut shutter_poses: BTreeSet<(Arc<str>, usize, u32)> = BTreeSet::new();
+        let mut shutter_poses: BTreeSet<(Arc<str>, u16, usize, u32)> = BTreeSet::new();
         let shot = crowd.shot();
         for f in shot.frames.iter() {
-            // (rig, piece, cycle, step) traced, and deforming (.., open step, close step).
-            let mut traced: BTreeSet<(Arc<str>, usize, usize, u32)> = BTreeSet::new();
-            let mut deform: BTreeSet<(Arc<str>, usize, usize, u32, u32)> = BTreeSet::new();
+            // (rig, piece, body, cycle, step) traced, and deforming (.., open step, close step).
+            let mut traced: BTreeSet<(Arc<str>, usize, u16, usize, u32)> = BTreeSet::new();
+            let mut deform: BTreeSet<(Arc<str>, usize, u16, usize, u32, u32)> = BTreeSet::new();
             match shutter {
                 None => {
                     let Ok(block) = crowd.agents_at(f) else { continue };
@@ -147,9 +147,9 @@ impl RenderFloor {
                         if crowd.rigs().skinned(&cast.rig).is_none() {
                             continue;
                         }
-                        if let Ok(AgentPose::Skinned { cycle, step, .. }) = crowd.agent_pose(a) {
+                        if let Ok(AgentPose::Skinned { body, cycle, step, .. }) = crowd.agent_pose(a) {
                             for p in pieces_of(a.id) {
-                                traced.insert((cast.rig.clone(), p, cycle, step));
+                                traced.insert((cast.rig.clone(), p, body, cycle, step));
                             }
                         }
                     }
@@ -160,20 +160,21 @@ impl RenderFloor {
                         crowd.cache(),
                         crowd.casting(),
                         crowd.rigs(),
+                        crowd.timing(),
                         f,
                         s,
                     )?;
-                    for (id, (rig, cycle, k0), (_, _, k1)) in keys {
+                    for (id, (rig, body, cycle, k0), (_, _, _, k1)) in keys {
                         // Every step is posed (the library); only full agents trace theirs.
-                        shutter_poses.insert((rig.clone(), cycle, k0));
-                        shutter_poses.insert((rig.clone(), cycle, k1));
+                        shutter_poses.insert((rig.clone(), body, cycle, k0));
+                        shutter_poses.insert((rig.clone(), body, cycle, k1));
                         if !full(id, f) {
                             continue;
                         }
                         for p in pieces_of(id) {
-                            traced.insert((rig.clone(), p, cycle, k0));
+                            traced.insert((rig.clone(), p, body, cycle, k0));
                             if k0 != k1 {
-                                deform.insert((rig.clone(), p, cycle, k0, k1));
+                                deform.insert((rig.clone(), p, body, cycle, k0, k1));
                             }
                         }
                     }
@@ -187,9 +188,9 @@ impl RenderFloor {
             }
         }
         // A shutter's steps not posed yet: every worn piece of its rig is posed at each.
-        for (rig, cycle, step) in &shutter_poses {
+        for (rig, body, cycle, step) in &shutter_poses {
             for &p in worn.get(rig).into_iter().flatten() {
-                if skins.mesh(rig, p, *cycle, *step).is_none() {
+                if skins.mesh(rig, p, *body, *cycle, *step).is_none() {
                     mesh_bytes += piece(rig, p).map_or(0, |m| m.bytes() as u64);
                 }
             }

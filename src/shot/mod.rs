@@ -193,7 +193,47 @@ pub struct RigRef {
     pub(crate) kind: Option<RigKind>,
     /// Options of a skinned or rigid character (defaults for slot rigs, which ignore them).
     pub skin: SkinOptions,
+    /// Per-agent body proportions of a skinned or rigid character (`None`: every agent's body as modelled).
+    pub proportions: Option<Proportions>,
 }
+
+/// `[rigs.NAME.proportions]`: seeded limb length and girth per joint
+/// group, drawn for a fixed number of bodies the rig's agents share
+/// (docs/wardrobes.md, "Body proportions").
+#[derive(Debug, Clone, PartialEq)]
+pub struct Proportions {
+    /// How many bodies are drawn; each agent plays one (bodies share pose steps, so memory grows with this, not with agents).
+    pub bodies: u16,
+    /// Joints kept uniform, with every joint below them (the head rule).
+    pub head: Vec<String>,
+    /// The group whose length sets the stride (`None`: strides as modelled).
+    pub legs: Option<String>,
+    /// Joint groups by name.
+    pub groups: BTreeMap<String, JointGroup>,
+}
+
+/// One joint group of [`Proportions`]: one draw per body for all its joints.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointGroup {
+    /// The joints (named nodes of the rig file).
+    pub joints: Vec<String>,
+    /// Bone length drawn from 1 +/- this.
+    pub length: f32,
+    /// Thickness across the bone drawn from 1 +/- this.
+    pub girth: f32,
+}
+
+impl Proportions {
+    /// The largest length factor any body can draw (1 + the largest `length`).
+    pub(crate) fn max_length(&self) -> f32 {
+        1.0 + self.groups.values().map(|g| g.length).fold(0.0, f32::max)
+    }
+}
+
+/// Bodies a rig draws unless `bodies` says otherwise.
+pub const DEFAULT_BODIES: u16 = 8;
+/// The most bodies a rig may draw (each is posed at every step its agents take).
+pub const MAX_BODIES: u16 = 64;
 
 /// What kind of character a rig file is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -589,6 +629,88 @@ struct RigFile {
     pose_step: Option<Spanned<f32>>,
     pose_error_max: Option<Spanned<f32>>,
     slots: Option<Vec<String>>,
+    proportions: Option<Spanned<ProportionsFile>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ProportionsFile {
+    bodies: Option<i64>,
+    head: Option<Vec<String>>,
+    legs: Option<String>,
+    #[serde(default)]
+    groups: BTreeMap<String, JointGroupFile>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct JointGroupFile {
+    joints: Vec<String>,
+    #[serde(default)]
+    length: f32,
+    #[serde(default)]
+    girth: f32,
+}
+
+impl ProportionsFile {
+    /// `[rigs.NAME.proportions]` -> checked proportions (joint names are checked against the file when the rig loads).
+    fn check(&self, name: &str, span: std::ops::Range<usize>, cx: &Context) -> Result<Proportions> {
+        let key = |k: &str| format!("rigs.{name}.proportions.{k}");
+        let bodies = self.bodies.unwrap_or(DEFAULT_BODIES as i64);
+        if !(1..=MAX_BODIES as i64).contains(&bodies) {
+            return Err(cx.at(span, &key("bodies"), format!("must be 1 to {MAX_BODIES}, got {bodies}")));
+        }
+        let Some(head) = self.head.clone() else {
+            return Err(cx.at(
+                span,
+                &key("head"),
+                "give the head's joints, which proportions never stretch (`head = []` for a character without one)"
+                    .into(),
+            ));
+        };
+        if self.groups.is_empty() {
+            return Err(cx.at(span, &key("groups"), "give at least one joint group".into()));
+        }
+        let mut groups = BTreeMap::new();
+        let mut seen: BTreeMap<&str, &str> = BTreeMap::new();
+        for (g, group) in &self.groups {
+            if group.joints.is_empty() {
+                return Err(cx.at(span.clone(), &key(&format!("groups.{g}.joints")), "give at least one joint".into()));
+            }
+            for (f, v) in [("length", group.length), ("girth", group.girth)] {
+                if !(0.0..0.5).contains(&v) {
+                    return Err(cx.at(
+                        span.clone(),
+                        &key(&format!("groups.{g}.{f}")),
+                        format!("must be a fraction in [0, 0.5), got {v}"),
+                    ));
+                }
+            }
+            for (i, j) in group.joints.iter().enumerate() {
+                if let Some(other) = seen.insert(j, g) {
+                    return Err(cx.at(
+                        span.clone(),
+                        &key(&format!("groups.{g}.joints[{i}]")),
+                        format!("joint `{j}` is already in group `{other}`: a joint takes one group's proportions"),
+                    ));
+                }
+            }
+            groups.insert(
+                g.clone(),
+                JointGroup { joints: group.joints.clone(), length: group.length, girth: group.girth },
+            );
+        }
+        if let Some(legs) = &self.legs {
+            if !groups.contains_key(legs) {
+                return Err(cx.at(
+                    span,
+                    &key("legs"),
+                    format!("names no group (groups: {})", groups.keys().cloned().collect::<Vec<_>>().join(", ")),
+                ));
+            }
+        }
+        Ok(Proportions { bodies: bodies as u16, head, legs: self.legs.clone(), groups })
+    }
 }
 
 impl RigFile {
@@ -771,6 +893,18 @@ impl RigFile {
         if rig.slots.as_ref().is_some_and(|s| s.is_empty()) {
             return Err(cx.at(rig.file.span(), &format!("rigs.{name}.slots"), "give at least one slot".into()));
         }
+        let proportions = match &rig.proportions {
+            Some(p) if rig.kind == Some(RigKind::Slots) => {
+                return Err(cx.at(
+                    p.span(),
+                    &format!("rigs.{name}.proportions"),
+                    "proportions are for skinned and rigid characters; a slot rig's parts are fitted to its slots"
+                        .into(),
+                ))
+            }
+            Some(p) => Some(p.get_ref().check(name, p.span(), cx)?),
+            None => None,
+        };
         Ok(RigRef {
             file: cx.existing(&rig.file, &format!("rigs.{name}.file"))?,
             schemes: rig.schemes.clone(),
@@ -786,9 +920,11 @@ impl RigFile {
                 strides: rig.strides.clone(),
                 pose_step,
                 pose_error_max,
-                max_height_scale: 1.0 + jitter,
+                // The tallest agent: the largest height scale on the longest body.
+                max_height_scale: (1.0 + jitter) * proportions.as_ref().map_or(1.0, Proportions::max_length),
                 slots: rig.slots.clone(),
             },
+            proportions,
         })
     }
 }

@@ -147,6 +147,7 @@ impl RawRig {
                     height_jitter: 0.0,
                     kind: None,
                     skin: SkinOptions::default(),
+                    proportions: None,
                 })
             }
             RawRig::Table(t) => t,
@@ -184,6 +185,7 @@ impl RawRig {
                 strides: t.strides.clone(),
                 ..d
             },
+            proportions: None,
         })
     }
 }
