@@ -442,3 +442,50 @@ fn bad_proportions_are_refused_naming_the_key() {
         assert!(!err.contains("panicked"), "{err}");
     }
 }
+
+#[test]
+fn a_lineup_of_bodies_renders() {
+    // Seven walkers side by side facing the camera, each on its own body:
+    // kept for looking at in target/tmp/proportions_lineup.png.
+    let dir = common::tempdir().unwrap();
+    let mut csv = String::from("frame,id,x,y,z,heading,rig,cycle,cycle_frame,flags\n");
+    for f in 1..=FRAMES {
+        for id in 1..=7u32 {
+            let x = (id as f32 - 4.0) * 0.75;
+            csv.push_str(&format!("{f},{id},{x:?},0,0,0,walker,WalkA,{:?},\n", (f as f32 * 0.5 + id as f32 * 4.0)));
+        }
+    }
+    let spread = PROPORTIONS
+        .replace("bodies = 4", "bodies = 64")
+        .replace("length = 0.12", "length = 0.2")
+        .replace("girth = 0.15", "girth = 0.3")
+        .replace("girth = 0.12", "girth = 0.3");
+    let shot = walker_shot(dir.path(), &csv, &spread);
+    let text = std::fs::read_to_string(&shot)
+        .unwrap()
+        .replace("position = [0.0, 1.2, -6.0]", "position = [0.0, 1.1, 6.5]")
+        .replace("resolution = [32, 18]", "resolution = [480, 200]");
+    std::fs::write(&shot, text).unwrap();
+    let crowd = ShotCrowd::load(&shot).unwrap();
+    let bodies: std::collections::BTreeSet<u16> = (1..=7).map(|id| crowd.cast(id).unwrap().body).collect();
+    assert!(bodies.len() >= 5, "most of the seven on bodies of their own: {bodies:?}");
+    let out = dir.path().join("renders");
+    let args = ["render", shot.to_str().unwrap(), "--layer", "full", "--frames", "10", "--png", "--spp", "8"];
+    let (code, stdout, err) = common::run(&[&args[..], &["--out", out.to_str().unwrap()]].concat());
+    assert_eq!(code, 0, "{stdout}\n{err}");
+    let png = std::fs::read_dir(out.join("full"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|e| e == "png"));
+    let png = png.expect("a PNG preview");
+    let img = image::open(&png).unwrap().to_rgb8();
+    // The walkers cover a good part of the frame.
+    let exr = png.with_extension("exr");
+    let (film, _) = throng::render::exr::read_layer(&exr).unwrap();
+    let ids = &film.agent_id;
+    let covered = ids.iter().filter(|&&id| id != 0).count() as f32 / ids.len() as f32;
+    assert!(covered > 0.1, "walkers cover {covered} of the frame");
+    assert_eq!((img.width(), img.height()), (480, 200));
+    std::fs::copy(&png, Path::new(env!("CARGO_TARGET_TMPDIR")).join("proportions_lineup.png")).unwrap();
+}

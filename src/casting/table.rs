@@ -97,6 +97,19 @@ pub struct SkinStats {
     pub worst_quantisation_error_m: f32,
     /// Per clip played: its pose step and measured error.
     pub clips: Vec<ClipPoseStats>,
+    /// Per rig with body proportions: its bodies and how many agents play each.
+    pub bodies: Vec<RigBodies>,
+}
+
+/// The bodies of one rig with proportions (docs/wardrobes.md, "Body proportions").
+#[derive(Debug, Serialize)]
+pub struct RigBodies {
+    /// Rig.
+    pub rig: String,
+    /// Agents per body: index 0 is the modelled body (seated and no-scale agents).
+    pub agents: Vec<usize>,
+    /// Stride factor of each body (the `legs` group's length), index 0 the modelled body's 1.
+    pub strides: Vec<f32>,
 }
 
 /// The pose step of one clip of a skinned rig and the error it costs.
@@ -248,6 +261,19 @@ fn skin_stats(crowd: &ShotCrowd) -> Option<SkinStats> {
     let rigid_agents = (skinned.iter())
         .filter(|(id, _)| crowd.cast(*id).and_then(|c| crowd.rigs().skinned(&c.rig)).is_some_and(|r| r.is_rigid()))
         .count();
+    let bodies = (crowd.rigs().iter())
+        .filter_map(|(name, r)| Some((name, r.skinned().filter(|s| s.body_count() > 0)?)))
+        .map(|(name, rig)| {
+            let mut agents = vec![0; rig.body_count() as usize + 1];
+            for c in crowd.casting().iter().filter(|c| &*c.rig == name) {
+                if let Some(n) = agents.get_mut(c.body as usize) {
+                    *n += 1;
+                }
+            }
+            let strides = (0..=rig.body_count()).map(|b| rig.body_stride(b)).collect();
+            RigBodies { rig: name.to_string(), agents, strides }
+        })
+        .collect();
     Some(SkinStats {
         agents: skinned.len(),
         rigid_agents,
@@ -257,6 +283,7 @@ fn skin_stats(crowd: &ShotCrowd) -> Option<SkinStats> {
         posed_per_agent_bytes: per_agent,
         worst_quantisation_error_m: worst,
         clips,
+        bodies,
     })
 }
 
@@ -283,6 +310,18 @@ pub fn format_stats(s: &CastStats) -> String {
         let _ = writeln!(o, "skinned agents       {}", k.agents - k.rigid_agents);
         if k.rigid_agents > 0 {
             let _ = writeln!(o, "rigid agents         {}", k.rigid_agents);
+        }
+        for b in &k.bodies {
+            let counts: Vec<String> = b.agents.iter().skip(1).map(usize::to_string).collect();
+            let (lo, hi) = b.strides[1..].iter().fold((f32::INFINITY, 0.0f32), |(l, h), &s| (l.min(s), h.max(s)));
+            let _ = writeln!(
+                o,
+                "bodies               {} {}: agents {} (+{} as modelled), strides x{lo:.3}-{hi:.3}",
+                b.rig,
+                b.agents.len() - 1,
+                counts.join("/"),
+                b.agents[0]
+            );
         }
         let _ =
             writeln!(o, "unique poses         {}  ({} posed meshes, one BLAS each)", k.unique_poses, k.posed_meshes);
