@@ -128,7 +128,13 @@ pub(crate) fn cycle_length<C>(crowd: &ShotCrowd<C>, a: &AgentSample) -> Option<f
 }
 
 /// [`cycle_length`] from the stages it reads.
-fn length_of(shot: &Shot, cache: &CacheReader, casting: &Casting, rigs: &ShotRigs, a: &AgentSample) -> Option<f32> {
+pub(crate) fn length_of(
+    shot: &Shot,
+    cache: &CacheReader,
+    casting: &Casting,
+    rigs: &ShotRigs,
+    a: &AgentSample,
+) -> Option<f32> {
     let rig = rigs.get(&casting.get(a.id)?.rig)?;
     rig.cycle_frames(cycle_name(cache, a), shot.frames.fps)
 }

@@ -19,7 +19,7 @@ use std::collections::{BTreeMap, HashMap};
 use crate::cache::{CacheReader, FrameBlock};
 use crate::casting::cast::Casting;
 use crate::casting::crowd::cycle_name;
-use crate::casting::motion::cycle_delta;
+use crate::casting::motion::{cycle_delta, length_of};
 use crate::casting::rigs::ShotRigs;
 use crate::error::Result;
 use crate::shot::Shot;
@@ -67,7 +67,7 @@ impl CycleTiming {
                 let rig = casting.get(a.id).and_then(|c| rigs.get(&c.rig));
                 let name = cycle_name(cache, a);
                 let walks = rig.and_then(|r| r.cycle_stride(name)).is_some_and(|s| s > 0.0);
-                let length = rig.and_then(|r| r.cycle_frames(name, shot.frames.fps)).filter(|l| *l > 0.0);
+                let length = length_of(shot, cache, casting, rigs, a).filter(|l| *l > 0.0);
                 let now = match last.get(&a.id) {
                     Some(&(f, cycle, raw, was)) if walks && Some(f) == previous && cycle == a.cycle => {
                         let advanced = was + cycle_delta(raw, a.cycle_frame, length) / k;
