@@ -26,7 +26,7 @@ const RR_START: u32 = 3;
 /// Sampler dimensions used per bounce (light point 2, lobe 1, direction 2,
 /// roulette 1, light pick 1, glass-or-not pick 1).
 const DIMS_PER_BOUNCE: u32 = 8;
-/// The extra stream (`Sampler::extra_light`) that picks the light group at
+/// The extra stream (`Sampler::extra_pick`) that picks the light group at
 /// vertices after the camera's; past any group index.
 const GROUP_PICK_STREAM: u32 = 7;
 /// Pixel filter: a radially truncated Gaussian, importance-sampled exactly.
@@ -893,7 +893,7 @@ impl<'a> Integrator<'a> {
             let (first, count) = if camera || groups.len() < 2 {
                 (0, groups.len())
             } else {
-                let u = sampler.extra_light(GROUP_PICK_STREAM, depth).0;
+                let u = sampler.extra_pick(GROUP_PICK_STREAM, depth);
                 (((u * groups.len() as f32) as usize).min(groups.len() - 1), 1)
             };
             let group_pick = if count == groups.len() { 1.0 } else { 1.0 / groups.len() as f32 };
@@ -908,7 +908,9 @@ impl<'a> Integrator<'a> {
                     sampler.set_dimension(base);
                     (u_pick, sampler.next_2d())
                 } else {
-                    sampler.extra_light(group as u32, depth)
+                    let u_pick =
+                        if self.lights.needs_pick(group) { sampler.extra_pick(group as u32, depth) } else { 0.0 };
+                    (u_pick, sampler.extra_light(group as u32, depth))
                 };
                 let Some(ls) = self.lights.sample(group, surface.p, u_pick, u_light, lookup) else { continue };
                 if ls.wi.dot(surface.ng) <= 0.0 {

@@ -162,14 +162,20 @@ impl Sampler {
         self.point_2d(mix32(self.pixel_key ^ LENS_SALT))
     }
 
-    /// The pick and 2D point of light group `group`'s shadow ray at bounce
-    /// `depth`, for every group after a scene's first: a stream of its own
-    /// per (group, bounce), like [`Sampler::lens`], so scenes with one group
+    /// The 2D point of light group `group`'s shadow ray at bounce `depth`,
+    /// for every group after a scene's first: a stream of its own per
+    /// (group, bounce), like [`Sampler::lens`], so scenes with one group
     /// keep their bits; each is stratified over a pixel's samples.
-    pub(crate) fn extra_light(&self, group: u32, depth: u32) -> (f32, Vec2) {
-        let seed = mix32(self.pixel_key ^ EXTRA_LIGHT_SALT ^ mix32(depth ^ (group << 16)));
-        let point = self.point_2d(seed);
-        (self.point_1d(mix32(seed ^ 0x68e3_1da4)), point)
+    pub(crate) fn extra_light(&self, group: u32, depth: u32) -> Vec2 {
+        self.point_2d(extra_seed(self.pixel_key, group, depth))
+    }
+
+    /// The number that picks a light within group `group` (or, for the
+    /// integrator's pick stream, the group) at bounce `depth`: the same
+    /// stream as [`Sampler::extra_light`]'s point, drawn apart because most
+    /// groups hold one light and need no pick (half an extra draw saved).
+    pub(crate) fn extra_pick(&self, group: u32, depth: u32) -> f32 {
+        self.point_1d(mix32(extra_seed(self.pixel_key, group, depth) ^ 0x68e3_1da4))
     }
 
     /// This sample's point of the Owen-scrambled, shuffled 2D Sobol
@@ -195,6 +201,11 @@ impl Sampler {
         let index = nested_uniform_scramble(self.sample, seed);
         to_unit(nested_uniform_scramble(index.reverse_bits(), mix32(seed ^ 0x5bd1_e995)))
     }
+}
+
+/// The seed of light group `group`'s extra stream at bounce `depth`.
+fn extra_seed(pixel_key: u32, group: u32, depth: u32) -> u32 {
+    mix32(pixel_key ^ EXTRA_LIGHT_SALT ^ mix32(depth ^ (group << 16)))
 }
 
 #[cfg(test)]
