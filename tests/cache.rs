@@ -566,8 +566,11 @@ fn import_args(rig: &str, cycle: &str, rig_file: Option<&str>) -> ImportFlags {
 
 fn options(f: &ImportFlags) -> throng::error::Result<ImportOptions> {
     ImportOptions::new(&f.rig, &f.cycle, f.stride, f.cycle_length, None)?;
-    let clip =
-        f.rig_file.as_deref().map(|p| throng::casting::rig::import_clip(p, &f.rig, &f.cycle, None)).transpose()?;
+    let clip = f
+        .rig_file
+        .as_deref()
+        .map(|p| throng::casting::rig::import_clip(p, &f.rig, &f.cycle, None, None))
+        .transpose()?;
     ImportOptions::new(&f.rig, &f.cycle, f.stride, f.cycle_length, clip)
 }
 
@@ -603,19 +606,19 @@ fn skinned_rig_file_gives_stride_and_length() {
         ..Default::default()
     };
     // The demo shot's walker: WalkA plays Walk, hips 1.4 m in 32 frames.
-    let clip = import_clip(&walker, "walker", "WalkA", Some(&hips)).unwrap();
+    let clip = import_clip(&walker, "walker", "WalkA", Some(&hips), None).unwrap();
     let o = ImportOptions::new("walker", "WalkA", None, None, Some(clip)).unwrap();
     assert!((o.stride() - 1.4).abs() < 1e-3 && (o.cycle_length() - 32.0).abs() < 1e-3, "{}", o.describe());
     // Detected as skinned without options; with no root joint the walk does not walk.
-    let e = err_text(import_clip(&walker, "walker", "Walk", None));
+    let e = err_text(import_clip(&walker, "walker", "Walk", None, None));
     assert_has(&e, &["walker.glb", "field `cycle`", "cycle `Walk` walks 0 m in 32 frames", "root"]);
-    let e = err_text(import_clip(&walker, "walker", "Idle", Some(&hips)));
+    let e = err_text(import_clip(&walker, "walker", "Idle", Some(&hips), None));
     assert_has(&e, &["walker.glb", "cycle `Idle` walks 0 m in 48 frames"]);
-    let e = err_text(import_clip(&walker, "walker", "RunZ", Some(&hips)));
+    let e = err_text(import_clip(&walker, "walker", "RunZ", Some(&hips), None));
     assert_has(&e, &["walker.glb", "no cycle `RunZ`", "WalkA (clip Walk)"]);
     // RiggedFigure (clip #0, 30 frames) has no joint that travels.
     let torso = SkinOptions { root: Some("torso_joint_1".into()), ..Default::default() };
-    let e = err_text(import_clip(&figure, "figure", "#0", Some(&torso)));
+    let e = err_text(import_clip(&figure, "figure", "#0", Some(&torso), None));
     assert_has(&e, &["RiggedFigure.gltf", "cycle `#0` walks 0 m in 30 frames"]);
 
     // The command line: --rig-root and --rig-cycle are the shot's `root` and `cycles`.

@@ -191,7 +191,7 @@ impl ImportArgs {
         // The flags are checked before the rig file is read.
         ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, None)?.with_turn_rate(self.keys.turn_rate)?;
         let skin = self.skin();
-        let clip = g.rig_file.as_deref().map(|f| import_clip(f, &rig, &cycle, skin.as_ref())).transpose()?;
+        let clip = g.rig_file.as_deref().map(|f| import_clip(f, &rig, &cycle, skin.as_ref(), g.stride)).transpose()?;
         ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, clip)?.with_turn_rate(self.keys.turn_rate)
     }
 
@@ -227,7 +227,8 @@ impl ImportArgs {
         let jp = self.options()?;
         let idle_length = match (&self.gait.rig_file, &spec.idle_cycle) {
             (Some(f), Some(_)) => {
-                file_gait(f, self.skin().as_ref(), &self.names().1, spec.idle_cycle.as_deref())?.idle_length
+                let (skin, walk) = (self.skin(), self.names().1);
+                file_gait(f, skin.as_ref(), &walk, spec.idle_cycle.as_deref(), self.gait.stride)?.idle_length
             }
             _ => Gait::default().idle_length,
         };
