@@ -148,28 +148,6 @@ const WHEEL_RADIUS: f32 = 0.3;
 const WHEELS: [(&str, f32, f32); 4] =
     [("wheel_fl", 0.8, 1.1), ("wheel_fr", -0.8, 1.1), ("wheel_rl", 0.8, -1.1), ("wheel_rr", -0.8, -1.1)];
 
-/// A box from `lo` to `hi` with flat normals.
-fn cuboid(lo: Vec3, hi: Vec3) -> MeshData {
-    let mut m = MeshData::default();
-    for (n, u, v) in [
-        (Vec3::X, Vec3::Y, Vec3::Z),
-        (Vec3::NEG_X, Vec3::Z, Vec3::Y),
-        (Vec3::Y, Vec3::Z, Vec3::X),
-        (Vec3::NEG_Y, Vec3::X, Vec3::Z),
-        (Vec3::Z, Vec3::X, Vec3::Y),
-        (Vec3::NEG_Z, Vec3::Y, Vec3::X),
-    ] {
-        let base = m.positions.len() as u32;
-        let (c, h) = ((lo + hi) / 2.0, (hi - lo) / 2.0);
-        for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-            m.positions.push((c + (n + u * a + v * b) * h).to_array());
-            m.normals.push(n.to_array());
-        }
-        m.indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
-    }
-    m
-}
-
 /// An octagonal wheel of `WHEEL_RADIUS` about the X axis, 0.2 m wide.
 fn wheel_mesh() -> MeshData {
     let mut m = MeshData::default();
@@ -207,9 +185,9 @@ fn write_car(dir: &Path, name: &str, backwards: bool) -> PathBuf {
     // A long bonnet: the car's front is the end further from its middle.
     let (back, front) = (Vec3::new(-0.8, 0.3, -1.6), Vec3::new(0.8, 1.1, 2.2));
     let body = if backwards {
-        cuboid(-front * Vec3::new(1.0, -1.0, 1.0), -back * Vec3::new(1.0, -1.0, 1.0))
+        common::cuboid(-front * Vec3::new(1.0, -1.0, 1.0), -back * Vec3::new(1.0, -1.0, 1.0))
     } else {
-        cuboid(back, front)
+        common::cuboid(back, front)
     };
     let body = b.add_mesh("body", &body, Some(paint)).unwrap();
     let tyre = b.add_mesh("tyre", &wheel_mesh(), Some(rubber)).unwrap();
@@ -426,7 +404,7 @@ fn bad_rigid_rigs_are_refused_naming_file_rig_and_field() {
     let still = dir.path().join("still.glb");
     {
         let mut b = GlbBuilder::new();
-        let m = b.add_mesh("box", &cuboid(Vec3::ZERO, Vec3::ONE), None).unwrap();
+        let m = b.add_mesh("box", &common::cuboid(Vec3::ZERO, Vec3::ONE), None).unwrap();
         b.add_node(NodeDesc::new("box").mesh(m)).unwrap();
         b.write(&still).unwrap();
     }
