@@ -872,7 +872,8 @@ fn imported_recordings_turn_no_faster_than_a_person() {
         |rate: f32| cache::read_with(&real, &ImportOptions::default().with_turn_rate(Some(rate)).unwrap()).unwrap();
     let (raw, turned) = (read(1e9), read(360.0));
     let snaps = plot_turns(&raw, &turned, &Path::new(env!("CARGO_TARGET_TMPDIR")).join("recording_turns.png"));
-    assert!(snaps >= 10, "{snaps} snaps of over 90 degrees in a frame in the recording as written");
+    // 6465 of them: JuPedSim's orientation flips for a frame in the crush.
+    assert!(snaps >= 1000, "{snaps} snaps of over 90 degrees in a frame in the recording as written");
     // A rate that is no rate is refused, naming the key.
     let e = ImportOptions::default().with_turn_rate(Some(0.0)).unwrap_err().to_string();
     assert!(e.contains("turn_rate"), "{e}");

@@ -2,7 +2,10 @@
 //! with node animation, no skin. Khronos InterpolationTest posed as a rigid
 //! rig against the glTF sampler's values (a STEP, LINEAR and CUBICSPLINE
 //! channel of each property); a car built here whose wheels roll at speed /
-//! radius through a shot; `forward` on a rigid rig; and bad input.
+//! radius through a shot; `forward` on a rigid rig; and bad input. The
+//! Kenney alien given a walk clip, and the car, read by the reference
+//! simulation's `[rigs]` and `cache convert --rig-file` as the shot reads
+//! them. Pictures: target/tmp/rigid_car.png, target/tmp/rigid_alien.png.
 
 mod common;
 
