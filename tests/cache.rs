@@ -566,8 +566,11 @@ fn import_args(rig: &str, cycle: &str, rig_file: Option<&str>) -> ImportFlags {
 
 fn options(f: &ImportFlags) -> throng::error::Result<ImportOptions> {
     ImportOptions::new(&f.rig, &f.cycle, f.stride, f.cycle_length, None)?;
-    let clip =
-        f.rig_file.as_deref().map(|p| throng::casting::rig::import_clip(p, &f.rig, &f.cycle, None)).transpose()?;
+    let clip = f
+        .rig_file
+        .as_deref()
+        .map(|p| throng::casting::rig::import_clip(p, &f.rig, &f.cycle, None, None))
+        .transpose()?;
     ImportOptions::new(&f.rig, &f.cycle, f.stride, f.cycle_length, clip)
 }
 
@@ -603,19 +606,19 @@ fn skinned_rig_file_gives_stride_and_length() {
         ..Default::default()
     };
     // The demo shot's walker: WalkA plays Walk, hips 1.4 m in 32 frames.
-    let clip = import_clip(&walker, "walker", "WalkA", Some(&hips)).unwrap();
+    let clip = import_clip(&walker, "walker", "WalkA", Some(&hips), None).unwrap();
     let o = ImportOptions::new("walker", "WalkA", None, None, Some(clip)).unwrap();
     assert!((o.stride() - 1.4).abs() < 1e-3 && (o.cycle_length() - 32.0).abs() < 1e-3, "{}", o.describe());
     // Detected as skinned without options; with no root joint the walk does not walk.
-    let e = err_text(import_clip(&walker, "walker", "Walk", None));
+    let e = err_text(import_clip(&walker, "walker", "Walk", None, None));
     assert_has(&e, &["walker.glb", "field `cycle`", "cycle `Walk` walks 0 m in 32 frames", "root"]);
-    let e = err_text(import_clip(&walker, "walker", "Idle", Some(&hips)));
+    let e = err_text(import_clip(&walker, "walker", "Idle", Some(&hips), None));
     assert_has(&e, &["walker.glb", "cycle `Idle` walks 0 m in 48 frames"]);
-    let e = err_text(import_clip(&walker, "walker", "RunZ", Some(&hips)));
+    let e = err_text(import_clip(&walker, "walker", "RunZ", Some(&hips), None));
     assert_has(&e, &["walker.glb", "no cycle `RunZ`", "WalkA (clip Walk)"]);
     // RiggedFigure (clip #0, 30 frames) has no joint that travels.
     let torso = SkinOptions { root: Some("torso_joint_1".into()), ..Default::default() };
-    let e = err_text(import_clip(&figure, "figure", "#0", Some(&torso)));
+    let e = err_text(import_clip(&figure, "figure", "#0", Some(&torso), None));
     assert_has(&e, &["RiggedFigure.gltf", "cycle `#0` walks 0 m in 30 frames"]);
 
     // The command line: --rig-root and --rig-cycle are the shot's `root` and `cycles`.
@@ -856,14 +859,132 @@ fn imported_recordings_turn_no_faster_than_a_person() {
         }
     }
     let real = common::shared_asset("crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
-    for (file, rate) in [(common::fixture("jupedsim_small.sqlite"), 360.0), (real.clone(), 360.0), (real, 90.0)] {
+    for (file, rate) in [(common::fixture("jupedsim_small.sqlite"), 360.0), (real.clone(), 360.0), (real.clone(), 90.0)]
+    {
         let opts = ImportOptions::default().with_turn_rate(Some(rate)).unwrap();
         let crowd = cache::read_with(&file, &opts).unwrap();
         check(&crowd, 25.0, rate, &file.display().to_string());
     }
+    // The recording as written snaps (a held heading resuming turns 90
+    // degrees and more in a frame); imported at the default rate it turns
+    // through the frames between. Drawn: target/tmp/recording_turns.png.
+    let read =
+        |rate: f32| cache::read_with(&real, &ImportOptions::default().with_turn_rate(Some(rate)).unwrap()).unwrap();
+    let (raw, turned) = (read(1e9), read(360.0));
+    let snaps = plot_turns(&raw, &turned, &Path::new(env!("CARGO_TARGET_TMPDIR")).join("recording_turns.png"));
+    // 6465 of them: JuPedSim's orientation flips for a frame in the crush.
+    assert!(snaps >= 1000, "{snaps} snaps of over 90 degrees in a frame in the recording as written");
     // A rate that is no rate is refused, naming the key.
     let e = ImportOptions::default().with_turn_rate(Some(0.0)).unwrap_err().to_string();
     assert!(e.contains("turn_rate"), "{e}");
+}
+
+/// Each agent's samples in frame order: (frame, x, z, heading).
+fn tracks(crowd: &CrowdCache) -> std::collections::BTreeMap<u32, Vec<(i32, f32, f32, f32)>> {
+    let mut out: std::collections::BTreeMap<u32, Vec<(i32, f32, f32, f32)>> = Default::default();
+    for b in &crowd.frames {
+        for a in &b.agents {
+            out.entry(a.id).or_default().push((b.frame, a.position.x, a.position.z, a.heading));
+        }
+    }
+    out
+}
+
+/// A heading change wrapped into [-pi, pi).
+fn turn(from: f32, to: f32) -> f32 {
+    (to - from + std::f32::consts::PI).rem_euclid(std::f32::consts::TAU) - std::f32::consts::PI
+}
+
+/// Draws a recording imported twice, unlimited (`raw`) and at a turn rate
+/// (`turned`), to `png`: on the left, top-down, every third agent's path (a
+/// hue per agent) with its heading as a dark tick every 25 frames; on the
+/// right, for the six agents with the largest one-frame snap in `raw`, the
+/// heading from 20 frames before that snap to 60 after it, turned in the
+/// agent's hue and raw in grey (within half a turn of the turned one), each
+/// in a band of its own (half a turn is 45 pixels). Gives the number of snaps over 90 degrees in a frame in `raw`.
+fn plot_turns(raw: &CrowdCache, turned: &CrowdCache, png: &Path) -> usize {
+    use tiny_skia::{Color, Paint, PathBuilder, Pixmap, Stroke, Transform};
+    let (raw, turned) = (tracks(raw), tracks(turned));
+    let (w, h) = (1200u32, 600u32);
+    let mut pm = Pixmap::new(w, h).unwrap();
+    pm.fill(Color::from_rgba8(250, 250, 247, 255));
+    let hue = |id: u32| {
+        let a = id as f32 * 2.399_963;
+        let c = |k: f32| (120.0 + 100.0 * (a + k).cos()) as u8;
+        (c(0.0), c(2.1), c(4.2))
+    };
+    let line = |pm: &mut Pixmap, pts: &[(f32, f32)], rgb: (u8, u8, u8), alpha: u8, width: f32| {
+        let mut pb = PathBuilder::new();
+        pb.move_to(pts[0].0, pts[0].1);
+        for p in &pts[1..] {
+            pb.line_to(p.0, p.1);
+        }
+        let Some(path) = pb.finish() else { return };
+        let mut paint = Paint::default();
+        paint.set_color_rgba8(rgb.0, rgb.1, rgb.2, alpha);
+        paint.anti_alias = true;
+        pm.stroke_path(&path, &paint, &Stroke { width, ..Default::default() }, Transform::identity(), None);
+    };
+    // Left: the floor, x across and z down, fitted with a margin and centred.
+    let (mut lo, mut hi) = ((f32::MAX, f32::MAX), (f32::MIN, f32::MIN));
+    for &(_, x, z, _) in turned.values().flatten() {
+        lo = (lo.0.min(x), lo.1.min(z));
+        hi = (hi.0.max(x), hi.1.max(z));
+    }
+    let scale = (560.0 / (hi.0 - lo.0)).min(560.0 / (hi.1 - lo.1));
+    let top = (h as f32 - (hi.1 - lo.1) * scale) / 2.0;
+    let at = |x: f32, z: f32| (20.0 + (x - lo.0) * scale, top + (z - lo.1) * scale);
+    for (&id, t) in turned.iter().filter(|(id, _)| *id % 3 == 0) {
+        let pts: Vec<(f32, f32)> = t.iter().map(|&(_, x, z, _)| at(x, z)).collect();
+        if pts.len() > 1 {
+            line(&mut pm, &pts, hue(id), 230, 1.5);
+        }
+        for &(_, x, z, heading) in t.iter().filter(|s| s.0 % 25 == 0) {
+            let (sx, sz) = (heading.sin() * 0.3, heading.cos() * 0.3);
+            line(&mut pm, &[at(x, z), at(x + sx, z + sz)], (20, 20, 30), 255, 1.5);
+        }
+    }
+    line(&mut pm, &[(600.0, 0.0), (600.0, h as f32)], (120, 120, 120), 255, 1.0);
+    // Right: the six worst snaps.
+    let mut snaps = 0;
+    let mut worst: Vec<(f32, u32, i32)> = Vec::new();
+    for (&id, t) in &raw {
+        let mut biggest = (0.0f32, 0);
+        for p in t.windows(2).filter(|p| p[0].0 + 1 == p[1].0) {
+            let d = turn(p[0].3, p[1].3).abs();
+            snaps += (d > std::f32::consts::FRAC_PI_2) as usize;
+            if d > biggest.0 {
+                biggest = (d, p[1].0);
+            }
+        }
+        worst.push((biggest.0, id, biggest.1));
+    }
+    worst.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    for (band, &(_, id, snap)) in worst.iter().take(6).enumerate() {
+        let mid = 50.0 + band as f32 * 100.0;
+        line(&mut pm, &[(610.0, mid + 50.0), (1190.0, mid + 50.0)], (215, 215, 215), 255, 1.0);
+        let x = |f: i32| 610.0 + (f - snap + 20) as f32 * 580.0 / 80.0;
+        line(&mut pm, &[(x(snap), mid - 45.0), (x(snap), mid + 45.0)], (225, 225, 225), 255, 1.0);
+        // The turned heading unwrapped; the raw one drawn within half a turn
+        // of it, so a one-frame flip is a spike, not a lasting turn.
+        let raw_at: std::collections::BTreeMap<i32, f32> = raw[&id].iter().map(|s| (s.0, s.3)).collect();
+        let window: Vec<_> = turned[&id].iter().filter(|s| (snap - 20..=snap + 60).contains(&s.0)).collect();
+        let (mut unwrapped, mut last) = (0.0f32, window[0].3);
+        let (mut raw_pts, mut turned_pts) = (Vec::new(), Vec::new());
+        for &&(f, _, _, heading) in &window {
+            unwrapped += turn(last, heading);
+            last = heading;
+            let y = |a: f32| mid - a / std::f32::consts::PI * 45.0;
+            turned_pts.push((x(f), y(unwrapped)));
+            if let Some(&r) = raw_at.get(&f) {
+                raw_pts.push((x(f), y(unwrapped + turn(heading, r))));
+            }
+        }
+        line(&mut pm, &raw_pts, (165, 165, 165), 255, 3.0);
+        line(&mut pm, &turned_pts, hue(id), 255, 2.5);
+    }
+    pm.save_png(png).unwrap();
+    snaps
 }
 
 /// Issue 27 item 7: a JuPedSim import refuses each table key it cannot

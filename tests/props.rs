@@ -364,3 +364,44 @@ fn a_prop_blurs_with_its_joint() {
     assert!(a.iter().any(|&c| c > 0.0), "the ball is on screen blurred");
     assert_ne!(a, still, "the ball's matte smears under motion blur");
 }
+
+/// Eight demo walkers in the demo's own wardrobe (wardrobes/walkers.toml:
+/// a bag in the right hand for a third of them, a cup in the left for a
+/// quarter), rendered: every prop drawn is on screen in its hand. Kept for
+/// looking at: target/tmp/props_bags_and_cups.png.
+#[test]
+fn the_demo_walkers_render_with_their_bags_and_cups() {
+    let dir = common::tempdir().unwrap();
+    let shot = walker_shot(dir.path(), &walker_wardrobe(""), 8);
+    let walkers = common::repo_path("wardrobes/walkers.toml");
+    let text = std::fs::read_to_string(&shot)
+        .unwrap()
+        .replace("wardrobes = [\"w.toml\"]", &format!("wardrobes = [{:?}]", walkers.display().to_string()))
+        .replace("schemes = { Carry = 1.0 }", "schemes = { Walkers = 1.0 }")
+        .replace("position = [0.0, 1.2, 5.0]", "position = [2.0, 1.4, 6.2]")
+        .replace("aim = [0.0, 0.9, 0.0]", "aim = [2.0, 0.85, 0.0]")
+        .replace("resolution = [64, 36]", "resolution = [640, 270]")
+        .replace("spp = 2", "spp = 16");
+    std::fs::write(&shot, text).unwrap();
+    let crowd = ShotCrowd::load(&shot).unwrap();
+    let carried: Vec<(u32, String)> =
+        crowd.casting().iter().flat_map(|c| c.props.iter().map(move |p| (c.id, p.name.to_string()))).collect();
+    for prop in ["bag", "cup"] {
+        assert!(carried.iter().any(|(_, p)| p == prop), "someone carries a {prop}: {carried:?}");
+    }
+    let out = dir.path().join("o");
+    let s = |p: &Path| p.display().to_string();
+    let (code, _, err) =
+        common::run(&["render", &s(&shot), "--layer", "full", "--frames", "1002", "--png", "--out", &s(&out)]);
+    assert_eq!(code, 0, "{err}");
+    let exr = out.join("full").join("props.full.1002.exr");
+    let mattes = throng::render::exr::mattes::read(&exr).unwrap();
+    for (id, prop) in &carried {
+        let name = format!("agent_{id}/{prop}");
+        let m = mattes.iter().find(|m| m.manifest.contains_key(&name)).unwrap_or_else(|| panic!("{name}'s matte"));
+        let pixels = m.matte(&name).iter().filter(|&&c| c > 0.5).count();
+        assert!(pixels >= 20, "{name} covers {pixels} pixels");
+    }
+    std::fs::copy(exr.with_extension("png"), Path::new(env!("CARGO_TARGET_TMPDIR")).join("props_bags_and_cups.png"))
+        .unwrap();
+}

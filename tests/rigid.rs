@@ -2,7 +2,10 @@
 //! with node animation, no skin. Khronos InterpolationTest posed as a rigid
 //! rig against the glTF sampler's values (a STEP, LINEAR and CUBICSPLINE
 //! channel of each property); a car built here whose wheels roll at speed /
-//! radius through a shot; `forward` on a rigid rig; and bad input.
+//! radius through a shot; `forward` on a rigid rig; and bad input. The
+//! Kenney alien given a walk clip, and the car, read by the reference
+//! simulation's `[rigs]` and `cache convert --rig-file` as the shot reads
+//! them. Pictures: target/tmp/rigid_car.png, target/tmp/rigid_alien.png.
 
 mod common;
 
@@ -148,28 +151,6 @@ const WHEEL_RADIUS: f32 = 0.3;
 const WHEELS: [(&str, f32, f32); 4] =
     [("wheel_fl", 0.8, 1.1), ("wheel_fr", -0.8, 1.1), ("wheel_rl", 0.8, -1.1), ("wheel_rr", -0.8, -1.1)];
 
-/// A box from `lo` to `hi` with flat normals.
-fn cuboid(lo: Vec3, hi: Vec3) -> MeshData {
-    let mut m = MeshData::default();
-    for (n, u, v) in [
-        (Vec3::X, Vec3::Y, Vec3::Z),
-        (Vec3::NEG_X, Vec3::Z, Vec3::Y),
-        (Vec3::Y, Vec3::Z, Vec3::X),
-        (Vec3::NEG_Y, Vec3::X, Vec3::Z),
-        (Vec3::Z, Vec3::X, Vec3::Y),
-        (Vec3::NEG_Z, Vec3::Y, Vec3::X),
-    ] {
-        let base = m.positions.len() as u32;
-        let (c, h) = ((lo + hi) / 2.0, (hi - lo) / 2.0);
-        for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-            m.positions.push((c + (n + u * a + v * b) * h).to_array());
-            m.normals.push(n.to_array());
-        }
-        m.indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
-    }
-    m
-}
-
 /// An octagonal wheel of `WHEEL_RADIUS` about the X axis, 0.2 m wide.
 fn wheel_mesh() -> MeshData {
     let mut m = MeshData::default();
@@ -207,9 +188,9 @@ fn write_car(dir: &Path, name: &str, backwards: bool) -> PathBuf {
     // A long bonnet: the car's front is the end further from its middle.
     let (back, front) = (Vec3::new(-0.8, 0.3, -1.6), Vec3::new(0.8, 1.1, 2.2));
     let body = if backwards {
-        cuboid(-front * Vec3::new(1.0, -1.0, 1.0), -back * Vec3::new(1.0, -1.0, 1.0))
+        common::cuboid(-front * Vec3::new(1.0, -1.0, 1.0), -back * Vec3::new(1.0, -1.0, 1.0))
     } else {
-        cuboid(back, front)
+        common::cuboid(back, front)
     };
     let body = b.add_mesh("body", &body, Some(paint)).unwrap();
     let tyre = b.add_mesh("tyre", &wheel_mesh(), Some(rubber)).unwrap();
@@ -426,7 +407,7 @@ fn bad_rigid_rigs_are_refused_naming_file_rig_and_field() {
     let still = dir.path().join("still.glb");
     {
         let mut b = GlbBuilder::new();
-        let m = b.add_mesh("box", &cuboid(Vec3::ZERO, Vec3::ONE), None).unwrap();
+        let m = b.add_mesh("box", &common::cuboid(Vec3::ZERO, Vec3::ONE), None).unwrap();
         b.add_node(NodeDesc::new("box").mesh(m)).unwrap();
         b.write(&still).unwrap();
     }
@@ -548,4 +529,373 @@ fn a_skinned_mesh_worn_on_a_rigid_rig_is_refused_not_drawn_in_its_bind_pose() {
     for want in ["walker.glb", "mesh `#0` is skinned", "mesh"] {
         assert!(err.contains(want), "`{want}` missing from: {err}");
     }
+}
+
+// ------------------------------------------------------------ an alien that walks
+
+/// Metres the walking alien's `alien` node travels in its one-second `Walk`.
+const ALIEN_STRIDE: f32 = 0.8;
+
+/// The Kenney alien (shared assets, CC0 1.0, Kenney "Space Kit"): its six
+/// part meshes on their nodes as the file has them (armLeft ... legRight
+/// under `alien`), in its materials, with a clip `Walk` (one second, LINEAR
+/// keys every quarter) swinging each leg and the opposite arm 30 degrees
+/// about X from the hip or shoulder, and, with `travel`, the `alien` node
+/// walking `ALIEN_STRIDE` along -Z, the way the model faces. No skin and no
+/// slots: a rigid rig, detected.
+fn write_alien(dir: &Path, name: &str, travel: bool) -> PathBuf {
+    let (doc, buffers, _) = gltf::import(common::shared_asset("gltf/KenneyAlien/alien.glb")).unwrap();
+    let mut b = GlbBuilder::new();
+    let materials: Vec<_> = doc
+        .materials()
+        .map(|m| b.add_material(&MaterialDesc::new(m.name().unwrap(), m.pbr_metallic_roughness().base_color_factor())))
+        .collect();
+    let top = b.add_node(NodeDesc::new("alien")).unwrap();
+    let times: Vec<f32> = (0..=4).map(|i| i as f32 / 4.0).collect();
+    let mut channels = Vec::new();
+    for node in doc.nodes() {
+        let Some(mesh) = node.mesh() else { continue };
+        let mut id = None;
+        for prim in mesh.primitives() {
+            let r = prim.reader(|buf| Some(&buffers[buf.index()].0[..]));
+            let data = MeshData {
+                positions: r.read_positions().unwrap().collect(),
+                normals: r.read_normals().unwrap().collect(),
+                indices: r.read_indices().unwrap().into_u32().collect(),
+                ..Default::default()
+            };
+            let material = prim.material().index().map(|i| materials[i]);
+            match id {
+                None => id = Some(b.add_mesh(mesh.name().unwrap(), &data, material).unwrap()),
+                Some(m) => b.add_primitive(m, &data, material).unwrap(),
+            }
+        }
+        let (t, r, s) = node.transform().decomposed();
+        let name = node.name().unwrap();
+        let n = b.add_node(NodeDesc::new(name).mesh(id.unwrap()).translation(t).rotation(r).scale(s)).unwrap();
+        b.add_child(top, n).unwrap();
+        // Left leg with right arm, then the other pair half a cycle later.
+        let swing = match name {
+            "legLeft" | "armRight" => 1.0,
+            "legRight" | "armLeft" => -1.0,
+            _ => continue,
+        };
+        let values = times
+            .iter()
+            .map(|t| {
+                (Quat::from_array(r) * Quat::from_rotation_x(swing * 30f32.to_radians() * (t * TAU).sin())).to_array()
+            })
+            .collect();
+        channels.push(ChannelDesc {
+            node: n,
+            interpolation: Interp::Linear,
+            times: times.clone(),
+            values: ChannelValues::Rotation(values),
+        });
+    }
+    if travel {
+        channels.push(ChannelDesc {
+            node: top,
+            interpolation: Interp::Linear,
+            times: vec![0.0, 1.0],
+            values: ChannelValues::Translation(vec![[0.0, 0.0, 0.0], [0.0, 0.0, -ALIEN_STRIDE]]),
+        });
+    }
+    b.add_animation(&AnimationDesc { name: "Walk".into(), channels }).unwrap();
+    let path = dir.join(name);
+    b.write(&path).unwrap();
+    path
+}
+
+/// Every agent-frame's cycle advance is its distance over the stride: feet
+/// (and wheels) do not slide. `agents` is how many must move.
+fn assert_planted(crowd: &throng::cache::CrowdCache, stride: f32, length: f32, agents: usize) {
+    let mut moving = 0;
+    for w in crowd.frames.windows(2) {
+        for (a, b) in w[0].agents.iter().zip(&w[1].agents) {
+            assert_eq!(a.id, b.id);
+            let dist = (b.position - a.position).length();
+            let got = (b.cycle_frame - a.cycle_frame).rem_euclid(length);
+            let want = (dist / stride * length).rem_euclid(length);
+            assert!((got - want).abs() < 1e-3, "agent {} frame {}: {got} vs {want}", b.id, w[1].frame);
+            moving += (dist > 0.0) as usize;
+        }
+    }
+    assert!(moving >= agents, "{moving} moving agent-frames");
+}
+
+#[test]
+fn a_rigid_alien_walks_at_its_root_nodes_travel_and_is_detected() {
+    let dir = common::tempdir().unwrap();
+    let alien = rigid(
+        &write_alien(dir.path(), "alien.glb", true),
+        SkinOptions { root: Some("alien".into()), forward: Axis::NegZ, ..Default::default() },
+    );
+    let walk = &alien.cycles()[alien.cycle_index("Walk").unwrap()];
+    assert!((walk.stride - ALIEN_STRIDE).abs() < 1e-4, "stride {}", walk.stride);
+    // Six part meshes of three primitives each, each primitive a piece.
+    assert_eq!(alien.piece_count(), 18);
+    let detected = SkinnedRig::load(&dir.path().join("alien.glb"), &SkinOptions::default(), FPS).unwrap();
+    assert!(detected.is_rigid());
+
+    // Five aliens walking at the camera, simulated (the sim's `[rigs]` reads
+    // the alien as the shot does) and rendered: target/tmp/rigid_alien.png.
+    let mut sim = String::from(
+        "version = 1\nseed = 11\n[frames]\nstart = 1\nend = 30\n[rigs]\n\
+         alien = { file = \"alien.glb\", root = \"alien\", forward = \"-z\" }\n[cycles.Walk]\n",
+    );
+    for id in 1..=5u32 {
+        let x = (id as f32 - 3.0) * 0.8;
+        sim.push_str(&format!(
+            "[[agents]]\nid = {id}\nposition = [{x:?}, {:?}]\nrig = \"alien\"\ncycle = \"Walk\"\n",
+            -((id % 2) as f32) * 0.6
+        ));
+    }
+    std::fs::write(dir.path().join("aliens_sim.toml"), sim).unwrap();
+    let crowd_file = dir.path().join("aliens.crowd");
+    let (code, out, err) = common::run(&[
+        "sim".as_ref(),
+        dir.path().join("aliens_sim.toml").as_os_str(),
+        "--out".as_ref(),
+        crowd_file.as_os_str(),
+    ]);
+    assert_eq!(code, 0, "{out}\n{err}");
+    let shot = dir.path().join("aliens.toml");
+    std::fs::write(
+        &shot,
+        r#"version = 1
+name = "aliens"
+seed = 3
+wardrobes = []
+[frames]
+start = 1
+end = 30
+fps = 24.0
+[cache]
+path = "aliens.crowd"
+[rigs.alien]
+file = "alien.glb"
+root = "alien"
+forward = "-z"
+[camera]
+sensor_width = 36.0
+[[camera.keys]]
+frame = 1
+position = [2.0, 0.9, 3.8]
+aim = [0.3, 0.35, 0.6]
+focal_length = 30.0
+[render]
+resolution = [480, 270]
+spp = 16
+"#,
+    )
+    .unwrap();
+    let crowd = ShotCrowd::load(&shot).unwrap();
+    // A leg swings from frame to frame; the body rides along unturned.
+    let part = |frame: i32, id: u32, name: &str| {
+        let block = crowd.agents_at(frame).unwrap();
+        let a = block.agents.iter().find(|a| a.id == id).unwrap();
+        let mut out = Vec::new();
+        crowd.agent_instances(a, Lod::Full, vis::ALL, &mut out).unwrap();
+        assert_eq!(out.len(), 18, "every primitive of the six parts, each its own instance");
+        let lib = crowd.library();
+        let m = out.iter().map(|i| &lib.meshes[i.mesh as usize]).find(|m| m.name.contains(&format!("#{name}/0@")));
+        m.unwrap_or_else(|| panic!("{name} at frame {frame}")).positions.clone()
+    };
+    let moved = |a: &[Vec3], b: &[Vec3]| a.iter().zip(b).map(|(x, y)| x.distance(*y)).fold(0.0f32, f32::max);
+    assert!(moved(&part(10, 1, "legLeft"), &part(16, 1, "legLeft")) > 0.03, "the left leg swings");
+    assert!(moved(&part(10, 1, "body"), &part(16, 1, "body")) < 1e-3, "the body does not");
+    let renders = dir.path().join("renders");
+    let (code, out, err) = common::run(&[
+        "render".as_ref(),
+        shot.as_os_str(),
+        "--layer".as_ref(),
+        "full".as_ref(),
+        "--frames".as_ref(),
+        "24".as_ref(),
+        "--png".as_ref(),
+        "--out".as_ref(),
+        renders.as_os_str(),
+    ]);
+    assert_eq!(code, 0, "{out}\n{err}");
+    let png = first_png(&renders.join("full"));
+    let (film, _) = throng::render::exr::read_layer(&png.with_extension("exr")).unwrap();
+    let seen: std::collections::BTreeSet<u32> = film.agent_id.iter().copied().filter(|&id| id != 0).collect();
+    assert_eq!(seen.len(), 5, "all five aliens in frame: {seen:?}");
+    let covered = film.agent_id.iter().filter(|&&id| id != 0).count() as f32 / film.agent_id.len() as f32;
+    assert!(covered > 0.05, "the aliens cover {covered} of the frame");
+    std::fs::copy(&png, Path::new(env!("CARGO_TARGET_TMPDIR")).join("rigid_alien.png")).unwrap();
+}
+
+/// The first PNG in `dir`.
+fn first_png(dir: &Path) -> PathBuf {
+    let found =
+        std::fs::read_dir(dir).unwrap().flatten().map(|e| e.path()).find(|p| p.extension().is_some_and(|e| e == "png"));
+    found.unwrap_or_else(|| panic!("no PNG in {}", dir.display()))
+}
+
+/// A sim scene of a car on `Drive` and an alien on `Walk`, with `[rigs]`
+/// entries `car` and `alien` as given, walking straight for 48 frames.
+fn rigid_scene(dir: &Path, car: &str, alien: &str) -> String {
+    format!(
+        "version = 1\nseed = 4\n[frames]\nstart = 1\nend = 48\n[rigs]\ncar = {car}\nalien = {alien}\n\
+         [cycles.Drive]\n[cycles.Walk]\n\
+         [[agents]]\nid = 1\nposition = [0.0, 0.0]\nrig = \"car\"\ncycle = \"Drive\"\ncycle_frame = 0.0\n\
+         [[agents]]\nid = 2\nposition = [4.0, 0.0]\nrig = \"alien\"\ncycle = \"Walk\"\ncycle_frame = 0.0\n"
+    )
+    .replace("DIR", &dir.display().to_string())
+}
+
+/// The reference simulation's `[rigs]` reads a car and a walking alien as
+/// the shot does, kind detected: the car's stride is its wheels' roll, the
+/// alien's its root node's travel, each cycle one clip long.
+#[test]
+fn the_sims_rigs_table_times_a_car_and_an_alien_without_kind() {
+    use throng::sim::{CycleTiming, SimScene};
+    let dir = common::tempdir().unwrap();
+    write_car(dir.path(), "car.glb", false);
+    write_alien(dir.path(), "alien.glb", true);
+    write_alien(dir.path(), "still_alien.glb", false);
+    let parse = |car: &str, alien: &str| SimScene::parse(&rigid_scene(dir.path(), car, alien), "rigid.toml");
+    let alien = "{ file = \"DIR/alien.glb\", root = \"alien\", forward = \"-z\" }";
+    let scene = parse("\"DIR/car.glb\"", alien).unwrap_or_else(|e| panic!("{e}"));
+    let r = |n: &str| scene.rigs.iter().position(|x| x == n).unwrap() as u16;
+    let c = |n: &str| scene.cycles.iter().position(|x| x.name == n).unwrap() as u16;
+    let (car, walk) = (scene.timing(r("car"), c("Drive")), scene.timing(r("alien"), c("Walk")));
+    assert!((car.stride - TAU * WHEEL_RADIUS).abs() < 1e-4 && (car.length - 24.0).abs() < 1e-3, "{car:?}");
+    assert!((walk.stride - ALIEN_STRIDE).abs() < 1e-4 && (walk.length - 24.0).abs() < 1e-3, "{walk:?}");
+    // What the shot plays: the same rig loaded as a shot loads it, kind detected.
+    let shot_car = SkinnedRig::load(&dir.path().join("car.glb"), &SkinOptions::default(), FPS).unwrap();
+    assert!(shot_car.is_rigid());
+    let (stride, length) = shot_car.cycle_timing("Drive").unwrap();
+    assert_eq!(car, CycleTiming { length, stride });
+    // Declared `kind = "rigid"`, the same timing.
+    let declared = parse("{ file = \"DIR/car.glb\", kind = \"rigid\" }", alien).unwrap();
+    assert_eq!(declared.timing(r("car"), c("Drive")), car);
+    // Each agent's cycle advances by its distance over its rig's stride.
+    let crowd = throng::sim::run(&scene);
+    for (k, t) in [(0, car), (1, walk)] {
+        let mut walked = 0.0;
+        for f in 1..crowd.frames.len() {
+            let (a, b) = (&crowd.frames[f - 1].agents[k], &crowd.frames[f].agents[k]);
+            let adv = (b.cycle_frame - a.cycle_frame).rem_euclid(t.length);
+            let dist = (b.position - a.position).length();
+            assert!((adv * t.stride / t.length - dist).abs() < 1e-4, "agent {k} frame {f}: {adv} frames for {dist} m");
+            walked += dist;
+        }
+        assert!(walked > 40.0 * 0.9 * t.stride / t.length, "agent {k} moves: {walked} m");
+    }
+    // An alien with no root node and no wheels has no stride: refused, naming
+    // the scene, the rig entry and the two keys that would give one...
+    let bare = "{ file = \"DIR/still_alien.glb\", forward = \"-z\" }";
+    let Err(e) = parse("\"DIR/car.glb\"", bare) else { panic!("an alien with no stride is refused") };
+    let e = e.to_string();
+    for want in [
+        "rigid.toml",
+        "field `rigs.alien`",
+        "rigid rig `alien`",
+        "still_alien.glb",
+        "turns no wheel",
+        "rigs.alien.strides.Walk",
+    ] {
+        assert!(e.contains(want), "`{want}` missing from: {e}");
+    }
+    // ... and given `strides` it walks at that.
+    let given = "{ file = \"DIR/still_alien.glb\", forward = \"-z\", strides = { Walk = 0.7 } }";
+    let scene = parse("\"DIR/car.glb\"", given).unwrap();
+    assert_eq!(scene.timing(r("alien"), c("Walk")).stride, 0.7);
+}
+
+/// `cache convert --rig-file` reads a car and a walking alien as the shot
+/// does, kind detected: stride and length in the import report, and the
+/// written cycle frames advance by distance over that stride.
+#[test]
+fn cache_convert_reads_a_car_and_an_alien_as_rig_files() {
+    let dir = common::tempdir().unwrap();
+    let car = write_car(dir.path(), "car.glb", false);
+    let alien = write_alien(dir.path(), "alien.glb", true);
+    let still = write_alien(dir.path(), "still_alien.glb", false);
+    let input = common::fixture("jupedsim_small.sqlite");
+    let info = |args: &[&str]| {
+        let mut all = vec!["cache", "info", input.to_str().unwrap(), "--json"];
+        all.extend_from_slice(args);
+        let (code, out, err) = common::run(&all);
+        assert_eq!(code, 0, "{args:?}: {err}");
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        (v["import"]["stride"].as_f64().unwrap() as f32, v["import"]["cycle_length"].as_f64().unwrap() as f32)
+    };
+    let (c, a, s) = (car.to_str().unwrap(), alien.to_str().unwrap(), still.to_str().unwrap());
+    let car_args = ["--rig", "car", "--cycle", "Drive", "--rig-file", c];
+    let (stride, length) = info(&car_args);
+    assert!((stride - TAU * WHEEL_RADIUS).abs() < 1e-4 && (length - 24.0).abs() < 1e-3, "car: {stride} m, {length}");
+    let alien_args =
+        ["--rig", "alien", "--cycle", "Walk", "--rig-file", a, "--rig-root", "alien", "--rig-forward", "-z"];
+    let (stride, length) = info(&alien_args);
+    assert!((stride - ALIEN_STRIDE).abs() < 1e-4 && (length - 24.0).abs() < 1e-3, "alien: {stride} m, {length}");
+    // Converted: the cycle frames follow distance / stride.
+    for (args, stride) in [(&car_args[..], TAU * WHEEL_RADIUS), (&alien_args[..], ALIEN_STRIDE)] {
+        let out = dir.path().join(format!("{}.crowd", args[1]));
+        let mut all = vec!["cache", "convert", input.to_str().unwrap(), out.to_str().unwrap()];
+        all.extend_from_slice(args);
+        let (code, stdout, err) = common::run(&all);
+        assert_eq!(code, 0, "{err}");
+        assert!(stdout.contains(&format!("stride {stride}")) || stdout.contains("stride"), "{stdout}");
+        assert_planted(&throng::cache::read(&out).unwrap(), stride, 24.0, 100);
+    }
+    // A trajectory table takes the car's stride too.
+    let table = common::fixture("tabular/eth_obsmat.txt");
+    let (code, out, err) = common::run(&[
+        "cache",
+        "info",
+        table.to_str().unwrap(),
+        "--preset",
+        "eth-ucy",
+        "--rig",
+        "car",
+        "--cycle",
+        "Drive",
+        "--rig-file",
+        c,
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("rig car, cycle Drive, stride 1.88495"), "{out}");
+    // No root node and no wheels: exit 2 naming the file and the field, nothing written.
+    let none = dir.path().join("none.crowd");
+    let (code, _, err) = common::run(&[
+        "cache",
+        "convert",
+        input.to_str().unwrap(),
+        none.to_str().unwrap(),
+        "--rig",
+        "alien",
+        "--cycle",
+        "Walk",
+        "--rig-file",
+        s,
+        "--rig-forward",
+        "-z",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    for want in ["still_alien.glb", "field `cycle`", "cycle `Walk` walks 0 m", "turns no wheel", "root node"] {
+        assert!(err.contains(want), "`{want}` missing from: {err}");
+    }
+    assert!(!none.exists());
+    // `--stride` gives the walk its stride, as the message says (the shot's `strides`).
+    let given = dir.path().join("given.crowd");
+    let (code, _, err) = common::run(&[
+        "cache",
+        "convert",
+        input.to_str().unwrap(),
+        given.to_str().unwrap(),
+        "--rig",
+        "alien",
+        "--cycle",
+        "Walk",
+        "--rig-file",
+        s,
+        "--stride",
+        "0.7",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_planted(&throng::cache::read(&given).unwrap(), 0.7, 24.0, 100);
 }

@@ -139,6 +139,148 @@ fn a_shot_casts_the_joint_parented_mesh_with_the_skin() {
     assert!(text.contains("limb"), "the limb is cast: {text}");
 }
 
+/// A robot built as RobotExpressive is: a skeleton (hips, torso, head,
+/// arms, hands, legs) whose body parts are separate meshes on nodes
+/// parented to its joints, not skinned, and only the hands a skinned mesh
+/// (the two hands, bound wholly to their hand joints). Its one clip swings
+/// the legs and arms 25 degrees about X over a second. `parts` false leaves
+/// the joint-parented meshes out: the hands alone, what throng drew of
+/// RobotExpressive before joint-parented meshes were read.
+fn write_robot(dir: &Path, name: &str, parts: bool) -> PathBuf {
+    use throng::export::glb::{
+        AnimationDesc, ChannelDesc, ChannelValues, GlbBuilder, Interpolation, MaterialDesc, MaterialId, MeshData,
+        NodeDesc,
+    };
+    let v = Vec3::new;
+    let mut b = GlbBuilder::new();
+    let paint = b.add_material(&MaterialDesc::new("paint", [0.85, 0.55, 0.1, 1.0]));
+    let dark = b.add_material(&MaterialDesc::new("dark", [0.08, 0.08, 0.1, 1.0]));
+    let steel = b.add_material(&MaterialDesc::new("steel", [0.6, 0.62, 0.66, 1.0]));
+    // (joint, parent, offset from the parent, its mesh's box in joint space, material)
+    type Joint = (&'static str, Option<usize>, Vec3, Option<(Vec3, Vec3)>, MaterialId);
+    let joints: [Joint; 9] = [
+        ("hips", None, v(0.0, 0.9, 0.0), Some((v(-0.17, -0.1, -0.11), v(0.17, 0.1, 0.11))), steel),
+        ("torso", Some(0), v(0.0, 0.1, 0.0), Some((v(-0.21, 0.0, -0.13), v(0.21, 0.5, 0.13))), paint),
+        ("head", Some(1), v(0.0, 0.55, 0.0), Some((v(-0.16, 0.0, -0.15), v(0.16, 0.3, 0.15))), paint),
+        ("leg_l", Some(0), v(0.1, -0.05, 0.0), Some((v(-0.06, -0.85, -0.07), v(0.06, 0.0, 0.07))), steel),
+        ("leg_r", Some(0), v(-0.1, -0.05, 0.0), Some((v(-0.06, -0.85, -0.07), v(0.06, 0.0, 0.07))), steel),
+        ("arm_l", Some(1), v(0.27, 0.47, 0.0), Some((v(-0.05, -0.45, -0.05), v(0.05, 0.03, 0.05))), steel),
+        ("arm_r", Some(1), v(-0.27, 0.47, 0.0), Some((v(-0.05, -0.45, -0.05), v(0.05, 0.03, 0.05))), steel),
+        ("hand_l", Some(5), v(0.0, -0.45, 0.0), None, dark),
+        ("hand_r", Some(6), v(0.0, -0.45, 0.0), None, dark),
+    ];
+    let mut nodes = Vec::new();
+    let mut world = Vec::new();
+    for (name, parent, offset, mesh, material) in joints {
+        let n = b.add_node(NodeDesc::new(name).translation(offset.to_array())).unwrap();
+        let at = parent.map_or(Vec3::ZERO, |p: usize| world[p]) + offset;
+        if let Some(p) = parent {
+            b.add_child(nodes[p], n).unwrap();
+        }
+        if let (true, Some((lo, hi))) = (parts, mesh) {
+            let m = b.add_mesh(&format!("{name}_part"), &common::cuboid(lo, hi), Some(material)).unwrap();
+            let child = b.add_node(NodeDesc::new(format!("{name}_part")).mesh(m)).unwrap();
+            b.add_child(n, child).unwrap();
+        }
+        nodes.push(n);
+        world.push(at);
+    }
+    // A visor on the head's front (+Z): the way the robot faces.
+    if parts {
+        let m = b.add_mesh("visor", &common::cuboid(v(-0.12, 0.12, 0.14), v(0.12, 0.22, 0.17)), Some(dark)).unwrap();
+        let child = b.add_node(NodeDesc::new("visor").mesh(m)).unwrap();
+        b.add_child(nodes[2], child).unwrap();
+    }
+    // The skinned hands, in the bind (rest) pose, each wholly on its joint.
+    let mut hands = MeshData::default();
+    for joint in [7, 8] {
+        let c = world[joint] + v(0.0, -0.06, 0.0);
+        let mut cube = common::cuboid(c - v(0.06, 0.07, 0.06), c + v(0.06, 0.07, 0.06));
+        let base = hands.positions.len() as u32;
+        hands.positions.append(&mut cube.positions);
+        hands.normals.append(&mut cube.normals);
+        hands.indices.extend(cube.indices.iter().map(|i| i + base));
+    }
+    let count = hands.positions.len();
+    hands.joints = (0..count).map(|i| [if i < count / 2 { 7 } else { 8 }, 0, 0, 0]).collect();
+    hands.weights = vec![[1.0, 0.0, 0.0, 0.0]; count];
+    let inverse_bind: Vec<[f32; 16]> =
+        world.iter().map(|w| glam::Mat4::from_translation(-*w).to_cols_array()).collect();
+    let skin = b.add_skin(&nodes, &inverse_bind).unwrap();
+    let mesh = b.add_mesh("hands", &hands, Some(dark)).unwrap();
+    b.add_node(NodeDesc::new("hands").mesh(mesh).skin(skin)).unwrap();
+    // Walk: legs and the opposite arms swing about X.
+    let times: Vec<f32> = (0..=4).map(|i| i as f32 / 4.0).collect();
+    let channels = [(3, 1.0), (4, -1.0), (5, -1.0), (6, 1.0)]
+        .map(|(joint, swing): (usize, f32)| ChannelDesc {
+            node: nodes[joint],
+            interpolation: Interpolation::Linear,
+            times: times.clone(),
+            values: ChannelValues::Rotation(
+                times
+                    .iter()
+                    .map(|t| {
+                        Quat::from_rotation_x(swing * 25f32.to_radians() * (t * std::f32::consts::TAU).sin()).to_array()
+                    })
+                    .collect(),
+            ),
+        })
+        .to_vec();
+    b.add_animation(&AnimationDesc { name: "Walk".into(), channels }).unwrap();
+    let path = dir.join(name);
+    b.write(&path).unwrap();
+    path
+}
+
+/// Five RobotExpressive-like robots rendered whole: their joint-parented
+/// parts cover many times the pixels of their skinned hands (all that was
+/// drawn before), and follow their joints. Kept for looking at:
+/// target/tmp/joint_parented_robots.png.
+#[test]
+fn robots_with_joint_parented_parts_render_whole() {
+    let render = |parts: bool| {
+        let dir = common::tempdir().unwrap();
+        let robot = write_robot(dir.path(), "robot.glb", parts);
+        let shot = common::figure_shot(dir.path(), &common::five_walkers(), "");
+        let figure = common::shared_asset("gltf/RiggedFigure/RiggedFigure.gltf");
+        let text = std::fs::read_to_string(&shot)
+            .unwrap()
+            .replace(&figure.display().to_string(), &robot.display().to_string())
+            .replace("resolution = [160, 90]", "resolution = [480, 270]")
+            .replace("position = [0.0, 1.1, 5.5]", "position = [0.0, 1.2, 6.5]")
+            .replace("aim = [0.0, 0.75, 0.0]", "aim = [0.0, 0.8, -1.2]");
+        std::fs::write(&shot, text).unwrap();
+        let crowd = ShotCrowd::load(&shot).unwrap();
+        let block = crowd.agents_at(1023).unwrap();
+        let mut out = Vec::new();
+        crowd.agent_instances(&block.agents[0], Lod::Full, vis::ALL, &mut out).unwrap();
+        // Eight parts and the visor on their joints, and the skinned hands.
+        assert_eq!(out.len(), if parts { 9 } else { 1 }, "instances of one robot");
+        let renders = dir.path().join("renders");
+        let args = ["render", shot.to_str().unwrap(), "--layer", "full", "--frames", "1023", "--png", "--spp", "8"];
+        let (code, stdout, err) = common::run(&[&args[..], &["--out", renders.to_str().unwrap()]].concat());
+        assert_eq!(code, 0, "{stdout}\n{err}");
+        let png = std::fs::read_dir(renders.join("full"))
+            .unwrap()
+            .flatten()
+            .map(|e| e.path())
+            .find(|p| p.extension().is_some_and(|e| e == "png"))
+            .expect("a PNG preview");
+        let (film, _) = throng::render::exr::read_layer(&png.with_extension("exr")).unwrap();
+        let covered = film.agent_id.iter().filter(|&&id| id != 0).count();
+        let seen: std::collections::BTreeSet<u32> = film.agent_id.iter().copied().filter(|&i| i != 0).collect();
+        if parts {
+            std::fs::copy(&png, Path::new(env!("CARGO_TARGET_TMPDIR")).join("joint_parented_robots.png")).unwrap();
+        }
+        (covered, seen.len())
+    };
+    let (whole, seen) = render(true);
+    let (hands, _) = render(false);
+    assert_eq!(seen, 5, "five robots in frame");
+    assert!(hands > 0, "the hands render");
+    assert!(whole > 10 * hands, "the robots cover {whole} pixels, their hands alone {hands}");
+}
+
 #[test]
 fn second_joint_set_counts_and_unnormalised_weights_warn_once() {
     // The multi-joint-set file repeats JOINTS_0/WEIGHTS_0 as JOINTS_1/WEIGHTS_1:

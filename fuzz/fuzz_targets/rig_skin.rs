@@ -45,7 +45,7 @@ fuzz_target!(|data: &[u8]| {
     if let Ok(a) = Animated::load(path) {
         let _ = a.clip("WalkA");
     }
-    let _ = import_clip(path, "bipedThinA", "WalkA", None);
+    let _ = import_clip(path, "bipedThinA", "WalkA", None, None);
     if let Ok(skin) = SkinnedRig::load(path, &SkinOptions::default(), 24.0) {
         let _ = skin.height();
         let _ = skin.warnings();

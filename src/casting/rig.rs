@@ -711,10 +711,19 @@ impl Pose {
 /// the cache does not name one rig and walk at another's stride. A skinned
 /// or rigid character (`skin` given, or detected: no slots) walks as a
 /// shot's skinned rig with those options does (`shot_cache::file_gait`):
-/// stride from its root joint's travel or `strides`, length from the clip.
-pub fn import_clip(file: &Path, rig: &str, cycle: &str, skin: Option<&SkinOptions>) -> Result<RigClip> {
+/// stride from its root joint's travel, a rigid rig's wheels or `strides`,
+/// length from the clip. A `stride` given (the import's own, as a shot's
+/// `strides` entry for the cycle) stands in for the file's, so a cycle whose
+/// travel the file does not give is not refused then.
+pub fn import_clip(
+    file: &Path,
+    rig: &str,
+    cycle: &str,
+    skin: Option<&SkinOptions>,
+    stride: Option<f32>,
+) -> Result<RigClip> {
     if crate::casting::shot_cache::is_character_file(file, skin)? {
-        let g = crate::casting::shot_cache::skinned_file_gait(file, skin, cycle, None)?;
+        let g = crate::casting::shot_cache::skinned_file_gait(file, skin, cycle, None, stride)?;
         return Ok(RigClip { file: file.to_path_buf(), stride: g.stride, cycle_length: g.cycle_length });
     }
     let r = Rig::load(file)?;
@@ -726,7 +735,7 @@ pub fn import_clip(file: &Path, rig: &str, cycle: &str, skin: Option<&SkinOption
         .field("rig"));
     }
     let c = r.cycle(cycle).map_err(|e| e.field("cycle"))?;
-    let (stride, cycle_length) = (c.stride(), c.frames(SHOT_FPS));
+    let (stride, cycle_length) = (stride.unwrap_or(c.stride()), c.frames(SHOT_FPS));
     if !(stride.is_finite() && stride > 0.0) {
         return Err(Error::invalid(
             file,

@@ -19,9 +19,14 @@ use crate::shot::{Shot, SkinOptions};
 /// idle cycle's length (frames at 24 fps, the unit of cycle frames). A walk
 /// cycle whose root does not travel is refused (it would never advance).
 pub fn gait(file: &Path, walk: &str, idle: Option<&str>) -> Result<Gait> {
+    slot_gait(file, walk, idle, None)
+}
+
+/// [`gait`], with `stride` (when given) in place of the walk's root travel.
+fn slot_gait(file: &Path, walk: &str, idle: Option<&str>, stride: Option<f32>) -> Result<Gait> {
     let rig = Rig::load(file)?;
     let c = rig.cycle(walk).map_err(|e| e.field("cycle"))?;
-    let (stride, cycle_length) = (c.stride(), c.frames(SHOT_FPS));
+    let (stride, cycle_length) = (stride.unwrap_or(c.stride()), c.frames(SHOT_FPS));
     if !(stride.is_finite() && stride > 0.0 && cycle_length.is_finite() && cycle_length > 0.0) {
         return Err(Error::invalid(
             file,
@@ -50,11 +55,13 @@ pub fn gait(file: &Path, walk: &str, idle: Option<&str>) -> Result<Gait> {
 fn skinned_gait(rig: &SkinnedRig, walk: &str, idle: Option<&str>) -> Result<Option<Gait>> {
     let Ok((stride, cycle_length)) = rig.cycle_timing(walk) else { return Ok(None) };
     if !(stride.is_finite() && stride > 0.0 && cycle_length.is_finite() && cycle_length > 0.0) {
+        let root = match rig.is_rigid() {
+            true => "the rigid rig's clip turns no wheel: name its root node",
+            false => "name its root joint",
+        };
         return Err(Error::invalid(
             rig.path(),
-            format!(
-                "cycle `{walk}` walks {stride} m in {cycle_length} frames: name its root joint (`root`) or give `strides`"
-            ),
+            format!("cycle `{walk}` walks {stride} m in {cycle_length} frames: {root} (`root`) or give `strides`"),
         )
         .field("cycle"));
     }
@@ -81,24 +88,36 @@ pub(crate) fn is_character_file(file: &Path, skin: Option<&SkinOptions>) -> Resu
 /// axes), as the shot's skinned rigs walk; a rigid one (no skin) likewise,
 /// its stride from its wheels where it has them. `skin` `None` detects the
 /// kind; a detected character takes the default options (each clip is a cycle
-/// of its own name; no root joint, so its walk needs `root` or a stride).
-pub fn file_gait(file: &Path, skin: Option<&SkinOptions>, walk: &str, idle: Option<&str>) -> Result<Gait> {
+/// of its own name; no root joint, so its walk needs `root`, wheels or a
+/// stride). A `stride` given is the walk's (for a character, its `strides`
+/// entry).
+pub fn file_gait(
+    file: &Path,
+    skin: Option<&SkinOptions>,
+    walk: &str,
+    idle: Option<&str>,
+    stride: Option<f32>,
+) -> Result<Gait> {
     match is_character_file(file, skin)? {
-        true => skinned_file_gait(file, skin, walk, idle),
-        false => gait(file, walk, idle),
+        true => skinned_file_gait(file, skin, walk, idle, stride),
+        false => slot_gait(file, walk, idle, stride),
     }
 }
 
-/// The gait of a file known to be a skinned character (`skin` `None`: the
-/// default options).
+/// The gait of a file known to be a skinned or rigid character (`skin`
+/// `None`: the default options; `stride` given: the walk's `strides` entry).
 pub(crate) fn skinned_file_gait(
     file: &Path,
     skin: Option<&SkinOptions>,
     walk: &str,
     idle: Option<&str>,
+    stride: Option<f32>,
 ) -> Result<Gait> {
-    let default = SkinOptions::default();
-    let rig = SkinnedRig::load(file, skin.unwrap_or(&default), SHOT_FPS)?;
+    let mut options = skin.cloned().unwrap_or_default();
+    if let Some(s) = stride {
+        options.strides.insert(walk.to_string(), s);
+    }
+    let rig = SkinnedRig::load(file, &options, SHOT_FPS)?;
     // The error lists the rig's cycles; past it the walk is there.
     rig.cycle_index(walk).map_err(|e| e.field("cycle"))?;
     skinned_gait(&rig, walk, idle)?

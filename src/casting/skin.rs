@@ -98,6 +98,19 @@ pub(crate) struct SkinPart {
     pub(crate) pieces: Vec<usize>,
 }
 
+/// Where a character cycle's stride comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum StrideFrom {
+    /// The shot's (or sim scene's, or import's) `strides` entry.
+    Given,
+    /// The `root` joint's (node's) travel over the clip, 0 for one that stands.
+    Root,
+    /// The distance a rigid rig's wheels roll over the clip.
+    Wheels,
+    /// Nothing measures it (no `root`, no wheels): 0, which walks on the spot.
+    Unmeasured,
+}
+
 /// One cycle of a skinned rig: a cache cycle name mapped to a clip.
 #[derive(Clone, Debug)]
 pub struct SkinCycle {
@@ -107,8 +120,11 @@ pub struct SkinCycle {
     pub(crate) clip: usize,
     /// The clip's name (`#index` when unnamed).
     pub(crate) clip_name: String,
-    /// Metres per cycle: given in the shot, else the root joint's travel, else 0.
+    /// Metres per cycle: given in the shot, else the root joint's travel,
+    /// else (a rigid rig) the distance its wheels roll, else 0.
     pub stride: f32,
+    /// Where `stride` came from.
+    pub(crate) stride_from: StrideFrom,
     /// Steps the cycle is cut into for pose instancing.
     pub steps: u32,
     /// Whether `steps` was chosen for `pose_error_max` (not from `pose_step`).
@@ -386,16 +402,20 @@ impl SkinnedRig {
         let mut rolls: BTreeMap<usize, f32> = BTreeMap::new();
         for (name, clip) in cycles {
             let clip_name = rig.animated.clips[clip].name.clone();
-            let stride = match options.strides.get(&name) {
-                Some(&s) => s,
-                None if rig.root.is_none() && rig.rigid => match rolls.get(&clip) {
-                    Some(&s) => s,
-                    None => {
-                        let s = rig.wheel_stride(&own, clip);
-                        *rolls.entry(clip).or_insert(s)
-                    }
-                },
-                None => rig.root_travel(clip),
+            let (stride, stride_from) = match options.strides.get(&name) {
+                Some(&s) => (s, StrideFrom::Given),
+                None if rig.root.is_none() && rig.rigid => {
+                    let s = match rolls.get(&clip) {
+                        Some(&s) => s,
+                        None => {
+                            let s = rig.wheel_stride(&own, clip);
+                            *rolls.entry(clip).or_insert(s)
+                        }
+                    };
+                    (s, if s > 0.0 { StrideFrom::Wheels } else { StrideFrom::Unmeasured })
+                }
+                None if rig.root.is_none() => (0.0, StrideFrom::Unmeasured),
+                None => (rig.root_travel(clip), StrideFrom::Root),
             };
             let (steps, chosen, error) = match per_clip.get(&clip) {
                 Some(&known) => known,
@@ -405,7 +425,7 @@ impl SkinnedRig {
                     known
                 }
             };
-            rig.cycles.push(SkinCycle { name, clip, clip_name, stride, steps, chosen, error });
+            rig.cycles.push(SkinCycle { name, clip, clip_name, stride, stride_from, steps, chosen, error });
         }
         Ok(rig)
     }
@@ -1112,6 +1132,21 @@ impl SkinnedRig {
         let c = self.cycle_index(name)?;
         let own = self.cycles.iter().find(|x| x.name == name).map_or(self.cycles[c].stride, |x| x.stride);
         Ok((own, self.cycle_frames(c)))
+    }
+
+    /// Where cache cycle `name`'s stride comes from (see [`SkinnedRig::cycle_timing`]).
+    pub(crate) fn stride_from(&self, name: &str) -> Result<StrideFrom> {
+        let c = self.cycle_index(name)?;
+        Ok(self.cycles.iter().find(|x| x.name == name).map_or(self.cycles[c].stride_from, |x| x.stride_from))
+    }
+
+    /// What gives a cycle of this rig its stride when the shot gives none:
+    /// for messages that a cycle has none.
+    pub(crate) fn stride_sources(&self) -> &'static str {
+        match self.rigid {
+            true => "no `root` node and its clip turns no wheel",
+            false => "no `root` joint",
+        }
     }
 
     /// Length of a cycle in frames.

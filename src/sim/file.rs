@@ -21,7 +21,7 @@ use super::{
     MAX_AGENTS, MAX_FRAMES, MAX_RIG_CYCLES, MAX_TARGETS,
 };
 use crate::casting::rig::Rig;
-use crate::casting::skin::{is_character_rig, SkinnedRig};
+use crate::casting::skin::{is_character_rig, SkinnedRig, StrideFrom};
 use crate::error::{Error, Result};
 use crate::shot::{Axis, RigKind, RigRef, SkinOptions};
 
@@ -659,17 +659,18 @@ fn timings(
                             let names = rig.cycles().iter().map(|k| format!("{} (clip {})", k.name, k.clip_name));
                             return Err(no_cycle(names.collect()));
                         };
-                        // Without a root joint a skinned clip's travel is not
-                        // measured: 0 would make a walk a walk on the spot.
-                        let given = rig_ref.skin.strides.contains_key(&cycle.name);
-                        if rig_ref.skin.root.is_none() && !given {
+                        // Without a root (or a rigid rig's wheels) a clip's travel
+                        // is not measured: 0 would make a walk a walk on the spot.
+                        if matches!(rig.stride_from(&cycle.name), Ok(StrideFrom::Unmeasured)) {
+                            let (kind, what) = if rig.is_rigid() { ("rigid", "node") } else { ("skinned", "joint") };
                             return Err(Error::invalid(
                                 path,
                                 format!(
-                                    "skinned rig `{rig_name}` ({}) has no `root` joint, so cycle `{}` has no stride: \
-                                     name its root joint (`rigs.{rig_name}.root`) or give `rigs.{rig_name}.strides.{}` \
+                                    "{kind} rig `{rig_name}` ({}) has {}, so cycle `{}` has no stride: \
+                                     name its root {what} (`rigs.{rig_name}.root`) or give `rigs.{rig_name}.strides.{}` \
                                      (used by {key})",
                                     file.display(),
+                                    rig.stride_sources(),
                                     cycle.name,
                                     cycle.name
                                 ),

@@ -296,3 +296,25 @@ pub fn tempdir() -> std::io::Result<TempDir> {
     std::fs::create_dir(&dir)?;
     Ok(TempDir(dir))
 }
+
+/// A box from `lo` to `hi` with flat normals.
+pub fn cuboid(lo: glam::Vec3, hi: glam::Vec3) -> throng::export::glb::MeshData {
+    let mut m = throng::export::glb::MeshData::default();
+    for (n, u, v) in [
+        (glam::Vec3::X, glam::Vec3::Y, glam::Vec3::Z),
+        (glam::Vec3::NEG_X, glam::Vec3::Z, glam::Vec3::Y),
+        (glam::Vec3::Y, glam::Vec3::Z, glam::Vec3::X),
+        (glam::Vec3::NEG_Y, glam::Vec3::X, glam::Vec3::Z),
+        (glam::Vec3::Z, glam::Vec3::X, glam::Vec3::Y),
+        (glam::Vec3::NEG_Z, glam::Vec3::Y, glam::Vec3::X),
+    ] {
+        let base = m.positions.len() as u32;
+        let (c, h) = ((lo + hi) / 2.0, (hi - lo) / 2.0);
+        for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+            m.positions.push((c + (n + u * a + v * b) * h).to_array());
+            m.normals.push(n.to_array());
+        }
+        m.indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+    }
+    m
+}

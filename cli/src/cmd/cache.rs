@@ -74,26 +74,28 @@ pub struct GaitArgs {
     #[arg(long)]
     pub stride: Option<f32>,
     /// Rig glTF to read the cycle's length (frames at 24 fps) and stride (root
-    /// travel) from; its rig name must match --rig. --stride and --cycle-length override it.
+    /// travel, or a vehicle's wheel roll) from; a slot rig's name must match
+    /// --rig. --stride and --cycle-length override it.
     #[arg(long)]
     pub rig_file: Option<PathBuf>,
-    /// Skinned --rig-file: the joint whose travel is root motion (its Z travel
-    /// is the stride), as a shot's `root` key. Any --rig-* flag below reads
-    /// the file as a skinned character (one is detected without them).
+    /// Character --rig-file: the joint (a rigid rig's node) whose travel is
+    /// root motion (its Z travel is the stride), as a shot's `root` key. Any
+    /// --rig-* flag reads the file as a character, skinned or rigid as its
+    /// skin says (one is detected without them).
     #[arg(long, value_name = "JOINT", requires = "rig_file")]
     pub rig_root: Option<String>,
-    /// Skinned --rig-file: the clip a cache cycle plays, CYCLE=CLIP (repeat
+    /// Character --rig-file: the clip a cache cycle plays, CYCLE=CLIP (repeat
     /// it; a shot's `cycles` key). Unmapped cycles play the clip of their name.
     #[arg(long, value_name = "CYCLE=CLIP", value_parser = cycle_clip, requires = "rig_file")]
     pub rig_cycle: Vec<(String, String)>,
-    /// Skinned --rig-file: metres per file unit (0.01 for centimetres), as a shot's `scale`.
+    /// Character --rig-file: metres per file unit (0.01 for centimetres), as a shot's `scale`.
     #[arg(long, value_name = "M", value_parser = positive, requires = "rig_file")]
     pub rig_scale: Option<f32>,
-    /// Skinned --rig-file: the direction the character faces in the file
+    /// Character --rig-file: the direction the character faces in the file
     /// (+x, -x, +y, -y, +z, -z; default +z), as a shot's `forward`.
     #[arg(long, value_name = "AXIS", value_parser = axis, allow_hyphen_values = true, requires = "rig_file")]
     pub rig_forward: Option<Axis>,
-    /// Skinned --rig-file: the file's up axis (default +y), as a shot's `up`.
+    /// Character --rig-file: the file's up axis (default +y), as a shot's `up`.
     #[arg(long, value_name = "AXIS", value_parser = axis, allow_hyphen_values = true, requires = "rig_file")]
     pub rig_up: Option<Axis>,
     /// Frames per second of the cache written (the shot's rate).
@@ -191,7 +193,7 @@ impl ImportArgs {
         // The flags are checked before the rig file is read.
         ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, None)?.with_turn_rate(self.keys.turn_rate)?;
         let skin = self.skin();
-        let clip = g.rig_file.as_deref().map(|f| import_clip(f, &rig, &cycle, skin.as_ref())).transpose()?;
+        let clip = g.rig_file.as_deref().map(|f| import_clip(f, &rig, &cycle, skin.as_ref(), g.stride)).transpose()?;
         ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, clip)?.with_turn_rate(self.keys.turn_rate)
     }
 
@@ -227,7 +229,8 @@ impl ImportArgs {
         let jp = self.options()?;
         let idle_length = match (&self.gait.rig_file, &spec.idle_cycle) {
             (Some(f), Some(_)) => {
-                file_gait(f, self.skin().as_ref(), &self.names().1, spec.idle_cycle.as_deref())?.idle_length
+                let (skin, walk) = (self.skin(), self.names().1);
+                file_gait(f, skin.as_ref(), &walk, spec.idle_cycle.as_deref(), self.gait.stride)?.idle_length
             }
             _ => Gait::default().idle_length,
         };
