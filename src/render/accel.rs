@@ -26,7 +26,7 @@ use rayon::prelude::*;
 
 use super::integrator::surface_alpha;
 use super::sampler::hash_words;
-use super::wide::{dispatch, Kernel, Traversal, Walk};
+use super::wide::{dispatch, octant_inv4, Kernel, Packet, PacketWalk, Traversal, Walk, PACKET};
 use crate::scene::{AlphaMode, Instance, Library, Material, Mesh, SceneMotion};
 
 /// Bottom-level BVH of one mesh, in object space.
@@ -461,6 +461,10 @@ struct TlasInstance {
 /// below it, a tree over parts traces faster; above it, memory and build
 /// time per part dominate (a million robots are eleven million parts).
 pub(crate) const AGENT_CLUSTERS_FROM: usize = 1_000_000;
+
+/// The fewest rays of one direction octant [`Tlas::intersect_stream`] walks
+/// as a packet; fewer are traced one by one.
+pub const MIN_PACKET: usize = 4;
 
 /// `TlasInstance::motion` of an instance that does not move.
 const STILL: u32 = u32::MAX;
@@ -914,33 +918,7 @@ impl<'a> Tlas<'a> {
         let time = ray.time;
         // (instance position, BLAS slot) of the closest hit so far.
         let mut best = (usize::MAX, u32::MAX);
-        let visit = |r: &Ray, slot: usize| {
-            // r.tmax is the closest hit so far, which prunes each BLAS walk.
-            let mut closest = r.tmax;
-            let mut found = f32::INFINITY;
-            for k in self.cluster(slot) {
-                let inst = &self.instances[k];
-                if inst.visibility & mask == 0 {
-                    continue;
-                }
-                let hit = if inst.motion == STILL {
-                    let Some(b) = self.blas.get(inst.mesh) else { continue };
-                    let local = object_ray(&self.object_from_world(k, inst), r, closest);
-                    match inst.cutout.then(|| self.holes_of(inst, r)).flatten() {
-                        None => b.intersect(w, local),
-                        Some(holes) => b.intersect_cut(w, local, &holes),
-                    }
-                } else {
-                    self.intersect_moving(w, inst, r, closest, time)
-                };
-                if let Some((s, t)) = hit {
-                    if t < closest {
-                        (closest, found, best) = (t, t, (k, s));
-                    }
-                }
-            }
-            found
-        };
+        let visit = |r: &Ray, slot: usize| self.visit_closest(w, r, slot, mask, time, &mut best);
         let found = match &self.tree {
             TlasTree::Empty => None,
             // `visit` moves into whichever arm runs, so it inlines into the traversal.
@@ -950,16 +928,56 @@ impl<'a> Tlas<'a> {
             }
             TlasTree::CwBvh(bvh) => w.closest(bvh, world, visit).map(|(_, t)| t),
         };
+        self.closest_hit(&world, time, best, found)
+    }
+
+    /// The visit of TLAS leaf `slot` in a closest-hit walk of world ray `r`
+    /// (whose tmax is the closest hit so far, which prunes each BLAS walk):
+    /// every instance of the leaf that `mask` admits, through its BLAS.
+    /// The `t` of a hit closer than `r.tmax` (infinity if none); `best`
+    /// becomes its (instance position, BLAS slot).
+    #[inline(always)]
+    fn visit_closest<W: Walk>(&self, w: W, r: &Ray, slot: usize, mask: u8, time: f32, best: &mut (usize, u32)) -> f32 {
+        let mut closest = r.tmax;
+        let mut found = f32::INFINITY;
+        for k in self.cluster(slot) {
+            let inst = &self.instances[k];
+            if inst.visibility & mask == 0 {
+                continue;
+            }
+            let hit = if inst.motion == STILL {
+                let Some(b) = self.blas.get(inst.mesh) else { continue };
+                let local = object_ray(&self.object_from_world(k, inst), r, closest);
+                match inst.cutout.then(|| self.holes_of(inst, r)).flatten() {
+                    None => b.intersect(w, local),
+                    Some(holes) => b.intersect_cut(w, local, &holes),
+                }
+            } else {
+                self.intersect_moving(w, inst, r, closest, time)
+            };
+            if let Some((s, t)) = hit {
+                if t < closest {
+                    (closest, found, *best) = (t, t, (k, s));
+                }
+            }
+        }
+        found
+    }
+
+    /// The [`Hit`] of world ray `world` (as it entered the walk) whose walk
+    /// ended at `found` with `best` (from [`Tlas::visit_closest`]).
+    #[inline(always)]
+    fn closest_hit(&self, world: &Ray, time: f32, best: (usize, u32), found: Option<f32>) -> Option<Hit> {
         let t = found.filter(|_| best.0 != usize::MAX)?;
         let inst = &self.instances[best.0];
         let slot = best.1 as usize;
         let (uv, triangle) = if inst.motion == STILL {
             let b = self.blas.get(inst.mesh)?;
-            let local = object_ray(&self.object_from_world(best.0, inst), &world, world.tmax);
+            let local = object_ray(&self.object_from_world(best.0, inst), world, world.tmax);
             (b.tris[slot].compute_barycentric(&local), b.triangle_index[slot])
         } else {
             let mv = &self.moving[inst.motion as usize];
-            let local = transform_ray(&mv.object_from_world(time)?, &world, world.tmax);
+            let local = transform_ray(&mv.object_from_world(time)?, world, world.tmax);
             match &mv.deform {
                 Some((d, _)) => (d.triangle(slot, mv.weight(time)).compute_barycentric(&local), d.triangle_index[slot]),
                 None => {
@@ -969,6 +987,101 @@ impl<'a> Tlas<'a> {
             }
         };
         Some(Hit { instance: inst.index, triangle, t, u: uv.x, v: uv.y })
+    }
+
+    /// The closest hits of a stream of rays, `hits[i]` of `rays[i]`: each
+    /// exactly what [`Tlas::intersect`] gives for it (same `t`, instance,
+    /// triangle and barycentrics, bit for bit), traced as packets where rays
+    /// are coherent. Rays are grouped by direction octant; each group of at
+    /// least [`MIN_PACKET`] walks the TLAS as packets of up to
+    /// [`super::wide::PACKET`] (one fetch of a node for every ray that
+    /// reaches it), each ray entering its own instances' BLASes at the
+    /// leaves; smaller groups are traced one ray at a time.
+    pub fn intersect_stream(&self, rays: &[WorldRay], mask: u8, hits: &mut [Option<Hit>]) {
+        self.intersect_stream_with(rays, mask, MIN_PACKET, hits);
+    }
+
+    /// As [`Tlas::intersect_stream`] with octant groups of at least
+    /// `min_packet` rays walked as packets (1: every ray in a packet; tests
+    /// force each path). Returns how many rays a packet walk answered
+    /// (the rest were traced one by one).
+    #[doc(hidden)]
+    pub fn intersect_stream_with(
+        &self,
+        rays: &[WorldRay],
+        mask: u8,
+        min_packet: usize,
+        hits: &mut [Option<Hit>],
+    ) -> usize {
+        assert_eq!(rays.len(), hits.len(), "one hit per ray");
+        dispatch!(self.kernel, w => self.intersect_stream_in(w, rays, mask, min_packet.max(1), hits))
+    }
+
+    #[inline(always)]
+    fn intersect_stream_in<W: PacketWalk>(
+        &self,
+        w: W,
+        rays: &[WorldRay],
+        mask: u8,
+        min_packet: usize,
+        hits: &mut [Option<Hit>],
+    ) -> usize {
+        let TlasTree::CwBvh(bvh) = &self.tree else {
+            for (h, r) in hits.iter_mut().zip(rays) {
+                *h = self.intersect_in(w, r, mask);
+            }
+            return 0;
+        };
+        let mut in_packets = 0;
+        // Ray indices by octant, in ray order within each (a counting sort).
+        let world: Vec<Ray> = rays.iter().map(world_ray).collect();
+        let octant = |r: &Ray| (octant_inv4(r.direction) & 7) as usize;
+        let mut starts = [0usize; 9];
+        for r in &world {
+            starts[octant(r) + 1] += 1;
+        }
+        for o in 0..8 {
+            starts[o + 1] += starts[o];
+        }
+        let mut order = vec![0u32; rays.len()];
+        let mut next = starts;
+        for (i, r) in world.iter().enumerate() {
+            let o = octant(r);
+            order[next[o]] = i as u32;
+            next[o] += 1;
+        }
+        let mut packet = [Ray::new(Vec3A::ZERO, Vec3A::X, 0.0, 0.0); PACKET];
+        for o in 0..8 {
+            let group = &order[starts[o]..starts[o + 1]];
+            if group.len() < min_packet {
+                for &i in group {
+                    hits[i as usize] = self.intersect_in(w, &rays[i as usize], mask);
+                }
+                continue;
+            }
+            for chunk in group.chunks(PACKET) {
+                let n = chunk.len();
+                for (p, &i) in packet.iter_mut().zip(chunk) {
+                    *p = world[i as usize];
+                }
+                let mut best = [(usize::MAX, u32::MAX); PACKET];
+                let walked = w.closest_packet(bvh, &mut packet[..n], |k, r, slot| {
+                    self.visit_closest(w, r, slot, mask, rays[chunk[k] as usize].time, &mut best[k])
+                });
+                in_packets += if walked == Packet::Done { n } else { 0 };
+                for (k, &i) in chunk.iter().enumerate() {
+                    let i = i as usize;
+                    hits[i] = match walked {
+                        Packet::Done => {
+                            let found = (best[k].0 != usize::MAX).then_some(packet[k].tmax);
+                            self.closest_hit(&world[i], rays[i].time, best[k], found)
+                        }
+                        Packet::Single => self.intersect_in(w, &rays[i], mask),
+                    };
+                }
+            }
+        }
+        in_packets
     }
 
     /// True when any instance whose visibility shares a bit with `mask`
