@@ -478,6 +478,8 @@ fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u3
             .collect(),
     };
     let (pw, pc, ph) = rate(&tlas, &blocks, vis::CAMERA, stream);
+    // The same rays in the same block order one by one: what the packets alone change.
+    let (_, sc, _) = if stream.is_some() { rate(&tlas, &blocks, vis::CAMERA, None) } else { (0.0, pc, 0.0) };
     let (bw, bc, bh) = rate(&tlas, &bounce, vis::INDIRECT, None);
     // The same bounce rays through the other TLAS kind (the renderer picks by instance count).
     let other = match TlasKind::for_count(scene.instances.len()) {
@@ -487,7 +489,7 @@ fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u3
     let (_, oc, _) = rate(&Tlas::build_with(blas, &scene.instances, other), &bounce, vis::INDIRECT, None);
     let m = |x: f64| (x / 1e4).round() / 100.0;
     serde_json::json!({
-        "primary": {"rays": primary.len(), "packets": stream.is_some(), "mrays_s_1t": m(pw), "mrays_per_cpu_s_1t": m(pc), "hit_fraction": (ph * 1e4).round() / 1e4},
+        "primary": {"rays": primary.len(), "packets": stream.is_some(), "single_same_order_mrays_per_cpu_s_1t": m(sc), "mrays_s_1t": m(pw), "mrays_per_cpu_s_1t": m(pc), "hit_fraction": (ph * 1e4).round() / 1e4},
         "bounce": {"rays": bounce.len(), "mrays_s_1t": m(bw), "mrays_per_cpu_s_1t": m(bc), "hit_fraction": (bh * 1e4).round() / 1e4,
                    "tlas": format!("{:?}", TlasKind::for_count(scene.instances.len())), "other_tlas_mrays_per_cpu_s_1t": m(oc)},
     })

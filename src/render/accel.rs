@@ -95,23 +95,43 @@ impl Blas {
     /// Closest hit in object space: (BVH slot, t).
     #[inline(always)]
     fn intersect<W: Walk>(&self, w: W, ray: Ray) -> Option<(u32, f32)> {
-        w.closest(&self.bvh, ray, |r, s| intersect_triangle(&self.tris[s], r))
+        w.closest(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| intersect_triangle(&self.tris[s], r),
+        )
     }
 
     #[inline(always)]
     fn occluded<W: Walk>(&self, w: W, ray: Ray) -> bool {
-        w.any(&self.bvh, ray, |r, s| intersect_triangle(&self.tris[s], r))
+        w.any(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| intersect_triangle(&self.tris[s], r),
+        )
     }
 
     /// As [`Blas::intersect`], skipping the hits `holes` cuts out.
     #[inline(always)]
     fn intersect_cut<W: Walk>(&self, w: W, ray: Ray, holes: &Holes) -> Option<(u32, f32)> {
-        w.closest(&self.bvh, ray, |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]))
+        w.closest(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]),
+        )
     }
 
     #[inline(always)]
     fn occluded_cut<W: Walk>(&self, w: W, ray: Ray, holes: &Holes) -> bool {
-        w.any(&self.bvh, ray, |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]))
+        w.any(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]),
+        )
     }
 
     /// Closest hit in object space, (BVH slot, t), walked with `traversal`
@@ -217,22 +237,42 @@ impl DeformBlas {
 
     #[inline(always)]
     fn intersect<W: Walk>(&self, k: W, ray: Ray, w: f32) -> Option<(u32, f32)> {
-        k.closest(&self.bvh, ray, |r, s| intersect_triangle(&self.triangle(s, w), r))
+        k.closest(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| intersect_triangle(&self.triangle(s, w), r),
+        )
     }
 
     #[inline(always)]
     fn occluded<W: Walk>(&self, k: W, ray: Ray, w: f32) -> bool {
-        k.any(&self.bvh, ray, |r, s| intersect_triangle(&self.triangle(s, w), r))
+        k.any(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| intersect_triangle(&self.triangle(s, w), r),
+        )
     }
 
     #[inline(always)]
     fn intersect_cut<W: Walk>(&self, k: W, ray: Ray, w: f32, holes: &Holes) -> Option<(u32, f32)> {
-        k.closest(&self.bvh, ray, |r, s| holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s]))
+        k.closest(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s]),
+        )
     }
 
     #[inline(always)]
     fn occluded_cut<W: Walk>(&self, k: W, ray: Ray, w: f32, holes: &Holes) -> bool {
-        k.any(&self.bvh, ray, |r, s| holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s]))
+        k.any(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s]),
+        )
     }
 }
 
@@ -918,15 +958,25 @@ impl<'a> Tlas<'a> {
         let time = ray.time;
         // (instance position, BLAS slot) of the closest hit so far.
         let mut best = (usize::MAX, u32::MAX);
-        let visit = |r: &Ray, slot: usize| self.visit_closest(w, r, slot, mask, time, &mut best);
+        // The leaf visit is a closure marked to inline into the walk, which
+        // runs in the kernel's SIMD context: left to itself, the compiler
+        // kept it a function of its own, compiled without AVX2, and the
+        // BLAS walks in it called into AVX2 once per node test.
         let found = match &self.tree {
             TlasTree::Empty => None,
-            // `visit` moves into whichever arm runs, so it inlines into the traversal.
             TlasTree::Bvh2(bvh) => {
                 let mut hit = RayHit::none();
+                let visit = |r: &Ray, slot: usize| self.visit_closest(w, r, slot, mask, time, &mut best);
                 bvh.ray_traverse(world, &mut hit, visit).then_some(hit.t)
             }
-            TlasTree::CwBvh(bvh) => w.closest(bvh, world, visit).map(|(_, t)| t),
+            TlasTree::CwBvh(bvh) => w
+                .closest(
+                    bvh,
+                    world,
+                    #[inline(always)]
+                    |r: &Ray, slot: usize| self.visit_closest(w, r, slot, mask, time, &mut best),
+                )
+                .map(|(_, t)| t),
         };
         self.closest_hit(&world, time, best, found)
     }
@@ -1065,9 +1115,12 @@ impl<'a> Tlas<'a> {
                     *p = world[i as usize];
                 }
                 let mut best = [(usize::MAX, u32::MAX); PACKET];
-                let walked = w.closest_packet(bvh, &mut packet[..n], |k, r, slot| {
-                    self.visit_closest(w, r, slot, mask, rays[chunk[k] as usize].time, &mut best[k])
-                });
+                let walked = w.closest_packet(
+                    bvh,
+                    &mut packet[..n],
+                    #[inline(always)]
+                    |k, r, slot| self.visit_closest(w, r, slot, mask, rays[chunk[k] as usize].time, &mut best[k]),
+                );
                 in_packets += if walked == Packet::Done { n } else { 0 };
                 for (k, &i) in chunk.iter().enumerate() {
                     let i = i as usize;
@@ -1100,7 +1153,33 @@ impl<'a> Tlas<'a> {
     fn occluded_in<W: Walk>(&self, w: W, ray: &WorldRay, mask: u8, counts: &impl Fn(u32) -> bool) -> bool {
         let world = world_ray(ray);
         let time = ray.time;
-        let visit = |r: &Ray, slot: usize| {
+        let visit = |r: &Ray, slot: usize| self.visit_any(w, r, slot, mask, time, counts);
+        match &self.tree {
+            TlasTree::Empty => false,
+            TlasTree::Bvh2(bvh) => !bvh.ray_traverse_miss(world, visit),
+            // Inlined into the walk, as `intersect_in`'s visit.
+            TlasTree::CwBvh(bvh) => w.any(
+                bvh,
+                world,
+                #[inline(always)]
+                |r: &Ray, slot: usize| self.visit_any(w, r, slot, mask, time, counts),
+            ),
+        }
+    }
+
+    /// The visit of TLAS leaf `slot` in an any-hit walk of world ray `r`:
+    /// 0 where an instance `mask` and `counts` admit blocks it, else infinity.
+    #[inline(always)]
+    fn visit_any<W: Walk>(
+        &self,
+        w: W,
+        r: &Ray,
+        slot: usize,
+        mask: u8,
+        time: f32,
+        counts: &impl Fn(u32) -> bool,
+    ) -> f32 {
+        {
             let blocked = self.cluster(slot).any(|k| {
                 let inst = &self.instances[k];
                 inst.visibility & mask != 0
@@ -1123,11 +1202,6 @@ impl<'a> Tlas<'a> {
             } else {
                 f32::INFINITY
             }
-        };
-        match &self.tree {
-            TlasTree::Empty => false,
-            TlasTree::Bvh2(bvh) => !bvh.ray_traverse_miss(world, visit),
-            TlasTree::CwBvh(bvh) => w.any(bvh, world, visit),
         }
     }
 

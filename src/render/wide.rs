@@ -158,13 +158,19 @@ impl PacketWalk for ObvhsWalk {
 impl<T: NodeTest> PacketWalk for OurWalk<T> {
     #[inline(always)]
     fn closest_packet(self, bvh: &CwBvh, rays: &mut [Ray], mut prim: impl FnMut(usize, &Ray, usize) -> f32) -> Packet {
-        walk_packet(self.0, bvh, rays, |i, r, slot| {
-            let t = prim(i, r, slot as usize);
-            if t < r.tmax {
-                r.tmax = t;
-            }
-            false
-        })
+        walk_packet(
+            self.0,
+            bvh,
+            rays,
+            #[inline(always)]
+            |i, r, slot| {
+                let t = prim(i, r, slot as usize);
+                if t < r.tmax {
+                    r.tmax = t;
+                }
+                false
+            },
+        )
     }
 }
 
@@ -177,21 +183,33 @@ impl<T: NodeTest> Walk for OurWalk<T> {
     fn closest(self, bvh: &CwBvh, ray: Ray, mut prim: impl FnMut(&Ray, usize) -> f32) -> Option<(u32, f32)> {
         let mut r = ray;
         let mut best = None;
-        walk(self.0, bvh, &mut r, |r, slot| {
-            let t = prim(r, slot as usize);
-            if t < r.tmax {
-                best = Some((slot, t));
-                r.tmax = t;
-            }
-            false
-        });
+        walk(
+            self.0,
+            bvh,
+            &mut r,
+            #[inline(always)]
+            |r, slot| {
+                let t = prim(r, slot as usize);
+                if t < r.tmax {
+                    best = Some((slot, t));
+                    r.tmax = t;
+                }
+                false
+            },
+        );
         best
     }
 
     #[inline(always)]
     fn any(self, bvh: &CwBvh, ray: Ray, mut prim: impl FnMut(&Ray, usize) -> f32) -> bool {
         let mut r = ray;
-        walk(self.0, bvh, &mut r, |r, slot| prim(r, slot as usize) < r.tmax)
+        walk(
+            self.0,
+            bvh,
+            &mut r,
+            #[inline(always)]
+            |r, slot| prim(r, slot as usize) < r.tmax,
+        )
     }
 }
 
@@ -318,6 +336,19 @@ impl NodeTest for Avx2Test {
     }
 }
 
+/// A value a closure spends, so that the closure is `FnOnce` by nature.
+/// pulp's `vectorize` calls its closure through `FnOnce::call_once`; for a
+/// closure that is `Fn` by nature that is a compiler-made shim, which is not
+/// always inlined into pulp's AVX2 function, so the whole query ended up
+/// compiled without AVX2 in the shim, calling into AVX2 once per node test.
+/// A closure that spends a `Once` is its own `call_once`, inlined.
+pub(crate) struct Once;
+
+impl Once {
+    #[inline(always)]
+    pub(crate) fn spend(self) {}
+}
+
 /// Runs `$body` with `$w` bound to the [`Walk`] of `$kernel`; on AVX2, inside
 /// pulp's `vectorize`, so the whole query (tree walks, triangle tests) is
 /// compiled with the features the kernel has and its node tests inline.
@@ -333,13 +364,17 @@ macro_rules! dispatch {
                 $body
             }
             #[cfg(target_arch = "x86_64")]
-            $crate::render::wide::Kernel::Avx2(v3) => v3.vectorize(
-                #[inline(always)]
-                || {
-                    let $w = $crate::render::wide::OurWalk($crate::render::wide::Avx2Test(v3));
-                    $body
-                },
-            ),
+            $crate::render::wide::Kernel::Avx2(v3) => {
+                let once = $crate::render::wide::Once;
+                v3.vectorize(
+                    #[inline(always)]
+                    || {
+                        once.spend();
+                        let $w = $crate::render::wide::OurWalk($crate::render::wide::Avx2Test(v3));
+                        $body
+                    },
+                )
+            }
         }
     };
 }
