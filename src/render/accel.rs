@@ -1014,129 +1014,6 @@ impl<'a> Tlas<'a> {
         found
     }
 
-    /// [`Tlas::visit_closest`] for the rays `here` of a packet at once (the
-    /// same result for each): an instance that neither moves nor cuts holes
-    /// takes the rays into object space with one transform fetch, and those
-    /// of one object-space octant walk its BLAS as a packet.
-    #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    fn visit_closest_packet<W: PacketWalk>(
-        &self,
-        w: W,
-        rays: &mut [Ray],
-        here: u32,
-        slot: usize,
-        mask: u8,
-        times: &[f32; PACKET],
-        best: &mut [(usize, u32); PACKET],
-    ) {
-        let mut closest = [0f32; PACKET];
-        let mut found = [f32::INFINITY; PACKET];
-        let mut todo = here;
-        while todo != 0 {
-            let i = todo.trailing_zeros() as usize;
-            todo &= todo - 1;
-            closest[i] = rays[i].tmax;
-        }
-        let mut local = [Ray::new(Vec3A::ZERO, Vec3A::X, 0.0, 0.0); PACKET];
-        for k in self.cluster(slot) {
-            let inst = &self.instances[k];
-            if inst.visibility & mask == 0 {
-                continue;
-            }
-            let blas = self.blas.get(inst.mesh);
-            let Some(b) = blas.filter(|_| inst.motion == STILL && !inst.cutout && here.count_ones() > 1) else {
-                // One ray at a time, as `visit_closest`'s loop body.
-                let mut todo = here;
-                while todo != 0 {
-                    let i = todo.trailing_zeros() as usize;
-                    todo &= todo - 1;
-                    let r = &rays[i];
-                    let hit = if inst.motion == STILL {
-                        let Some(b) = blas else { continue };
-                        let local = object_ray(&self.object_from_world(k, inst), r, closest[i]);
-                        match inst.cutout.then(|| self.holes_of(inst, r)).flatten() {
-                            None => b.intersect(w, local),
-                            Some(holes) => b.intersect_cut(w, local, &holes),
-                        }
-                    } else {
-                        self.intersect_moving(w, inst, r, closest[i], times[i])
-                    };
-                    if let Some((s, t)) = hit {
-                        if t < closest[i] {
-                            (closest[i], found[i], best[i]) = (t, t, (k, s));
-                        }
-                    }
-                }
-                continue;
-            };
-            let object_from_world = self.object_from_world(k, inst);
-            // The rays in object space, grouped by their octant there.
-            let mut octants = [0u32; 8];
-            let mut todo = here;
-            while todo != 0 {
-                let i = todo.trailing_zeros() as usize;
-                todo &= todo - 1;
-                let l = object_ray(&object_from_world, &rays[i], closest[i]);
-                octants[(octant_inv4(l.direction) & 7) as usize] |= 1 << i;
-                local[i] = l;
-            }
-            for group in octants {
-                if group == 0 {
-                    continue;
-                }
-                let n = group.count_ones() as usize;
-                let mut hits = [(u32::MAX, f32::INFINITY); PACKET];
-                let mut walked = Packet::Single;
-                if n > 1 {
-                    let mut packed = [Ray::new(Vec3A::ZERO, Vec3A::X, 0.0, 0.0); PACKET];
-                    let mut g = group;
-                    for p in packed.iter_mut().take(n) {
-                        let i = g.trailing_zeros() as usize;
-                        g &= g - 1;
-                        *p = local[i];
-                    }
-                    walked = w.closest_packet(
-                        &b.bvh,
-                        &mut packed[..n],
-                        #[inline(always)]
-                        |j, r, s| {
-                            let t = intersect_triangle(&b.tris[s], r);
-                            if t < r.tmax {
-                                hits[j] = (s as u32, t);
-                            }
-                            t
-                        },
-                    );
-                }
-                let mut g = group;
-                let mut j = 0;
-                while g != 0 {
-                    let i = g.trailing_zeros() as usize;
-                    g &= g - 1;
-                    let hit = match walked {
-                        Packet::Done => (hits[j].0 != u32::MAX).then_some(hits[j]),
-                        Packet::Single => b.intersect(w, local[i]),
-                    };
-                    j += 1;
-                    if let Some((s, t)) = hit {
-                        if t < closest[i] {
-                            (closest[i], found[i], best[i]) = (t, t, (k, s));
-                        }
-                    }
-                }
-            }
-        }
-        let mut todo = here;
-        while todo != 0 {
-            let i = todo.trailing_zeros() as usize;
-            todo &= todo - 1;
-            if found[i] < rays[i].tmax {
-                rays[i].tmax = found[i];
-            }
-        }
-    }
-
     /// The [`Hit`] of world ray `world` (as it entered the walk) whose walk
     /// ended at `found` with `best` (from [`Tlas::visit_closest`]).
     #[inline(always)]
@@ -1238,15 +1115,11 @@ impl<'a> Tlas<'a> {
                     *p = world[i as usize];
                 }
                 let mut best = [(usize::MAX, u32::MAX); PACKET];
-                let mut times = [0f32; PACKET];
-                for (t, &i) in times.iter_mut().zip(chunk) {
-                    *t = rays[i as usize].time;
-                }
-                let walked = w.closest_packet_leaves(
+                let walked = w.closest_packet(
                     bvh,
                     &mut packet[..n],
                     #[inline(always)]
-                    |here, rs, slot| self.visit_closest_packet(w, rs, here, slot, mask, &times, &mut best),
+                    |k, r, slot| self.visit_closest(w, r, slot, mask, rays[chunk[k] as usize].time, &mut best[k]),
                 );
                 in_packets += if walked == Packet::Done { n } else { 0 };
                 for (k, &i) in chunk.iter().enumerate() {

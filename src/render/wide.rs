@@ -146,21 +146,11 @@ pub(crate) trait PacketWalk: Walk {
     /// As [`Walk::closest`] per ray: each ray's `tmax` ends at its closest `t`
     /// (`prim` records which primitive that was).
     fn closest_packet(self, bvh: &CwBvh, rays: &mut [Ray], prim: impl FnMut(usize, &Ray, usize) -> f32) -> Packet;
-    /// As [`PacketWalk::closest_packet`] with a leaf's primitive visited for
-    /// all the rays that reach it at once: `leaf(rays_here, rays, slot)`, bit
-    /// `i` of `rays_here` set for each ray `i` to test there, which lowers
-    /// those rays' `tmax` to any closer hit itself.
-    fn closest_packet_leaves(self, bvh: &CwBvh, rays: &mut [Ray], leaf: impl FnMut(u32, &mut [Ray], usize)) -> Packet;
 }
 
 impl PacketWalk for ObvhsWalk {
     #[inline(always)]
     fn closest_packet(self, _: &CwBvh, _: &mut [Ray], _: impl FnMut(usize, &Ray, usize) -> f32) -> Packet {
-        Packet::Single
-    }
-
-    #[inline(always)]
-    fn closest_packet_leaves(self, _: &CwBvh, _: &mut [Ray], _: impl FnMut(u32, &mut [Ray], usize)) -> Packet {
         Packet::Single
     }
 }
@@ -173,37 +163,12 @@ impl<T: NodeTest> PacketWalk for OurWalk<T> {
             bvh,
             rays,
             #[inline(always)]
-            |here, rays, slot| {
-                let mut todo = here;
-                while todo != 0 {
-                    let i = todo.trailing_zeros() as usize;
-                    todo &= todo - 1;
-                    let r = &mut rays[i];
-                    let t = prim(i, r, slot as usize);
-                    if t < r.tmax {
-                        r.tmax = t;
-                    }
+            |i, r, slot| {
+                let t = prim(i, r, slot as usize);
+                if t < r.tmax {
+                    r.tmax = t;
                 }
-                0
-            },
-        )
-    }
-
-    #[inline(always)]
-    fn closest_packet_leaves(
-        self,
-        bvh: &CwBvh,
-        rays: &mut [Ray],
-        mut leaf: impl FnMut(u32, &mut [Ray], usize),
-    ) -> Packet {
-        walk_packet(
-            self.0,
-            bvh,
-            rays,
-            #[inline(always)]
-            |here, rays, slot| {
-                leaf(here, rays, slot as usize);
-                0
+                false
             },
         )
     }
@@ -494,12 +459,10 @@ struct PacketGroup {
 /// union of the rays' child bits, in that order, is a supersequence of each
 /// ray's own walk. Each ray keeps its own child bits (a node is tested only
 /// for the rays whose own bits reached it, each with its own `tmax`) and its
-/// own primitive bits (a node's primitives are visited high bit first after
-/// the node's tests, `leaf(rays_here, rays, primitive)` for the rays whose
-/// own bits have that primitive; for each ray that is `walk`'s order, and
-/// the rays are independent), so every ray meets the same nodes and
-/// primitives in the same order with the same `tmax` as alone. The rays
-/// whose bits `leaf` returns leave the walk (any hit). The packet's stack
+/// own primitive bits (run ray by ray, high bit first, right after that
+/// ray's node test, as `walk` does), so every ray meets the same nodes and
+/// primitives in the same order with the same `tmax` as alone. A ray leaves
+/// the walk where `prim` returns true for it (any hit). The packet's stack
 /// is at least as deep as any member's; where it would reach the depth at
 /// which `walk` starts overwriting its top, the walk stops and says
 /// [`Packet::Single`], and the caller traces the rays one by one.
@@ -508,7 +471,7 @@ fn walk_packet<T: NodeTest>(
     test: T,
     bvh: &CwBvh,
     rays: &mut [Ray],
-    mut leaf: impl FnMut(u32, &mut [Ray], u32) -> u32,
+    mut prim: impl FnMut(usize, &mut Ray, u32) -> bool,
 ) -> Packet {
     let n = rays.len();
     if n == 0 || bvh.nodes.is_empty() {
@@ -556,39 +519,34 @@ fn walk_packet<T: NodeTest>(
         let relative = (group.imask & !(u32::MAX << slot)).count_ones();
         let node = &bvh.nodes[(group.base + relative) as usize];
         let mut next = PacketGroup { base: node.child_base_idx, imask: node.imask as u32, rays: [0; 8] };
-        // Every ray here is tested first (its child and primitive bits
-        // from its own tmax, as `walk` takes them before its primitives),
-        // then the primitives, high bit first, each for the rays that have it.
-        let mut prims = [0u32; 24];
-        let mut any_prims = 0u32;
         let mut todo = here;
         while todo != 0 {
             let i = todo.trailing_zeros() as usize;
             todo &= todo - 1;
-            let mask = test.hits(node, &rays[i], oct_inv4);
-            let mut p = mask & 0x00ff_ffff;
-            any_prims |= p;
-            while p != 0 {
-                let b = p.trailing_zeros() as usize;
-                p &= p - 1;
-                prims[b] |= 1 << i;
+            let ray = &mut rays[i];
+            let mask = test.hits(node, ray, oct_inv4);
+            let mut prims = mask & 0x00ff_ffff;
+            let mut stopped = false;
+            while prims != 0 {
+                let local = 31 - prims.leading_zeros();
+                prims &= !(1 << local);
+                if prim(i, ray, node.primitive_base_idx + local) {
+                    stopped = true;
+                    break;
+                }
+            }
+            if stopped {
+                alive &= !(1 << i);
+                if alive == 0 {
+                    return Packet::Done;
+                }
+                continue;
             }
             let mut children = mask >> 24;
             while children != 0 {
                 let c = children.trailing_zeros() as usize;
                 children &= children - 1;
                 next.rays[c] |= 1 << i;
-            }
-        }
-        while any_prims != 0 {
-            let local = 31 - any_prims.leading_zeros();
-            any_prims &= !(1 << local);
-            let at = prims[local as usize] & alive;
-            if at != 0 {
-                alive &= !leaf(at, rays, node.primitive_base_idx + local);
-                if alive == 0 {
-                    return Packet::Done;
-                }
             }
         }
         group = next;
