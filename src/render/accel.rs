@@ -1044,7 +1044,7 @@ impl<'a> Tlas<'a> {
     /// triangle and barycentrics, bit for bit), traced as packets where rays
     /// are coherent. Rays are grouped by direction octant; each group of at
     /// least [`MIN_PACKET`] walks the TLAS as packets of up to
-    /// [`super::wide::PACKET`] (one fetch of a node for every ray that
+    /// 32 (one fetch of a node for every ray that
     /// reaches it), each ray entering its own instances' BLASes at the
     /// leaves; smaller groups are traced one ray at a time.
     pub fn intersect_stream(&self, rays: &[WorldRay], mask: u8, hits: &mut [Option<Hit>]) {

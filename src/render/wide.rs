@@ -16,6 +16,13 @@
 //! and checks the closest hits (t and primitive) and any-hit answers agree,
 //! with each other and with obvhs' own traversal.
 //!
+//! Packets (`PacketWalk`, `walk_packet`): up to 32 rays of one direction
+//! octant walk a tree together, each with its own child and primitive bits
+//! and its own `tmax`, so each meets exactly the nodes and primitives of
+//! its single-ray walk, in the same order: the same hits, bit for bit
+//! (`Tlas::intersect_stream` uses it for camera rays; docs/benchmarks.md,
+//! issue 25 item 2, has the argument and the figures).
+//!
 //! Safe: SIMD dispatch goes through `pulp` (its `V3` token proves AVX2 and
 //! its intrinsics are safe functions), so the crate's `forbid(unsafe_code)`
 //! holds.
@@ -123,7 +130,7 @@ impl Walk for ObvhsWalk {
     }
 }
 
-/// The most rays a packet walk ([`Walk::closest_packet`]) takes: one bit each in a `u32`.
+/// The most rays a packet walk ([`PacketWalk::closest_packet`]) takes: one bit each in a `u32`.
 pub(crate) const PACKET: usize = 32;
 
 /// What a packet walk did.
@@ -140,8 +147,8 @@ pub(crate) enum Packet {
 /// The packet form of [`Walk`]: `rays` (at most [`PACKET`], all of one
 /// direction octant) walked together, each meeting exactly the nodes and
 /// primitives, in the same order and with the same `tmax`, as its own
-/// [`Walk::closest`] / [`Walk::any`] walk (see [`walk_packet`]). `prim` gets
-/// the ray's index in `rays` as well.
+/// [`Walk::closest`] walk (see [`walk_packet`]). `prim` gets the ray's
+/// index in `rays` as well.
 pub(crate) trait PacketWalk: Walk {
     /// As [`Walk::closest`] per ray: each ray's `tmax` ends at its closest `t`
     /// (`prim` records which primitive that was).
