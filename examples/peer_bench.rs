@@ -40,6 +40,10 @@
 //! single-thread closest-hit ray rates measured like the peers' Embree script:
 //! `primary` (one ray per pixel centre) and `bounce` (one cosine-weighted ray
 //! from every primary hit), best wall time of 3 and per thread CPU second.
+//! Primary rays go as packets (blocks of 8x4 pixels through
+//! `Tlas::intersect_stream`), as the render's camera rays do, unless
+//! THRONG_PACKETS=0 (which also makes the render trace camera rays one by
+//! one); THRONG_TRAVERSAL=obvhs|scalar|wide picks the node test kernel.
 
 use std::f32::consts::PI;
 use std::path::PathBuf;
@@ -408,12 +412,25 @@ fn hit_normal(lib: &Library, inst: &Instance, triangle: u32) -> Option<Vec3> {
 }
 
 /// Rays per second (best wall time of 3, and rays per thread-CPU second of
-/// the best run) tracing `rays` closest-hit on the calling thread; and the hit fraction.
-fn rate(tlas: &Tlas, rays: &[WorldRay], mask: u8) -> (f64, f64, f64) {
+/// the best run) tracing `rays` closest-hit on the calling thread; and the
+/// hit fraction. With `stream`, `rays` go to `Tlas::intersect_stream` in
+/// runs of that many (packets where their octants agree), else one by one.
+fn rate(tlas: &Tlas, rays: &[WorldRay], mask: u8, stream: Option<usize>) -> (f64, f64, f64) {
     let (mut best_wall, mut best_cpu, mut hits) = (f64::INFINITY, f64::INFINITY, 0usize);
+    let mut found = vec![None; stream.unwrap_or(0)];
     for _ in 0..3 {
         let (t, c) = (Instant::now(), throng::bench::thread_cpu_s());
-        hits = rays.iter().filter(|r| tlas.intersect(r, mask).is_some()).count();
+        hits = match stream {
+            None => rays.iter().filter(|r| tlas.intersect(r, mask).is_some()).count(),
+            Some(n) => rays
+                .chunks(n)
+                .map(|run| {
+                    let found = &mut found[..run.len()];
+                    tlas.intersect_stream(run, mask, found);
+                    found.iter().filter(|h| h.is_some()).count()
+                })
+                .sum(),
+        };
         best_cpu = best_cpu.min(throng::bench::thread_cpu_s() - c);
         best_wall = best_wall.min(t.elapsed().as_secs_f64());
     }
@@ -447,17 +464,32 @@ fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u3
             Some(WorldRay { origin: offset_ray_origin(p, n), direction: d, tmax: f32::INFINITY, time: 0.0 })
         })
         .collect();
-    let (pw, pc, ph) = rate(&tlas, &primary, vis::CAMERA);
-    let (bw, bc, bh) = rate(&tlas, &bounce, vis::INDIRECT);
+    // As packets: the rays in blocks of 8x4 pixels, each block one stream.
+    let stream = throng::render::integrator::camera_packets().then_some(32);
+    let blocks: Vec<WorldRay> = match stream {
+        None => primary.clone(),
+        Some(_) => (0..h.div_ceil(4))
+            .flat_map(|by| (0..w.div_ceil(8)).map(move |bx| (bx, by)))
+            .flat_map(|(bx, by)| {
+                let p = &primary;
+                (by * 4..(by * 4 + 4).min(h))
+                    .flat_map(move |y| (bx * 8..(bx * 8 + 8).min(w)).map(move |x| p[(y * w + x) as usize]))
+            })
+            .collect(),
+    };
+    let (pw, pc, ph) = rate(&tlas, &blocks, vis::CAMERA, stream);
+    // The same rays in the same block order one by one: what the packets alone change.
+    let (_, sc, _) = if stream.is_some() { rate(&tlas, &blocks, vis::CAMERA, None) } else { (0.0, pc, 0.0) };
+    let (bw, bc, bh) = rate(&tlas, &bounce, vis::INDIRECT, None);
     // The same bounce rays through the other TLAS kind (the renderer picks by instance count).
     let other = match TlasKind::for_count(scene.instances.len()) {
         TlasKind::Bvh2 => TlasKind::CwBvh,
         TlasKind::CwBvh => TlasKind::Bvh2,
     };
-    let (_, oc, _) = rate(&Tlas::build_with(blas, &scene.instances, other), &bounce, vis::INDIRECT);
+    let (_, oc, _) = rate(&Tlas::build_with(blas, &scene.instances, other), &bounce, vis::INDIRECT, None);
     let m = |x: f64| (x / 1e4).round() / 100.0;
     serde_json::json!({
-        "primary": {"rays": primary.len(), "mrays_s_1t": m(pw), "mrays_per_cpu_s_1t": m(pc), "hit_fraction": (ph * 1e4).round() / 1e4},
+        "primary": {"rays": primary.len(), "packets": stream.is_some(), "single_same_order_mrays_per_cpu_s_1t": m(sc), "mrays_s_1t": m(pw), "mrays_per_cpu_s_1t": m(pc), "hit_fraction": (ph * 1e4).round() / 1e4},
         "bounce": {"rays": bounce.len(), "mrays_s_1t": m(bw), "mrays_per_cpu_s_1t": m(bc), "hit_fraction": (bh * 1e4).round() / 1e4,
                    "tlas": format!("{:?}", TlasKind::for_count(scene.instances.len())), "other_tlas_mrays_per_cpu_s_1t": m(oc)},
     })
@@ -483,6 +515,17 @@ fn main() {
         }
     };
     throng::render::wide::set_traversal(traversal);
+    // THRONG_PACKETS=0|1 (default 1): camera rays as packets or one by one,
+    // in the render and in the primary ray rate.
+    let packets = match std::env::var("THRONG_PACKETS").as_deref() {
+        Ok("1") | Err(_) => true,
+        Ok("0") => false,
+        Ok(other) => {
+            eprintln!("peer_bench: THRONG_PACKETS={other}: expected 0 or 1");
+            std::process::exit(2);
+        }
+    };
+    throng::render::integrator::set_camera_packets(packets);
     let t_all = Instant::now();
     let cpu0 = throng::bench::process_cpu_s();
     let loaded = match (&args.scene, args.synthetic) {

@@ -1,13 +1,17 @@
 //! Our BVH traversal (render::wide) gives the same hits on every kernel:
 //! the 8-wide AVX2 node test, the portable scalar one and obvhs' own walk,
 //! forced one by one on random rays over the demo's meshes (each BLAS alone)
-//! and over a whole frame of the demo (TLAS and BLASes together).
+//! and over a whole frame of the demo (TLAS and BLASes together). Packets
+//! (`Tlas::intersect_stream`) give every ray's single-ray hit, bit for bit,
+//! on random rays of every octant and on a camera's rays, on every kernel,
+//! and a render with camera packets is the render without them.
 
 mod common;
 
 use glam::Vec3;
 use throng::casting::ShotCrowd;
-use throng::render::accel::{Hit, Tlas, WorldRay};
+use throng::render::accel::{Hit, Tlas, WorldRay, MIN_PACKET};
+use throng::render::integrator::CameraRays;
 use throng::render::wide::Traversal;
 use throng::render::BlasSet;
 use throng::scene::vis;
@@ -137,4 +141,146 @@ fn every_kernel_finds_the_same_hits_in_a_demo_frame() {
         blocked += want_any as u32;
     }
     assert!(hits > n as u32 / 5 && blocked >= hits, "{hits} hits, {blocked} blocked of {n}: too few to test anything");
+}
+
+/// Every ray of `rays` through `tlas` as a stream (packets forced for every
+/// octant group, and the default grouping) against its single-ray hit.
+/// Returns how many rays the forced stream answered from packet walks.
+fn stream_matches_single(tlas: &Tlas, rays: &[WorldRay], mask: u8, what: &str) -> usize {
+    let want: Vec<_> = rays.iter().map(|r| hit_key(tlas.intersect(r, mask))).collect();
+    let mut in_packets = 0;
+    for min_packet in [1, MIN_PACKET] {
+        let mut hits = vec![None; rays.len()];
+        let n = tlas.intersect_stream_with(rays, mask, min_packet, &mut hits);
+        if min_packet == 1 {
+            in_packets = n;
+        }
+        for (i, (h, w)) in hits.into_iter().zip(&want).enumerate() {
+            let r = &rays[i];
+            assert_eq!(
+                hit_key(h),
+                *w,
+                "{what}: {} min_packet {min_packet} ray {i} {} {} {} mask {mask}",
+                tlas.kernel_name(),
+                r.origin,
+                r.direction,
+                r.tmax
+            );
+        }
+    }
+    in_packets
+}
+
+#[test]
+fn packets_find_the_single_ray_hits_on_random_rays_of_every_octant() {
+    let crowd = ShotCrowd::load(&common::demo_shot()).unwrap();
+    let frame = crowd.shot().frames.start;
+    let scene = throng::render::job::streamed_frame_scene(&crowd, None, throng::output::FULL_LAYER, frame).unwrap();
+    let blas = BlasSet::build(crowd.library());
+    let mut rng = Rng(0x1234_5678_9abc_def1);
+    for k in KERNELS {
+        let tlas = Tlas::build(&blas, &scene.instances).with_traversal(k);
+        let (lo, hi) = tlas.bounds().unwrap();
+        let (mut rays_total, mut packed, mut hits) = (0usize, 0usize, 0usize);
+        // Streams of many sizes (1 to 200 rays), each of rays from one spot
+        // to random agents (somewhat coherent) or from anywhere (not at all),
+        // in every octant, with finite and infinite tmax.
+        for s in 0..120 {
+            let len = 1 + (rng.f() * 200.0) as usize;
+            let spot = rng.point(lo, hi);
+            let rays: Vec<WorldRay> = (0..len)
+                .filter_map(|i| {
+                    let o = if s % 2 == 0 { spot } else { rng.point(lo, hi) };
+                    let inst = &scene.instances[(rng.f() * scene.instances.len() as f32) as usize];
+                    let d = rng.direction(o, inst.world_from_object.translation.into());
+                    let tmax = if i % 3 == 0 { rng.f() * 10.0 } else { f32::INFINITY };
+                    (d != Vec3::ZERO).then_some(WorldRay { origin: o, direction: d, tmax, time: 0.0 })
+                })
+                .collect();
+            let mask = [vis::ALL, vis::CAMERA | vis::HOLDOUT, vis::INDIRECT][s % 3];
+            packed += stream_matches_single(&tlas, &rays, mask, "random");
+            rays_total += rays.len();
+            hits += rays.iter().filter(|r| tlas.intersect(r, mask).is_some()).count();
+        }
+        assert!(hits > rays_total / 5, "{hits} hits of {rays_total} rays: too few to test anything");
+        if tlas.kernel_name() == "obvhs" {
+            assert_eq!(packed, 0, "obvhs' walk has no packets: its rays go one by one");
+        } else {
+            assert!(packed > rays_total * 9 / 10, "{packed} of {rays_total} rays were walked as packets");
+        }
+    }
+}
+
+#[test]
+fn packets_find_the_single_ray_hits_of_a_camera_over_a_demo_frame() {
+    let crowd = ShotCrowd::load(&common::demo_shot()).unwrap();
+    let frame = crowd.shot().frames.start;
+    let scene = throng::render::job::streamed_frame_scene(&crowd, None, throng::output::FULL_LAYER, frame).unwrap();
+    let blas = BlasSet::build(crowd.library());
+    let (w, h) = (160u32, 90u32);
+    let camera = CameraRays::new(&scene.camera, w, h);
+    let mut rng = Rng(0x0bad_cafe_f00d_d00d);
+    for k in KERNELS {
+        let tlas = Tlas::build(&blas, &scene.instances).with_traversal(k);
+        wide_kernel_is_the_cpus(Tlas::build(&blas, &scene.instances).kernel_name());
+        let (mut total, mut packed, mut hits) = (0usize, 0usize, 0usize);
+        // Per 8x4 block of pixels, eight jittered rays per pixel, in pixel order.
+        for by in (0..h).step_by(4) {
+            for bx in (0..w).step_by(8) {
+                let rays: Vec<WorldRay> = (by..by + 4)
+                    .flat_map(|y| (bx..bx + 8).map(move |x| (x, y)))
+                    .flat_map(|(x, y)| (0..8).map(move |_| (x, y)))
+                    .map(|(x, y)| {
+                        let (origin, direction) = camera.ray(x as f32 + rng.f(), y as f32 + rng.f());
+                        WorldRay { origin, direction, tmax: f32::INFINITY, time: 0.0 }
+                    })
+                    .collect();
+                packed += stream_matches_single(&tlas, &rays, vis::CAMERA | vis::HOLDOUT, "camera");
+                hits += rays.iter().filter(|r| tlas.intersect(r, vis::CAMERA | vis::HOLDOUT).is_some()).count();
+                total += rays.len();
+            }
+        }
+        assert!(hits > total / 2, "{hits} of {total} camera rays hit: too few to test anything");
+        if tlas.kernel_name() != "obvhs" {
+            assert!(packed > total * 9 / 10, "{packed} of {total} camera rays were walked as packets");
+        }
+    }
+}
+
+/// The render path: a blurred demo frame, the full image and a crowd layer
+/// (whose set is a holdout), plain and adaptive, with camera rays traced as
+/// packets and one by one: the same films, bit for bit.
+#[test]
+fn a_render_with_camera_packets_is_the_render_without() {
+    use throng::render::integrator::set_camera_packets;
+    use throng::render::job::{self, RenderJob};
+    let dir = common::tempdir().unwrap();
+    let shutter = [-0.25, 0.25];
+    let crowd = ShotCrowd::open(throng::shot::Shot::load(&common::demo_shot()).unwrap(), Some(shutter)).unwrap();
+    let manifest = throng::layers::build_layers(&crowd, &Default::default()).unwrap();
+    let mut layers = job::all_layers(&manifest);
+    assert!(layers.len() >= 2, "the demo has a set layer and crowd layers: {layers:?}");
+    layers.push("full".into());
+    let render = |packets: bool, adaptive: Option<throng::shot::Adaptive>, out: &str| {
+        set_camera_packets(packets);
+        let job = RenderJob {
+            shutter: Some(shutter),
+            resolution: Some([96, 54]),
+            adaptive,
+            ..RenderJob::new(layers.clone(), vec![1024], 8, dir.path().join(out))
+        };
+        let done = job::run(&crowd, Some(&manifest), &job, &job::Silent).unwrap().layers;
+        set_camera_packets(true);
+        done.iter().map(|l| throng::render::exr::read_layer(&l.path).unwrap().0).collect::<Vec<_>>()
+    };
+    let adaptive = Some(throng::shot::Adaptive { threshold: 0.05, min_spp: 3, max_spp: 12 });
+    for (a, name) in [(None, "plain"), (adaptive, "adaptive")] {
+        let with = render(true, a, &format!("{name}_p"));
+        let without = render(false, a, &format!("{name}_s"));
+        assert_eq!(with.len(), layers.len());
+        for (x, y) in with.iter().zip(&without) {
+            assert!(x == y, "{name}: a layer differs with camera packets");
+        }
+        assert!(with.iter().all(|f| f.rgba.iter().any(|p| p[3] > 0.0)), "{name}: every layer shows something");
+    }
 }

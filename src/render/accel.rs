@@ -26,7 +26,7 @@ use rayon::prelude::*;
 
 use super::integrator::surface_alpha;
 use super::sampler::hash_words;
-use super::wide::{dispatch, Kernel, Traversal, Walk};
+use super::wide::{dispatch, octant_inv4, Kernel, Packet, PacketWalk, Traversal, Walk, PACKET};
 use crate::scene::{AlphaMode, Instance, Library, Material, Mesh, SceneMotion};
 
 /// Bottom-level BVH of one mesh, in object space.
@@ -95,23 +95,43 @@ impl Blas {
     /// Closest hit in object space: (BVH slot, t).
     #[inline(always)]
     fn intersect<W: Walk>(&self, w: W, ray: Ray) -> Option<(u32, f32)> {
-        w.closest(&self.bvh, ray, |r, s| intersect_triangle(&self.tris[s], r))
+        w.closest(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| intersect_triangle(&self.tris[s], r),
+        )
     }
 
     #[inline(always)]
     fn occluded<W: Walk>(&self, w: W, ray: Ray) -> bool {
-        w.any(&self.bvh, ray, |r, s| intersect_triangle(&self.tris[s], r))
+        w.any(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| intersect_triangle(&self.tris[s], r),
+        )
     }
 
     /// As [`Blas::intersect`], skipping the hits `holes` cuts out.
     #[inline(always)]
     fn intersect_cut<W: Walk>(&self, w: W, ray: Ray, holes: &Holes) -> Option<(u32, f32)> {
-        w.closest(&self.bvh, ray, |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]))
+        w.closest(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]),
+        )
     }
 
     #[inline(always)]
     fn occluded_cut<W: Walk>(&self, w: W, ray: Ray, holes: &Holes) -> bool {
-        w.any(&self.bvh, ray, |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]))
+        w.any(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| holes.filter(hit_triangle(&self.tris[s], r), self.triangle_index[s]),
+        )
     }
 
     /// Closest hit in object space, (BVH slot, t), walked with `traversal`
@@ -217,22 +237,42 @@ impl DeformBlas {
 
     #[inline(always)]
     fn intersect<W: Walk>(&self, k: W, ray: Ray, w: f32) -> Option<(u32, f32)> {
-        k.closest(&self.bvh, ray, |r, s| intersect_triangle(&self.triangle(s, w), r))
+        k.closest(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| intersect_triangle(&self.triangle(s, w), r),
+        )
     }
 
     #[inline(always)]
     fn occluded<W: Walk>(&self, k: W, ray: Ray, w: f32) -> bool {
-        k.any(&self.bvh, ray, |r, s| intersect_triangle(&self.triangle(s, w), r))
+        k.any(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| intersect_triangle(&self.triangle(s, w), r),
+        )
     }
 
     #[inline(always)]
     fn intersect_cut<W: Walk>(&self, k: W, ray: Ray, w: f32, holes: &Holes) -> Option<(u32, f32)> {
-        k.closest(&self.bvh, ray, |r, s| holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s]))
+        k.closest(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s]),
+        )
     }
 
     #[inline(always)]
     fn occluded_cut<W: Walk>(&self, k: W, ray: Ray, w: f32, holes: &Holes) -> bool {
-        k.any(&self.bvh, ray, |r, s| holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s]))
+        k.any(
+            &self.bvh,
+            ray,
+            #[inline(always)]
+            |r, s| holes.filter(hit_triangle(&self.triangle(s, w), r), self.triangle_index[s]),
+        )
     }
 }
 
@@ -461,6 +501,10 @@ struct TlasInstance {
 /// below it, a tree over parts traces faster; above it, memory and build
 /// time per part dominate (a million robots are eleven million parts).
 pub(crate) const AGENT_CLUSTERS_FROM: usize = 1_000_000;
+
+/// The fewest rays of one direction octant [`Tlas::intersect_stream`] walks
+/// as a packet; fewer are traced one by one.
+pub const MIN_PACKET: usize = 4;
 
 /// `TlasInstance::motion` of an instance that does not move.
 const STILL: u32 = u32::MAX;
@@ -914,52 +958,76 @@ impl<'a> Tlas<'a> {
         let time = ray.time;
         // (instance position, BLAS slot) of the closest hit so far.
         let mut best = (usize::MAX, u32::MAX);
-        let visit = |r: &Ray, slot: usize| {
-            // r.tmax is the closest hit so far, which prunes each BLAS walk.
-            let mut closest = r.tmax;
-            let mut found = f32::INFINITY;
-            for k in self.cluster(slot) {
-                let inst = &self.instances[k];
-                if inst.visibility & mask == 0 {
-                    continue;
-                }
-                let hit = if inst.motion == STILL {
-                    let Some(b) = self.blas.get(inst.mesh) else { continue };
-                    let local = object_ray(&self.object_from_world(k, inst), r, closest);
-                    match inst.cutout.then(|| self.holes_of(inst, r)).flatten() {
-                        None => b.intersect(w, local),
-                        Some(holes) => b.intersect_cut(w, local, &holes),
-                    }
-                } else {
-                    self.intersect_moving(w, inst, r, closest, time)
-                };
-                if let Some((s, t)) = hit {
-                    if t < closest {
-                        (closest, found, best) = (t, t, (k, s));
-                    }
-                }
-            }
-            found
-        };
+        // The leaf visit is a closure marked to inline into the walk, which
+        // runs in the kernel's SIMD context: left to itself, the compiler
+        // kept it a function of its own, compiled without AVX2, and the
+        // BLAS walks in it called into AVX2 once per node test.
         let found = match &self.tree {
             TlasTree::Empty => None,
-            // `visit` moves into whichever arm runs, so it inlines into the traversal.
             TlasTree::Bvh2(bvh) => {
                 let mut hit = RayHit::none();
+                let visit = |r: &Ray, slot: usize| self.visit_closest(w, r, slot, mask, time, &mut best);
                 bvh.ray_traverse(world, &mut hit, visit).then_some(hit.t)
             }
-            TlasTree::CwBvh(bvh) => w.closest(bvh, world, visit).map(|(_, t)| t),
+            TlasTree::CwBvh(bvh) => w
+                .closest(
+                    bvh,
+                    world,
+                    #[inline(always)]
+                    |r: &Ray, slot: usize| self.visit_closest(w, r, slot, mask, time, &mut best),
+                )
+                .map(|(_, t)| t),
         };
+        self.closest_hit(&world, time, best, found)
+    }
+
+    /// The visit of TLAS leaf `slot` in a closest-hit walk of world ray `r`
+    /// (whose tmax is the closest hit so far, which prunes each BLAS walk):
+    /// every instance of the leaf that `mask` admits, through its BLAS.
+    /// The `t` of a hit closer than `r.tmax` (infinity if none); `best`
+    /// becomes its (instance position, BLAS slot).
+    #[inline(always)]
+    fn visit_closest<W: Walk>(&self, w: W, r: &Ray, slot: usize, mask: u8, time: f32, best: &mut (usize, u32)) -> f32 {
+        let mut closest = r.tmax;
+        let mut found = f32::INFINITY;
+        for k in self.cluster(slot) {
+            let inst = &self.instances[k];
+            if inst.visibility & mask == 0 {
+                continue;
+            }
+            let hit = if inst.motion == STILL {
+                let Some(b) = self.blas.get(inst.mesh) else { continue };
+                let local = object_ray(&self.object_from_world(k, inst), r, closest);
+                match inst.cutout.then(|| self.holes_of(inst, r)).flatten() {
+                    None => b.intersect(w, local),
+                    Some(holes) => b.intersect_cut(w, local, &holes),
+                }
+            } else {
+                self.intersect_moving(w, inst, r, closest, time)
+            };
+            if let Some((s, t)) = hit {
+                if t < closest {
+                    (closest, found, *best) = (t, t, (k, s));
+                }
+            }
+        }
+        found
+    }
+
+    /// The [`Hit`] of world ray `world` (as it entered the walk) whose walk
+    /// ended at `found` with `best` (from [`Tlas::visit_closest`]).
+    #[inline(always)]
+    fn closest_hit(&self, world: &Ray, time: f32, best: (usize, u32), found: Option<f32>) -> Option<Hit> {
         let t = found.filter(|_| best.0 != usize::MAX)?;
         let inst = &self.instances[best.0];
         let slot = best.1 as usize;
         let (uv, triangle) = if inst.motion == STILL {
             let b = self.blas.get(inst.mesh)?;
-            let local = object_ray(&self.object_from_world(best.0, inst), &world, world.tmax);
+            let local = object_ray(&self.object_from_world(best.0, inst), world, world.tmax);
             (b.tris[slot].compute_barycentric(&local), b.triangle_index[slot])
         } else {
             let mv = &self.moving[inst.motion as usize];
-            let local = transform_ray(&mv.object_from_world(time)?, &world, world.tmax);
+            let local = transform_ray(&mv.object_from_world(time)?, world, world.tmax);
             match &mv.deform {
                 Some((d, _)) => (d.triangle(slot, mv.weight(time)).compute_barycentric(&local), d.triangle_index[slot]),
                 None => {
@@ -969,6 +1037,104 @@ impl<'a> Tlas<'a> {
             }
         };
         Some(Hit { instance: inst.index, triangle, t, u: uv.x, v: uv.y })
+    }
+
+    /// The closest hits of a stream of rays, `hits[i]` of `rays[i]`: each
+    /// exactly what [`Tlas::intersect`] gives for it (same `t`, instance,
+    /// triangle and barycentrics, bit for bit), traced as packets where rays
+    /// are coherent. Rays are grouped by direction octant; each group of at
+    /// least [`MIN_PACKET`] walks the TLAS as packets of up to
+    /// 32 (one fetch of a node for every ray that
+    /// reaches it), each ray entering its own instances' BLASes at the
+    /// leaves; smaller groups are traced one ray at a time.
+    pub fn intersect_stream(&self, rays: &[WorldRay], mask: u8, hits: &mut [Option<Hit>]) {
+        self.intersect_stream_with(rays, mask, MIN_PACKET, hits);
+    }
+
+    /// As [`Tlas::intersect_stream`] with octant groups of at least
+    /// `min_packet` rays walked as packets (1: every ray in a packet; tests
+    /// force each path). Returns how many rays a packet walk answered
+    /// (the rest were traced one by one).
+    #[doc(hidden)]
+    pub fn intersect_stream_with(
+        &self,
+        rays: &[WorldRay],
+        mask: u8,
+        min_packet: usize,
+        hits: &mut [Option<Hit>],
+    ) -> usize {
+        assert_eq!(rays.len(), hits.len(), "one hit per ray");
+        dispatch!(self.kernel, w => self.intersect_stream_in(w, rays, mask, min_packet.max(1), hits))
+    }
+
+    #[inline(always)]
+    fn intersect_stream_in<W: PacketWalk>(
+        &self,
+        w: W,
+        rays: &[WorldRay],
+        mask: u8,
+        min_packet: usize,
+        hits: &mut [Option<Hit>],
+    ) -> usize {
+        let TlasTree::CwBvh(bvh) = &self.tree else {
+            for (h, r) in hits.iter_mut().zip(rays) {
+                *h = self.intersect_in(w, r, mask);
+            }
+            return 0;
+        };
+        let mut in_packets = 0;
+        // Ray indices by octant, in ray order within each (a counting sort).
+        let world: Vec<Ray> = rays.iter().map(world_ray).collect();
+        let octant = |r: &Ray| (octant_inv4(r.direction) & 7) as usize;
+        let mut starts = [0usize; 9];
+        for r in &world {
+            starts[octant(r) + 1] += 1;
+        }
+        for o in 0..8 {
+            starts[o + 1] += starts[o];
+        }
+        let mut order = vec![0u32; rays.len()];
+        let mut next = starts;
+        for (i, r) in world.iter().enumerate() {
+            let o = octant(r);
+            order[next[o]] = i as u32;
+            next[o] += 1;
+        }
+        let mut packet = [Ray::new(Vec3A::ZERO, Vec3A::X, 0.0, 0.0); PACKET];
+        for o in 0..8 {
+            let group = &order[starts[o]..starts[o + 1]];
+            if group.len() < min_packet {
+                for &i in group {
+                    hits[i as usize] = self.intersect_in(w, &rays[i as usize], mask);
+                }
+                continue;
+            }
+            for chunk in group.chunks(PACKET) {
+                let n = chunk.len();
+                for (p, &i) in packet.iter_mut().zip(chunk) {
+                    *p = world[i as usize];
+                }
+                let mut best = [(usize::MAX, u32::MAX); PACKET];
+                let walked = w.closest_packet(
+                    bvh,
+                    &mut packet[..n],
+                    #[inline(always)]
+                    |k, r, slot| self.visit_closest(w, r, slot, mask, rays[chunk[k] as usize].time, &mut best[k]),
+                );
+                in_packets += if walked == Packet::Done { n } else { 0 };
+                for (k, &i) in chunk.iter().enumerate() {
+                    let i = i as usize;
+                    hits[i] = match walked {
+                        Packet::Done => {
+                            let found = (best[k].0 != usize::MAX).then_some(packet[k].tmax);
+                            self.closest_hit(&world[i], rays[i].time, best[k], found)
+                        }
+                        Packet::Single => self.intersect_in(w, &rays[i], mask),
+                    };
+                }
+            }
+        }
+        in_packets
     }
 
     /// True when any instance whose visibility shares a bit with `mask`
@@ -987,7 +1153,33 @@ impl<'a> Tlas<'a> {
     fn occluded_in<W: Walk>(&self, w: W, ray: &WorldRay, mask: u8, counts: &impl Fn(u32) -> bool) -> bool {
         let world = world_ray(ray);
         let time = ray.time;
-        let visit = |r: &Ray, slot: usize| {
+        let visit = |r: &Ray, slot: usize| self.visit_any(w, r, slot, mask, time, counts);
+        match &self.tree {
+            TlasTree::Empty => false,
+            TlasTree::Bvh2(bvh) => !bvh.ray_traverse_miss(world, visit),
+            // Inlined into the walk, as `intersect_in`'s visit.
+            TlasTree::CwBvh(bvh) => w.any(
+                bvh,
+                world,
+                #[inline(always)]
+                |r: &Ray, slot: usize| self.visit_any(w, r, slot, mask, time, counts),
+            ),
+        }
+    }
+
+    /// The visit of TLAS leaf `slot` in an any-hit walk of world ray `r`:
+    /// 0 where an instance `mask` and `counts` admit blocks it, else infinity.
+    #[inline(always)]
+    fn visit_any<W: Walk>(
+        &self,
+        w: W,
+        r: &Ray,
+        slot: usize,
+        mask: u8,
+        time: f32,
+        counts: &impl Fn(u32) -> bool,
+    ) -> f32 {
+        {
             let blocked = self.cluster(slot).any(|k| {
                 let inst = &self.instances[k];
                 inst.visibility & mask != 0
@@ -1010,11 +1202,6 @@ impl<'a> Tlas<'a> {
             } else {
                 f32::INFINITY
             }
-        };
-        match &self.tree {
-            TlasTree::Empty => false,
-            TlasTree::Bvh2(bvh) => !bvh.ray_traverse_miss(world, visit),
-            TlasTree::CwBvh(bvh) => w.any(bvh, world, visit),
         }
     }
 

@@ -43,7 +43,8 @@ use rayon::prelude::*;
 
 use super::accel::{BlasSet, Tlas};
 use super::cryptomatte::{CryptoNames, Cryptomatte, RankAccumulator, MATTES, RANKS};
-use super::integrator::{Integrator, RayCounts, SampleResult};
+use super::integrator::{CameraBatch, Integrator, RayCounts, SampleResult};
+use super::wide::PACKET;
 use super::RenderSettings;
 use crate::error::{Error, Result};
 use crate::scene::passes::{LightGroups, PassSet, Split};
@@ -75,6 +76,23 @@ impl SampleCount {
             Some(a) => SampleCount { min: a.min_spp, max: a.max_spp, threshold: Some(f64::from(a.threshold)) },
             None => SampleCount { min: settings.spp, max: settings.spp, threshold: None },
         }
+    }
+
+    /// Whether a pixel may stop after its first `spp` samples (as `render_pixel` decides).
+    fn may_stop_after(&self, spp: u32) -> bool {
+        self.threshold.is_some() && spp >= self.min.max(2) && (spp - self.min).is_multiple_of(ADAPTIVE_STEP)
+    }
+
+    /// The end of the run of samples from `s` whose camera rays are traced
+    /// together: at most a packet's worth, and never past a sample after
+    /// which the pixel may stop (no camera ray is traced for nothing).
+    fn batch_end(&self, s: u32) -> u32 {
+        let cap = s.saturating_add(PACKET as u32).min(self.max);
+        let mut end = s + 1;
+        while end < cap && !self.may_stop_after(end) {
+            end += 1;
+        }
+        end
     }
 }
 
@@ -236,6 +254,7 @@ struct PassOut<'p> {
     values: &'p mut [[f32; 3]],
 }
 
+#[allow(clippy::too_many_arguments)]
 fn render_pixel(
     integrator: &Integrator,
     x: u32,
@@ -243,8 +262,11 @@ fn render_pixel(
     count: SampleCount,
     crypto: Option<&CryptoNames>,
     counts: &mut RayCounts,
+    batch: &mut CameraBatch,
     mut passes: Option<PassOut>,
 ) -> Pixel {
+    batch.clear();
+    let packets = integrator.camera_packets();
     let (mut rgb, mut alpha, mut normal, mut albedo) = (Vec3::ZERO, 0.0f32, Vec3::ZERO, Vec3::ZERO);
     let mut nearest = (f32::INFINITY, SampleResult { z: f32::INFINITY, ..Default::default() });
     let mut acc: [RankAccumulator; 3] = Default::default();
@@ -260,7 +282,11 @@ fn render_pixel(
             p.split.clear();
             &mut *p.split
         });
-        let (r, offset) = integrator.sample_pixel(x, y, s, counts, split);
+        let (r, offset) = if packets {
+            integrator.sample_pixel_batched(x, y, s, || count.batch_end(s), batch, counts, split)
+        } else {
+            integrator.sample_pixel(x, y, s, counts, split)
+        };
         if let Some(p) = &passes {
             // A sample the beauty drops (not finite) the passes drop too.
             if r.rgb.is_finite() {
@@ -290,10 +316,7 @@ fn render_pixel(
         }
         if let Some(threshold) = count.threshold {
             estimate.add(r.rgb, r.alpha);
-            if spp >= count.min.max(2)
-                && (spp - count.min).is_multiple_of(ADAPTIVE_STEP)
-                && estimate.error(spp) < threshold
-            {
+            if count.may_stop_after(spp) && estimate.error(spp) < threshold {
                 break;
             }
         }
@@ -406,6 +429,7 @@ pub fn render_frame_with_cryptomatte(
                 let mut values = vec![[0f32; 3]; n * triples];
                 let mut split = Split::new(if settings.passes.light_groups { group_count } else { 0 });
                 let mut chunks = values.chunks_mut(triples.max(1));
+                let mut batch = CameraBatch::default();
                 for y in y0..y1 {
                     for x in x0..x1 {
                         let out = chunks.next().filter(|_| triples > 0).map(|values| PassOut {
@@ -413,7 +437,7 @@ pub fn render_frame_with_cryptomatte(
                             split: &mut split,
                             values,
                         });
-                        pixels.push(render_pixel(&integrator, x, y, count, crypto, &mut counts, out));
+                        pixels.push(render_pixel(&integrator, x, y, count, crypto, &mut counts, &mut batch, out));
                     }
                 }
                 if let Some(report) = progress {

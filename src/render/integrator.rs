@@ -33,6 +33,55 @@ const GROUP_PICK_STREAM: u32 = 7;
 pub(crate) const FILTER_RADIUS: f32 = 1.5;
 const FILTER_SIGMA: f32 = 0.5;
 
+/// What camera rays see: camera-visible instances and holdouts.
+const CAMERA_MASK: u8 = vis::CAMERA | vis::HOLDOUT;
+
+/// Camera rays as packets ([`Tlas::intersect_stream`]) in the integrators
+/// made from now on, or one at a time; the same image either way.
+static CAMERA_PACKETS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(true);
+
+/// Chooses whether renders started from now on trace camera rays as packets
+/// (the default) or one at a time, process-wide: for benchmarks comparing
+/// the two in one binary. Renders are the same bits either way.
+#[doc(hidden)]
+pub fn set_camera_packets(on: bool) {
+    CAMERA_PACKETS.store(on, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// The choice [`set_camera_packets`] made (default true).
+pub fn camera_packets() -> bool {
+    CAMERA_PACKETS.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// One camera sample up to its camera ray: its sampler (past the film
+/// offset, time and lens draws), the film offset and the ray.
+#[derive(Clone, Debug)]
+pub(crate) struct CameraSample {
+    sampler: Sampler,
+    offset: Vec2,
+    ray: WorldRay,
+}
+
+/// A run of one pixel's camera samples with their camera hits, traced
+/// ahead of their paths ([`Integrator::sample_pixel_batched`]); reused from
+/// pixel to pixel so it allocates once per tile.
+#[derive(Default)]
+pub(crate) struct CameraBatch {
+    /// Sample index of `samples[0]`.
+    first: u32,
+    samples: Vec<CameraSample>,
+    rays: Vec<WorldRay>,
+    hits: Vec<Option<Hit>>,
+}
+
+impl CameraBatch {
+    /// Forgets the samples held (for a new pixel).
+    pub(crate) fn clear(&mut self) {
+        self.samples.clear();
+        self.first = 0;
+    }
+}
+
 /// What one camera sample returns.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct SampleResult {
@@ -376,6 +425,7 @@ pub(crate) struct Integrator<'a> {
     lights: LightSampler<'a>,
     settings: &'a RenderSettings,
     default_material: Material,
+    camera_packets: bool,
 }
 
 /// The surface at a hit, in world space.
@@ -428,6 +478,7 @@ impl<'a> Integrator<'a> {
             lights: LightSampler::new(lib, scene, tlas.bounds(), groups),
             settings,
             default_material: Material::default(),
+            camera_packets: camera_packets(),
         }
     }
 
@@ -442,6 +493,18 @@ impl<'a> Integrator<'a> {
         counts: &mut RayCounts,
         split: Option<&mut Split>,
     ) -> (SampleResult, Vec2) {
+        self.trace_sample(self.camera_sample(x, y, sample), None, counts, split)
+    }
+
+    /// Whether camera rays are traced as packets ([`Integrator::camera_hits`]):
+    /// [`camera_packets`] when the integrator was made.
+    pub(crate) fn camera_packets(&self) -> bool {
+        self.camera_packets
+    }
+
+    /// Camera sample `sample` of pixel (x, y) up to its camera ray: the
+    /// sampler, the film offset and the ray, drawn as [`Integrator::sample_pixel`] draws them.
+    pub(crate) fn camera_sample(&self, x: u32, y: u32, sample: u32) -> CameraSample {
         let s = self.settings;
         let mut sampler = Sampler::new(s.seed, s.frame, s.layer, x, y, sample);
         let offset = sample_filter(sampler.next_2d());
@@ -457,7 +520,62 @@ impl<'a> Integrator<'a> {
             }
             _ => self.camera.lens_ray(fx, fy, lens),
         };
-        let mut result = self.trace_path(origin, dir, time, &mut sampler, counts, split);
+        CameraSample { sampler, offset, ray: WorldRay { origin, direction: dir, tmax: f32::INFINITY, time } }
+    }
+
+    /// The camera hits of `samples` (`hits[i]` of `samples[i]`), traced
+    /// together as packets ([`Tlas::intersect_stream`]): each the hit
+    /// [`Integrator::sample_pixel`]'s own camera ray finds, bit for bit.
+    pub(crate) fn camera_hits(&self, samples: &[CameraSample], rays: &mut Vec<WorldRay>, hits: &mut [Option<Hit>]) {
+        rays.clear();
+        rays.extend(samples.iter().map(|c| c.ray));
+        self.tlas.intersect_stream(rays, CAMERA_MASK, hits);
+    }
+
+    /// As [`Integrator::sample_pixel`] (the same bits), with the camera rays
+    /// of a run of the pixel's samples traced together ahead of their paths:
+    /// where `batch` does not hold sample `sample`, it is filled with the
+    /// samples `sample..end()` of pixel (x, y) and their camera hits.
+    /// `batch` must be cleared ([`CameraBatch::clear`]) for each new pixel.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn sample_pixel_batched(
+        &self,
+        x: u32,
+        y: u32,
+        sample: u32,
+        end: impl FnOnce() -> u32,
+        batch: &mut CameraBatch,
+        counts: &mut RayCounts,
+        split: Option<&mut Split>,
+    ) -> (SampleResult, Vec2) {
+        let held = sample.checked_sub(batch.first).map(|k| k as usize).filter(|&k| k < batch.samples.len());
+        let k = match held {
+            Some(k) => k,
+            None => {
+                let end = end().max(sample + 1);
+                batch.first = sample;
+                batch.samples.clear();
+                batch.samples.extend((sample..end).map(|s| self.camera_sample(x, y, s)));
+                batch.hits.clear();
+                batch.hits.resize(batch.samples.len(), None);
+                self.camera_hits(&batch.samples, &mut batch.rays, &mut batch.hits);
+                0
+            }
+        };
+        self.trace_sample(batch.samples[k].clone(), Some(batch.hits[k]), counts, split)
+    }
+
+    /// Traces camera sample `cs` as [`Integrator::sample_pixel`] does; with
+    /// `hit`, its camera ray's hit as [`Integrator::camera_hits`] found it.
+    pub(crate) fn trace_sample(
+        &self,
+        cs: CameraSample,
+        hit: Option<Option<Hit>>,
+        counts: &mut RayCounts,
+        split: Option<&mut Split>,
+    ) -> (SampleResult, Vec2) {
+        let CameraSample { mut sampler, offset, ray } = cs;
+        let mut result = self.trace_path(ray.origin, ray.direction, ray.time, hit, &mut sampler, counts, split);
         if !(result.rgb.is_finite()) {
             result.rgb = Vec3::ZERO; // one bad sample must not poison the pixel
         }
@@ -666,11 +784,15 @@ impl<'a> Integrator<'a> {
         self.lib.materials.get(index).unwrap_or(&self.default_material)
     }
 
+    /// The path of a camera ray; `camera_hit`, where given, is what the
+    /// ray meets (traced already, [`Integrator::camera_hits`]).
+    #[allow(clippy::too_many_arguments)]
     fn trace_path(
         &self,
         mut origin: Vec3,
         mut dir: Vec3,
         time: f32,
+        mut camera_hit: Option<Option<Hit>>,
         sampler: &mut Sampler,
         counts: &mut RayCounts,
         mut split: Option<&mut Split>,
@@ -704,8 +826,11 @@ impl<'a> Integrator<'a> {
         counts.camera += 1;
         for depth in 0.. {
             let camera = depth == 0;
-            let mask = if camera { vis::CAMERA | vis::HOLDOUT } else { vis::INDIRECT };
-            let hit = self.tlas.intersect(&WorldRay { origin, direction: dir, tmax: f32::INFINITY, time }, mask);
+            let mask = if camera { CAMERA_MASK } else { vis::INDIRECT };
+            let hit = match camera_hit.take() {
+                Some(hit) => hit,
+                None => self.tlas.intersect(&WorldRay { origin, direction: dir, tmax: f32::INFINITY, time }, mask),
+            };
             // A sized light (rect, disk, sphere) in front of whatever the ray hits ends the path there.
             let tmax = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
             if let Some(light) = self.lights.hit_sized(origin, dir, tmax, camera) {

@@ -16,6 +16,13 @@
 //! and checks the closest hits (t and primitive) and any-hit answers agree,
 //! with each other and with obvhs' own traversal.
 //!
+//! Packets (`PacketWalk`, `walk_packet`): up to 32 rays of one direction
+//! octant walk a tree together, each with its own child and primitive bits
+//! and its own `tmax`, so each meets exactly the nodes and primitives of
+//! its single-ray walk, in the same order: the same hits, bit for bit
+//! (`Tlas::intersect_stream` uses it for camera rays; docs/benchmarks.md,
+//! issue 25 item 2, has the argument and the figures).
+//!
 //! Safe: SIMD dispatch goes through `pulp` (its `V3` token proves AVX2 and
 //! its intrinsics are safe functions), so the crate's `forbid(unsafe_code)`
 //! holds.
@@ -123,6 +130,57 @@ impl Walk for ObvhsWalk {
     }
 }
 
+/// The most rays a packet walk ([`PacketWalk::closest_packet`]) takes: one bit each in a `u32`.
+pub(crate) const PACKET: usize = 32;
+
+/// What a packet walk did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Packet {
+    /// Every ray walked as its single-ray walk would have.
+    Done,
+    /// Not walked as a packet, or given up (the packet's stack filled, where a
+    /// member's single-ray walk might have overwritten its top): the caller
+    /// traces the rays one by one from the start.
+    Single,
+}
+
+/// The packet form of [`Walk`]: `rays` (at most [`PACKET`], all of one
+/// direction octant) walked together, each meeting exactly the nodes and
+/// primitives, in the same order and with the same `tmax`, as its own
+/// [`Walk::closest`] walk (see [`walk_packet`]). `prim` gets the ray's
+/// index in `rays` as well.
+pub(crate) trait PacketWalk: Walk {
+    /// As [`Walk::closest`] per ray: each ray's `tmax` ends at its closest `t`
+    /// (`prim` records which primitive that was).
+    fn closest_packet(self, bvh: &CwBvh, rays: &mut [Ray], prim: impl FnMut(usize, &Ray, usize) -> f32) -> Packet;
+}
+
+impl PacketWalk for ObvhsWalk {
+    #[inline(always)]
+    fn closest_packet(self, _: &CwBvh, _: &mut [Ray], _: impl FnMut(usize, &Ray, usize) -> f32) -> Packet {
+        Packet::Single
+    }
+}
+
+impl<T: NodeTest> PacketWalk for OurWalk<T> {
+    #[inline(always)]
+    fn closest_packet(self, bvh: &CwBvh, rays: &mut [Ray], mut prim: impl FnMut(usize, &Ray, usize) -> f32) -> Packet {
+        walk_packet(
+            self.0,
+            bvh,
+            rays,
+            #[inline(always)]
+            |i, r, slot| {
+                let t = prim(i, r, slot as usize);
+                if t < r.tmax {
+                    r.tmax = t;
+                }
+                false
+            },
+        )
+    }
+}
+
 /// Our traversal with node test `T`.
 #[derive(Clone, Copy)]
 pub(crate) struct OurWalk<T>(pub T);
@@ -132,21 +190,33 @@ impl<T: NodeTest> Walk for OurWalk<T> {
     fn closest(self, bvh: &CwBvh, ray: Ray, mut prim: impl FnMut(&Ray, usize) -> f32) -> Option<(u32, f32)> {
         let mut r = ray;
         let mut best = None;
-        walk(self.0, bvh, &mut r, |r, slot| {
-            let t = prim(r, slot as usize);
-            if t < r.tmax {
-                best = Some((slot, t));
-                r.tmax = t;
-            }
-            false
-        });
+        walk(
+            self.0,
+            bvh,
+            &mut r,
+            #[inline(always)]
+            |r, slot| {
+                let t = prim(r, slot as usize);
+                if t < r.tmax {
+                    best = Some((slot, t));
+                    r.tmax = t;
+                }
+                false
+            },
+        );
         best
     }
 
     #[inline(always)]
     fn any(self, bvh: &CwBvh, ray: Ray, mut prim: impl FnMut(&Ray, usize) -> f32) -> bool {
         let mut r = ray;
-        walk(self.0, bvh, &mut r, |r, slot| prim(r, slot as usize) < r.tmax)
+        walk(
+            self.0,
+            bvh,
+            &mut r,
+            #[inline(always)]
+            |r, slot| prim(r, slot as usize) < r.tmax,
+        )
     }
 }
 
@@ -273,6 +343,19 @@ impl NodeTest for Avx2Test {
     }
 }
 
+/// A value a closure spends, so that the closure is `FnOnce` by nature.
+/// pulp's `vectorize` calls its closure through `FnOnce::call_once`; for a
+/// closure that is `Fn` by nature that is a compiler-made shim, which is not
+/// always inlined into pulp's AVX2 function, so the whole query ended up
+/// compiled without AVX2 in the shim, calling into AVX2 once per node test.
+/// A closure that spends a `Once` is its own `call_once`, inlined.
+pub(crate) struct Once;
+
+impl Once {
+    #[inline(always)]
+    pub(crate) fn spend(self) {}
+}
+
 /// Runs `$body` with `$w` bound to the [`Walk`] of `$kernel`; on AVX2, inside
 /// pulp's `vectorize`, so the whole query (tree walks, triangle tests) is
 /// compiled with the features the kernel has and its node tests inline.
@@ -288,21 +371,26 @@ macro_rules! dispatch {
                 $body
             }
             #[cfg(target_arch = "x86_64")]
-            $crate::render::wide::Kernel::Avx2(v3) => v3.vectorize(
-                #[inline(always)]
-                || {
-                    let $w = $crate::render::wide::OurWalk($crate::render::wide::Avx2Test(v3));
-                    $body
-                },
-            ),
+            $crate::render::wide::Kernel::Avx2(v3) => {
+                let once = $crate::render::wide::Once;
+                v3.vectorize(
+                    #[inline(always)]
+                    || {
+                        once.spend();
+                        let $w = $crate::render::wide::OurWalk($crate::render::wide::Avx2Test(v3));
+                        $body
+                    },
+                )
+            }
         }
     };
 }
 pub(crate) use dispatch;
 
 /// obvhs' traversal order code for a direction: which child octant is near.
+/// Rays with the same code walk a tree's nodes in the same order.
 #[inline(always)]
-fn octant_inv4(d: glam::Vec3A) -> u32 {
+pub(crate) fn octant_inv4(d: glam::Vec3A) -> u32 {
     (if d.x < 0.0 { 0 } else { 0x04040404 })
         | (if d.y < 0.0 { 0 } else { 0x02020202 })
         | (if d.z < 0.0 { 0 } else { 0x01010101 })
@@ -358,6 +446,117 @@ fn walk<T: NodeTest>(test: T, bvh: &CwBvh, ray: &mut Ray, mut prim: impl FnMut(&
             depth -= 1;
             group = stack[depth];
         }
+    }
+}
+
+/// A node group of a packet walk: the group's base index and internal-child
+/// mask (as in [`walk`]) and, per child priority (bit `24 + p` of a
+/// single-ray walk's group), the rays that have that child still to visit.
+#[derive(Clone, Copy)]
+struct PacketGroup {
+    base: u32,
+    imask: u32,
+    rays: [u32; 8],
+}
+
+/// [`walk`] for up to [`PACKET`] rays of one direction octant at once.
+///
+/// Exact, not approximate: the single-ray walk's child order depends only on
+/// the octant, never on entry distances, so a depth-first walk over the
+/// union of the rays' child bits, in that order, is a supersequence of each
+/// ray's own walk. Each ray keeps its own child bits (a node is tested only
+/// for the rays whose own bits reached it, each with its own `tmax`) and its
+/// own primitive bits (run ray by ray, high bit first, right after that
+/// ray's node test, as `walk` does), so every ray meets the same nodes and
+/// primitives in the same order with the same `tmax` as alone. A ray leaves
+/// the walk where `prim` returns true for it (any hit). The packet's stack
+/// is at least as deep as any member's; where it would reach the depth at
+/// which `walk` starts overwriting its top, the walk stops and says
+/// [`Packet::Single`], and the caller traces the rays one by one.
+#[inline(always)]
+fn walk_packet<T: NodeTest>(
+    test: T,
+    bvh: &CwBvh,
+    rays: &mut [Ray],
+    mut prim: impl FnMut(usize, &mut Ray, u32) -> bool,
+) -> Packet {
+    let n = rays.len();
+    if n == 0 || bvh.nodes.is_empty() {
+        return Packet::Done;
+    }
+    if n > PACKET {
+        return Packet::Single;
+    }
+    let oct_inv4 = octant_inv4(rays[0].direction);
+    if rays.iter().any(|r| octant_inv4(r.direction) != oct_inv4) {
+        return Packet::Single;
+    }
+    let mut alive = if n == PACKET { u32::MAX } else { (1u32 << n) - 1 };
+    let mut stack = [PacketGroup { base: 0, imask: 0, rays: [0; 8] }; STACK];
+    let mut depth = 0usize;
+    // The root: `walk`'s first group (0, 0x8000_0000), every ray on its top bit.
+    let mut group = PacketGroup { base: 0, imask: 0, rays: [0, 0, 0, 0, 0, 0, 0, alive] };
+    loop {
+        // The highest child priority some live ray still has in this group.
+        let mut p = 8;
+        for q in (0..8).rev() {
+            if group.rays[q] & alive != 0 {
+                p = q;
+                break;
+            }
+        }
+        if p == 8 {
+            if depth == 0 {
+                return Packet::Done;
+            }
+            depth -= 1;
+            group = stack[depth];
+            continue;
+        }
+        let here = group.rays[p] & alive;
+        group.rays[p] = 0;
+        if group.rays[..p].iter().any(|&r| r & alive != 0) {
+            if depth == STACK - 1 {
+                return Packet::Single; // `walk` would overwrite its top here
+            }
+            stack[depth] = group;
+            depth += 1;
+        }
+        let slot = p as u32 ^ (oct_inv4 & 0xff);
+        let relative = (group.imask & !(u32::MAX << slot)).count_ones();
+        let node = &bvh.nodes[(group.base + relative) as usize];
+        let mut next = PacketGroup { base: node.child_base_idx, imask: node.imask as u32, rays: [0; 8] };
+        let mut todo = here;
+        while todo != 0 {
+            let i = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let ray = &mut rays[i];
+            let mask = test.hits(node, ray, oct_inv4);
+            let mut prims = mask & 0x00ff_ffff;
+            let mut stopped = false;
+            while prims != 0 {
+                let local = 31 - prims.leading_zeros();
+                prims &= !(1 << local);
+                if prim(i, ray, node.primitive_base_idx + local) {
+                    stopped = true;
+                    break;
+                }
+            }
+            if stopped {
+                alive &= !(1 << i);
+                if alive == 0 {
+                    return Packet::Done;
+                }
+                continue;
+            }
+            let mut children = mask >> 24;
+            while children != 0 {
+                let c = children.trailing_zeros() as usize;
+                children &= children - 1;
+                next.rays[c] |= 1 << i;
+            }
+        }
+        group = next;
     }
 }
 
