@@ -6,11 +6,15 @@
 //! local lights (points, spots, sized lights, emissive triangles). A
 //! shading point sends one shadow ray per group the scene has, to one light
 //! of it picked in proportion to its power (an alias table), so the cost
-//! does not grow with the number of lights; each light then samples a
-//! point by solid angle (cones for the sun and spheres, the dome's own
-//! distributions) or by area, converted to solid angle. Rays that hit a
-//! light (an emissive surface, a sized light, the dome) are weighted
-//! against that pdf by multiple importance sampling in the integrator.
+//! does not grow with the number of lights; a local group of a few lights
+//! (up to [`SHADED_PICK_MAX`]) is picked instead by what each gives the
+//! shading point ([`Reach`]). Each light then samples a point by solid
+//! angle (cones for the sun and spheres, the dome's own distributions,
+//! spherical triangles for emissive triangles that subtend enough) or by
+//! area, converted to solid angle. Rays that hit a light (an emissive
+//! surface, a sized light, the dome) are weighted against that pdf, the
+//! pick taken again at the point they left, by multiple importance
+//! sampling in the integrator.
 //!
 //! Why groups: one pick among all lights spends a random share of each
 //! pixel's samples on each, so a sunlit surface under a sunny dome gets its
@@ -23,7 +27,7 @@
 
 use std::f32::consts::PI;
 
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 
 use super::bsdf::{luminance, sample_concentric_disk, ShadingFrame};
 use super::dome::{DomePart, DomeSampler, Lookup};
@@ -653,6 +657,31 @@ impl<'a> LightSampler<'a> {
             }
             Source::Local(light) => sample_local(light, p, u).map(|s| LightSample { pdf: s.pdf * pick, ..s }),
             Source::Triangle(tri) => {
+                if let Some(st) = SphericalTriangle::new(p, &tri.p) {
+                    // By solid angle: the direction, then where it meets the triangle.
+                    let w = st.sample(u);
+                    let v0 = tri.p[0].as_dvec3();
+                    let n = tri.n.as_dvec3();
+                    let t = (v0 - p.as_dvec3()).dot(n) / w.dot(n);
+                    if !(t > 0.0) {
+                        return None;
+                    }
+                    let wi = w.as_vec3();
+                    let cos_l = -wi.dot(tri.n);
+                    if cos_l <= 1e-6 {
+                        return None;
+                    }
+                    let (b1, b2) = barycentrics(&tri.p, p.as_dvec3() + w * t);
+                    let radiance = self.triangle_emission(tri, b1, b2);
+                    return Some(LightSample {
+                        wi,
+                        distance: t as f32,
+                        radiance,
+                        pdf: pick / st.area as f32,
+                        delta: false,
+                        group,
+                    });
+                }
                 let su = u.x.sqrt();
                 let (b1, b2) = (1.0 - su, u.y * su);
                 let q = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
@@ -731,7 +760,13 @@ impl<'a> LightSampler<'a> {
         }
         let index = first as usize + triangle as usize;
         match self.sources.get(index) {
-            Some(Source::Triangle(tri)) if tri.area > 0.0 => self.pick_at(index, from) * t * t / (tri.area * cos_l),
+            Some(Source::Triangle(tri)) if tri.area > 0.0 => {
+                let pick = self.pick_at(index, from);
+                match SphericalTriangle::new(from.0, &tri.p) {
+                    Some(st) => pick / st.area as f32,
+                    None => pick * t * t / (tri.area * cos_l),
+                }
+            }
             _ => 0.0,
         }
     }
@@ -792,6 +827,90 @@ impl<'a> LightSampler<'a> {
         let pick = if camera { 0.0 } else { self.pick_at(index, from) };
         Some(AreaHit { pdf: hit.pdf * pick, ..hit })
     }
+}
+
+/// Solid angles (steradians) between which an emissive triangle is sampled
+/// by solid angle from a shading point, by area outside them: below, it is
+/// small enough that area sampling is as good and the spherical arithmetic
+/// loses precision; above, the point is all but in its plane.
+const SPHERICAL_MIN: f64 = 3e-4;
+const SPHERICAL_MAX: f64 = 6.22;
+
+/// A triangle as seen from a point: its corners' directions, the angle at
+/// the first, and the solid angle. Sampled uniformly by Arvo's method
+/// ("Stratified sampling of spherical triangles", 1995), in f64.
+struct SphericalTriangle {
+    a: DVec3,
+    b: DVec3,
+    c: DVec3,
+    alpha: f64,
+    area: f64,
+}
+
+/// The angle between unit vectors, precise near 0 and pi.
+fn angle_between(x: DVec3, y: DVec3) -> f64 {
+    if x.dot(y) < 0.0 {
+        std::f64::consts::PI - 2.0 * ((x + y).length() / 2.0).min(1.0).asin()
+    } else {
+        2.0 * ((y - x).length() / 2.0).min(1.0).asin()
+    }
+}
+
+impl SphericalTriangle {
+    /// The triangle `v` seen from `p`; `None` (sample by area) outside
+    /// [`SPHERICAL_MIN`, `SPHERICAL_MAX`] or degenerate.
+    fn new(p: Vec3, v: &[Vec3; 3]) -> Option<SphericalTriangle> {
+        let p = p.as_dvec3();
+        let [a, b, c] = v.map(|q| (q.as_dvec3() - p).normalize_or_zero());
+        let n_ab = a.cross(b).normalize_or_zero();
+        let n_bc = b.cross(c).normalize_or_zero();
+        let n_ca = c.cross(a).normalize_or_zero();
+        if [a, b, c, n_ab, n_bc, n_ca].contains(&DVec3::ZERO) {
+            return None;
+        }
+        let alpha = angle_between(n_ab, -n_ca);
+        let beta = angle_between(n_bc, -n_ab);
+        let gamma = angle_between(n_ca, -n_bc);
+        let area = alpha + beta + gamma - std::f64::consts::PI;
+        (SPHERICAL_MIN..=SPHERICAL_MAX).contains(&area).then_some(SphericalTriangle { a, b, c, alpha, area })
+    }
+
+    /// A direction into the triangle, uniform in solid angle for `u` uniform.
+    fn sample(&self, u: Vec2) -> DVec3 {
+        let (u0, u1) = (u.x as f64, u.y as f64);
+        let gram_schmidt = |v: DVec3, w: DVec3| (v - v.dot(w) * w).normalize_or_zero();
+        // The sub-triangle of area u0 x area: its corner c' on the arc from a to c.
+        let (sin_ap, cos_ap) = (std::f64::consts::PI + u0 * self.area).sin_cos();
+        let (sin_alpha, cos_alpha) = self.alpha.sin_cos();
+        let sin_phi = sin_ap * cos_alpha - cos_ap * sin_alpha;
+        let cos_phi = cos_ap * cos_alpha + sin_ap * sin_alpha;
+        let k1 = cos_phi + cos_alpha;
+        let k2 = sin_phi - sin_alpha * self.a.dot(self.b);
+        let cos_bp = ((k2 + (k2 * cos_phi - k1 * sin_phi) * cos_alpha) / ((k2 * sin_phi + k1 * cos_phi) * sin_alpha))
+            .clamp(-1.0, 1.0);
+        let sin_bp = (1.0 - cos_bp * cos_bp).max(0.0).sqrt();
+        let cp = cos_bp * self.a + sin_bp * gram_schmidt(self.c, self.a);
+        // Then along the arc from b to c'.
+        let cos_t = 1.0 - u1 * (1.0 - cp.dot(self.b));
+        let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+        (cos_t * self.b + sin_t * gram_schmidt(cp, self.b)).normalize()
+    }
+}
+
+/// The barycentrics (of the second and third corners) of point `q` in the
+/// plane of triangle `v`, clamped into it.
+fn barycentrics(v: &[Vec3; 3], q: DVec3) -> (f32, f32) {
+    let v0 = v[0].as_dvec3();
+    let (e1, e2, r) = (v[1].as_dvec3() - v0, v[2].as_dvec3() - v0, q - v0);
+    let (d00, d01, d11) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (d20, d21) = (r.dot(e1), r.dot(e2));
+    let den = d00 * d11 - d01 * d01;
+    if !(den > 0.0) {
+        return (0.0, 0.0);
+    }
+    let b1 = ((d11 * d20 - d01 * d21) / den).clamp(0.0, 1.0);
+    let b2 = ((d00 * d21 - d01 * d20) / den).clamp(0.0, 1.0 - b1);
+    (b1 as f32, b2 as f32)
 }
 
 /// Power of a local light (luminance), for the pick.
@@ -1118,6 +1237,49 @@ mod tests {
         assert!(((mean_s - exact) / exact).abs() < 0.01, "shaded pick: {mean_s} vs exact {exact}");
         assert!(((mean_p - exact) / exact).abs() < 0.01, "by power: {mean_p} vs exact {exact}");
         assert!(var_s < 0.5 * var_p, "variance: shaded {var_s} vs by power {var_p}");
+    }
+
+    #[test]
+    fn a_triangle_samples_pdf_is_what_a_ray_hitting_it_is_weighed_by() {
+        let (lib, scene) = point_spot_panel();
+        let sampler = LightSampler::new(&lib, &scene, Some((Vec3::splat(-5.0), Vec3::splat(5.0))), None);
+        let (mut spherical, mut by_area) = (0, 0);
+        for (p, n) in shading_points() {
+            for k in 0..64u32 {
+                let u = Vec2::new((k as f32 + 0.5) / 64.0, k.reverse_bits() as f32 / 4294967296.0);
+                let u_pick = ((k * 37) % 64) as f32 / 64.0 + 0.01;
+                let Some(s) = sampler.sample(LightGroup::Local, p, n, u_pick, u, Lookup::Bilinear) else { continue };
+                if s.delta {
+                    continue;
+                }
+                // Which of the panel's triangles the direction meets.
+                let hit = scene.instances[0].world_from_object;
+                let mesh = &lib.meshes[0];
+                let tri = (0..2u32).find(|&t| {
+                    let v = [0, 1, 2]
+                        .map(|j| hit.transform_point3(mesh.positions[mesh.indices[(3 * t + j) as usize] as usize]));
+                    let (b1, b2) = barycentrics(&v, (p + s.wi * s.distance).as_dvec3());
+                    let q = v[0] * (1.0 - b1 - b2) + v[1] * b1 + v[2] * b2;
+                    (q - (p + s.wi * s.distance)).length() < 1e-3
+                });
+                let Some(tri) = tri else { continue };
+                let pdf = sampler.triangle_pdf(0, tri, s.distance, -s.wi.dot(Vec3::NEG_Y), (p, n));
+                assert!((pdf - s.pdf).abs() <= 1e-3 * s.pdf, "{p} {n}: sampled pdf {} vs hit's {pdf}", s.pdf);
+                if SphericalTriangle::new(
+                    p,
+                    &[0, 1, 2]
+                        .map(|j| hit.transform_point3(mesh.positions[mesh.indices[(3 * tri + j) as usize] as usize])),
+                )
+                .is_some()
+                {
+                    spherical += 1;
+                } else {
+                    by_area += 1;
+                }
+            }
+        }
+        // (From this close the panel is sampled by solid angle throughout.)
+        assert!(spherical > 1000, "{spherical} by solid angle, {by_area} by area");
     }
 
     #[test]
