@@ -413,6 +413,54 @@ fn the_sunny_hdri_samples_to_the_same_mean_with_less_variance() {
     assert!(vi < 0.1 * vu, "variance: importance {vi} vs uniform {vu}");
 }
 
+/// A point, a spot, a rect light and an emissive panel together: the local
+/// group's pick then weighs each light by what it gives the shading point
+/// (render::lights), and with a bounce the BSDF rays that find the rect
+/// and the panel are weighed by multiple importance sampling against that
+/// pick, taken at the point they leave. The floor is their four closed
+/// forms added, and 1 and 2 threads give the same image.
+#[test]
+fn a_point_a_spot_a_rect_and_a_panel_add_up_with_mis() {
+    let (ip, hp) = (4.0, 2.0);
+    let p_point = Vec3::new(-1.0, hp, -1.0);
+    let (is, outer, blend) = (30.0, 0.35, 0.3);
+    let p_spot = Vec3::new(1.0, 3.0, 1.0);
+    let (lr, dr, wr) = (4.0, 1.2, 0.8);
+    let c_rect = Vec3::new(-1.0, dr, 1.0);
+    // The panel, face down, out of the camera's view (it sees 1.25 m either side at its height).
+    let (lp, dp) = (6.0, 1.5);
+    let c_panel = Vec3::new(2.0, dp, 0.0);
+    let lights = local(vec![
+        light(LightKind::Point, p_point, -Vec3::Y, ip),
+        light(LightKind::Spot { outer, blend }, p_spot, -Vec3::Y, is),
+        light(LightKind::Rect { size: Vec2::splat(wr) }, c_rect, -Vec3::Y, lr),
+    ]);
+    let glow =
+        Material { name: "glow".into(), base_color: Vec3::ZERO, emission: Vec3::splat(lp), ..Default::default() };
+    let down = Affine3A::from_rotation_translation(Quat::from_rotation_x(PI), c_panel);
+    let (lib, scene) = floor_scene(lights, vec![(quad(1.0), glow, down)]);
+    let s = |threads| RenderSettings { max_bounces: 1, ..settings(64, threads) };
+    let blas = BlasSet::build(&lib);
+    let film = render_frame(&blas, &lib, &scene, &s(2), None).unwrap();
+    let expected = |p: Vec3| {
+        let r = p_point - p;
+        let point = ip * hp / r.length().powi(3);
+        let r = p_spot - p;
+        // Blender's edge: smoothstep over the outer `blend` of the cone, in cosines.
+        let (cos, cos_outer) = (r.normalize().dot(Vec3::Y), outer.cos());
+        let t = ((cos - cos_outer) / ((1.0 - cos_outer) * blend)).clamp(0.0, 1.0);
+        let cone = t * t * (3.0 - 2.0 * t);
+        let spot = is * cone * r.y / r.length().powi(3);
+        let offset = |c: Vec3| Vec3::new(p.x - c.x, 0.0, p.z - c.z);
+        let rect = rect_irradiance(lr, offset(c_rect), wr, wr, dr);
+        let panel = rect_irradiance(lp, offset(c_panel), 1.0, 1.0, dp);
+        ALBEDO / PI * (point + spot + rect + panel)
+    };
+    assert_matches(&film, expected, 0.03, "point + spot + rect + panel");
+    let one = render_frame(&blas, &lib, &scene, &s(1), None).unwrap();
+    assert_eq!(one.rgba, film.rgba, "1 and 2 threads");
+}
+
 #[test]
 fn lit_renders_are_bit_identical_for_any_thread_count() {
     let dome = Dome {

@@ -813,6 +813,9 @@ impl<'a> Integrator<'a> {
         // The chance the last vertex's next-event estimation sampled a given
         // light's group (1 at the camera vertex, which samples every group).
         let mut prev_group_pick = 1.0f32;
+        // The last vertex's shading point and geometric normal, where its
+        // NEE picked its light (render::lights: a small group's pick depends on them).
+        let mut prev_at = (Vec3::ZERO, Vec3::ZERO);
         // The last bounce was a delta lobe (glass): what the ray finds has MIS weight 1.
         let mut prev_delta = false;
         // How the dome is looked up for what the ray finds (render::dome::Lookup):
@@ -833,7 +836,7 @@ impl<'a> Integrator<'a> {
             };
             // A sized light (rect, disk, sphere) in front of whatever the ray hits ends the path there.
             let tmax = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
-            if let Some(light) = self.lights.hit_sized(origin, dir, tmax, camera) {
+            if let Some(light) = self.lights.hit_sized(origin, dir, tmax, camera, prev_at) {
                 if camera {
                     // A visible lamp is the set's: crowd layers hold it out
                     // (empty, alpha 0, like set geometry), so the stack shows it once.
@@ -931,7 +934,7 @@ impl<'a> Integrator<'a> {
                     pass!(surface.emission, true, group);
                 } else {
                     // Weighted against NEE's choice of this point (weight 1 where NEE never samples it).
-                    let pdf = self.lights.triangle_pdf(hit.instance, hit.triangle, hit.t, surface.cos_front)
+                    let pdf = self.lights.triangle_pdf(hit.instance, hit.triangle, hit.t, surface.cos_front, prev_at)
                         * prev_group_pick;
                     let weight = if pdf > 0.0 { bsdf_weight(prev_delta, prev_bsdf_pdf, pdf) } else { 1.0 };
                     let c = self.clamp_indirect(throughput * surface.emission * weight);
@@ -1037,7 +1040,9 @@ impl<'a> Integrator<'a> {
                         if self.lights.needs_pick(group) { sampler.extra_pick(group as u32, depth) } else { 0.0 };
                     (u_pick, sampler.extra_light(group as u32, depth))
                 };
-                let Some(ls) = self.lights.sample(group, surface.p, u_pick, u_light, lookup) else { continue };
+                let Some(ls) = self.lights.sample(group, surface.p, surface.ng, u_pick, u_light, lookup) else {
+                    continue;
+                };
                 if ls.wi.dot(surface.ng) <= 0.0 {
                     continue;
                 }
@@ -1111,6 +1116,7 @@ impl<'a> Integrator<'a> {
             throughput *= bs.weight;
             prev_bsdf_pdf = bs.pdf;
             prev_group_pick = group_pick;
+            prev_at = (surface.p, surface.ng);
             prev_delta = false;
             prev_lookup = lookup;
             if !survives_roulette(&mut throughput, eta_scale, depth, sampler) {

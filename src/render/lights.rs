@@ -6,11 +6,15 @@
 //! local lights (points, spots, sized lights, emissive triangles). A
 //! shading point sends one shadow ray per group the scene has, to one light
 //! of it picked in proportion to its power (an alias table), so the cost
-//! does not grow with the number of lights; each light then samples a
-//! point by solid angle (cones for the sun and spheres, the dome's own
-//! distributions) or by area, converted to solid angle. Rays that hit a
-//! light (an emissive surface, a sized light, the dome) are weighted
-//! against that pdf by multiple importance sampling in the integrator.
+//! does not grow with the number of lights; a local group of a few lights
+//! (up to [`SHADED_PICK_MAX`]) is picked instead by what each gives the
+//! shading point ([`Reach`]). Each light then samples a point by solid
+//! angle (cones for the sun and spheres, the dome's own distributions,
+//! spherical triangles for emissive triangles that subtend enough) or by
+//! area, converted to solid angle. Rays that hit a light (an emissive
+//! surface, a sized light, the dome) are weighted against that pdf, the
+//! pick taken again at the point they left, by multiple importance
+//! sampling in the integrator.
 //!
 //! Why groups: one pick among all lights spends a random share of each
 //! pixel's samples on each, so a sunlit surface under a sunny dome gets its
@@ -23,7 +27,7 @@
 
 use std::f32::consts::PI;
 
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 
 use super::bsdf::{luminance, sample_concentric_disk, ShadingFrame};
 use super::dome::{DomePart, DomeSampler, Lookup};
@@ -223,11 +227,163 @@ impl LightGroup {
     }
 }
 
-/// One group's pick: its sources (indices into `sources`) by power.
+/// Groups of local lights up to this size pick by what each light gives
+/// the shading point ([`Reach`]); larger ones by power (the alias table),
+/// so the pick's cost does not grow with the number of lights.
+const SHADED_PICK_MAX: usize = 16;
+
+/// What a local light can give a shading point, for the pick in a small
+/// group: a bound on its unshadowed irradiance there (luminance), zero only
+/// where it cannot light the point at all.
+#[derive(Clone, Copy, Debug)]
+enum Reach {
+    /// A point or spot light: intensity (and the spot's cone).
+    Delta { centre: Vec3, intensity: f32, spot: Option<(Vec3, f32, f32)> },
+    /// A rect, disk or emissive triangle: its bounding sphere, the emitting
+    /// side's normal and radiance x area.
+    Planar { centre: Vec3, radius: f32, normal: Vec3, two_sided: bool, intensity: f32 },
+    /// A sphere light: radiance x its disc's area.
+    Sphere { centre: Vec3, radius: f32, intensity: f32 },
+}
+
+/// cos(max(0, theta - theta_u)) clamped at 0, for cos theta = `cos` and
+/// the half angle theta_u (its sine and cosine) a bounding sphere subtends.
+fn widened(cos: f32, sin_u: f32, cos_u: f32) -> f32 {
+    let cos = cos.clamp(-1.0, 1.0);
+    if cos >= cos_u {
+        return 1.0;
+    }
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    (cos * cos_u + sin * sin_u).max(0.0)
+}
+
+impl Reach {
+    fn of_local(light: &Light) -> Option<Reach> {
+        let l = luminance(light.emission);
+        let centre = light.position();
+        let m = &light.world_from_light;
+        let planar = |corners: &[Vec2], area: f32| {
+            let radius = corners
+                .iter()
+                .map(|c| (m.transform_point3(Vec3::new(c.x, c.y, 0.0)) - centre).length())
+                .fold(0.0f32, f32::max);
+            Reach::Planar {
+                centre,
+                radius: pad(radius),
+                normal: light.facing(),
+                two_sided: light.two_sided,
+                intensity: l * area,
+            }
+        };
+        Some(match light.kind {
+            LightKind::Point => Reach::Delta { centre, intensity: l, spot: None },
+            LightKind::Spot { outer, blend } => {
+                Reach::Delta { centre, intensity: l, spot: Some((light.facing(), outer, blend)) }
+            }
+            LightKind::Rect { size } => {
+                let h = 0.5 * size;
+                planar(&[Vec2::new(h.x, h.y), Vec2::new(-h.x, h.y), Vec2::new(h.x, -h.y), -h], size.x * size.y)
+            }
+            LightKind::Disk { radius } => {
+                let r = radius;
+                planar(&[Vec2::new(r, 0.0), Vec2::new(-r, 0.0), Vec2::new(0.0, r), Vec2::new(0.0, -r)], PI * r * r)
+            }
+            LightKind::Sphere { radius } => Reach::Sphere { centre, radius, intensity: l * PI * radius * radius },
+            LightKind::Distant { .. } => return None,
+        })
+    }
+
+    fn of_triangle(tri: &Triangle, emission: Vec3) -> Reach {
+        let centre = (tri.p[0] + tri.p[1] + tri.p[2]) / 3.0;
+        let radius = tri.p.iter().map(|q| (*q - centre).length()).fold(0.0f32, f32::max);
+        let intensity = if tri.n == Vec3::ZERO || !(tri.area > 0.0) { 0.0 } else { luminance(emission) * tri.area };
+        Reach::Planar { centre, radius: pad(radius), normal: tri.n, two_sided: false, intensity }
+    }
+
+    /// The pick's weight at a shading point `p` with geometric normal `n`
+    /// (what next-event estimation and BSDF rays leave from): intensity x
+    /// the emitter's and receiver's cosines, each widened by the half angle
+    /// of the light's bounding sphere, / distance^2 (no nearer than the
+    /// sphere's radius). Zero only where the light gives `p` nothing: below
+    /// its horizon, behind a one-sided light, outside a spot's cone.
+    fn weight(&self, p: Vec3, n: Vec3) -> f64 {
+        match *self {
+            Reach::Delta { centre, intensity, spot } => {
+                let d = centre - p;
+                let dist2 = d.length_squared();
+                if !(dist2 > 0.0) {
+                    return 0.0;
+                }
+                let dist = dist2.sqrt();
+                let cos = d.dot(n) / dist;
+                if !(cos > 0.0) {
+                    return 0.0;
+                }
+                let cone = spot.map_or(1.0, |(facing, outer, blend)| spot_falloff(-d.dot(facing) / dist, outer, blend));
+                intensity as f64 * cone as f64 * cos as f64 / dist2 as f64
+            }
+            Reach::Planar { centre, radius, normal, two_sided, intensity } => {
+                let d = centre - p;
+                let dist2 = d.length_squared();
+                let dist = dist2.sqrt();
+                // Height of p above the light's plane: a one-sided light lights only its front.
+                let mut s = -d.dot(normal);
+                if two_sided {
+                    s = s.abs();
+                }
+                if s <= -1e-4 * (dist + radius) {
+                    return 0.0;
+                }
+                if !(dist > radius) {
+                    return intensity as f64 / (radius as f64 * radius as f64).max(1e-30);
+                }
+                let sin_u = radius / dist;
+                let cos_u = (1.0 - sin_u * sin_u).max(0.0).sqrt();
+                let emitter = widened(s / dist, sin_u, cos_u);
+                let receiver = widened(d.dot(n) / dist, sin_u, cos_u);
+                intensity as f64 * emitter as f64 * receiver as f64 / dist2 as f64
+            }
+            Reach::Sphere { centre, radius, intensity } => {
+                let d = centre - p;
+                let dist2 = d.length_squared();
+                if dist2 <= radius * radius {
+                    return 0.0; // inside: it does not light its interior
+                }
+                let dist = dist2.sqrt();
+                let sin_u = radius / dist;
+                let cos_u = (1.0 - sin_u * sin_u).max(0.0).sqrt();
+                intensity as f64 * widened(d.dot(n) / dist, sin_u, cos_u) as f64 / dist2 as f64
+            }
+        }
+    }
+}
+
+/// A bounding radius, grown a little so rounding never leaves a light's
+/// edge outside it.
+fn pad(radius: f32) -> f32 {
+    radius * (1.0 + 1e-4) + 1e-6
+}
+
+/// One group's pick: its sources (indices into `sources`) by power, or,
+/// for a small group of local lights, by each one's [`Reach`] at the
+/// shading point (`reach` then holds one per source).
 #[derive(Clone, Debug, Default)]
 struct GroupTable {
     sources: Vec<u32>,
     table: AliasTable,
+    reach: Vec<Reach>,
+}
+
+impl GroupTable {
+    /// The shaded pick's weights at (p, n) into `w`, and their sum.
+    fn weights(&self, p: Vec3, n: Vec3, w: &mut [f64; SHADED_PICK_MAX]) -> f64 {
+        let mut total = 0.0;
+        for (wi, r) in w.iter_mut().zip(&self.reach) {
+            *wi = r.weight(p, n);
+            total += *wi;
+        }
+        total
+    }
 }
 
 /// Every light of one frame scene, ready to sample.
@@ -236,8 +392,11 @@ pub(crate) struct LightSampler<'a> {
     sources: Vec<Source<'a>>,
     /// Each group's pick, in [`LightGroup::ALL`]'s order.
     tables: [GroupTable; 3],
-    /// Per source, the probability its group's pick chooses it.
+    /// Per source, the probability its group's pick chooses it (by power;
+    /// a shaded pick's group computes it per shading point).
     pmf: Vec<f32>,
+    /// Per source, its place in its group's `sources`.
+    slot: Vec<u32>,
     /// The groups with light, in [`LightGroup::ALL`]'s order.
     groups: Vec<LightGroup>,
     /// Per instance, the source index of its first triangle (`u32::MAX`: not emissive).
@@ -367,6 +526,7 @@ impl<'a> LightSampler<'a> {
         }
         let mut tables: [GroupTable; 3] = Default::default();
         let mut pmf = vec![0.0; sources.len()];
+        let mut slot = vec![0u32; sources.len()];
         let mut groups = Vec::new();
         for (g, group) in LightGroup::ALL.into_iter().enumerate() {
             let members: Vec<u32> =
@@ -379,13 +539,33 @@ impl<'a> LightSampler<'a> {
             for (&i, &p) in members.iter().zip(&table.pmf) {
                 pmf[i as usize] = p;
             }
+            for (k, &i) in members.iter().enumerate() {
+                slot[i as usize] = k as u32;
+            }
+            let reach = if group == LightGroup::Local && members.len() > 1 && members.len() <= SHADED_PICK_MAX {
+                members
+                    .iter()
+                    .map(|&i| match &sources[i as usize] {
+                        Source::Local(light) => Reach::of_local(light),
+                        Source::Triangle(tri) => Some(Reach::of_triangle(
+                            tri,
+                            lib.materials.get(tri.material as usize).map_or(Vec3::ZERO, |m| m.emission),
+                        )),
+                        _ => None,
+                    })
+                    .collect::<Option<Vec<Reach>>>()
+                    .unwrap_or_default()
+            } else {
+                Vec::new()
+            };
             groups.push(group);
-            tables[g] = GroupTable { sources: members, table };
+            tables[g] = GroupTable { sources: members, table, reach };
         }
         LightSampler {
             lib,
             tables,
             pmf,
+            slot,
             groups,
             sources,
             first_triangle,
@@ -422,13 +602,14 @@ impl<'a> LightSampler<'a> {
         self.sun.map_or(0.0, |(_, i)| self.pmf[i as usize])
     }
 
-    /// A light sample of `group` for a shading point at `p`: the light
-    /// picked by `u_pick`, a point on it by `u`.
+    /// A light sample of `group` for a shading point at `p` with geometric
+    /// normal `n`: the light picked by `u_pick`, a point on it by `u`.
     /// `lookup`: how the dome's radiance is looked up for this shading point.
     pub(crate) fn sample(
         &self,
         group: LightGroup,
         p: Vec3,
+        n: Vec3,
         u_pick: f32,
         u: Vec2,
         lookup: Lookup,
@@ -437,8 +618,30 @@ impl<'a> LightSampler<'a> {
         if t.sources.is_empty() {
             return None;
         }
-        let index = t.sources[if t.sources.len() > 1 { t.table.pick(u_pick) } else { 0 }] as usize;
-        let pick = self.pmf[index];
+        let (index, pick) = if !t.reach.is_empty() {
+            let mut w = [0.0; SHADED_PICK_MAX];
+            let total = t.weights(p, n, &mut w);
+            if !(total > 0.0) {
+                return None; // no light of the group reaches p
+            }
+            let target = u_pick as f64 * total;
+            let mut k = t.reach.len() - 1;
+            while w[k] == 0.0 {
+                k -= 1; // the last light with weight (one has: total > 0)
+            }
+            let mut sum = 0.0;
+            for (i, &wi) in w.iter().enumerate().take(t.reach.len()) {
+                sum += wi;
+                if wi > 0.0 && target < sum {
+                    k = i;
+                    break;
+                }
+            }
+            (t.sources[k] as usize, (w[k] / total) as f32)
+        } else {
+            let index = t.sources[if t.sources.len() > 1 { t.table.pick(u_pick) } else { 0 }] as usize;
+            (index, self.pmf[index])
+        };
         let group = self.group[index];
         let sample = match &self.sources[index] {
             Source::Distant(d) => {
@@ -454,6 +657,31 @@ impl<'a> LightSampler<'a> {
             }
             Source::Local(light) => sample_local(light, p, u).map(|s| LightSample { pdf: s.pdf * pick, ..s }),
             Source::Triangle(tri) => {
+                if let Some(st) = SphericalTriangle::new(p, &tri.p) {
+                    // By solid angle: the direction, then where it meets the triangle.
+                    let w = st.sample(u);
+                    let v0 = tri.p[0].as_dvec3();
+                    let n = tri.n.as_dvec3();
+                    let t = (v0 - p.as_dvec3()).dot(n) / w.dot(n);
+                    if !(t > 0.0) {
+                        return None;
+                    }
+                    let wi = w.as_vec3();
+                    let cos_l = -wi.dot(tri.n);
+                    if cos_l <= 1e-6 {
+                        return None;
+                    }
+                    let (b1, b2) = barycentrics(&tri.p, p.as_dvec3() + w * t);
+                    let radiance = self.triangle_emission(tri, b1, b2);
+                    return Some(LightSample {
+                        wi,
+                        distance: t as f32,
+                        radiance,
+                        pdf: pick / st.area as f32,
+                        delta: false,
+                        group,
+                    });
+                }
                 let su = u.x.sqrt();
                 let (b1, b2) = (1.0 - su, u.y * su);
                 let q = tri.p[0] * (1.0 - b1 - b2) + tri.p[1] * b1 + tri.p[2] * b2;
@@ -482,6 +710,34 @@ impl<'a> LightSampler<'a> {
         sample.map(|s| LightSample { group, ..s })
     }
 
+    /// The probability the pick of a shading point at `from` (its position
+    /// and geometric normal, as [`LightSampler::sample`] took them) chooses
+    /// source `index` within its group.
+    fn pick_at(&self, index: usize, from: (Vec3, Vec3)) -> f32 {
+        let t = match self.sources.get(index) {
+            Some(source) => self.table(LightGroup::of(source)),
+            None => return 0.0,
+        };
+        if t.reach.is_empty() {
+            return self.pmf[index];
+        }
+        let mut w = [0.0; SHADED_PICK_MAX];
+        let total = t.weights(from.0, from.1, &mut w);
+        let wi = w[self.slot[index] as usize];
+        if total > 0.0 {
+            (wi / total) as f32
+        } else {
+            0.0
+        }
+    }
+
+    /// The probability the pick of a shading point at `p` (geometric normal
+    /// `n`) chooses each light of `group`, in the group's order.
+    #[cfg(test)]
+    fn picks(&self, group: LightGroup, p: Vec3, n: Vec3) -> Vec<f32> {
+        self.table(group).sources.iter().map(|&i| self.pick_at(i as usize, (p, n))).collect()
+    }
+
     /// The emission of a triangle's material at barycentrics (b1, b2),
     /// with its emissive texture and alpha coverage.
     fn triangle_emission(&self, tri: &Triangle, b1: f32, b2: f32) -> Vec3 {
@@ -492,18 +748,25 @@ impl<'a> LightSampler<'a> {
         }
     }
 
-    /// Solid-angle pdf (including the pick) with which NEE would have chosen
-    /// the point at ray distance `t` on triangle `triangle` of instance
+    /// Solid-angle pdf (including the pick) with which NEE at `from` (the
+    /// ray's shading point and its geometric normal) would have chosen the
+    /// point at ray distance `t` on triangle `triangle` of instance
     /// `instance`, seen at cosine `cos_l` from its normal; 0 when NEE never
     /// samples that surface.
-    pub(crate) fn triangle_pdf(&self, instance: u32, triangle: u32, t: f32, cos_l: f32) -> f32 {
+    pub(crate) fn triangle_pdf(&self, instance: u32, triangle: u32, t: f32, cos_l: f32, from: (Vec3, Vec3)) -> f32 {
         let Some(&first) = self.first_triangle.get(instance as usize) else { return 0.0 };
         if first == u32::MAX || !(cos_l > 0.0) {
             return 0.0;
         }
         let index = first as usize + triangle as usize;
         match self.sources.get(index) {
-            Some(Source::Triangle(tri)) if tri.area > 0.0 => self.pmf[index] * t * t / (tri.area * cos_l),
+            Some(Source::Triangle(tri)) if tri.area > 0.0 => {
+                let pick = self.pick_at(index, from);
+                match SphericalTriangle::new(from.0, &tri.p) {
+                    Some(st) => pick / st.area as f32,
+                    None => pick * t * t / (tri.area * cos_l),
+                }
+            }
             _ => 0.0,
         }
     }
@@ -538,22 +801,116 @@ impl<'a> LightSampler<'a> {
     }
 
     /// The nearest sized light a ray (unit `dir`) meets before `tmax`;
-    /// camera rays (`camera`) meet only those marked camera-visible.
-    pub(crate) fn hit_sized(&self, origin: Vec3, dir: Vec3, tmax: f32, camera: bool) -> Option<AreaHit> {
-        let mut best: Option<AreaHit> = None;
+    /// camera rays (`camera`) meet only those marked camera-visible (and
+    /// have no pdf). `from`: the shading point the ray left and its
+    /// geometric normal, where NEE's pick was made.
+    pub(crate) fn hit_sized(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        tmax: f32,
+        camera: bool,
+        from: (Vec3, Vec3),
+    ) -> Option<AreaHit> {
+        let mut best: Option<(AreaHit, usize)> = None;
         for &index in &self.sized {
             let Source::Local(light) = &self.sources[index as usize] else { continue };
             if camera && !light.camera_visible {
                 continue;
             }
-            let limit = best.map_or(tmax, |b| b.t);
+            let limit = best.map_or(tmax, |b| b.0.t);
             if let Some(hit) = intersect_sized(light, origin, dir, limit) {
-                best =
-                    Some(AreaHit { pdf: hit.pdf * self.pmf[index as usize], group: self.group[index as usize], ..hit });
+                best = Some((AreaHit { group: self.group[index as usize], ..hit }, index as usize));
             }
         }
-        best
+        let (hit, index) = best?;
+        let pick = if camera { 0.0 } else { self.pick_at(index, from) };
+        Some(AreaHit { pdf: hit.pdf * pick, ..hit })
     }
+}
+
+/// Solid angles (steradians) between which an emissive triangle is sampled
+/// by solid angle from a shading point, by area outside them: below, it is
+/// small enough that area sampling is as good and the spherical arithmetic
+/// loses precision; above, the point is all but in its plane.
+const SPHERICAL_MIN: f64 = 3e-4;
+const SPHERICAL_MAX: f64 = 6.22;
+
+/// A triangle as seen from a point: its corners' directions, the angle at
+/// the first, and the solid angle. Sampled uniformly by Arvo's method
+/// ("Stratified sampling of spherical triangles", 1995), in f64.
+struct SphericalTriangle {
+    a: DVec3,
+    b: DVec3,
+    c: DVec3,
+    alpha: f64,
+    area: f64,
+}
+
+/// The angle between unit vectors, precise near 0 and pi.
+fn angle_between(x: DVec3, y: DVec3) -> f64 {
+    if x.dot(y) < 0.0 {
+        std::f64::consts::PI - 2.0 * ((x + y).length() / 2.0).min(1.0).asin()
+    } else {
+        2.0 * ((y - x).length() / 2.0).min(1.0).asin()
+    }
+}
+
+impl SphericalTriangle {
+    /// The triangle `v` seen from `p`; `None` (sample by area) outside
+    /// [`SPHERICAL_MIN`, `SPHERICAL_MAX`] or degenerate.
+    fn new(p: Vec3, v: &[Vec3; 3]) -> Option<SphericalTriangle> {
+        let p = p.as_dvec3();
+        let [a, b, c] = v.map(|q| (q.as_dvec3() - p).normalize_or_zero());
+        let n_ab = a.cross(b).normalize_or_zero();
+        let n_bc = b.cross(c).normalize_or_zero();
+        let n_ca = c.cross(a).normalize_or_zero();
+        if [a, b, c, n_ab, n_bc, n_ca].contains(&DVec3::ZERO) {
+            return None;
+        }
+        let alpha = angle_between(n_ab, -n_ca);
+        let beta = angle_between(n_bc, -n_ab);
+        let gamma = angle_between(n_ca, -n_bc);
+        let area = alpha + beta + gamma - std::f64::consts::PI;
+        (SPHERICAL_MIN..=SPHERICAL_MAX).contains(&area).then_some(SphericalTriangle { a, b, c, alpha, area })
+    }
+
+    /// A direction into the triangle, uniform in solid angle for `u` uniform.
+    fn sample(&self, u: Vec2) -> DVec3 {
+        let (u0, u1) = (u.x as f64, u.y as f64);
+        let gram_schmidt = |v: DVec3, w: DVec3| (v - v.dot(w) * w).normalize_or_zero();
+        // The sub-triangle of area u0 x area: its corner c' on the arc from a to c.
+        let (sin_ap, cos_ap) = (std::f64::consts::PI + u0 * self.area).sin_cos();
+        let (sin_alpha, cos_alpha) = self.alpha.sin_cos();
+        let sin_phi = sin_ap * cos_alpha - cos_ap * sin_alpha;
+        let cos_phi = cos_ap * cos_alpha + sin_ap * sin_alpha;
+        let k1 = cos_phi + cos_alpha;
+        let k2 = sin_phi - sin_alpha * self.a.dot(self.b);
+        let cos_bp = ((k2 + (k2 * cos_phi - k1 * sin_phi) * cos_alpha) / ((k2 * sin_phi + k1 * cos_phi) * sin_alpha))
+            .clamp(-1.0, 1.0);
+        let sin_bp = (1.0 - cos_bp * cos_bp).max(0.0).sqrt();
+        let cp = cos_bp * self.a + sin_bp * gram_schmidt(self.c, self.a);
+        // Then along the arc from b to c'.
+        let cos_t = 1.0 - u1 * (1.0 - cp.dot(self.b));
+        let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+        (cos_t * self.b + sin_t * gram_schmidt(cp, self.b)).normalize()
+    }
+}
+
+/// The barycentrics (of the second and third corners) of point `q` in the
+/// plane of triangle `v`, clamped into it.
+fn barycentrics(v: &[Vec3; 3], q: DVec3) -> (f32, f32) {
+    let v0 = v[0].as_dvec3();
+    let (e1, e2, r) = (v[1].as_dvec3() - v0, v[2].as_dvec3() - v0, q - v0);
+    let (d00, d01, d11) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (d20, d21) = (r.dot(e1), r.dot(e2));
+    let den = d00 * d11 - d01 * d01;
+    if !(den > 0.0) {
+        return (0.0, 0.0);
+    }
+    let b1 = ((d11 * d20 - d01 * d21) / den).clamp(0.0, 1.0);
+    let b2 = ((d00 * d21 - d01 * d20) / den).clamp(0.0, 1.0 - b1);
+    (b1 as f32, b2 as f32)
 }
 
 /// Power of a local light (luminance), for the pick.
@@ -742,6 +1099,211 @@ mod tests {
             assert!((*c as f32 / n as f32 - w / 8.0).abs() < 0.002, "{counts:?}");
         }
         assert_eq!(table.pmf, [0.125, 0.375, 0.0, 0.5]);
+    }
+
+    use crate::scene::Sky;
+    use crate::scene::{Camera, Instance, InstanceAgent, Material, Mesh};
+    use glam::{Affine3A, Quat};
+
+    /// A point, a spot and a 1 x 1 m emissive panel (two triangles, face
+    /// down at (0, 1, 1.5)) over a floor at y = 0, as a light sampler sees them.
+    fn point_spot_panel() -> (Library, FrameScene) {
+        let h = 0.5;
+        let panel = Mesh {
+            name: "panel".into(),
+            positions: [(-h, -h), (h, -h), (h, h), (-h, h)].map(|(x, z)| Vec3::new(x, 0.0, z)).to_vec(),
+            normals: vec![],
+            uvs: vec![],
+            tangents: vec![],
+            indices: vec![0, 2, 1, 0, 3, 2],
+        };
+        let glow = Material { name: "glow".into(), emission: Vec3::splat(3.0), ..Default::default() };
+        let lib = Library { meshes: vec![panel], materials: vec![glow], textures: vec![] };
+        let down = Affine3A::from_rotation_translation(Quat::from_rotation_x(PI), Vec3::new(0.0, 1.0, 1.5));
+        let instances = vec![Instance {
+            mesh: 0,
+            material: 0,
+            world_from_object: down,
+            agent: InstanceAgent::NONE,
+            part: 0,
+            visibility: vis::ALL,
+        }];
+        let light = |kind, position: Vec3, aim: Vec3, emission: f32| Light {
+            name: "test".into(),
+            kind,
+            world_from_light: crate::shot::look_at(position, aim),
+            emission: Vec3::splat(emission),
+            two_sided: false,
+            camera_visible: false,
+            light_group: None,
+        };
+        let lights = SceneLights {
+            sun: None,
+            sky: Sky { radiance: Vec3::ZERO },
+            dome: None,
+            local: vec![
+                light(LightKind::Point, Vec3::new(1.5, 2.0, -1.0), Vec3::ZERO, 6.0),
+                light(
+                    LightKind::Spot { outer: 0.3, blend: 0.3 },
+                    Vec3::new(-1.0, 4.0, 0.0),
+                    Vec3::new(-1.0, 0.0, 0.0),
+                    60.0,
+                ),
+            ],
+            groups: Default::default(),
+        };
+        let camera = Camera::pinhole(Affine3A::from_translation(Vec3::new(0.0, 1.0, 5.0)), 1.0);
+        (lib, FrameScene { instances, camera, lights, motion: None })
+    }
+
+    /// Irradiance (luminance) at `p` (normal `n`) from the three lights, the
+    /// panel by a 300 x 300 midpoint rule.
+    fn exact_irradiance(p: Vec3, n: Vec3) -> f64 {
+        let delta = |c: Vec3, i: f32, cone: f32| {
+            let d = c - p;
+            (i * cone * (d.normalize().dot(n)).max(0.0) / d.length_squared()) as f64
+        };
+        let spot = Vec3::new(-1.0, 4.0, 0.0);
+        let cos_axis = (p - spot).normalize().dot(-Vec3::Y);
+        let mut e = delta(Vec3::new(1.5, 2.0, -1.0), 6.0, 1.0) + delta(spot, 60.0, spot_falloff(cos_axis, 0.3, 0.3));
+        let k = 300;
+        for i in 0..k {
+            for j in 0..k {
+                let q = Vec3::new(-0.5 + (i as f32 + 0.5) / k as f32, 1.0, 1.0 + (j as f32 + 0.5) / k as f32);
+                let d = q - p;
+                let (dist2, w) = (d.length_squared(), d.normalize());
+                let (cos_l, cos_r) = (w.dot(Vec3::Y), w.dot(n));
+                if cos_l > 0.0 && cos_r > 0.0 {
+                    e += (3.0 * cos_l * cos_r / dist2) as f64 / (k * k) as f64;
+                }
+            }
+        }
+        e
+    }
+
+    /// Mean and variance of the one-sample NEE estimate of the local
+    /// group's irradiance at `p` (no shadows), over `n` stratified samples.
+    fn nee_estimate(sampler: &LightSampler<'_>, p: Vec3, normal: Vec3, n: u32) -> (f64, f64) {
+        let (mut sum, mut sum2) = (0.0f64, 0.0f64);
+        for k in 0..n {
+            let u_pick = (k as f32 + 0.5) / n as f32;
+            let u = Vec2::new(
+                (k.wrapping_mul(2654435769) as f64 / 4294967296.0) as f32,
+                k.reverse_bits() as f32 / 4294967296.0,
+            );
+            let e = sampler
+                .sample(LightGroup::Local, p, normal, u_pick, u, Lookup::Bilinear)
+                .map_or(0.0, |s| (luminance(s.radiance) * s.wi.dot(normal).max(0.0)) as f64 / s.pdf as f64);
+            sum += e;
+            sum2 += e * e;
+        }
+        let mean = sum / n as f64;
+        (mean, sum2 / n as f64 - mean * mean)
+    }
+
+    /// Shading points on the floor (facing up) and on walls facing +X and -Z.
+    fn shading_points() -> Vec<(Vec3, Vec3)> {
+        let mut points = Vec::new();
+        for i in 0..7 {
+            for j in 0..7 {
+                let p = Vec3::new(-3.0 + i as f32, 0.0, -3.0 + j as f32);
+                points.push((p, Vec3::Y));
+                points.push((p + Vec3::new(0.0, 0.5, 0.0), Vec3::X));
+                points.push((p + Vec3::new(0.0, 0.5, 0.0), -Vec3::Z));
+            }
+        }
+        points
+    }
+
+    #[test]
+    fn the_shaded_pick_keeps_the_mean_and_cuts_the_variance() {
+        let (lib, scene) = point_spot_panel();
+        let bounds = Some((Vec3::splat(-5.0), Vec3::splat(5.0)));
+        let shaded = LightSampler::new(&lib, &scene, bounds, None);
+        assert_eq!(shaded.table(LightGroup::Local).reach.len(), 4, "point, spot, two triangles: the shaded pick");
+        // The same lights picked by power alone, as large groups are.
+        let mut by_power = LightSampler::new(&lib, &scene, bounds, None);
+        by_power.tables[LightGroup::Local as usize].reach.clear();
+        let (mut exact, mut mean_s, mut mean_p, mut var_s, mut var_p) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (p, n) in shading_points() {
+            exact += exact_irradiance(p, n);
+            let (m, v) = nee_estimate(&shaded, p, n, 1024);
+            mean_s += m;
+            var_s += v;
+            let (m, v) = nee_estimate(&by_power, p, n, 1024);
+            mean_p += m;
+            var_p += v;
+        }
+        assert!(((mean_s - exact) / exact).abs() < 0.01, "shaded pick: {mean_s} vs exact {exact}");
+        assert!(((mean_p - exact) / exact).abs() < 0.01, "by power: {mean_p} vs exact {exact}");
+        assert!(var_s < 0.1 * var_p, "variance: shaded {var_s} vs by power {var_p}");
+    }
+
+    #[test]
+    fn a_triangle_samples_pdf_is_what_a_ray_hitting_it_is_weighed_by() {
+        let (lib, scene) = point_spot_panel();
+        let sampler = LightSampler::new(&lib, &scene, Some((Vec3::splat(-5.0), Vec3::splat(5.0))), None);
+        let (mut spherical, mut by_area) = (0, 0);
+        for (p, n) in shading_points() {
+            for k in 0..64u32 {
+                let u = Vec2::new((k as f32 + 0.5) / 64.0, k.reverse_bits() as f32 / 4294967296.0);
+                let u_pick = ((k * 37) % 64) as f32 / 64.0 + 0.01;
+                let Some(s) = sampler.sample(LightGroup::Local, p, n, u_pick, u, Lookup::Bilinear) else { continue };
+                if s.delta {
+                    continue;
+                }
+                // Which of the panel's triangles the direction meets.
+                let hit = scene.instances[0].world_from_object;
+                let mesh = &lib.meshes[0];
+                let tri = (0..2u32).find(|&t| {
+                    let v = [0, 1, 2]
+                        .map(|j| hit.transform_point3(mesh.positions[mesh.indices[(3 * t + j) as usize] as usize]));
+                    let (b1, b2) = barycentrics(&v, (p + s.wi * s.distance).as_dvec3());
+                    let q = v[0] * (1.0 - b1 - b2) + v[1] * b1 + v[2] * b2;
+                    (q - (p + s.wi * s.distance)).length() < 1e-3
+                });
+                let Some(tri) = tri else { continue };
+                let pdf = sampler.triangle_pdf(0, tri, s.distance, -s.wi.dot(Vec3::NEG_Y), (p, n));
+                assert!((pdf - s.pdf).abs() <= 1e-3 * s.pdf, "{p} {n}: sampled pdf {} vs hit's {pdf}", s.pdf);
+                if SphericalTriangle::new(
+                    p,
+                    &[0, 1, 2]
+                        .map(|j| hit.transform_point3(mesh.positions[mesh.indices[(3 * tri + j) as usize] as usize])),
+                )
+                .is_some()
+                {
+                    spherical += 1;
+                } else {
+                    by_area += 1;
+                }
+            }
+        }
+        // (From this close the panel is sampled by solid angle throughout.)
+        assert!(spherical > 1000, "{spherical} by solid angle, {by_area} by area");
+    }
+
+    #[test]
+    fn shaded_picks_sum_to_one_and_skip_lights_that_cannot_reach() {
+        let (lib, scene) = point_spot_panel();
+        let sampler = LightSampler::new(&lib, &scene, Some((Vec3::splat(-5.0), Vec3::splat(5.0))), None);
+        for (p, n) in shading_points() {
+            let picks = sampler.picks(LightGroup::Local, p, n);
+            let sum: f32 = picks.iter().sum();
+            assert!((sum - 1.0).abs() < 1e-5 || sum == 0.0, "{p} {n}: picks {picks:?}");
+            // The group's order: point, spot, the panel's two triangles.
+            let spot = Vec3::new(-1.0, 4.0, 0.0);
+            if spot_falloff((p - spot).normalize().dot(-Vec3::Y), 0.3, 0.3) == 0.0 {
+                assert_eq!(picks[1], 0.0, "{p} {n}: the spot's cone does not reach");
+            }
+            if p.z <= 0.0 && n == -Vec3::Z {
+                assert_eq!(&picks[2..], [0.0, 0.0], "{p} {n}: behind the panel's horizon");
+            }
+        }
+        // Under the floor, facing down, nothing reaches.
+        assert_eq!(sampler.picks(LightGroup::Local, Vec3::new(0.0, -1.0, 0.0), -Vec3::Y), [0.0; 4]);
+        assert!(sampler
+            .sample(LightGroup::Local, Vec3::new(0.0, -1.0, 0.0), -Vec3::Y, 0.5, Vec2::splat(0.5), Lookup::Bilinear)
+            .is_none());
     }
 
     #[test]
