@@ -10,7 +10,7 @@
 //! (up to [`SHADED_PICK_MAX`]) is picked instead by what each gives the
 //! shading point ([`Reach`]). Each light then samples a point by solid
 //! angle (cones for the sun and spheres, the dome's own distributions,
-//! spherical triangles for emissive triangles that subtend enough) or by
+//! spherical triangles for emissive triangles and rects that subtend enough) or by
 //! area, converted to solid angle. Rays that hit a light (an emissive
 //! surface, a sized light, the dome) are weighted against that pdf, the
 //! pick taken again at the point they left, by multiple importance
@@ -819,7 +819,7 @@ impl<'a> LightSampler<'a> {
                 continue;
             }
             let limit = best.map_or(tmax, |b| b.0.t);
-            if let Some(hit) = intersect_sized(light, origin, dir, limit) {
+            if let Some(hit) = intersect_sized(light, origin, dir, limit, from.0) {
                 best = Some((AreaHit { group: self.group[index as usize], ..hit }, index as usize));
             }
         }
@@ -948,6 +948,57 @@ pub(crate) fn spot_falloff(cos_angle: f32, outer: f32, blend: f32) -> f32 {
 }
 
 /// Samples a point, spot, rect, disk or sphere light from `p` (pdf without the pick).
+/// A rect light seen from `p` as two spherical triangles (split on a
+/// diagonal), sampled together uniformly in the solid angle they span;
+/// `None` (sample by area) where either half is outside the bounds
+/// [`SphericalTriangle::new`] keeps, as for emissive triangles.
+fn spherical_rect(light: &Light, size: Vec2, p: Vec3) -> Option<(SphericalTriangle, SphericalTriangle)> {
+    let h = 0.5 * size;
+    let [a, b, c, d] = [Vec2::new(-h.x, -h.y), Vec2::new(h.x, -h.y), h, Vec2::new(-h.x, h.y)]
+        .map(|q| light.world_from_light.transform_point3(Vec3::new(q.x, q.y, 0.0)));
+    Some((SphericalTriangle::new(p, &[a, b, c])?, SphericalTriangle::new(p, &[a, c, d])?))
+}
+
+/// A sample of a rect light uniform in the solid angle its two halves
+/// ([`spherical_rect`]) span from `p`.
+fn sample_spherical_rect(
+    light: &Light,
+    p: Vec3,
+    u: Vec2,
+    halves: (SphericalTriangle, SphericalTriangle),
+) -> Option<LightSample> {
+    let (first, second) = halves;
+    let centre = light.position();
+    // One half or the other in proportion to its solid angle, from u.x
+    // (rescaled, so the pixel's stratification carries into the half).
+    let total = first.area + second.area;
+    let share = first.area / total;
+    let ux = u.x as f64;
+    let (half, ux) = if ux < share { (&first, ux / share) } else { (&second, (ux - share) / (1.0 - share)) };
+    let w = half.sample(Vec2::new(ux as f32, u.y));
+    let n = light.facing().as_dvec3();
+    let t = (centre.as_dvec3() - p.as_dvec3()).dot(n) / w.dot(n);
+    if !(t > 0.0 && t.is_finite()) {
+        return None;
+    }
+    let wi = w.as_vec3();
+    let mut cos_l = -wi.dot(light.facing());
+    if light.two_sided {
+        cos_l = cos_l.abs();
+    }
+    if cos_l <= 1e-6 {
+        return None;
+    }
+    Some(LightSample {
+        wi,
+        distance: t as f32,
+        radiance: light.emission,
+        pdf: (1.0 / total) as f32,
+        delta: false,
+        group: 0,
+    })
+}
+
 fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
     let m = &light.world_from_light;
     let centre = light.position();
@@ -970,6 +1021,11 @@ fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
             Some(LightSample { wi, distance, radiance, pdf: 1.0, delta: true, group: 0 })
         }
         LightKind::Rect { .. } | LightKind::Disk { .. } => {
+            if let LightKind::Rect { size } = light.kind {
+                if let Some(halves) = spherical_rect(light, size, p) {
+                    return sample_spherical_rect(light, p, u, halves);
+                }
+            }
             let (local, area) = match light.kind {
                 LightKind::Rect { size } => (Vec2::new((u.x - 0.5) * size.x, (u.y - 0.5) * size.y), size.x * size.y),
                 LightKind::Disk { radius } => (sample_concentric_disk(u) * radius, PI * radius * radius),
@@ -1034,8 +1090,9 @@ fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
 }
 
 /// A ray against one sized light: where it meets it before `tmax`, and the
-/// light's own solid-angle pdf for that point (without the pick).
-fn intersect_sized(light: &Light, origin: Vec3, dir: Vec3, tmax: f32) -> Option<AreaHit> {
+/// light's own solid-angle pdf for that point (without the pick), as its
+/// sampling from `from` (the shading point the ray left) would give it.
+fn intersect_sized(light: &Light, origin: Vec3, dir: Vec3, tmax: f32, from: Vec3) -> Option<AreaHit> {
     let centre = light.position();
     match light.kind {
         LightKind::Rect { .. } | LightKind::Disk { .. } => {
@@ -1058,7 +1115,14 @@ fn intersect_sized(light: &Light, origin: Vec3, dir: Vec3, tmax: f32) -> Option<
                 LightKind::Disk { radius } if q.x * q.x + q.y * q.y <= radius * radius => PI * radius * radius,
                 _ => return None,
             };
-            Some(AreaHit { t, radiance: light.emission, pdf: t * t / (area * cos_l.abs()), group: 0 })
+            let pdf = match light.kind {
+                LightKind::Rect { size } => match spherical_rect(light, size, from) {
+                    Some((first, second)) => (1.0 / (first.area + second.area)) as f32,
+                    None => t * t / (area * cos_l.abs()),
+                },
+                _ => t * t / (area * cos_l.abs()),
+            };
+            Some(AreaHit { t, radiance: light.emission, pdf, group: 0 })
         }
         LightKind::Sphere { radius } => {
             let d = centre - origin;
@@ -1237,6 +1301,54 @@ mod tests {
         assert!(((mean_s - exact) / exact).abs() < 0.01, "shaded pick: {mean_s} vs exact {exact}");
         assert!(((mean_p - exact) / exact).abs() < 0.01, "by power: {mean_p} vs exact {exact}");
         assert!(var_s < 0.1 * var_p, "variance: shaded {var_s} vs by power {var_p}");
+    }
+
+    /// A rect light is sampled uniformly in the solid angle it spans: each
+    /// sample's pdf is the one a ray hitting that point is weighed by (MIS),
+    /// the irradiance below a 2 x 1 m rect 1 m up matches the closed form,
+    /// and with far less variance per sample than sampling it by area.
+    #[test]
+    fn a_rect_light_is_sampled_by_solid_angle() {
+        let light = Light {
+            name: "rect".into(),
+            kind: LightKind::Rect { size: Vec2::new(2.0, 1.0) },
+            world_from_light: crate::shot::look_at(Vec3::new(0.0, 1.0, 0.0), Vec3::ZERO),
+            emission: Vec3::ONE,
+            two_sided: false,
+            camera_visible: false,
+            light_group: None,
+        };
+        let (p, n) = (Vec3::ZERO, Vec3::Y);
+        assert!(spherical_rect(&light, Vec2::new(2.0, 1.0), p).is_some());
+        let count = 4096u32;
+        let (mut solid, mut area) = (Vec::new(), Vec::new());
+        for k in 0..count {
+            let u = Vec2::new((k as f32 + 0.5) / count as f32, k.reverse_bits() as f32 / 4294967296.0);
+            let s = sample_local(&light, p, u).expect("below the rect every sample lights p");
+            let hit = intersect_sized(&light, p, s.wi, f32::INFINITY, p).expect("the sample's ray meets the rect");
+            assert!((hit.pdf - s.pdf).abs() <= 1e-4 * s.pdf, "sampled pdf {} vs hit's {}", s.pdf, hit.pdf);
+            assert!((hit.t - s.distance).abs() <= 1e-4, "distance {} vs {}", s.distance, hit.t);
+            solid.push((s.wi.dot(n) / s.pdf) as f64);
+            // The same point by area, as the rect was sampled before.
+            let q = Vec3::new((u.x - 0.5) * 2.0, 1.0, u.y - 0.5);
+            let d = q - p;
+            let wi = d.normalize();
+            area.push((wi.dot(n) * wi.y * 2.0 / d.length_squared()) as f64);
+        }
+        let stats = |v: &[f64]| {
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            (mean, v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / v.len() as f64)
+        };
+        let ((mean_s, var_s), (mean_a, var_a)) = (stats(&solid), stats(&area));
+        // Four corner pieces of a 1 x 0.5 m rectangle seen from 1 m (the form factor).
+        let (x, y) = (1.0f64, 0.5f64);
+        let f = (x / (1.0 + x * x).sqrt() * (y / (1.0 + x * x).sqrt()).atan()
+            + y / (1.0 + y * y).sqrt() * (x / (1.0 + y * y).sqrt()).atan())
+            / (2.0 * std::f64::consts::PI);
+        let exact = 4.0 * std::f64::consts::PI * f;
+        assert!(((mean_s - exact) / exact).abs() < 2e-3, "by solid angle {mean_s} vs exact {exact}");
+        assert!(((mean_a - exact) / exact).abs() < 2e-3, "by area {mean_a} vs exact {exact}");
+        assert!(var_s < 0.2 * var_a, "variance per sample: by solid angle {var_s}, by area {var_a}");
     }
 
     #[test]
