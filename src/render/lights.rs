@@ -959,6 +959,15 @@ fn spherical_rect(light: &Light, size: Vec2, p: Vec3) -> Option<(SphericalTriang
     Some((SphericalTriangle::new(p, &[a, b, c])?, SphericalTriangle::new(p, &[a, c, d])?))
 }
 
+/// The cosine at a planar light (rect, disc) between its emitting side and
+/// the way back along `wi` to the shading point; `None` where it does not
+/// light that way (behind a one-sided light, or edge-on).
+fn emitting_cos(light: &Light, wi: Vec3) -> Option<f32> {
+    let cos = -wi.dot(light.facing());
+    let cos = if light.two_sided { cos.abs() } else { cos };
+    (cos > 1e-6).then_some(cos)
+}
+
 /// A sample of a rect light uniform in the solid angle its two halves
 /// ([`spherical_rect`]) span from `p`.
 fn sample_spherical_rect(
@@ -982,13 +991,7 @@ fn sample_spherical_rect(
         return None;
     }
     let wi = w.as_vec3();
-    let mut cos_l = -wi.dot(light.facing());
-    if light.two_sided {
-        cos_l = cos_l.abs();
-    }
-    if cos_l <= 1e-6 {
-        return None;
-    }
+    emitting_cos(light, wi)?;
     Some(LightSample {
         wi,
         distance: t as f32,
@@ -1039,13 +1042,7 @@ fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
                 return None;
             }
             let wi = d / distance;
-            let mut cos_l = -wi.dot(light.facing());
-            if light.two_sided {
-                cos_l = cos_l.abs();
-            }
-            if cos_l <= 1e-6 {
-                return None;
-            }
+            let cos_l = emitting_cos(light, wi)?;
             Some(LightSample {
                 wi,
                 distance,
