@@ -10,6 +10,7 @@
 //!          --camera NODE (first node with a perspective camera)  --no-rays  --no-render
 //!          --hdri FILE (.hdr/.exr lat-long; replaces --sky)  --hdri-strength S (1)  --hdri-rotate DEG (0)
 //!          --no-sun (drop the sun)  --sun-angle DEG (the sun's angular diameter, 0: delta)  --sun-direction X Y Z (towards the sun)  --point-lights N (N lamps 4 m over the scene, 2,000 W/sr in all)
+//!          --adaptive THRESHOLD MIN MAX (adaptive sampling, render.adaptive's keys; replaces --spp)
 //! ```
 //! Any .glb with a perspective camera (make_crowd.py output, `throng export`
 //! output), lit by its KHR_lights_punctual lights (directional, point, spot)
@@ -27,6 +28,10 @@
 //! sun at vertices 0..=4. So the default B = 5 traces the same sky paths and
 //! the same number of bounce rays, plus one sun shadow ray at vertex 5 (a
 //! fifth-order sun bounce; B = 4 would instead drop the sky seen from vertex 4).
+//!
+//! Environment switches (A/B runs of one binary): THRONG_TRAVERSAL=wide|obvhs|scalar,
+//! THRONG_PACKETS=1|0 (camera rays as packets or singly), THRONG_FLATTEN=0|1
+//! (every instance's triangles baked into a few world-space meshes).
 //!
 //! `--synthetic N`: N agents x 11 rigid parts sharing 8 meshes (make_crowd.py's
 //! shape: ~1,060 triangles per agent, density 0.5 agents/m^2, a ground quad 4x
@@ -84,6 +89,7 @@ struct Args {
     sun_angle: Option<f32>,
     sun_direction: Option<Vec3>,
     point_lights: usize,
+    adaptive: Option<throng::shot::Adaptive>,
     rays: bool,
     render: bool,
 }
@@ -108,6 +114,7 @@ fn parse_args() -> Result<Args, String> {
         sun_angle: None,
         sun_direction: None,
         point_lights: 0,
+        adaptive: None,
         rays: true,
         render: true,
     };
@@ -144,6 +151,15 @@ fn parse_args() -> Result<Args, String> {
                 a.sun_direction = Some(d.try_normalize().ok_or("--sun-direction: a zero vector")?);
             }
             "--point-lights" => a.point_lights = num(&mut it, &arg)?,
+            "--adaptive" => {
+                let adaptive = throng::shot::Adaptive {
+                    threshold: num(&mut it, &arg)?,
+                    min_spp: num(&mut it, &arg)?,
+                    max_spp: num(&mut it, &arg)?,
+                };
+                adaptive.check().map_err(|(key, m)| format!("--adaptive ({key}): {m}"))?;
+                a.adaptive = Some(adaptive);
+            }
             "--no-rays" => a.rays = false,
             "--no-render" => a.render = false,
             s if s.starts_with("--") => return Err(format!("unknown flag {s}")),
@@ -495,6 +511,51 @@ fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u3
     })
 }
 
+/// `THRONG_FLATTEN=1` (issue 25 item 3, measured): every instance's
+/// triangles in world space, one mesh per material and visibility, so the
+/// TLAS has a handful of entries and each ray walks one big tree, as
+/// Mitsuba's `--geometry merged` does. Drops UVs and tangents (the harness's
+/// diffuse materials have no textures).
+fn flatten(lib: &mut Library, scene: &mut FrameScene) {
+    let mut groups: std::collections::BTreeMap<(u32, u8), Mesh> = Default::default();
+    for inst in &scene.instances {
+        let src = &lib.meshes[inst.mesh as usize];
+        let m = groups.entry((inst.material, inst.visibility)).or_insert_with(|| Mesh {
+            name: format!("flat_{}_{}", inst.material, inst.visibility),
+            positions: vec![],
+            normals: vec![],
+            uvs: vec![],
+            tangents: vec![],
+            indices: vec![],
+        });
+        let base = m.positions.len() as u32;
+        let nm = glam::Mat3::from(inst.world_from_object.matrix3).inverse().transpose();
+        m.positions.extend(src.positions.iter().map(|&p| inst.world_from_object.transform_point3(p)));
+        if !src.normals.is_empty() {
+            m.normals.extend(src.normals.iter().map(|&n| (nm * n).normalize_or_zero()));
+        } else {
+            m.normals.extend(std::iter::repeat_n(Vec3::ZERO, src.positions.len()));
+        }
+        m.indices.extend(src.indices.iter().map(|&i| i + base));
+    }
+    let first = scene.instances.first().copied();
+    scene.instances.clear();
+    for ((material, visibility), mut m) in groups {
+        if m.normals.iter().all(|n| *n == Vec3::ZERO) {
+            m.normals.clear();
+        }
+        let mesh = lib.meshes.len() as u32;
+        lib.meshes.push(m);
+        let mut inst = first.expect("a scene with instances");
+        inst.mesh = mesh as _;
+        inst.material = material;
+        inst.visibility = visibility;
+        inst.world_from_object = glam::Affine3A::IDENTITY;
+        scene.instances.push(inst);
+    }
+    eprintln!("peer_bench: flattened into {} meshes", scene.instances.len());
+}
+
 fn main() {
     let args = match parse_args() {
         Ok(a) => a,
@@ -539,7 +600,10 @@ fn main() {
         (None, Some(n)) => synthetic(n, &args),
         (None, None) => unreachable!("checked by parse_args"),
     };
-    let Loaded { lib, mut scene, started: t0, load_s } = loaded;
+    let Loaded { mut lib, mut scene, started: t0, load_s } = loaded;
+    if std::env::var("THRONG_FLATTEN").as_deref() == Ok("1") {
+        flatten(&mut lib, &mut scene);
+    }
     if args.no_sun {
         scene.lights.sun = None;
         scene.lights.local.retain(|l| !matches!(l.kind, LightKind::Distant { .. }));
@@ -594,7 +658,7 @@ fn main() {
         indirect_clamp: 0.0,
         diffuse_only: args.diffuse,
         passes: Default::default(),
-        adaptive: None,
+        adaptive: args.adaptive,
     };
     let mut out = serde_json::json!({
         "tool": "throng peer_bench",
@@ -646,6 +710,10 @@ fn main() {
         let lum: f64 = film.rgba.iter().map(|p| (0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]) as f64).sum::<f64>()
             / film.rgba.len() as f64;
         out["mean_luminance"] = lum.into();
+        if !film.samples.is_empty() {
+            let taken: u64 = film.samples.iter().map(|&n| u64::from(n)).sum();
+            out["mean_spp"] = (taken as f64 / film.samples.len() as f64).into();
+        }
         if let Some(prefix) = &args.out {
             let (near, far) = film.depth_range().unwrap_or((0.1, 1000.0));
             let (world_to_camera, world_to_ndc) =
