@@ -44,6 +44,7 @@ fn laine_karras(mut x: u32, seed: u32) -> u32 {
     x
 }
 
+#[cfg(test)]
 #[inline]
 fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
     laine_karras(x.reverse_bits(), seed).reverse_bits()
@@ -88,7 +89,35 @@ const SOBOL1_BYTES: [[u32; 256]; 4] = {
     t
 };
 
+/// [`SOBOL1_BYTES`] with every entry's bits reversed. Reversal is linear
+/// over XOR, so these give Sobol dimension 1 of a point already reversed,
+/// which is how its scramble takes it (one reversal fewer per point).
+const SOBOL1_BYTES_REVERSED: [[u32; 256]; 4] = {
+    let mut t = SOBOL1_BYTES;
+    let mut j = 0;
+    while j < 4 {
+        let mut b = 0;
+        while b < 256 {
+            t[j][b] = t[j][b].reverse_bits();
+            b += 1;
+        }
+        j += 1;
+    }
+    t
+};
+
+/// Sobol dimension 1 of point `index` with its bits reversed.
+#[inline]
+fn sobol_1_reversed(index: u32) -> u32 {
+    let b = index.to_le_bytes();
+    SOBOL1_BYTES_REVERSED[0][b[0] as usize]
+        ^ SOBOL1_BYTES_REVERSED[1][b[1] as usize]
+        ^ SOBOL1_BYTES_REVERSED[2][b[2] as usize]
+        ^ SOBOL1_BYTES_REVERSED[3][b[3] as usize]
+}
+
 /// Sobol dimensions 0 and 1 of point `index`, as 32-bit fixed point.
+#[cfg(test)]
 #[inline]
 fn sobol_2d(index: u32) -> (u32, u32) {
     let x = index.reverse_bits();
@@ -119,7 +148,8 @@ const EXTRA_LIGHT_SALT: u32 = 0x4c69_6768;
 #[derive(Clone, Debug)]
 pub(crate) struct Sampler {
     pixel_key: u32,
-    sample: u32,
+    /// The sample index with its bits reversed, as the index scramble takes it.
+    sample_reversed: u32,
     dimension: u32,
 }
 
@@ -128,7 +158,7 @@ impl Sampler {
     pub(crate) fn new(seed: u64, frame: i64, layer: u32, x: u32, y: u32, sample: u32) -> Sampler {
         let pixel_key =
             hash_words(&[seed as u32, (seed >> 32) as u32, frame as u32, (frame >> 32) as u32, layer, x, y]);
-        Sampler { pixel_key, sample, dimension: 0 }
+        Sampler { pixel_key, sample_reversed: sample.reverse_bits(), dimension: 0 }
     }
 
     /// Jumps to a fixed dimension, so each bounce uses the same dimensions
@@ -181,10 +211,12 @@ impl Sampler {
     /// This sample's point of the Owen-scrambled, shuffled 2D Sobol
     /// sequence keyed by `seed`.
     fn point_2d(&self, seed: u32) -> Vec2 {
-        let index = nested_uniform_scramble(self.sample, seed);
-        let (x, y) = sobol_2d(index);
-        let x = nested_uniform_scramble(x, mix32(seed ^ 0x5bd1_e995));
-        let y = nested_uniform_scramble(y, mix32(seed ^ 0x27d4_eb2f));
+        // nested_uniform_scramble(x) is reverse(laine_karras(reverse(x))); the
+        // reversals that cancel are left out (sobol x is reverse(index)), so
+        // this is the textbook form (`point_2d_reference` in the tests), bit for bit.
+        let index = laine_karras(self.sample_reversed, seed).reverse_bits();
+        let x = laine_karras(index, mix32(seed ^ 0x5bd1_e995)).reverse_bits();
+        let y = laine_karras(sobol_1_reversed(index), mix32(seed ^ 0x27d4_eb2f)).reverse_bits();
         Vec2::new(to_unit(x), to_unit(y))
     }
 
@@ -198,8 +230,9 @@ impl Sampler {
     /// This sample's number of the Owen-scrambled, shuffled 1D Sobol
     /// (van der Corput) sequence keyed by `seed`.
     fn point_1d(&self, seed: u32) -> f32 {
-        let index = nested_uniform_scramble(self.sample, seed);
-        to_unit(nested_uniform_scramble(index.reverse_bits(), mix32(seed ^ 0x5bd1_e995)))
+        // As point_2d: the textbook form with the cancelling reversals left out.
+        let index = laine_karras(self.sample_reversed, seed).reverse_bits();
+        to_unit(laine_karras(index, mix32(seed ^ 0x5bd1_e995)).reverse_bits())
     }
 }
 
@@ -242,6 +275,33 @@ mod tests {
         }
     }
 
+    /// The points are the textbook Owen-scrambled Sobol points, bit for bit.
+    #[test]
+    fn points_are_the_textbook_scrambled_sobol_points() {
+        let point_2d_reference = |sample: u32, seed: u32| {
+            let index = nested_uniform_scramble(sample, seed);
+            let (x, y) = sobol_2d(index);
+            let x = nested_uniform_scramble(x, mix32(seed ^ 0x5bd1_e995));
+            let y = nested_uniform_scramble(y, mix32(seed ^ 0x27d4_eb2f));
+            Vec2::new(to_unit(x), to_unit(y))
+        };
+        let point_1d_reference = |sample: u32, seed: u32| {
+            let index = nested_uniform_scramble(sample, seed);
+            to_unit(nested_uniform_scramble(index.reverse_bits(), mix32(seed ^ 0x5bd1_e995)))
+        };
+        let mut seed = 99u32;
+        for sample in (0..2048).chain([u32::MAX, 1 << 31, 0x8000_0001]) {
+            seed = mix32(seed);
+            let smp = Sampler::new(3, 7, 1, 4, 5, sample);
+            assert_eq!(
+                smp.point_2d(seed).to_array().map(f32::to_bits),
+                point_2d_reference(sample, seed).to_array().map(f32::to_bits),
+                "sample {sample}"
+            );
+            assert_eq!(smp.point_1d(seed).to_bits(), point_1d_reference(sample, seed).to_bits(), "sample {sample}");
+        }
+    }
+
     /// The byte tables give the points of the bit-by-bit recurrence.
     #[test]
     fn sobol_tables_match_the_recurrence() {
@@ -259,6 +319,7 @@ mod tests {
         let mut x = 12345u32;
         for i in (0..4096).chain([u32::MAX, 1 << 31, 0xdead_beef]) {
             assert_eq!(sobol_2d(i).1, reference(i), "index {i}");
+            assert_eq!(sobol_1_reversed(i), reference(i).reverse_bits(), "index {i}");
             x = mix32(x);
             assert_eq!(sobol_2d(x).1, reference(x), "index {x}");
         }
