@@ -1179,30 +1179,31 @@ impl<'a> Tlas<'a> {
         time: f32,
         counts: &impl Fn(u32) -> bool,
     ) -> f32 {
-        {
-            let blocked = self.cluster(slot).any(|k| {
-                let inst = &self.instances[k];
-                inst.visibility & mask != 0
-                    && counts(inst.index)
-                    && if inst.motion == STILL {
-                        self.blas.get(inst.mesh).is_some_and(|b| {
-                            let local = object_ray(&self.object_from_world(k, inst), r, r.tmax);
-                            match inst.cutout.then(|| self.holes_of(inst, r)).flatten() {
-                                None => b.occluded(w, local),
-                                Some(holes) => b.occluded_cut(w, local, &holes),
-                            }
-                        })
-                    } else {
-                        self.occluded_moving(w, inst, r, time)
-                    }
-            });
-            // Any value below tmax stops the walk.
-            if blocked {
-                0.0
+        // A plain loop, not `Iterator::any`: `any`'s `try_fold` is not
+        // always inlined, and then this whole leaf visit (the BLAS any-hit
+        // walk and its triangle tests) runs outside the walk's AVX2 body.
+        for k in self.cluster(slot) {
+            let inst = &self.instances[k];
+            if inst.visibility & mask == 0 || !counts(inst.index) {
+                continue;
+            }
+            // No closures here either (`is_some_and`'s was not inlined).
+            let blocked = if inst.motion != STILL {
+                self.occluded_moving(w, inst, r, time)
+            } else if let Some(b) = self.blas.get(inst.mesh) {
+                let local = object_ray(&self.object_from_world(k, inst), r, r.tmax);
+                match if inst.cutout { self.holes_of(inst, r) } else { None } {
+                    None => b.occluded(w, local),
+                    Some(holes) => b.occluded_cut(w, local, &holes),
+                }
             } else {
-                f32::INFINITY
+                false
+            };
+            if blocked {
+                return 0.0; // any value below tmax stops the walk
             }
         }
+        f32::INFINITY
     }
 
     /// World-space bounds of everything in the tree (`None` when empty).
