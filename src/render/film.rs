@@ -23,8 +23,10 @@
 //!   pixel took. Every pixel takes `min_spp`; from there, after every
 //!   [`ADAPTIVE_STEP`] samples, it stops once its error is below the
 //!   threshold: the standard error of its mean luminance over that mean
-//!   (plus [`ADAPTIVE_FLOOR`], so black pixels stop at once) or the standard
-//!   error of its alpha (edges), whichever is larger; or at `max_spp`.
+//!   (plus [`ADAPTIVE_FLOOR`], so dark pixels are held to an absolute
+//!   error) or the standard error of its alpha (edges), whichever is
+//!   larger, and never below 1 / n after n samples (what happens less often
+//!   than once in n samples, n samples cannot see); or at `max_spp`.
 //!   The decision reads the pixel's own samples alone, in index order, so
 //!   the image is the same for any thread count, and a pixel's first n
 //!   samples are those of a fixed n-sample render. Every other buffer is
@@ -58,7 +60,7 @@ const TILE: u32 = 16;
 /// its first `min_spp`.
 pub const ADAPTIVE_STEP: u32 = 4;
 /// Added to a pixel's mean luminance in its relative error, so that dark
-/// pixels are held to an absolute error and black ones stop at `min_spp`.
+/// pixels are held to an absolute error.
 pub const ADAPTIVE_FLOOR: f64 = 0.01;
 
 /// How many samples a pixel takes: `min` to `max`, stopping at `threshold`.
@@ -115,7 +117,8 @@ impl ErrorEstimate {
     }
 
     /// The larger of the relative standard error of the mean luminance and
-    /// the standard error of the mean alpha, after `n` (> 1) samples.
+    /// the standard error of the mean alpha, after `n` (> 1) samples, and at
+    /// least 1 / `n`.
     fn error(&self, n: u32) -> f64 {
         let n = f64::from(n);
         let se = |[s, s2]: [f64; 2]| {
@@ -123,7 +126,11 @@ impl ErrorEstimate {
             ((s2 / n - mean * mean).max(0.0) / (n - 1.0)).sqrt()
         };
         let mean = self.lum[0] / n;
-        (se(self.lum) / (mean.abs() + ADAPTIVE_FLOOR)).max(se(self.alpha))
+        let relative = se(self.lum) / (mean.abs() + ADAPTIVE_FLOOR);
+        // n samples cannot see what happens less often than once in n (a
+        // shadow, a lamp through a gap): their variance says nothing of it,
+        // so no pixel claims an error below 1 / n.
+        relative.max(se(self.alpha)).hypot(1.0 / n)
     }
 }
 
@@ -576,4 +583,33 @@ fn check(blas: &BlasSet, lib: &Library, scene: &FrameScene, s: &RenderSettings) 
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Samples that all agree do not prove a pixel converged: a light seen
+    /// once in 20 samples is missed by 8 of them nine times in ten, so the
+    /// error of n agreeing samples is 1 / n, not 0, and a pixel whose rare
+    /// light its first samples missed samples on until it is found.
+    #[test]
+    fn agreeing_samples_claim_no_less_than_one_over_n() {
+        for n in [2u32, 8, 33, 256] {
+            let mut e = ErrorEstimate::default();
+            for _ in 0..n {
+                e.add(Vec3::splat(0.5), 1.0);
+            }
+            assert_eq!(e.error(n), 1.0 / f64::from(n));
+        }
+        // One sample in 20 sees a lamp 20 times brighter than the rest.
+        let sample = |i: u32| if i % 20 == 19 { Vec3::splat(10.0) } else { Vec3::splat(0.5) };
+        let mut e = ErrorEstimate::default();
+        let stop = (1..=400u32).find(|&n| {
+            e.add(sample(n - 1), 1.0);
+            n >= 8 && n % 4 == 0 && e.error(n) < 0.05
+        });
+        assert!(stop.is_none_or(|n| n >= 20), "stopped at {stop:?}, before the lamp's first sample");
+        assert!(stop.is_none(), "once seen, the lamp keeps the pixel sampling: stopped at {stop:?}");
+    }
 }
