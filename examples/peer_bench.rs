@@ -29,7 +29,7 @@
 //! the same number of bounce rays, plus one sun shadow ray at vertex 5 (a
 //! fifth-order sun bounce; B = 4 would instead drop the sky seen from vertex 4).
 //!
-//! Environment switches (A/B runs of one binary): THRONG_TRAVERSAL=wide|obvhs|scalar,
+//! Environment switches (A/B runs of one binary): THRONG_TRAVERSAL=wide|avx2|obvhs|scalar,
 //! THRONG_PACKETS=1|0 (camera rays as packets or singly), THRONG_FLATTEN=0|1
 //! (every instance's triangles baked into a few world-space meshes).
 //!
@@ -48,7 +48,7 @@
 //! Primary rays go as packets (blocks of 8x4 pixels through
 //! `Tlas::intersect_stream`), as the render's camera rays do, unless
 //! THRONG_PACKETS=0 (which also makes the render trace camera rays one by
-//! one); THRONG_TRAVERSAL=obvhs|scalar|wide picks the node test kernel.
+//! one); THRONG_TRAVERSAL=obvhs|scalar|avx2|wide picks the node test kernel.
 
 use std::f32::consts::PI;
 use std::path::PathBuf;
@@ -565,13 +565,14 @@ fn main() {
         }
     };
     // A/B switch for the BVH traversal in one binary (benchmarks only):
-    // THRONG_TRAVERSAL=obvhs|scalar|wide (default wide).
+    // THRONG_TRAVERSAL=obvhs|scalar|avx2|wide (default wide: the CPU's widest).
     let traversal = match std::env::var("THRONG_TRAVERSAL").as_deref() {
         Ok("obvhs") => Traversal::Obvhs,
         Ok("scalar") => Traversal::Scalar,
+        Ok("avx2") => Traversal::Avx2,
         Ok("wide") | Err(_) => Traversal::Wide,
         Ok(other) => {
-            eprintln!("peer_bench: THRONG_TRAVERSAL={other}: expected obvhs, scalar or wide");
+            eprintln!("peer_bench: THRONG_TRAVERSAL={other}: expected obvhs, scalar, avx2 or wide");
             std::process::exit(2);
         }
     };

@@ -1,5 +1,6 @@
 //! Our BVH traversal (render::wide) gives the same hits on every kernel:
-//! the 8-wide AVX2 node test, the portable scalar one and obvhs' own walk,
+//! the 16-lane AVX-512 node test (where the CPU has it), the 8-wide AVX2
+//! one, the portable scalar one and obvhs' own walk,
 //! forced one by one on random rays over the demo's meshes (each BLAS alone)
 //! and over a whole frame of the demo (TLAS and BLASes together). Packets
 //! (`Tlas::intersect_stream`) give every ray's single-ray hit, bit for bit,
@@ -16,7 +17,7 @@ use throng::render::wide::Traversal;
 use throng::render::BlasSet;
 use throng::scene::vis;
 
-const KERNELS: [Traversal; 3] = [Traversal::Wide, Traversal::Scalar, Traversal::Obvhs];
+const KERNELS: [Traversal; 4] = [Traversal::Wide, Traversal::Scalar, Traversal::Obvhs, Traversal::Avx2];
 
 /// xorshift64: deterministic rays without a dependency.
 struct Rng(u64);
@@ -61,15 +62,37 @@ fn hit_key(h: Option<Hit>) -> Option<(u32, u32, u32, u32, u32)> {
     h.map(|h| (h.instance, h.triangle, h.t.to_bits(), h.u.to_bits(), h.v.to_bits()))
 }
 
-/// The wide kernel really is AVX2 where the CPU has it, so the comparisons
-/// below are not scalar against scalar.
-fn wide_kernel_is_the_cpus(name: &str) {
+/// Whether this CPU has what pulp's AVX-512 token (x86-64-v4) asks for.
+fn has_avx512() -> bool {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-        assert_eq!(name, "avx2");
-        return;
+    {
+        use std::arch::is_x86_feature_detected as has;
+        has!("avx512f") && has!("avx512bw") && has!("avx512cd") && has!("avx512dq") && has!("avx512vl") && has_avx2()
     }
-    assert_eq!(name, "scalar");
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+/// The wide kernel really is the widest this CPU has (AVX-512, else AVX2),
+/// so the comparisons below are not scalar against scalar.
+fn wide_kernel_is_the_cpus(name: &str) {
+    let want = if has_avx512() {
+        "avx512"
+    } else if has_avx2() {
+        "avx2"
+    } else {
+        "scalar"
+    };
+    assert_eq!(name, want);
 }
 
 #[test]
@@ -114,6 +137,7 @@ fn every_kernel_finds_the_same_hits_in_a_demo_frame() {
     wide_kernel_is_the_cpus(trees[0].kernel_name());
     assert_eq!(trees[1].kernel_name(), "scalar");
     assert_eq!(trees[2].kernel_name(), "obvhs");
+    assert_eq!(trees[3].kernel_name(), if has_avx2() { "avx2" } else { "scalar" });
     let (lo, hi) = trees[0].bounds().unwrap();
     // Rays from inside the crowd's box (and around it), most aimed at an
     // agent's part so they meet the crowd, not just the ground.
@@ -222,7 +246,7 @@ fn packets_find_the_single_ray_hits_of_a_camera_over_a_demo_frame() {
     let mut rng = Rng(0x0bad_cafe_f00d_d00d);
     for k in KERNELS {
         let tlas = Tlas::build(&blas, &scene.instances).with_traversal(k);
-        wide_kernel_is_the_cpus(Tlas::build(&blas, &scene.instances).kernel_name());
+        wide_kernel_is_the_cpus(Tlas::build(&blas, &scene.instances).with_traversal(Traversal::Wide).kernel_name());
         let (mut total, mut packed, mut hits) = (0usize, 0usize, 0usize);
         // Per 8x4 block of pixels, eight jittered rays per pixel, in pixel order.
         for by in (0..h).step_by(4) {
@@ -249,9 +273,10 @@ fn packets_find_the_single_ray_hits_of_a_camera_over_a_demo_frame() {
 
 /// The render path: a blurred demo frame, the full image and a crowd layer
 /// (whose set is a holdout), plain and adaptive, with camera rays traced as
-/// packets and one by one: the same films, bit for bit.
+/// packets and one by one, and on every kernel (the CPU's widest, AVX2 and
+/// scalar): the same films, bit for bit.
 #[test]
-fn a_render_with_camera_packets_is_the_render_without() {
+fn a_render_with_camera_packets_is_the_render_without_on_every_kernel() {
     use throng::render::integrator::set_camera_packets;
     use throng::render::job::{self, RenderJob};
     let dir = common::tempdir().unwrap();
@@ -261,8 +286,9 @@ fn a_render_with_camera_packets_is_the_render_without() {
     let mut layers = job::all_layers(&manifest);
     assert!(layers.len() >= 2, "the demo has a set layer and crowd layers: {layers:?}");
     layers.push("full".into());
-    let render = |packets: bool, adaptive: Option<throng::shot::Adaptive>, out: &str| {
+    let render = |packets: bool, kernel: Traversal, adaptive: Option<throng::shot::Adaptive>, out: &str| {
         set_camera_packets(packets);
+        throng::render::wide::set_traversal(kernel);
         let job = RenderJob {
             shutter: Some(shutter),
             resolution: Some([96, 54]),
@@ -271,15 +297,22 @@ fn a_render_with_camera_packets_is_the_render_without() {
         };
         let done = job::run(&crowd, Some(&manifest), &job, &job::Silent).unwrap().layers;
         set_camera_packets(true);
+        throng::render::wide::set_traversal(Traversal::Wide);
         done.iter().map(|l| throng::render::exr::read_layer(&l.path).unwrap().0).collect::<Vec<_>>()
     };
     let adaptive = Some(throng::shot::Adaptive { threshold: 0.05, min_spp: 3, max_spp: 12 });
     for (a, name) in [(None, "plain"), (adaptive, "adaptive")] {
-        let with = render(true, a, &format!("{name}_p"));
-        let without = render(false, a, &format!("{name}_s"));
+        let with = render(true, Traversal::Wide, a, &format!("{name}_p"));
+        let without = render(false, Traversal::Wide, a, &format!("{name}_s"));
         assert_eq!(with.len(), layers.len());
         for (x, y) in with.iter().zip(&without) {
             assert!(x == y, "{name}: a layer differs with camera packets");
+        }
+        for k in [Traversal::Avx2, Traversal::Scalar] {
+            let other = render(true, k, a, &format!("{name}_{k:?}"));
+            for (x, y) in with.iter().zip(&other) {
+                assert!(x == y, "{name}: a layer differs on the {k:?} kernel");
+            }
         }
         assert!(with.iter().all(|f| f.rgba.iter().any(|p| p[3] > 0.0)), "{name}: every layer shows something");
     }

@@ -868,7 +868,7 @@ impl<'a> Tlas<'a> {
         self
     }
 
-    /// Name of the kernel this tree is walked with: "obvhs", "scalar" or "avx2".
+    /// Name of the kernel this tree is walked with: "obvhs", "scalar", "avx2" or "avx512".
     pub fn kernel_name(&self) -> &'static str {
         self.kernel.name()
     }

@@ -2,10 +2,12 @@
 //! BLASes and the TLAS): the same nodes, the same walk order and the same
 //! tie rules as obvhs' `ray_traverse` / `ray_traverse_miss`, but the eight
 //! child boxes of a node are tested in one 8-lane operation where the CPU
-//! has AVX2 (chosen at run time, so one portable binary uses what the node
-//! has), with a portable scalar kernel everywhere else.
+//! has AVX2, or one 16-lane operation (each child's near and far planes
+//! side by side) where it has AVX-512 (chosen at run time, so one portable
+//! binary uses what the node has), with a portable scalar kernel everywhere
+//! else.
 //!
-//! Bit-identical on every path: both kernels do the same IEEE f32
+//! Bit-identical on every path: every kernel does the same IEEE f32
 //! operations in the same order, each rounded on its own (a multiply, then
 //! an add: Rust never contracts them into a fused multiply-add, and neither
 //! kernel calls one), `max(a, b)` is `a > b ? a : b` and `min(a, b)` is
@@ -14,7 +16,8 @@
 //! the same order. What differs is only how many lanes run at once.
 //! `tests/wide.rs` forces each path on random rays over the demo's meshes
 //! and checks the closest hits (t and primitive) and any-hit answers agree,
-//! with each other and with obvhs' own traversal.
+//! with each other and with obvhs' own traversal; on an AVX-512 CPU it
+//! forces the AVX2 kernel too.
 //!
 //! Packets (`PacketWalk`, `walk_packet`): up to 32 rays of one direction
 //! octant walk a tree together, each with its own child and primitive bits
@@ -23,8 +26,9 @@
 //! (`Tlas::intersect_stream` uses it for camera rays; docs/benchmarks.md,
 //! issue 25 item 2, has the argument and the figures).
 //!
-//! Safe: SIMD dispatch goes through `pulp` (its `V3` token proves AVX2 and
-//! its intrinsics are safe functions), so the crate's `forbid(unsafe_code)`
+//! Safe: SIMD dispatch goes through `pulp` (its `V3` and `V4` tokens prove
+//! AVX2 and AVX-512, and
+//! their intrinsics are safe functions), so the crate's `forbid(unsafe_code)`
 //! holds.
 
 use std::sync::atomic::{AtomicU8, Ordering};
@@ -39,9 +43,12 @@ pub enum Traversal {
     Obvhs,
     /// Ours, one child box at a time: the portable kernel.
     Scalar,
-    /// Ours, the widest kernel this CPU has (8-wide AVX2; the scalar
-    /// kernel where AVX2 is absent).
+    /// Ours, the widest kernel this CPU has (16-lane AVX-512, else 8-wide
+    /// AVX2, else the scalar kernel).
     Wide,
+    /// Ours, 8-wide AVX2 even where AVX-512 is present (the scalar kernel
+    /// where AVX2 is absent): to test and measure the AVX2 path on any CPU.
+    Avx2,
 }
 
 /// The traversal trees built from now on use (the default, [`Traversal::Wide`], unless
@@ -61,11 +68,12 @@ pub fn traversal() -> Traversal {
     match CHOSEN.load(Ordering::Relaxed) {
         0 => Traversal::Obvhs,
         1 => Traversal::Scalar,
+        3 => Traversal::Avx2,
         _ => Traversal::Wide,
     }
 }
 
-/// The kernel `t` resolves to on this CPU: "obvhs", "scalar" or "avx2".
+/// The kernel `t` resolves to on this CPU: "obvhs", "scalar", "avx2" or "avx512".
 pub fn kernel_name(t: Traversal) -> &'static str {
     Kernel::detect(t).name()
 }
@@ -77,6 +85,8 @@ pub(crate) enum Kernel {
     Scalar,
     #[cfg(target_arch = "x86_64")]
     Avx2(pulp::x86::V3),
+    #[cfg(target_arch = "x86_64")]
+    Avx512(pulp::x86::V4),
 }
 
 impl Kernel {
@@ -86,9 +96,11 @@ impl Kernel {
             Traversal::Obvhs => Kernel::Obvhs,
             Traversal::Scalar => Kernel::Scalar,
             #[cfg(target_arch = "x86_64")]
-            Traversal::Wide => pulp::x86::V3::try_new().map_or(Kernel::Scalar, Kernel::Avx2),
+            Traversal::Wide => pulp::x86::V4::try_new().map_or_else(|| Kernel::detect(Traversal::Avx2), Kernel::Avx512),
+            #[cfg(target_arch = "x86_64")]
+            Traversal::Avx2 => pulp::x86::V3::try_new().map_or(Kernel::Scalar, Kernel::Avx2),
             #[cfg(not(target_arch = "x86_64"))]
-            Traversal::Wide => Kernel::Scalar,
+            Traversal::Wide | Traversal::Avx2 => Kernel::Scalar,
         }
     }
 
@@ -99,6 +111,8 @@ impl Kernel {
             Kernel::Scalar => "scalar",
             #[cfg(target_arch = "x86_64")]
             Kernel::Avx2(_) => "avx2",
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx512(_) => "avx512",
         }
     }
 }
@@ -343,6 +357,46 @@ impl NodeTest for Avx2Test {
     }
 }
 
+/// All eight children in one AVX-512 operation per axis: lanes 0-7 hold the
+/// children's near planes and lanes 8-15 their far planes, so one multiply
+/// and one add move both into the ray's distances (six each on AVX2). Each
+/// lane computes exactly what the scalar kernel computes for that plane,
+/// and the maxima and minima are taken in the same order.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+pub(crate) struct Avx512Test(pub pulp::x86::V4);
+
+#[cfg(target_arch = "x86_64")]
+impl NodeTest for Avx512Test {
+    #[inline(always)]
+    fn hits(self, node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
+        let s = self.0;
+        s.vectorize(
+            #[inline(always)]
+            || {
+                use pulp::{f32x16, f32x8, u8x16};
+                let (dir, org) = node_ray(node, ray);
+                let [(nx, fx), (ny, fy), (nz, fz)] = planes(node, ray);
+                // One axis: near planes in the low eight lanes, far in the high eight.
+                let axis = |near: &[u8; 8], far: &[u8; 8], k: usize| -> f32x16 {
+                    let bytes: u8x16 = pulp::bytemuck::cast([u64::from_le_bytes(*near), u64::from_le_bytes(*far)]);
+                    let q = s.convert_i32x16_to_f32x16(s.convert_u8x16_to_i32x16(bytes));
+                    s.add_f32x16(s.mul_f32x16(q, s.splat_f32x16(dir[k])), s.splat_f32x16(org[k]))
+                };
+                let (x, y, z) = (axis(nx, fx, 0), axis(ny, fy, 1), axis(nz, fz, 2));
+                // vmaxps / vminps: a > b ? a : b and a < b ? a : b, as `max` / `min` above.
+                let [entry, _]: [f32x8; 2] = pulp::bytemuck::cast(s.max_f32x16(x, s.max_f32x16(y, z)));
+                let [_, exit]: [f32x8; 2] = pulp::bytemuck::cast(s.min_f32x16(x, s.min_f32x16(y, z)));
+                let tmin = s.max_f32x8(entry, s.splat_f32x8(ENTRY_EPSILON));
+                let tmax = s.min_f32x8(exit, s.splat_f32x8(ray.tmax));
+                // An AVX-512 compare gives the 8-bit mask itself (ordered <=, as on AVX2).
+                let boxes = s.cmp_le_f32x8(tmin, tmax).0 as u32;
+                hit_mask(node, oct_inv4, boxes)
+            },
+        )
+    }
+}
+
 /// A value a closure spends, so that the closure is `FnOnce` by nature.
 /// pulp's `vectorize` calls its closure through `FnOnce::call_once`; for a
 /// closure that is `Fn` by nature that is a compiler-made shim, which is not
@@ -356,8 +410,8 @@ impl Once {
     pub(crate) fn spend(self) {}
 }
 
-/// Runs `$body` with `$w` bound to the [`Walk`] of `$kernel`; on AVX2, inside
-/// pulp's `vectorize`, so the whole query (tree walks, triangle tests) is
+/// Runs `$body` with `$w` bound to the [`Walk`] of `$kernel`; on AVX2 and
+/// AVX-512, inside pulp's `vectorize`, so the whole query (tree walks, triangle tests) is
 /// compiled with the features the kernel has and its node tests inline.
 macro_rules! dispatch {
     ($kernel:expr, $w:ident => $body:expr) => {
@@ -378,6 +432,18 @@ macro_rules! dispatch {
                     || {
                         once.spend();
                         let $w = $crate::render::wide::OurWalk($crate::render::wide::Avx2Test(v3));
+                        $body
+                    },
+                )
+            }
+            #[cfg(target_arch = "x86_64")]
+            $crate::render::wide::Kernel::Avx512(v4) => {
+                let once = $crate::render::wide::Once;
+                v4.vectorize(
+                    #[inline(always)]
+                    || {
+                        once.spend();
+                        let $w = $crate::render::wide::OurWalk($crate::render::wide::Avx512Test(v4));
                         $body
                     },
                 )
@@ -586,7 +652,8 @@ mod tests {
         let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut std::time::Duration::default());
         let order = bvh.primitive_indices.clone();
         let prim = |r: &Ray, s: usize| tris[order[s] as usize].intersect(r);
-        let kernels = [Kernel::detect(Traversal::Wide), Kernel::Scalar];
+        // The CPU's widest kernel, AVX2 forced (where AVX-512 is the widest), and scalar.
+        let kernels = [Traversal::Wide, Traversal::Avx2, Traversal::Scalar].map(Kernel::detect);
         let mut met = 0;
         for _ in 0..4000 {
             let ray = Ray::new(v(&mut s), v(&mut s).normalize(), 0.0, 3.0 + rng(&mut s) * 10.0);
@@ -594,16 +661,7 @@ mod tests {
             let want_any = ObvhsWalk.any(&bvh, ray, prim);
             met += want.is_some() as u32;
             for k in kernels {
-                let (got, any) = match k {
-                    Kernel::Scalar => {
-                        (OurWalk(ScalarTest).closest(&bvh, ray, prim), OurWalk(ScalarTest).any(&bvh, ray, prim))
-                    }
-                    #[cfg(target_arch = "x86_64")]
-                    Kernel::Avx2(v3) => {
-                        (OurWalk(Avx2Test(v3)).closest(&bvh, ray, prim), OurWalk(Avx2Test(v3)).any(&bvh, ray, prim))
-                    }
-                    Kernel::Obvhs => unreachable!(),
-                };
+                let (got, any) = dispatch!(k, w => (w.closest(&bvh, ray, prim), w.any(&bvh, ray, prim)));
                 assert_eq!(got.map(|(p, t)| (p, t.to_bits())), want.map(|(p, t)| (p, t.to_bits())), "{}", k.name());
                 assert_eq!(any, want_any, "{}", k.name());
             }
