@@ -30,8 +30,8 @@
 //! fifth-order sun bounce; B = 4 would instead drop the sky seen from vertex 4).
 //!
 //! Environment switches (A/B runs of one binary): THRONG_TRAVERSAL=wide|avx2|obvhs|scalar,
-//! THRONG_PACKETS=1|0 (camera rays as packets or singly), THRONG_FLATTEN=0|1
-//! (every instance's triangles baked into a few world-space meshes).
+//! THRONG_PACKETS=1|0 (camera rays as packets or singly), THRONG_FLATTEN=0|1|one
+//! (every instance's triangles baked into world-space meshes: one per material, or one in all).
 //!
 //! `--synthetic N`: N agents x 11 rigid parts sharing 8 meshes (make_crowd.py's
 //! shape: ~1,060 triangles per agent, density 0.5 agents/m^2, a ground quad 4x
@@ -514,13 +514,16 @@ fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u3
 /// `THRONG_FLATTEN=1` (issue 25 item 3, measured): every instance's
 /// triangles in world space, one mesh per material and visibility, so the
 /// TLAS has a handful of entries and each ray walks one big tree, as
-/// Mitsuba's `--geometry merged` does. Drops UVs and tangents (the harness's
+/// Mitsuba's `--geometry merged` does; `THRONG_FLATTEN=one` bakes them all
+/// into one mesh (one BVH, as Embree's soup; the image then has one
+/// material: for ray rates only). Drops UVs and tangents (the harness's
 /// diffuse materials have no textures).
 fn flatten(lib: &mut Library, scene: &mut FrameScene) {
     let mut groups: std::collections::BTreeMap<(u32, u8), Mesh> = Default::default();
     for inst in &scene.instances {
         let src = &lib.meshes[inst.mesh as usize];
-        let m = groups.entry((inst.material, inst.visibility)).or_insert_with(|| Mesh {
+        let one = std::env::var("THRONG_FLATTEN").as_deref() == Ok("one");
+        let m = groups.entry((if one { 0 } else { inst.material }, inst.visibility)).or_insert_with(|| Mesh {
             name: format!("flat_{}_{}", inst.material, inst.visibility),
             positions: vec![],
             normals: vec![],
@@ -602,7 +605,7 @@ fn main() {
         (None, None) => unreachable!("checked by parse_args"),
     };
     let Loaded { mut lib, mut scene, started: t0, load_s } = loaded;
-    if std::env::var("THRONG_FLATTEN").as_deref() == Ok("1") {
+    if matches!(std::env::var("THRONG_FLATTEN").as_deref(), Ok("1") | Ok("one")) {
         flatten(&mut lib, &mut scene);
     }
     if args.no_sun {

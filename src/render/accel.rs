@@ -467,7 +467,7 @@ impl BlasSet {
 pub enum TlasKind {
     /// Binary BVH, `fastest_build`.
     Bvh2,
-    /// Compressed 8-wide BVH, `fast_build`.
+    /// Compressed 8-wide BVH ([`tlas_build_params`]).
     CwBvh,
 }
 
@@ -495,6 +495,26 @@ struct TlasInstance {
     /// Its material has alpha holes ([`Tlas::holes`] says where); false
     /// keeps the plain walk.
     cutout: bool,
+}
+
+/// Up to this many TLAS leaves the tree is built with obvhs'
+/// `very_slow_build` (PLOC plus a full pass of reinsertion); above it with
+/// `fast_build`. Every TLAS leaf a ray enters costs a transform and a BLAS
+/// walk, so a tighter tree pays back many times over: at 11,000 and
+/// 110,000 leaves (the peer harness's crowds) single-thread primary rays
+/// were 1.10x and 1.13x and bounce rays 1.13x and 1.18x as fast, for
+/// 16 ms and 0.3 s more build per layer-frame (docs/benchmarks.md). Past
+/// this the build time would grow into a render's (a million agents
+/// render a frame in seconds), so those trees stay fast-built.
+pub(crate) const CAREFUL_TLAS_UP_TO: usize = 200_000;
+
+/// The build parameters of a TLAS of `leaves` leaves ([`CAREFUL_TLAS_UP_TO`]).
+fn tlas_build_params(leaves: usize) -> BvhBuildParams {
+    if leaves <= CAREFUL_TLAS_UP_TO {
+        BvhBuildParams::very_slow_build()
+    } else {
+        BvhBuildParams::fast_build()
+    }
 }
 
 /// From this many instances on, each agent's parts share one TLAS leaf:
@@ -796,7 +816,7 @@ impl<'a> Tlas<'a> {
                     (TlasTree::Bvh2(bvh), order)
                 }
                 TlasKind::CwBvh => {
-                    let bvh = build_cwbvh(&aabbs, BvhBuildParams::fast_build(), &mut Duration::default());
+                    let bvh = build_cwbvh(&aabbs, tlas_build_params(aabbs.len()), &mut Duration::default());
                     let order = bvh.primitive_indices.clone();
                     (TlasTree::CwBvh(bvh), order)
                 }
