@@ -1,5 +1,5 @@
 //! Our BVH traversal (render::wide) gives the same hits on every kernel:
-//! the 16-lane AVX-512 node test (where the CPU has it), the 8-wide AVX2
+//! the AVX-512 node test (where the CPU has it), the 8-wide AVX2
 //! one, the portable scalar one and obvhs' own walk,
 //! forced one by one on random rays over the demo's meshes (each BLAS alone)
 //! and over a whole frame of the demo (TLAS and BLASes together). Packets

@@ -2,10 +2,10 @@
 //! BLASes and the TLAS): the same nodes, the same walk order and the same
 //! tie rules as obvhs' `ray_traverse` / `ray_traverse_miss`, but the eight
 //! child boxes of a node are tested in one 8-lane operation where the CPU
-//! has AVX2, or one 16-lane operation (each child's near and far planes
-//! side by side) where it has AVX-512 (chosen at run time, so one portable
-//! binary uses what the node has), with a portable scalar kernel everywhere
-//! else.
+//! has AVX2 or AVX-512 (chosen at run time, so one portable binary uses
+//! what the node has; on AVX-512 the whole query is compiled for it and the
+//! compare writes a mask register), with a portable scalar kernel
+//! everywhere else.
 //!
 //! Bit-identical on every path: every kernel does the same IEEE f32
 //! operations in the same order, each rounded on its own (a multiply, then
@@ -43,8 +43,8 @@ pub enum Traversal {
     Obvhs,
     /// Ours, one child box at a time: the portable kernel.
     Scalar,
-    /// Ours, the widest kernel this CPU has (16-lane AVX-512, else 8-wide
-    /// AVX2, else the scalar kernel).
+    /// Ours, the widest kernel this CPU has (AVX-512, else AVX2, else the
+    /// scalar kernel).
     Wide,
     /// Ours, 8-wide AVX2 even where AVX-512 is present (the scalar kernel
     /// where AVX2 is absent): to test and measure the AVX2 path on any CPU.
@@ -357,11 +357,19 @@ impl NodeTest for Avx2Test {
     }
 }
 
-/// All eight children in one AVX-512 operation per axis: lanes 0-7 hold the
-/// children's near planes and lanes 8-15 their far planes, so one multiply
-/// and one add move both into the ray's distances (six each on AVX2). Each
-/// lane computes exactly what the scalar kernel computes for that plane,
-/// and the maxima and minima are taken in the same order.
+/// The AVX-512 kernel: the eight children in 8-lane (256-bit) operations,
+/// as on AVX2, but compiled with AVX-512 (VL, BW, DQ) for the whole query
+/// and its compare writing the 8-bit hit mask straight into a mask register.
+/// Each lane computes exactly what the scalar kernel computes for that
+/// plane, and the maxima and minima are taken in the same order.
+///
+/// Why not 16 lanes: a node has eight children, so the 16-lane form packs
+/// each child's near planes in the low half and far planes in the high
+/// half (one multiply and one add per axis instead of two); measured on an
+/// AMD EPYC (Zen 4, whose AVX-512 units are 256 bits wide) that form
+/// traced 0.93x the rays per second of the AVX2 kernel (the halves must be
+/// split again for the compare), and this one renders in the AVX2
+/// kernel's time to within 1 % (docs/benchmarks.md).
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy)]
 pub(crate) struct Avx512Test(pub pulp::x86::V4);
@@ -374,22 +382,24 @@ impl NodeTest for Avx512Test {
         s.vectorize(
             #[inline(always)]
             || {
-                use pulp::{f32x16, f32x8, u8x16};
+                use pulp::{f32x8, u8x16};
                 let (dir, org) = node_ray(node, ray);
                 let [(nx, fx), (ny, fy), (nz, fz)] = planes(node, ray);
-                // One axis: near planes in the low eight lanes, far in the high eight.
-                let axis = |near: &[u8; 8], far: &[u8; 8], k: usize| -> f32x16 {
-                    let bytes: u8x16 = pulp::bytemuck::cast([u64::from_le_bytes(*near), u64::from_le_bytes(*far)]);
-                    let q = s.convert_i32x16_to_f32x16(s.convert_u8x16_to_i32x16(bytes));
-                    s.add_f32x16(s.mul_f32x16(q, s.splat_f32x16(dir[k])), s.splat_f32x16(org[k]))
+                // Eight u8 planes widened to eight f32 lanes (exact: 0..=255).
+                let lanes = |q: &[u8; 8]| -> f32x8 {
+                    let bytes: u8x16 = pulp::bytemuck::cast([u64::from_le_bytes(*q), 0u64]);
+                    s.convert_i32x8_to_f32x8(s.convert_u8x16_to_i32x8(bytes))
                 };
-                let (x, y, z) = (axis(nx, fx, 0), axis(ny, fy, 1), axis(nz, fz, 2));
+                let axis = |q: &[u8; 8], k: usize| {
+                    s.add_f32x8(s.mul_f32x8(lanes(q), s.splat_f32x8(dir[k])), s.splat_f32x8(org[k]))
+                };
+                let (near_x, far_x) = (axis(nx, 0), axis(fx, 0));
+                let (near_y, far_y) = (axis(ny, 1), axis(fy, 1));
+                let (near_z, far_z) = (axis(nz, 2), axis(fz, 2));
                 // vmaxps / vminps: a > b ? a : b and a < b ? a : b, as `max` / `min` above.
-                let [entry, _]: [f32x8; 2] = pulp::bytemuck::cast(s.max_f32x16(x, s.max_f32x16(y, z)));
-                let [_, exit]: [f32x8; 2] = pulp::bytemuck::cast(s.min_f32x16(x, s.min_f32x16(y, z)));
-                let tmin = s.max_f32x8(entry, s.splat_f32x8(ENTRY_EPSILON));
-                let tmax = s.min_f32x8(exit, s.splat_f32x8(ray.tmax));
-                // An AVX-512 compare gives the 8-bit mask itself (ordered <=, as on AVX2).
+                let tmin = s.max_f32x8(s.max_f32x8(near_x, s.max_f32x8(near_y, near_z)), s.splat_f32x8(ENTRY_EPSILON));
+                let tmax = s.min_f32x8(s.min_f32x8(far_x, s.min_f32x8(far_y, far_z)), s.splat_f32x8(ray.tmax));
+                // The compare gives the 8-bit mask itself (ordered <=, as on AVX2).
                 let boxes = s.cmp_le_f32x8(tmin, tmax).0 as u32;
                 hit_mask(node, oct_inv4, boxes)
             },
