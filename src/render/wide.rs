@@ -3,9 +3,8 @@
 //! tie rules as obvhs' `ray_traverse` / `ray_traverse_miss`, but the eight
 //! child boxes of a node are tested in one 8-lane operation where the CPU
 //! has AVX2 or AVX-512 (chosen at run time, so one portable binary uses
-//! what the node has; on AVX-512 the whole query is compiled for it and the
-//! compare writes a mask register), with a portable scalar kernel
-//! everywhere else.
+//! what the node has; on AVX-512 the same node test, with the whole query
+//! compiled for AVX-512), with a portable scalar kernel everywhere else.
 //!
 //! Bit-identical on every path: every kernel does the same IEEE f32
 //! operations in the same order, each rounded on its own (a multiply, then
@@ -27,9 +26,8 @@
 //! issue 25 item 2, has the argument and the figures).
 //!
 //! Safe: SIMD dispatch goes through `pulp` (its `V3` and `V4` tokens prove
-//! AVX2 and AVX-512, and
-//! their intrinsics are safe functions), so the crate's `forbid(unsafe_code)`
-//! holds.
+//! AVX2 and AVX-512, and their intrinsics are safe functions), so the
+//! crate's `forbid(unsafe_code)` holds.
 
 use std::sync::atomic::{AtomicU8, Ordering};
 
@@ -85,6 +83,14 @@ pub(crate) enum Kernel {
     Scalar,
     #[cfg(target_arch = "x86_64")]
     Avx2(pulp::x86::V3),
+    /// The AVX2 node test with the whole query (walks, instance entry,
+    /// triangle tests) compiled for AVX-512 (x86-64-v4). Why not a 16-lane
+    /// test: a node has eight children, so 16 lanes means each child's near
+    /// planes in the low half and far planes in the high half (one multiply
+    /// and one add per axis instead of two); on an AMD EPYC (Zen 4, whose
+    /// AVX-512 units are 256 bits wide) that traced 0.93x the AVX2 kernel's
+    /// rays per second, and an 8-lane test with its compare into a mask
+    /// register rendered in 1.02x this kernel's time (docs/benchmarks.md).
     #[cfg(target_arch = "x86_64")]
     Avx512(pulp::x86::V4),
 }
@@ -357,56 +363,6 @@ impl NodeTest for Avx2Test {
     }
 }
 
-/// The AVX-512 kernel: the eight children in 8-lane (256-bit) operations,
-/// as on AVX2, but compiled with AVX-512 (VL, BW, DQ) for the whole query
-/// and its compare writing the 8-bit hit mask straight into a mask register.
-/// Each lane computes exactly what the scalar kernel computes for that
-/// plane, and the maxima and minima are taken in the same order.
-///
-/// Why not 16 lanes: a node has eight children, so the 16-lane form packs
-/// each child's near planes in the low half and far planes in the high
-/// half (one multiply and one add per axis instead of two); measured on an
-/// AMD EPYC (Zen 4, whose AVX-512 units are 256 bits wide) that form
-/// traced 0.93x the rays per second of the AVX2 kernel (the halves must be
-/// split again for the compare), and this one renders in the AVX2
-/// kernel's time to within 1 % (docs/benchmarks.md).
-#[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy)]
-pub(crate) struct Avx512Test(pub pulp::x86::V4);
-
-#[cfg(target_arch = "x86_64")]
-impl NodeTest for Avx512Test {
-    #[inline(always)]
-    fn hits(self, node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
-        let s = self.0;
-        s.vectorize(
-            #[inline(always)]
-            || {
-                use pulp::{f32x8, u8x16};
-                let (dir, org) = node_ray(node, ray);
-                let [(nx, fx), (ny, fy), (nz, fz)] = planes(node, ray);
-                // Eight u8 planes widened to eight f32 lanes (exact: 0..=255).
-                let lanes = |q: &[u8; 8]| -> f32x8 {
-                    let bytes: u8x16 = pulp::bytemuck::cast([u64::from_le_bytes(*q), 0u64]);
-                    s.convert_i32x8_to_f32x8(s.convert_u8x16_to_i32x8(bytes))
-                };
-                let axis = |q: &[u8; 8], k: usize| {
-                    s.add_f32x8(s.mul_f32x8(lanes(q), s.splat_f32x8(dir[k])), s.splat_f32x8(org[k]))
-                };
-                let (near_x, far_x) = (axis(nx, 0), axis(fx, 0));
-                let (near_y, far_y) = (axis(ny, 1), axis(fy, 1));
-                let (near_z, far_z) = (axis(nz, 2), axis(fz, 2));
-                // vmaxps / vminps: a > b ? a : b and a < b ? a : b, as `max` / `min` above.
-                let tmin = s.max_f32x8(s.max_f32x8(near_x, s.max_f32x8(near_y, near_z)), s.splat_f32x8(ENTRY_EPSILON));
-                let tmax = s.min_f32x8(s.min_f32x8(far_x, s.min_f32x8(far_y, far_z)), s.splat_f32x8(ray.tmax));
-                // The compare gives the 8-bit mask itself (ordered <=, as on AVX2).
-                let boxes = s.cmp_le_f32x8(tmin, tmax).0 as u32;
-                hit_mask(node, oct_inv4, boxes)
-            },
-        )
-    }
-}
-
 /// A value a closure spends, so that the closure is `FnOnce` by nature.
 /// pulp's `vectorize` calls its closure through `FnOnce::call_once`; for a
 /// closure that is `Fn` by nature that is a compiler-made shim, which is not
@@ -453,7 +409,7 @@ macro_rules! dispatch {
                     #[inline(always)]
                     || {
                         once.spend();
-                        let $w = $crate::render::wide::OurWalk($crate::render::wide::Avx512Test(v4));
+                        let $w = $crate::render::wide::OurWalk($crate::render::wide::Avx2Test(*v4));
                         $body
                     },
                 )
