@@ -380,6 +380,19 @@ impl Once {
 /// AVX-512, inside pulp's `vectorize`, so the whole query (tree walks, triangle tests) is
 /// compiled with the features the kernel has and its node tests inline.
 macro_rules! dispatch {
+    // The AVX2 node test inside `$simd`'s `vectorize` (AVX2 or AVX-512):
+    // `$v3` is the AVX2 token the node test takes.
+    (@simd $simd:ident, $v3:expr, $w:ident => $body:expr) => {{
+        let once = $crate::render::wide::Once;
+        $simd.vectorize(
+            #[inline(always)]
+            || {
+                once.spend();
+                let $w = $crate::render::wide::OurWalk($crate::render::wide::Avx2Test($v3));
+                $body
+            },
+        )
+    }};
     ($kernel:expr, $w:ident => $body:expr) => {
         match $kernel {
             $crate::render::wide::Kernel::Obvhs => {
@@ -391,29 +404,9 @@ macro_rules! dispatch {
                 $body
             }
             #[cfg(target_arch = "x86_64")]
-            $crate::render::wide::Kernel::Avx2(v3) => {
-                let once = $crate::render::wide::Once;
-                v3.vectorize(
-                    #[inline(always)]
-                    || {
-                        once.spend();
-                        let $w = $crate::render::wide::OurWalk($crate::render::wide::Avx2Test(v3));
-                        $body
-                    },
-                )
-            }
+            $crate::render::wide::Kernel::Avx2(v3) => $crate::render::wide::dispatch!(@simd v3, v3, $w => $body),
             #[cfg(target_arch = "x86_64")]
-            $crate::render::wide::Kernel::Avx512(v4) => {
-                let once = $crate::render::wide::Once;
-                v4.vectorize(
-                    #[inline(always)]
-                    || {
-                        once.spend();
-                        let $w = $crate::render::wide::OurWalk($crate::render::wide::Avx2Test(*v4));
-                        $body
-                    },
-                )
-            }
+            $crate::render::wide::Kernel::Avx512(v4) => $crate::render::wide::dispatch!(@simd v4, *v4, $w => $body),
         }
     };
 }
