@@ -518,13 +518,13 @@ fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u3
 /// into one mesh (one BVH, as Embree's soup; the image then has one
 /// material: for ray rates only). Drops UVs and tangents (the harness's
 /// diffuse materials have no textures).
-fn flatten(lib: &mut Library, scene: &mut FrameScene) {
+fn flatten(lib: &mut Library, scene: &mut FrameScene, one: bool) {
     let mut groups: std::collections::BTreeMap<(u32, u8), Mesh> = Default::default();
     for inst in &scene.instances {
         let src = &lib.meshes[inst.mesh as usize];
-        let one = std::env::var("THRONG_FLATTEN").as_deref() == Ok("one");
-        let m = groups.entry((if one { 0 } else { inst.material }, inst.visibility)).or_insert_with(|| Mesh {
-            name: format!("flat_{}_{}", inst.material, inst.visibility),
+        let material = if one { 0 } else { inst.material };
+        let m = groups.entry((material, inst.visibility)).or_insert_with(|| Mesh {
+            name: format!("flat_{material}_{}", inst.visibility),
             positions: vec![],
             normals: vec![],
             uvs: vec![],
@@ -605,8 +605,14 @@ fn main() {
         (None, None) => unreachable!("checked by parse_args"),
     };
     let Loaded { mut lib, mut scene, started: t0, load_s } = loaded;
-    if matches!(std::env::var("THRONG_FLATTEN").as_deref(), Ok("1") | Ok("one")) {
-        flatten(&mut lib, &mut scene);
+    match std::env::var("THRONG_FLATTEN").as_deref() {
+        Ok("1") => flatten(&mut lib, &mut scene, false),
+        Ok("one") => flatten(&mut lib, &mut scene, true),
+        Ok("0") | Err(_) => {}
+        Ok(other) => {
+            eprintln!("peer_bench: THRONG_FLATTEN={other}: expected 0, 1 or one");
+            std::process::exit(2);
+        }
     }
     if args.no_sun {
         scene.lights.sun = None;
