@@ -355,9 +355,24 @@ impl NodeTest for Avx2Test {
                 // max_f32x8 is maxps (a > b ? a : b), min_f32x8 minps: as `max` / `min` above.
                 let tmin = s.max_f32x8(s.max_f32x8(near_x, s.max_f32x8(near_y, near_z)), s.splat_f32x8(ENTRY_EPSILON));
                 let tmax = s.min_f32x8(s.min_f32x8(far_x, s.min_f32x8(far_y, far_z)), s.splat_f32x8(ray.tmax));
-                let met: std::arch::x86_64::__m256 = pulp::bytemuck::cast(s.cmp_le_f32x8(tmin, tmax));
-                let boxes = s.avx._mm256_movemask_ps(met) as u32;
-                hit_mask(node, oct_inv4, boxes)
+                // The hit mask as `hit_mask` builds it, without its loop
+                // over the children met (a branch per child): each lane
+                // shifts its child's bits to their place, the lanes whose
+                // box the ray missed are zeroed, and the eight are ORed.
+                use std::arch::x86_64::__m256i;
+                let met: __m256i = pulp::bytemuck::cast(s.cmp_le_f32x8(tmin, tmax));
+                let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+                let widen = |b: u64| -> __m256i {
+                    pulp::bytemuck::cast(s.convert_u8x16_to_i32x8(pulp::bytemuck::cast([b, 0u64])))
+                };
+                // Shifts are below 32 (obvhs masks them to five bits).
+                let placed = s.avx2._mm256_sllv_epi32(widen(child_bits8), widen(bit_index8));
+                let kept = s.avx2._mm256_and_si256(placed, met);
+                let x =
+                    s.sse2._mm_or_si128(s.avx._mm256_castsi256_si128(kept), s.avx2._mm256_extracti128_si256::<1>(kept));
+                let x = s.sse2._mm_or_si128(x, s.sse2._mm_shuffle_epi32::<0b01_00_11_10>(x));
+                let x = s.sse2._mm_or_si128(x, s.sse2._mm_shuffle_epi32::<0b10_11_00_01>(x));
+                s.sse2._mm_cvtsi128_si32(x) as u32
             },
         )
     }
