@@ -138,14 +138,14 @@ impl Blas {
     /// (tests compare the kernels).
     #[doc(hidden)]
     pub fn intersect_with(&self, traversal: Traversal, origin: Vec3, direction: Vec3, tmax: f32) -> Option<(u32, f32)> {
-        let ray = Ray::new(origin.into(), (direction + Vec3::ZERO).into(), 0.0, tmax);
+        let ray = new_ray(origin.into(), (direction + Vec3::ZERO).into(), 0.0, tmax);
         dispatch!(Kernel::detect(traversal), w => self.intersect(w, ray))
     }
 
     /// True when the ray meets the mesh within (0, tmax), walked with `traversal`.
     #[doc(hidden)]
     pub fn occluded_with(&self, traversal: Traversal, origin: Vec3, direction: Vec3, tmax: f32) -> bool {
-        let ray = Ray::new(origin.into(), (direction + Vec3::ZERO).into(), 0.0, tmax);
+        let ray = new_ray(origin.into(), (direction + Vec3::ZERO).into(), 0.0, tmax);
         dispatch!(Kernel::detect(traversal), w => self.occluded(w, ray))
     }
 
@@ -637,7 +637,24 @@ fn world_bounds(b: &Aabb, world_from_object: &Affine3A) -> Aabb {
 /// an axis-aligned ray with a -0.0 component missed boxes it passes through.
 #[inline]
 fn world_ray(ray: &WorldRay) -> Ray {
-    Ray::new(ray.origin.into(), (ray.direction + Vec3::ZERO).into(), 0.0, ray.tmax)
+    new_ray(ray.origin.into(), (ray.direction + Vec3::ZERO).into(), 0.0, ray.tmax)
+}
+
+/// obvhs' `Ray::new`, bit for bit, with the inverse direction taken in one
+/// SIMD division and select instead of three branches and divisions: a ray
+/// is made at every tree entry (each BLAS it enters).
+#[inline(always)]
+fn new_ray(origin: Vec3A, direction: Vec3A, tmin: f32, tmax: f32) -> Ray {
+    Ray { origin, direction, inv_direction: safe_inverse(direction), tmin, tmax }
+}
+
+/// obvhs' `safe_inverse` per component: `1 / x`, or `signum(x) / EPSILON`
+/// where `|x| <= EPSILON` (a NaN fails that test and gives `1 / NaN`, as there).
+#[inline(always)]
+fn safe_inverse(d: Vec3A) -> Vec3A {
+    let small = d.abs().cmple(Vec3A::splat(f32::EPSILON));
+    // signum(x) / EPSILON is exactly +-2^23 for every x that is not NaN.
+    Vec3A::select(small, Vec3A::splat(1.0 / f32::EPSILON).copysign(d), Vec3A::ONE / d)
 }
 
 /// Transforms a world ray into an instance's object space. The direction is
@@ -649,7 +666,7 @@ fn object_ray(object_from_world: &Affine3A, r: &Ray, tmax: f32) -> Ray {
 
 #[inline]
 fn transform_ray(object_from_world: &Affine3A, r: &Ray, tmax: f32) -> Ray {
-    Ray::new(
+    new_ray(
         object_from_world.transform_point3a(r.origin),
         // + 0.0: no -0.0 components (see `world_ray`).
         object_from_world.transform_vector3a(r.direction) + Vec3A::ZERO,
@@ -1251,6 +1268,46 @@ impl<'a> Tlas<'a> {
             TlasTree::CwBvh(bvh) => {
                 bvh.validate(aabbs, true);
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `new_ray` inverts as obvhs' `Ray::new` does, bit for bit, at the edges of
+    /// `safe_inverse` (zeros, +-EPSILON and their neighbours, subnormals,
+    /// infinities, NaN) and on a sweep of bit patterns.
+    #[test]
+    fn new_ray_inverts_as_obvhs_does() {
+        let eps = f32::EPSILON;
+        let mut values = vec![
+            0.0,
+            -0.0,
+            eps,
+            -eps,
+            f32::from_bits(eps.to_bits() + 1),
+            f32::from_bits(eps.to_bits() - 1),
+            -f32::from_bits(eps.to_bits() + 1),
+            f32::MIN_POSITIVE,
+            1e-40,
+            -1e-40,
+            1.0,
+            -3.5,
+            f32::MAX,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ];
+        values.extend((0..200_000u32).map(|k| f32::from_bits(k.wrapping_mul(0x9e37_79b9) ^ (k << 7))));
+        for w in values.chunks(3).filter(|w| w.len() == 3) {
+            let d = Vec3A::new(w[0], w[1], w[2]);
+            let ours = new_ray(Vec3A::ONE, d, 0.0, 2.0).inv_direction.to_array().map(f32::to_bits);
+            // obvhs' `Ray::new` takes `safe_inverse` per component (called
+            // directly: its debug assertions refuse the non-finite cases).
+            let theirs = [d.x, d.y, d.z].map(|x| obvhs::ray::safe_inverse(x).to_bits());
+            assert_eq!(ours, theirs, "{d:?}");
         }
     }
 }
