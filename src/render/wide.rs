@@ -365,12 +365,24 @@ impl NodeTest for Avx2Test {
                 // box the ray missed are zeroed, and the eight are ORed.
                 use std::arch::x86_64::__m256i;
                 let met: __m256i = pulp::bytemuck::cast(s.cmp_le_f32x8(tmin, tmax));
-                let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
-                let widen = |b: u64| -> __m256i {
-                    pulp::bytemuck::cast(s.convert_u8x16_to_i32x8(pulp::bytemuck::cast([b, 0u64])))
-                };
-                // Shifts are below 32 (obvhs masks them to five bits).
-                let placed = s.avx2._mm256_sllv_epi32(widen(child_bits8), widen(bit_index8));
+                // Each child's bits and where they go, from its meta byte, in
+                // its lane: obvhs' `get_child_and_index_bits` byte by byte
+                // (its u64 shifts never carry a bit into a kept position of the
+                // next byte), without its sixteen scalar steps per node test.
+                let a = s.avx2;
+                let meta: __m256i = pulp::bytemuck::cast(
+                    s.convert_u8x16_to_i32x8(pulp::bytemuck::cast([u64::from_le_bytes(node.child_meta), 0u64])),
+                );
+                let splat = |x: u32| -> __m256i { pulp::bytemuck::cast(s.splat_u32x8(x)) };
+                // An inner child's meta is 0b001_11xxx (bits 3 and 4 set; never both in a leaf's).
+                let is_inner =
+                    a._mm256_and_si256(a._mm256_and_si256(meta, a._mm256_slli_epi32::<1>(meta)), splat(0x10));
+                let inner = a._mm256_cmpeq_epi32(is_inner, splat(0x10));
+                let octant = a._mm256_and_si256(splat(oct_inv4 & 0xff), inner);
+                let bit_index = a._mm256_and_si256(a._mm256_xor_si256(meta, octant), splat(0x1f));
+                let child_bits = a._mm256_and_si256(a._mm256_srli_epi32::<5>(meta), splat(0x07));
+                // Shifts are below 32 (masked to five bits above).
+                let placed = a._mm256_sllv_epi32(child_bits, bit_index);
                 let kept = s.avx2._mm256_and_si256(placed, met);
                 let x =
                     s.sse2._mm_or_si128(s.avx._mm256_castsi256_si128(kept), s.avx2._mm256_extracti128_si256::<1>(kept));
