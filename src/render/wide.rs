@@ -282,6 +282,24 @@ fn node_ray(node: &CwBvhNode, ray: &Ray) -> ([f32; 3], [f32; 3]) {
     ([e[0] * inv.x, e[1] * inv.y, e[2] * inv.z], [(p.x - o.x) * inv.x, (p.y - o.y) * inv.y, (p.z - o.z) * inv.z])
 }
 
+/// [`node_ray`] in one SSE step per term (the same multiply and subtract
+/// per axis): at every node test, where the scalar form's three shifts,
+/// moves and products were about 2 % of a render's instructions.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn node_ray_lanes(s: pulp::x86::V3, node: &CwBvhNode, ray: &Ray) -> ([f32; 4], [f32; 4]) {
+    use std::arch::x86_64::__m128;
+    // The three exponent bytes, each moved into an f32's exponent field: 2^(e - 127).
+    let e = i32::from_le_bytes([node.e[0], node.e[1], node.e[2], 0]);
+    let scale =
+        s.sse2._mm_castsi128_ps(s.sse2._mm_slli_epi32::<23>(s.sse4_1._mm_cvtepu8_epi32(s.sse2._mm_cvtsi32_si128(e))));
+    let inv: __m128 = ray.inv_direction.into();
+    let (p, o): (__m128, __m128) = (glam::Vec3A::from(node.p).into(), ray.origin.into());
+    let dir = s.sse._mm_mul_ps(scale, inv);
+    let org = s.sse._mm_mul_ps(s.sse._mm_sub_ps(p, o), inv);
+    (pulp::bytemuck::cast(dir), pulp::bytemuck::cast(org))
+}
+
 /// The near and far planes of each axis for the ray's direction signs.
 #[inline(always)]
 fn planes<'n>(node: &'n CwBvhNode, ray: &Ray) -> [(&'n [u8; 8], &'n [u8; 8]); 3] {
@@ -343,7 +361,7 @@ impl NodeTest for Avx2Test {
             #[inline(always)]
             || {
                 use pulp::{f32x8, u8x16};
-                let (dir, org) = node_ray(node, ray);
+                let (dir, org) = node_ray_lanes(s, node, ray);
                 let [(nx, fx), (ny, fy), (nz, fz)] = planes(node, ray);
                 // Eight u8 planes widened to eight f32 lanes (exact: 0..=255).
                 let lanes = |q: &[u8; 8]| -> f32x8 {
