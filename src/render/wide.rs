@@ -288,18 +288,13 @@ fn node_ray(node: &CwBvhNode, ray: &Ray) -> ([f32; 3], [f32; 3]) {
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn node_ray_lanes(s: pulp::x86::V3, node: &CwBvhNode, ray: &Ray) -> ([f32; 4], [f32; 4]) {
-    use std::arch::x86_64::{__m128, __m128i};
-    // The node's first 16 bytes in one load: p.x, p.y, p.z, then the three
-    // exponent bytes and imask (`CwBvhNode` is `repr(C)`).
-    let words: &[u32; 20] = pulp::bytemuck::cast_ref(node);
-    let head: __m128i = pulp::bytemuck::cast([words[0], words[1], words[2], words[3]]);
-    let p = s.sse2._mm_castsi128_ps(head);
-    // The exponent bytes, each moved into an f32's exponent field: 2^(e - 127)
-    // (the fourth lane, imask's, is never read).
-    let e = s.sse4_1._mm_cvtepu8_epi32(s.sse2._mm_srli_si128::<12>(head));
-    let scale = s.sse2._mm_castsi128_ps(s.sse2._mm_slli_epi32::<23>(e));
+    use std::arch::x86_64::__m128;
+    // The three exponent bytes, each moved into an f32's exponent field: 2^(e - 127).
+    let e = i32::from_le_bytes([node.e[0], node.e[1], node.e[2], 0]);
+    let scale =
+        s.sse2._mm_castsi128_ps(s.sse2._mm_slli_epi32::<23>(s.sse4_1._mm_cvtepu8_epi32(s.sse2._mm_cvtsi32_si128(e))));
     let inv: __m128 = ray.inv_direction.into();
-    let o: __m128 = ray.origin.into();
+    let (p, o): (__m128, __m128) = (glam::Vec3A::from(node.p).into(), ray.origin.into());
     let dir = s.sse._mm_mul_ps(scale, inv);
     let org = s.sse._mm_mul_ps(s.sse._mm_sub_ps(p, o), inv);
     (pulp::bytemuck::cast(dir), pulp::bytemuck::cast(org))
