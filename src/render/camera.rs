@@ -7,8 +7,8 @@ use std::f32::consts::PI;
 use glam::{Affine3A, Vec2, Vec3};
 
 use super::accel::{Hit, WorldRay};
-use super::sampling::sample_concentric_disk;
 use super::sampler::Sampler;
+use super::sampling::sample_concentric_disk;
 use super::surface::object_point;
 use super::RenderSettings;
 use crate::scene::{FrameScene, Library};
