@@ -163,6 +163,16 @@ enum Names {
     Each(Vec<String>),
 }
 
+impl Names {
+    /// How many names a per-instance primvar gives (`None`: one for all, or none).
+    fn each_len(names: &Option<Names>) -> Option<usize> {
+        match names {
+            Some(Names::Each(v)) => Some(v.len()),
+            _ => None,
+        }
+    }
+}
+
 fn names_of(v: &Value) -> Option<Names> {
     match v {
         Value::String(s) => Some(Names::One(s.clone())),
@@ -444,28 +454,14 @@ impl<'a> Instancer<'a> {
         let cycle_frame = ctx.value(pi, "primvars:throng:cycleFrame", t)?;
         // A per-agent primvar names every agent: a shorter array would
         // give the rest the defaults without a word.
+        let cycle_frames = match &cycle_frame {
+            Some(Value::FloatVec(v)) => Some(v.len()),
+            _ => None,
+        };
         let lengths = [
-            (
-                "primvars:throng:rig",
-                match &rig {
-                    Some(Names::Each(v)) => Some(v.len()),
-                    _ => None,
-                },
-            ),
-            (
-                "primvars:throng:cycle",
-                match &cycle {
-                    Some(Names::Each(v)) => Some(v.len()),
-                    _ => None,
-                },
-            ),
-            (
-                "primvars:throng:cycleFrame",
-                match &cycle_frame {
-                    Some(Value::FloatVec(v)) => Some(v.len()),
-                    _ => None,
-                },
-            ),
+            ("primvars:throng:rig", Names::each_len(&rig)),
+            ("primvars:throng:cycle", Names::each_len(&cycle)),
+            ("primvars:throng:cycleFrame", cycle_frames),
         ];
         for (attr, n) in lengths {
             if let Some(n) = n.filter(|&n| n != ids.len()) {
