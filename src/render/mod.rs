@@ -1,5 +1,8 @@
-//! The renderer core: a CPU path tracer over a two-level BVH, working purely
-//! from [`crate::scene`] types.
+//! The renderer: a CPU path tracer over a two-level BVH. Its core (`accel`,
+//! `integrator`, `surface`, `lights`, `film`) traces [`crate::scene`] types
+//! alone; `job` is where it meets the rest of the pipeline (the cast crowd,
+//! the layer manifest, the shot, output names) to render a shot's frames
+//! and layers into files.
 //!
 //! Typical use, per run and per frame:
 //! ```ignore

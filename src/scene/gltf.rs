@@ -32,7 +32,6 @@ use crate::scene::lights::{Light, LightKind};
 use crate::scene::{
     AlphaMode, Camera, Library, Material, MaterialId, Mesh, MeshId, Texture, TextureRef, UvTransform, Volume,
 };
-use crate::shot::Axis;
 
 /// One parsed glTF file with its buffers loaded (images are decoded only on
 /// demand, so a rig never needs its textures).
@@ -1206,6 +1205,29 @@ pub(crate) fn quat_from_gltf(q: [f32; 4]) -> Quat {
     } else {
         Quat::IDENTITY
     }
+}
+
+/// A coordinate axis of a source file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+pub enum Axis {
+    /// +X.
+    #[serde(rename = "+x")]
+    PosX,
+    /// -X.
+    #[serde(rename = "-x")]
+    NegX,
+    /// +Y.
+    #[serde(rename = "+y")]
+    PosY,
+    /// -Y.
+    #[serde(rename = "-y")]
+    NegY,
+    /// +Z.
+    #[serde(rename = "+z")]
+    PosZ,
+    /// -Z.
+    #[serde(rename = "-z")]
+    NegZ,
 }
 
 /// The unit vector along a file's axis `a`.
