@@ -57,12 +57,14 @@ use std::time::Instant;
 
 use glam::{Affine3A, Quat, Vec2, Vec3};
 use throng::render::accel::{Tlas, TlasKind, WorldRay};
-use throng::render::bsdf::{sample_cosine_hemisphere, ShadingFrame};
+use throng::render::bsdf::ShadingFrame;
+use throng::render::camera::CameraRays;
 use throng::render::exr::{camera_matrices, write_layer, write_preview_png, LayerMeta, ID_MAPPING};
 use throng::render::film::render_frame_with_stats;
-use throng::render::integrator::{offset_ray_origin, CameraRays};
+use throng::render::integrator::offset_ray_origin;
+use throng::render::sampling::sample_cosine_hemisphere;
 use throng::render::wide::Traversal;
-use throng::render::{BlasSet, RenderSettings};
+use throng::render::{BlasSet, RenderSettings, Tracing};
 use throng::scene::dome::load_dome;
 use throng::scene::gltf::{AssetCache, LUMENS_PER_WATT};
 use throng::scene::lights::{Light, LightKind};
@@ -455,8 +457,14 @@ fn rate(tlas: &Tlas, rays: &[WorldRay], mask: u8, stream: Option<usize>) -> (f64
 }
 
 /// The peers' `embree_rays.py` primary and bounce sets, traced on one thread.
-fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u32)) -> serde_json::Value {
-    let tlas = Tlas::build(blas, &scene.instances);
+fn ray_rates(
+    blas: &BlasSet,
+    lib: &Library,
+    scene: &FrameScene,
+    (w, h): (u32, u32),
+    tracing: &Tracing,
+) -> serde_json::Value {
+    let tlas = Tlas::build_with(blas, &scene.instances, tracing.tlas).with_traversal(tracing.traversal);
     let cam = CameraRays::new(&scene.camera, w, h);
     let primary: Vec<WorldRay> = (0..h)
         .flat_map(|y| (0..w).map(move |x| (x, y)))
@@ -481,7 +489,7 @@ fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u3
         })
         .collect();
     // As packets: the rays in blocks of 8x4 pixels, each block one stream.
-    let stream = throng::render::integrator::camera_packets().then_some(32);
+    let stream = tracing.camera_packets.then_some(32);
     let blocks: Vec<WorldRay> = match stream {
         None => primary.clone(),
         Some(_) => (0..h.div_ceil(4))
@@ -497,17 +505,22 @@ fn ray_rates(blas: &BlasSet, lib: &Library, scene: &FrameScene, (w, h): (u32, u3
     // The same rays in the same block order one by one: what the packets alone change.
     let (_, sc, _) = if stream.is_some() { rate(&tlas, &blocks, vis::CAMERA, None) } else { (0.0, pc, 0.0) };
     let (bw, bc, bh) = rate(&tlas, &bounce, vis::INDIRECT, None);
-    // The same bounce rays through the other TLAS kind (the renderer picks by instance count).
-    let other = match TlasKind::for_count(scene.instances.len()) {
+    // The same bounce rays through the other TLAS kind.
+    let other = match tracing.tlas {
         TlasKind::Bvh2 => TlasKind::CwBvh,
         TlasKind::CwBvh => TlasKind::Bvh2,
     };
-    let (_, oc, _) = rate(&Tlas::build_with(blas, &scene.instances, other), &bounce, vis::INDIRECT, None);
+    let (_, oc, _) = rate(
+        &Tlas::build_with(blas, &scene.instances, other).with_traversal(tracing.traversal),
+        &bounce,
+        vis::INDIRECT,
+        None,
+    );
     let m = |x: f64| (x / 1e4).round() / 100.0;
     serde_json::json!({
         "primary": {"rays": primary.len(), "packets": stream.is_some(), "single_same_order_mrays_per_cpu_s_1t": m(sc), "mrays_s_1t": m(pw), "mrays_per_cpu_s_1t": m(pc), "hit_fraction": (ph * 1e4).round() / 1e4},
         "bounce": {"rays": bounce.len(), "mrays_s_1t": m(bw), "mrays_per_cpu_s_1t": m(bc), "hit_fraction": (bh * 1e4).round() / 1e4,
-                   "tlas": format!("{:?}", TlasKind::for_count(scene.instances.len())), "other_tlas_mrays_per_cpu_s_1t": m(oc)},
+                   "tlas": format!("{:?}", tracing.tlas), "other_tlas_mrays_per_cpu_s_1t": m(oc)},
     })
 }
 
@@ -579,7 +592,6 @@ fn main() {
             std::process::exit(2);
         }
     };
-    throng::render::wide::set_traversal(traversal);
     // THRONG_PACKETS=0|1 (default 1): camera rays as packets or one by one,
     // in the render and in the primary ray rate.
     let packets = match std::env::var("THRONG_PACKETS").as_deref() {
@@ -590,7 +602,8 @@ fn main() {
             std::process::exit(2);
         }
     };
-    throng::render::integrator::set_camera_packets(packets);
+    // Both choices go to the render through its settings, and to the ray rates.
+    let tracing = Tracing { traversal, camera_packets: packets, ..Tracing::default() };
     let t_all = Instant::now();
     let cpu0 = throng::bench::process_cpu_s();
     let loaded = match (&args.scene, args.synthetic) {
@@ -669,6 +682,7 @@ fn main() {
         diffuse_only: args.diffuse,
         passes: Default::default(),
         adaptive: args.adaptive,
+        tracing,
     };
     let mut out = serde_json::json!({
         "tool": "throng peer_bench",
@@ -757,7 +771,7 @@ fn main() {
     } else {
         // Memory-only run: build the TLAS as a render would, then drop it.
         let cpu = throng::bench::process_cpu_s();
-        let tlas = pool.install(|| Tlas::build(&blas, &scene.instances));
+        let tlas = pool.install(|| Tlas::build_with(&blas, &scene.instances, tracing.tlas));
         out["tlas_cpu_s"] = (throng::bench::process_cpu_s() - cpu).into();
         out["tlas_build_s"] = tlas.build_time.as_secs_f64().into();
         // Everything a render does before its first sample (plus the integrator's per-instance normal matrices, not built here).
@@ -767,7 +781,7 @@ fn main() {
         drop(tlas);
     }
     if args.rays {
-        out["rays_1t"] = ray_rates(&blas, &lib, &scene, args.res);
+        out["rays_1t"] = ray_rates(&blas, &lib, &scene, args.res, &tracing);
     }
     out["total_s"] = t_all.elapsed().as_secs_f64().into();
     out["total_cpu_s"] = (throng::bench::process_cpu_s() - cpu0).into();

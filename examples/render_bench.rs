@@ -222,6 +222,7 @@ fn main() {
             diffuse_only: false,
             passes: Default::default(),
             adaptive: None,
+            tracing: Default::default(),
         };
         let cpu = throng::bench::process_cpu_s();
         let (film, stats) = render_frame_with_stats(&blas, &lib, &scene, &settings, None).expect("render");

@@ -28,10 +28,14 @@ pub(crate) const ALGORITHM: &str = "fnv1a64";
 /// Bytes read from a file at a time.
 pub(crate) const BLOCK_BYTES: usize = 1 << 20;
 
-const OFFSET_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
+/// FNV-1a 64's starting state (the hash of no bytes).
+pub(crate) const FNV_OFFSET_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
 const PRIME: u64 = 0x0000_0100_0000_01b3;
 
-fn update(mut h: u64, bytes: &[u8]) -> u64 {
+/// FNV-1a 64 continued over `bytes` from the state `h` (the hash of what
+/// came before; [`FNV_OFFSET_BASIS`] for nothing). The keyed draws hash
+/// their purpose names with it too (`crate::seed`).
+pub(crate) fn fnv1a_continued(mut h: u64, bytes: &[u8]) -> u64 {
     for &b in bytes {
         h ^= u64::from(b);
         h = h.wrapping_mul(PRIME);
@@ -42,7 +46,7 @@ fn update(mut h: u64, bytes: &[u8]) -> u64 {
 /// FNV-1a 64 of `bytes`.
 #[cfg(test)] // the tests check the FNV-1a reference values
 pub(crate) fn hash_bytes(bytes: &[u8]) -> u64 {
-    update(OFFSET_BASIS, bytes)
+    fnv1a_continued(FNV_OFFSET_BASIS, bytes)
 }
 
 /// A hash as it is written: 16 hex digits.
@@ -64,7 +68,7 @@ pub fn hash_file(path: &Path) -> Result<FileHash> {
     crate::error::check_readable_file(path)?;
     let mut f = std::fs::File::open(path).at(path)?;
     let mut buf = vec![0u8; BLOCK_BYTES];
-    let (mut hash, mut bytes) = (OFFSET_BASIS, 0u64);
+    let (mut hash, mut bytes) = (FNV_OFFSET_BASIS, 0u64);
     loop {
         let n = match f.read(&mut buf) {
             Ok(0) => return Ok(FileHash { hash, bytes }),
@@ -72,7 +76,7 @@ pub fn hash_file(path: &Path) -> Result<FileHash> {
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
             Err(e) => return Err(e).at(path),
         };
-        hash = update(hash, &buf[..n]);
+        hash = fnv1a_continued(hash, &buf[..n]);
         bytes += n as u64;
     }
 }
@@ -102,7 +106,7 @@ pub(crate) struct Fingerprinter {
 
 impl Default for Fingerprinter {
     fn default() -> Self {
-        Fingerprinter { h: OFFSET_BASIS }
+        Fingerprinter { h: FNV_OFFSET_BASIS }
     }
 }
 
@@ -113,7 +117,7 @@ impl Fingerprinter {
     }
 
     fn put(&mut self, bytes: &[u8]) {
-        self.h = update(self.h, bytes);
+        self.h = fnv1a_continued(self.h, bytes);
     }
 
     /// Feeds the field `name` with raw bytes.

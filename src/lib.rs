@@ -29,5 +29,6 @@ pub mod output; // names of rendered files and layers, shared by render and comp
 pub mod render; // a cast crowd + manifest -> path-traced multi-channel EXR layers
 pub mod review; // a shot's renders, manifest and botInfo -> a local read-only web page (`throng review`)
 pub mod scene; // the shared vocabulary: meshes, materials, instances, visibility, camera, lights; glTF loading
+pub(crate) mod seed; // keyed random draws (seed, agent, purpose), shared by casting and the simulation
 pub mod shot; // the shot file (TOML) -> a checked `Shot`: frames, camera, rigs, wardrobes, render and layer settings
 pub mod sim; // a steering scene -> a cache (the reference crowd simulation) // process figures (CPU time, peak RSS) for the benchmark examples

@@ -157,17 +157,25 @@ struct Writer {
 }
 
 /// Start time of process `pid` (field 22 of /proc/PID/stat); `None` when
-/// there is no such process (or no /proc).
+/// there is no such process (or no /proc), or when it has ended and only
+/// its entry is left: a zombie (state `Z`) that its parent has not reaped,
+/// as a process killed under a farm job or in a container whose PID 1
+/// never reaps stays, writes nothing more, so its claims are void.
 fn process_start(pid: u32) -> Option<u64> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     // The command name (field 2) is in parentheses and may hold spaces.
-    let rest = &stat[stat.rfind(')')? + 1..];
-    rest.split_whitespace().nth(19)?.parse().ok()
+    let mut rest = stat[stat.rfind(')')? + 1..].split_whitespace();
+    let state = rest.next()?;
+    if matches!(state, "Z" | "X" | "x") {
+        return None;
+    }
+    rest.nth(18)?.parse().ok()
 }
 
-/// Whether process `pid` is alive on this host (no /proc: assumed alive).
+/// Whether process `pid` is alive on this host: it exists and has not
+/// ended (a zombie has); no /proc: assumed alive.
 pub(crate) fn process_alive(pid: u32) -> bool {
-    !Path::new("/proc/self").exists() || Path::new(&format!("/proc/{pid}")).exists()
+    !Path::new("/proc/self").exists() || process_start(pid).is_some()
 }
 
 /// This machine's host name (the kernel's, no `hostname` binary needed).
@@ -338,4 +346,45 @@ pub(crate) fn layer_file_frame(file_name: &str, shot: &str, layer: &str) -> Opti
     let frame: i32 = digits.parse().ok()?;
     // Only the spelling layer_path gives (so each frame has one file).
     (format!("{frame:04}") == digits).then_some(frame)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_killed_writer_its_parent_has_not_reaped_holds_no_claim() {
+        // A child killed and not waited for stays a zombie: /proc/PID is
+        // still there, but it writes nothing more.
+        let mut child = std::process::Command::new("sleep").arg("30").spawn().expect("spawn sleep");
+        let pid = child.id();
+        let dir = std::env::temp_dir().join(format!("throng-zombie-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let live = Writer {
+            pid,
+            start: process_start(pid).expect("the child runs"),
+            host: host_name(),
+            settings: "other".into(),
+            targets: vec!["a.exr".into()],
+        };
+        std::fs::write(dir.join(WRITERS_FILE), format!("{}\n", serde_json::to_string(&live).unwrap())).unwrap();
+        assert!(process_alive(pid));
+        let refused = WriterLock::claim(&dir, &["a.exr".to_string()], "mine").unwrap_err().to_string();
+        assert!(refused.contains(&pid.to_string()), "{refused}");
+        child.kill().unwrap();
+        // SIGKILL is delivered asynchronously: wait (bounded) for the zombie state.
+        let zombie = (0..200).any(|_| {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+            std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|s| s.contains(") Z "))
+        });
+        assert!(zombie, "the killed child never showed as a zombie");
+        assert!(Path::new(&format!("/proc/{pid}")).exists(), "a zombie keeps its /proc entry");
+        assert!(!process_alive(pid));
+        let claim = WriterLock::claim(&dir, &["a.exr".to_string()], "mine");
+        assert!(claim.is_ok(), "a zombie's claim still refused a writer: {:?}", claim.err());
+        drop(claim);
+        child.wait().unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

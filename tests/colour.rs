@@ -135,6 +135,7 @@ fn settings(diffuse_only: bool, max_bounces: u32) -> RenderSettings {
         diffuse_only,
         passes: Default::default(),
         adaptive: None,
+        tracing: Default::default(),
     }
 }
 

@@ -79,6 +79,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
         colourspace: Default::default(),
         passes: None,
         adaptive: None,
+        tracing: Default::default(),
     };
     job::run(crowd, Some(manifest), &job, &job::Silent).unwrap();
 }

@@ -275,6 +275,7 @@ fn settings(spp: u32, threads: usize) -> RenderSettings {
         diffuse_only: false,
         passes: Default::default(),
         adaptive: None,
+        tracing: Default::default(),
     }
 }
 

@@ -123,6 +123,7 @@ fn render_with_shutter(
         colourspace: Default::default(),
         passes: None,
         adaptive: None,
+        tracing: Default::default(),
     };
     let done = job::run(crowd, Some(manifest), &job, &job::Silent).expect("demo renders").layers;
     done.into_iter().map(|r| (r.layer, r.path)).collect()

@@ -73,6 +73,7 @@ fn settings(spp: u32, threads: usize) -> RenderSettings {
         diffuse_only: true,
         passes: Default::default(),
         adaptive: None,
+        tracing: Default::default(),
     }
 }
 

@@ -85,6 +85,7 @@ fn settings(spp: u32, threads: usize, max_bounces: u32, diffuse_only: bool) -> R
         diffuse_only,
         passes: Default::default(),
         adaptive: None,
+        tracing: Default::default(),
     }
 }
 

@@ -88,6 +88,7 @@ fn settings(width: u32, height: u32, spp: u32) -> RenderSettings {
         diffuse_only: false,
         passes: Default::default(),
         adaptive: None,
+        tracing: Default::default(),
     }
 }
 

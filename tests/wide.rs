@@ -12,7 +12,7 @@ mod common;
 use glam::Vec3;
 use throng::casting::ShotCrowd;
 use throng::render::accel::{Hit, Tlas, WorldRay, MIN_PACKET};
-use throng::render::integrator::CameraRays;
+use throng::render::camera::CameraRays;
 use throng::render::wide::Traversal;
 use throng::render::BlasSet;
 use throng::scene::vis;
@@ -277,8 +277,8 @@ fn packets_find_the_single_ray_hits_of_a_camera_over_a_demo_frame() {
 /// scalar): the same films, bit for bit.
 #[test]
 fn a_render_with_camera_packets_is_the_render_without_on_every_kernel() {
-    use throng::render::integrator::set_camera_packets;
     use throng::render::job::{self, RenderJob};
+    use throng::render::Tracing;
     let dir = common::tempdir().unwrap();
     let shutter = [-0.25, 0.25];
     let crowd = ShotCrowd::open(throng::shot::Shot::load(&common::demo_shot()).unwrap(), Some(shutter)).unwrap();
@@ -287,17 +287,14 @@ fn a_render_with_camera_packets_is_the_render_without_on_every_kernel() {
     assert!(layers.len() >= 2, "the demo has a set layer and crowd layers: {layers:?}");
     layers.push("full".into());
     let render = |packets: bool, kernel: Traversal, adaptive: Option<throng::shot::Adaptive>, out: &str| {
-        set_camera_packets(packets);
-        throng::render::wide::set_traversal(kernel);
         let job = RenderJob {
             shutter: Some(shutter),
             resolution: Some([96, 54]),
             adaptive,
+            tracing: Tracing { traversal: kernel, camera_packets: packets, ..Tracing::default() },
             ..RenderJob::new(layers.clone(), vec![1024], 8, dir.path().join(out))
         };
         let done = job::run(&crowd, Some(&manifest), &job, &job::Silent).unwrap().layers;
-        set_camera_packets(true);
-        throng::render::wide::set_traversal(Traversal::Wide);
         done.iter().map(|l| throng::render::exr::read_layer(&l.path).unwrap().0).collect::<Vec<_>>()
     };
     let adaptive = Some(throng::shot::Adaptive { threshold: 0.05, min_spp: 3, max_spp: 12 });

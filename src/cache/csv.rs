@@ -68,9 +68,10 @@ fn intern(names: &mut Vec<String>, lookup: &mut HashMap<String, u16>, name: &str
 
 /// Parses CSV text; `path` names it in errors.
 pub(crate) fn parse_str(path: &Path, text: &str) -> Result<CrowdCache> {
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text); // spreadsheets add a BOM
-                                                              // The csv crate splits fields, so quoted fields are fine; columns are
-                                                              // found by header name, so any order is.
+    // Spreadsheets add a BOM.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    // The csv crate splits fields, so quoted fields are fine; columns are
+    // found by header name, so any order is.
     let mut reader =
         csv::ReaderBuilder::new().has_headers(false).flexible(true).trim(csv::Trim::All).from_reader(text.as_bytes());
     let starts: Vec<usize> = std::iter::once(0).chain(text.match_indices('\n').map(|(i, _)| i + 1)).collect();
@@ -95,23 +96,7 @@ pub(crate) fn parse_str(path: &Path, text: &str) -> Result<CrowdCache> {
         Some(h) => h.map_err(csv_err)?,
         None => return Err(Error::invalid(path, format!("empty file: expected the header `{HEADER}`")).line(1)),
     };
-    // File column of each of COLUMNS.
-    let order: Option<Vec<usize>> = COLUMNS
-        .iter()
-        .map(|name| header.iter().position(|h| h == *name))
-        .collect::<Option<Vec<_>>>()
-        .filter(|o| header.len() == COLUMNS.len() && o.iter().collect::<HashSet<_>>().len() == COLUMNS.len());
-    let Some(order) = order else {
-        let found: Vec<&str> = header.iter().collect();
-        return Err(Error::invalid(
-            path,
-            format!(
-                "expected the header `{HEADER}` (in any order), found `{}`; for another layout give a preset or columns (docs/cache-format.md)",
-                found.join(",").escape_debug()
-            ),
-        )
-        .line(1));
-    };
+    let order = column_order(path, &header)?;
 
     let mut crowd = CrowdCache::default();
     let (mut rig_ids, mut cycle_ids) = (HashMap::new(), HashMap::new());
@@ -187,6 +172,27 @@ pub(crate) fn parse_str(path: &Path, text: &str) -> Result<CrowdCache> {
     }
     validate(path, &crowd)?;
     Ok(crowd)
+}
+
+/// The file column of each of [`COLUMNS`], from the header: each exactly
+/// once, in any order.
+fn column_order(path: &Path, header: &csv::StringRecord) -> Result<Vec<usize>> {
+    let order: Option<Vec<usize>> = COLUMNS
+        .iter()
+        .map(|name| header.iter().position(|h| h == *name))
+        .collect::<Option<Vec<_>>>()
+        .filter(|o| header.len() == COLUMNS.len() && o.iter().collect::<HashSet<_>>().len() == COLUMNS.len());
+    order.ok_or_else(|| {
+        let found: Vec<&str> = header.iter().collect();
+        Error::invalid(
+            path,
+            format!(
+                "expected the header `{HEADER}` (in any order), found `{}`; for another layout give a preset or columns (docs/cache-format.md)",
+                found.join(",").escape_debug()
+            ),
+        )
+        .line(1)
+    })
 }
 
 /// Writes `crowd` as CSV through [`write_atomic`], after [`validate`].

@@ -35,14 +35,11 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use rusqlite::{Connection, OpenFlags};
 
-use super::tabular::{turn_toward, DEFAULT_TURN_RATE};
+use super::tabular::turn_toward;
+use super::tabular_options::{DEFAULT_CYCLE_LENGTH, DEFAULT_STRIDE, DEFAULT_TURN_RATE};
 use super::{validate, AgentSample, CrowdCache, FrameBlock};
 use crate::error::{Error, IoContext, Result};
 
-/// Stride (metres per walk cycle) when neither --stride nor a rig gives one.
-pub(crate) const DEFAULT_STRIDE: f32 = 1.4;
-/// Walk cycle length in frames when --cycle-length is not given.
-pub(crate) const DEFAULT_CYCLE_LENGTH: f32 = 32.0;
 /// Frames per second cycle frames are counted in (SPEC: shot fps 24), so a
 /// rig clip's length is `duration * SHOT_FPS` frames.
 pub(crate) const SHOT_FPS: f32 = 24.0;

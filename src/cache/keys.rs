@@ -6,15 +6,18 @@
 //! of a user's keys on a preset's. A flag's text becomes the value the shot's
 //! table would hold ([`Key::parse`]) and the spec is deserialized from those
 //! values, so a shot key and its flag reach the same field by the same code.
-//! Presets are data: each table preset is written as `[cache]` keys.
+//! Presets are data: each table preset is written as `[cache]` keys, and
+//! [`TabularOptions::resolve`] lays a spec over its preset into the options
+//! the reader follows.
 
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 use toml::Spanned;
 
-use super::tabular::{
-    AngleUnits, Column, Columns, Delimiter, Handedness, HeadingFrom, Placement, Preset, Units, UpAxis, MAX_FPS,
+use super::tabular_options::{
+    AngleUnits, Column, Columns, Delimiter, Handedness, HeadingFrom, Placement, Preset, TabularOptions, Units, UpAxis,
+    MAX_FPS,
 };
 
 /// How a key's value is written on a command line.
@@ -343,6 +346,56 @@ impl TabularSpec {
             c.set(role, col.clone())?;
         }
         Ok(c)
+    }
+}
+
+impl TabularOptions {
+    /// `spec` laid over its preset's layout (or a headed CSV with z up), for
+    /// a target of `fps` frames per second. Errors give the key and message.
+    pub fn resolve(spec: &TabularSpec, fps: f32) -> std::result::Result<TabularOptions, (String, String)> {
+        let preset = match spec.preset {
+            Some(p) => p.keys().ok_or_else(|| {
+                ("preset".to_string(), format!("preset `{p:?}` is not a table; only petrack, eth and eth-ucy are"))
+            })?,
+            None => TabularSpec::default(),
+        };
+        let keys = spec.clone().over(preset);
+        let d = TabularOptions::default();
+        let comment = match &keys.comment {
+            None => d.comment,
+            Some(c) => match c.as_bytes() {
+                [] => None,
+                [b] if b.is_ascii() && !b.is_ascii_alphanumeric() => Some(*b),
+                _ => return Err(("comment".into(), format!("`{c}`: a comment prefix is one punctuation character"))),
+            },
+        };
+        let columns = keys.roles().map_err(|m| ("columns".to_string(), m))?;
+        let o = TabularOptions {
+            preset: spec.preset,
+            delimiter: keys.delimiter.unwrap_or(d.delimiter),
+            comment,
+            header: keys.header.unwrap_or(d.header),
+            columns,
+            units: keys.units,
+            up: keys.up.unwrap_or(d.up),
+            handedness: keys.handedness.unwrap_or(d.handedness),
+            heading_units: keys.heading_units.unwrap_or(d.heading_units),
+            source_fps: keys.source_fps,
+            fps,
+            max_gap: keys.max_gap.unwrap_or(d.max_gap),
+            heading: keys.heading.unwrap_or(d.heading),
+            heading_window: keys.heading_window.unwrap_or(d.heading_window),
+            hold_speed: keys.hold_speed.unwrap_or(d.hold_speed),
+            turn_rate: keys.turn_rate.unwrap_or(d.turn_rate),
+            placement: keys.placement(),
+            rig: keys.rig.unwrap_or(d.rig),
+            cycle: keys.cycle.unwrap_or(d.cycle),
+            idle_cycle: keys.idle_cycle,
+            gaits: d.gaits,
+            default_gait: d.default_gait,
+        };
+        o.check()?;
+        Ok(o)
     }
 }
 

@@ -74,6 +74,7 @@ mod info;
 pub(crate) mod jupedsim;
 pub mod keys;
 pub mod tabular;
+mod tabular_options;
 pub(crate) mod usd;
 
 use std::collections::HashSet;

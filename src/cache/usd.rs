@@ -163,6 +163,16 @@ enum Names {
     Each(Vec<String>),
 }
 
+impl Names {
+    /// How many names a per-instance primvar gives (`None`: one for all, or none).
+    fn each_len(names: &Option<Names>) -> Option<usize> {
+        match names {
+            Some(Names::Each(v)) => Some(v.len()),
+            _ => None,
+        }
+    }
+}
+
 fn names_of(v: &Value) -> Option<Names> {
     match v {
         Value::String(s) => Some(Names::One(s.clone())),
@@ -207,6 +217,24 @@ impl Names2 {
 
 /// Reads a USD crowd into a [`CrowdCache`].
 pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
+    let ctx = open(path)?;
+    let (instancers, agent_prims) = find_crowd(&ctx)?;
+    let frames = frame_range(&ctx, &instancers, &agent_prims)?;
+    let mut gather = Gather::new(path, frames);
+    for pi in &instancers {
+        let instancer = Instancer::check(&ctx, pi, frames)?;
+        for f in frames.0..=frames.1 {
+            instancer.read_frame(&ctx, f, opts, &mut gather)?;
+        }
+    }
+    for ap in &agent_prims {
+        read_agent_prim(&ctx, ap, frames, opts, &mut gather)?;
+    }
+    gather.finish()
+}
+
+/// Opens the stage at `path`, with its prim names and composition checked.
+fn open(path: &Path) -> Result<Ctx<'_>> {
     let text = path.to_str().ok_or_else(|| Error::invalid(path, "the USD file's path is not UTF-8"))?;
     if !path.exists() {
         return Err(Error::invalid(path, "no such USD file"));
@@ -217,15 +245,17 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
     if let Some(e) = ctx.stage.composition_errors().first() {
         return Err(Error::invalid(path, format!("USD composition error: {e}")));
     }
+    Ok(ctx)
+}
 
-    let (instancers, agent_prims) = find_crowd(&ctx)?;
-
-    // The frames.
+/// The crowd's frames: the stage's time code range, else the span of the
+/// authored samples; checked against [`MAX_FRAMES`] and the cache's i32.
+fn frame_range(ctx: &Ctx, instancers: &[String], agent_prims: &[String]) -> Result<(i64, i64)> {
     let frames: (i64, i64) = if ctx.stage.has_authored_time_code_range() {
         (ctx.stage.start_time_code().ceil() as i64, ctx.stage.end_time_code().floor() as i64)
     } else {
         let mut all = Vec::new();
-        for (p, attr) in sampled_attrs(&ctx, &instancers, &agent_prims)? {
+        for (p, attr) in sampled_attrs(ctx, instancers, agent_prims)? {
             all.extend(ctx.times(&p, &attr)?);
         }
         let lo = all.iter().copied().fold(f64::INFINITY, f64::min);
@@ -236,6 +266,7 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
             (0, 0)
         }
     };
+    let path = ctx.path;
     if frames.1 < frames.0 || frames.1 - frames.0 >= MAX_FRAMES {
         return Err(Error::invalid(
             path,
@@ -245,21 +276,80 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
     if i32::try_from(frames.0).is_err() || i32::try_from(frames.1).is_err() {
         return Err(Error::invalid(path, format!("frames {}-{} do not fit a cache frame", frames.0, frames.1)));
     }
+    Ok(frames)
+}
 
-    let mut names = Names2::default();
-    let mut blocks: BTreeMap<i32, Vec<AgentSample>> = (frames.0..=frames.1).map(|f| (f as i32, Vec::new())).collect();
-    let mut samples = 0usize;
-    let mut first_seen: HashMap<u32, i32> = HashMap::new();
-    let mut push = |blocks: &mut BTreeMap<i32, Vec<AgentSample>>, prim: &str, f: i32, a: AgentSample| -> Result<()> {
-        samples += 1;
-        if samples > MAX_SAMPLES {
-            return Err(Error::invalid(path, format!("more than {MAX_SAMPLES} agent samples")).field(prim.to_string()));
+/// The agents read so far: frame blocks, the rig and cycle tables, and each
+/// agent's first frame (a cycle frame's default counts from it).
+struct Gather<'a> {
+    path: &'a Path,
+    names: Names2,
+    blocks: BTreeMap<i32, Vec<AgentSample>>,
+    samples: usize,
+    first_seen: HashMap<u32, i32>,
+}
+
+impl<'a> Gather<'a> {
+    fn new(path: &'a Path, frames: (i64, i64)) -> Self {
+        Gather {
+            path,
+            names: Names2::default(),
+            blocks: (frames.0..=frames.1).map(|f| (f as i32, Vec::new())).collect(),
+            samples: 0,
+            first_seen: HashMap::new(),
         }
-        blocks.entry(f).or_default().push(a);
-        Ok(())
-    };
+    }
 
-    for pi in &instancers {
+    /// The frame agent `id` was first seen at (`f` when this is it).
+    fn first_seen(&mut self, id: u32, f: i32) -> i32 {
+        *self.first_seen.entry(id).or_insert(f)
+    }
+
+    /// Adds one agent at frame `f`; `prim` names the source in errors.
+    fn push(&mut self, prim: &str, f: i32, a: AgentSample) -> Result<()> {
+        self.samples += 1;
+        if self.samples > MAX_SAMPLES {
+            return Err(
+                Error::invalid(self.path, format!("more than {MAX_SAMPLES} agent samples")).field(prim.to_string())
+            );
+        }
+        self.blocks.entry(f).or_default().push(a);
+        Ok(())
+    }
+
+    /// The crowd: frames holding agents, agents by id, validated.
+    fn finish(self) -> Result<CrowdCache> {
+        let frames = self
+            .blocks
+            .into_iter()
+            .filter(|(_, agents)| !agents.is_empty())
+            .map(|(frame, mut agents)| {
+                agents.sort_by_key(|a| a.id);
+                FrameBlock { frame, agents }
+            })
+            .collect();
+        let crowd = CrowdCache { rigs: self.names.rigs, cycles: self.names.cycles, frames };
+        validate(self.path, &crowd)?;
+        Ok(crowd)
+    }
+}
+
+/// A PointInstancer whose attributes were found and whose samples cover
+/// the crowd's frames.
+struct Instancer<'a> {
+    /// Its prim path.
+    pi: &'a str,
+    /// Its property names.
+    props: BTreeSet<String>,
+    /// Its prototypes (each an existing prim).
+    protos: Vec<sdf::Path>,
+    /// The orientation attribute it has, if any.
+    orient: Option<&'static str>,
+}
+
+impl<'a> Instancer<'a> {
+    /// Checks `pi`'s required attributes, prototypes and sample coverage.
+    fn check(ctx: &Ctx, pi: &'a str, frames: (i64, i64)) -> Result<Self> {
         let p = props(&ctx.stage, &ctx.sdf_path(pi)?);
         if !ctx.has(&p, "ids") {
             return Err(ctx.err(pi, format!("PointInstancer <{pi}> has no `ids`: throng needs the agent ids")));
@@ -294,198 +384,180 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
         for a in ["ids", "positions"].into_iter().chain(orient) {
             ctx.covers(pi, a, frames)?;
         }
-        for (prim, op) in xform_chain_ops(&ctx, pi)? {
+        for (prim, op) in xform_chain_ops(ctx, pi)? {
             ctx.covers(&prim, &op, frames)?;
         }
-        for f in frames.0..=frames.1 {
-            let t = f as f64;
-            let frame_err = |attr: &str, msg: String| ctx.err(&format!("{pi}.{attr}"), msg).frame(f);
-            // Positions and orientations are in the instancer's space: its
-            // own and its ancestors' xform ops place them in the world.
-            let world_from_pi = world_matrix(&ctx, pi, t)?;
-            let ids = ctx
-                .value(pi, "ids", t)?
-                .and_then(|v| ids_of(&v))
-                .ok_or_else(|| frame_err("ids", format!("<{pi}.ids> has no int64[] value at frame {f}")))?;
-            let pos = ctx.value(pi, "positions", t)?.and_then(|v| vec3s_of(&v)).ok_or_else(|| {
-                frame_err("positions", format!("<{pi}.positions> has no point3f[] value at frame {f}"))
-            })?;
-            let rot = match orient {
-                Some(o) => ctx
-                    .value(pi, o, t)?
-                    .and_then(|v| quats_of(&v))
-                    .ok_or_else(|| frame_err(o, format!("<{pi}.{o}> has no quaternion array at frame {f}")))?,
-                None => vec![Quat::IDENTITY; ids.len()],
-            };
-            if pos.len() != ids.len() || rot.len() != ids.len() {
-                return Err(frame_err(
-                    "positions",
-                    format!(
-                        "{} ids, {} positions and {} orientations at frame {f}; they must be equally long",
-                        ids.len(),
-                        pos.len(),
-                        rot.len()
-                    ),
-                ));
-            }
-            if ctx.has(&p, "protoIndices") {
-                if let Some(Value::IntVec(idx)) = ctx.value(pi, "protoIndices", t)? {
-                    // USD: protoIndices has one entry per instance.
-                    if idx.len() != ids.len() {
-                        return Err(frame_err(
-                            "protoIndices",
-                            format!(
-                                "{} protoIndices for {} ids at frame {f}; they must be equally long",
-                                idx.len(),
-                                ids.len()
-                            ),
-                        ));
-                    }
-                }
-            }
-            if !protos.is_empty() && ctx.has(&p, "protoIndices") {
-                if let Some(Value::IntVec(idx)) = ctx.value(pi, "protoIndices", t)? {
-                    if let Some(bad) = idx.iter().find(|&&i| i < 0 || i as usize >= protos.len()) {
-                        return Err(frame_err(
-                            "protoIndices",
-                            format!("protoIndex {bad} at frame {f}: there are {} prototypes", protos.len()),
-                        ));
-                    }
-                }
-            }
-            let rig = ctx.value(pi, "primvars:throng:rig", t)?.and_then(|v| names_of(&v));
-            let cycle = ctx.value(pi, "primvars:throng:cycle", t)?.and_then(|v| names_of(&v));
-            let cycle_frame = ctx.value(pi, "primvars:throng:cycleFrame", t)?;
-            // A per-agent primvar names every agent: a shorter array would
-            // give the rest the defaults without a word.
-            let lengths = [
-                (
-                    "primvars:throng:rig",
-                    match &rig {
-                        Some(Names::Each(v)) => Some(v.len()),
-                        _ => None,
-                    },
+        Ok(Instancer { pi, props: p, protos, orient })
+    }
+
+    /// Reads every instance at frame `f` into `gather`.
+    fn read_frame(&self, ctx: &Ctx, f: i64, opts: &ImportOptions, gather: &mut Gather) -> Result<()> {
+        let (pi, p, protos, orient) = (self.pi, &self.props, &self.protos, self.orient);
+        let t = f as f64;
+        let frame_err = |attr: &str, msg: String| ctx.err(&format!("{pi}.{attr}"), msg).frame(f);
+        // Positions and orientations are in the instancer's space: its
+        // own and its ancestors' xform ops place them in the world.
+        let world_from_pi = world_matrix(ctx, pi, t)?;
+        let ids = ctx
+            .value(pi, "ids", t)?
+            .and_then(|v| ids_of(&v))
+            .ok_or_else(|| frame_err("ids", format!("<{pi}.ids> has no int64[] value at frame {f}")))?;
+        let pos = ctx
+            .value(pi, "positions", t)?
+            .and_then(|v| vec3s_of(&v))
+            .ok_or_else(|| frame_err("positions", format!("<{pi}.positions> has no point3f[] value at frame {f}")))?;
+        let rot = match orient {
+            Some(o) => ctx
+                .value(pi, o, t)?
+                .and_then(|v| quats_of(&v))
+                .ok_or_else(|| frame_err(o, format!("<{pi}.{o}> has no quaternion array at frame {f}")))?,
+            None => vec![Quat::IDENTITY; ids.len()],
+        };
+        if pos.len() != ids.len() || rot.len() != ids.len() {
+            return Err(frame_err(
+                "positions",
+                format!(
+                    "{} ids, {} positions and {} orientations at frame {f}; they must be equally long",
+                    ids.len(),
+                    pos.len(),
+                    rot.len()
                 ),
-                (
-                    "primvars:throng:cycle",
-                    match &cycle {
-                        Some(Names::Each(v)) => Some(v.len()),
-                        _ => None,
-                    },
-                ),
-                (
-                    "primvars:throng:cycleFrame",
-                    match &cycle_frame {
-                        Some(Value::FloatVec(v)) => Some(v.len()),
-                        _ => None,
-                    },
-                ),
-            ];
-            for (attr, n) in lengths {
-                if let Some(n) = n.filter(|&n| n != ids.len()) {
+            ));
+        }
+        if ctx.has(p, "protoIndices") {
+            if let Some(Value::IntVec(idx)) = ctx.value(pi, "protoIndices", t)? {
+                // USD: protoIndices has one entry per instance.
+                if idx.len() != ids.len() {
                     return Err(frame_err(
-                        attr,
-                        format!("{n} values for {} ids at frame {f}; give one per agent", ids.len()),
+                        "protoIndices",
+                        format!(
+                            "{} protoIndices for {} ids at frame {f}; they must be equally long",
+                            idx.len(),
+                            ids.len()
+                        ),
                     ));
                 }
             }
-            for (i, &id) in ids.iter().enumerate() {
-                let id =
-                    u32::try_from(id).map_err(|_| frame_err("ids", format!("id {id} at frame {f} is not a u32")))?;
-                let pick = |n: &Option<Names>, default: &str| match n {
-                    Some(Names::One(s)) => s.clone(),
-                    Some(Names::Each(v)) => v.get(i).cloned().unwrap_or_else(|| default.to_string()),
-                    None => default.to_string(),
-                };
-                let rig_name = pick(&rig, &opts.rig);
-                let cycle_name = pick(&cycle, &opts.cycle);
-                let first = *first_seen.entry(id).or_insert(f as i32);
-                let cf = match &cycle_frame {
-                    Some(Value::FloatVec(v)) => v.get(i).copied(),
-                    Some(v) => f32_of(v),
-                    None => None,
+        }
+        if !protos.is_empty() && ctx.has(p, "protoIndices") {
+            if let Some(Value::IntVec(idx)) = ctx.value(pi, "protoIndices", t)? {
+                if let Some(bad) = idx.iter().find(|&&i| i < 0 || i as usize >= protos.len()) {
+                    return Err(frame_err(
+                        "protoIndices",
+                        format!("protoIndex {bad} at frame {f}: there are {} prototypes", protos.len()),
+                    ));
                 }
-                .unwrap_or((f as i32 - first) as f32);
-                let too_many = || frame_err("primvars:throng:rig", "more than 65536 rig or cycle names".into());
-                let a = AgentSample {
-                    id,
-                    position: world_from_pi.transform_point3(pos[i]),
-                    heading: heading_of(&(world_from_pi * Mat4::from_quat(rot[i]))),
-                    rig: names.rig(&rig_name).ok_or_else(too_many)?,
-                    cycle: names.cycle(&cycle_name).ok_or_else(too_many)?,
-                    cycle_frame: cf,
-                    flags: 0,
-                };
-                push(&mut blocks, pi, f as i32, a)?;
             }
         }
-    }
-
-    for ap in &agent_prims {
-        let id = match ctx.value(ap, "primvars:throng:agentId", 0.0)? {
-            Some(Value::Int(i)) => u32::try_from(i).ok(),
-            Some(Value::Int64(i)) => u32::try_from(i).ok(),
-            Some(Value::Uint(i)) => Some(i),
+        let rig = ctx.value(pi, "primvars:throng:rig", t)?.and_then(|v| names_of(&v));
+        let cycle = ctx.value(pi, "primvars:throng:cycle", t)?.and_then(|v| names_of(&v));
+        let cycle_frame = ctx.value(pi, "primvars:throng:cycleFrame", t)?;
+        // A per-agent primvar names every agent: a shorter array would
+        // give the rest the defaults without a word.
+        let cycle_frames = match &cycle_frame {
+            Some(Value::FloatVec(v)) => Some(v.len()),
             _ => None,
-        }
-        .ok_or_else(|| ctx.err(ap, format!("<{ap}> primvars:throng:agentId is not a non-negative int")))?;
-        let ops = xform_ops(&ctx, ap)?;
-        if ops.is_empty() {
-            return Err(ctx.err(ap, format!("agent prim <{ap}> has no xformOpOrder: throng needs its transform")));
-        }
-        for (prim, op) in xform_chain_ops(&ctx, ap)? {
-            ctx.covers(&prim, &op, frames)?;
-        }
-        let p = props(&ctx.stage, &ctx.sdf_path(ap)?);
-        for f in frames.0..=frames.1 {
-            let t = f as f64;
-            if ctx.has(&p, "visibility") {
-                if let Some(Value::Token(v)) = ctx.value(ap, "visibility", t)? {
-                    if v.as_str() == "invisible" {
-                        continue;
-                    }
-                }
+        };
+        let lengths = [
+            ("primvars:throng:rig", Names::each_len(&rig)),
+            ("primvars:throng:cycle", Names::each_len(&cycle)),
+            ("primvars:throng:cycleFrame", cycle_frames),
+        ];
+        for (attr, n) in lengths {
+            if let Some(n) = n.filter(|&n| n != ids.len()) {
+                return Err(frame_err(
+                    attr,
+                    format!("{n} values for {} ids at frame {f}; give one per agent", ids.len()),
+                ));
             }
-            let m = world_matrix(&ctx, ap, t)?;
-            let name_at = |attr: &str, default: &str| -> Result<String> {
-                Ok(match ctx.value(ap, attr, t)?.and_then(|v| names_of(&v)) {
-                    Some(Names::One(s)) => s,
-                    _ => default.to_string(),
-                })
+        }
+        for (i, &id) in ids.iter().enumerate() {
+            let id = u32::try_from(id).map_err(|_| frame_err("ids", format!("id {id} at frame {f} is not a u32")))?;
+            let pick = |n: &Option<Names>, default: &str| match n {
+                Some(Names::One(s)) => s.clone(),
+                Some(Names::Each(v)) => v.get(i).cloned().unwrap_or_else(|| default.to_string()),
+                None => default.to_string(),
             };
-            let rig_name = name_at("primvars:throng:rig", &opts.rig)?;
-            let cycle_name = name_at("primvars:throng:cycle", &opts.cycle)?;
-            let first = *first_seen.entry(id).or_insert(f as i32);
-            let cf = ctx
-                .value(ap, "primvars:throng:cycleFrame", t)?
-                .and_then(|v| f32_of(&v))
-                .unwrap_or((f as i32 - first) as f32);
-            let too_many = || ctx.err(ap, "more than 65536 rig or cycle names").frame(f);
-            let seated = matches!(ctx.value(ap, "primvars:throng:seated", t)?, Some(Value::Bool(true)));
+            let rig_name = pick(&rig, &opts.rig);
+            let cycle_name = pick(&cycle, &opts.cycle);
+            let first = gather.first_seen(id, f as i32);
+            let cf = match &cycle_frame {
+                Some(Value::FloatVec(v)) => v.get(i).copied(),
+                Some(v) => f32_of(v),
+                None => None,
+            }
+            .unwrap_or((f as i32 - first) as f32);
+            let too_many = || frame_err("primvars:throng:rig", "more than 65536 rig or cycle names".into());
             let a = AgentSample {
                 id,
-                position: m.w_axis.truncate(),
-                heading: heading_of(&m),
-                rig: names.rig(&rig_name).ok_or_else(too_many)?,
-                cycle: names.cycle(&cycle_name).ok_or_else(too_many)?,
+                position: world_from_pi.transform_point3(pos[i]),
+                heading: heading_of(&(world_from_pi * Mat4::from_quat(rot[i]))),
+                rig: gather.names.rig(&rig_name).ok_or_else(too_many)?,
+                cycle: gather.names.cycle(&cycle_name).ok_or_else(too_many)?,
                 cycle_frame: cf,
-                flags: if seated { SEATED } else { 0 },
+                flags: 0,
             };
-            push(&mut blocks, ap, f as i32, a)?;
+            gather.push(pi, f as i32, a)?;
         }
+        Ok(())
     }
+}
 
-    let frames = blocks
-        .into_iter()
-        .filter(|(_, agents)| !agents.is_empty())
-        .map(|(frame, mut agents)| {
-            agents.sort_by_key(|a| a.id);
-            FrameBlock { frame, agents }
-        })
-        .collect();
-    let crowd = CrowdCache { rigs: names.rigs, cycles: names.cycles, frames };
-    validate(path, &crowd)?;
-    Ok(crowd)
+/// Reads one agent prim (`primvars:throng:agentId`, xform ops) at every
+/// frame it is visible into `gather`.
+fn read_agent_prim(ctx: &Ctx, ap: &str, frames: (i64, i64), opts: &ImportOptions, gather: &mut Gather) -> Result<()> {
+    let id = match ctx.value(ap, "primvars:throng:agentId", 0.0)? {
+        Some(Value::Int(i)) => u32::try_from(i).ok(),
+        Some(Value::Int64(i)) => u32::try_from(i).ok(),
+        Some(Value::Uint(i)) => Some(i),
+        _ => None,
+    }
+    .ok_or_else(|| ctx.err(ap, format!("<{ap}> primvars:throng:agentId is not a non-negative int")))?;
+    let ops = xform_ops(ctx, ap)?;
+    if ops.is_empty() {
+        return Err(ctx.err(ap, format!("agent prim <{ap}> has no xformOpOrder: throng needs its transform")));
+    }
+    for (prim, op) in xform_chain_ops(ctx, ap)? {
+        ctx.covers(&prim, &op, frames)?;
+    }
+    let p = props(&ctx.stage, &ctx.sdf_path(ap)?);
+    for f in frames.0..=frames.1 {
+        let t = f as f64;
+        if ctx.has(&p, "visibility") {
+            if let Some(Value::Token(v)) = ctx.value(ap, "visibility", t)? {
+                if v.as_str() == "invisible" {
+                    continue;
+                }
+            }
+        }
+        let m = world_matrix(ctx, ap, t)?;
+        let name_at = |attr: &str, default: &str| -> Result<String> {
+            Ok(match ctx.value(ap, attr, t)?.and_then(|v| names_of(&v)) {
+                Some(Names::One(s)) => s,
+                _ => default.to_string(),
+            })
+        };
+        let rig_name = name_at("primvars:throng:rig", &opts.rig)?;
+        let cycle_name = name_at("primvars:throng:cycle", &opts.cycle)?;
+        let first = gather.first_seen(id, f as i32);
+        let cf = ctx
+            .value(ap, "primvars:throng:cycleFrame", t)?
+            .and_then(|v| f32_of(&v))
+            .unwrap_or((f as i32 - first) as f32);
+        let too_many = || ctx.err(ap, "more than 65536 rig or cycle names").frame(f);
+        let seated = matches!(ctx.value(ap, "primvars:throng:seated", t)?, Some(Value::Bool(true)));
+        let a = AgentSample {
+            id,
+            position: m.w_axis.truncate(),
+            heading: heading_of(&m),
+            rig: gather.names.rig(&rig_name).ok_or_else(too_many)?,
+            cycle: gather.names.cycle(&cycle_name).ok_or_else(too_many)?,
+            cycle_frame: cf,
+            flags: if seated { SEATED } else { 0 },
+        };
+        gather.push(ap, f as i32, a)?;
+    }
+    Ok(())
 }
 
 /// Errors when a prim in the stage's layers has a name that is not a USD

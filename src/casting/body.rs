@@ -18,9 +18,9 @@ use std::path::Path;
 
 use glam::{Mat3, Vec3};
 
-use crate::casting::cast::uniform;
-use crate::casting::rig::Hierarchy;
+use crate::casting::animation::Hierarchy;
 use crate::error::{Error, Result};
+use crate::seed::uniform;
 use crate::shot::Proportions;
 
 /// One body of a rig (index 1 and up; 0 is the rig as modelled).

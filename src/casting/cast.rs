@@ -17,38 +17,8 @@ use crate::cache::CacheReader;
 use crate::casting::rigs::ShotRigs;
 use crate::casting::wardrobe::{CastPart, CastProp, Scheme, Wardrobes, GLTF_MATERIAL};
 use crate::error::{Error, Result};
+use crate::seed::{purpose_hash, purpose_hash_from, uniform, uniform_hashed};
 use crate::shot::Shot;
-
-/// A 64-bit mix (splitmix64's finaliser): a bijection with good avalanche.
-pub(crate) fn mix64(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
-const FNV_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
-
-/// FNV-1a continued over `s` from state `h`: `fnv1a_from(fnv1a("part/"), slot)`
-/// is `fnv1a("part/" + slot)` without building the string.
-fn fnv1a_from(h: u64, s: &str) -> u64 {
-    s.bytes().fold(h, |h, b| (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3))
-}
-
-/// FNV-1a of a purpose string, so purposes are named, not numbered.
-fn fnv1a(s: &str) -> u64 {
-    fnv1a_from(FNV_BASIS, s)
-}
-
-/// A uniform number in [0, 1) keyed by (seed, agent id, purpose).
-pub fn uniform(seed: u64, agent: u32, purpose: &str) -> f64 {
-    uniform_hashed(seed, agent, fnv1a(purpose))
-}
-
-/// [`uniform`] with the purpose already hashed by [`fnv1a`].
-fn uniform_hashed(seed: u64, agent: u32, purpose: u64) -> f64 {
-    let h = mix64(mix64(mix64(seed) ^ (agent as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)) ^ purpose);
-    (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
-}
 
 /// Index drawn with probability proportional to `weights` (all >= 0);
 /// `None` when they sum to zero.
@@ -159,15 +129,16 @@ pub fn cast_agent(
     for slot in rig.slots {
         let candidates: Vec<_> = scheme.candidates(slot, shot_excludes).collect();
         let w: Vec<f32> = candidates.iter().map(|p| p.weight).collect();
-        let part = weighted_pick(&w, uniform_hashed(seed, id, fnv1a_from(fnv1a("part/"), slot))).map(|i| {
-            let p = candidates[i];
-            let m = weighted_pick(
-                &p.material_weight_list(),
-                uniform_hashed(seed, id, fnv1a_from(fnv1a("material/"), slot)),
-            )
-            .unwrap_or(0);
-            p.cast_part(m, scheme.is_uniform(slot))
-        });
+        let part =
+            weighted_pick(&w, uniform_hashed(seed, id, purpose_hash_from(purpose_hash("part/"), slot))).map(|i| {
+                let p = candidates[i];
+                let m = weighted_pick(
+                    &p.material_weight_list(),
+                    uniform_hashed(seed, id, purpose_hash_from(purpose_hash("material/"), slot)),
+                )
+                .unwrap_or(0);
+                p.cast_part(m, scheme.is_uniform(slot))
+            });
         slots.push(SlotCast { slot: slot.clone(), part });
     }
 
@@ -190,14 +161,15 @@ fn draw_props(seed: u64, id: u32, scheme: &Scheme) -> Vec<Arc<CastProp>> {
     let mut props = Vec::new();
     for g in &scheme.prop_groups {
         let w: Vec<f32> = g.entries.iter().map(|&(_, w)| w).collect();
-        let Some(pick) = weighted_pick(&w, uniform_hashed(seed, id, fnv1a_from(fnv1a("prop/"), &g.name))) else {
+        let Some(pick) = weighted_pick(&w, uniform_hashed(seed, id, purpose_hash_from(purpose_hash("prop/"), &g.name)))
+        else {
             continue;
         };
         let prop = &scheme.props[g.entries[pick].0];
         if prop.is_none() {
             continue;
         }
-        let u = uniform_hashed(seed, id, fnv1a_from(fnv1a("prop_material/"), &g.name));
+        let u = uniform_hashed(seed, id, purpose_hash_from(purpose_hash("prop_material/"), &g.name));
         let m = weighted_pick(&prop.material_weight_list(), u).unwrap_or(0);
         props.extend(prop.cast.get(m).or(prop.cast.first()).cloned());
     }
@@ -292,6 +264,85 @@ pub(crate) struct CastOutcome {
     pub(crate) warnings: Vec<String>,
 }
 
+/// Where an agent first appears, and whether it is ever seated or on a no-scale cycle.
+struct Seen {
+    /// Its rig index in the cache at its first appearance.
+    rig: u16,
+    never_scale: bool,
+}
+
+/// Reads the shot's frames once: every agent seen (id order), refusing a
+/// cycle an agent's rig lacks, and the warnings of shot frames outside the
+/// cache; an error when no frame holds an agent.
+fn seen_agents(shot: &Shot, cache: &CacheReader, rigs: &ShotRigs) -> Result<(BTreeMap<u32, Seen>, Vec<String>)> {
+    let mut seen: BTreeMap<u32, Seen> = BTreeMap::new();
+    let mut outside: Vec<i32> = Vec::new();
+    for f in shot.frames.iter() {
+        let cf = shot.cache.cache_frame(f);
+        if cache.frames().binary_search(&cf).is_err() {
+            outside.push(f);
+            continue;
+        }
+        let block = cache.read_frame(cf)?;
+        for a in &block.agents {
+            crate::casting::check_agent_id(cache.path(), cf, a.id)?;
+            let cycle = cache.cycles().get(a.cycle as usize).map(String::as_str).unwrap_or("");
+            let rig_name = cache.rigs().get(a.rig as usize).map(String::as_str).unwrap_or("");
+            // A cycle the agent's rig lacks would only fail when posed; say so now.
+            let missing = rigs.get(rig_name).and_then(|rig| rig.lacks_cycle(cycle));
+            if let Some(e) = missing {
+                return Err(Error::invalid(cache.path(), format!("rig `{rig_name}`: {e}"))
+                    .frame(f as i64)
+                    .agent(a.id)
+                    .field("cycle"));
+            }
+            let no_scale = a.seated() || shot.is_no_scale_cycle(cycle);
+            let e = seen.entry(a.id).or_insert(Seen { rig: a.rig, never_scale: false });
+            e.never_scale |= no_scale;
+        }
+    }
+    let warnings = crate::casting::check_outside_cache(shot, cache.frames(), cache.path(), &outside)?;
+    if seen.is_empty() {
+        return Err(Error::invalid(
+            &shot.cache.path,
+            format!(
+                "no agents in cache frames {}-{} (shot frames {}-{} with frame_offset {})",
+                shot.cache.cache_frame(shot.frames.start),
+                shot.cache.cache_frame(shot.frames.end),
+                shot.frames.start,
+                shot.frames.end,
+                shot.cache.frame_offset
+            ),
+        ));
+    }
+    Ok((seen, warnings))
+}
+
+/// Skinned rigs without schemes: the character as delivered, in its own
+/// materials; the slot list is made once per rig and shared.
+fn delivered_slots<'a>(shot: &Shot, rigs: &'a ShotRigs) -> HashMap<&'a str, Vec<SlotCast>> {
+    (rigs.iter())
+        .filter(|(name, _)| shot.rigs.get(*name).is_some_and(|r| r.schemes.is_empty()))
+        .filter_map(|(name, rig)| Some((name, rig.skinned()?)))
+        .map(|(name, rig)| {
+            let rig_file: Arc<Path> = rig.path().into();
+            let parts = (rig.delivered().iter())
+                .map(|(slot, mesh, _)| SlotCast {
+                    slot: slot.as_str().into(),
+                    part: Some(Arc::new(CastPart {
+                        file: rig_file.clone(),
+                        mesh: mesh.as_str().into(),
+                        material: GLTF_MATERIAL.into(),
+                        uniform: false,
+                        facing: glam::Quat::IDENTITY,
+                    })),
+                })
+                .collect();
+            (name, parts)
+        })
+        .collect()
+}
+
 impl Casting {
     /// Casts every agent that appears in the shot's frames: reads the
     /// frames once (each agent's rig at its first appearance, whether it is
@@ -303,78 +354,14 @@ impl Casting {
         rigs: &ShotRigs,
         wardrobes: &Wardrobes,
     ) -> Result<CastOutcome> {
-        struct Seen {
-            rig: u16,
-            never_scale: bool,
-        }
-        let mut seen: BTreeMap<u32, Seen> = BTreeMap::new();
-        let mut outside: Vec<i32> = Vec::new();
-        for f in shot.frames.iter() {
-            let cf = shot.cache.cache_frame(f);
-            if cache.frames().binary_search(&cf).is_err() {
-                outside.push(f);
-                continue;
-            }
-            let block = cache.read_frame(cf)?;
-            for a in &block.agents {
-                crate::casting::check_agent_id(cache.path(), cf, a.id)?;
-                let cycle = cache.cycles().get(a.cycle as usize).map(String::as_str).unwrap_or("");
-                let rig_name = cache.rigs().get(a.rig as usize).map(String::as_str).unwrap_or("");
-                // A cycle the agent's rig lacks would only fail when posed; say so now.
-                let missing = rigs.get(rig_name).and_then(|rig| rig.lacks_cycle(cycle));
-                if let Some(e) = missing {
-                    return Err(Error::invalid(cache.path(), format!("rig `{rig_name}`: {e}"))
-                        .frame(f as i64)
-                        .agent(a.id)
-                        .field("cycle"));
-                }
-                let no_scale = a.seated() || shot.is_no_scale_cycle(cycle);
-                let e = seen.entry(a.id).or_insert(Seen { rig: a.rig, never_scale: false });
-                e.never_scale |= no_scale;
-            }
-        }
-        let warnings = crate::casting::check_outside_cache(shot, cache.frames(), cache.path(), &outside)?;
-        if seen.is_empty() {
-            return Err(Error::invalid(
-                &shot.cache.path,
-                format!(
-                    "no agents in cache frames {}-{} (shot frames {}-{} with frame_offset {})",
-                    shot.cache.cache_frame(shot.frames.start),
-                    shot.cache.cache_frame(shot.frames.end),
-                    shot.frames.start,
-                    shot.frames.end,
-                    shot.cache.frame_offset
-                ),
-            ));
-        }
+        let (seen, warnings) = seen_agents(shot, cache, rigs)?;
 
         // Rig and slot names shared (Arc) by every agent cast on the rig.
         let rig_names: HashMap<&str, (Arc<str>, Vec<Arc<str>>)> = rigs
             .iter()
             .map(|(name, rig)| (name, (name.into(), rig.slot_names().into_iter().map(Arc::from).collect())))
             .collect();
-        // Skinned rigs without schemes: the character as delivered, in its
-        // own materials; the slot list is made once per rig and shared.
-        let delivered: HashMap<&str, Vec<SlotCast>> = (rigs.iter())
-            .filter(|(name, _)| shot.rigs.get(*name).is_some_and(|r| r.schemes.is_empty()))
-            .filter_map(|(name, rig)| Some((name, rig.skinned()?)))
-            .map(|(name, rig)| {
-                let rig_file: Arc<Path> = rig.path().into();
-                let parts = (rig.delivered().iter())
-                    .map(|(slot, mesh, _)| SlotCast {
-                        slot: slot.as_str().into(),
-                        part: Some(Arc::new(CastPart {
-                            file: rig_file.clone(),
-                            mesh: mesh.as_str().into(),
-                            material: GLTF_MATERIAL.into(),
-                            uniform: false,
-                            facing: glam::Quat::IDENTITY,
-                        })),
-                    })
-                    .collect();
-                (name, parts)
-            })
-            .collect();
+        let delivered = delivered_slots(shot, rigs);
         // Casting is a pure function of (seed, agent): cast every agent in
         // parallel, kept in id order (so the first error is as if cast one by one).
         let cache_rigs = cache.rigs();
@@ -474,25 +461,6 @@ mod tests {
         assert!(a.cmpge(blo - 1e-6).all() && b.cmple(bhi + 1e-6).all(), "{a} {b}");
         assert!((a.y - blo.y).abs() < 1e-6, "rests on the bottom");
         assert!(((a.z + b.z) * 0.5).abs() < 1e-6, "centred in z");
-    }
-
-    #[test]
-    fn uniform_is_keyed_and_in_range() {
-        let a = uniform(1, 7, "height");
-        assert_eq!(a, uniform(1, 7, "height"));
-        assert_ne!(a, uniform(2, 7, "height"));
-        assert_ne!(a, uniform(1, 8, "height"));
-        assert_ne!(a, uniform(1, 7, "scheme"));
-        for id in 0..1000 {
-            let u = uniform(3, id, "x");
-            assert!((0.0..1.0).contains(&u));
-        }
-    }
-
-    #[test]
-    fn continued_purpose_hash_is_the_whole_string() {
-        assert_eq!(fnv1a_from(fnv1a("part/"), "head"), fnv1a("part/head"));
-        assert_eq!(uniform_hashed(5, 9, fnv1a_from(fnv1a("material/"), "torso")), uniform(5, 9, "material/torso"));
     }
 
     #[test]

@@ -26,7 +26,7 @@ use crate::casting::cast::{AgentCast, Casting};
 use crate::casting::dressing::{AgentDress, Dressing};
 use crate::casting::poses::{PoseLibrary, PosedSkins};
 use crate::casting::rigs::{ShotRig, ShotRigs};
-use crate::casting::timing::CycleTiming;
+use crate::casting::timing::{cycle_name, CycleTiming};
 use crate::casting::wardrobe::Wardrobes;
 use crate::error::{Error, Result};
 use crate::scene::dome::load_dome;
@@ -222,11 +222,6 @@ impl LoadedLights {
 /// value but `u16::MAX` (which marks the unnamed rest).
 pub(crate) const SET_OBJECTS_NAMED: usize = u16::MAX as usize;
 
-/// Name of an agent record's cycle in the cache (`?` if out of range).
-pub(crate) fn cycle_name<'a>(cache: &'a CacheReader, a: &AgentSample) -> &'a str {
-    cache.cycles().get(a.cycle as usize).map(String::as_str).unwrap_or("?")
-}
-
 impl ShotCrowd {
     /// Loads the shot and everything it names, and casts every agent that
     /// appears in the shot's frame range, posed for still frames.
@@ -246,18 +241,18 @@ impl ShotCrowd {
     /// frames and, with `shutter`, for that shutter.
     pub fn new(shot: Shot, cache: CacheReader, shutter: Option<[f32; 2]>) -> Result<ShotCrowd> {
         let wardrobes = Wardrobes::load(&shot.wardrobes)?;
-        let mut rigs = ShotRigs::load(&shot, &wardrobes)?;
+        let rigs = ShotRigs::load(&shot, &wardrobes)?;
         let cast = Casting::cast(&shot, &cache, &rigs, &wardrobes)?;
         let (casting, mut warnings) = (cast.casting, cast.warnings);
         check_shot_lists(&shot, &cache, &rigs, &wardrobes, &casting)?;
         let mut assets = AssetCache::new();
         crate::casting::dressing::check_schemes(&shot, &rigs, &wardrobes, &mut assets)?;
-        let dressing = Dressing::dress(&casting, &mut rigs, &wardrobes, &mut assets)?;
+        let dressing = Dressing::dress(&casting, &rigs, &wardrobes, &mut assets)?;
         let worn = dressing.worn_pieces(&casting);
         let timing = CycleTiming::new(&shot, &cache, &casting, &rigs)?;
         let mut skins = PosedSkins::default();
-        let still = crate::casting::motion::still_steps(&shot, &cache, &casting, &rigs, &timing)?;
-        skins.pose(&still, &worn, &rigs, &mut assets);
+        let still = crate::casting::steps::still_steps(&shot, &cache, &casting, &rigs, &timing)?;
+        skins.pose(&still, &worn, (&rigs, &dressing), &mut assets);
         let set = ShotSet::load(&shot, &mut assets, &mut warnings)?;
         let lights = LoadedLights::load(&shot, &mut assets)?;
         let gltf_camera = match &shot.camera.gltf {
@@ -268,11 +263,11 @@ impl ShotCrowd {
         // whether the shot is posed for a shutter or not.
         if let Some(shutter) = shutter {
             if rigs.any_skinned() {
-                let steps = crate::casting::motion::shutter_steps(&shot, &cache, &casting, &rigs, &timing, shutter)?;
-                skins.pose(&steps, &worn, &rigs, &mut assets);
+                let steps = crate::casting::steps::shutter_steps(&shot, &cache, &casting, &rigs, &timing, shutter)?;
+                skins.pose(&steps, &worn, (&rigs, &dressing), &mut assets);
             }
         }
-        warnings.extend(rigs.warnings().cloned());
+        warnings.extend(rigs.warnings(dressing.worn()).cloned());
         // A scheme of no parts is legal (every slot left empty) but dresses its agents in nothing.
         for (name, r) in &shot.rigs {
             for (scheme, _) in r.schemes.iter().filter(|(_, w)| **w > 0.0) {
@@ -577,7 +572,7 @@ impl<C> ShotCrowd<C> {
                             let Some(joints) = skins.joints(&cast.rig, body, cycle, step) else {
                                 continue;
                             };
-                            let piece = rig.piece(d.piece);
+                            let piece = self.dressing.piece(&cast.rig, rig, d.piece);
                             for (j, b) in piece.joint_boxes.iter().enumerate() {
                                 let Some((lo, hi)) = *b else { continue };
                                 let size = (hi - lo).max(Vec3::splat(1e-4));

@@ -9,9 +9,12 @@ use std::sync::Arc;
 use glam::{Affine3A, Quat, Vec3};
 
 use crate::casting::cast::{fit_part, AgentCast, Casting};
+use crate::casting::kind::skinned_refusal;
+use crate::casting::pieces::SkinPiece;
 use crate::casting::rigs::{ShotRig, ShotRigs};
-use crate::casting::skin::skinned_refusal;
+use crate::casting::skin::SkinnedRig;
 use crate::casting::wardrobe::{PropAt, Wardrobes, GLTF_MATERIAL};
+use crate::casting::worn::WornParts;
 use crate::casting::Lod;
 use crate::error::{Error, Result};
 use crate::scene::gltf::AssetCache;
@@ -51,7 +54,8 @@ pub struct PartFit {
 pub struct SkinDress {
     /// Its part index: a cast slot, or a prop after them (`slots + i`).
     pub(crate) slot: usize,
-    /// Index into the rig's pieces ([`crate::casting::skin::SkinnedRig::piece`]).
+    /// Index of the piece: the rig's own ([`crate::casting::skin::SkinnedRig::piece`])
+    /// or one dressing loaded for it ([`Dressing::piece`]).
     pub(crate) piece: usize,
     /// The piece's material.
     pub(crate) material: MaterialId,
@@ -84,6 +88,8 @@ pub struct Dressing {
     agents: BTreeMap<u32, AgentDress>,
     fits: Vec<PartFit>,
     proxy_mesh: MeshId,
+    /// The parts and pieces dressing loaded for skinned rigs beyond their own.
+    worn: WornParts,
 }
 
 /// A memo key made of the addresses of shared (`Arc`) names: (rig, file,
@@ -199,10 +205,11 @@ fn check_image(path: &std::path::Path) -> Result<()> {
     reader.into_dimensions().map(|_| ()).map_err(|e| bad(e.to_string()))
 }
 
-/// Each piece of skinned-rig part `part` with its material: the glTF's own
-/// (`material` is [`GLTF_MATERIAL`]) or the wardrobe's `material`.
+/// Each piece of part `part` of skinned rig `rig` (its own, or `worn`)
+/// with its material: the glTF's own (`material` is [`GLTF_MATERIAL`]) or
+/// the wardrobe's `material`.
 fn piece_materials(
-    rig: &crate::casting::skin::SkinnedRig,
+    (worn, rig_name, rig): (&WornParts, &str, &SkinnedRig),
     part: usize,
     material: &str,
     assets: &mut AssetCache,
@@ -210,9 +217,9 @@ fn piece_materials(
     wardrobes: &Wardrobes,
 ) -> Result<Vec<(usize, MaterialId)>> {
     let mut list = Vec::new();
-    for &piece in &rig.part_at(part).pieces {
+    for &piece in &worn.part_at(rig_name, rig, part).pieces {
         let material = if *material == *GLTF_MATERIAL {
-            let p = rig.piece(piece);
+            let p = worn.piece(rig_name, rig, piece);
             assets.gltf_material_at(&p.file, p.material)?
         } else {
             wardrobe_material(assets, made, wardrobes, material)?
@@ -303,20 +310,21 @@ fn rigid_pieces<'m>(
 
 impl Dressing {
     /// Dresses every cast agent in id order, loading the parts it wears into
-    /// `assets` (the proxy cube first) and, for skinned characters, into
-    /// their rigs.
+    /// `assets` (the proxy cube first) and, for skinned characters, the
+    /// pieces of parts beyond their own into the dressing's table of them.
     pub(crate) fn dress(
         casting: &Casting,
-        rigs: &mut ShotRigs,
+        rigs: &ShotRigs,
         wardrobes: &Wardrobes,
         assets: &mut AssetCache,
     ) -> Result<Dressing> {
         let proxy_mesh = assets.add_mesh(unit_cube());
-        let mut dressing = Dressing { agents: BTreeMap::new(), fits: Vec::new(), proxy_mesh };
+        let mut dressing =
+            Dressing { agents: BTreeMap::new(), fits: Vec::new(), proxy_mesh, worn: WornParts::default() };
         let mut memo = Memo::default();
         for cast in casting.iter() {
-            let dress = if rigs.skinned_mut(&cast.rig).is_some() {
-                AgentDress::Skinned(dress_skinned(cast, rigs, wardrobes, assets, &mut memo)?)
+            let dress = if let Some(rig) = rigs.skinned(&cast.rig) {
+                AgentDress::Skinned(dress_skinned(cast, rig, &mut dressing.worn, wardrobes, assets, &mut memo)?)
             } else if let Some(ShotRig::Slots(_)) = rigs.get(&cast.rig) {
                 AgentDress::Slots(dressing.dress_slots(cast, rigs, wardrobes, assets, &mut memo)?)
             } else {
@@ -457,6 +465,17 @@ impl Dressing {
         self.proxy_mesh
     }
 
+    /// Piece `piece` of skinned rig `rig_name` (`rig`): the character's own,
+    /// or one of a part dressing loaded for it.
+    pub(crate) fn piece<'a>(&'a self, rig_name: &str, rig: &'a SkinnedRig, piece: usize) -> &'a SkinPiece {
+        self.worn.piece(rig_name, rig, piece)
+    }
+
+    /// The parts and pieces dressing loaded beyond the characters' own.
+    pub(crate) fn worn(&self) -> &WornParts {
+        &self.worn
+    }
+
     /// The skinned pieces worn on each skinned rig, over all its agents.
     pub(crate) fn worn_pieces(&self, casting: &Casting) -> BTreeMap<Arc<str>, BTreeSet<usize>> {
         let mut worn: BTreeMap<Arc<str>, BTreeSet<usize>> = BTreeMap::new();
@@ -477,10 +496,11 @@ impl Dressing {
             (Some(AgentDress::Slots(parts)), Lod::Proxy) => parts.iter().filter(|p| p.proxy).count(),
             (Some(AgentDress::Skinned(pieces)), Lod::Full) => pieces.len(),
             (Some(AgentDress::Skinned(pieces)), Lod::Proxy) => {
-                let rig = casting.get(id).and_then(|cast| rigs.skinned(&cast.rig));
-                rig.map_or(0, |rig| {
-                    pieces.iter().map(|d| rig.piece(d.piece).joint_boxes.iter().filter(|b| b.is_some()).count()).sum()
-                })
+                let Some(cast) = casting.get(id) else { return 0 };
+                let Some(rig) = rigs.skinned(&cast.rig) else { return 0 };
+                (pieces.iter())
+                    .map(|d| self.piece(&cast.rig, rig, d.piece).joint_boxes.iter().filter(|b| b.is_some()).count())
+                    .sum()
             }
         }
     }
@@ -490,12 +510,12 @@ impl Dressing {
 /// its own glTF materials or the wardrobe's.
 fn dress_skinned(
     cast: &AgentCast,
-    rigs: &mut ShotRigs,
+    rig: &SkinnedRig,
+    worn: &mut WornParts,
     wardrobes: &Wardrobes,
     assets: &mut AssetCache,
     memo: &mut Memo,
 ) -> Result<Vec<SkinDress>> {
-    let Some(rig) = rigs.skinned_mut(&cast.rig) else { return Ok(Vec::new()) };
     let mut pieces = Vec::new();
     for (slot_index, slot_cast) in cast.slots.iter().enumerate() {
         let Some(part) = &slot_cast.part else { continue };
@@ -503,9 +523,17 @@ fn dress_skinned(
         // and glTF materials touch the file system.
         let key = (address(&cast.rig), address(&part.file), address(&part.mesh), address(&part.material));
         if let std::collections::hash_map::Entry::Vacant(slot) = memo.skin_parts.entry(key) {
-            let part_index = rig.part(&part.file, &part.mesh, &slot_cast.slot).map_err(|e| e.agent(cast.id))?;
-            let list = piece_materials(rig, part_index, &part.material, assets, &mut memo.materials, wardrobes)
-                .map_err(|e| e.agent(cast.id))?;
+            let part_index =
+                worn.part((&cast.rig, rig), &part.file, &part.mesh, &slot_cast.slot).map_err(|e| e.agent(cast.id))?;
+            let list = piece_materials(
+                (worn, &cast.rig, rig),
+                part_index,
+                &part.material,
+                assets,
+                &mut memo.materials,
+                wardrobes,
+            )
+            .map_err(|e| e.agent(cast.id))?;
             slot.insert(list);
         }
         for &(piece, material) in &memo.skin_parts[&key] {
@@ -519,9 +547,11 @@ fn dress_skinned(
         let key = (address(&cast.rig), Arc::as_ptr(prop) as usize);
         if let std::collections::hash_map::Entry::Vacant(slot) = memo.skin_props.entry(key) {
             let in_scheme = |e: Error| e.agent(cast.id).or_field(format!("schemes.{}.props", cast.scheme));
-            let part = rig.prop_part(&prop.file, &prop.mesh, joint, prop.offset).map_err(in_scheme)?;
-            let list = piece_materials(rig, part, &prop.material, assets, &mut memo.materials, wardrobes)
-                .map_err(in_scheme)?;
+            let part =
+                worn.prop_part((&cast.rig, rig), &prop.file, &prop.mesh, (joint, prop.offset)).map_err(in_scheme)?;
+            let list =
+                piece_materials((worn, &cast.rig, rig), part, &prop.material, assets, &mut memo.materials, wardrobes)
+                    .map_err(in_scheme)?;
             slot.insert(list);
         }
         for &(piece, material) in &memo.skin_props[&key] {

@@ -5,22 +5,29 @@
 //! [`PoseLibrary`] (every mesh, and every skinned pose step still frames and
 //! the shutter take); and from them any frame's posed instances.
 
+pub(crate) mod animation;
 pub(crate) mod body;
 pub(crate) mod cast;
 pub(crate) mod crowd;
 pub(crate) mod dressing;
+pub(crate) mod gait;
+pub(crate) mod kind;
 pub mod motion;
+pub(crate) mod pieces;
 pub(crate) mod poses;
 pub mod rig;
 pub(crate) mod rigs;
 pub mod shot_cache;
 pub mod skin;
+pub(crate) mod steps;
 pub mod table;
 pub(crate) mod timing;
 pub mod wardrobe;
 pub(crate) mod wheels;
+pub(crate) mod worn;
 
-pub use cast::{cast_agent, uniform, AgentCast, Casting, RigCasting, SlotCast};
+pub use crate::seed::uniform;
+pub use cast::{cast_agent, AgentCast, Casting, RigCasting, SlotCast};
 pub use crowd::{AgentPose, Lod, ShotCrowd};
 pub use dressing::{AgentDress, DressedPart, Dressing, PartFit, SkinDress};
 pub use poses::{PoseLibrary, PosedSkins};

@@ -11,6 +11,7 @@ use std::sync::Arc;
 use glam::Affine3A;
 
 use crate::casting::cast::PoseStep;
+use crate::casting::dressing::Dressing;
 use crate::casting::rigs::ShotRigs;
 use crate::scene::gltf::AssetCache;
 use crate::scene::{Library, Material, MeshId, Rec709, Space, Texture};
@@ -34,7 +35,7 @@ impl PosedSkins {
         &mut self,
         steps: &BTreeSet<PoseStep>,
         worn: &BTreeMap<Arc<str>, BTreeSet<usize>>,
-        rigs: &ShotRigs,
+        (rigs, dressing): (&ShotRigs, &Dressing),
         assets: &mut AssetCache,
     ) {
         for key @ (rig_name, body, cycle, step) in steps {
@@ -49,7 +50,7 @@ impl PosedSkins {
                 b => format!("{}/body{b}", rig.pose_name(*cycle, *step)),
             };
             for &piece in pieces {
-                let mesh = rig.pose_body_piece(*body, piece, &joints, &pose);
+                let mesh = rig.pose_skin_piece(*body, dressing.piece(rig_name, rig, piece), &joints, &pose);
                 self.meshes.insert((rig_key.clone(), piece, *body, *cycle, *step), assets.add_mesh(mesh));
             }
             self.joints.insert((rig_key.clone(), *body, *cycle, *step), joints);

@@ -4,9 +4,11 @@
 
 use std::collections::BTreeMap;
 
+use crate::casting::kind::is_character_rig;
 use crate::casting::rig::Rig;
-use crate::casting::skin::{is_character_rig, SkinnedRig};
+use crate::casting::skin::SkinnedRig;
 use crate::casting::wardrobe::Wardrobes;
+use crate::casting::worn::WornParts;
 use crate::error::{same_file, Error, Result};
 use crate::shot::Shot;
 
@@ -77,11 +79,11 @@ impl ShotRigs {
         let mut rigs = BTreeMap::new();
         for (name, r) in &shot.rigs {
             let rig = if is_character_rig(r)? {
-                let mut rig = SkinnedRig::load_shot_rig(name, r, shot.frames.fps)?;
-                if let Some(p) = &r.proportions {
-                    rig.draw_bodies(name, p, shot.seed)?;
-                }
-                ShotRig::Skinned(rig)
+                let rig = SkinnedRig::load_shot_rig(name, r, shot.frames.fps)?;
+                ShotRig::Skinned(match &r.proportions {
+                    Some(p) => rig.with_bodies(name, p, shot.seed)?,
+                    None => rig,
+                })
             } else if r.proportions.is_some() {
                 return Err(Error::invalid(
                     &r.file,
@@ -131,17 +133,13 @@ impl ShotRigs {
         self.iter().any(|(_, rig)| rig.skinned().is_some())
     }
 
-    /// A skinned character to load worn parts into (dressing only).
-    pub(crate) fn skinned_mut(&mut self, name: &str) -> Option<&mut SkinnedRig> {
-        match self.rigs.get_mut(name) {
-            Some((ShotRig::Skinned(rig), _)) => Some(rig),
-            _ => None,
-        }
-    }
-
-    /// What loading the rigs noticed but accepted, in rig order.
-    pub(crate) fn warnings(&self) -> impl Iterator<Item = &String> {
-        let skinned = self.iter().filter_map(|(_, rig)| rig.skinned()).flat_map(|r| r.warnings().iter());
+    /// What loading the rigs noticed but accepted, in rig order, each
+    /// skinned rig's followed by what loading its worn parts noticed
+    /// (`worn`, the dressing's; empty before dressing).
+    pub(crate) fn warnings<'a>(&'a self, worn: &'a WornParts) -> impl Iterator<Item = &'a String> {
+        let skinned = (self.iter())
+            .filter_map(|(name, rig)| Some((name, rig.skinned()?)))
+            .flat_map(|(name, r)| r.warnings().iter().chain(worn.warnings(name)));
         self.warnings.iter().chain(skinned)
     }
 }

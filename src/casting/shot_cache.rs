@@ -10,8 +10,10 @@ use std::path::Path;
 use crate::cache::jupedsim::{RigClip, SHOT_FPS};
 use crate::cache::tabular::Gait;
 use crate::cache::{CacheReader, Format, Import, ImportOptions, TabularOptions};
+use crate::casting::gait::{skinned_file_gait, skinned_gait};
+use crate::casting::kind::{is_character_import, is_character_rig};
 use crate::casting::rig::Rig;
-use crate::casting::skin::{is_character_rig, SkinnedRig};
+use crate::casting::skin::SkinnedRig;
 use crate::error::{Error, Result};
 use crate::shot::{Shot, SkinOptions};
 
@@ -49,39 +51,6 @@ fn slot_gait(file: &Path, walk: &str, idle: Option<&str>, stride: Option<f32>) -
     Ok(Gait { stride, cycle_length, idle_length })
 }
 
-/// A skinned character's gait: its walk cycle's stride (the root joint's
-/// travel, or the shot's `strides`) and length; `None` when it has no such
-/// cycle. A walk whose stride is 0 (no root, no given stride) is refused.
-fn skinned_gait(rig: &SkinnedRig, walk: &str, idle: Option<&str>) -> Result<Option<Gait>> {
-    let Ok((stride, cycle_length)) = rig.cycle_timing(walk) else { return Ok(None) };
-    if !(stride.is_finite() && stride > 0.0 && cycle_length.is_finite() && cycle_length > 0.0) {
-        let root = match rig.is_rigid() {
-            true => "the rigid rig's clip turns no wheel: name its root node",
-            false => "name its root joint",
-        };
-        return Err(Error::invalid(
-            rig.path(),
-            format!("cycle `{walk}` walks {stride} m in {cycle_length} frames: {root} (`root`) or give `strides`"),
-        )
-        .field("cycle"));
-    }
-    let idle_length = match idle {
-        Some(name) => rig.cycle_frames(rig.cycle_index(name).map_err(|e| e.field("idle_cycle"))?),
-        None => Gait::default().idle_length,
-    };
-    Ok(Some(Gait { stride, cycle_length, idle_length }))
-}
-
-/// Whether the rig in `file` is read as a character (skinned or rigid):
-/// `skin` given says so, else it is detected as a shot's rig without `kind`
-/// is (no slots).
-pub(crate) fn is_character_file(file: &Path, skin: Option<&SkinOptions>) -> Result<bool> {
-    match skin {
-        Some(_) => Ok(true),
-        None => crate::casting::skin::is_character_file(file),
-    }
-}
-
 /// A rig file's gait outside a shot (a trajectory import's `rig_file`): a
 /// slot rig's as [`gait`] reads it, or a skinned character's with `skin`
 /// (its `[rigs.X]` options: root joint, cycle -> clip map, strides, scale,
@@ -98,30 +67,10 @@ pub fn file_gait(
     idle: Option<&str>,
     stride: Option<f32>,
 ) -> Result<Gait> {
-    match is_character_file(file, skin)? {
+    match is_character_import(file, skin)? {
         true => skinned_file_gait(file, skin, walk, idle, stride),
         false => slot_gait(file, walk, idle, stride),
     }
-}
-
-/// The gait of a file known to be a skinned or rigid character (`skin`
-/// `None`: the default options; `stride` given: the walk's `strides` entry).
-pub(crate) fn skinned_file_gait(
-    file: &Path,
-    skin: Option<&SkinOptions>,
-    walk: &str,
-    idle: Option<&str>,
-    stride: Option<f32>,
-) -> Result<Gait> {
-    let mut options = skin.cloned().unwrap_or_default();
-    if let Some(s) = stride {
-        options.strides.insert(walk.to_string(), s);
-    }
-    let rig = SkinnedRig::load(file, &options, SHOT_FPS)?;
-    // The error lists the rig's cycles; past it the walk is there.
-    rig.cycle_index(walk).map_err(|e| e.field("cycle"))?;
-    skinned_gait(&rig, walk, idle)?
-        .ok_or_else(|| Error::invalid(file, format!("skinned rig has no cycle `{walk}`")).field("cycle"))
 }
 
 /// How the shot's cache becomes a crowd: the `[cache]` keys over their

@@ -6,6 +6,7 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
+use super::skin::SkinPiece;
 use super::wardrobe::PropAt;
 use super::{AgentCast, AgentDress, ShotCrowd};
 
@@ -243,7 +244,7 @@ fn skin_stats(crowd: &ShotCrowd) -> Option<SkinStats> {
         .filter_map(|((name, cycle), pieces)| {
             let rig = crowd.rigs().skinned(name)?;
             let c = &rig.cycles()[*cycle];
-            let pieces: Vec<usize> = pieces.iter().copied().collect();
+            let pieces: Vec<&SkinPiece> = pieces.iter().map(|&p| crowd.dressing().piece(name, rig, p)).collect();
             Some(ClipPoseStats {
                 rig: name.clone(),
                 clip: c.clip_name.clone(),

@@ -16,13 +16,39 @@
 
 use std::collections::{BTreeMap, HashMap};
 
-use crate::cache::{CacheReader, FrameBlock};
+use crate::cache::{AgentSample, CacheReader, FrameBlock};
 use crate::casting::cast::Casting;
-use crate::casting::crowd::cycle_name;
-use crate::casting::motion::{cycle_delta, length_of};
 use crate::casting::rigs::ShotRigs;
 use crate::error::Result;
 use crate::shot::Shot;
+
+/// Name of an agent record's cycle in the cache (`?` if out of range).
+pub(crate) fn cycle_name<'a>(cache: &'a CacheReader, a: &AgentSample) -> &'a str {
+    cache.cycles().get(a.cycle as usize).map(String::as_str).unwrap_or("?")
+}
+
+/// `to - from` of two cycle frames, taken modulo `length` to the value
+/// nearest zero (a wrap from the cycle's end to its start is a small step
+/// forward). Without a length, the plain difference.
+pub(crate) fn cycle_delta(from: f32, to: f32, length: Option<f32>) -> f32 {
+    let d = to - from;
+    match length {
+        Some(l) if l > 0.0 && l.is_finite() => d - l * (d / l).round(),
+        _ => d,
+    }
+}
+
+/// Length in frames of the cycle an agent record plays (`None` if unknown).
+pub(crate) fn length_of(
+    shot: &Shot,
+    cache: &CacheReader,
+    casting: &Casting,
+    rigs: &ShotRigs,
+    a: &AgentSample,
+) -> Option<f32> {
+    let rig = rigs.get(&casting.get(a.id)?.rig)?;
+    rig.cycle_frames(cycle_name(cache, a), shot.frames.fps)
+}
 
 /// The played cycle frames of agents whose pace is not 1, at every cache
 /// frame the shot's frames and their shutter neighbours read.

@@ -408,7 +408,7 @@ impl Wardrobes {
                             part.up.unwrap_or(crate::shot::Axis::PosY),
                             part.forward.unwrap_or(crate::shot::Axis::PosZ),
                         );
-                        part.facing = crate::casting::skin::orientation(path, up, forward)
+                        part.facing = crate::scene::gltf::orientation(path, up, forward)
                             .map_err(|e| e.field(format!("{key}.forward")))?;
                     }
                     if !(part.weight >= 0.0 && part.weight.is_finite()) {

@@ -13,7 +13,7 @@
 
 use glam::{Affine3A, Quat, Vec3};
 
-use crate::casting::rig::{Channel, Clip, Hierarchy, Property};
+use crate::casting::animation::{Channel, Clip, Hierarchy, Property};
 
 /// How far a wheel's axle may lean off the agent's side axis (rig X).
 pub(crate) const MAX_AXLE_TILT_DEG: f32 = 25.0;

@@ -635,8 +635,10 @@ impl GlbBuilder {
             if !self.root.extensions_used.iter().any(|e| e == EXT) {
                 self.root.extensions_used.push(EXT.to_string());
             }
-            // Other gltf features add fields to this struct; keep the default for them.
-            #[allow(clippy::needless_update)]
+            #[allow(
+                clippy::needless_update,
+                reason = "other gltf features add fields to this struct; keep the default for them"
+            )]
             let ext = json::extensions::material::Material {
                 emissive_strength: Some(json::extensions::material::EmissiveStrength {
                     emissive_strength: json::extensions::material::EmissiveStrengthFactor(strength),
@@ -821,8 +823,10 @@ impl GlbBuilder {
             self.root.extensions_used.push(EXT.to_string());
         }
         let mut json_node = self.node_json(&node)?;
-        // Other gltf features add fields to this struct; keep the default for them.
-        #[allow(clippy::needless_update)]
+        #[allow(
+            clippy::needless_update,
+            reason = "other gltf features add fields to this struct; keep the default for them"
+        )]
         let ext = json::extensions::scene::Node {
             khr_lights_punctual: Some(klp::KhrLightsPunctual { light }),
             ..Default::default()

@@ -255,6 +255,57 @@ fn gather(crowd: &ShotCrowd, opts: &UsdExportOptions) -> Result<Gathered> {
 /// Writes the crowd as USD to `out` (the encoding from its extension:
 /// `.usda` or `.usd` text, or a `.usdz` package of a text layer).
 pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Result<UsdExportSummary> {
+    let encoding = check_request(crowd, opts, out)?;
+    let (a, b) = opts.frames;
+    let g = gather(crowd, opts)?;
+    let lib = crowd.library();
+    let mut root = root_layer(crowd.shot(), a, b);
+    let mesh_names = write_meshes(&mut root, lib, &g.meshes);
+
+    // Materials, and the base colour textures they read (written beside the
+    // export, or into the .usdz package).
+    let mat_names = unique_names(g.materials.iter().map(|&m| (m, material_name(&lib.materials[m as usize].name))));
+    let lights = crowd.lights();
+    // The light groups a render's `lg_<name>` passes use, named on each light
+    // and emissive material (a shot with more groups than a render writes has none to name).
+    let groups = LightGroups::new(&lights, lib).ok();
+    let textures = Textures::of(lib, &g.materials, lights.dome.as_deref(), encoding, out)?;
+    write_materials(&mut root, lib, &mat_names, groups.as_ref(), &textures);
+
+    let proto_names = write_prototypes(&mut root, &g.pairs, &mesh_names, &mat_names)?;
+    let mut instances = write_set(&mut root, crowd, &proto_names)?;
+    let times: Vec<i32> = (a..=b).collect();
+    let (layer_files, agent_instances) = write_crowd(&mut root, crowd, &g, opts, &times, &proto_names)?;
+    instances += agent_instances;
+    write_camera(&mut root, crowd, &times)?;
+    write_lights(&mut root, &lights, groups.as_ref(), textures.dome_asset().as_deref());
+
+    // No output over an input: a texture folder or a layer file beside
+    // `out` may be a file the shot reads (the shot itself, a texture).
+    if encoding != UsdEncoding::Usdz {
+        let mut outputs: Vec<PathBuf> = textures.files.values().map(|(rel, _)| out.with_file_name(rel)).collect();
+        outputs.extend(textures.dome.iter().map(|(rel, _)| out.with_file_name(rel)));
+        outputs.extend(layer_files.keys().map(|layer| out.with_file_name(layer_file_name(out, layer))));
+        outputs.push(out.to_path_buf());
+        crate::output::InputFiles::new(crowd.input_files()).check_all(outputs.iter().map(PathBuf::as_path))?;
+    }
+    let written = write_files(root, &layer_files, &textures, lights.dome.as_deref(), encoding, out)?;
+    Ok(UsdExportSummary {
+        agents: g.agents.len(),
+        frames: times.len(),
+        prototypes: proto_names.len(),
+        meshes: mesh_names.len(),
+        materials: mat_names.len(),
+        instances,
+        prims: written.prims,
+        files: written.files,
+        bytes: written.bytes,
+    })
+}
+
+/// Checks what an export is asked for before anything is read: a USD file
+/// name it can write, frames within the shot, and what split layers need.
+fn check_request(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Result<UsdEncoding> {
     let encoding = UsdEncoding::of(out).ok_or_else(|| {
         Error::Usage(format!("{}: a USD export needs a .usda, .usdc, .usd or .usdz file name", out.display()))
     })?;
@@ -281,9 +332,11 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
             return Err(Error::setting("split_layers", "needs the layer manifest (run `throng layers` first)"));
         }
     }
-    let g = gather(crowd, opts)?;
-    let lib = crowd.library();
+    Ok(encoding)
+}
 
+/// The root layer: stage metadata for frames `a`-`b` of `shot`, and `/World`.
+fn root_layer(shot: &crate::shot::Shot, a: i32, b: i32) -> LayerBuilder {
     let mut root = LayerBuilder::new();
     root.layer_meta("defaultPrim", Value::Token("World".into()));
     root.layer_meta("doc", string(&format!("throng {}: shot {}", env!("CARGO_PKG_VERSION"), shot.name)));
@@ -294,10 +347,17 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     root.layer_meta("timeCodesPerSecond", Value::Double(shot.frames.fps.into()));
     root.layer_meta("framesPerSecond", Value::Double(shot.frames.fps.into()));
     root.def("/World", "Xform");
+    root
+}
 
-    // Geometry: one Mesh per library mesh, named from the mesh name, under
-    // /World/Prototypes/Meshes.
-    let mesh_names = unique_names(g.meshes.iter().map(|&m| (m, prototype_name(&lib.meshes[m as usize].name))));
+/// Geometry: one Mesh per library mesh, named from the mesh name, under
+/// /World/Prototypes/Meshes. Returns the names.
+fn write_meshes(
+    root: &mut LayerBuilder,
+    lib: &crate::scene::Library,
+    meshes: &BTreeSet<MeshId>,
+) -> BTreeMap<MeshId, String> {
+    let mesh_names = unique_names(meshes.iter().map(|&m| (m, prototype_name(&lib.meshes[m as usize].name))));
     // A defined but invisible Scope: importers that skip abstract (`class`)
     // prims, Blender's among them, still find the prototypes, and a reference
     // to one brings only its own opinions, not the Scope's invisibility.
@@ -329,22 +389,25 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
         }
         root.uniform(p, "subdivisionScheme", "token", Value::Token("none".into()));
     }
+    mesh_names
+}
 
-    // Materials, and the base colour textures they read (written beside the
-    // export, or into the .usdz package).
-    let mat_names = unique_names(g.materials.iter().map(|&m| (m, material_name(&lib.materials[m as usize].name))));
-    let lights = crowd.lights();
-    // The light groups a render's `lg_<name>` passes use, named on each light
-    // and emissive material (a shot with more groups than a render writes has none to name).
-    let groups = LightGroups::new(&lights, lib).ok();
-    let textures = Textures::of(lib, &g.materials, lights.dome.as_deref(), encoding, out)?;
+/// One UsdPreviewSurface Material per library material under /World/Looks,
+/// reading its base colour texture when it has one.
+fn write_materials(
+    root: &mut LayerBuilder,
+    lib: &crate::scene::Library,
+    mat_names: &BTreeMap<MaterialId, String>,
+    groups: Option<&LightGroups>,
+    textures: &Textures,
+) {
     root.def("/World/Looks", "Scope");
-    for (&m, name) in &mat_names {
+    for (&m, name) in mat_names {
         let src = &lib.materials[m as usize];
         let path = format!("/World/Looks/{name}");
         let mat = root.def(&path, "Material");
-        if let Some(g) = groups.as_ref().filter(|_| src.emission.max_element() > 0.0) {
-            light_group(&mut root, mat, g, g.material(m));
+        if let Some(g) = groups.filter(|_| src.emission.max_element() > 0.0) {
+            light_group(root, mat, g, g.material(m));
         }
         root.connect(mat, "outputs:surface", "token", &format!("{path}/PreviewSurface.outputs:surface"));
         let sh = root.def(&format!("{path}/PreviewSurface"), "Shader");
@@ -373,13 +436,20 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
         root.attr(sh, "inputs:metallic", "float", Value::Float(src.metallic));
         root.attr(sh, "outputs:surface", "token", Value::Token("".into()));
     }
+}
 
-    // Instancing prototypes: one per (mesh, material), referencing the
-    // geometry and binding the material on the Mesh inside it, where
-    // importers that read bindings only inside an instance's prototype
-    // (Blender) see it. Instances of a pair share one prototype.
+/// Instancing prototypes: one per (mesh, material), referencing the
+/// geometry and binding the material on the Mesh inside it, where
+/// importers that read bindings only inside an instance's prototype
+/// (Blender) see it. Instances of a pair share one prototype. Returns the names.
+fn write_prototypes(
+    root: &mut LayerBuilder,
+    pairs: &BTreeSet<(MeshId, MaterialId)>,
+    mesh_names: &BTreeMap<MeshId, String>,
+    mat_names: &BTreeMap<MaterialId, String>,
+) -> Result<BTreeMap<(MeshId, MaterialId), String>> {
     let proto_names =
-        unique_names(g.pairs.iter().map(|&(m, mt)| ((m, mt), format!("{}__{}", mesh_names[&m], mat_names[&mt]))));
+        unique_names(pairs.iter().map(|&(m, mt)| ((m, mt), format!("{}__{}", mesh_names[&m], mat_names[&mt]))));
     for (&(m, mt), name) in &proto_names {
         let path = format!("/World/Prototypes/{name}");
         let p = root.def(&path, "Xform");
@@ -388,8 +458,15 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
         root.api_schemas(inner, &["MaterialBindingAPI"]);
         root.rel(inner, "material:binding", vec![format!("/World/Looks/{}", mat_names[&mt])]);
     }
+    Ok(proto_names)
+}
 
-    // The set.
+/// The set under /World/Set, one instanceable prim per piece; returns how many.
+fn write_set(
+    root: &mut LayerBuilder,
+    crowd: &ShotCrowd,
+    proto_names: &BTreeMap<(MeshId, MaterialId), String>,
+) -> Result<usize> {
     let mut instances = 0;
     if !crowd.set().is_empty() {
         let set = root.def("/World/Set", "Xform");
@@ -398,26 +475,39 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
             let p = root.def(&format!("/World/Set/set_{i}"), "Xform");
             root.meta(p, "instanceable", Value::Bool(true));
             root.reference(p, &format!("/World/Prototypes/{}", proto_names[&(inst.mesh, inst.material)]))?;
-            xform(&mut root, p, vec![(0.0, matrix(&inst.world_from_object))]);
+            xform(root, p, vec![(0.0, matrix(&inst.world_from_object))]);
             instances += 1;
         }
     }
+    Ok(instances)
+}
 
-    // Layer of each agent, from the manifest.
-    let layer_of = |id: u32| -> Option<&str> {
-        let m = opts.manifest?;
-        let a = m.agent(id)?;
-        m.layers.get(a.layer).map(|l| l.name.as_str())
-    };
+/// The render layer agent `id` is in, from the manifest.
+fn layer_of(manifest: Option<&Manifest>, id: u32) -> Option<&str> {
+    let m = manifest?;
+    let a = m.agent(id)?;
+    m.layers.get(a.layer).map(|l| l.name.as_str())
+}
 
-    // The crowd.
+/// The crowd under /World/Crowd, as prims or PointInstancers, with one
+/// collection per render layer. With split layers, each layer's agents go
+/// to a layer of their own, returned by layer name; also returns the
+/// instances written.
+fn write_crowd(
+    root: &mut LayerBuilder,
+    crowd: &ShotCrowd,
+    g: &Gathered,
+    opts: &UsdExportOptions,
+    times: &[i32],
+    proto_names: &BTreeMap<(MeshId, MaterialId), String>,
+) -> Result<(BTreeMap<String, LayerBuilder>, usize)> {
     let crowd_prim = root.def("/World/Crowd", "Scope");
     let mut layer_files: BTreeMap<String, LayerBuilder> = BTreeMap::new();
-    let times: Vec<i32> = (a..=b).collect();
+    let mut instances = 0;
     match opts.instancing {
         Instancing::Prims => {
             for (&id, t) in &g.agents {
-                let layer = layer_of(id);
+                let layer = layer_of(opts.manifest, id);
                 let l = match (opts.split_layers, layer) {
                     (true, Some(name)) => layer_files.entry(name.to_string()).or_insert_with(|| {
                         let mut l = LayerBuilder::new();
@@ -425,13 +515,13 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
                         l.prim("/World/Crowd", Specifier::Over, "");
                         l
                     }),
-                    _ => &mut root,
+                    _ => &mut *root,
                 };
-                instances += write_agent(l, crowd, id, t, layer, &times, &proto_names)?;
+                instances += write_agent(l, crowd, id, t, layer, times, proto_names)?;
             }
         }
         Instancing::PointInstancer => {
-            instances += write_point_instancers(&mut root, &g, &times, &proto_names)?;
+            instances += write_point_instancers(root, g, times, proto_names)?;
         }
     }
     // One collection per render layer on /World/Crowd.
@@ -439,7 +529,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
         let mut names = Vec::new();
         let mut members: BTreeMap<&str, Vec<String>> = BTreeMap::new();
         for &id in g.agents.keys() {
-            if let Some(layer) = layer_of(id) {
+            if let Some(layer) = layer_of(opts.manifest, id) {
                 members.entry(layer).or_default().push(format!("/World/Crowd/{}", agent_name(id)));
             }
         }
@@ -462,22 +552,36 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
             root.api_schemas(crowd_prim, &names);
         }
     }
+    Ok((layer_files, instances))
+}
 
-    write_camera(&mut root, crowd, &times)?;
-    write_lights(&mut root, &lights, groups.as_ref(), textures.dome_asset().as_deref());
-
-    // Files: per-layer files first, the root last.
+/// The file a split render layer is written to, beside `out`: `<stem>.<layer>.<ext>`.
+fn layer_file_name(out: &Path, layer: &str) -> String {
     let ext = out.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default();
     let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    // No output over an input: a texture folder or a layer file beside
-    // `out` may be a file the shot reads (the shot itself, a texture).
-    if encoding != UsdEncoding::Usdz {
-        let mut outputs: Vec<PathBuf> = textures.files.values().map(|(rel, _)| out.with_file_name(rel)).collect();
-        outputs.extend(textures.dome.iter().map(|(rel, _)| out.with_file_name(rel)));
-        outputs.extend(layer_files.keys().map(|layer| out.with_file_name(format!("{stem}.{layer}.{ext}"))));
-        outputs.push(out.to_path_buf());
-        crate::output::InputFiles::new(crowd.input_files()).check_all(outputs.iter().map(PathBuf::as_path))?;
-    }
+    format!("{stem}.{layer}.{ext}")
+}
+
+/// What [`write_files`] wrote.
+struct Written {
+    /// Files written, root last.
+    files: Vec<PathBuf>,
+    /// Bytes written.
+    bytes: u64,
+    /// Prims in all layers.
+    prims: usize,
+}
+
+/// Writes the files: textures and the dome's map (beside a text export, or
+/// into the package), the per-layer files, and the root last.
+fn write_files(
+    mut root: LayerBuilder,
+    layer_files: &BTreeMap<String, LayerBuilder>,
+    textures: &Textures,
+    dome: Option<&Dome>,
+    encoding: UsdEncoding,
+    out: &Path,
+) -> Result<Written> {
     let mut files = Vec::new();
     let mut bytes = 0u64;
     let mut prims = root.prim_count();
@@ -499,7 +603,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     }
     // The dome's map: beside a text export, the file as it is; in a
     // package, an OpenEXR (the file's bytes when it is one).
-    if let (Some((rel, map)), Some(dome)) = (&textures.dome, &lights.dome) {
+    if let (Some((rel, map)), Some(dome)) = (&textures.dome, dome) {
         match (encoding, map) {
             (UsdEncoding::Usdz, DomeMap::Copy) => package.push((rel.clone(), read_dome_file(&dome.file)?)),
             (UsdEncoding::Usdz, DomeMap::Exr) => package.push((rel.clone(), dome_exr(dome)?)),
@@ -513,8 +617,8 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
             }
         }
     }
-    for (layer, l) in &layer_files {
-        let name = format!("{stem}.{layer}.{ext}");
+    for (layer, l) in layer_files {
+        let name = layer_file_name(out, layer);
         let path = out.with_file_name(&name);
         let data = l.encode(encoding, &name)?;
         write_bytes(&path, &data)?;
@@ -528,17 +632,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     write_bytes(out, &data)?;
     bytes += data.len() as u64;
     files.push(out.to_path_buf());
-    Ok(UsdExportSummary {
-        agents: g.agents.len(),
-        frames: times.len(),
-        prototypes: proto_names.len(),
-        meshes: mesh_names.len(),
-        materials: mat_names.len(),
-        instances,
-        prims,
-        files,
-        bytes,
-    })
+    Ok(Written { files, bytes, prims })
 }
 
 /// The base colour textures an export writes, as PNG files in

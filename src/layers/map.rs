@@ -43,6 +43,10 @@ const WHITE: Rgba = [255, 255, 255, 255];
 const REMOVED: Rgba = [20, 20, 20, 255];
 const HIGHLIGHT: Rgba = [255, 214, 10, 255];
 
+/// An outline: its colour and width in pixels.
+#[derive(Clone, Copy)]
+struct Pen(Rgba, f32);
+
 /// Layer colours, nearest first: warm near, cool far.
 const PALETTE: [Rgba; 8] = [
     [255, 96, 72, 255],
@@ -85,8 +89,8 @@ impl Canvas {
         }
     }
 
-    #[allow(clippy::too_many_arguments)]
-    fn stroke_rect(&mut self, x: f32, y: f32, w: f32, h: f32, c: Rgba, width: f32, clip: Option<&Mask>) {
+    fn stroke_rect(&mut self, x: f32, y: f32, w: f32, h: f32, pen: Pen, clip: Option<&Mask>) {
+        let Pen(c, width) = pen;
         if let Some(r) = Rect::from_xywh(x, y, w.max(0.5), h.max(0.5)) {
             let path = PathBuilder::from_rect(r);
             let stroke = Stroke { width, ..Stroke::default() };
@@ -218,7 +222,7 @@ pub fn render_map(m: &Manifest, opts: &MapOptions) -> Result<Vec<u8>> {
 
     top_down(&mut cv, m, opts, left, (panel_w, panel_h), s, lh);
     camera_view(&mut cv, m, opts, right, (panel_w, panel_h), s, lh);
-    legend(&mut cv, m, pad, bottom + pad, s, lh, shown, more);
+    legend(&mut cv, m, LegendLayout { x: pad, y: bottom + pad, scale: s, line_height: lh, shown, more });
 
     cv.pm.encode_png().map_err(|e| Error::Usage(format!("cannot encode the layer map: {e}")))
 }
@@ -378,7 +382,7 @@ fn camera_view(cv: &mut Canvas, m: &Manifest, opts: &MapOptions, at: (f32, f32),
         let bw = (0.28 * bh).max(1.5);
         let col = layer_color(a.layer);
         if a.removed {
-            cv.stroke_rect(x - 0.5 * bw, y0, bw, bh, DIM, 1.0, clip);
+            cv.stroke_rect(x - 0.5 * bw, y0, bw, bh, Pen(DIM, 1.0), clip);
             cv.cross(x, y0 + 0.5 * bh, (0.5 * bw).max(2.0), WHITE, 1.0, clip);
             continue;
         }
@@ -386,11 +390,11 @@ fn camera_view(cv: &mut Canvas, m: &Manifest, opts: &MapOptions, at: (f32, f32),
             Lod::Full => cv.rect(x - 0.5 * bw, y0, bw, bh, col, clip),
             Lod::Proxy => {
                 cv.rect(x - 0.5 * bw, y0, bw, bh, with_alpha(col, 70), clip);
-                cv.stroke_rect(x - 0.5 * bw, y0, bw, bh, col, 1.0, clip);
+                cv.stroke_rect(x - 0.5 * bw, y0, bw, bh, Pen(col, 1.0), clip);
             }
         }
         if a.pinned {
-            cv.stroke_rect(x - 0.5 * bw - 1.5, y0 - 1.5, bw + 3.0, bh + 3.0, WHITE, 1.0, clip);
+            cv.stroke_rect(x - 0.5 * bw - 1.5, y0 - 1.5, bw + 3.0, bh + 3.0, Pen(WHITE, 1.0), clip);
         }
     }
     if let Some(a) = opts.highlight.and_then(|id| m.agent(id)) {
@@ -399,15 +403,30 @@ fn camera_view(cv: &mut Canvas, m: &Manifest, opts: &MapOptions, at: (f32, f32),
             let (x, y0, y1) = (fx + pf.0 * k, fy + ph.1 * k, fy + pf.1 * k);
             let bh = (y1 - y0).max(1.0);
             let bw = (0.28 * bh).max(1.5);
-            cv.stroke_rect(x - 0.5 * bw - 4.0, y0 - 4.0, bw + 8.0, bh + 8.0, [0, 0, 0, 255], 4.0, clip);
-            cv.stroke_rect(x - 0.5 * bw - 4.0, y0 - 4.0, bw + 8.0, bh + 8.0, HIGHLIGHT, 2.5, clip);
+            cv.stroke_rect(x - 0.5 * bw - 4.0, y0 - 4.0, bw + 8.0, bh + 8.0, Pen([0, 0, 0, 255], 4.0), clip);
+            cv.stroke_rect(x - 0.5 * bw - 4.0, y0 - 4.0, bw + 8.0, bh + 8.0, Pen(HIGHLIGHT, 2.5), clip);
         }
     }
-    cv.stroke_rect(fx, fy, fw, fh, DIM, 1.0, None);
+    cv.stroke_rect(fx, fy, fw, fh, Pen(DIM, 1.0), None);
 }
 
-#[allow(clippy::too_many_arguments)]
-fn legend(cv: &mut Canvas, m: &Manifest, x: f32, y: f32, s: u32, lh: f32, shown: usize, more: usize) {
+/// Where the legend goes and how many layer rows it lists.
+#[derive(Clone, Copy)]
+struct LegendLayout {
+    /// Top-left corner, pixels.
+    x: f32,
+    y: f32,
+    /// Text scale.
+    scale: u32,
+    /// Line height, pixels.
+    line_height: f32,
+    /// Layer rows shown, and layers left out for want of room.
+    shown: usize,
+    more: usize,
+}
+
+fn legend(cv: &mut Canvas, m: &Manifest, layout: LegendLayout) {
+    let LegendLayout { x, y, scale: s, line_height: lh, shown, more } = layout;
     let sw = (font::H * s) as f32;
     let tx = x + sw + (6 * s) as f32;
     let mut y = y;
@@ -438,7 +457,7 @@ fn legend(cv: &mut Canvas, m: &Manifest, x: f32, y: f32, s: u32, lh: f32, shown:
         y += lh;
     }
     cv.rect(x, y, sw, sw, SET, None);
-    cv.stroke_rect(x, y, sw, sw, DIM, 1.0, None);
+    cv.stroke_rect(x, y, sw, sw, Pen(DIM, 1.0), None);
     cv.text(tx, y, s, "SET     BACKGROUND. COMP: SET, THEN CROWD LAYERS FAR TO NEAR", TEXT);
     y += lh;
     // Key.

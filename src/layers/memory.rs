@@ -155,7 +155,7 @@ impl RenderFloor {
                     }
                 }
                 Some(s) => {
-                    let keys = crate::casting::motion::shutter_keys_at(
+                    let keys = crate::casting::steps::shutter_keys_at(
                         shot,
                         crowd.cache(),
                         crowd.casting(),

@@ -24,8 +24,8 @@ use obvhs::{
 };
 use rayon::prelude::*;
 
-use super::integrator::surface_alpha;
 use super::sampler::hash_words;
+use super::surface::surface_alpha;
 use super::wide::{dispatch, octant_inv4, Kernel, Packet, PacketWalk, Traversal, Walk, PACKET};
 use crate::scene::{AlphaMode, Instance, Library, Material, Mesh, SceneMotion};
 
@@ -458,24 +458,17 @@ impl BlasSet {
     }
 }
 
-/// Which obvhs tree the TLAS uses. Measured with `examples/peer_bench.rs`
-/// (single-thread bounce rays, 2026-12-01, Xeon with AVX-512): CwBvh traces
-/// 1.35x faster than Bvh2 at 11,000 instances and faster at every count we
-/// tried; its slower build (a few ms per 10,000 instances) never pays that
-/// back, so it is the only kind `Tlas::build` uses. Bvh2 stays for benchmarks.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Which obvhs tree the TLAS uses. CwBvh traces faster than Bvh2 at every
+/// instance count measured (`examples/peer_bench.rs`, docs/benchmarks.md),
+/// and its slower build never pays that back, so it is the default
+/// ([`super::Tracing`]). Bvh2 stays for benchmarks.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum TlasKind {
     /// Binary BVH, `fastest_build`.
     Bvh2,
     /// Compressed 8-wide BVH ([`tlas_build_params`]).
+    #[default]
     CwBvh,
-}
-
-impl TlasKind {
-    /// The tree `Tlas::build` uses for `instances` instances.
-    pub fn for_count(_instances: usize) -> TlasKind {
-        TlasKind::CwBvh
-    }
 }
 
 enum TlasTree {
@@ -500,12 +493,10 @@ struct TlasInstance {
 /// Up to this many TLAS leaves the tree is built with obvhs'
 /// `very_slow_build` (PLOC plus a full pass of reinsertion); above it with
 /// `fast_build`. Every TLAS leaf a ray enters costs a transform and a BLAS
-/// walk, so a tighter tree pays back many times over: at 11,000 and
-/// 110,000 leaves (the peer harness's crowds) single-thread primary rays
-/// were 1.10x and 1.13x and bounce rays 1.13x and 1.18x as fast, for
-/// 16 ms and 0.3 s more build per layer-frame (docs/benchmarks.md). Past
-/// this the build time would grow into a render's (a million agents
-/// render a frame in seconds), so those trees stay fast-built.
+/// walk, so a tighter tree pays back many times over its extra build time
+/// at crowd sizes (docs/benchmarks.md). Past this the build time would
+/// grow into a render's (a million agents render a frame in seconds), so
+/// those trees stay fast-built.
 pub(crate) const CAREFUL_TLAS_UP_TO: usize = 200_000;
 
 /// The build parameters of a TLAS of `leaves` leaves ([`CAREFUL_TLAS_UP_TO`]).
@@ -676,11 +667,10 @@ fn transform_ray(object_from_world: &Affine3A, r: &Ray, tmax: f32) -> Ray {
 }
 
 impl<'a> Tlas<'a> {
-    /// Builds the TLAS of `instances` with the tree kind suited to their
-    /// number. Instances with an unknown or empty mesh, a singular or
+    /// Builds the TLAS of `instances` with the default tree kind. Instances with an unknown or empty mesh, a singular or
     /// non-finite transform, or no visibility bits are left out.
     pub fn build(blas: &'a BlasSet, instances: &'a [Instance]) -> Tlas<'a> {
-        Self::build_with(blas, instances, TlasKind::for_count(instances.len()))
+        Self::build_with(blas, instances, TlasKind::CwBvh)
     }
 
     /// Builds the TLAS of a frame scene's instances, moving over the shutter
@@ -694,8 +684,8 @@ impl<'a> Tlas<'a> {
         lib: &'a Library,
         instances: &'a [Instance],
         motion: Option<&SceneMotion>,
+        kind: TlasKind,
     ) -> Tlas<'a> {
-        let kind = TlasKind::for_count(instances.len());
         let by_agent = instances.len() >= AGENT_CLUSTERS_FROM;
         let still = |_: usize, inst: &Instance, b: &Blas| world_bounds(&b.bounds(), &inst.world_from_object);
         let Some(motion) = motion.filter(|m| m.instances.len() == instances.len()) else {
@@ -875,7 +865,7 @@ impl<'a> Tlas<'a> {
             aabbs,
             moving,
             holes: None,
-            kernel: Kernel::detect(super::wide::traversal()),
+            kernel: Kernel::detect(Traversal::Wide),
             build_time: start.elapsed(),
         }
     }

@@ -13,6 +13,7 @@
 
 use std::f32::consts::{FRAC_1_PI, PI};
 
+use super::sampling::sample_cosine_hemisphere;
 use glam::{Vec2, Vec3};
 
 /// Smallest GGX alpha; below this the lobe is a near-delta that f32 handles badly.
@@ -55,29 +56,6 @@ impl ShadingFrame {
     pub fn to_world(&self, v: Vec3) -> Vec3 {
         self.s * v.x + self.t * v.y + self.n * v.z
     }
-}
-
-/// Concentric square-to-disk map (Shirley-Chiu) onto the unit disc: area
-/// preserving, so uniform `u` gives uniform points (lens and disc lights).
-#[inline]
-pub(crate) fn sample_concentric_disk(u: Vec2) -> Vec2 {
-    let o = 2.0 * u - Vec2::ONE;
-    if o.x == 0.0 && o.y == 0.0 {
-        Vec2::ZERO
-    } else if o.x.abs() > o.y.abs() {
-        let phi = PI / 4.0 * (o.y / o.x);
-        o.x * Vec2::new(phi.cos(), phi.sin())
-    } else {
-        let phi = PI / 2.0 - PI / 4.0 * (o.x / o.y);
-        o.y * Vec2::new(phi.cos(), phi.sin())
-    }
-}
-
-/// The concentric disc map lifted to the hemisphere (Malley's method).
-#[inline]
-pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
-    let d = sample_concentric_disk(u);
-    Vec3::new(d.x, d.y, (1.0 - d.length_squared()).max(0.0).sqrt())
 }
 
 #[inline]

@@ -45,7 +45,7 @@ use rayon::prelude::*;
 
 use super::accel::{BlasSet, Tlas};
 use super::cryptomatte::{CryptoNames, Cryptomatte, RankAccumulator, MATTES, RANKS};
-use super::integrator::{CameraBatch, Integrator, RayCounts, SampleResult};
+use super::integrator::{CameraBatch, Integrator, RayCounts, SampleResult, Tally};
 use super::wide::PACKET;
 use super::RenderSettings;
 use crate::error::{Error, Result};
@@ -261,11 +261,9 @@ struct PassOut<'p> {
     values: &'p mut [[f32; 3]],
 }
 
-#[allow(clippy::too_many_arguments)]
 fn render_pixel(
     integrator: &Integrator,
-    x: u32,
-    y: u32,
+    (x, y): (u32, u32),
     count: SampleCount,
     crypto: Option<&CryptoNames>,
     counts: &mut RayCounts,
@@ -290,9 +288,9 @@ fn render_pixel(
             &mut *p.split
         });
         let (r, offset) = if packets {
-            integrator.sample_pixel_batched(x, y, s, || count.batch_end(s), batch, counts, split)
+            integrator.sample_pixel_batched(x, y, s, || count.batch_end(s), batch, Tally { counts, split })
         } else {
-            integrator.sample_pixel(x, y, s, counts, split)
+            integrator.sample_pixel(x, y, s, Tally { counts, split })
         };
         if let Some(p) = &passes {
             // A sample the beauty drops (not finite) the passes drop too.
@@ -414,7 +412,9 @@ pub fn render_frame_with_cryptomatte(
         .build()
         .map_err(|e| Error::Usage(format!("cannot start {} render threads: {e}", settings.threads)))?;
     pool.install(|| {
-        let tlas = Tlas::build_scene(blas, lib, &scene.instances, scene.motion.as_ref());
+        let tracing = &settings.tracing;
+        let tlas = Tlas::build_scene(blas, lib, &scene.instances, scene.motion.as_ref(), tracing.tlas)
+            .with_traversal(tracing.traversal);
         let mut stats = RenderStats { tlas_build: tlas.build_time, ..Default::default() };
         let groups = if settings.passes.light_groups { Some(LightGroups::new(&scene.lights, lib)?) } else { None };
         let group_count = groups.as_ref().map_or(0, |g| g.names.len());
@@ -444,7 +444,7 @@ pub fn render_frame_with_cryptomatte(
                             split: &mut split,
                             values,
                         });
-                        pixels.push(render_pixel(&integrator, x, y, count, crypto, &mut counts, &mut batch, out));
+                        pixels.push(render_pixel(&integrator, (x, y), count, crypto, &mut counts, &mut batch, out));
                     }
                 }
                 if let Some(report) = progress {

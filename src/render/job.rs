@@ -6,7 +6,7 @@
 //! layer; only the TLAS is rebuilt per (frame, layer).
 
 use std::borrow::Cow;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::cache::AgentSample;
@@ -18,9 +18,9 @@ use crate::layers::Manifest;
 use crate::output::{layer_path, WriterLock, FULL_LAYER};
 use crate::render::colour::{self, Colourspace};
 use crate::render::cryptomatte::{CryptoNames, NameTables};
-use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, RenderSettings};
+use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, Film, RenderSettings, Tracing};
 use crate::scene::passes::PassSet;
-use crate::scene::{vis, Deform, FrameScene, Instance, InstanceMotion, SceneMotion, Space};
+use crate::scene::{vis, Camera, Deform, FrameScene, Instance, InstanceMotion, SceneMotion, Space};
 
 /// What to render.
 #[derive(Debug, Clone)]
@@ -61,6 +61,9 @@ pub struct RenderJob {
     /// in every pixel. `throng render` takes the shot's `render.adaptive`
     /// unless given `--spp`.
     pub adaptive: Option<crate::shot::Adaptive>,
+    /// How rays are traced: the product's default; benchmarks and tests
+    /// compare other choices (the same pixels on every one).
+    pub tracing: Tracing,
 }
 
 impl RenderJob {
@@ -92,6 +95,7 @@ impl RenderJob {
             colourspace: Colourspace::Rec709,
             passes: None,
             adaptive: None,
+            tracing: Tracing::default(),
         }
     }
 }
@@ -221,6 +225,24 @@ pub struct RenderedLayer {
     pub pass_bytes: Vec<(String, u64)>,
     /// Bytes of the EXR written (0 when skipped).
     pub file_bytes: u64,
+}
+
+impl RenderedLayer {
+    /// Layer `layer` of frame `frame` at `path`, left as a resumed job found it.
+    fn skipped(layer: &str, frame: i32, path: PathBuf) -> RenderedLayer {
+        RenderedLayer {
+            layer: layer.to_string(),
+            frame,
+            path,
+            skipped: true,
+            seconds: 0.0,
+            instances: 0,
+            peak_rss_bytes: None,
+            tlas_build_s: 0.0,
+            pass_bytes: Vec::new(),
+            file_bytes: 0,
+        }
+    }
 }
 
 /// Every rendered agent of a frame with its posed slots (world_from_slot):
@@ -581,14 +603,40 @@ pub(crate) fn remove_stale_temporaries(
     Ok(removed)
 }
 
-/// Renders every (frame, layer) of the job, reporting to `observer`. The
-/// crowd's library is in the job's colourspace and posed for its shutter.
-pub fn run<C: Space>(
+/// Claims the job's layer folders (one writer per file and per layer's
+/// settings), warning through `warn` of folders holding frames rendered
+/// otherwise, and removes temporaries a killed render left behind. The
+/// claims hold until they are dropped.
+fn claim_and_clean<C: Space>(
     crowd: &ShotCrowd<C>,
-    manifest: Option<&Manifest>,
     job: &RenderJob,
-    observer: &dyn RenderObserver,
-) -> Result<RenderReport> {
+    fingerprints: &std::collections::HashMap<&str, String>,
+    warn: &mut dyn FnMut(String) -> Result<()>,
+) -> Result<Vec<(String, WriterLock)>> {
+    let claims = claim_layer_folders(&crowd.shot().name, job, fingerprints)?;
+    for (layer, others) in other_settings(&crowd.shot().name, job, fingerprints) {
+        warn(format!(
+            "{} holds frames of layer {layer} rendered with other settings ({} of the nearest, first {}): the \
+             folder will mix two renders; render every frame again, or into another folder, to keep it whole",
+            job.out.join(&layer).display(),
+            others.len(),
+            others[0]
+        ))?;
+    }
+    let stale = remove_stale_temporaries(&crowd.shot().name, job, &claims)?;
+    if !stale.is_empty() {
+        warn(format!(
+            "removed {} stale temporary file(s) a killed render left behind (first: {})",
+            stale.len(),
+            stale[0].display()
+        ))?;
+    }
+    Ok(claims)
+}
+
+/// The job's choices against the crowd and manifest it renders: its
+/// colourspace and shutter are the crowd's, its layers and frames exist.
+fn check_job<C: Space>(crowd: &ShotCrowd<C>, manifest: Option<&Manifest>, job: &RenderJob) -> Result<()> {
     if C::COLOURSPACE != job.colourspace {
         return Err(Error::Usage(format!(
             "the job renders in {} but the crowd's library is in {}: convert the crowd (render::colour::into_acescg)",
@@ -603,13 +651,6 @@ pub fn run<C: Space>(
             crowd.poses().shutter()
         )));
     }
-    let mut warnings = Vec::new();
-    let mut warn = |text: String| -> Result<()> {
-        let told = observer.warning(&text);
-        warnings.push(text);
-        told
-    };
-    let [w, h] = job.resolution.unwrap_or(crowd.shot().render.resolution);
     for layer in &job.layers {
         let known = layer == FULL_LAYER || manifest.is_some_and(|m| m.comp_order.contains(layer));
         if !known {
@@ -627,6 +668,117 @@ pub fn run<C: Space>(
             )));
         }
     }
+    Ok(())
+}
+
+/// Whether `path` holds the layer-frame rendered as `fingerprint` says (a
+/// resumed job skips it); a file rendered otherwise is told of through `warn`.
+fn is_rendered(path: &Path, fingerprint: &str, warn: &mut dyn FnMut(String) -> Result<()>) -> Result<bool> {
+    Ok(match exr::read_layer(path) {
+        Ok((_, meta)) if meta.render_fingerprint == fingerprint => true,
+        Ok((_, meta)) => {
+            warn(format!(
+                    "resume: re-rendering {}: it was rendered with other settings \
+                     (renderFingerprint {}, now {fingerprint}: spp, resolution, seed, camera, lights, shutter, colourspace, Cryptomatte, compression or manifest differ)",
+                    path.display(),
+                    if meta.render_fingerprint.is_empty() { "none" } else { &meta.render_fingerprint },
+                ))?;
+            false
+        }
+        Err(_) => false,
+    })
+}
+
+/// The settings of layer `layer` of frame `frame`.
+fn layer_settings<C: Space>(
+    crowd: &ShotCrowd<C>,
+    manifest: Option<&Manifest>,
+    job: &RenderJob,
+    layer: &str,
+    frame: i32,
+    passes: &PassSet,
+) -> RenderSettings {
+    let [width, height] = job.resolution.unwrap_or(crowd.shot().render.resolution);
+    // The layer index keys the random streams, so layers are
+    // independent samples; `full` and `set` get fixed indices.
+    let index = manifest.and_then(|m| m.comp_order.iter().position(|l| l == layer)).unwrap_or(u32::MAX as usize) as u32;
+    RenderSettings {
+        width,
+        height,
+        spp: job.spp,
+        max_bounces: crowd.shot().render.max_bounces,
+        indirect_clamp: crowd.shot().render.indirect_clamp,
+        seed: crowd.shot().seed,
+        frame: frame as i64,
+        layer: index,
+        sky_visible: layer == FULL_LAYER || manifest.is_some_and(|m| *layer == m.set.name),
+        threads: job.threads,
+        passes: passes.clone(),
+        adaptive: job.adaptive,
+        tracing: job.tracing,
+        ..RenderSettings::default()
+    }
+}
+
+/// Drops what earlier frames built and `scene` does not trace (its later
+/// layers add to it): one frame's BLASes at a time, what the memory model
+/// (`layers::memory`) counts.
+fn keep_frame_blases(blas: &mut BlasSet, scene: &FrameScene) {
+    let meshes: std::collections::HashSet<u32> = scene.instances.iter().map(|i| i.mesh).collect();
+    let pairs: std::collections::HashSet<(u32, u32)> = scene.motion.as_ref().map_or_else(Default::default, |m| {
+        scene.instances.iter().zip(&m.instances).filter_map(|(i, k)| k.deform.map(|d| (i.mesh, d.mesh))).collect()
+    });
+    blas.retain(|m| meshes.contains(&m), |p| pairs.contains(&p));
+}
+
+/// The EXR header of layer `layer` of frame `frame`, rendered as
+/// `fingerprint` into `film` through `camera`.
+fn layer_meta<C: Space>(
+    crowd: &ShotCrowd<C>,
+    job: &RenderJob,
+    layer: &str,
+    frame: i32,
+    fingerprint: String,
+    film: &Film,
+    camera: &Camera,
+) -> exr::LayerMeta {
+    let [w, h] = job.resolution.unwrap_or(crowd.shot().render.resolution);
+    let (near, far) = film.depth_range().unwrap_or((0.1, 1000.0));
+    let (world_to_camera, world_to_ndc) = exr::camera_matrices(camera, w, h, near, far);
+    exr::LayerMeta {
+        shot: crowd.shot().name.clone(),
+        layer: layer.to_string(),
+        frame,
+        seed: crowd.shot().seed,
+        spp: job.adaptive.map_or(job.spp, |a| a.max_spp),
+        id_mapping: exr::ID_MAPPING.to_string(),
+        world_to_camera,
+        world_to_ndc,
+        near,
+        far,
+        fps: crowd.shot().frames.fps,
+        render_fingerprint: fingerprint,
+        shutter: job.shutter,
+        colourspace: job.colourspace,
+    }
+}
+
+/// Renders every (frame, layer) of the job, reporting to `observer`. The
+/// crowd's library is in the job's colourspace and posed for its shutter.
+pub fn run<C: Space>(
+    crowd: &ShotCrowd<C>,
+    manifest: Option<&Manifest>,
+    job: &RenderJob,
+    observer: &dyn RenderObserver,
+) -> Result<RenderReport> {
+    check_job(crowd, manifest, job)?;
+    let mut warnings = Vec::new();
+    let mut warn = |text: String| -> Result<()> {
+        let told = observer.warning(&text);
+        warnings.push(text);
+        told
+    };
+    let [w, h] = job.resolution.unwrap_or(crowd.shot().render.resolution);
     let passes = job.passes_of(crowd.shot())?;
     let channels = crate::layers::memory::FilmChannels {
         blurred: job.shutter.is_some(),
@@ -636,24 +788,7 @@ pub fn run<C: Space>(
     let fingerprints: std::collections::HashMap<&str, String> =
         job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
     // Held until the job returns: one writer per file and per layer's settings.
-    let claims = claim_layer_folders(&crowd.shot().name, job, &fingerprints)?;
-    for (layer, others) in other_settings(&crowd.shot().name, job, &fingerprints) {
-        warn(format!(
-            "{} holds frames of layer {layer} rendered with other settings ({} of the nearest, first {}): the \
-             folder will mix two renders; render every frame again, or into another folder, to keep it whole",
-            job.out.join(&layer).display(),
-            others.len(),
-            others[0]
-        ))?;
-    }
-    let stale = remove_stale_temporaries(&crowd.shot().name, job, &claims)?;
-    if !stale.is_empty() {
-        warn(format!(
-            "removed {} stale temporary file(s) a killed render left behind (first: {})",
-            stale.len(),
-            stale[0].display()
-        ))?;
-    }
+    let _claims = claim_and_clean(crowd, job, &fingerprints, &mut warn)?;
     // BLASes are built as layer-frames need them (and kept for later frames).
     let mut blas = BlasSet::lazy(crowd.library());
     let total = job.frames.len() * job.layers.len();
@@ -666,33 +801,9 @@ pub fn run<C: Space>(
         for layer in &job.layers {
             let path = layer_path(&job.out, &crowd.shot().name, layer, frame);
             let fingerprint = fingerprints.get(layer.as_str()).cloned().unwrap_or_default();
-            let complete = job.resume
-                && match exr::read_layer(&path) {
-                    Ok((_, meta)) if meta.render_fingerprint == fingerprint => true,
-                    Ok((_, meta)) => {
-                        warn(format!(
-                            "resume: re-rendering {}: it was rendered with other settings \
-                             (renderFingerprint {}, now {fingerprint}: spp, resolution, seed, camera, lights, shutter, colourspace, Cryptomatte, compression or manifest differ)",
-                            path.display(),
-                            if meta.render_fingerprint.is_empty() { "none" } else { &meta.render_fingerprint },
-                        ))?;
-                        false
-                    }
-                    Err(_) => false,
-                };
+            let complete = job.resume && is_rendered(&path, &fingerprint, &mut warn)?;
             if complete {
-                out.push(RenderedLayer {
-                    layer: layer.clone(),
-                    frame,
-                    path,
-                    skipped: true,
-                    seconds: 0.0,
-                    instances: 0,
-                    peak_rss_bytes: None,
-                    tlas_build_s: 0.0,
-                    pass_bytes: Vec::new(),
-                    file_bytes: 0,
-                });
+                out.push(RenderedLayer::skipped(layer, frame, path));
                 observer.layer_finished(RenderProgress { frame, layer, done: out.len() - 1, total }, true);
                 continue;
             }
@@ -727,42 +838,11 @@ pub fn run<C: Space>(
                 // before its trees are built (a million agents' slots).
                 (posed, moving) = (None, None);
             }
-            // The layer index keys the random streams, so layers are
-            // independent samples; `full` and `set` get fixed indices.
-            let index =
-                manifest.and_then(|m| m.comp_order.iter().position(|l| l == layer)).unwrap_or(u32::MAX as usize) as u32;
-            let settings = RenderSettings {
-                width: w,
-                height: h,
-                spp: job.spp,
-                max_bounces: crowd.shot().render.max_bounces,
-                indirect_clamp: crowd.shot().render.indirect_clamp,
-                seed: crowd.shot().seed,
-                frame: frame as i64,
-                layer: index,
-                sky_visible: layer == FULL_LAYER || manifest.is_some_and(|m| *layer == m.set.name),
-                threads: job.threads,
-                passes: passes.clone(),
-                adaptive: job.adaptive,
-                ..RenderSettings::default()
-            };
+            let settings = layer_settings(crowd, manifest, job, layer, frame, &passes);
             let pixels = (w as usize * h as usize).max(1);
             let report = |p: usize| observer.pixels(at, p as f64 / pixels as f64);
             if first_of_frame {
-                // Drop what earlier frames built and this one does not trace
-                // (its later layers add to it): one frame's BLASes at a time,
-                // what the memory model (`layers::memory`) counts.
-                let meshes: std::collections::HashSet<u32> = scene.instances.iter().map(|i| i.mesh).collect();
-                let pairs: std::collections::HashSet<(u32, u32)> =
-                    scene.motion.as_ref().map_or_else(Default::default, |m| {
-                        scene
-                            .instances
-                            .iter()
-                            .zip(&m.instances)
-                            .filter_map(|(i, k)| k.deform.map(|d| (i.mesh, d.mesh)))
-                            .collect()
-                    });
-                blas.retain(|m| meshes.contains(&m), |p| pairs.contains(&p));
+                keep_frame_blases(&mut blas, &scene);
                 first_of_frame = false;
             }
             blas.prepare(crowd.library(), scene.instances.iter().map(|i| i.mesh));
@@ -775,24 +855,7 @@ pub fn run<C: Space>(
                 names.as_ref(),
                 if observer.wants_pixels() { Some(&report) } else { None },
             )?;
-            let (near, far) = film.depth_range().unwrap_or((0.1, 1000.0));
-            let (world_to_camera, world_to_ndc) = exr::camera_matrices(&scene.camera, w, h, near, far);
-            let meta = exr::LayerMeta {
-                shot: crowd.shot().name.clone(),
-                layer: layer.clone(),
-                frame,
-                seed: crowd.shot().seed,
-                spp: job.adaptive.map_or(job.spp, |a| a.max_spp),
-                id_mapping: exr::ID_MAPPING.to_string(),
-                world_to_camera,
-                world_to_ndc,
-                near,
-                far,
-                fps: crowd.shot().frames.fps,
-                render_fingerprint: fingerprint,
-                shutter: job.shutter,
-                colourspace: job.colourspace,
-            };
+            let meta = layer_meta(crowd, job, layer, frame, fingerprint, &film, &scene.camera);
             let manifest = match job.cryptomatte {
                 CryptoOutput::Sidecar => exr::ManifestMode::Sidecar,
                 _ => exr::ManifestMode::Header,

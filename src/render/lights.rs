@@ -18,8 +18,8 @@
 //!
 //! Why groups: one pick among all lights spends a random share of each
 //! pixel's samples on each, so a sunlit surface under a sunny dome gets its
-//! sun in some samples and not others and speckles (10 % noise at 16 spp
-//! on an open plane, against 0.02 % under a sun lamp and uniform sky), and
+//! sun in some samples and not others and speckles (far noisier than a sun
+//! lamp under a uniform sky), and
 //! by power the sun and dome (what they pour onto the whole scene) dwarf a
 //! street lamp, which would all but never be picked for the points it lights.
 //!
@@ -27,11 +27,12 @@
 
 use std::f32::consts::PI;
 
-use glam::{DVec3, Vec2, Vec3};
+use glam::{Vec2, Vec3};
 
-use super::bsdf::{luminance, sample_concentric_disk, ShadingFrame};
+use super::bsdf::{luminance, ShadingFrame};
 use super::dome::{DomePart, DomeSampler, Lookup};
-use super::integrator::surface_emission;
+use super::sampling::{barycentrics, sample_concentric_disk, AliasTable, SphericalQuad, SphericalTriangle};
+use super::surface::surface_emission;
 use crate::scene::lights::{Light, LightKind, SceneLights};
 use crate::scene::passes::LightGroups;
 use crate::scene::{vis, FrameScene, Library, Sun};
@@ -152,55 +153,6 @@ pub(crate) struct AreaHit {
     pub(crate) pdf: f32,
     /// Its light group.
     pub(crate) group: u16,
-}
-
-/// Vose's alias table: picks index i with probability weight[i] / sum in
-/// O(1) from one uniform number. Built in f64, so the same weights give the
-/// same table on any machine.
-#[derive(Clone, Debug, Default)]
-struct AliasTable {
-    /// Probability of keeping bin i (else its alias).
-    keep: Vec<f32>,
-    alias: Vec<u32>,
-    /// Probability of each index.
-    pmf: Vec<f32>,
-}
-
-impl AliasTable {
-    fn new(weights: &[f64]) -> AliasTable {
-        let n = weights.len();
-        let total: f64 = weights.iter().sum();
-        if n == 0 || !(total > 0.0) {
-            return AliasTable::default();
-        }
-        let pmf: Vec<f64> = weights.iter().map(|w| w / total).collect();
-        let mut scaled: Vec<f64> = pmf.iter().map(|p| p * n as f64).collect();
-        let (mut small, mut large): (Vec<usize>, Vec<usize>) = (0..n).partition(|&i| scaled[i] < 1.0);
-        let mut keep = vec![1.0f32; n];
-        let mut alias: Vec<u32> = (0..n as u32).collect();
-        while let (Some(s), Some(&l)) = (small.pop(), large.last()) {
-            keep[s] = scaled[s] as f32;
-            alias[s] = l as u32;
-            scaled[l] -= 1.0 - scaled[s];
-            if scaled[l] < 1.0 {
-                large.pop();
-                small.push(l);
-            }
-        }
-        AliasTable { keep, alias, pmf: pmf.iter().map(|&p| p as f32).collect() }
-    }
-
-    /// The index `u` in [0, 1) picks.
-    fn pick(&self, u: f32) -> usize {
-        let n = self.keep.len();
-        let x = u * n as f32;
-        let i = (x as usize).min(n - 1);
-        if x - (i as f32) < self.keep[i] {
-            i
-        } else {
-            self.alias[i] as usize
-        }
-    }
 }
 
 /// The two groups of lights that next-event estimation samples apart
@@ -485,82 +437,8 @@ impl<'a> LightSampler<'a> {
             sources.push(Source::Local(light));
             group.push(light_group);
         }
-        let mut first_triangle = Vec::new();
-        if lib.materials.iter().any(|m| m.emission.max_element() > 0.0) {
-            first_triangle = vec![u32::MAX; scene.instances.len()];
-            for (i, inst) in scene.instances.iter().enumerate() {
-                let Some(m) = lib.materials.get(inst.material as usize) else { continue };
-                if inst.visibility & vis::INDIRECT == 0 || !(m.emission.max_element() > 0.0) {
-                    continue;
-                }
-                let Some(mesh) = lib.meshes.get(inst.mesh as usize) else { continue };
-                let det = inst.world_from_object.matrix3.determinant();
-                first_triangle[i] = sources.len() as u32;
-                let material_group = lg(&|g| g.material(inst.material));
-                for (t, tri) in mesh.indices.chunks_exact(3).enumerate() {
-                    let p = [0, 1, 2].map(|j| {
-                        let k = tri[j] as usize;
-                        inst.world_from_object.transform_point3(mesh.positions.get(k).copied().unwrap_or_default())
-                    });
-                    let cross = (p[1] - p[0]).cross(p[2] - p[0]);
-                    // glTF: a mirroring transform flips which winding is the front.
-                    let n = (cross * det.signum()).normalize_or_zero();
-                    let area = 0.5 * cross.length();
-                    let p_t = if n == Vec3::ZERO || !(area > 0.0) {
-                        0.0
-                    } else {
-                        PI as f64 * luminance(m.emission) as f64 * area as f64
-                    };
-                    power.push(p_t);
-                    group.push(material_group);
-                    sources.push(Source::Triangle(Triangle {
-                        p,
-                        n,
-                        area,
-                        mesh: inst.mesh,
-                        triangle: t as u32,
-                        material: inst.material,
-                    }));
-                }
-            }
-        }
-        let mut tables: [GroupTable; 3] = Default::default();
-        let mut pmf = vec![0.0; sources.len()];
-        let mut slot = vec![0u32; sources.len()];
-        let mut groups = Vec::new();
-        for (g, group) in LightGroup::ALL.into_iter().enumerate() {
-            let members: Vec<u32> =
-                (0..sources.len() as u32).filter(|&i| LightGroup::of(&sources[i as usize]) == group).collect();
-            let weights: Vec<f64> = members.iter().map(|&i| power[i as usize]).collect();
-            let table = AliasTable::new(&weights);
-            if table.pmf.is_empty() {
-                continue;
-            }
-            for (&i, &p) in members.iter().zip(&table.pmf) {
-                pmf[i as usize] = p;
-            }
-            for (k, &i) in members.iter().enumerate() {
-                slot[i as usize] = k as u32;
-            }
-            let reach = if group == LightGroup::Local && members.len() > 1 && members.len() <= SHADED_PICK_MAX {
-                members
-                    .iter()
-                    .map(|&i| match &sources[i as usize] {
-                        Source::Local(light) => Reach::of_local(light),
-                        Source::Triangle(tri) => Some(Reach::of_triangle(
-                            tri,
-                            lib.materials.get(tri.material as usize).map_or(Vec3::ZERO, |m| m.emission),
-                        )),
-                        _ => None,
-                    })
-                    .collect::<Option<Vec<Reach>>>()
-                    .unwrap_or_default()
-            } else {
-                Vec::new()
-            };
-            groups.push(group);
-            tables[g] = GroupTable { sources: members, table, reach };
-        }
+        let first_triangle = emissive_triangles(lib, scene, light_groups, &mut sources, &mut power, &mut group);
+        let (tables, pmf, slot, groups) = group_tables(lib, &sources, &power);
         LightSampler {
             lib,
             tables,
@@ -829,88 +707,107 @@ impl<'a> LightSampler<'a> {
     }
 }
 
-/// Solid angles (steradians) between which an emissive triangle is sampled
-/// by solid angle from a shading point, by area outside them: below, it is
-/// small enough that area sampling is as good and the spherical arithmetic
-/// loses precision; above, the point is all but in its plane.
-const SPHERICAL_MIN: f64 = 3e-4;
-const SPHERICAL_MAX: f64 = 6.22;
-
-/// A triangle as seen from a point: its corners' directions, the angle at
-/// the first, and the solid angle. Sampled uniformly by Arvo's method
-/// ("Stratified sampling of spherical triangles", 1995), in f64.
-struct SphericalTriangle {
-    a: DVec3,
-    b: DVec3,
-    c: DVec3,
-    alpha: f64,
-    area: f64,
-}
-
-/// The angle between unit vectors, precise near 0 and pi.
-fn angle_between(x: DVec3, y: DVec3) -> f64 {
-    if x.dot(y) < 0.0 {
-        std::f64::consts::PI - 2.0 * ((x + y).length() / 2.0).min(1.0).asin()
-    } else {
-        2.0 * ((y - x).length() / 2.0).min(1.0).asin()
-    }
-}
-
-impl SphericalTriangle {
-    /// The triangle `v` seen from `p`; `None` (sample by area) outside
-    /// [`SPHERICAL_MIN`, `SPHERICAL_MAX`] or degenerate.
-    fn new(p: Vec3, v: &[Vec3; 3]) -> Option<SphericalTriangle> {
-        let p = p.as_dvec3();
-        let [a, b, c] = v.map(|q| (q.as_dvec3() - p).normalize_or_zero());
-        let n_ab = a.cross(b).normalize_or_zero();
-        let n_bc = b.cross(c).normalize_or_zero();
-        let n_ca = c.cross(a).normalize_or_zero();
-        if [a, b, c, n_ab, n_bc, n_ca].contains(&DVec3::ZERO) {
-            return None;
+/// Adds every emissive triangle of `scene`'s instances that bounce rays can
+/// see to `sources`, with its `power` and light `group`. Returns the index
+/// of each instance's first triangle source (`u32::MAX` for none; empty
+/// when no material emits).
+fn emissive_triangles<'a>(
+    lib: &Library,
+    scene: &FrameScene,
+    light_groups: Option<&LightGroups>,
+    sources: &mut Vec<Source<'a>>,
+    power: &mut Vec<f64>,
+    group: &mut Vec<u16>,
+) -> Vec<u32> {
+    let lg = |f: &dyn Fn(&LightGroups) -> u16| light_groups.map_or(0, f);
+    let mut first_triangle = Vec::new();
+    if lib.materials.iter().any(|m| m.emission.max_element() > 0.0) {
+        first_triangle = vec![u32::MAX; scene.instances.len()];
+        for (i, inst) in scene.instances.iter().enumerate() {
+            let Some(m) = lib.materials.get(inst.material as usize) else { continue };
+            if inst.visibility & vis::INDIRECT == 0 || !(m.emission.max_element() > 0.0) {
+                continue;
+            }
+            let Some(mesh) = lib.meshes.get(inst.mesh as usize) else { continue };
+            let det = inst.world_from_object.matrix3.determinant();
+            first_triangle[i] = sources.len() as u32;
+            let material_group = lg(&|g| g.material(inst.material));
+            for (t, tri) in mesh.indices.chunks_exact(3).enumerate() {
+                let p = [0, 1, 2].map(|j| {
+                    let k = tri[j] as usize;
+                    inst.world_from_object.transform_point3(mesh.positions.get(k).copied().unwrap_or_default())
+                });
+                let cross = (p[1] - p[0]).cross(p[2] - p[0]);
+                // glTF: a mirroring transform flips which winding is the front.
+                let n = (cross * det.signum()).normalize_or_zero();
+                let area = 0.5 * cross.length();
+                let p_t = if n == Vec3::ZERO || !(area > 0.0) {
+                    0.0
+                } else {
+                    PI as f64 * luminance(m.emission) as f64 * area as f64
+                };
+                power.push(p_t);
+                group.push(material_group);
+                sources.push(Source::Triangle(Triangle {
+                    p,
+                    n,
+                    area,
+                    mesh: inst.mesh,
+                    triangle: t as u32,
+                    material: inst.material,
+                }));
+            }
         }
-        let alpha = angle_between(n_ab, -n_ca);
-        let beta = angle_between(n_bc, -n_ab);
-        let gamma = angle_between(n_ca, -n_bc);
-        let area = alpha + beta + gamma - std::f64::consts::PI;
-        (SPHERICAL_MIN..=SPHERICAL_MAX).contains(&area).then_some(SphericalTriangle { a, b, c, alpha, area })
     }
-
-    /// A direction into the triangle, uniform in solid angle for `u` uniform.
-    fn sample(&self, u: Vec2) -> DVec3 {
-        let (u0, u1) = (u.x as f64, u.y as f64);
-        let gram_schmidt = |v: DVec3, w: DVec3| (v - v.dot(w) * w).normalize_or_zero();
-        // The sub-triangle of area u0 x area: its corner c' on the arc from a to c.
-        let (sin_ap, cos_ap) = (std::f64::consts::PI + u0 * self.area).sin_cos();
-        let (sin_alpha, cos_alpha) = self.alpha.sin_cos();
-        let sin_phi = sin_ap * cos_alpha - cos_ap * sin_alpha;
-        let cos_phi = cos_ap * cos_alpha + sin_ap * sin_alpha;
-        let k1 = cos_phi + cos_alpha;
-        let k2 = sin_phi - sin_alpha * self.a.dot(self.b);
-        let cos_bp = ((k2 + (k2 * cos_phi - k1 * sin_phi) * cos_alpha) / ((k2 * sin_phi + k1 * cos_phi) * sin_alpha))
-            .clamp(-1.0, 1.0);
-        let sin_bp = (1.0 - cos_bp * cos_bp).max(0.0).sqrt();
-        let cp = cos_bp * self.a + sin_bp * gram_schmidt(self.c, self.a);
-        // Then along the arc from b to c'.
-        let cos_t = 1.0 - u1 * (1.0 - cp.dot(self.b));
-        let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-        (cos_t * self.b + sin_t * gram_schmidt(cp, self.b)).normalize()
-    }
+    first_triangle
 }
 
-/// The barycentrics (of the second and third corners) of point `q` in the
-/// plane of triangle `v`, clamped into it.
-fn barycentrics(v: &[Vec3; 3], q: DVec3) -> (f32, f32) {
-    let v0 = v[0].as_dvec3();
-    let (e1, e2, r) = (v[1].as_dvec3() - v0, v[2].as_dvec3() - v0, q - v0);
-    let (d00, d01, d11) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
-    let (d20, d21) = (r.dot(e1), r.dot(e2));
-    let den = d00 * d11 - d01 * d01;
-    if !(den > 0.0) {
-        return (0.0, 0.0);
+/// The alias table of each group of `sources` picked by `power` (with, for
+/// a small local group, each light's reach), each source's probability in
+/// its group's table and its slot there, and the groups that have light.
+fn group_tables(
+    lib: &Library,
+    sources: &[Source<'_>],
+    power: &[f64],
+) -> ([GroupTable; 3], Vec<f32>, Vec<u32>, Vec<LightGroup>) {
+    let mut tables: [GroupTable; 3] = Default::default();
+    let mut pmf = vec![0.0; sources.len()];
+    let mut slot = vec![0u32; sources.len()];
+    let mut groups = Vec::new();
+    for (g, group) in LightGroup::ALL.into_iter().enumerate() {
+        let members: Vec<u32> =
+            (0..sources.len() as u32).filter(|&i| LightGroup::of(&sources[i as usize]) == group).collect();
+        let weights: Vec<f64> = members.iter().map(|&i| power[i as usize]).collect();
+        let table = AliasTable::new(&weights);
+        if table.pmf.is_empty() {
+            continue;
+        }
+        for (&i, &p) in members.iter().zip(&table.pmf) {
+            pmf[i as usize] = p;
+        }
+        for (k, &i) in members.iter().enumerate() {
+            slot[i as usize] = k as u32;
+        }
+        let reach = if group == LightGroup::Local && members.len() > 1 && members.len() <= SHADED_PICK_MAX {
+            members
+                .iter()
+                .map(|&i| match &sources[i as usize] {
+                    Source::Local(light) => Reach::of_local(light),
+                    Source::Triangle(tri) => Some(Reach::of_triangle(
+                        tri,
+                        lib.materials.get(tri.material as usize).map_or(Vec3::ZERO, |m| m.emission),
+                    )),
+                    _ => None,
+                })
+                .collect::<Option<Vec<Reach>>>()
+                .unwrap_or_default()
+        } else {
+            Vec::new()
+        };
+        groups.push(group);
+        tables[g] = GroupTable { sources: members, table, reach };
     }
-    let b1 = ((d11 * d20 - d01 * d21) / den).clamp(0.0, 1.0);
-    let b2 = ((d00 * d21 - d01 * d20) / den).clamp(0.0, 1.0 - b1);
-    (b1 as f32, b2 as f32)
+    (tables, pmf, slot, groups)
 }
 
 /// Power of a local light (luminance), for the pick.
@@ -948,15 +845,14 @@ pub(crate) fn spot_falloff(cos_angle: f32, outer: f32, blend: f32) -> f32 {
 }
 
 /// Samples a point, spot, rect, disk or sphere light from `p` (pdf without the pick).
-/// A rect light seen from `p` as two spherical triangles (split on a
-/// diagonal), sampled together uniformly in the solid angle they span;
-/// `None` (sample by area) where either half is outside the bounds
-/// [`SphericalTriangle::new`] keeps, as for emissive triangles.
-fn spherical_rect(light: &Light, size: Vec2, p: Vec3) -> Option<(SphericalTriangle, SphericalTriangle)> {
+/// A rect light seen from `p` as a spherical quad; `None` (sample by area)
+/// where either half is outside the bounds [`SphericalTriangle::new`]
+/// keeps, as for emissive triangles.
+fn spherical_rect(light: &Light, size: Vec2, p: Vec3) -> Option<SphericalQuad> {
     let h = 0.5 * size;
-    let [a, b, c, d] = [Vec2::new(-h.x, -h.y), Vec2::new(h.x, -h.y), h, Vec2::new(-h.x, h.y)]
+    let corners = [Vec2::new(-h.x, -h.y), Vec2::new(h.x, -h.y), h, Vec2::new(-h.x, h.y)]
         .map(|q| light.world_from_light.transform_point3(Vec3::new(q.x, q.y, 0.0)));
-    Some((SphericalTriangle::new(p, &[a, b, c])?, SphericalTriangle::new(p, &[a, c, d])?))
+    SphericalQuad::new(p, corners)
 }
 
 /// The cosine at a planar light (rect, disc) between its emitting side and
@@ -968,23 +864,11 @@ fn emitting_cos(light: &Light, wi: Vec3) -> Option<f32> {
     (cos > 1e-6).then_some(cos)
 }
 
-/// A sample of a rect light uniform in the solid angle its two halves
-/// ([`spherical_rect`]) span from `p`.
-fn sample_spherical_rect(
-    light: &Light,
-    p: Vec3,
-    u: Vec2,
-    halves: (SphericalTriangle, SphericalTriangle),
-) -> Option<LightSample> {
-    let (first, second) = halves;
+/// A sample of a rect light uniform in the solid angle it spans from `p`
+/// ([`spherical_rect`]).
+fn sample_spherical_rect(light: &Light, p: Vec3, u: Vec2, quad: SphericalQuad) -> Option<LightSample> {
     let centre = light.position();
-    // One half or the other in proportion to its solid angle, from u.x
-    // (rescaled, so the pixel's stratification carries into the half).
-    let total = first.area + second.area;
-    let share = first.area / total;
-    let ux = u.x as f64;
-    let (half, ux) = if ux < share { (&first, ux / share) } else { (&second, (ux - share) / (1.0 - share)) };
-    let w = half.sample(Vec2::new(ux as f32, u.y));
+    let w = quad.sample(u);
     let n = light.facing().as_dvec3();
     let t = (centre.as_dvec3() - p.as_dvec3()).dot(n) / w.dot(n);
     if !(t > 0.0 && t.is_finite()) {
@@ -996,7 +880,7 @@ fn sample_spherical_rect(
         wi,
         distance: t as f32,
         radiance: light.emission,
-        pdf: (1.0 / total) as f32,
+        pdf: (1.0 / quad.area()) as f32,
         delta: false,
         group: 0,
     })
@@ -1025,8 +909,8 @@ fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
         }
         LightKind::Rect { .. } | LightKind::Disk { .. } => {
             if let LightKind::Rect { size } = light.kind {
-                if let Some(halves) = spherical_rect(light, size, p) {
-                    return sample_spherical_rect(light, p, u, halves);
+                if let Some(quad) = spherical_rect(light, size, p) {
+                    return sample_spherical_rect(light, p, u, quad);
                 }
             }
             let (local, area) = match light.kind {
@@ -1114,7 +998,7 @@ fn intersect_sized(light: &Light, origin: Vec3, dir: Vec3, tmax: f32, from: Vec3
             };
             let pdf = match light.kind {
                 LightKind::Rect { size } => match spherical_rect(light, size, from) {
-                    Some((first, second)) => (1.0 / (first.area + second.area)) as f32,
+                    Some(quad) => (1.0 / quad.area()) as f32,
                     None => t * t / (area * cos_l.abs()),
                 },
                 _ => t * t / (area * cos_l.abs()),
@@ -1147,20 +1031,6 @@ fn intersect_sized(light: &Light, origin: Vec3, dir: Vec3, tmax: f32, from: Vec3
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn alias_table_picks_in_proportion() {
-        let table = AliasTable::new(&[1.0, 3.0, 0.0, 4.0]);
-        let n = 80_000;
-        let mut counts = [0u32; 4];
-        for i in 0..n {
-            counts[table.pick((i as f32 + 0.5) / n as f32)] += 1;
-        }
-        for (c, w) in counts.iter().zip([1.0, 3.0, 0.0, 4.0]) {
-            assert!((*c as f32 / n as f32 - w / 8.0).abs() < 0.002, "{counts:?}");
-        }
-        assert_eq!(table.pmf, [0.125, 0.375, 0.0, 0.5]);
-    }
 
     use crate::scene::Sky;
     use crate::scene::{Camera, Instance, InstanceAgent, Material, Mesh};

@@ -1,5 +1,8 @@
-//! The renderer core: a CPU path tracer over a two-level BVH, working purely
-//! from [`crate::scene`] types.
+//! The renderer: a CPU path tracer over a two-level BVH. Its core (`accel`,
+//! `integrator`, `surface`, `lights`, `film`) traces [`crate::scene`] types
+//! alone; `job` is where it meets the rest of the pipeline (the cast crowd,
+//! the layer manifest, the shot, output names) to render a shot's frames
+//! and layers into files.
 //!
 //! Typical use, per run and per frame:
 //! ```ignore
@@ -12,6 +15,7 @@
 
 pub mod accel;
 pub mod bsdf;
+pub mod camera;
 pub mod colour;
 pub mod cryptomatte;
 pub mod dome;
@@ -21,6 +25,8 @@ pub mod integrator;
 pub mod job;
 pub(crate) mod lights;
 pub(crate) mod sampler;
+pub mod sampling;
+pub(crate) mod surface;
 pub mod wide;
 
 pub use accel::{BlasSet, Tlas};
@@ -61,6 +67,28 @@ pub struct RenderSettings {
     pub passes: crate::scene::passes::PassSet,
     /// Adaptive sampling (`spp` is then not used): see [`film`]'s docs.
     pub adaptive: Option<crate::shot::Adaptive>,
+    /// How rays are traced (the image is the same bits on every choice).
+    pub tracing: Tracing,
+}
+
+/// How rays are traced: choices that change the speed of a render, never
+/// its pixels. The product always uses the default; benchmarks and tests
+/// set them to compare one choice against another in one process.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Tracing {
+    /// The BVH traversal kernel ([`wide`]).
+    pub traversal: wide::Traversal,
+    /// Each pixel's camera rays traced together as packets
+    /// ([`Tlas::intersect_stream`]), or one at a time.
+    pub camera_packets: bool,
+    /// The tree the TLAS is built as.
+    pub tlas: accel::TlasKind,
+}
+
+impl Default for Tracing {
+    fn default() -> Self {
+        Tracing { traversal: wide::Traversal::Wide, camera_packets: true, tlas: accel::TlasKind::CwBvh }
+    }
 }
 
 impl Default for RenderSettings {
@@ -79,6 +107,7 @@ impl Default for RenderSettings {
             diffuse_only: false,
             passes: crate::scene::passes::PassSet::default(),
             adaptive: None,
+            tracing: Tracing::default(),
         }
     }
 }

@@ -29,13 +29,11 @@
 //! AVX2 and AVX-512, and their intrinsics are safe functions), so the
 //! crate's `forbid(unsafe_code)` holds.
 
-use std::sync::atomic::{AtomicU8, Ordering};
-
 use obvhs::cwbvh::{node::CwBvhNode, CwBvh};
 use obvhs::ray::Ray;
 
-/// Which BVH traversal the trees use.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Which BVH traversal the trees use ([`super::Tracing`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Traversal {
     /// obvhs' own `ray_traverse` (its node test is two 4-wide SSE halves).
     Obvhs,
@@ -43,32 +41,11 @@ pub enum Traversal {
     Scalar,
     /// Ours, the widest kernel this CPU has (AVX-512, else AVX2, else the
     /// scalar kernel).
+    #[default]
     Wide,
     /// Ours, 8-wide AVX2 even where AVX-512 is present (the scalar kernel
     /// where AVX2 is absent): to test and measure the AVX2 path on any CPU.
     Avx2,
-}
-
-/// The traversal trees built from now on use (the default, [`Traversal::Wide`], unless
-/// a benchmark has chosen another with [`set_traversal`]).
-static CHOSEN: AtomicU8 = AtomicU8::new(2);
-
-/// Chooses the traversal of the trees built from now on, process-wide: for
-/// benchmarks comparing kernels in one binary. Renders are the same on
-/// every choice (see the module notes).
-#[doc(hidden)]
-pub fn set_traversal(t: Traversal) {
-    CHOSEN.store(t as u8, Ordering::Relaxed);
-}
-
-/// The traversal chosen by [`set_traversal`] (default [`Traversal::Wide`]).
-pub fn traversal() -> Traversal {
-    match CHOSEN.load(Ordering::Relaxed) {
-        0 => Traversal::Obvhs,
-        1 => Traversal::Scalar,
-        3 => Traversal::Avx2,
-        _ => Traversal::Wide,
-    }
 }
 
 /// The kernel `t` resolves to on this CPU: "obvhs", "scalar", "avx2" or "avx512".
@@ -87,12 +64,9 @@ pub(crate) enum Kernel {
     /// triangle tests) compiled for AVX-512 (x86-64-v4). Why not a 16-lane
     /// test: a node has eight children, so 16 lanes means each child's near
     /// planes in the low half and far planes in the high half (one multiply
-    /// and one add per axis instead of two); on an AMD EPYC (Zen 4, whose
-    /// AVX-512 units are 256 bits wide) that traced 0.93x the AVX2 kernel's
-    /// rays per second, and an 8-lane test with its compare into a mask
-    /// register rendered in 1.02x this kernel's time; on an Intel Xeon
-    /// (Emerald Rapids, full-width 512-bit units) the 16-lane test traced
-    /// 0.97x the primary and 0.98x the bounce rays (docs/benchmarks.md).
+    /// and one add per axis instead of two), which was no faster on the CPUs
+    /// measured, nor was an 8-lane test with its compare into a mask
+    /// register (docs/benchmarks.md).
     #[cfg(target_arch = "x86_64")]
     Avx512(pulp::x86::V4),
 }
@@ -284,7 +258,7 @@ fn node_ray(node: &CwBvhNode, ray: &Ray) -> ([f32; 3], [f32; 3]) {
 
 /// [`node_ray`] in one SSE step per term (the same multiply and subtract
 /// per axis). It runs at every node test, where the scalar form's shifts,
-/// moves and products took 1.75 % more of a render's instructions.
+/// moves and products cost a measurable share of a render's instructions.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn node_ray_lanes(s: pulp::x86::V3, node: &CwBvhNode, ray: &Ray) -> ([f32; 4], [f32; 4]) {

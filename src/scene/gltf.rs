@@ -24,7 +24,7 @@ use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use glam::{Affine3A, Mat4, Quat, Vec2, Vec3, Vec4};
+use glam::{Affine3A, Mat3, Mat4, Quat, Vec2, Vec3, Vec4};
 use gltf::accessor::{Accessor, DataType, Dimensions};
 
 use crate::error::{Error, Result};
@@ -1205,6 +1205,55 @@ pub(crate) fn quat_from_gltf(q: [f32; 4]) -> Quat {
     } else {
         Quat::IDENTITY
     }
+}
+
+/// A coordinate axis of a source file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+pub enum Axis {
+    /// +X.
+    #[serde(rename = "+x")]
+    PosX,
+    /// -X.
+    #[serde(rename = "-x")]
+    NegX,
+    /// +Y.
+    #[serde(rename = "+y")]
+    PosY,
+    /// -Y.
+    #[serde(rename = "-y")]
+    NegY,
+    /// +Z.
+    #[serde(rename = "+z")]
+    PosZ,
+    /// -Z.
+    #[serde(rename = "-z")]
+    NegZ,
+}
+
+/// The unit vector along a file's axis `a`.
+fn axis_vector(a: Axis) -> Vec3 {
+    match a {
+        Axis::PosX => Vec3::X,
+        Axis::NegX => Vec3::NEG_X,
+        Axis::PosY => Vec3::Y,
+        Axis::NegY => Vec3::NEG_Y,
+        Axis::PosZ => Vec3::Z,
+        Axis::NegZ => Vec3::NEG_Z,
+    }
+}
+
+/// The rotation taking a file's `up` to +Y and `forward` to +Z (a rig's
+/// or a wardrobe part's axes as the shot or wardrobe names them).
+pub(crate) fn orientation(path: &Path, up: Axis, forward: Axis) -> Result<Quat> {
+    let (u, f) = (axis_vector(up), axis_vector(forward));
+    if u.dot(f).abs() > 0.5 {
+        return Err(
+            Error::invalid(path, format!("forward {forward:?} is along up {up:?}; they must differ")).field("forward")
+        );
+    }
+    // Columns (right, up, forward) of the file's frame; its transpose maps them onto X, Y, Z.
+    let frame = Mat3::from_cols(u.cross(f), u, f);
+    Ok(Quat::from_mat3(&frame.transpose()))
 }
 
 #[cfg(test)]

@@ -259,28 +259,8 @@ impl RigKind {
     }
 }
 
-/// A coordinate axis of a source file.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-pub enum Axis {
-    /// +X.
-    #[serde(rename = "+x")]
-    PosX,
-    /// -X.
-    #[serde(rename = "-x")]
-    NegX,
-    /// +Y.
-    #[serde(rename = "+y")]
-    PosY,
-    /// -Y.
-    #[serde(rename = "-y")]
-    NegY,
-    /// +Z.
-    #[serde(rename = "+z")]
-    PosZ,
-    /// -Z.
-    #[serde(rename = "-z")]
-    NegZ,
-}
+/// A coordinate axis of a source file (it is the glTF reader's: `orientation` reads it).
+pub use crate::scene::gltf::Axis;
 
 /// Largest pose error of a skinned rig, metres, when the shot gives no
 /// `pose_error_max` (docs/wardrobes.md, "Pose instancing").

@@ -20,8 +20,9 @@ use super::{
     AgentSpec, Cycle, CycleTiming, Model, Obstacle, SimScene, Target, Wall, WallShape, Weights, DEFAULT_FPS,
     MAX_AGENTS, MAX_FRAMES, MAX_RIG_CYCLES, MAX_TARGETS,
 };
+use crate::casting::kind::{declared_in_sim, is_character_rig};
 use crate::casting::rig::Rig;
-use crate::casting::skin::{is_character_rig, SkinnedRig, StrideFrom};
+use crate::casting::skin::{SkinnedRig, StrideFrom};
 use crate::error::{Error, Result};
 use crate::shot::{Axis, RigKind, RigRef, SkinOptions};
 
@@ -174,7 +175,7 @@ impl RawRig {
             file: base.join(&t.file),
             schemes: BTreeMap::new(),
             height_jitter: 0.0,
-            kind: t.kind.or(skin_keys.then_some(RigKind::Skinned)),
+            kind: declared_in_sim(t.kind, skin_keys),
             skin: SkinOptions {
                 rigid: RigKind::rigid(t.kind),
                 cycles: t.cycles.clone(),
@@ -212,7 +213,10 @@ struct RawTarget {
 #[serde(deny_unknown_fields)]
 struct RawObstacle {
     #[serde(default)]
-    #[allow(dead_code)] // for the reader of the file
+    #[allow(
+        dead_code,
+        reason = "read so the file may name it; a name documents the file, the simulation never uses it"
+    )]
     name: Option<String>,
     radius: f32,
     center: Option<[f32; 2]>,
@@ -231,7 +235,10 @@ struct RawKey {
 #[serde(deny_unknown_fields)]
 struct RawWall {
     #[serde(default)]
-    #[allow(dead_code)] // for the reader of the file
+    #[allow(
+        dead_code,
+        reason = "read so the file may name it; a name documents the file, the simulation never uses it"
+    )]
     name: Option<String>,
     from: Option<[f32; 2]>,
     to: Option<[f32; 2]>,

@@ -1,6 +1,6 @@
-//! Keyed random numbers: every draw is a pure function of
-//! (seed, agent id, purpose, counter), so results never depend on iteration
-//! order, thread count, or which other agents exist.
+//! The simulation's keyed random numbers: its purposes, numbered, over the
+//! shared keyed draws of [`crate::seed`] (a pure function of (seed, agent
+//! id, purpose, counter)).
 
 /// What a draw is for; each purpose gets its own stream.
 #[derive(Clone, Copy, Debug)]
@@ -20,24 +20,14 @@ pub(crate) enum Purpose {
     NextCycle = 6,
 }
 
-fn splitmix(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
 /// 64 random bits for (seed, id, purpose, counter).
 pub(crate) fn bits(seed: u64, id: u32, purpose: Purpose, counter: i64) -> u64 {
-    let mut h = splitmix(seed);
-    h = splitmix(h ^ u64::from(id));
-    h = splitmix(h ^ purpose as u64);
-    splitmix(h ^ counter as u64)
+    crate::seed::keyed_bits(seed, id, purpose as u64, counter)
 }
 
 /// Uniform in [0, 1).
 pub(crate) fn unit(seed: u64, id: u32, purpose: Purpose, counter: i64) -> f64 {
-    (bits(seed, id, purpose, counter) >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    crate::seed::unit_of(bits(seed, id, purpose, counter))
 }
 
 /// Picks an entry of `items` (value, weight) with probability proportional

@@ -222,9 +222,9 @@ pub fn write_layer(path: &Path, film: &Film, meta: &LayerMeta) -> Result<()> {
     write_layer_with(path, film, meta, &WriteOptions::default())
 }
 
-/// As [`write_layer`], with options. Sidecar manifests are written (atomically)
-/// before the EXR, so an EXR that exists has its sidecars.
-pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &WriteOptions) -> Result<()> {
+/// The film's channels, sorted by name as EXR stores them; an error for a
+/// channel whose size is not the film's.
+fn film_channels(path: &Path, film: &Film) -> Result<AnyChannels<FlatSamples>> {
     let (w, h) = (film.width as usize, film.height as usize);
     let rgba = |c: usize| half(film.rgba.iter().map(move |p| p[c]));
     let vec3 = |v: &[[f32; 3]], c: usize| half(v.iter().map(|p| p[c]));
@@ -283,8 +283,12 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
             list.push(AnyChannel::new(text(&format!("{}.{suffix}", pass.name)), samples));
         }
     }
-    let channels = AnyChannels::sort(SmallVec::from_vec(list));
+    Ok(AnyChannels::sort(SmallVec::from_vec(list)))
+}
 
+/// The layer's header attributes: the standard ones, throng's own and each
+/// Cryptomatte's (whose manifest `options` may write to a sidecar file).
+fn layer_attributes(path: &Path, film: &Film, meta: &LayerMeta, options: &WriteOptions) -> Result<LayerAttributes> {
     let mut attrs = LayerAttributes::named(text(&meta.layer));
     attrs.software_name = Some(text(&format!("throng {}", env!("CARGO_PKG_VERSION"))));
     attrs.near_clip_plane = Some(meta.near);
@@ -335,6 +339,15 @@ pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &Wr
             }
         }
     }
+    Ok(attrs)
+}
+
+/// As [`write_layer`], with options. Sidecar manifests are written (atomically)
+/// before the EXR, so an EXR that exists has its sidecars.
+pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &WriteOptions) -> Result<()> {
+    let (w, h) = (film.width as usize, film.height as usize);
+    let channels = film_channels(path, film)?;
+    let attrs = layer_attributes(path, film, meta, options)?;
 
     let encoding = Encoding {
         compression: options.compression.exr(),
