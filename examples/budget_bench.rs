@@ -233,6 +233,7 @@ fn separate(
             tlas_build_s: 0.0,
             pass_bytes: Vec::new(),
             file_bytes: 0,
+            denoise_s: 0.0,
         });
     }
     Ok(done)

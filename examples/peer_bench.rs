@@ -755,6 +755,7 @@ fn main() {
                 far,
                 fps: 24.0,
                 render_fingerprint: String::new(),
+                denoiser: String::new(),
                 shutter: None,
                 colourspace: Default::default(),
             };

@@ -304,6 +304,7 @@ fn meta(film: &Film, scene: &FrameScene) -> LayerMeta {
         far: 100.0,
         fps: 24.0,
         render_fingerprint: String::new(),
+        denoiser: String::new(),
         shutter: None,
         colourspace: Default::default(),
     }

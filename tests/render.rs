@@ -528,6 +528,7 @@ fn exr_round_trip() {
         far: 1000.0,
         fps: 24.0,
         render_fingerprint: String::new(),
+        denoiser: String::new(),
         shutter: None,
         colourspace: Default::default(),
     };

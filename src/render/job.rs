@@ -18,6 +18,7 @@ use crate::layers::Manifest;
 use crate::output::{layer_path, WriterLock, FULL_LAYER};
 use crate::render::colour::{self, Colourspace};
 use crate::render::cryptomatte::{CryptoNames, NameTables};
+use crate::render::denoise::Denoiser;
 use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, Film, RenderSettings, Tracing};
 use crate::scene::passes::PassSet;
 use crate::scene::{vis, Camera, Deform, FrameScene, Instance, InstanceMotion, SceneMotion, Space};
@@ -64,6 +65,10 @@ pub struct RenderJob {
     /// How rays are traced: the product's default; benchmarks and tests
     /// compare other choices (the same pixels on every one).
     pub tracing: Tracing,
+    /// Denoise every layer-frame with Open Image Denoise at this preset
+    /// (render::denoise); `None`: not denoised. `throng render` takes the
+    /// shot's `render.denoise` unless told otherwise.
+    pub denoise: Option<crate::shot::Denoise>,
 }
 
 impl RenderJob {
@@ -96,6 +101,7 @@ impl RenderJob {
             passes: None,
             adaptive: None,
             tracing: Tracing::default(),
+            denoise: None,
         }
     }
 }
@@ -225,6 +231,8 @@ pub struct RenderedLayer {
     pub pass_bytes: Vec<(String, u64)>,
     /// Bytes of the EXR written (0 when skipped).
     pub file_bytes: u64,
+    /// Seconds denoising, included in `seconds` (0 when not denoised or skipped).
+    pub denoise_s: f64,
 }
 
 impl RenderedLayer {
@@ -241,6 +249,7 @@ impl RenderedLayer {
             tlas_build_s: 0.0,
             pass_bytes: Vec::new(),
             file_bytes: 0,
+            denoise_s: 0.0,
         }
     }
 }
@@ -476,8 +485,13 @@ pub fn render_fingerprint<C>(
         .debug("cryptomatte", &job.cryptomatte)
         .value("mattes", &crate::render::cryptomatte::MATTES)
         .debug("compression", &job.compression)
-        .text("layer", layer)
-        .value("manifest", &manifest)
+        .text("layer", layer);
+    // Only a denoised render names it, so an undenoised file keeps the
+    // fingerprint it had before denoising existed.
+    if let Some(d) = job.denoise {
+        f.text("denoise", d.name());
+    }
+    f.value("manifest", &manifest)
         .text("throng", env!("CARGO_PKG_VERSION"));
     f.hex()
 }
@@ -758,9 +772,56 @@ fn layer_meta<C: Space>(
         far,
         fps: crowd.shot().frames.fps,
         render_fingerprint: fingerprint,
+        denoiser: String::new(),
         shutter: job.shutter,
         colourspace: job.colourspace,
     }
+}
+
+/// Which layer-frame file is being written, under which fingerprint.
+struct LayerFile<'a> {
+    layer: &'a str,
+    frame: i32,
+    path: &'a Path,
+    fingerprint: String,
+}
+
+/// What writing a layer-frame's file gave.
+struct Written {
+    pass_bytes: Vec<(String, u64)>,
+    file_bytes: u64,
+    denoise_s: f64,
+}
+
+/// Denoises `film` when the job asks (render::denoise), then writes its
+/// EXR and, when asked, its PNG preview.
+fn write_layer_file<C: Space>(
+    crowd: &ShotCrowd<C>,
+    job: &RenderJob,
+    denoiser: Option<&Denoiser>,
+    at: LayerFile<'_>,
+    mut film: Film,
+    camera: &Camera,
+) -> Result<Written> {
+    let started = Instant::now();
+    let mut stamp = String::new();
+    if let (Some(denoiser), Some(preset)) = (denoiser, job.denoise) {
+        denoiser.denoise(&mut film, preset)?;
+        stamp = crate::render::denoise::stamp(denoiser, preset);
+    }
+    let denoise_s = if stamp.is_empty() { 0.0 } else { started.elapsed().as_secs_f64() };
+    let mut meta = layer_meta(crowd, job, at.layer, at.frame, at.fingerprint, &film, camera);
+    meta.denoiser = stamp;
+    let manifest = match job.cryptomatte {
+        CryptoOutput::Sidecar => exr::ManifestMode::Sidecar,
+        _ => exr::ManifestMode::Header,
+    };
+    exr::write_layer_with(at.path, &film, &meta, &exr::WriteOptions { manifest, compression: job.compression })?;
+    if job.png {
+        exr::write_preview_png_from(&at.path.with_extension("png"), &film, job.colourspace)?;
+    }
+    let file_bytes = std::fs::metadata(at.path).map_or(0, |m| m.len());
+    Ok(Written { pass_bytes: exr::pass_bytes(&film), file_bytes, denoise_s })
 }
 
 /// Renders every (frame, layer) of the job, reporting to `observer`. The
@@ -785,6 +846,8 @@ pub fn run<C: Space>(
         passes: crate::layers::memory::pass_count_of(crowd, &passes)?,
     };
     check_film_fits(w, h, channels)?;
+    // Opened before anything is written: a missing library stops the job here.
+    let denoiser = job.denoise.map(|_| Denoiser::open(None, job.threads)).transpose()?;
     let fingerprints: std::collections::HashMap<&str, String> =
         job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
     // Held until the job returns: one writer per file and per layer's settings.
@@ -855,16 +918,8 @@ pub fn run<C: Space>(
                 names.as_ref(),
                 if observer.wants_pixels() { Some(&report) } else { None },
             )?;
-            let meta = layer_meta(crowd, job, layer, frame, fingerprint, &film, &scene.camera);
-            let manifest = match job.cryptomatte {
-                CryptoOutput::Sidecar => exr::ManifestMode::Sidecar,
-                _ => exr::ManifestMode::Header,
-            };
-            exr::write_layer_with(&path, &film, &meta, &exr::WriteOptions { manifest, compression: job.compression })?;
-            if job.png {
-                exr::write_preview_png_from(&path.with_extension("png"), &film, job.colourspace)?;
-            }
-            let file_bytes = std::fs::metadata(&path).map_or(0, |m| m.len());
+            let at_file = LayerFile { layer, frame, path: &path, fingerprint };
+            let written = write_layer_file(crowd, job, denoiser.as_ref(), at_file, film, &scene.camera)?;
             out.push(RenderedLayer {
                 layer: layer.clone(),
                 frame,
@@ -874,8 +929,9 @@ pub fn run<C: Space>(
                 instances: scene.instances.len(),
                 peak_rss_bytes: measured.then(crate::bench::peak_rss_bytes).flatten(),
                 tlas_build_s: stats.tlas_build.as_secs_f64(),
-                pass_bytes: exr::pass_bytes(&film),
-                file_bytes,
+                pass_bytes: written.pass_bytes,
+                file_bytes: written.file_bytes,
+                denoise_s: written.denoise_s,
             });
             observer.layer_finished(at, false);
         }

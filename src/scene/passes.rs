@@ -87,6 +87,10 @@ pub struct PassSet {
 pub const LIGHT_GROUPS: &str = "light_groups";
 /// The shadow pass's name in `render.passes` and in files.
 pub const SHADOW: &str = "shadow";
+
+/// The pass a denoised film keeps its noisy beauty in (`noisy.R/G/B`;
+/// render::denoise), first in the file.
+pub const NOISY: &str = "noisy";
 /// The position pass's name in `render.passes`.
 pub const POSITION: &str = "P";
 /// Every pass and light group.
@@ -144,10 +148,11 @@ impl PassSet {
 /// order, light groups by name, the shadow pass, then `P`.
 pub fn file_order(name: &str) -> (usize, &str) {
     match LightPath::ALL.iter().position(|p| p.name() == name) {
-        Some(i) => (i, ""),
-        None if name == SHADOW => (LightPath::ALL.len() + 1, name),
-        None if name == POSITION => (LightPath::ALL.len() + 2, name),
-        None => (LightPath::ALL.len(), name),
+        Some(i) => (i + 1, ""),
+        None if name == NOISY => (0, ""),
+        None if name == SHADOW => (LightPath::ALL.len() + 2, name),
+        None if name == POSITION => (LightPath::ALL.len() + 3, name),
+        None => (LightPath::ALL.len() + 1, name),
     }
 }
 

@@ -453,6 +453,50 @@ pub struct RenderSettings {
     /// not used; docs/render.md, "Adaptive sampling").
     #[serde(default)]
     pub adaptive: Option<Adaptive>,
+    /// Denoise every layer and pass with Open Image Denoise at this quality
+    /// (`"high"`, `"balanced"`, `"fast"`); `None` (the default): not denoised
+    /// (docs/render.md, "Denoising").
+    #[serde(default)]
+    pub denoise: Option<Denoise>,
+}
+
+/// `render.denoise`: Open Image Denoise's quality preset: `high` for
+/// finals, `balanced` (faster, a little softer) for dailies, `fast` for
+/// previews.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Denoise {
+    /// OIDN's best (its default).
+    #[default]
+    High,
+    /// Faster, a little softer.
+    Balanced,
+    /// Fastest.
+    Fast,
+}
+
+impl Denoise {
+    /// Every preset's name, as the shot and the command line spell it.
+    pub const NAMES: [&'static str; 3] = ["high", "balanced", "fast"];
+
+    /// The preset named `name`.
+    pub fn parse(name: &str) -> Option<Denoise> {
+        match name {
+            "high" => Some(Denoise::High),
+            "balanced" => Some(Denoise::Balanced),
+            "fast" => Some(Denoise::Fast),
+            _ => None,
+        }
+    }
+
+    /// Its name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Denoise::High => "high",
+            Denoise::Balanced => "balanced",
+            Denoise::Fast => "fast",
+        }
+    }
 }
 
 /// `render.adaptive`: a pixel stops sampling once its estimated error
@@ -498,6 +542,7 @@ impl Default for RenderSettings {
             working_colourspace: Colourspace::Rec709,
             passes: Vec::new(),
             adaptive: None,
+            denoise: None,
         }
     }
 }

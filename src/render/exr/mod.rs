@@ -65,6 +65,9 @@ pub struct LayerMeta {
     pub fps: f32,
     /// `throng/renderFingerprint`: what `--resume` compares (empty: not written).
     pub render_fingerprint: String,
+    /// `throng/denoiser`: what denoised the beauty and passes (empty: not
+    /// denoised; render::denoise::stamp).
+    pub denoiser: String,
     /// `throng/shutter` (v2f): shutter open and close in frames relative to
     /// the frame; not written for a render without motion blur.
     pub shutter: Option<[f32; 2]>,
@@ -310,6 +313,9 @@ fn layer_attributes(path: &Path, film: &Film, meta: &LayerMeta, options: &WriteO
     if !meta.render_fingerprint.is_empty() {
         put("throng/renderFingerprint", AttributeValue::Text(text(&meta.render_fingerprint)))?;
     }
+    if !meta.denoiser.is_empty() {
+        put("throng/denoiser", AttributeValue::Text(text(&meta.denoiser)))?;
+    }
     if let Some([open, close]) = meta.shutter {
         put("throng/shutter", AttributeValue::FloatVec2(exr::math::Vec2(open, close)))?;
         put("throng/motionConvention", AttributeValue::Text(text(MOTION_CONVENTION)))?;
@@ -512,11 +518,11 @@ pub fn pass_bytes(film: &Film) -> Vec<(String, u64)> {
 /// The passes among a file's channel `names` (light paths, `lg_*`,
 /// `shadow`, `P`), in file order, each with its channel suffixes.
 pub(crate) fn pass_layout(names: &[String]) -> Vec<(String, [&'static str; 3])> {
-    use crate::scene::passes::{file_order, LightPath, SHADOW};
+    use crate::scene::passes::{file_order, LightPath, NOISY, SHADOW};
     let mut passes: Vec<(String, [&'static str; 3])> = Vec::new();
     for name in names {
         let Some(layer) = name.strip_suffix(".R") else { continue };
-        if LightPath::ALL.iter().any(|p| p.name() == layer) || layer.starts_with("lg_") || layer == SHADOW {
+        if LightPath::ALL.iter().any(|p| p.name() == layer) || layer.starts_with("lg_") || layer == SHADOW || layer == NOISY {
             passes.push((layer.to_string(), ["R", "G", "B"]));
         }
     }
@@ -528,7 +534,7 @@ pub(crate) fn pass_layout(names: &[String]) -> Vec<(String, [&'static str; 3])> 
     passes
 }
 
-/// The passes among a file's `channels` (light paths, `lg_*`, `shadow`, `P`), in file
+/// The passes among a file's `channels` (`noisy`, light paths, `lg_*`, `shadow`, `P`), in file
 /// order, read with `floats`.
 fn read_passes(
     channels: impl Iterator<Item = String>,
@@ -654,6 +660,7 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
         far: attrs.far_clip_plane.unwrap_or(0.0),
         fps: attrs.frames_per_second.map_or(0.0, |(n, d)| n as f32 / d.max(1) as f32),
         render_fingerprint: get_text("throng/renderFingerprint").unwrap_or_default(),
+        denoiser: get_text("throng/denoiser").unwrap_or_default(),
         shutter: match other("throng/shutter") {
             Some(AttributeValue::FloatVec2(v)) => Some([v.0, v.1]),
             _ => None,
