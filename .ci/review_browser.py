@@ -260,9 +260,27 @@ try:
     loaded = (
         "(() => { const m = document.getElementById('matte'), p = document.getElementById('map');"
         f" return !m.hidden && m.complete && m.naturalWidth > 0 && m.src.includes('id={aid}')"
-        f" && p.complete && p.naturalWidth === 1600 && p.src.includes('agent={aid}'); }})()"
+        f" && p.complete && p.naturalWidth > 0 && p.src.includes('agent={aid}'); }})()"
     )
     wait_for("the agent's matte and the ringed map", lambda: cdp.eval(loaded), 60)
+    # The map is drawn at the size it is shown (its text the font's own 7 px
+    # and up), and pictures are shrunk with smooth sampling.
+    shown = cdp.eval(
+        "(() => { const p = document.getElementById('map'), i = document.getElementById('image');"
+        " return [p.naturalWidth, Math.round(p.getBoundingClientRect().width), getComputedStyle(i).imageRendering]; })()"
+    )
+    if abs(shown[0] - shown[1]) > 2 or shown[2] == "pixelated":
+        fail(f"the map is {shown[0]} px drawn for {shown[1]} px shown, the image renders {shown[2]}")
+    # One layer shown: the comp's layer checkboxes are hidden (not only `hidden`).
+    cdp.eval(
+        "(() => { const l = document.getElementById('layer'); l.value = [...l.options].find(o => o.value !== 'comp').value;"
+        " l.dispatchEvent(new Event('change')); return true; })()"
+    )
+    wait_for(
+        "the comp's layer checkboxes to hide when one layer is shown",
+        lambda: cdp.eval("getComputedStyle(document.getElementById('toggles')).display") == "none",
+        30,
+    )
     time.sleep(0.3)
     shot_png = base64.b64decode(cdp("Page.captureScreenshot", format="png")["data"])
     with open(SHOT_PNG, "wb") as f:

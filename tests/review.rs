@@ -261,6 +261,10 @@ fn every_endpoint_answers() {
     assert_eq!((plain.width(), plain.height()), (1600, 900));
     let ringed = get(a, &format!("/api/map.png?agent={id}")).png();
     assert_ne!(plain.to_rgba8().as_raw(), ringed.to_rgba8().as_raw(), "the highlight shows on the map");
+    // Drawn at the width the page shows it, so its text is not shrunk to 3 px.
+    let shown = get(a, "/api/map.png?w=480").png();
+    assert_eq!((shown.width(), shown.height()), (480, 270));
+    assert_eq!(get(a, "/api/map.png?w=9").png().width(), 320, "clamped to a legible width");
 
     // Figures: casting, per-layer agents and memory (estimated, measured), pops.
     let fig = get_ok(a, "/api/figures").json();
@@ -273,6 +277,17 @@ fn every_endpoint_answers() {
         assert!(row["measured"]["peak_rss_bytes"].as_u64().unwrap() > 1 << 20, "{row}");
     }
     assert_eq!(fig["layers"].as_array().unwrap().len(), manifest.layers.len() + 1, "the set row too");
+    // Each row's figures are that layer's own: its estimate from the model
+    // (the set layer's too, not the split's shared bytes) and its measured
+    // peak from the `render --json` summary's layer-frame.
+    let summary: Value = serde_json::from_slice(&std::fs::read(f.renders().join("render.json")).unwrap()).unwrap();
+    for row in fig["layers"].as_array().unwrap() {
+        let name = row["name"].as_str().unwrap();
+        assert_eq!(row["estimated_bytes"].as_u64(), manifest.render_memory(name), "{row}");
+        let peak = summary["layer_frames"].as_array().unwrap().iter().find(|lf| lf["layer"] == name).unwrap();
+        assert_eq!(row["measured"]["peak_rss_bytes"], peak["peak_rss_bytes"], "{row}");
+    }
+    assert_eq!(manifest.render_memory("set"), manifest.set.memory_bytes, "the set layer has an estimate of its own");
     assert!(fig["pops_avoided"].is_object());
     assert_eq!(fig["summaries"].as_array().unwrap().len(), 1);
 
@@ -463,6 +478,21 @@ fn bad_requests_get_4xx_and_the_server_carries_on() {
     // The server still answers.
     assert_eq!(get_ok(a, "/api/shot").json()["shot"], "demo");
     drop((junk, slow));
+}
+
+/// Issue 49: the page's own rules. `hidden` wins over `.controls`'s flex
+/// (the comp's layer checkboxes stayed visible on one layer), pictures are
+/// shrunk smoothly (nearest-neighbour sampling sparkled), and the page asks
+/// for the map at the width it shows it.
+#[test]
+fn the_page_hides_what_it_hides_and_shrinks_pictures_smoothly() {
+    let a = server();
+    let css = get_ok(a, "/page.css").text();
+    let rules: String = css.lines().filter(|l| !l.trim_start().starts_with("/*")).collect::<Vec<_>>().join("\n");
+    assert!(rules.contains("[hidden] { display: none !important; }"), "{css}");
+    assert!(!rules.contains("pixelated") && !rules.contains("crisp-edges"), "{css}");
+    assert!(get_ok(a, "/").text().contains(r#"id="toggles" class="controls" hidden"#));
+    assert!(get_ok(a, "/page.js").text().contains("/api/map.png?w="));
 }
 
 #[test]

@@ -7,7 +7,7 @@ use std::collections::HashMap;
 
 use glam::Vec3;
 
-use super::memory::{instance_bytes, RenderFloor};
+use super::memory::{blas_bytes, instance_bytes, AgentTraces, RenderFloor};
 use super::{agent_lods, build_manifest, lod_at, shot_input, LayerOptions, LodChange, Manifest};
 use crate::casting::{Lod, ShotCrowd};
 use crate::error::{Error, Result};
@@ -88,16 +88,102 @@ pub fn build_layers(crowd: &ShotCrowd, overrides: &LayerOverrides) -> Result<Man
         let (full, proxies) = (crowd.instance_count(id, Lod::Full), crowd.instance_count(id, Lod::Proxy));
         (height, instance_bytes(full as u64, blurred), instance_bytes(proxies as u64, blurred))
     })?;
-    // The floor needs each agent's LOD (only full agents trace their poses),
-    // which does not depend on the split.
+    // Each agent's LOD (only full agents trace their poses) does not depend on the split.
     let lods: HashMap<u32, Vec<LodChange>> =
         input.agents.iter().zip(agent_lods(&input)?).filter_map(|(a, l)| Some((a.id, l?))).collect();
-    let full = |id: u32, f: i32| lods.get(&id).and_then(|c| lod_at(c, f)) == Some(Lod::Full);
-    input.options.shared_bytes = RenderFloor::of(crowd, shutter, w as u64 * h as u64, full)?.bytes();
+    let removed: std::collections::HashSet<u32> = input.agents.iter().filter(|a| a.removed).map(|a| a.id).collect();
+    let full = |id: u32, f: i32| !removed.contains(&id) && lods.get(&id).and_then(|c| lod_at(c, f)) == Some(Lod::Full);
+    // What every render holds whatever its agents: process, loaded shot,
+    // library, set, film (charged once per layer).
+    let floor = RenderFloor::of(crowd, shutter, w as u64 * h as u64, full)?.bytes();
+    // The poses every full agent plays, all in one render: what each layer
+    // traces when other layers' agents cast at their own LOD, else what the
+    // split shares out among the full agents.
+    let every = AgentTraces::of(crowd, shutter, 1, |id, f| if full(id, f) { vec![0] } else { Vec::new() })?;
+    let all_poses = every.per_render.first().map_or(0, |&(t, d)| blas_bytes(t, d));
+    if input.settings.proxy_shadow_casters {
+        // A layer traces only its own agents' poses: the split charges each
+        // full agent an equal share (the exact figure is worked out below).
+        let full_agents =
+            input.agents.iter().filter(|a| lods.get(&a.id).is_some_and(|c| c.iter().any(|c| c.lod == Lod::Full)));
+        let share = all_poses / (full_agents.count() as u64).max(1);
+        for a in input.agents.iter_mut() {
+            a.memory_full = a.memory_full.saturating_add(share);
+        }
+        input.options.shared_bytes = floor;
+    } else {
+        input.options.shared_bytes = floor.saturating_add(all_poses);
+    }
     let mut manifest = build_manifest(&input)?;
+    layer_estimates(crowd, shutter, floor, blurred, &mut manifest)?;
     manifest.made_from = Some(super::MadeFrom::of(crowd.shot())?);
     super::made_from::seal(&mut manifest);
     Ok(manifest)
+}
+
+/// Each render's own estimate ([`super::memory`]): the floor once, plus
+/// what its agents cost there — the BLASes of the poses it traces (its
+/// own full agents', and every other full agent's unless casters are proxy
+/// boxes) at its dearest frame, and the instances it traces (its own at
+/// their LOD, the others as casters). Sets every crowd layer's
+/// `memory_bytes` and the set layer's, and checks them against a budget.
+fn layer_estimates(
+    crowd: &ShotCrowd,
+    shutter: Option<[f32; 2]>,
+    floor: u64,
+    blurred: bool,
+    m: &mut Manifest,
+) -> Result<()> {
+    let n = m.layers.len();
+    let proxy_casters = m.proxy_shadow_casters;
+    let by_id: HashMap<u32, (usize, Vec<LodChange>, Lod)> =
+        m.agents.iter().filter(|a| !a.removed).map(|a| (a.id, (a.layer, a.lod_changes.clone(), a.lod))).collect();
+    let set = n;
+    let traces = AgentTraces::of(crowd, shutter, n + 1, |id, f| {
+        let Some((layer, changes, lod)) = by_id.get(&id) else { return Vec::new() };
+        if lod_at(changes, f).unwrap_or(*lod) != Lod::Full {
+            return Vec::new();
+        }
+        if proxy_casters {
+            vec![*layer]
+        } else {
+            (0..=set).collect()
+        }
+    })?;
+    // Instances: own at their LOD (full if ever full), the others as casters.
+    let mut own = vec![0u64; n];
+    let mut casters = 0u64;
+    let mut caster_of_layer = vec![0u64; n];
+    for a in m.agents.iter().filter(|a| !a.removed) {
+        let ever_full = a.lod == Lod::Full || a.lod_changes.iter().any(|c| c.lod == Lod::Full);
+        let count = |lod| crowd.instance_count(a.id, lod) as u64;
+        let mine = instance_bytes(count(if ever_full { Lod::Full } else { Lod::Proxy }), blurred);
+        let caster = if proxy_casters { instance_bytes(count(Lod::Proxy), blurred) } else { mine };
+        own[a.layer] += mine;
+        caster_of_layer[a.layer] += caster;
+        casters += caster;
+    }
+    let poses = |r: usize| traces.per_render.get(r).map_or(0, |&(t, d)| blas_bytes(t, d));
+    for (i, l) in m.layers.iter_mut().enumerate() {
+        l.memory_bytes = floor + poses(i) + own[i] + (casters - caster_of_layer[i]);
+    }
+    m.set.memory_bytes = Some(floor + poses(set) + casters);
+    if let Some(budget) = m.split.budget_bytes {
+        if let Some(over) = m.layers.iter().find(|l| l.memory_bytes > budget) {
+            return Err(Error::invalid(
+                &crowd.shot().path,
+                format!(
+                    "layer {} needs {} (its agents' poses, shared by fewer agents than the split assumed), over \
+                     the budget of {}; lower the budget a little or raise it",
+                    over.name,
+                    super::format_bytes(over.memory_bytes),
+                    super::format_bytes(budget)
+                ),
+            )
+            .field("layers.budget"));
+        }
+    }
+    Ok(())
 }
 
 /// World bounds of the set's instances, for the layer map.

@@ -131,6 +131,12 @@ pub struct SetRecord {
     pub name: String,
     /// Visibility in the set render (`own_agents` is empty: it has none).
     pub(crate) visibility: Visibility,
+    /// Estimated peak memory of the set layer's render ([`super::memory`]):
+    /// the floor and every agent as a caster. Absent in manifests of older
+    /// throngs and of [`super::build_manifest`] alone (then the split's
+    /// shared bytes stand in).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub memory_bytes: Option<u64>,
 }
 
 impl SetRecord {
@@ -145,6 +151,7 @@ impl SetRecord {
                 other_agents_as_proxy: proxy_casters,
                 set: vec![RayKind::Camera, RayKind::Shadow, RayKind::Indirect],
             },
+            memory_bytes: None,
         }
     }
 }
@@ -344,12 +351,13 @@ impl Manifest {
     }
 
     /// Estimated peak memory of the render of `layer` at the manifest's
-    /// image size ([`super::memory`]): a crowd layer's `memory_bytes`, or for
-    /// the set layer the shared part (the floor with every agent as a
-    /// caster, which is all it traces). `None` for an unknown layer.
+    /// image size ([`super::memory`]): a crowd layer's `memory_bytes`, or
+    /// the set layer's (the floor with every agent as a caster, which is all
+    /// it traces; the split's shared bytes in older manifests). `None` for
+    /// an unknown layer.
     pub fn render_memory(&self, layer: &str) -> Option<u64> {
         if layer == self.set.name {
-            return Some(self.split.shared_bytes);
+            return Some(self.set.memory_bytes.unwrap_or(self.split.shared_bytes));
         }
         self.layer(layer).map(|l| l.memory_bytes)
     }

@@ -40,6 +40,13 @@ pub const BLAS_BYTES_PER_TRIANGLE: u64 = 170;
 /// Deforming-BLAS bytes per triangle (a skinned mesh blending between two
 /// pose steps): both keys' vertices, nodes over their union, build scratch.
 pub const DEFORM_BYTES_PER_TRIANGLE: u64 = 195;
+/// Bytes per texel of the dome map (`[lights.dome]`): the loaded texels
+/// (12, RGB f32), and as much again transiently: the file's decoded buffer
+/// beside them while it loads, then a per-frame copy of the texels when
+/// the frame's light colours are set (`render::colour::scene_lights`).
+/// Measured on a 16384 x 8192 map (docs/lights.md, "Memory"): 22.7 bytes
+/// per texel at load, 20.7 during the frame.
+pub const DOME_BYTES_PER_TEXEL: u64 = 24;
 /// Bytes per pixel of the image: the film and its AOVs, Cryptomatte ranks
 /// of three types, tile results and the EXR channels being encoded.
 pub const PIXEL_BYTES: u64 = 590;
@@ -63,14 +70,17 @@ pub struct RenderFloor {
     pub mesh_bytes: u64,
     /// Texel bytes of every texture loaded.
     pub texture_bytes: u64,
-    /// Triangles of the meshes one frame traces (rigid parts, proxy box and
-    /// set, and the poses its agents at full LOD play): the most of any shot
-    /// frame, since a render keeps only the current frame's BLASes.
+    /// Triangles of the meshes every render traces whatever its agents
+    /// (rigid parts, proxy box and set). The skinned poses its agents play
+    /// are the layer's own ([`AgentTraces`]).
     pub triangles: u64,
-    /// Triangles of the deforming BLASes that frame traces (blurred only).
+    /// Deforming-BLAS triangles every render traces (none: only skinned
+    /// agents deform, and they are the layer's own).
     pub deform_triangles: u64,
     /// The set's instances.
     pub set_instances: u64,
+    /// Texels of the dome map (0: no dome).
+    pub dome_texels: u64,
     /// Pixels of the image.
     pub pixels: u64,
     /// Rendered with a shutter (motion blur).
@@ -90,6 +100,7 @@ impl RenderFloor {
             .saturating_add(self.texture_bytes)
             .saturating_add(blas_bytes(self.triangles, self.deform_triangles))
             .saturating_add(instance_bytes(self.set_instances, self.blurred))
+            .saturating_add(self.dome_texels.saturating_mul(DOME_BYTES_PER_TEXEL))
             .saturating_add(film_bytes(self.pixels, self.film()))
     }
 
@@ -99,15 +110,15 @@ impl RenderFloor {
     }
 
     /// The floor of `crowd` rendered with `shutter` (`None`: still frames)
-    /// at `pixels`, where `full(agent id, shot frame)` says whether an agent
-    /// renders at full LOD at a frame (the manifest's LOD; only those trace
-    /// their skinned poses). The crowd may be posed for still frames only: a
-    /// shutter's poses are counted from the steps it needs.
+    /// at `pixels`. The crowd may be posed for still frames only: a
+    /// shutter's poses are counted from the steps it needs. `_full` (an
+    /// agent's LOD at a frame) is no longer read: the skinned poses full
+    /// agents trace are each layer's own ([`AgentTraces`]), not the floor's.
     pub fn of<C>(
         crowd: &ShotCrowd<C>,
         shutter: Option<[f32; 2]>,
         pixels: u64,
-        full: impl Fn(u32, i32) -> bool,
+        _full: impl Fn(u32, i32) -> bool,
     ) -> Result<RenderFloor> {
         let lib = crowd.library();
         let skins = crowd.poses().skins();
@@ -124,32 +135,97 @@ impl RenderFloor {
             agent_parts += crowd.instance_count(id, Lod::Full) as u64;
         }
         let fixed_tris: u64 = fixed.iter().map(|&m| tris(m)).sum();
-        // A skinned piece's poses share its topology: price them by any one.
-        let piece = |rig: &Arc<str>, p: usize| skins.first_mesh(rig, p).and_then(|m| lib.meshes.get(m as usize));
+        let mut mesh_bytes: u64 = lib.meshes.iter().map(|m| m.bytes() as u64).sum();
+        // A shutter's steps not posed yet: every worn piece of its rig is posed at each.
+        let traces = AgentTraces::of(crowd, shutter, 0, |_, _| Vec::new())?;
         let worn = crowd.dressing().worn_pieces(crowd.casting());
+        let piece = |rig: &Arc<str>, p: usize| skins.first_mesh(rig, p).and_then(|m| lib.meshes.get(m as usize));
+        for (rig, body, cycle, step) in &traces.shutter_poses {
+            for &p in worn.get(rig).into_iter().flatten() {
+                if skins.mesh(rig, p, *body, *cycle, *step).is_none() {
+                    mesh_bytes += piece(rig, p).map_or(0, |m| m.bytes() as u64);
+                }
+            }
+        }
+        let (triangles, deform_triangles) = (fixed_tris, 0);
+        Ok(RenderFloor {
+            agents: crowd.casting().len() as u64,
+            agent_parts,
+            mesh_bytes,
+            texture_bytes: lib.textures.iter().map(|t| t.texels.len() as u64 * 16).sum(),
+            triangles,
+            deform_triangles,
+            set_instances: crowd.set().len() as u64,
+            dome_texels: crowd.lights().dome.as_ref().map_or(0, |d| d.texels.len() as u64),
+            pixels,
+            blurred: shutter.is_some(),
+            passes: pass_count(crowd)?,
+        })
+    }
+}
+
+/// The skinned poses renders trace, per render (a layer, or the set layer):
+/// the BLAS triangles of the poses its agents at full LOD play, still and
+/// deforming, at the shot frame where they cost the most (a render keeps
+/// only the current frame's BLASes), and the shutter steps the library
+/// poses.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct AgentTraces {
+    /// Per render: (triangles, deforming triangles) at its dearest frame.
+    pub per_render: Vec<(u64, u64)>,
+    /// (rig, body, cycle, step) of every shutter key of the shot.
+    pub shutter_poses: BTreeSet<(Arc<str>, u16, usize, u32)>,
+}
+
+impl AgentTraces {
+    /// The poses each of `renders` renders traces, where `traced_full(agent
+    /// id, shot frame)` lists the renders that trace that agent at full LOD
+    /// at that frame (its own layer, and every other render when casters
+    /// keep their LOD). One pass over the shot's frames for all renders.
+    pub fn of<C>(
+        crowd: &ShotCrowd<C>,
+        shutter: Option<[f32; 2]>,
+        renders: usize,
+        traced_full: impl Fn(u32, i32) -> Vec<usize>,
+    ) -> Result<AgentTraces> {
+        let lib = crowd.library();
+        let skins = crowd.poses().skins();
+        // A skinned piece's poses share its topology: price them by any one.
+        let piece_tris = |rig: &Arc<str>, p: usize| {
+            skins.first_mesh(rig, p).and_then(|m| lib.meshes.get(m as usize)).map_or(0, |m| m.triangle_count() as u64)
+        };
         let pieces_of = |id: u32| match crowd.dressing().get(id) {
             Some(AgentDress::Skinned(pieces)) => pieces.iter().map(|d| d.piece).collect(),
             _ => Vec::new(),
         };
-        let mut mesh_bytes: u64 = lib.meshes.iter().map(|m| m.bytes() as u64).sum();
-        let (mut triangles, mut deform_triangles) = (fixed_tris, 0u64);
-        let mut shutter_poses: BTreeSet<(Arc<str>, u16, usize, u32)> = BTreeSet::new();
+        let mut out = AgentTraces { per_render: vec![(0, 0); renders], shutter_poses: BTreeSet::new() };
+        if renders == 0 && shutter.is_none() {
+            return Ok(out);
+        }
         let shot = crowd.shot();
+        // (rig, piece, body, cycle, step) traced, and deforming (.., open step, close step).
+        type Traced = BTreeSet<(Arc<str>, usize, u16, usize, u32)>;
+        type Deform = BTreeSet<(Arc<str>, usize, u16, usize, u32, u32)>;
         for f in shot.frames.iter() {
-            // (rig, piece, body, cycle, step) traced, and deforming (.., open step, close step).
-            let mut traced: BTreeSet<(Arc<str>, usize, u16, usize, u32)> = BTreeSet::new();
-            let mut deform: BTreeSet<(Arc<str>, usize, u16, usize, u32, u32)> = BTreeSet::new();
+            let mut traced: Vec<Traced> = vec![Traced::new(); renders];
+            let mut deform: Vec<Deform> = vec![Deform::new(); renders];
             match shutter {
                 None => {
                     let Ok(block) = crowd.agents_at(f) else { continue };
-                    for a in block.agents.iter().filter(|a| crowd.renders(a) && full(a.id, f)) {
+                    for a in block.agents.iter().filter(|a| crowd.renders(a)) {
                         let Some(cast) = crowd.cast(a.id) else { continue };
                         if crowd.rigs().skinned(&cast.rig).is_none() {
                             continue;
                         }
+                        let into = traced_full(a.id, f);
+                        if into.is_empty() {
+                            continue;
+                        }
                         if let Ok(AgentPose::Skinned { body, cycle, step, .. }) = crowd.agent_pose(a) {
                             for p in pieces_of(a.id) {
-                                traced.insert((cast.rig.clone(), p, body, cycle, step));
+                                for &r in &into {
+                                    traced[r].insert((cast.rig.clone(), p, body, cycle, step));
+                                }
                             }
                         }
                     }
@@ -166,47 +242,28 @@ impl RenderFloor {
                     )?;
                     for (id, (rig, body, cycle, k0), (_, _, _, k1)) in keys {
                         // Every step is posed (the library); only full agents trace theirs.
-                        shutter_poses.insert((rig.clone(), body, cycle, k0));
-                        shutter_poses.insert((rig.clone(), body, cycle, k1));
-                        if !full(id, f) {
-                            continue;
-                        }
-                        for p in pieces_of(id) {
-                            traced.insert((rig.clone(), p, body, cycle, k0));
-                            if k0 != k1 {
-                                deform.insert((rig.clone(), p, body, cycle, k0, k1));
+                        out.shutter_poses.insert((rig.clone(), body, cycle, k0));
+                        out.shutter_poses.insert((rig.clone(), body, cycle, k1));
+                        for r in traced_full(id, f) {
+                            for p in pieces_of(id) {
+                                traced[r].insert((rig.clone(), p, body, cycle, k0));
+                                if k0 != k1 {
+                                    deform[r].insert((rig.clone(), p, body, cycle, k0, k1));
+                                }
                             }
                         }
                     }
                 }
             }
-            let t = fixed_tris
-                + traced.iter().map(|(r, p, ..)| piece(r, *p).map_or(0, |m| m.triangle_count() as u64)).sum::<u64>();
-            let d = deform.iter().map(|(r, p, ..)| piece(r, *p).map_or(0, |m| m.triangle_count() as u64)).sum::<u64>();
-            if blas_bytes(t, d) > blas_bytes(triangles, deform_triangles) {
-                (triangles, deform_triangles) = (t, d);
-            }
-        }
-        // A shutter's steps not posed yet: every worn piece of its rig is posed at each.
-        for (rig, body, cycle, step) in &shutter_poses {
-            for &p in worn.get(rig).into_iter().flatten() {
-                if skins.mesh(rig, p, *body, *cycle, *step).is_none() {
-                    mesh_bytes += piece(rig, p).map_or(0, |m| m.bytes() as u64);
+            for (r, best) in out.per_render.iter_mut().enumerate() {
+                let t = traced[r].iter().map(|(rig, p, ..)| piece_tris(rig, *p)).sum::<u64>();
+                let d = deform[r].iter().map(|(rig, p, ..)| piece_tris(rig, *p)).sum::<u64>();
+                if blas_bytes(t, d) > blas_bytes(best.0, best.1) {
+                    *best = (t, d);
                 }
             }
         }
-        Ok(RenderFloor {
-            agents: crowd.casting().len() as u64,
-            agent_parts,
-            mesh_bytes,
-            texture_bytes: lib.textures.iter().map(|t| t.texels.len() as u64 * 16).sum(),
-            triangles,
-            deform_triangles,
-            set_instances: crowd.set().len() as u64,
-            pixels,
-            blurred: shutter.is_some(),
-            passes: pass_count(crowd)?,
-        })
+        Ok(out)
     }
 }
 
@@ -274,6 +331,7 @@ mod tests {
             triangles: 100,
             deform_triangles: 50,
             set_instances: 3,
+            dome_texels: 0,
             pixels: 64,
             blurred: false,
             passes: 0,
@@ -297,5 +355,8 @@ mod tests {
         let passes = RenderFloor { passes: 9, ..f };
         assert_eq!(passes.bytes() - f.bytes(), 64 * 9 * PASS_PIXEL_BYTES);
         assert_eq!(at_pixels(passes.bytes(), 64, 6400, passes.film()), RenderFloor { pixels: 6400, ..passes }.bytes());
+        // A dome: its texels and their transient copy, whatever the image.
+        let dome = RenderFloor { dome_texels: 16384 * 8192, ..f };
+        assert_eq!(dome.bytes() - f.bytes(), 16384 * 8192 * DOME_BYTES_PER_TEXEL);
     }
 }

@@ -390,6 +390,18 @@ fn film_bytes(f: &Film) -> u64 {
     n * (16 + 4 + 12 + 12 + 4) + f.motion.len() as u64 * 8 + f.samples.len() as u64 * 4 + crypto + passes
 }
 
+/// Widest and narrowest layer map drawn, pixels.
+const MAP_WIDTH: (u32, u32) = (320, 1600);
+
+/// The size the layer map is drawn at for a page showing it `w` pixels wide
+/// (16:9; 1600x900 when not asked): drawn at the size it is shown, its text
+/// is the map font's own 7 pixels or more, where a 1600-pixel map shrunk to
+/// a 500-pixel panel made it 3.
+fn map_size(w: Option<u32>) -> (u32, u32) {
+    let w = w.unwrap_or(MAP_WIDTH.1).clamp(MAP_WIDTH.0, MAP_WIDTH.1);
+    (w, w * 9 / 16)
+}
+
 /// A file's identity for cache keys: path, length and modification time,
 /// so a layer rendered again is decoded again.
 fn file_key(path: &Path) -> String {
@@ -752,8 +764,9 @@ impl State {
             return Err(not_found("no layer manifest: run `throng layers` on the shot (or name the manifest)"));
         };
         let agent: Option<u32> = param(q, "agent")?;
-        self.cached_png(format!("map|{agent:?}"), || {
-            let opts = MapOptions { size: (1600, 900), set_bounds: self.set_bounds, highlight: agent };
+        let size = map_size(param(q, "w")?);
+        self.cached_png(format!("map|{agent:?}|{size:?}"), || {
+            let opts = MapOptions { size, set_bounds: self.set_bounds, highlight: agent };
             crate::layers::render_map(m, &opts).map_err(|e| Refusal(500, e.to_string()))
         })
     }

@@ -259,7 +259,11 @@ function loadMap() {
   const img = $("map");
   img.hidden = false;
   $("map-note").textContent = state.agent !== null ? "Agent " + state.agent + " is ringed in yellow." : "";
-  img.src = "/api/map.png" + (state.agent !== null ? "?agent=" + state.agent : "");
+  // Drawn at the width it is shown (CSS pixels), so the map's text is the
+  // font's own size on screen (7 px and up) instead of a 1600-pixel map
+  // shrunk to a third of that.
+  const w = Math.round(img.parentElement.clientWidth || 800);
+  img.src = "/api/map.png?w=" + w + (state.agent !== null ? "&agent=" + state.agent : "");
 }
 
 function showBotInfo(b, command, where) {
