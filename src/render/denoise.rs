@@ -156,3 +156,42 @@ fn clean(v: f32) -> f32 {
 fn flatten(plane: &[[f32; 3]]) -> Vec<f32> {
     plane.iter().flatten().copied().collect()
 }
+
+/// The channels a file must hold to be denoised: the beauty and both guides.
+pub const NEEDED_CHANNELS: [&str; 10] = ["R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z"];
+
+/// Denoises the layer or comp file `input` (as `throng render` or `throng
+/// comp` wrote it) into `output`, a new file: the same channels and header,
+/// with the beauty and light passes denoised and the noisy beauty kept (see
+/// the module docs). Refuses a file lacking the beauty or a guide (naming
+/// the channel), one already denoised, and an `output` that is `input`.
+pub fn denoise_file(denoiser: &Denoiser, input: &Path, output: &Path, preset: Denoise) -> Result<()> {
+    crate::error::check_readable_file(input)?;
+    crate::output::InputFiles::new([("input".to_string(), input.to_path_buf())]).check(output)?;
+    let (_, _, channels) = crate::render::exr::read_channel_names(input)?;
+    if let Some(missing) = NEEDED_CHANNELS.iter().find(|c| !channels.iter().any(|n| n == *c)) {
+        return Err(Error::invalid(
+            input,
+            format!(
+                "has no channel {missing}: denoising needs the beauty (R, G, B, A) and its albedo (albedo.R/G/B) \
+                 and normal (N.X/Y/Z) guides, as throng render writes them"
+            ),
+        )
+        .field(*missing));
+    }
+    let (mut film, mut meta) = crate::render::exr::read_layer(input)?;
+    if !meta.denoiser.is_empty() || film.passes.iter().any(|p| p.name == NOISY) {
+        return Err(Error::invalid(
+            input,
+            format!("is already denoised ({}); denoise the render it came from", meta.denoiser),
+        )
+        .field("throng/denoiser"));
+    }
+    denoiser.denoise(&mut film, preset).map_err(|e| Error::invalid(input, e.to_string()))?;
+    meta.denoiser = stamp(denoiser, preset);
+    let options = crate::render::exr::WriteOptions {
+        manifest: crate::render::exr::ManifestMode::Header,
+        compression: crate::render::exr::LayerCompression::Zip,
+    };
+    crate::render::exr::write_layer_with(output, &film, &meta, &options)
+}
