@@ -1152,6 +1152,80 @@ matrix! {
         &["1003"],
         &["c.exr"],
     ),
+    // ------------------------------------------- issue 49: the CLI's own
+    flags_render_threads_4096_without_the_address_space => c(
+        "flags render",
+        "render --threads 4096 under the 4 GB cap",
+        |_| {},
+        &["render", "{d}/shot.toml", "--layer", "full", "--frames", "1001", "--threads", "4096", "--out", "{d}/o"],
+        &["--threads", "4096"],
+        &["o"],
+    ),
+    flags_render_threads_2048_without_the_address_space => c(
+        "flags render",
+        "render --threads 2048 under the 4 GB cap",
+        |_| {},
+        &["render", "{d}/shot.toml", "--layer", "full", "--frames", "1001", "--threads", "2048", "--out", "{d}/o"],
+        &["--threads", "2048"],
+        &["o"],
+    ),
+    flags_cast_threads_4096_without_the_address_space => c(
+        "flags cast",
+        "cast --threads 4096 under the 4 GB cap",
+        |_| {},
+        &["cast", "{d}/shot.toml", "--threads", "4096"],
+        &["--threads"],
+        &[],
+    ),
+    flags_render_passes_misspelt_before_any_file_is_read => c(
+        "flags render",
+        "render --passes difuse_direct (and no manifest yet)",
+        |_| {},
+        &["render", "{d}/shot.toml", "--passes", "difuse_direct", "--out", "{d}/o"],
+        &["--passes", "difuse_direct", "diffuse_direct"],
+        &["o"],
+    ),
+    flags_botinfo_id_abc => c(
+        "flags botinfo",
+        "botinfo SHOT abc",
+        |_| {},
+        &["botinfo", "{d}/shot.toml", "abc"],
+        &["abc", "agent id", "whole number"],
+        &[],
+    ),
+    flags_botinfo_an_id_for_the_shot => c(
+        "flags botinfo",
+        "botinfo 17 (no shot file)",
+        |_| {},
+        &["botinfo", "17"],
+        &["17", "shot file"],
+        &[],
+    ),
+    exr_botinfo_at_the_sky_of_another_shots_exr => c(
+        "EXR",
+        "botinfo --json at the sky of another shot's EXR",
+        |d| {
+            rendered(d);
+            let other = std::fs::read_to_string(d.join("shot.toml")).unwrap().replacen("name = \"bad\"", "name = \"other\"", 1);
+            std::fs::write(d.join("other.toml"), other).unwrap();
+        },
+        &["botinfo", "{d}/other.toml", "--exr", "{d}/r/set/bad.set.1001.exr", "--pixel", "0,0", "--json"],
+        &["bad.set.1001.exr", "`bad`", "throng/shot"],
+        &[],
+    ),
+    strict_cache_convert_warns_before_it_writes => c(
+        "flags cache",
+        "--strict cache convert of a crowd 90 km wide",
+        |d| {
+            let csv = std::fs::read_to_string(d.join("c.csv")).unwrap();
+            let last: Vec<String> = csv.lines().last().unwrap().split(',').map(str::to_string).collect();
+            let far = [&last[..1], &["3".to_string(), "90000".to_string()], &last[3..]].concat().join(",");
+            std::fs::write(d.join("c.csv"), format!("{csv}{far}\n")).unwrap();
+        },
+        &["--strict", "cache", "convert", "{d}/c.csv", "{d}/out.crowd"],
+        &["--strict", "wide"],
+        &["out.crowd"],
+    ),
     flags_demo_spp_0 => c(
         "flags demo",
         "demo --spp 0",
@@ -1173,7 +1247,7 @@ const HARNESS: Harness = Harness {
 
 #[test]
 fn the_matrix_keeps_every_case() {
-    assert_eq!(cases().len(), 105);
+    assert_eq!(cases().len(), 113);
 }
 
 /// The table of every case, as issue 15 closed with: written to

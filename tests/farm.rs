@@ -252,13 +252,14 @@ fn status_reports_waiting_done_and_failed_with_the_log() {
     assert!(err.contains("render.crowd1.0") && err.contains(s(&log)), "{err}");
     assert!(out.contains("comp.1024 blocked"), "{out}");
     let (code, out, _) = run(&["farm", "status", s(&plan)]);
-    assert_eq!(code, 1);
+    assert_eq!(code, 3, "a failed task: exit 3, not 1 (it will not finish by itself)\n{out}");
     let line = out.lines().find(|l| l.starts_with("render.crowd1.0 ")).unwrap_or_default();
     assert!(line.contains("failed") && line.contains(s(&log)), "failed task names its log: {out}");
     assert!(out.lines().any(|l| l.starts_with("render.set.0 ") && l.contains("done")), "{out}");
     assert!(out.lines().any(|l| l.starts_with("comp.1024 ") && l.contains("waiting")), "{out}");
     // JSON status has the same states.
-    let (_, json, _) = run(&["farm", "status", s(&plan), "--json"]);
+    let (code, json, _) = run(&["farm", "status", s(&plan), "--json"]);
+    assert_eq!(code, 3);
     let v: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(v["done"], false);
     let t = v["tasks"].as_array().unwrap().iter().find(|t| t["id"] == "render.crowd1.0").unwrap();
@@ -500,4 +501,27 @@ fn json_summaries_and_plain_progress() {
     let v: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(v["verb"], "sim");
     assert_eq!(v["files_written"][0], s(&cache));
+}
+
+/// `farm status PLAN | head`: the exit status is the plan's, whatever reads
+/// stdout and whenever it stops (a closed stdout once made it 0).
+#[test]
+fn status_exits_the_same_into_a_closed_pipe() {
+    use std::process::Stdio;
+    let tmp = common::tempdir().unwrap();
+    let plan = plan_demo(&demo_shot(), tmp.path(), &[]);
+    for json in [&[][..], &["--json"]] {
+        let mut child = Command::new(common::bin())
+            .args(["farm", "status", s(&plan)])
+            .args(json)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take()); // `| true`, or a `| head` that already quit
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "an unfinished plan is 1 into a closed pipe too: {err}");
+        assert!(!err.contains("panicked") && !err.contains("Broken pipe"), "{err}");
+    }
 }

@@ -486,3 +486,46 @@ fn a_unicode_shot_name_round_trips_through_the_exr_header() {
     let said = ok(&["botinfo", s(&shot), "--exr", s(&exr), "--pixel", "8,4"]);
     assert!(!said.contains("is from shot"), "botinfo takes the EXR as this shot's:\n{said}");
 }
+
+/// `botinfo --exr --pixel`: `--json` answers in JSON whether or not an
+/// agent is at the pixel, and a file of another shot is refused (exit 2,
+/// naming the file and the shot it belongs to) whether or not an agent is
+/// at the pixel (issue 49: an agentless pixel of another shot's file was
+/// "no agent", exit 0, and a text line under --json).
+#[test]
+fn botinfo_by_pixel_answers_in_json_and_refuses_another_shots_file() {
+    let tmp = common::tempdir().expect("temp dir");
+    let shot = common::figure_shot(tmp.path(), &common::five_walkers(), "");
+    let out = tmp.path().join("out");
+    let args = ["render", s(&shot), "--layer", "full", "--frames", "1020", "--spp", "1"];
+    ok(&[&args[..], &["--resolution", "16x9", "--progress", "off", "--out", s(&out)]].concat());
+    let exr = out.join("full/figure.full.1020.exr");
+    let (film, _) = read_layer(&exr).expect("reads back");
+    let at = |want_agent: bool| {
+        let i = film.agent_id.iter().position(|&id| (id != 0) == want_agent).expect("such a pixel");
+        format!("{},{}", i as u32 % film.width, i as u32 / film.width)
+    };
+    let (sky, agent) = (at(false), at(true));
+    let json = |pixel: &str| -> serde_json::Value {
+        let said = ok(&["botinfo", s(&shot), "--exr", s(&exr), "--pixel", pixel, "--json"]);
+        serde_json::from_str(&said).unwrap_or_else(|e| panic!("not JSON ({e}):\n{said}"))
+    };
+    let none = json(&sky);
+    let (x, y) = sky.split_once(',').unwrap();
+    assert_eq!(none["agent"], serde_json::Value::Null, "{none}");
+    assert_eq!(none["pixel"], serde_json::json!([x.parse::<u32>().unwrap(), y.parse::<u32>().unwrap()]), "{none}");
+    assert_eq!(none["frame"], 1020, "{none}");
+    let hit = json(&agent);
+    assert!(hit.as_array().is_some_and(|a| a.len() == 1 && a[0]["id"].is_u64()), "{hit}");
+    // The same file against another shot: refused, at the set as at an agent, with or without --json.
+    let other = tmp.path().join("other.toml");
+    let toml = std::fs::read_to_string(&shot).unwrap().replacen("name = \"figure\"", "name = \"other\"", 1);
+    std::fs::write(&other, toml).unwrap();
+    for pixel in [&sky, &agent] {
+        for json in [&[][..], &["--json"]] {
+            let err = usage_error(&[&["botinfo", s(&other), "--exr", s(&exr), "--pixel", pixel][..], json].concat());
+            assert!(err.contains("figure.full.1020.exr") && err.contains("`figure`"), "{err}");
+            assert!(err.contains("other.toml") && !err.contains("panicked"), "{err}");
+        }
+    }
+}

@@ -65,3 +65,89 @@ fn man_pages_are_written_whole_with_no_temporary_left() {
     assert!(names.iter().all(|n| n.ends_with(".1") && !n.starts_with('.')), "a temporary is left: {names:?}");
     assert!(!names.iter().any(|n| n.contains("run-task")), "the hidden verb has a page: {names:?}");
 }
+
+#[test]
+fn help_and_man_open_with_what_throng_does() {
+    let (code, out, _) = throng(&["--help"]);
+    assert_eq!(code, 0);
+    let first = out.lines().next().unwrap_or_default();
+    assert!(first.contains("crowd renderer") && first.contains("lighters"), "{first}");
+    assert!(!out.contains("clap"), "{out}");
+    let (code, man, _) = throng(&["man"]);
+    assert_eq!(code, 0);
+    assert!(man.contains("crowd renderer") && !man.contains("clap, printing"), "{man}");
+}
+
+#[test]
+fn help_takes_help_at_every_level() {
+    for args in [
+        &["help", "--help"][..],
+        &["help"],
+        &["help", "render"],
+        &["help", "farm", "plan"],
+        &["farm", "help", "--help"],
+        &["farm", "help", "status"],
+        &["cache", "help", "convert"],
+    ] {
+        let (code, out, err) = throng(args);
+        assert_eq!(code, 0, "throng {}: {err}", args.join(" "));
+        assert!(out.contains("Usage: throng"), "throng {}: {out}", args.join(" "));
+    }
+    let (_, out, _) = throng(&["help", "farm", "plan"]);
+    let (_, direct, _) = throng(&["farm", "plan", "--help"]);
+    assert_eq!(out, direct);
+    let (code, _, err) = throng(&["help", "rendr"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("rendr") && err.contains("render"), "{err}");
+}
+
+#[test]
+fn every_man_page_has_examples_and_exit_status() {
+    let dir = std::env::temp_dir().join(format!("throng-cli-man-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (code, _, err) = throng(&["man", "--out", dir.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let pages: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().map(|e| e.path()).collect();
+    assert!(pages.len() > 10, "{pages:?}");
+    for page in &pages {
+        let text = std::fs::read_to_string(page).unwrap();
+        assert!(text.contains(".SH EXAMPLES") && text.contains(".SH \"EXIT STATUS\""), "{}", page.display());
+    }
+    let status = std::fs::read_to_string(dir.join("throng-farm-status.1")).unwrap();
+    assert!(status.contains(".TP\n3\n"), "{status}");
+    let (_, top, _) = throng(&["man"]);
+    assert!(top.contains(".SH EXAMPLES") && top.contains(".SH \"EXIT STATUS\""));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_bad_number_names_its_argument_and_what_it_takes() {
+    for (args, want) in [
+        (&["botinfo", "shot.toml", "abc"][..], "agent id"),
+        (&["botinfo", "shot.toml", "1", "--frame", "x"], "frame"),
+        (&["layers", "shot.toml", "--count", "three"], "count"),
+        (&["farm", "submit", "p.json", "--engine", "local", "--workers", "two"], "whole number"),
+        (&["review", "shot.toml", "--port", "http"], "port"),
+        (&["render", "shot.toml", "--out", "o", "--passes", "difuse_direct"], "unknown pass"),
+    ] {
+        let (code, _, err) = throng(args);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains(want) && !err.contains("invalid digit"), "throng {}: {err}", args.join(" "));
+    }
+}
+
+/// `--threads` builds the global pool at once: a pool that cannot start is
+/// exit 2 naming `--threads` and why, never a panic inside rayon.
+#[test]
+fn threads_that_cannot_start_are_a_usage_error_not_a_panic() {
+    for n in ["4096", "2048"] {
+        let out = Command::new("sh")
+            .args(["-c", "ulimit -v 4000000; exec \"$0\" \"$@\"", env!("CARGO_BIN_EXE_throng")])
+            .args(["render", "no-such-shot.toml", "--out", "o", "--threads", n])
+            .output()
+            .expect("run sh");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains("--threads") && err.contains("cannot start") && !err.contains("panicked"), "{err}");
+    }
+}

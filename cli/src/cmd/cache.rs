@@ -25,6 +25,8 @@ pub enum CacheVerb {
     Info(CacheInfoArgs),
     /// Convert between formats, chosen by extension (.crowd, .csv, .sqlite, tables).
     Convert(CacheConvertArgs),
+    /// Print this message or the help of the given cache verb(s).
+    Help(super::shell::HelpArgs),
 }
 
 /// `throng cache info`.
@@ -68,10 +70,10 @@ pub struct ImportArgs {
 #[derive(Debug, Args, Clone)]
 pub struct GaitArgs {
     /// Cycle length in frames (the walk cycle loops at this length).
-    #[arg(long)]
+    #[arg(long, value_parser = super::values::number)]
     pub cycle_length: Option<f32>,
     /// Metres walked per cycle; the cycle frame advances by distance / stride.
-    #[arg(long)]
+    #[arg(long, value_parser = super::values::number)]
     pub stride: Option<f32>,
     /// Rig glTF to read the cycle's length (frames at 24 fps) and stride (root
     /// travel, or a vehicle's wheel roll) from; a slot rig's name must match
@@ -244,6 +246,7 @@ pub fn run(verb: &CacheVerb) -> Result<()> {
     match verb {
         CacheVerb::Info(args) => run_info(args),
         CacheVerb::Convert(args) => run_convert(args),
+        CacheVerb::Help(args) => super::shell::help(&["cache"], args),
     }
 }
 
@@ -337,6 +340,10 @@ fn run_convert(args: &CacheConvertArgs) -> Result<()> {
     inputs.extend(args.import.gait.rig_file.iter().map(|f| ("rig file".to_string(), f.clone())));
     throng::output::refuse_input_overwrite([args.output.as_path()], inputs)?;
     let (crowd, report) = import(&args.input, &how)?;
+    // Warned before the write: under --strict a warning stops the convert with no output.
+    for w in throng::cache::bounds_warnings(&crowd) {
+        super::warn(&w)?;
+    }
     write(&args.output, &crowd)?;
     let agents: HashSet<u32> = crowd.frames.iter().flat_map(|b| b.agents.iter().map(|a| a.id)).collect();
     let from_name = if how.tabular.is_some() { Format::Tabular.name() } else { from.name() };
@@ -354,9 +361,6 @@ fn run_convert(args: &CacheConvertArgs) -> Result<()> {
     }
     if let (Some(o), Some(r)) = (&how.tabular, &report) {
         outln!("import: {}", describe_table(o, r));
-    }
-    for w in throng::cache::bounds_warnings(&crowd) {
-        super::warn(&w)?;
     }
     Ok(())
 }

@@ -13,7 +13,7 @@ pub struct CompArgs {
     /// Render output directory.
     pub dir: PathBuf,
     /// Shot frame.
-    #[arg(long)]
+    #[arg(long, value_parser = super::values::frame)]
     pub frame: i32,
     /// Composited EXR.
     #[arg(long)]

@@ -31,7 +31,7 @@ pub struct ExportArgs {
     /// Shot file.
     pub shot: PathBuf,
     /// Shot frame (glTF).
-    #[arg(long)]
+    #[arg(long, value_parser = super::values::frame)]
     pub frame: Option<i32>,
     /// Output format.
     #[arg(long, value_enum, default_value = "glb")]

@@ -17,11 +17,14 @@ pub enum FarmVerb {
     Plan(PlanArgs),
     /// Submit what is not done of a plan to an engine.
     Submit(SubmitArgs),
-    /// Each task done, running, failed or waiting; exit 0 only when all are done.
+    /// Each task done, running, failed or waiting; exit 0 when all are done, 1 while some are
+    /// waiting or running, 3 when one failed.
     Status(StatusArgs),
     /// Run one task of a plan (what engines run; retries and leaves state markers).
     #[command(hide = true)]
     RunTask(RunTaskArgs),
+    /// Print this message or the help of the given farm verb(s).
+    Help(super::shell::HelpArgs),
 }
 
 /// `throng farm plan`.
@@ -36,7 +39,7 @@ pub struct PlanArgs {
     #[arg(long, value_delimiter = ',')]
     pub layers: Option<Vec<String>>,
     /// Frames per render task.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = super::values::count)]
     pub chunk: usize,
     /// Samples per pixel, 1-65536 (default: the shot's).
     #[arg(long, value_parser = super::values::spp)]
@@ -76,7 +79,7 @@ pub struct SubmitArgs {
     #[arg(long, value_enum)]
     pub engine: Engine,
     /// Worker processes (local engine).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = super::values::whole)]
     pub workers: usize,
     /// Refuse the plan unless it is for this shot file.
     #[arg(long)]
@@ -114,6 +117,7 @@ pub fn run(verb: &FarmVerb) -> Result<()> {
         FarmVerb::Plan(a) => plan(a),
         FarmVerb::Submit(a) => submit(a),
         FarmVerb::Status(a) => status(a),
+        FarmVerb::Help(a) => super::shell::help(&["farm"], a),
         FarmVerb::RunTask(a) => {
             let plan = farm::open_plan(&a.plan, None)?;
             if plan.task(&a.task).is_none() {
@@ -259,10 +263,44 @@ fn status(a: &StatusArgs) -> Result<()> {
             tasks.len()
         );
     }
-    if !all_done {
-        // Exit 1: not done (2 is kept for errors, like every verb).
+    let code = status_code(&tasks.iter().map(|t| t.state).collect::<Vec<_>>());
+    if code != 0 {
         let _ = std::io::stdout().flush();
-        std::process::exit(1);
+        std::process::exit(code);
     }
     Ok(())
+}
+
+/// `farm status`'s exit status, for a pipeline that polls it: 0 when every
+/// task is done, [`UNFINISHED`] while some are still waiting or running,
+/// [`FAILED`] when one failed (it will not finish by itself: look at its
+/// log, fix, submit again). 2 stays every verb's error (a bad plan).
+fn status_code(states: &[TaskState]) -> i32 {
+    if states.contains(&TaskState::Failed) {
+        FAILED
+    } else if states.iter().all(|&s| s == TaskState::Done) {
+        0
+    } else {
+        UNFINISHED
+    }
+}
+
+/// `farm status`: some task still waiting or running, none failed.
+const UNFINISHED: i32 = 1;
+/// `farm status`: some task failed.
+const FAILED: i32 = 3;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn status_is_0_done_1_unfinished_3_failed() {
+        use TaskState::*;
+        assert_eq!(status_code(&[Done, Done]), 0);
+        assert_eq!(status_code(&[Done, Waiting]), 1);
+        assert_eq!(status_code(&[Running, Waiting]), 1);
+        assert_eq!(status_code(&[Done, Running, Failed]), 3);
+        assert_eq!(status_code(&[]), 0);
+    }
 }

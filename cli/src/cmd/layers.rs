@@ -14,16 +14,16 @@ pub struct LayersArgs {
     /// Shot file.
     pub shot: PathBuf,
     /// Split into N layers of equal agent count, nearest first.
-    #[arg(long, conflicts_with_all = ["cutoffs", "budget"])]
+    #[arg(long, conflicts_with_all = ["cutoffs", "budget"], value_parser = super::values::count)]
     pub count: Option<usize>,
     /// Split at these distances in metres, e.g. 10,25,60.
-    #[arg(long, value_delimiter = ',', conflicts_with = "budget")]
+    #[arg(long, value_delimiter = ',', conflicts_with = "budget", value_parser = super::values::number)]
     pub cutoffs: Option<Vec<f32>>,
     /// Split so each layer's estimated render memory stays under this, e.g. 2.8GB.
     #[arg(long, value_parser = budget)]
     pub budget: Option<String>,
     /// Shot frame to rank at (default: the middle of the shot).
-    #[arg(long)]
+    #[arg(long, value_parser = super::values::frame)]
     pub ref_frame: Option<i32>,
     /// Also rank on every frame and report how many agents would change layer
     /// (membership stays the reference frame's; the count is for comparison only).
@@ -31,7 +31,7 @@ pub struct LayersArgs {
     pub per_frame: bool,
     /// Projected height in pixels below which an agent renders as proxy boxes
     /// (default: the shot's `lod_full_min_px`).
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::values::number)]
     pub lod_px: Option<f32>,
     /// Choose LOD on every frame, with hysteresis, instead of once at the reference frame.
     #[arg(long)]

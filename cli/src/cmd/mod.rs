@@ -8,8 +8,8 @@ use clap::{Parser, Subcommand};
 
 use throng::error::Result;
 
-/// `print!` to stdout that ends the process quietly with status 0 when
-/// stdout is closed (`throng botinfo ... --json | head`), like ripgrep.
+/// `print!` to stdout that prints nothing more, quietly, once stdout is
+/// closed (`throng botinfo ... --json | head`); the verb's exit status stands.
 macro_rules! out {
     ($($t:tt)*) => { $crate::cmd::emit(&format!($($t)*)) };
 }
@@ -38,6 +38,9 @@ mod values;
 /// throng: crowd renderer and level-of-detail layering tool for lighters.
 #[derive(Debug, Parser)]
 #[command(name = "throng", version, propagate_version = true, about, long_about = None)]
+// clap's own `help` verb takes no `--help` (`throng help --help` was a
+// usage error); [`Verb::Help`] and the farm's and cache's are ours.
+#[command(disable_help_subcommand = true)]
 pub struct Cli {
     /// The verb.
     #[command(subcommand)]
@@ -123,13 +126,13 @@ pub enum Verb {
     Completions(shell::CompletionsArgs),
     /// Print the man page, or write one per verb with --out DIR.
     Man(shell::ManArgs),
+    /// Print this message or the help of the given verb(s).
+    Help(shell::HelpArgs),
 }
 
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> Result<()> {
-    if let Some(n) = cli.threads {
-        cap_threads(n);
-    }
+    start_threads(cli.threads)?;
     STRICT.store(cli.strict, std::sync::atomic::Ordering::Relaxed);
     match cli.verb {
         Verb::Demo(args) => demo::run(&args),
@@ -145,17 +148,80 @@ pub fn run(cli: Cli) -> Result<()> {
         Verb::Farm(verb) => farm::run(&verb),
         Verb::Completions(args) => shell::completions(&args),
         Verb::Man(args) => shell::man(&args),
+        Verb::Help(args) => shell::help(&[], &args),
     }
 }
 
-/// Caps every thread pool of the process at `n`. Each stage runs on rayon:
-/// the global pool (casting, posing, BVH builds), the render pool and the
-/// exr crate's compression pool, and rayon sizes every pool built without
-/// an explicit size by `RAYON_NUM_THREADS`. Set here, before any pool or
-/// thread exists (so no other thread can read the environment meanwhile);
-/// the render pool gets `n` explicitly as well.
-fn cap_threads(n: usize) {
-    std::env::set_var("RAYON_NUM_THREADS", n.to_string());
+/// Starts the process's global thread pool, `n` threads (`--threads`) or
+/// one per core, and caps every other pool at `n`. Each stage runs on
+/// rayon: the global pool (casting, posing, BVH builds), the render pool
+/// and the exr crate's compression pool; rayon sizes every pool built
+/// without an explicit size by `RAYON_NUM_THREADS`, set here before any
+/// pool or thread exists (so no other thread can read the environment
+/// meanwhile); the render pool gets `n` explicitly as well.
+///
+/// The global pool is built here, fallibly: left to rayon, it is built on
+/// first use and a pool that cannot start (too little address space for
+/// the threads' stacks, a process limit) panics inside rayon. Here it is
+/// exit 2 naming `--threads` and the cause.
+fn start_threads(n: Option<usize>) -> Result<()> {
+    if let Some(n) = n {
+        std::env::set_var("RAYON_NUM_THREADS", n.to_string());
+    }
+    // Refused before any thread starts when their stacks cannot fit: a pool
+    // that starts some threads and then fails can leave a started one
+    // panicking for want of its signal stack.
+    let threads = n.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
+    if let Some(left) = address_space_left() {
+        let need = threads as u64 * THREAD_ADDRESS_SPACE;
+        // The stage's own pool (the render's) takes as many again, and the data needs room.
+        if need * 2 + DATA_ROOM > left {
+            let cause = format!(
+                "their stacks need {:.1} GiB of address space twice over (the global and the render pool), with \
+                 1 GiB for data, and the process may map {:.1} GiB more (ulimit -v)",
+                need as f64 / GIB,
+                left as f64 / GIB
+            );
+            return Err(threads_error(n, &cause));
+        }
+    }
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = n {
+        pool = pool.num_threads(n);
+    }
+    pool.build_global().map_err(|e| threads_error(n, &e))
+}
+
+const GIB: f64 = (1u64 << 30) as f64;
+
+/// Address space kept for a stage's data when sizing pools.
+const DATA_ROOM: u64 = 1 << 30;
+
+/// Address space one pool thread maps: its stack (Rust's and rayon's
+/// default 2 MiB) and the guard and signal-stack pages std adds.
+const THREAD_ADDRESS_SPACE: u64 = (2 << 20) + (64 << 10);
+
+/// Bytes of address space this process may still map under its soft
+/// `RLIMIT_AS` (`ulimit -v`), from /proc; `None` when unlimited or unknown.
+fn address_space_left() -> Option<u64> {
+    let limits = std::fs::read_to_string("/proc/self/limits").ok()?;
+    let soft = limits.lines().find(|l| l.starts_with("Max address space"))?.split_whitespace().nth(3)?;
+    let limit: u64 = soft.parse().ok()?; // "unlimited" -> None
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kib: u64 = status.lines().find(|l| l.starts_with("VmSize:"))?.split_whitespace().nth(1)?.parse().ok()?;
+    Some(limit.saturating_sub(kib * 1024))
+}
+
+/// Why the global pool did not start, naming `--threads`.
+fn threads_error(n: Option<usize>, cause: &dyn std::fmt::Display) -> throng::error::Error {
+    let msg = match n {
+        Some(n) => format!("cannot start {n} threads ({cause}); give fewer, or leave --threads out for one per core"),
+        None => format!(
+            "cannot start one thread per core ({} threads: {cause}); give fewer with --threads N",
+            std::thread::available_parallelism().map_or(0, usize::from)
+        ),
+    };
+    throng::error::Error::Setting { option: "threads", msg }
 }
 
 /// An error as the command line says it: a stage's option (`Error::Setting`)
@@ -167,15 +233,25 @@ pub fn wording(e: &throng::error::Error) -> String {
     }
 }
 
-/// Writes `text` to stdout and flushes. A closed pipe (EPIPE) ends the
-/// process with status 0 and no message: the reader has what it wanted.
-/// Any other write error ends it with status 2 and the reason.
+/// Whether stdout was found closed: nothing more is written to it.
+static STDOUT_CLOSED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Writes `text` to stdout and flushes. A closed pipe (EPIPE) stops the
+/// printing, quietly (the reader has what it wanted), not the verb: its exit
+/// status is its own, whatever reads stdout (`farm status PLAN | head` is 1
+/// on an unfinished plan, as without the pipe). Any other write error ends
+/// the process with status 2 and the reason.
 pub(crate) fn emit(text: &str) {
     use std::io::Write;
+    use std::sync::atomic::Ordering;
+    if STDOUT_CLOSED.load(Ordering::Relaxed) {
+        return;
+    }
     let mut out = std::io::stdout().lock();
     if let Err(e) = out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
         if e.kind() == std::io::ErrorKind::BrokenPipe {
-            std::process::exit(0);
+            STDOUT_CLOSED.store(true, Ordering::Relaxed);
+            return;
         }
         eprintln!("throng: error: cannot write to stdout: {e}");
         std::process::exit(2);

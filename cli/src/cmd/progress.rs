@@ -3,7 +3,7 @@
 
 use std::io::IsTerminal;
 use std::sync::Mutex;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use throng::render::job::{RenderObserver, RenderProgress};
 
@@ -25,12 +25,43 @@ pub enum ProgressStyle {
 /// Seconds between plain lines within one layer-frame.
 const PLAIN_EVERY_S: f64 = 10.0;
 
+/// Least time between two redraws of the bar: at most 10 a second (each
+/// tile reports, hundreds a second on a small frame; a terminal, or a
+/// remote one, should not be flooded with redraws).
+const BAR_EVERY: Duration = Duration::from_millis(100);
+
+/// When the bar may be redrawn: at most once per `every`, and always for
+/// the job's last update, so the bar ends showing where the job ended.
+#[derive(Debug)]
+struct Throttle {
+    every: Duration,
+    last: Option<Instant>,
+}
+
+impl Throttle {
+    fn new(every: Duration) -> Throttle {
+        Throttle { every, last: None }
+    }
+
+    /// Whether to draw at `now` (`last_one`: the job's final update); a
+    /// draw allowed is counted as made.
+    fn ready(&mut self, now: Instant, last_one: bool) -> bool {
+        let due = last_one || self.last.is_none_or(|t| now.saturating_duration_since(t) >= self.every);
+        if due {
+            self.last = Some(now);
+        }
+        due
+    }
+}
+
 /// Prints a job's progress and warnings on stderr.
 pub struct Progress {
     style: ProgressStyle,
     start: Instant,
     /// When the last plain line mid-frame was printed.
     last_line: Mutex<Instant>,
+    /// When the bar may be redrawn.
+    redraw: Mutex<Throttle>,
 }
 
 impl Progress {
@@ -41,7 +72,12 @@ impl Progress {
             ProgressStyle::Auto => ProgressStyle::Plain,
             s => s,
         };
-        Progress { style, start: Instant::now(), last_line: Mutex::new(Instant::now()) }
+        Progress {
+            style,
+            start: Instant::now(),
+            last_line: Mutex::new(Instant::now()),
+            redraw: Mutex::new(Throttle::new(BAR_EVERY)),
+        }
     }
 
     fn figures(&self, at: RenderProgress<'_>, frac: f64) -> (f64, f64, f64) {
@@ -51,7 +87,13 @@ impl Progress {
         (progress, elapsed, eta)
     }
 
-    fn bar(&self, at: RenderProgress<'_>, frac: f64) {
+    /// Redraws the bar, unless it was redrawn less than [`BAR_EVERY`] ago
+    /// and this is not the job's last update.
+    fn bar(&self, at: RenderProgress<'_>, frac: f64, last_one: bool) {
+        let Ok(mut redraw) = self.redraw.lock() else { return };
+        if !redraw.ready(Instant::now(), last_one) {
+            return;
+        }
         let (progress, elapsed, eta) = self.figures(at, frac);
         eprint!(
             "\r\x1b[2Kframe {} layer {:<8} [{}/{}] {:>5.1}%  elapsed {:.0}s  ETA {:.0}s",
@@ -79,12 +121,12 @@ impl RenderObserver for Progress {
     }
     fn layer_started(&self, at: RenderProgress<'_>) {
         if self.style == ProgressStyle::Bar {
-            self.bar(at, 0.0);
+            self.bar(at, 0.0, false);
         }
     }
     fn pixels(&self, at: RenderProgress<'_>, frac: f64) {
         match self.style {
-            ProgressStyle::Bar => self.bar(at, frac),
+            ProgressStyle::Bar => self.bar(at, frac, false),
             ProgressStyle::Plain if frac > 0.0 => {
                 // A block of tiles: at most one line per PLAIN_EVERY_S, so long frames show life in a log.
                 let Ok(mut last) = self.last_line.lock() else { return };
@@ -104,6 +146,10 @@ impl RenderObserver for Progress {
         }
     }
     fn layer_finished(&self, at: RenderProgress<'_>, skipped: bool) {
+        if self.style == ProgressStyle::Bar && at.done + 1 >= at.total {
+            // The job's last layer-frame: the bar ends at 100 %, whenever it was last drawn.
+            self.bar(RenderProgress { done: at.total.saturating_sub(1), ..at }, 1.0, true);
+        }
         if self.style != ProgressStyle::Plain {
             return;
         }
@@ -126,5 +172,28 @@ impl RenderObserver for Progress {
             eprintln!();
         }
         super::warn(&text)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_bar_redraws_at_most_ten_times_a_second_and_always_at_the_end() {
+        let t0 = Instant::now();
+        let mut t = Throttle::new(BAR_EVERY);
+        // 483 updates in 3.5 s (what a small render sent): 35 or 36 redraws, not 483.
+        let drawn = (0..483).filter(|&i| t.ready(t0 + Duration::from_micros(i * 3_500_000 / 483), false)).count();
+        assert!((35..=36).contains(&drawn), "{drawn} redraws");
+        // The first update draws; one 10 ms later does not; one 100 ms later does.
+        let mut t = Throttle::new(BAR_EVERY);
+        assert!(t.ready(t0, false));
+        assert!(!t.ready(t0 + Duration::from_millis(10), false));
+        assert!(t.ready(t0 + Duration::from_millis(110), false));
+        // The last update draws however soon it comes.
+        assert!(t.ready(t0 + Duration::from_millis(111), true));
+        // A clock that goes backwards (updates from several threads) never draws early.
+        assert!(!t.ready(t0, false));
     }
 }

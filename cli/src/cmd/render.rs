@@ -159,7 +159,7 @@ pub struct RenderArgs {
     /// specular_direct, specular_indirect, transmission, emission, environment, light_groups (one
     /// lg_<name> per light group), P (world position), shadow (the set layer's crowd shadows), or all
     /// (default: the shot's `render.passes`).
-    #[arg(long, value_delimiter = ',', value_name = "NAME,...")]
+    #[arg(long, value_delimiter = ',', value_name = "NAME,...", value_parser = super::values::pass_name)]
     pub passes: Option<Vec<String>>,
 }
 

@@ -21,13 +21,13 @@ pub struct ReviewArgs {
     #[arg(long)]
     pub manifest: Option<PathBuf>,
     /// The frame the page opens on (default: the first rendered).
-    #[arg(long)]
+    #[arg(long, value_parser = super::values::frame)]
     pub frame: Option<i32>,
     /// Port to listen on (0: any free port).
-    #[arg(long, default_value_t = 8028)]
+    #[arg(long, default_value_t = 8028, value_parser = super::values::port)]
     pub port: u16,
     /// Address to listen on; anything but loopback lets other machines read the shot.
-    #[arg(long, default_value = "127.0.0.1")]
+    #[arg(long, default_value = "127.0.0.1", value_parser = super::values::ip)]
     pub bind: IpAddr,
     /// Memory kept for decoded EXRs and images between requests (e.g. 512MB, 2GB).
     #[arg(long, default_value = "1GiB", value_parser = super::values::bytes)]

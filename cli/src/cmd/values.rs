@@ -104,3 +104,83 @@ pub fn bytes(s: &str) -> Result<u64, String> {
     }
     Ok(b)
 }
+
+/// An agent id (`botinfo SHOT ID...`): the agent's id in the cache, as `throng cast` lists them.
+pub fn agent_id(s: &str) -> Result<u32, String> {
+    s.trim().parse().map_err(|_| {
+        format!(
+            "`{s}` is not an agent id (a whole number 0-{}: the agent's id in the cache, as `throng cast` lists them)",
+            u32::MAX
+        )
+    })
+}
+
+/// A shot frame (`--frame`, `--ref-frame`): a whole number, e.g. 1001.
+pub fn frame(s: &str) -> Result<i32, String> {
+    s.trim().parse().map_err(|_| format!("`{s}` is not a frame (a whole shot frame number, e.g. 1001)"))
+}
+
+/// A count of 1 or more (`--chunk`, `--workers`, `layers --count`); the
+/// stage checks its own upper bound.
+pub fn count(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n) if n > 0 => Ok(n),
+        _ => Err(format!("`{s}` is not a count (a whole number, 1 or more)")),
+    }
+}
+
+/// A whole number (`--workers`); the stage checks its range.
+pub fn whole(s: &str) -> Result<usize, String> {
+    s.trim().parse().map_err(|_| format!("`{s}` is not a whole number"))
+}
+
+/// A plain number (`--cutoffs`, `--lod-px`, gait lengths); the stage checks its range.
+pub fn number(s: &str) -> Result<f32, String> {
+    s.trim().parse().map_err(|_| format!("`{s}` is not a number (e.g. 12 or 0.5)"))
+}
+
+/// A TCP port (`review --port`): 0-65535 (0: any free port).
+pub fn port(s: &str) -> Result<u16, String> {
+    s.trim().parse().map_err(|_| format!("`{s}` is not a port (a whole number 0-65535)"))
+}
+
+/// An IP address to listen on (`review --bind`).
+pub fn ip(s: &str) -> Result<std::net::IpAddr, String> {
+    s.trim().parse().map_err(|_| format!("`{s}` is not an IP address (e.g. 127.0.0.1, 0.0.0.0 or ::1)"))
+}
+
+/// A render pass name (`render --passes`), checked at parse time against
+/// the names the renderer knows, before any file is read.
+pub fn pass_name(s: &str) -> Result<String, String> {
+    throng::scene::passes::PassSet::parse(&[s], "--passes").map_err(|e| {
+        let e = e.to_string();
+        e.strip_prefix("--passes: ").map(str::to_string).unwrap_or(e)
+    })?;
+    Ok(s.trim().to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bad_number_says_what_the_argument_takes() {
+        assert_eq!(agent_id("17"), Ok(17));
+        assert!(agent_id("abc").unwrap_err().contains("not an agent id (a whole number"));
+        assert!(agent_id("-1").is_err());
+        assert!(frame("10x").unwrap_err().contains("not a frame"));
+        assert_eq!(frame("-4"), Ok(-4));
+        assert!(count("0").unwrap_err().contains("1 or more"));
+        assert!(number("fast").unwrap_err().contains("not a number"));
+        assert!(port("99999").unwrap_err().contains("0-65535"));
+        assert!(ip("localhost").unwrap_err().contains("not an IP address"));
+    }
+
+    #[test]
+    fn pass_names_are_checked_at_parse_time() {
+        assert_eq!(pass_name("diffuse_direct").as_deref(), Ok("diffuse_direct"));
+        assert_eq!(pass_name("all").as_deref(), Ok("all"));
+        let e = pass_name("difuse_direct").unwrap_err();
+        assert!(e.contains("unknown pass `difuse_direct`") && e.contains("diffuse_direct"), "{e}");
+    }
+}
