@@ -166,8 +166,27 @@ pub const NEEDED_CHANNELS: [&str; 10] = ["R", "G", "B", "A", "albedo.R", "albedo
 /// the module docs). Refuses a file lacking the beauty or a guide (naming
 /// the channel), one already denoised, and an `output` that is `input`.
 pub fn denoise_file(denoiser: &Denoiser, input: &Path, output: &Path, preset: Denoise) -> Result<()> {
-    crate::error::check_readable_file(input)?;
+    check_input(input)?;
     crate::output::InputFiles::new([("input".to_string(), input.to_path_buf())]).check(output)?;
+    let (mut film, mut meta) = crate::render::exr::read_layer(input)?;
+    if film.passes.iter().any(|p| p.name == NOISY) {
+        return Err(Error::invalid(input, "is already denoised (it has noisy.R/G/B)").field("noisy.R"));
+    }
+    denoiser.denoise(&mut film, preset).map_err(|e| Error::invalid(input, e.to_string()))?;
+    meta.denoiser = stamp(denoiser, preset);
+    let options = crate::render::exr::WriteOptions {
+        manifest: crate::render::exr::ManifestMode::Header,
+        compression: crate::render::exr::LayerCompression::Zip,
+    };
+    crate::render::exr::write_layer_with(output, &film, &meta, &options)
+}
+
+/// Whether `input` can be denoised, from its header alone: a readable EXR
+/// with the beauty and both guides, not denoised already. What
+/// [`denoise_file`] checks first, and what a batch checks for every file
+/// before it writes any.
+pub fn check_input(input: &Path) -> Result<()> {
+    crate::error::check_readable_file(input)?;
     let (_, _, channels) = crate::render::exr::read_channel_names(input)?;
     if let Some(missing) = NEEDED_CHANNELS.iter().find(|c| !channels.iter().any(|n| n == *c)) {
         return Err(Error::invalid(
@@ -179,19 +198,9 @@ pub fn denoise_file(denoiser: &Denoiser, input: &Path, output: &Path, preset: De
         )
         .field(*missing));
     }
-    let (mut film, mut meta) = crate::render::exr::read_layer(input)?;
-    if !meta.denoiser.is_empty() || film.passes.iter().any(|p| p.name == NOISY) {
-        return Err(Error::invalid(
-            input,
-            format!("is already denoised ({}); denoise the render it came from", meta.denoiser),
-        )
-        .field("throng/denoiser"));
+    if channels.iter().any(|n| n == "noisy.R") {
+        return Err(Error::invalid(input, "is already denoised (it has noisy.R/G/B); denoise the render it came from")
+            .field("noisy.R"));
     }
-    denoiser.denoise(&mut film, preset).map_err(|e| Error::invalid(input, e.to_string()))?;
-    meta.denoiser = stamp(denoiser, preset);
-    let options = crate::render::exr::WriteOptions {
-        manifest: crate::render::exr::ManifestMode::Header,
-        compression: crate::render::exr::LayerCompression::Zip,
-    };
-    crate::render::exr::write_layer_with(output, &film, &meta, &options)
+    Ok(())
 }

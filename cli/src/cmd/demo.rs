@@ -29,6 +29,10 @@ pub struct DemoArgs {
     /// frame), or `off` for instants.
     #[arg(long, default_value = "-0.25,0.25", value_parser = super::values::shutter, allow_hyphen_values = true)]
     pub shutter: super::values::ShutterFlag,
+    /// Denoise the renders with Open Image Denoise at this preset, or `off` (default: `high` when
+    /// the library is installed, else off with a line saying how to install it).
+    #[arg(long, value_enum)]
+    pub denoise: Option<super::render::DenoiseFlag>,
 }
 
 /// `throng demo`: every stage on the bundled demo shot.
@@ -82,9 +86,17 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let f = crowd.shot().frames;
     let mut layers = job::all_layers(&manifest);
     layers.push(FULL_LAYER.to_string());
+    let (denoise, without) = match args.denoise {
+        Some(flag) => (flag.preset(), None),
+        None => match throng::render::denoise::Denoiser::open(None, 0) {
+            Ok(_) => (Some(throng::shot::Denoise::High), None),
+            Err(e) => (None, Some(e)),
+        },
+    };
     let render = RenderJob {
         png: true,
         shutter,
+        denoise,
         colourspace: crowd.shot().render.working_colourspace,
         ..RenderJob::new(layers, vec![f.start, manifest.ref_frame, f.end], args.spp, out.join("render"))
     };
@@ -129,14 +141,21 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     };
     progress.finish();
     let done = report?.layers;
+    if let Some(e) = &without {
+        outln!("  denoise  off: {}", super::wording(e));
+    }
     let blur = match shutter {
         Some([open, close]) => format!("motion blur, shutter {open}..{close} frames"),
         None => "no motion blur".to_string(),
     };
     outln!(
-        "  render   {} layer-frames at {w}x{h}, {} spp, {blur}  [{:.1} s]",
+        "  render   {} layer-frames at {w}x{h}, {} spp, {blur}, {}  [{:.1} s]",
         done.len(),
         render.spp,
+        match render.denoise {
+            Some(d) => format!("denoised ({}, {:.1} s of it)", d.name(), done.iter().map(|l| l.denoise_s).sum::<f64>()),
+            None => "not denoised".to_string(),
+        },
         t.elapsed().as_secs_f64()
     );
 

@@ -25,6 +25,7 @@ pub mod cache;
 pub mod cast;
 pub mod comp;
 pub mod demo;
+pub mod denoise;
 pub mod export;
 pub mod farm;
 pub mod layers;
@@ -115,6 +116,8 @@ pub enum Verb {
     Render(render::RenderArgs),
     /// Stack a frame's layers back into one image.
     Comp(comp::CompArgs),
+    /// Denoise rendered layer or comp files (Open Image Denoise) into another folder.
+    Denoise(denoise::DenoiseArgs),
     /// Write one frame of the shot as glTF (.glb), or a frame range as USD (.usda, .usd, .usdz).
     Export(export::ExportArgs),
     /// A local web page of the shot's layers: click an agent to read its botInfo.
@@ -143,6 +146,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Verb::Layers(args) => layers::run(&args),
         Verb::Render(args) => render::run(&args, cli.threads),
         Verb::Comp(args) => comp::run(&args),
+        Verb::Denoise(args) => denoise::run(&args, cli.threads),
         Verb::Export(args) => export::run(&args),
         Verb::Review(args) => review::run(&args),
         Verb::Farm(verb) => farm::run(&verb),
@@ -327,6 +331,8 @@ struct LayerFrameSummary {
     peak_rss_bytes: Option<u64>,
     /// Seconds building the top-level tree.
     tlas_build_s: f64,
+    /// Seconds denoising (part of `seconds`; 0 when not denoised).
+    denoise_s: f64,
     /// Bytes of the EXR written.
     file_bytes: u64,
     /// Each pass written and its channels' bytes before compression.

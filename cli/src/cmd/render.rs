@@ -70,6 +70,31 @@ pub enum ColourspaceFlag {
     Acescg,
 }
 
+/// `--denoise`: Open Image Denoise's preset, or `off`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DenoiseFlag {
+    /// Best quality, for finals.
+    High,
+    /// Faster, a little softer (dailies).
+    Balanced,
+    /// Fastest (previews).
+    Fast,
+    /// Not denoised, whatever the shot says.
+    Off,
+}
+
+impl DenoiseFlag {
+    /// The library's preset (`None`: off).
+    pub fn preset(self) -> Option<throng::shot::Denoise> {
+        match self {
+            DenoiseFlag::High => Some(throng::shot::Denoise::High),
+            DenoiseFlag::Balanced => Some(throng::shot::Denoise::Balanced),
+            DenoiseFlag::Fast => Some(throng::shot::Denoise::Fast),
+            DenoiseFlag::Off => None,
+        }
+    }
+}
+
 impl From<ColourspaceFlag> for throng::shot::Colourspace {
     fn from(f: ColourspaceFlag) -> throng::shot::Colourspace {
         match f {
@@ -161,6 +186,12 @@ pub struct RenderArgs {
     /// (default: the shot's `render.passes`).
     #[arg(long, value_delimiter = ',', value_name = "NAME,...", value_parser = super::values::pass_name)]
     pub passes: Option<Vec<String>>,
+    /// Denoise every layer and light pass with Intel Open Image Denoise (albedo and normal guides,
+    /// prefiltered); the noisy beauty stays as noisy.R/G/B. `--denoise` alone is `high` (default:
+    /// the shot's `render.denoise`, else off). Needs the library: `python3 -m pip install --no-deps
+    /// --target .oidn pyoidn==2.5.1.0` in the checkout, or THRONG_OIDN=<its lib folder>.
+    #[arg(long, value_enum, num_args = 0..=1, default_missing_value = "high", value_name = "QUALITY")]
+    pub denoise: Option<DenoiseFlag>,
 }
 
 /// `throng render SHOT ...`: renders the asked layers and frames.
@@ -217,6 +248,7 @@ pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
         compression: args.compression.into(),
         shutter,
         colourspace,
+        denoise: args.denoise.map_or(crowd.shot().render.denoise, DenoiseFlag::preset),
         ..RenderJob::new(layers, frames, spp, args.out.clone())
     };
     // No output over an input: the shot's files and the manifest.
@@ -247,6 +279,7 @@ pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
                     instances: d.instances as u64,
                     peak_rss_bytes: d.peak_rss_bytes,
                     tlas_build_s: d.tlas_build_s,
+                    denoise_s: d.denoise_s,
                     file_bytes: d.file_bytes,
                     passes: d
                         .pass_bytes
