@@ -645,22 +645,29 @@ fn emissive_materials_export_the_radiance_the_renderer_emits() {
     std::fs::write(d.join("w.toml"), common::heads_wardrobe(glow, "slot = \"head\"\nmaterials = [\"glow\"]")).unwrap();
     common::wear_heads(&shot, "w.toml");
     let out = d.join("glow.usda");
-    let (code, _, err) =
-        run(&["export", shot.to_str().unwrap(), "--format", "usd", "--frames", "1001-1002", "--out", out.to_str().unwrap()]);
+    let (code, _, err) = run(&[
+        "export",
+        shot.to_str().unwrap(),
+        "--format",
+        "usd",
+        "--frames",
+        "1001-1002",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{err}");
     let crowd = throng::casting::ShotCrowd::load(&shot).unwrap();
     let stage = Stage::open(out.to_str().unwrap()).unwrap();
     let mut emissive = Vec::new();
     for look in stage.prim(path("/World/Looks")).child_names().unwrap() {
-        let attr = stage.attribute(path(&format!("/World/Looks/{}/PreviewSurface.inputs:emissiveColor", look.as_str())));
+        let attr =
+            stage.attribute(path(&format!("/World/Looks/{}/PreviewSurface.inputs:emissiveColor", look.as_str())));
         if let Some(sdf::Value::Vec3f(c)) = attr.get::<sdf::Value>().unwrap() {
             emissive.push((look.as_str().to_string(), glam::Vec3::new(c.x, c.y, c.z)));
         }
     }
-    let want: Vec<glam::Vec3> = (crowd.library().materials.iter())
-        .filter(|m| m.emission.max_element() > 0.0)
-        .map(|m| m.emission)
-        .collect();
+    let want: Vec<glam::Vec3> =
+        (crowd.library().materials.iter()).filter(|m| m.emission.max_element() > 0.0).map(|m| m.emission).collect();
     assert_eq!(emissive.len(), want.len(), "{emissive:?} vs {want:?}");
     for w in &want {
         assert!(emissive.iter().any(|(_, c)| (*c - *w).abs().max_element() < 1e-6), "{w} not in {emissive:?}");

@@ -1319,6 +1319,30 @@ mod tests {
     }
 
     #[test]
+    fn short_floats_read_back_as_the_same_f32() {
+        let mut x = 0x1234_5678u32;
+        let mut values = vec![0.0f32, -0.0, 1.0, 0.5 - f32::EPSILON / 4.0, 1e-38, 3.4e38, 0.1, 1.0 / 3.0];
+        for _ in 0..20_000 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            let f = f32::from_bits(x);
+            if f.is_finite() {
+                values.push(f);
+            }
+        }
+        let v: Vec<Vec3> = values.chunks(3).filter(|c| c.len() == 3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
+        let Value::Vec3dVec(short) = short_vec3s(&v) else { panic!("not a double vector") };
+        for (p, s) in v.iter().zip(&short) {
+            // The text writer prints a double's shortest form; a reader parses it as float.
+            for (want, d) in [(p.x, s.x), (p.y, s.y), (p.z, s.z)] {
+                let back: f32 = format!("{d}").parse().unwrap();
+                assert_eq!(back.to_bits(), want.to_bits(), "{want} written as {d}");
+            }
+        }
+    }
+
+    #[test]
     fn names_drop_directories() {
         assert_eq!(material_name("/a/b/set.glb#floor"), "set_floor");
         assert_eq!(material_name("robots/chrome"), "robots/chrome");

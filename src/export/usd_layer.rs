@@ -322,12 +322,7 @@ impl LayerBuilder {
     /// [`LayerBuilder::encode`], with `extra` files (package-relative path,
     /// bytes) after the layer in a `.usdz` package; ignored for the other
     /// encodings.
-    pub(crate) fn encode_with(
-        self,
-        encoding: UsdEncoding,
-        name: &str,
-        extra: &[(String, Vec<u8>)],
-    ) -> Result<Vec<u8>> {
+    pub(crate) fn encode_with(self, encoding: UsdEncoding, name: &str, extra: &[(String, Vec<u8>)]) -> Result<Vec<u8>> {
         let data = self.into_data()?;
         match encoding {
             UsdEncoding::Usdz => encode_package(&data, name, extra),
