@@ -12,13 +12,22 @@ metersPerUnit = 1, focalLength x 100 is millimetres (docs/usd.md).
 Every light and the lens (fStop, focusDistance) are read by the UsdLux and
 UsdGeomCamera specs and compared with the shot's values (.ci/usd_lights.py).
 
+Every emissive material's UsdPreviewSurface emissiveColor (the radiance the
+renderer emits: glTF emissiveFactor x emissive strength, a wardrobe's
+emission) is compared with throng's own materials, read from a glTF
+`throng export` of the first frame (emissiveFactor x
+KHR_materials_emissive_strength).
+
 usage: usd_check.py THRONG SHOT STAGE FRAME...
 """
 import json
 import math
 import os
+import re
+import struct
 import subprocess
 import sys
+import tempfile
 import tomllib
 
 from pxr import Gf, Usd, UsdGeom, UsdShade
@@ -37,6 +46,62 @@ def check(ok, what):
 
 def close(a, b, tol=1e-4):
     return all(abs(x - y) <= tol * max(1.0, abs(y)) for x, y in zip(a, b))
+
+
+def usd_material_name(name):
+    """The USD prim name throng gives a library material (docs/usd.md,
+    "The stage"): `<file>#<name>` as `<file stem>_<name>`, made a USD identifier."""
+    if "#" in name:
+        file, mat = name.rsplit("#", 1)
+        name = os.path.splitext(os.path.basename(file))[0] + "_" + mat
+    name = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    return "_" + name if not name or name[0].isdigit() else name
+
+
+def glb_emission(throng, shot_path, frame):
+    """Material name -> emitted radiance, from a glTF export of `frame`."""
+    with tempfile.TemporaryDirectory() as d:
+        out = os.path.join(d, "frame.glb")
+        subprocess.run([throng, "export", shot_path, "--frame", str(frame), "--out", out],
+                       check=True, capture_output=True)
+        data = open(out, "rb").read()
+    (length,) = struct.unpack("<I", data[12:16])
+    doc = json.loads(data[20:20 + length])
+    found = {}
+    for m in doc.get("materials", []):
+        strength = m.get("extensions", {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+        found[m["name"]] = [c * strength for c in m.get("emissiveFactor", [0.0, 0.0, 0.0])]
+    return found
+
+
+def emissive_color(stage, material):
+    """A Looks material's emitted radiance: UsdPreviewSurface emissiveColor,
+    or the scale of the texture connected to it."""
+    shader = UsdShade.Shader(stage.GetPrimAtPath(f"{material}/PreviewSurface"))
+    if not shader:
+        return None
+    inp = shader.GetInput("emissiveColor")
+    if not inp:
+        return [0.0, 0.0, 0.0]
+    if inp.HasConnectedSource():
+        source = inp.GetConnectedSources()[0][0].source
+        scale = UsdShade.Shader(source.GetPrim()).GetInput("scale").Get()
+        return list(scale)[:3]
+    return list(inp.Get())
+
+
+def check_emission(throng, shot_path, stage, frame):
+    want = glb_emission(throng, shot_path, frame)
+    emissive = 0
+    for name, radiance in sorted(want.items()):
+        path = f"/World/Looks/{usd_material_name(name)}"
+        got = emissive_color(stage, path)
+        check(got is not None, f"material {name}: {path} exists")
+        if got is None:
+            continue
+        check(close(got, radiance, 1e-5), f"{path}: emissiveColor {got}, throng emits {radiance} (material {name})")
+        emissive += max(radiance) > 0
+    return f"{len(want)} materials of frame {frame}, {emissive} emissive, emit in USD what throng renders"
 
 
 def main(throng, shot_path, stage_path, frames):
@@ -144,6 +209,7 @@ def main(throng, shot_path, stage_path, frames):
           f"focal {cam.GetFocalLengthAttr().Get(stage.GetStartTimeCode()) * mm:.3f} mm "
           f"(tenths of a metre: {cam.GetFocalLengthAttr().Get(stage.GetStartTimeCode())}), "
           f"field of view {fov:.3f} deg, clipping {near}-{far}")
+    print(check_emission(throng, shot_path, stage, frames[0]))
     check_lights(stage, shot, os.path.dirname(os.path.abspath(shot_path)), check)
     print(check_lens(stage, shot, check))
     if failures:

@@ -632,3 +632,49 @@ fn every_light_and_the_lens_export_in_usd_units_and_the_lit_export_reads_back() 
     assert_eq!(code, 0, "render of the lit USD crowd failed: {err}");
     assert!(r.join("full/lit.full.1002.exr").exists());
 }
+
+/// Every emissive material, the set's and the crowd's, carries the radiance
+/// the renderer emits (emissiveFactor x strength, a wardrobe's emission) as
+/// its UsdPreviewSurface `emissiveColor`; the others have none.
+#[test]
+fn emissive_materials_export_the_radiance_the_renderer_emits() {
+    let dir = common::tempdir().unwrap();
+    let d = dir.path();
+    let shot = common::DemoShot { name: "glow", ..Default::default() }.write(d, &common::two_robots(1..=3));
+    let glow = "[materials.glow]\nbase_color = [0.1, 0.1, 0.1]\nemission = [2.0, 1.0, 0.5]\n";
+    std::fs::write(d.join("w.toml"), common::heads_wardrobe(glow, "slot = \"head\"\nmaterials = [\"glow\"]")).unwrap();
+    common::wear_heads(&shot, "w.toml");
+    let out = d.join("glow.usda");
+    let (code, _, err) = run(&[
+        "export",
+        shot.to_str().unwrap(),
+        "--format",
+        "usd",
+        "--frames",
+        "1001-1002",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let crowd = throng::casting::ShotCrowd::load(&shot).unwrap();
+    let stage = Stage::open(out.to_str().unwrap()).unwrap();
+    let mut emissive = Vec::new();
+    for look in stage.prim(path("/World/Looks")).child_names().unwrap() {
+        let attr =
+            stage.attribute(path(&format!("/World/Looks/{}/PreviewSurface.inputs:emissiveColor", look.as_str())));
+        if let Some(sdf::Value::Vec3f(c)) = attr.get::<sdf::Value>().unwrap() {
+            emissive.push((look.as_str().to_string(), glam::Vec3::new(c.x, c.y, c.z)));
+        }
+    }
+    let want: Vec<glam::Vec3> =
+        (crowd.library().materials.iter()).filter(|m| m.emission.max_element() > 0.0).map(|m| m.emission).collect();
+    assert_eq!(emissive.len(), want.len(), "{emissive:?} vs {want:?}");
+    for w in &want {
+        assert!(emissive.iter().any(|(_, c)| (*c - *w).abs().max_element() < 1e-6), "{w} not in {emissive:?}");
+    }
+    // The set's shop windows (emissiveFactor x KHR_materials_emissive_strength 1.1) and the crowd's glow.
+    let by_name = |n: &str| emissive.iter().find(|(l, _)| l.ends_with(n)).map(|x| x.1);
+    assert_eq!(by_name("glow"), Some(glam::Vec3::new(2.0, 1.0, 0.5)));
+    let window = by_name("set_shop_window").expect("the shop windows emit");
+    assert!((window - glam::Vec3::new(1.0, 0.72727275, 0.4363636) * 1.1).abs().max_element() < 1e-6, "{window}");
+}

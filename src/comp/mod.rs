@@ -21,7 +21,9 @@
 //! - Passes (docs/render.md, "Passes"): the light-path passes, light groups
 //!   and `shadow` are premultiplied like colour and stacked with the same
 //!   over, so the comp's light groups (and its light-path passes) still add
-//!   up to its beauty; `P` comes, like `agent.id`, from the layer whose Z
+//!   up to its beauty (stacked in f32 from the layers' half values: within
+//!   one half rounding, 2^-11 (sum + beauty); the comp's file rounds to half
+//!   once more, so within two: docs/render.md, "In the comp"); `P` comes, like `agent.id`, from the layer whose Z
 //!   wins (zero where none hit). A pass is stacked only when every layer has
 //!   it: one missing from some layer would not add up, so it is left out and
 //!   named in [`Comped::warnings`].

@@ -260,7 +260,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     let g = gather(crowd, opts)?;
     let lib = crowd.library();
     let mut root = root_layer(crowd.shot(), a, b);
-    let mesh_names = write_meshes(&mut root, lib, &g.meshes);
+    let mesh_names = write_meshes(&mut root, lib, &g.meshes)?;
 
     // Materials, and the base colour textures they read (written beside the
     // export, or into the .usdz package).
@@ -289,7 +289,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
         outputs.push(out.to_path_buf());
         crate::output::InputFiles::new(crowd.input_files()).check_all(outputs.iter().map(PathBuf::as_path))?;
     }
-    let written = write_files(root, &layer_files, &textures, lights.dome.as_deref(), encoding, out)?;
+    let written = write_files(root, layer_files, &textures, lights.dome.as_deref(), encoding, out)?;
     Ok(UsdExportSummary {
         agents: g.agents.len(),
         frames: times.len(),
@@ -351,12 +351,16 @@ fn root_layer(shot: &crate::shot::Shot, a: i32, b: i32) -> LayerBuilder {
 }
 
 /// Geometry: one Mesh per library mesh, named from the mesh name, under
-/// /World/Prototypes/Meshes. Returns the names.
+/// /World/Prototypes/Meshes. Meshes with the same triangles and UVs (a
+/// skinned piece's posed meshes, one per pose step) share them: each
+/// references one abstract `class` Mesh under /World/Prototypes/Topology
+/// holding `faceVertexCounts`, `faceVertexIndices` and `primvars:st`, and
+/// authors only its points, normals and extent. Returns the names.
 fn write_meshes(
     root: &mut LayerBuilder,
     lib: &crate::scene::Library,
     meshes: &BTreeSet<MeshId>,
-) -> BTreeMap<MeshId, String> {
+) -> Result<BTreeMap<MeshId, String>> {
     let mesh_names = unique_names(meshes.iter().map(|&m| (m, prototype_name(&lib.meshes[m as usize].name))));
     // A defined but invisible Scope: importers that skip abstract (`class`)
     // prims, Blender's among them, still find the prototypes, and a reference
@@ -364,6 +368,10 @@ fn write_meshes(
     let protos = root.def("/World/Prototypes", "Scope");
     root.attr(protos, "visibility", "token", Value::Token("invisible".into()));
     root.def("/World/Prototypes/Meshes", "Scope");
+    let topology = shared_topology(lib, &mesh_names);
+    if !topology.is_empty() {
+        root.def("/World/Prototypes/Topology", "Scope");
+    }
     for (&m, name) in &mesh_names {
         let mesh = &lib.meshes[m as usize];
         // An Xform holding the Mesh: an instance's prototype root is the
@@ -371,25 +379,72 @@ fn write_meshes(
         // such as Blender build their shared prototype from the root's children).
         root.def(&format!("/World/Prototypes/Meshes/{name}"), "Xform");
         let p = root.def(&format!("/World/Prototypes/Meshes/{name}/mesh"), "Mesh");
+        let shared = topology.get(&m);
+        if let Some(first) = shared {
+            let path = format!("/World/Prototypes/Topology/{}", mesh_names[first]);
+            if !root.has_prim(&path) {
+                let t = root.prim(&path, Specifier::Class, "Mesh");
+                mesh_topology(root, t, mesh);
+            }
+            root.reference(p, &path)?;
+        }
         let (lo, hi) = mesh.bounds();
         root.attr(p, "extent", "float3[]", Value::Vec3fVec(vec![vec3(lo), vec3(hi)]));
-        root.attr(p, "points", "point3f[]", Value::Vec3fVec(mesh.positions.iter().map(|&v| vec3(v)).collect()));
-        root.attr(p, "faceVertexCounts", "int[]", Value::IntVec(vec![3; mesh.indices.len() / 3]));
-        let indices = mesh.indices.iter().map(|&i| i32::try_from(i).unwrap_or(i32::MAX)).collect();
-        root.attr(p, "faceVertexIndices", "int[]", Value::IntVec(indices));
+        root.attr(p, "points", "point3f[]", short_vec3s(&mesh.positions));
         if mesh.normals.len() == mesh.positions.len() {
-            root.attr(p, "normals", "normal3f[]", Value::Vec3fVec(mesh.normals.iter().map(|&v| vec3(v)).collect()));
+            root.attr(p, "normals", "normal3f[]", short_vec3s(&mesh.normals));
             root.attr_meta(p, "normals", "interpolation", Value::Token("vertex".into()));
         }
-        if mesh.uvs.len() == mesh.positions.len() {
-            // glTF's v runs down the image, USD's st up it.
-            let st = mesh.uvs.iter().map(|u| gf::Vec2f { x: u.x, y: 1.0 - u.y }).collect();
-            root.attr(p, "primvars:st", "texCoord2f[]", Value::Vec2fVec(st));
-            root.attr_meta(p, "primvars:st", "interpolation", Value::Token("vertex".into()));
+        if shared.is_none() {
+            mesh_topology(root, p, mesh);
         }
-        root.uniform(p, "subdivisionScheme", "token", Value::Token("none".into()));
     }
-    mesh_names
+    Ok(mesh_names)
+}
+
+/// A mesh's triangles, UVs (`primvars:st`) and subdivision scheme on `p`.
+fn mesh_topology(root: &mut LayerBuilder, p: PrimId, mesh: &crate::scene::Mesh) {
+    root.attr(p, "faceVertexCounts", "int[]", Value::IntVec(vec![3; mesh.indices.len() / 3]));
+    let indices = mesh.indices.iter().map(|&i| i32::try_from(i).unwrap_or(i32::MAX)).collect();
+    root.attr(p, "faceVertexIndices", "int[]", Value::IntVec(indices));
+    if mesh.uvs.len() == mesh.positions.len() {
+        // glTF's v runs down the image, USD's st up it.
+        let st = mesh.uvs.iter().map(|u| gf::Vec2f { x: u.x, y: 1.0 - u.y }).collect();
+        root.attr(p, "primvars:st", "texCoord2f[]", Value::Vec2fVec(st));
+        root.attr_meta(p, "primvars:st", "interpolation", Value::Token("vertex".into()));
+    }
+    root.uniform(p, "subdivisionScheme", "token", Value::Token("none".into()));
+}
+
+/// Meshes whose triangles and UVs another mesh has too, each mapped to the
+/// first (by name) of its group; meshes alone in their group are left out.
+fn shared_topology(lib: &crate::scene::Library, names: &BTreeMap<MeshId, String>) -> HashMap<MeshId, MeshId> {
+    type Key<'a> = (usize, &'a [u32], Vec<[u32; 2]>);
+    let mut groups: HashMap<Key, Vec<MeshId>> = HashMap::new();
+    for &m in names.keys() {
+        let mesh = &lib.meshes[m as usize];
+        let uvs = match mesh.uvs.len() == mesh.positions.len() {
+            true => mesh.uvs.iter().map(|u| [u.x.to_bits(), u.y.to_bits()]).collect(),
+            false => Vec::new(),
+        };
+        groups.entry((mesh.positions.len(), &mesh.indices, uvs)).or_default().push(m);
+    }
+    let mut out = HashMap::new();
+    for members in groups.into_values().filter(|g| g.len() > 1) {
+        let first = members.iter().copied().min_by(|a, b| names[a].cmp(&names[b])).unwrap_or(members[0]);
+        out.extend(members.into_iter().map(|m| (m, first)));
+    }
+    out
+}
+
+/// Float vectors for a text layer: each component the double nearest the
+/// shortest decimal that reads back as the same `f32`, so the text writer
+/// (which prints every float through a double) writes `0.49999997`, not
+/// `0.4999999701976776`. The attribute's own type (`point3f[]`, ...) is
+/// what a reader parses it as; only the text encodings are written.
+fn short_vec3s(v: &[Vec3]) -> Value {
+    let short = |x: f32| format!("{x}").parse::<f64>().unwrap_or(f64::from(x));
+    Value::Vec3dVec(v.iter().map(|p| gf::Vec3d { x: short(p.x), y: short(p.y), z: short(p.z) }).collect())
 }
 
 /// One UsdPreviewSurface Material per library material under /World/Looks,
@@ -427,15 +482,44 @@ fn write_materials(
             root.attr(tex, "inputs:wrapS", "token", Value::Token("repeat".into()));
             root.attr(tex, "inputs:wrapT", "token", Value::Token("repeat".into()));
             root.declare(tex, "outputs:rgb", "float3");
-            let st = root.def(&format!("{path}/TexCoord"), "Shader");
-            root.uniform(st, "info:id", "token", Value::Token("UsdPrimvarReader_float2".into()));
-            root.attr(st, "inputs:varname", "string", string("st"));
-            root.declare(st, "outputs:result", "float2");
+            tex_coord(root, &path);
+        }
+        if src.emission.max_element() > 0.0 {
+            // The emitted radiance as the renderer uses it (emissiveFactor x
+            // strength, times the emissive texture when there is one).
+            root.attr(sh, "inputs:emissiveColor", "color3f", Value::Vec3f(vec3(src.emission)));
+            if let Some(file) = src.emissive_texture.and_then(|t| textures.asset(t)) {
+                root.connect(sh, "inputs:emissiveColor", "color3f", &format!("{path}/Emission.outputs:rgb"));
+                let tex = root.def(&format!("{path}/Emission"), "Shader");
+                root.uniform(tex, "info:id", "token", Value::Token("UsdUVTexture".into()));
+                root.attr(tex, "inputs:file", "asset", Value::AssetPath(file.into()));
+                root.connect(tex, "inputs:st", "float2", &format!("{path}/TexCoord.outputs:result"));
+                root.attr(tex, "inputs:sourceColorSpace", "token", Value::Token("sRGB".into()));
+                let e = src.emission;
+                root.attr(tex, "inputs:scale", "float4", Value::Vec4f(gf::Vec4f { x: e.x, y: e.y, z: e.z, w: 1.0 }));
+                root.attr(tex, "inputs:wrapS", "token", Value::Token("repeat".into()));
+                root.attr(tex, "inputs:wrapT", "token", Value::Token("repeat".into()));
+                root.declare(tex, "outputs:rgb", "float3");
+                tex_coord(root, &path);
+            }
         }
         root.attr(sh, "inputs:roughness", "float", Value::Float(src.roughness));
         root.attr(sh, "inputs:metallic", "float", Value::Float(src.metallic));
         root.attr(sh, "outputs:surface", "token", Value::Token("".into()));
     }
+}
+
+/// The material's `TexCoord` shader (UsdPrimvarReader_float2 reading
+/// `st`), defined once however many textures read it.
+fn tex_coord(root: &mut LayerBuilder, material: &str) {
+    let path = format!("{material}/TexCoord");
+    if root.has_prim(&path) {
+        return;
+    }
+    let st = root.def(&path, "Shader");
+    root.uniform(st, "info:id", "token", Value::Token("UsdPrimvarReader_float2".into()));
+    root.attr(st, "inputs:varname", "string", string("st"));
+    root.declare(st, "outputs:result", "float2");
 }
 
 /// Instancing prototypes: one per (mesh, material), referencing the
@@ -576,7 +660,7 @@ struct Written {
 /// into the package), the per-layer files, and the root last.
 fn write_files(
     mut root: LayerBuilder,
-    layer_files: &BTreeMap<String, LayerBuilder>,
+    layer_files: BTreeMap<String, LayerBuilder>,
     textures: &Textures,
     dome: Option<&Dome>,
     encoding: UsdEncoding,
@@ -618,12 +702,12 @@ fn write_files(
         }
     }
     for (layer, l) in layer_files {
-        let name = layer_file_name(out, layer);
+        let name = layer_file_name(out, &layer);
         let path = out.with_file_name(&name);
-        let data = l.encode(encoding, &name)?;
+        prims += l.prim_count();
+        let data = l.encode_with(encoding, &name, &[])?;
         write_bytes(&path, &data)?;
         bytes += data.len() as u64;
-        prims += l.prim_count();
         root.sublayer(format!("./{name}"));
         files.push(path);
     }
@@ -663,8 +747,16 @@ impl Textures {
         encoding: UsdEncoding,
         out: &Path,
     ) -> Result<Textures> {
-        let used: BTreeSet<u32> =
-            materials.iter().filter_map(|&m| lib.materials.get(m as usize)?.base_color_texture).collect();
+        // Base colour textures, and the emissive textures of emissive materials.
+        let used: BTreeSet<u32> = materials
+            .iter()
+            .filter_map(|&m| lib.materials.get(m as usize))
+            .flat_map(|m| {
+                let emissive = m.emissive_texture.filter(|_| m.emission.max_element() > 0.0);
+                [m.base_color_texture, emissive]
+            })
+            .flatten()
+            .collect();
         let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         let dir = format!("{}_textures", identifier(&stem));
         let names =
@@ -1224,6 +1316,30 @@ mod tests {
         assert_eq!(back.texels, texels);
         // Deterministic: the same bytes twice.
         assert!(dome_exr(&dome).unwrap() == bytes);
+    }
+
+    #[test]
+    fn short_floats_read_back_as_the_same_f32() {
+        let mut x = 0x1234_5678u32;
+        let mut values = vec![0.0f32, -0.0, 1.0, 0.5 - f32::EPSILON / 4.0, 1e-38, 3.4e38, 0.1, 1.0 / 3.0];
+        for _ in 0..20_000 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            let f = f32::from_bits(x);
+            if f.is_finite() {
+                values.push(f);
+            }
+        }
+        let v: Vec<Vec3> = values.chunks(3).filter(|c| c.len() == 3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
+        let Value::Vec3dVec(short) = short_vec3s(&v) else { panic!("not a double vector") };
+        for (p, s) in v.iter().zip(&short) {
+            // The text writer prints a double's shortest form; a reader parses it as float.
+            for (want, d) in [(p.x, s.x), (p.y, s.y), (p.z, s.z)] {
+                let back: f32 = format!("{d}").parse().unwrap();
+                assert_eq!(back.to_bits(), want.to_bits(), "{want} written as {d}");
+            }
+        }
     }
 
     #[test]

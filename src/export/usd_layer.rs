@@ -136,6 +136,11 @@ impl LayerBuilder {
         PrimId(i)
     }
 
+    /// Whether the layer holds a prim at `path`.
+    pub(crate) fn has_prim(&self, path: &str) -> bool {
+        self.index.contains_key(path)
+    }
+
     /// `def <type> "<name>"`.
     pub(crate) fn def(&mut self, path: &str, type_name: &str) -> PrimId {
         self.prim(path, Specifier::Def, type_name)
@@ -238,12 +243,14 @@ impl LayerBuilder {
     }
 
     /// The layer as `sdf::Data`.
-    pub(crate) fn to_data(&self) -> Result<sdf::Data> {
+    /// Moves the values (an export's geometry is most of its memory: it is
+    /// held once, not twice).
+    pub(crate) fn into_data(self) -> Result<sdf::Data> {
         let mut data = sdf::Data::new();
         let root = sdf::Path::abs_root();
         let root_spec = data.create_spec(root.clone(), SpecType::PseudoRoot);
-        for (k, v) in &self.meta {
-            root_spec.add(k, v.clone());
+        for (k, v) in self.meta {
+            root_spec.add(&k, v);
         }
         if !self.sublayers.is_empty() {
             root_spec.add(FieldKey::SubLayers, Value::StringVec(self.sublayers.clone()));
@@ -253,15 +260,15 @@ impl LayerBuilder {
             );
         }
         root_spec.add(ChildrenKey::PrimChildren, tokens(&self.roots));
-        for prim in &self.prims {
+        for prim in self.prims {
             let path = sdf_path(&prim.path)?;
             let spec = data.create_spec(path.clone(), SpecType::Prim);
             spec.add(FieldKey::Specifier, Value::Specifier(prim.specifier));
             if !prim.type_name.is_empty() {
                 spec.add(FieldKey::TypeName, Value::Token(prim.type_name.as_str().into()));
             }
-            for (k, v) in &prim.meta {
-                spec.add(k, v.clone());
+            for (k, v) in prim.meta {
+                spec.add(&k, v);
             }
             if !prim.props.is_empty() {
                 let names: Vec<String> = prim.props.iter().map(|p| p.name.clone()).collect();
@@ -270,7 +277,7 @@ impl LayerBuilder {
             if !prim.children.is_empty() {
                 spec.add(ChildrenKey::PrimChildren, tokens(&prim.children));
             }
-            for p in &prim.props {
+            for p in prim.props {
                 let prop_path = path.append_property(&p.name).map_err(|e| bad_path(&prim.path, e))?;
                 let targets = p.targets.iter().map(|t| sdf_path(t)).collect::<Result<Vec<_>>>()?;
                 let spec = match &p.type_name {
@@ -287,14 +294,14 @@ impl LayerBuilder {
                 if p.uniform {
                     spec.add(FieldKey::Variability, Value::Variability(Variability::Uniform));
                 }
-                if let Some(d) = &p.default {
-                    spec.add(FieldKey::Default, d.clone());
+                if let Some(d) = p.default {
+                    spec.add(FieldKey::Default, d);
                 }
-                for (k, v) in &p.meta {
-                    spec.add(k, v.clone());
+                for (k, v) in p.meta {
+                    spec.add(&k, v);
                 }
                 if !p.samples.is_empty() {
-                    spec.add(FieldKey::TimeSamples, Value::TimeSamples(p.samples.clone()));
+                    spec.add(FieldKey::TimeSamples, Value::TimeSamples(p.samples));
                 }
                 if !targets.is_empty() {
                     let key = if p.type_name.is_some() { FieldKey::ConnectionPaths } else { FieldKey::TargetPaths };
@@ -307,20 +314,16 @@ impl LayerBuilder {
 
     /// The layer encoded. `name` is the layer's file name (the entry inside
     /// a `.usdz` package).
+    #[cfg(test)]
     pub(crate) fn encode(&self, encoding: UsdEncoding, name: &str) -> Result<Vec<u8>> {
-        self.encode_with(encoding, name, &[])
+        self.clone().encode_with(encoding, name, &[])
     }
 
     /// [`LayerBuilder::encode`], with `extra` files (package-relative path,
     /// bytes) after the layer in a `.usdz` package; ignored for the other
     /// encodings.
-    pub(crate) fn encode_with(
-        &self,
-        encoding: UsdEncoding,
-        name: &str,
-        extra: &[(String, Vec<u8>)],
-    ) -> Result<Vec<u8>> {
-        let data = self.to_data()?;
+    pub(crate) fn encode_with(self, encoding: UsdEncoding, name: &str, extra: &[(String, Vec<u8>)]) -> Result<Vec<u8>> {
+        let data = self.into_data()?;
         match encoding {
             UsdEncoding::Usdz => encode_package(&data, name, extra),
             _ => encode_data(&data, encoding, name),
@@ -337,8 +340,8 @@ pub(crate) fn encode_data(data: &dyn AbstractData, encoding: UsdEncoding, name: 
     let fail = |e| f(&e);
     match encoding {
         UsdEncoding::Usda => {
-            Ok(bracket_single_api_schemas(&openusd::usda::TextWriter::write_to_string(data).map_err(fail)?)
-                .into_bytes())
+            let text = openusd::usda::TextWriter::write_to_string(data).map_err(fail)?;
+            Ok(bracket_single_api_schemas(&text).into_bytes())
         }
         UsdEncoding::Usdc => {
             let mut out = Cursor::new(Vec::new());
