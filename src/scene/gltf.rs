@@ -852,10 +852,19 @@ impl AssetCache {
             }
             _ => None,
         };
+        // KHR_materials_unlit: the base colour as it is, whatever lights it
+        // (what Blender's importer renders for the camera): its emission,
+        // reflecting nothing (docs/lights.md, "Emissive surfaces").
+        let unlit = m.extension_value("KHR_materials_unlit").is_some();
+        let (base_color, emission, emissive_texture, emissive_uv) = if unlit {
+            (Vec3::ZERO, Vec3::new(r, g, b), base_color_texture, base_color_uv)
+        } else {
+            (Vec3::new(r, g, b), emission, emissive_texture, emissive_uv)
+        };
         Ok(Material {
             name: format!("{}#{label}", src.shown),
-            base_color: Vec3::new(r, g, b),
-            base_color_texture,
+            base_color,
+            base_color_texture: if unlit { None } else { base_color_texture },
             base_color_uv,
             roughness: pbr.roughness_factor(),
             metallic: pbr.metallic_factor(),
@@ -957,8 +966,26 @@ impl AssetCache {
             }
             _ => String::new(),
         };
+        // Bound the size from the image's header before decoding it.
+        let header = match image.source() {
+            gltf::image::Source::View { view, .. } => file.buffers.get(view.buffer().index()).and_then(|b| {
+                image::ImageReader::new(std::io::Cursor::new(&b[view.offset()..view.offset() + view.length()]))
+                    .with_guessed_format()
+                    .ok()?
+                    .into_dimensions()
+                    .ok()
+            }),
+            gltf::image::Source::Uri { uri, .. } if !uri.contains(':') => decode_uri(uri).and_then(|rel| {
+                image::ImageReader::open(base.join(rel)).ok()?.with_guessed_format().ok()?.into_dimensions().ok()
+            }),
+            gltf::image::Source::Uri { .. } => None,
+        };
+        if let Some((w, h)) = header {
+            check_texture_size(w, h).map_err(|m| ctx(format!("{}{from}", m)))?;
+        }
         let data = gltf::image::Data::from_source(image.source(), Some(base), &file.buffers)
             .map_err(|e| ctx(format!("cannot decode{from}: {e}")))?;
+        check_texture_size(data.width, data.height).map_err(|m| ctx(format!("{m}{from}")))?;
         let texels =
             decode_texels(&data, colour).ok_or_else(|| ctx(format!("unsupported pixel format {:?}", data.format)))?;
         let texture =
@@ -1000,6 +1027,7 @@ impl AssetCache {
         if let Some(&id) = self.textures.get(&key) {
             return Ok(id);
         }
+        texture_size(path)?;
         let img =
             image::open(path).map_err(|e| Error::invalid(path, format!("cannot decode texture: {e}")))?.to_rgba32f();
         let texels =
@@ -1094,6 +1122,8 @@ impl AssetCache {
             if !(intensity >= 0.0 && intensity.is_finite() && color.is_finite() && color.min_element() >= 0.0) {
                 return Err(err(format!("intensity {intensity} and color {color} must be finite and >= 0")));
             }
+            let emission = color * (intensity / LUMENS_PER_WATT);
+            super::lights::check_product("intensity / 683 x color", emission).map_err(err)?;
             let kind = match light.kind() {
                 gltf::khr_lights_punctual::Kind::Directional => LightKind::Distant { angular_diameter: 0.0 },
                 gltf::khr_lights_punctual::Kind::Point => LightKind::Point,
@@ -1112,7 +1142,7 @@ impl AssetCache {
                 name,
                 kind,
                 world_from_light: Affine3A::from_rotation_translation(rotation.normalize(), translation),
-                emission: color * (intensity / LUMENS_PER_WATT),
+                emission,
                 two_sided: false,
                 camera_visible: false,
                 light_group: None,
@@ -1152,6 +1182,37 @@ fn uv_transform_json(v: &gltf::json::Value, tex_coord: u32) -> std::result::Resu
         return Err("must be finite".into());
     }
     Ok(uv)
+}
+
+/// Widest or tallest texture accepted, texels.
+pub(crate) const MAX_TEXTURE_SIDE: u32 = 16384;
+/// Most texels a texture may hold: 8192 x 8192, 1 GiB as the renderer's
+/// linear RGBA floats.
+pub(crate) const MAX_TEXTURE_TEXELS: u64 = 8192 * 8192;
+
+/// Refuses a texture beyond [`MAX_TEXTURE_SIDE`] or [`MAX_TEXTURE_TEXELS`]
+/// (read from its header, before its pixels are decoded).
+pub(crate) fn check_texture_size(width: u32, height: u32) -> std::result::Result<(), String> {
+    if width.max(height) > MAX_TEXTURE_SIDE || width as u64 * height as u64 > MAX_TEXTURE_TEXELS {
+        return Err(format!(
+            "texture is {width} x {height} texels, more than throng reads ({MAX_TEXTURE_SIDE} a side, \
+             {MAX_TEXTURE_TEXELS} in all: docs/wardrobes.md)"
+        ));
+    }
+    Ok(())
+}
+
+/// A texture file's size from its header, bounded by [`check_texture_size`].
+pub(crate) fn texture_size(path: &Path) -> Result<(u32, u32)> {
+    let bad = |e: String| Error::invalid(path, format!("texture is not an image throng reads: {e}"));
+    let reader = image::ImageReader::open(path).map_err(|e| Error::io(path, e))?;
+    let (w, h) = reader
+        .with_guessed_format()
+        .map_err(|e| bad(e.to_string()))?
+        .into_dimensions()
+        .map_err(|e| bad(e.to_string()))?;
+    check_texture_size(w, h).map_err(|m| Error::invalid(path, m))?;
+    Ok((w, h))
 }
 
 /// Linear RGBA texels from decoded image data (RGB sRGB-decoded when
