@@ -234,13 +234,7 @@ impl DomeSampler {
         // Each cell's weight: its mean luminance x solid angle. Computed
         // where needed rather than kept (a 16k map's would be 1 GiB of f64).
         let weight_of = |mean: Vec3, omega: f64| luminance(mean).max(0.0) as f64 * omega;
-        let mut sun_cells = find_sun(
-            (0..h)
-                .flat_map(|j| (0..w).map(move |i| (i, j)))
-                .map(|(i, j)| weight_of(cell_mean(i, j), cell_solid_angle[j])),
-            &cell_solid_angle,
-            w,
-        );
+        let mut sun_cells = find_sun(|i, j| weight_of(cell_mean(i, j), cell_solid_angle[j]), &cell_solid_angle, w);
         let window = SunWindow::around(&sun_cells, w);
         if window.is_none() {
             sun_cells.clear();
@@ -614,22 +608,29 @@ impl DomeSampler {
 /// Sampled apart from the rest, a sunny dome gives sunlit surfaces the
 /// clean light of a sun lamp: a single distribution over both spends a
 /// random share of each pixel's samples on the sun.
-fn find_sun<I: Iterator<Item = f64> + Clone>(weights: I, cell_solid_angle: &[f64], w: usize) -> Vec<u32> {
-    let total: f64 = weights.clone().sum();
+fn find_sun(weight: impl Fn(usize, usize) -> f64, cell_solid_angle: &[f64], w: usize) -> Vec<u32> {
+    let mut total = 0.0;
+    for j in 0..cell_solid_angle.len() {
+        for i in 0..w {
+            total += weight(i, j);
+        }
+    }
     if !(total > 0.0) {
         return Vec::new();
     }
     let bright = SUN_CONTRAST * total / (4.0 * PI64);
     let (mut cells, mut solid_angle, mut sum) = (Vec::new(), 0.0, 0.0);
-    for (i, weight) in weights.enumerate() {
-        let omega = cell_solid_angle[i / w];
-        if weight > bright * omega {
-            solid_angle += omega;
-            if solid_angle > SUN_MAX_SOLID_ANGLE || cells.len() == SUN_MAX_CELLS {
-                return Vec::new();
+    for (j, &omega) in cell_solid_angle.iter().enumerate() {
+        for i in 0..w {
+            let weight = weight(i, j);
+            if weight > bright * omega {
+                solid_angle += omega;
+                if solid_angle > SUN_MAX_SOLID_ANGLE || cells.len() == SUN_MAX_CELLS {
+                    return Vec::new();
+                }
+                sum += weight;
+                cells.push((j * w + i) as u32);
             }
-            sum += weight;
-            cells.push(i as u32);
         }
     }
     if sum < SUN_MIN_SHARE * total {

@@ -308,6 +308,29 @@ mod tests {
         }
     }
 
+    /// Each texel and the scale finite, their product not (issue 49).
+    #[test]
+    fn refuses_a_brightest_texel_whose_scaled_radiance_overflows() {
+        let path = temp("bright.exr");
+        exr::prelude::write_rgb_file(&path, 8, 4, |x, _| (if x == 3 { 1e20f32 } else { 1.0 }, 1.0f32, 1.0f32)).unwrap();
+        let msg = message(load_dome(&path, Vec3::splat(1e30), 0.0, true).unwrap_err().or_field("lights.dome.file"));
+        assert!(msg.contains("brightest texel") && msg.contains("overflows") && msg.contains("`lights.dome`"), "{msg}");
+        assert!(load_dome(&path, Vec3::splat(1e10), 0.0, true).is_ok());
+    }
+
+    /// The texels converted a chunk at a time come out in order.
+    #[test]
+    fn texels_of_keeps_the_order_across_chunks() {
+        let n = CONVERT_CHUNK_BYTES / 12 * 2 + 5;
+        let bytes: Vec<u8> = (0..n * 3).flat_map(|k| (k as f32).to_ne_bytes()).collect();
+        let texels = texels_of(bytes);
+        assert_eq!(texels.len(), n);
+        assert!(texels
+            .iter()
+            .enumerate()
+            .all(|(i, t)| *t == Vec3::new(3.0 * i as f32, 3.0 * i as f32 + 1.0, 3.0 * i as f32 + 2.0)));
+    }
+
     #[test]
     fn refuses_missing_unreadable_and_unknown_files() {
         let missing = temp("missing.hdr");

@@ -1321,6 +1321,58 @@ pub(crate) fn orientation(path: &Path, up: Axis, forward: Axis) -> Result<Quat> 
 mod tests {
     use super::*;
 
+    /// KHR_materials_unlit: the base colour emitted as it is, reflecting
+    /// nothing (docs/lights.md, "Emissive surfaces").
+    #[test]
+    fn an_unlit_material_emits_its_base_colour() {
+        let dir = std::env::temp_dir().join(format!("throng-unlit-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut bin = Vec::new();
+        for c in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+        std::fs::write(dir.join("tri.bin"), &bin).unwrap();
+        let json = r#"{"asset":{"version":"2.0"},"extensionsUsed":["KHR_materials_unlit"],
+"buffers":[{"byteLength":36,"uri":"tri.bin"}],"bufferViews":[{"buffer":0,"byteLength":36}],
+"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,0,1]}],
+"materials":[{"name":"sign","pbrMetallicRoughness":{"baseColorFactor":[0.8,0.4,0.2,1.0]},"extensions":{"KHR_materials_unlit":{}}},
+ {"name":"lit","pbrMetallicRoughness":{"baseColorFactor":[0.8,0.4,0.2,1.0]}}],
+"meshes":[{"name":"tri","primitives":[{"attributes":{"POSITION":0},"material":0}]}],
+"nodes":[{"mesh":0,"name":"tri"}],"scenes":[{"nodes":[0]}],"scene":0}"#;
+        let path = dir.join("unlit.gltf");
+        std::fs::write(&path, json).unwrap();
+        let mut assets = AssetCache::default();
+        let unlit = assets.gltf_material_at(&path, Some(0)).unwrap();
+        let lit = assets.gltf_material_at(&path, Some(1)).unwrap();
+        let m = &assets.library().materials;
+        let (unlit, lit) = (&m[unlit as usize], &m[lit as usize]);
+        assert_eq!((unlit.emission, unlit.base_color), (Vec3::new(0.8, 0.4, 0.2), Vec3::ZERO));
+        assert_eq!((lit.emission, lit.base_color), (Vec3::ZERO, Vec3::new(0.8, 0.4, 0.2)));
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    /// A texture's size is bounded from its header, before its pixels are
+    /// decoded (issue 49: a PNG declaring 100000 x 100000 passed).
+    #[test]
+    fn a_texture_past_the_size_bound_is_refused_from_its_header() {
+        assert!(check_texture_size(MAX_TEXTURE_SIDE, 1).is_ok() && check_texture_size(8192, 8192).is_ok());
+        assert!(check_texture_size(MAX_TEXTURE_SIDE + 1, 1).is_err());
+        assert!(check_texture_size(16384, 8192).unwrap_err().contains("16384 x 8192"));
+        let path = std::env::temp_dir().join(format!("throng-huge-{}.png", std::process::id()));
+        let mut ihdr = b"IHDR".to_vec();
+        ihdr.extend(100_000u32.to_be_bytes().iter().chain(&100_000u32.to_be_bytes()).chain(&[8, 6, 0, 0, 0]));
+        let mut png = b"\x89PNG\r\n\x1a\n\0\0\0\x0d".to_vec();
+        png.extend(ihdr.iter().chain(&crc32fast::hash(&ihdr).to_be_bytes()));
+        // An empty IDAT: the header ends where the pixels would start.
+        png.extend([0u8, 0, 0, 0].iter().chain(b"IDAT").chain(&crc32fast::hash(b"IDAT").to_be_bytes()));
+        std::fs::write(&path, png).unwrap();
+        let msg = texture_size(&path).unwrap_err().to_string();
+        assert!(msg.contains("100000 x 100000") && msg.contains("throng-huge-"), "{msg}");
+        let msg = AssetCache::default().texture_png(&path).unwrap_err().to_string();
+        assert!(msg.contains("100000 x 100000"), "{msg}");
+        let _ = std::fs::remove_file(path);
+    }
+
     fn paths(list: &[&str]) -> Vec<Vec<String>> {
         list.iter().map(|p| p.split('/').map(str::to_string).collect()).collect()
     }
