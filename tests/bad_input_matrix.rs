@@ -1234,6 +1234,57 @@ matrix! {
         &["--spp"],
         &["demo"],
     ),
+    // ---------------------------------------------------------- issue 49
+    shot_lights_sun_strength_overflows => c(
+        "shot [lights]",
+        "sun intensity x colour overflows f32",
+        |d| edit(d, "shot.toml", "intensity = 3.0", "intensity = 3e38\ncolor = [2.0, 1.0, 1.0]"),
+        CAST,
+        &["shot.toml", "`lights.sun`", "overflows"],
+        &[],
+    ),
+    shot_lights_point_strength_overflows => c(
+        "shot [lights]",
+        "point intensity x 2^exposure overflows f32",
+        |d| append(d, "shot.toml", "\n[[lights.point]]\nposition = [0.0, 3.0, 0.0]\nintensity = 1e30\nexposure = 40.0\n"),
+        CAST,
+        &["shot.toml", "`lights.point[0]`", "intensity x colour x 2^exposure overflows"],
+        &[],
+    ),
+    gltf_texture_declares_100000_squared => c(
+        "glTF",
+        "texture PNG declaring 100000 x 100000",
+        |d| {
+            std::fs::write(d.join("huge.png"), png_header(100_000, 100_000)).unwrap();
+            tri_gltf(
+                d,
+                r#","images":[{"uri":"huge.png"}],"textures":[{"source":0}],"materials":[{"name":"m","pbrMetallicRoughness":{"baseColorTexture":{"index":0}}}]"#,
+                r#","material":0"#,
+                3,
+            )
+        },
+        CAST,
+        &["set.gltf", "huge.png", "100000 x 100000"],
+        &[],
+    ),
+}
+
+/// The first bytes of a PNG declaring `width` x `height` (8-bit RGBA): its
+/// signature, IHDR chunk and an empty IDAT, no pixels.
+fn png_header(width: u32, height: u32) -> Vec<u8> {
+    let mut ihdr = b"IHDR".to_vec();
+    ihdr.extend_from_slice(&width.to_be_bytes());
+    ihdr.extend_from_slice(&height.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    png.extend_from_slice(&13u32.to_be_bytes());
+    png.extend_from_slice(&ihdr);
+    png.extend_from_slice(&crc32fast::hash(&ihdr).to_be_bytes());
+    // An empty IDAT: the header ends where the pixels would start.
+    png.extend_from_slice(&[0, 0, 0, 0]);
+    png.extend_from_slice(b"IDAT");
+    png.extend_from_slice(&crc32fast::hash(b"IDAT").to_be_bytes());
+    png
 }
 
 /// Every case runs under a 4 GB address-space cap and 120 s of CPU: a
@@ -1247,7 +1298,7 @@ const HARNESS: Harness = Harness {
 
 #[test]
 fn the_matrix_keeps_every_case() {
-    assert_eq!(cases().len(), 113);
+    assert_eq!(cases().len(), 116);
 }
 
 /// The table of every case, as issue 15 closed with: written to

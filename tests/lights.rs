@@ -802,3 +802,56 @@ fn adaptive_sampling_stops_each_pixel_on_its_own_samples() {
     let e = render_frame(&blas, &lib, &scene, &s, None).unwrap_err().to_string();
     assert!(e.contains("render.adaptive.min_spp") && e.contains("above max_spp"), "{e}");
 }
+
+/// A light of huge but finite strength (each of the sun, a point, a rect, an
+/// emissive panel and the dome at `strength`) renders an all-finite image
+/// brighter than the same scene without it: no light's power overflows the
+/// pick's sums nor its samples (issue 49).
+fn huge_light_renders_finite_and_brighter(strength: f32) {
+    let dim = || SceneLights { sky: Sky { radiance: Vec3::splat(0.2) }, ..local(vec![]) };
+    let mean = |film: &Film| {
+        assert!(film.rgba.iter().all(|p| p.iter().all(|c| c.is_finite())), "{strength}: a pixel is not finite");
+        film.rgba.iter().map(|p| p[0] as f64).sum::<f64>() / film.rgba.len() as f64
+    };
+    let (lib, scene) = floor_scene(dim(), vec![]);
+    let without = mean(&render(&lib, &scene, 4, 2));
+    let sun = throng::scene::Sun { direction: Vec3::Y, angular_diameter: 0.0093, irradiance: Vec3::splat(strength) };
+    let glow =
+        Material { name: "glow".into(), base_color: Vec3::ZERO, emission: Vec3::splat(strength), ..Default::default() };
+    let down = Affine3A::from_rotation_translation(Quat::from_rotation_x(PI), Vec3::new(3.0, 1.0, 0.0));
+    let dome = Arc::new(Dome { scale: Vec3::splat(strength), ..(*constant_dome(1.0, 0.0)).clone() });
+    type Case = (&'static str, SceneLights, Vec<(Mesh, Material, Affine3A)>);
+    let cases: Vec<Case> = vec![
+        ("sun", SceneLights { sun: Some(sun), ..dim() }, vec![]),
+        (
+            "point",
+            SceneLights { local: vec![light(LightKind::Point, Vec3::new(0.3, 2.0, 0.0), -Vec3::Y, strength)], ..dim() },
+            vec![],
+        ),
+        (
+            "rect",
+            SceneLights {
+                local: vec![light(
+                    LightKind::Rect { size: Vec2::splat(0.5) },
+                    Vec3::new(0.0, 2.0, 0.0),
+                    -Vec3::Y,
+                    strength,
+                )],
+                ..dim()
+            },
+            vec![],
+        ),
+        ("emissive panel", dim(), vec![(quad(0.5), glow, down)]),
+        ("dome", SceneLights { dome: Some(dome), ..dim() }, vec![]),
+    ];
+    for (what, lights, extra) in cases {
+        let (lib, scene) = floor_scene(lights, extra);
+        let with = mean(&render(&lib, &scene, 4, 2));
+        assert!(with > without, "{what} of {strength}: mean {with} is not brighter than {without} without it");
+    }
+}
+
+#[test]
+fn a_light_of_huge_but_finite_strength_renders_finite_and_brighter() {
+    huge_light_renders_finite_and_brighter(1e30);
+}

@@ -15,9 +15,12 @@
 //! ACES white (0.32168, 0.33767), XYZ -> AP1. Its rows sum to 1, so a neutral
 //! stays neutral; `tests/colour.rs` derives it from the primaries.
 
+use std::sync::Arc;
+
 use glam::{Mat3, Vec3};
 
 use crate::casting::ShotCrowd;
+use crate::scene::lights::Dome;
 pub(crate) use crate::scene::{Acescg, Rec709};
 use crate::scene::{FrameScene, Material, Texture};
 pub use crate::shot::Colourspace;
@@ -161,8 +164,26 @@ pub fn convert_library(materials: &mut [Material], textures: &mut [Texture], spa
 }
 
 /// Converts a frame scene's light colours (sun, sky, dome texels, local
-/// lights) from Rec.709 into `space`.
+/// lights) from Rec.709 into `space`. In Rec.709 nothing is touched (the
+/// dome stays the crowd's, shared). In ACEScg the dome's texels are copied
+/// and converted: a render of many frames converts it once
+/// ([`scene_lights_once`]).
 pub fn scene_lights(scene: &mut FrameScene, space: Colourspace) {
+    scene_lights_once(scene, space, &mut ConvertedDome::default());
+}
+
+/// The dome of a render's frame scenes converted into the working
+/// colourspace once, for every frame and layer after the first: a 16k map is
+/// 1.5 GiB of texels, which converting per frame scene copied each time.
+#[derive(Debug, Default)]
+pub struct ConvertedDome {
+    /// The crowd's dome (Rec.709) and its conversion.
+    last: Option<(Arc<Dome>, Arc<Dome>)>,
+}
+
+/// [`scene_lights`], converting the dome only when `converted` does not
+/// already hold it (the same crowd dome: the same `Arc`).
+pub fn scene_lights_once(scene: &mut FrameScene, space: Colourspace, converted: &mut ConvertedDome) {
     if space == Colourspace::Rec709 {
         return;
     }
@@ -175,13 +196,28 @@ pub fn scene_lights(scene: &mut FrameScene, space: Colourspace) {
         light.emission = input(space, light.emission);
     }
     if let Some(dome) = &mut lights.dome {
-        // A copy per frame scene (a 1k map is 6 MB): the shot's own stays Rec.709.
-        // The scale is a colour too: fold it in before the matrix.
-        let d = std::sync::Arc::make_mut(dome);
-        for t in &mut d.texels {
-            *t = input(space, *t * d.scale);
-        }
-        d.scale = Vec3::ONE;
+        let done = converted.last.as_ref().filter(|(from, _)| Arc::ptr_eq(from, dome)).map(|(_, to)| to.clone());
+        let to = match done {
+            Some(to) => to,
+            None => {
+                // Drop the last conversion before making this one.
+                converted.last = None;
+                // The shot's own stays Rec.709. The scale is a colour too:
+                // fold it in before the matrix.
+                let to = Arc::new(Dome {
+                    file: dome.file.clone(),
+                    width: dome.width,
+                    height: dome.height,
+                    texels: dome.texels.iter().map(|t| input(space, *t * dome.scale)).collect(),
+                    scale: Vec3::ONE,
+                    rotate: dome.rotate,
+                    camera_visible: dome.camera_visible,
+                });
+                converted.last = Some((dome.clone(), to.clone()));
+                to
+            }
+        };
+        *dome = to;
     }
 }
 

@@ -231,20 +231,13 @@ impl DomeSampler {
                 2.0 * ((a + b) / 2.0).sin() * ((b - a) / 2.0).sin() * 2.0 * PI64 / w as f64
             })
             .collect();
-        // Each cell's weight: its mean luminance x solid angle.
-        let mut weights = vec![0f64; w * h];
-        for j in 0..h {
-            for i in 0..w {
-                weights[j * w + i] = luminance(cell_mean(i, j)).max(0.0) as f64 * cell_solid_angle[j];
-            }
-        }
-        let mut sun_cells = find_sun(&weights, &cell_solid_angle, w);
+        // Each cell's weight: its mean luminance x solid angle. Computed
+        // where needed rather than kept (a 16k map's would be 1 GiB of f64).
+        let weight_of = |mean: Vec3, omega: f64| luminance(mean).max(0.0) as f64 * omega;
+        let mut sun_cells = find_sun(|i, j| weight_of(cell_mean(i, j), cell_solid_angle[j]), &cell_solid_angle, w);
         let window = SunWindow::around(&sun_cells, w);
         if window.is_none() {
             sun_cells.clear();
-        }
-        for &c in &sun_cells {
-            weights[c as usize] = 0.0;
         }
         let mut block_shift = 0;
         while w.div_ceil(1 << block_shift) > REST_MAX_COLUMNS {
@@ -255,16 +248,20 @@ impl DomeSampler {
         // Per block: the sum of its rest cells' mean radiance x solid angle, and their solid angle.
         let mut light = vec![(DVec3::ZERO, 0f64); row_cdf.len()];
         let mut sun_blocks = Vec::new();
-        for j in 0..h {
+        // The sun's cells, in cell order: the next one still to pass.
+        let mut next_sun = sun_cells.iter().peekable();
+        for (j, &omega) in cell_solid_angle.iter().enumerate() {
             for i in 0..w {
                 let b = (j >> block_shift) * blocks.0 + (i >> block_shift);
-                if weights[j * w + i] == 0.0 && sun_cells.binary_search(&((j * w + i) as u32)).is_ok() {
+                if next_sun.peek().is_some_and(|&&c| c as usize == j * w + i) {
+                    next_sun.next();
                     sun_blocks.push(b as u32);
                     continue;
                 }
-                row_cdf[b] += weights[j * w + i];
-                light[b].0 += cell_mean(i, j).as_dvec3() * cell_solid_angle[j];
-                light[b].1 += cell_solid_angle[j];
+                let mean = cell_mean(i, j);
+                row_cdf[b] += weight_of(mean, omega);
+                light[b].0 += mean.as_dvec3() * omega;
+                light[b].1 += omega;
             }
         }
         sun_blocks.sort_unstable();
@@ -611,22 +608,29 @@ impl DomeSampler {
 /// Sampled apart from the rest, a sunny dome gives sunlit surfaces the
 /// clean light of a sun lamp: a single distribution over both spends a
 /// random share of each pixel's samples on the sun.
-fn find_sun(weights: &[f64], cell_solid_angle: &[f64], w: usize) -> Vec<u32> {
-    let total: f64 = weights.iter().sum();
+fn find_sun(weight: impl Fn(usize, usize) -> f64, cell_solid_angle: &[f64], w: usize) -> Vec<u32> {
+    let mut total = 0.0;
+    for j in 0..cell_solid_angle.len() {
+        for i in 0..w {
+            total += weight(i, j);
+        }
+    }
     if !(total > 0.0) {
         return Vec::new();
     }
     let bright = SUN_CONTRAST * total / (4.0 * PI64);
     let (mut cells, mut solid_angle, mut sum) = (Vec::new(), 0.0, 0.0);
-    for (i, &weight) in weights.iter().enumerate() {
-        let omega = cell_solid_angle[i / w];
-        if weight > bright * omega {
-            solid_angle += omega;
-            if solid_angle > SUN_MAX_SOLID_ANGLE || cells.len() == SUN_MAX_CELLS {
-                return Vec::new();
+    for (j, &omega) in cell_solid_angle.iter().enumerate() {
+        for i in 0..w {
+            let weight = weight(i, j);
+            if weight > bright * omega {
+                solid_angle += omega;
+                if solid_angle > SUN_MAX_SOLID_ANGLE || cells.len() == SUN_MAX_CELLS {
+                    return Vec::new();
+                }
+                sum += weight;
+                cells.push((j * w + i) as u32);
             }
-            sum += weight;
-            cells.push(i as u32);
         }
     }
     if sum < SUN_MIN_SHARE * total {

@@ -370,6 +370,12 @@ fn render_pixel(
     }
 }
 
+/// The render's thread pool could not start: a bad `threads` setting (or
+/// a machine out of threads), named by its option with the cause.
+fn pool_error(threads: usize, e: rayon::ThreadPoolBuildError) -> Error {
+    Error::setting("threads", format!("cannot start {threads} render threads: {e}"))
+}
+
 /// Renders one frame of one layer. `blas` must be built from `lib`.
 /// `progress`, if given, is called with the number of pixels finished so far
 /// (from render threads, in no particular order).
@@ -410,7 +416,7 @@ pub fn render_frame_with_cryptomatte(
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(settings.threads)
         .build()
-        .map_err(|e| Error::Usage(format!("cannot start {} render threads: {e}", settings.threads)))?;
+        .map_err(|e| pool_error(settings.threads, e))?;
     pool.install(|| {
         let tracing = &settings.tracing;
         let tlas = Tlas::build_scene(blas, lib, &scene.instances, scene.motion.as_ref(), tracing.tlas)
@@ -588,6 +594,24 @@ fn check(blas: &BlasSet, lib: &Library, scene: &FrameScene, s: &RenderSettings) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A pool that cannot start names the `threads` setting and the cause
+    /// (issue 49: it was a bare usage error naming no option).
+    #[test]
+    fn a_pool_that_cannot_start_names_the_threads_setting() {
+        let e = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .spawn_handler(|_| Err(std::io::Error::other("no threads left")))
+            .build()
+            .unwrap_err();
+        match pool_error(3, e) {
+            Error::Setting { option, msg } => {
+                assert_eq!(option, "threads");
+                assert!(msg.contains("cannot start 3 render threads") && msg.contains("no threads left"), "{msg}");
+            }
+            other => panic!("{other:?}"),
+        }
+    }
 
     /// Samples that all agree do not prove a pixel converged: a light seen
     /// once in 20 samples is missed by 8 of them nine times in ten, so the

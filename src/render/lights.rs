@@ -62,7 +62,9 @@ impl Distant {
         let cos_max = half.cos();
         let solid_angle = 2.0 * PI * (1.0 - cos_max);
         let frame = ShadingFrame::from_normal(direction);
-        if solid_angle < 1e-9 {
+        // A disc so small (or a sun so strong) that its radiance overflows
+        // is a delta direction: the same light, and no infinite sample.
+        if solid_angle < 1e-9 || !(sun.irradiance / solid_angle).is_finite() {
             return Some(Distant { direction, frame, cos_max: 1.0, radiance: sun.irradiance, pdf: 0.0 });
         }
         Some(Distant { direction, frame, cos_max, radiance: sun.irradiance / solid_angle, pdf: 1.0 / solid_angle })
@@ -190,12 +192,12 @@ const SHADED_PICK_MAX: usize = 16;
 #[derive(Clone, Copy, Debug)]
 enum Reach {
     /// A point or spot light: intensity (and the spot's cone).
-    Delta { centre: Vec3, intensity: f32, spot: Option<(Vec3, f32, f32)> },
+    Delta { centre: Vec3, intensity: f64, spot: Option<(Vec3, f32, f32)> },
     /// A rect, disk or emissive triangle: its bounding sphere, the emitting
     /// side's normal and radiance x area.
-    Planar { centre: Vec3, radius: f32, normal: Vec3, two_sided: bool, intensity: f32 },
+    Planar { centre: Vec3, radius: f32, normal: Vec3, two_sided: bool, intensity: f64 },
     /// A sphere light: radiance x its disc's area.
-    Sphere { centre: Vec3, radius: f32, intensity: f32 },
+    Sphere { centre: Vec3, radius: f32, intensity: f64 },
 }
 
 /// cos(max(0, theta - theta_u)) clamped at 0, for cos theta = `cos` and
@@ -211,7 +213,7 @@ fn widened(cos: f32, sin_u: f32, cos_u: f32) -> f32 {
 
 impl Reach {
     fn of_local(light: &Light) -> Option<Reach> {
-        let l = luminance(light.emission);
+        let (l32, l) = (luminance(light.emission), power_luminance(light.emission));
         let centre = light.position();
         let m = &light.world_from_light;
         let planar = |corners: &[Vec2], area: f32| {
@@ -224,7 +226,7 @@ impl Reach {
                 radius: pad(radius),
                 normal: light.facing(),
                 two_sided: light.two_sided,
-                intensity: l * area,
+                intensity: f32_or_wide(l32 * area, || l * area as f64),
             }
         };
         Some(match light.kind {
@@ -240,7 +242,11 @@ impl Reach {
                 let r = radius;
                 planar(&[Vec2::new(r, 0.0), Vec2::new(-r, 0.0), Vec2::new(0.0, r), Vec2::new(0.0, -r)], PI * r * r)
             }
-            LightKind::Sphere { radius } => Reach::Sphere { centre, radius, intensity: l * PI * radius * radius },
+            LightKind::Sphere { radius } => Reach::Sphere {
+                centre,
+                radius,
+                intensity: f32_or_wide(l32 * PI * radius * radius, || l * (PI * radius * radius) as f64),
+            },
             LightKind::Distant { .. } => return None,
         })
     }
@@ -248,7 +254,11 @@ impl Reach {
     fn of_triangle(tri: &Triangle, emission: Vec3) -> Reach {
         let centre = (tri.p[0] + tri.p[1] + tri.p[2]) / 3.0;
         let radius = tri.p.iter().map(|q| (*q - centre).length()).fold(0.0f32, f32::max);
-        let intensity = if tri.n == Vec3::ZERO || !(tri.area > 0.0) { 0.0 } else { luminance(emission) * tri.area };
+        let intensity = if tri.n == Vec3::ZERO || !(tri.area > 0.0) {
+            0.0
+        } else {
+            f32_or_wide(luminance(emission) * tri.area, || power_luminance(emission) * tri.area as f64)
+        };
         Reach::Planar { centre, radius: pad(radius), normal: tri.n, two_sided: false, intensity }
     }
 
@@ -272,7 +282,7 @@ impl Reach {
                     return 0.0;
                 }
                 let cone = spot.map_or(1.0, |(facing, outer, blend)| spot_falloff(-d.dot(facing) / dist, outer, blend));
-                intensity as f64 * cone as f64 * cos as f64 / dist2 as f64
+                intensity * cone as f64 * cos as f64 / dist2 as f64
             }
             Reach::Planar { centre, radius, normal, two_sided, intensity } => {
                 let d = centre - p;
@@ -287,13 +297,13 @@ impl Reach {
                     return 0.0;
                 }
                 if !(dist > radius) {
-                    return intensity as f64 / (radius as f64 * radius as f64).max(1e-30);
+                    return intensity / (radius as f64 * radius as f64).max(1e-30);
                 }
                 let sin_u = radius / dist;
                 let cos_u = (1.0 - sin_u * sin_u).max(0.0).sqrt();
                 let emitter = widened(s / dist, sin_u, cos_u);
                 let receiver = widened(d.dot(n) / dist, sin_u, cos_u);
-                intensity as f64 * emitter as f64 * receiver as f64 / dist2 as f64
+                intensity * emitter as f64 * receiver as f64 / dist2 as f64
             }
             Reach::Sphere { centre, radius, intensity } => {
                 let d = centre - p;
@@ -304,7 +314,7 @@ impl Reach {
                 let dist = dist2.sqrt();
                 let sin_u = radius / dist;
                 let cos_u = (1.0 - sin_u * sin_u).max(0.0).sqrt();
-                intensity as f64 * widened(d.dot(n) / dist, sin_u, cos_u) as f64 / dist2 as f64
+                intensity * widened(d.dot(n) / dist, sin_u, cos_u) as f64 / dist2 as f64
             }
         }
     }
@@ -365,6 +375,27 @@ pub(crate) struct LightSampler<'a> {
     light_groups: Option<&'a LightGroups>,
 }
 
+/// Luminance for a light's power: the f32 sum, or, for a huge light whose
+/// f32 sum overflows, the same sum in f64 (finite for any finite colour).
+fn power_luminance(c: Vec3) -> f64 {
+    let l = luminance(c);
+    if l.is_finite() {
+        l as f64
+    } else {
+        c.as_dvec3().dot(glam::DVec3::new(0.2126, 0.7152, 0.0722))
+    }
+}
+
+/// A pick weight computed in f32 (`narrow`), as it always was, or, where
+/// a huge light overflows that, in f64 (`wide`).
+fn f32_or_wide(narrow: f32, wide: impl FnOnce() -> f64) -> f64 {
+    if narrow.is_finite() {
+        narrow as f64
+    } else {
+        wide()
+    }
+}
+
 /// Bounding-sphere radius of the scene, for the power of lights at infinity
 /// (what they deliver onto the scene: pbrt's pi r^2 L).
 fn scene_radius(bounds: Option<(Vec3, Vec3)>) -> f64 {
@@ -388,7 +419,7 @@ impl<'a> LightSampler<'a> {
         let mut sun = None;
         if let Some(d) = lights.sun.as_ref().and_then(Distant::new) {
             sun = Some((d, sources.len() as u32));
-            power.push(luminance(d.irradiance()) as f64 * infinite_area);
+            power.push(power_luminance(d.irradiance()) * infinite_area);
             sources.push(Source::Distant(d));
         }
         let mut dome = None;
@@ -420,7 +451,7 @@ impl<'a> LightSampler<'a> {
             if let LightKind::Distant { angular_diameter } = light.kind {
                 let sun = Sun { direction: -light.facing(), angular_diameter, irradiance: light.emission };
                 if let Some(d) = Distant::new(&sun) {
-                    power.push(luminance(d.irradiance()) as f64 * infinite_area);
+                    power.push(power_luminance(d.irradiance()) * infinite_area);
                     sources.push(Source::Distant(d));
                     group.push(light_group);
                 }
@@ -744,7 +775,7 @@ fn emissive_triangles<'a>(
                 let p_t = if n == Vec3::ZERO || !(area > 0.0) {
                     0.0
                 } else {
-                    PI as f64 * luminance(m.emission) as f64 * area as f64
+                    PI as f64 * power_luminance(m.emission) * area as f64
                 };
                 power.push(p_t);
                 group.push(material_group);
@@ -812,7 +843,7 @@ fn group_tables(
 
 /// Power of a local light (luminance), for the pick.
 fn local_power(light: &Light, infinite_area: f64) -> f64 {
-    let l = luminance(light.emission) as f64;
+    let l = power_luminance(light.emission);
     let pi = PI as f64;
     let sides = if light.two_sided { 2.0 } else { 1.0 };
     match light.kind {

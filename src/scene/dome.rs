@@ -40,6 +40,7 @@ pub fn load_dome(path: &Path, scale: Vec3, rotate: f32, camera_visible: bool) ->
         }
     };
     check_texels(path, width, &texels)?;
+    check_brightest(path, &texels, scale)?;
     Ok(Dome { file: path.to_path_buf(), width, height, texels, scale, rotate, camera_visible })
 }
 
@@ -84,6 +85,27 @@ fn check_texels(path: &Path, width: u32, texels: &[Vec3]) -> Result<()> {
     }
 }
 
+/// Refuses a dome whose brightest texel times its scale (intensity x colour x
+/// 2^exposure) overflows: its light would be no light at all. The bilinear
+/// cell means the sampler builds sum eight scaled texels in f32, so the bound
+/// is an eighth of f32's largest.
+fn check_brightest(path: &Path, texels: &[Vec3], scale: Vec3) -> Result<()> {
+    let brightest = texels.iter().fold(Vec3::ZERO, |m, t| m.max(*t));
+    let product = brightest * scale;
+    if (product * 8.0).is_finite() {
+        return Ok(());
+    }
+    Err(Error::invalid(
+        path,
+        format!(
+            "the brightest texel ({brightest}) x intensity x colour x 2^exposure ({scale}) overflows: {product} is past \
+             {:e}, an eighth of the largest f32; lower the dome's intensity or exposure",
+            f32::MAX / 8.0
+        ),
+    )
+    .field("lights.dome"))
+}
+
 fn unreadable(path: &Path, e: std::io::Error) -> Error {
     Error::invalid(path, format!("cannot read the dome map: {e}"))
 }
@@ -106,10 +128,34 @@ fn read_hdr(path: &Path) -> Result<(u32, u32, Vec<Vec3>)> {
     }
     let mut bytes = vec![0u8; count as usize * 12];
     decoder.read_image(&mut bytes).map_err(|e| Error::invalid(path, format!("Radiance HDR: {e}")))?;
+    Ok((width, height, texels_of(bytes)))
+}
+
+/// Bytes of decoded texels converted at a time by [`texels_of`].
+const CONVERT_CHUNK_BYTES: usize = 12 << 20;
+
+/// The decoded RGB f32 texels in `bytes` (native endian) as `Vec3`s, without
+/// holding both whole: converted from the end a chunk at a time, each chunk's
+/// bytes handed back to the allocator (a large buffer shrinks in place) before
+/// the next, then put back in order. A 16k map's bytes and texels are
+/// 1.5 GiB each.
+fn texels_of(mut bytes: Vec<u8>) -> Vec<Vec3> {
     let float = |b: &[u8]| f32::from_ne_bytes([b[0], b[1], b[2], b[3]]);
-    let texels =
-        bytes.chunks_exact(12).map(|p| Vec3::new(float(&p[0..4]), float(&p[4..8]), float(&p[8..12]))).collect();
-    Ok((width, height, texels))
+    let mut texels = Vec::with_capacity(bytes.len() / 12);
+    while !bytes.is_empty() {
+        let start = bytes.len().saturating_sub(CONVERT_CHUNK_BYTES);
+        let start = start - start % 12;
+        texels.extend(
+            bytes[start..]
+                .chunks_exact(12)
+                .rev()
+                .map(|p| Vec3::new(float(&p[0..4]), float(&p[4..8]), float(&p[8..12]))),
+        );
+        bytes.truncate(start);
+        bytes.shrink_to_fit();
+    }
+    texels.reverse();
+    texels
 }
 
 fn exr_error(path: &Path, e: exr::error::Error) -> Error {
@@ -260,6 +306,29 @@ mod tests {
             assert!(msg.contains("texel (5, 2)") && msg.contains(shows), "{msg}");
             assert!(msg.contains("field `lights.dome.file`") && msg.contains("bad.exr"), "{msg}");
         }
+    }
+
+    /// Each texel and the scale finite, their product not (issue 49).
+    #[test]
+    fn refuses_a_brightest_texel_whose_scaled_radiance_overflows() {
+        let path = temp("bright.exr");
+        exr::prelude::write_rgb_file(&path, 8, 4, |x, _| (if x == 3 { 1e20f32 } else { 1.0 }, 1.0f32, 1.0f32)).unwrap();
+        let msg = message(load_dome(&path, Vec3::splat(1e30), 0.0, true).unwrap_err().or_field("lights.dome.file"));
+        assert!(msg.contains("brightest texel") && msg.contains("overflows") && msg.contains("`lights.dome`"), "{msg}");
+        assert!(load_dome(&path, Vec3::splat(1e10), 0.0, true).is_ok());
+    }
+
+    /// The texels converted a chunk at a time come out in order.
+    #[test]
+    fn texels_of_keeps_the_order_across_chunks() {
+        let n = CONVERT_CHUNK_BYTES / 12 * 2 + 5;
+        let bytes: Vec<u8> = (0..n * 3).flat_map(|k| (k as f32).to_ne_bytes()).collect();
+        let texels = texels_of(bytes);
+        assert_eq!(texels.len(), n);
+        assert!(texels
+            .iter()
+            .enumerate()
+            .all(|(i, t)| *t == Vec3::new(3.0 * i as f32, 3.0 * i as f32 + 1.0, 3.0 * i as f32 + 2.0)));
     }
 
     #[test]

@@ -852,10 +852,19 @@ impl AssetCache {
             }
             _ => None,
         };
+        // KHR_materials_unlit: the base colour as it is, whatever lights it
+        // (what Blender's importer renders for the camera): its emission,
+        // reflecting nothing (docs/lights.md, "Emissive surfaces").
+        let unlit = m.extension_value("KHR_materials_unlit").is_some();
+        let (base_color, emission, emissive_texture, emissive_uv) = if unlit {
+            (Vec3::ZERO, Vec3::new(r, g, b), base_color_texture, base_color_uv)
+        } else {
+            (Vec3::new(r, g, b), emission, emissive_texture, emissive_uv)
+        };
         Ok(Material {
             name: format!("{}#{label}", src.shown),
-            base_color: Vec3::new(r, g, b),
-            base_color_texture,
+            base_color,
+            base_color_texture: if unlit { None } else { base_color_texture },
             base_color_uv,
             roughness: pbr.roughness_factor(),
             metallic: pbr.metallic_factor(),
@@ -957,8 +966,26 @@ impl AssetCache {
             }
             _ => String::new(),
         };
+        // Bound the size from the image's header before decoding it.
+        let header = match image.source() {
+            gltf::image::Source::View { view, .. } => file.buffers.get(view.buffer().index()).and_then(|b| {
+                image::ImageReader::new(std::io::Cursor::new(&b[view.offset()..view.offset() + view.length()]))
+                    .with_guessed_format()
+                    .ok()?
+                    .into_dimensions()
+                    .ok()
+            }),
+            gltf::image::Source::Uri { uri, .. } if !uri.contains(':') => decode_uri(uri).and_then(|rel| {
+                image::ImageReader::open(base.join(rel)).ok()?.with_guessed_format().ok()?.into_dimensions().ok()
+            }),
+            gltf::image::Source::Uri { .. } => None,
+        };
+        if let Some((w, h)) = header {
+            check_texture_size(w, h).map_err(|m| ctx(format!("{}{from}", m)))?;
+        }
         let data = gltf::image::Data::from_source(image.source(), Some(base), &file.buffers)
             .map_err(|e| ctx(format!("cannot decode{from}: {e}")))?;
+        check_texture_size(data.width, data.height).map_err(|m| ctx(format!("{m}{from}")))?;
         let texels =
             decode_texels(&data, colour).ok_or_else(|| ctx(format!("unsupported pixel format {:?}", data.format)))?;
         let texture =
@@ -1000,6 +1027,7 @@ impl AssetCache {
         if let Some(&id) = self.textures.get(&key) {
             return Ok(id);
         }
+        texture_size(path)?;
         let img =
             image::open(path).map_err(|e| Error::invalid(path, format!("cannot decode texture: {e}")))?.to_rgba32f();
         let texels =
@@ -1094,6 +1122,8 @@ impl AssetCache {
             if !(intensity >= 0.0 && intensity.is_finite() && color.is_finite() && color.min_element() >= 0.0) {
                 return Err(err(format!("intensity {intensity} and color {color} must be finite and >= 0")));
             }
+            let emission = color * (intensity / LUMENS_PER_WATT);
+            super::lights::check_product("intensity / 683 x color", emission).map_err(err)?;
             let kind = match light.kind() {
                 gltf::khr_lights_punctual::Kind::Directional => LightKind::Distant { angular_diameter: 0.0 },
                 gltf::khr_lights_punctual::Kind::Point => LightKind::Point,
@@ -1112,7 +1142,7 @@ impl AssetCache {
                 name,
                 kind,
                 world_from_light: Affine3A::from_rotation_translation(rotation.normalize(), translation),
-                emission: color * (intensity / LUMENS_PER_WATT),
+                emission,
                 two_sided: false,
                 camera_visible: false,
                 light_group: None,
@@ -1152,6 +1182,37 @@ fn uv_transform_json(v: &gltf::json::Value, tex_coord: u32) -> std::result::Resu
         return Err("must be finite".into());
     }
     Ok(uv)
+}
+
+/// Widest or tallest texture accepted, texels.
+pub(crate) const MAX_TEXTURE_SIDE: u32 = 16384;
+/// Most texels a texture may hold: 8192 x 8192, 1 GiB as the renderer's
+/// linear RGBA floats.
+pub(crate) const MAX_TEXTURE_TEXELS: u64 = 8192 * 8192;
+
+/// Refuses a texture beyond [`MAX_TEXTURE_SIDE`] or [`MAX_TEXTURE_TEXELS`]
+/// (read from its header, before its pixels are decoded).
+pub(crate) fn check_texture_size(width: u32, height: u32) -> std::result::Result<(), String> {
+    if width.max(height) > MAX_TEXTURE_SIDE || width as u64 * height as u64 > MAX_TEXTURE_TEXELS {
+        return Err(format!(
+            "texture is {width} x {height} texels, more than throng reads ({MAX_TEXTURE_SIDE} a side, \
+             {MAX_TEXTURE_TEXELS} in all: docs/wardrobes.md)"
+        ));
+    }
+    Ok(())
+}
+
+/// A texture file's size from its header, bounded by [`check_texture_size`].
+pub(crate) fn texture_size(path: &Path) -> Result<(u32, u32)> {
+    let bad = |e: String| Error::invalid(path, format!("texture is not an image throng reads: {e}"));
+    let reader = image::ImageReader::open(path).map_err(|e| Error::io(path, e))?;
+    let (w, h) = reader
+        .with_guessed_format()
+        .map_err(|e| bad(e.to_string()))?
+        .into_dimensions()
+        .map_err(|e| bad(e.to_string()))?;
+    check_texture_size(w, h).map_err(|m| Error::invalid(path, m))?;
+    Ok((w, h))
 }
 
 /// Linear RGBA texels from decoded image data (RGB sRGB-decoded when
@@ -1259,6 +1320,58 @@ pub(crate) fn orientation(path: &Path, up: Axis, forward: Axis) -> Result<Quat> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// KHR_materials_unlit: the base colour emitted as it is, reflecting
+    /// nothing (docs/lights.md, "Emissive surfaces").
+    #[test]
+    fn an_unlit_material_emits_its_base_colour() {
+        let dir = std::env::temp_dir().join(format!("throng-unlit-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut bin = Vec::new();
+        for c in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+        std::fs::write(dir.join("tri.bin"), &bin).unwrap();
+        let json = r#"{"asset":{"version":"2.0"},"extensionsUsed":["KHR_materials_unlit"],
+"buffers":[{"byteLength":36,"uri":"tri.bin"}],"bufferViews":[{"buffer":0,"byteLength":36}],
+"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,0,1]}],
+"materials":[{"name":"sign","pbrMetallicRoughness":{"baseColorFactor":[0.8,0.4,0.2,1.0]},"extensions":{"KHR_materials_unlit":{}}},
+ {"name":"lit","pbrMetallicRoughness":{"baseColorFactor":[0.8,0.4,0.2,1.0]}}],
+"meshes":[{"name":"tri","primitives":[{"attributes":{"POSITION":0},"material":0}]}],
+"nodes":[{"mesh":0,"name":"tri"}],"scenes":[{"nodes":[0]}],"scene":0}"#;
+        let path = dir.join("unlit.gltf");
+        std::fs::write(&path, json).unwrap();
+        let mut assets = AssetCache::default();
+        let unlit = assets.gltf_material_at(&path, Some(0)).unwrap();
+        let lit = assets.gltf_material_at(&path, Some(1)).unwrap();
+        let m = &assets.library().materials;
+        let (unlit, lit) = (&m[unlit as usize], &m[lit as usize]);
+        assert_eq!((unlit.emission, unlit.base_color), (Vec3::new(0.8, 0.4, 0.2), Vec3::ZERO));
+        assert_eq!((lit.emission, lit.base_color), (Vec3::ZERO, Vec3::new(0.8, 0.4, 0.2)));
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    /// A texture's size is bounded from its header, before its pixels are
+    /// decoded (issue 49: a PNG declaring 100000 x 100000 passed).
+    #[test]
+    fn a_texture_past_the_size_bound_is_refused_from_its_header() {
+        assert!(check_texture_size(MAX_TEXTURE_SIDE, 1).is_ok() && check_texture_size(8192, 8192).is_ok());
+        assert!(check_texture_size(MAX_TEXTURE_SIDE + 1, 1).is_err());
+        assert!(check_texture_size(16384, 8192).unwrap_err().contains("16384 x 8192"));
+        let path = std::env::temp_dir().join(format!("throng-huge-{}.png", std::process::id()));
+        let mut ihdr = b"IHDR".to_vec();
+        ihdr.extend(100_000u32.to_be_bytes().iter().chain(&100_000u32.to_be_bytes()).chain(&[8, 6, 0, 0, 0]));
+        let mut png = b"\x89PNG\r\n\x1a\n\0\0\0\x0d".to_vec();
+        png.extend(ihdr.iter().chain(&crc32fast::hash(&ihdr).to_be_bytes()));
+        // An empty IDAT: the header ends where the pixels would start.
+        png.extend([0u8, 0, 0, 0].iter().chain(b"IDAT").chain(&crc32fast::hash(b"IDAT").to_be_bytes()));
+        std::fs::write(&path, png).unwrap();
+        let msg = texture_size(&path).unwrap_err().to_string();
+        assert!(msg.contains("100000 x 100000") && msg.contains("throng-huge-"), "{msg}");
+        let msg = AssetCache::default().texture_png(&path).unwrap_err().to_string();
+        assert!(msg.contains("100000 x 100000"), "{msg}");
+        let _ = std::fs::remove_file(path);
+    }
 
     fn paths(list: &[&str]) -> Vec<Vec<String>> {
         list.iter().map(|p| p.split('/').map(str::to_string).collect()).collect()

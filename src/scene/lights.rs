@@ -17,6 +17,18 @@ use glam::{Affine3A, Vec2, Vec3};
 
 use super::{Sky, Sun};
 
+/// A light's effective strength (`what`: how it is made, "intensity x
+/// colour x 2^exposure") must be a finite f32: each factor may pass its own
+/// range check and their product still overflow, which would render the
+/// light as no light at all (docs/lights.md, "Strength").
+pub(crate) fn check_product(what: &str, v: Vec3) -> std::result::Result<(), String> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(format!("{what} overflows an f32 (largest {:e}): got {v}; lower one of them", f32::MAX))
+    }
+}
+
 /// The shape (and so the sampling) of a local light.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum LightKind {

@@ -10,7 +10,7 @@ use toml::Spanned;
 
 use super::{look_at, Context};
 use crate::error::{Error, Result};
-use crate::scene::lights::{Light, LightKind, NamedGroups};
+use crate::scene::lights::{check_product, Light, LightKind, NamedGroups};
 use crate::scene::passes::check_group_name;
 use crate::scene::{Sky, Sun};
 
@@ -214,10 +214,14 @@ impl LightsFile {
             }
             check_light(sun.intensity, sun.color)
                 .map_err(|(k, m)| Error::invalid(path, m).field(format!("lights.sun.{k}")))?;
+            check_product("intensity x colour", Vec3::from(sun.color) * sun.intensity)
+                .map_err(|m| Error::invalid(path, m).field("lights.sun"))?;
         }
         let sky = &self.sky;
         check_light(sky.intensity, sky.color)
             .map_err(|(k, m)| Error::invalid(path, m).field(format!("lights.sky.{k}")))?;
+        check_product("intensity x colour", Vec3::from(sky.color) * sky.intensity)
+            .map_err(|m| Error::invalid(path, m).field("lights.sky"))?;
         let dome = self.dome.as_ref().map(|d| d.check(cx)).transpose()?;
         let kinds: [(&str, &[LocalFile]); 5] = [
             ("point", &self.point),
@@ -238,7 +242,11 @@ impl LightsFile {
         for (kind, lights) in kinds {
             for (i, l) in lights.iter().enumerate() {
                 let key = format!("lights.{kind}[{i}]");
-                local.push(l.check(kind, &key).map_err(|(k, m)| Error::invalid(path, m).field(format!("{key}.{k}")))?);
+                let light =
+                    l.check(kind, &key).map_err(|(k, m)| Error::invalid(path, m).field(format!("{key}.{k}")))?;
+                check_product("intensity x colour x 2^exposure", light.emission)
+                    .map_err(|m| Error::invalid(path, m).field(key.clone()))?;
+                local.push(light);
             }
         }
         let g = &self.groups;
@@ -274,12 +282,10 @@ impl DomeFile {
         if !self.rotate.is_finite() {
             return Err(err("rotate", format!("must be finite degrees, got {}", self.rotate)));
         }
-        Ok(DomeSpec {
-            file,
-            scale: Vec3::from(self.color) * self.intensity * exposure,
-            rotate: self.rotate.to_radians(),
-            camera_visible: self.camera_visible,
-        })
+        let scale = Vec3::from(self.color) * self.intensity * exposure;
+        check_product("intensity x colour x 2^exposure", scale)
+            .map_err(|m| Error::invalid(cx.path, m).field("lights.dome"))?;
+        Ok(DomeSpec { file, scale, rotate: self.rotate.to_radians(), camera_visible: self.camera_visible })
     }
 }
 
@@ -484,6 +490,32 @@ mod tests {
             assert!(e.contains(field), "{text}\n -> {e}");
         }
         assert!(check("[dome]\nfile = \"nowhere.hdr\"").unwrap_err().contains("lights.dome.file"));
+    }
+
+    /// Each factor within its range, their product past f32 (issue 49).
+    #[test]
+    fn a_light_whose_product_overflows_is_refused_naming_it() {
+        let big = "intensity = 3e38\ncolor = [2.0, 1.0, 1.0]";
+        for (text, field, product) in [
+            (
+                format!("[[point]]\nposition = [0.0, 1.0, 0.0]\n{big}"),
+                "lights.point[0]`",
+                "intensity x colour x 2^exposure",
+            ),
+            (
+                "[[rect]]\nposition = [0.0, 1.0, 0.0]\nsize = [1.0, 1.0]\nintensity = 1e30\nexposure = 40.0".into(),
+                "lights.rect[0]`",
+                "intensity x colour x 2^exposure",
+            ),
+            (format!("[sun]\ndirection = [0.0, 1.0, 0.0]\n{big}"), "lights.sun`", "intensity x colour"),
+            (format!("[sky]\n{big}"), "lights.sky`", "intensity x colour"),
+            (format!("[dome]\nfile = \"Cargo.toml\"\n{big}"), "lights.dome`", "intensity x colour x 2^exposure"),
+        ] {
+            let e = check(&text).unwrap_err();
+            assert!(e.contains(field) && e.contains(product) && e.contains("overflows"), "{text}\n -> {e}");
+        }
+        // Huge but finite passes.
+        check("[[point]]\nposition = [0.0, 1.0, 0.0]\nintensity = 1e30\nexposure = 20.0").unwrap();
     }
 
     #[test]
