@@ -101,7 +101,7 @@ pub fn bounds_warnings(crowd: &CrowdCache) -> Vec<String> {
         b.min = glam::Vec3::from(b.min).min(a.position).to_array();
         b.max = glam::Vec3::from(b.max).max(a.position).to_array();
     }
-    let mut plausible = Plausible::default();
+    let mut plausible = Plausible::new(super::jupedsim::SHOT_FPS);
     for (i, f) in crowd.frames.iter().enumerate() {
         plausible.add(f, Plausible::sampled(crowd.frames.len(), i));
     }
@@ -131,7 +131,7 @@ pub fn info(reader: &CacheReader) -> Result<CacheInfo> {
     let (mut total, mut seated_frames, mut hidden_frames) = (0u64, 0u64, 0u64);
     let (mut min_n, mut max_n) = (usize::MAX, 0);
     let mut bounds: Option<Bounds> = None;
-    let mut plausible = Plausible::default();
+    let mut plausible = Plausible::new(super::jupedsim::SHOT_FPS);
     for (i, &f) in frames.iter().enumerate() {
         let block = reader.read_frame(f)?;
         plausible.add(&block, Plausible::sampled(frames.len(), i));

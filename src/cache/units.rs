@@ -84,8 +84,9 @@ fn candidates() -> Vec<(String, f64, String)> {
 }
 
 /// Speeds, spacing and paths of people, gathered frame by frame for [`Plausible::judge`].
-#[derive(Default)]
 pub(crate) struct Plausible {
+    /// Frames per second a speed counts consecutive frames at.
+    fps: f32,
     last: HashMap<u32, (i32, glam::Vec3)>,
     paths: HashMap<u32, f32>,
     speeds: Vec<f32>,
@@ -136,8 +137,13 @@ fn cost(x: f64, scale: f64, (centre, spread): (f64, f64)) -> f64 {
 }
 
 impl Plausible {
-    /// Adds one frame; `sample` says whether its spacing is measured. Speeds
-    /// count frames at the shot's 24 fps; seated and hidden agents do not count.
+    /// Nothing gathered yet; speeds count consecutive frames at `fps`.
+    pub(crate) fn new(fps: f32) -> Plausible {
+        Plausible { fps, last: HashMap::new(), paths: HashMap::new(), speeds: Vec::new(), nearest: Vec::new() }
+    }
+
+    /// Adds one frame; `sample` says whether its spacing is measured.
+    /// Seated and hidden agents do not count.
     pub(crate) fn add(&mut self, block: &FrameBlock, sample: bool) {
         for a in block.agents.iter().filter(|a| !a.seated() && !a.hidden()) {
             if let Some((f, p)) = self.last.insert(a.id, (block.frame, a.position)) {
@@ -145,7 +151,7 @@ impl Plausible {
                 if f + 1 == block.frame && d.is_finite() {
                     *self.paths.entry(a.id).or_default() += d;
                     if d > 1e-6 && self.speeds.len() < MAX_SPEED_SAMPLES {
-                        self.speeds.push(d * super::jupedsim::SHOT_FPS);
+                        self.speeds.push(d * self.fps);
                     }
                 }
             }
