@@ -868,9 +868,12 @@ fn imported_recordings_turn_no_faster_than_a_person() {
     // The recording as written snaps (a held heading resuming turns 90
     // degrees and more in a frame); imported at the default rate it turns
     // through the frames between. Drawn: target/tmp/recording_turns.png.
-    let read =
-        |rate: f32| cache::read_with(&real, &ImportOptions::default().with_turn_rate(Some(rate)).unwrap()).unwrap();
-    let (raw, turned) = (read(1e9), read(360.0));
+    // As written: no turn limit and no hold (hold_speed 0).
+    let read = |rate: f32, hold_speed: f32| {
+        let o = ImportOptions { hold_speed, ..ImportOptions::default() }.with_turn_rate(Some(rate)).unwrap();
+        cache::read_with(&real, &o).unwrap()
+    };
+    let (raw, turned) = (read(1e9, 0.0), read(360.0, 0.0));
     let snaps = plot_turns(&raw, &turned, &Path::new(env!("CARGO_TARGET_TMPDIR")).join("recording_turns.png"));
     // 6465 of them: JuPedSim's orientation flips for a frame in the crush.
     assert!(snaps >= 1000, "{snaps} snaps of over 90 degrees in a frame in the recording as written");
@@ -1008,8 +1011,8 @@ fn jupedsim_refuses_the_keys_it_cannot_apply() {
     assert_eq!(cache::TabularSpec { turn_rate: Some(90.0), ..Default::default() }.jupedsim_refuses(), None);
 }
 
-/// Issue 27 item 7: `cache info` warns, naming the likely unit, when speeds
-/// or spacing are not a person's.
+/// Issue 27 item 7, issue 49 item A: `cache info` warns, naming the likely
+/// unit, when speeds and spacing together are not a person's.
 #[test]
 fn info_warns_of_speeds_and_spacing_people_do_not_have() {
     let crowd = |spacing: f32, speed: f32| CrowdCache {
@@ -1033,17 +1036,103 @@ fn info_warns_of_speeds_and_spacing_people_do_not_have() {
             .collect(),
     };
     assert_eq!(cache::bounds_warnings(&crowd(1.0, 1.4)), Vec::<String>::new());
+    // Twelve people 10 cm apart: metres read as feet, say spacing and speed together.
     let close = cache::bounds_warnings(&crowd(0.1, 1.4));
-    assert!(close.len() == 1 && close[0].contains("closer than 0.2 m"), "{close:?}");
-    let fast = cache::bounds_warnings(&crowd(1.0, 140.0));
-    assert!(fast.iter().any(|w| w.contains("median walking speed 140") && w.contains("centimetres")), "{fast:?}");
-    let slow = cache::bounds_warnings(&crowd(1.0, 0.05));
-    assert!(slow.iter().any(|w| w.contains("median walking speed 0.050")), "{slow:?}");
+    assert!(close.len() == 1 && close[0].contains("m read as ft") && close[0].contains("nearest"), "{close:?}");
+    // Centimetres read as metres: too fast and too far apart.
+    let fast = cache::bounds_warnings(&crowd(100.0, 140.0));
+    assert!(fast.len() == 1 && fast[0].contains("median speed 140") && fast[0].contains("units = \"cm\""), "{fast:?}");
+    // Issue 49 item A: slow is no wolf: people 1 m apart shuffling at 5 cm/s are people.
+    assert_eq!(cache::bounds_warnings(&crowd(1.0, 0.05)), Vec::<String>::new());
     // The PeTrack fixture read in metres, not its centimetres: `cache info` says so.
     let petrack = common::fixture("tabular").join("petrack_cm.txt");
     let out = throng(&["cache", "info", s(&petrack), "--preset", "petrack", "--units", "m"]);
     assert!(out.status.success());
-    assert_has(&String::from_utf8(out.stderr).unwrap(), &["median walking speed 100", "centimetres"]);
+    assert_has(&String::from_utf8(out.stderr).unwrap(), &["median speed 100", "units = \"cm\""]);
     let out = throng(&["cache", "info", s(&petrack), "--preset", "petrack"]);
-    assert!(!String::from_utf8(out.stderr).unwrap().contains("walking speed"));
+    assert!(!String::from_utf8(out.stderr).unwrap().contains("warning"));
+}
+
+/// Percent of slow agent-frames (under 0.25 m/s between consecutive frames
+/// at `fps`) whose heading turns more than 5 degrees in that frame, and
+/// how many there are.
+fn slow_turning(crowd: &CrowdCache, fps: f32) -> (f64, usize) {
+    let (mut slow, mut turning) = (0usize, 0usize);
+    for t in tracks(crowd).values() {
+        for w in t.windows(2) {
+            let ((f0, x0, z0, h0), (f1, x1, z1, h1)) = (w[0], w[1]);
+            if f1 != f0 + 1 || (x1 - x0).hypot(z1 - z0) * fps >= 0.25 {
+                continue;
+            }
+            slow += 1;
+            turning += usize::from(turn(h0, h1).abs() > 5f32.to_radians());
+        }
+    }
+    (100.0 * turning as f64 / slow.max(1) as f64, slow)
+}
+
+/// A JuPedSim file of 20 agents standing with +-5 mm position jitter (their
+/// orientation following the jitter, as JuPedSim writes it) and 4 walking
+/// +x at 1.2 m/s, 100 frames at 25 fps.
+fn standing_jupedsim(p: &Path) {
+    let db = rusqlite::Connection::open(p).unwrap();
+    db.execute_batch(
+        "CREATE TABLE metadata(key TEXT NOT NULL UNIQUE PRIMARY KEY, value TEXT NOT NULL);
+         INSERT INTO metadata VALUES ('version', '2'), ('fps', '25');
+         CREATE TABLE trajectory_data(frame INTEGER NOT NULL, id INTEGER NOT NULL, pos_x REAL NOT NULL,
+             pos_y REAL NOT NULL, ori_x REAL NOT NULL, ori_y REAL NOT NULL);",
+    )
+    .unwrap();
+    let mut seed = 49u64;
+    let mut jitter = || {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((seed >> 33) as f64 / (1u64 << 31) as f64 - 0.5) * 0.01
+    };
+    let mut last = std::collections::HashMap::new();
+    for frame in 0..100 {
+        for id in 1..=24u32 {
+            let (x, y) = if id <= 20 {
+                (f64::from(id % 5) * 0.6 + jitter(), f64::from(id / 5) * 0.6 + jitter())
+            } else {
+                (f64::from(frame) * 1.2 / 25.0, f64::from(id) * 0.6)
+            };
+            let (px, py) = last.insert(id, (x, y)).unwrap_or((x, y));
+            let (dx, dy) = (x - px, y - py);
+            let n = dx.hypot(dy).max(1e-12);
+            db.execute(
+                "INSERT INTO trajectory_data VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+                rusqlite::params![frame, id, x, y, dx / n, dy / n],
+            )
+            .unwrap();
+        }
+    }
+}
+
+/// Issue 49 item B: JuPedSim agents standing with position jitter hold
+/// their heading below the hold speed (the tables' rule), where they used
+/// to turn at the turn cap on every frame; walkers still face their
+/// orientation. The figures before (hold_speed 0, the old import) and
+/// after, on this file and on the real bottleneck recording, are printed.
+#[test]
+fn jupedsim_agents_standing_with_jitter_hold_their_heading() {
+    let dir = common::tempdir().unwrap();
+    let p = dir.path().join("standing.sqlite");
+    standing_jupedsim(&p);
+    let before = cache::read_with(&p, &ImportOptions { hold_speed: 0.0, ..ImportOptions::default() }).unwrap();
+    let after = cache::read(&p).unwrap();
+    let (b, n) = slow_turning(&before, 25.0);
+    let (a, _) = slow_turning(&after, 25.0);
+    eprintln!("synthetic standing agents: {n} slow agent-frames, {b:.1} % turn > 5 deg/frame before, {a:.1} % after");
+    assert!(n > 1000 && b > 50.0 && a < 1.0, "before {b:.1} %, after {a:.1} % of {n}");
+    // Walkers face their orientation (+x: heading 90 degrees) from the first frame on.
+    for f in &after.frames {
+        let w = f.agents.iter().find(|a| a.id == 22).unwrap();
+        assert!((w.heading - std::f32::consts::FRAC_PI_2).abs() < 1e-3, "frame {}: {}", f.frame, w.heading);
+    }
+    let real = common::shared_asset("crowd/jupedsim_bottleneck_200/bottleneck_200.sqlite");
+    let before = cache::read_with(&real, &ImportOptions { hold_speed: 0.0, ..ImportOptions::default() }).unwrap();
+    let (b, n) = slow_turning(&before, 25.0);
+    let (a, _) = slow_turning(&cache::read(&real).unwrap(), 25.0);
+    eprintln!("bottleneck_200.sqlite: {n} slow agent-frames, {b:.1} % turn > 5 deg/frame before, {a:.1} % after");
+    assert!(a < b / 4.0, "real recording: before {b:.1} %, after {a:.1} %");
 }

@@ -655,3 +655,49 @@ fn export_shares_posed_meshes_between_agents_on_one_pose() {
     assert_ne!(mesh_of("agent_1"), mesh_of("agent_3"));
     assert_eq!(doc.meshes().len(), 2, "two poses, two meshes");
 }
+
+/// Issue 49 item C: a pose-error warning is given only for a clip the
+/// shot's cycles play. RiggedFigure with its clip copied as `Dance` (never
+/// played), a pose_step too coarse for either: only the played clip warns.
+/// One rig file under two rig names warns, naming both keys (docs/wardrobes.md).
+/// `cast --stats` counts the posed meshes as the skinned shot's geometry.
+#[test]
+fn casting_warns_of_played_clips_and_shared_rig_files_and_counts_posed_geometry() {
+    let dir = common::tempdir().unwrap();
+    let figure = common::shared_asset("gltf/RiggedFigure/RiggedFigure.gltf");
+    let mut gltf: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&figure).unwrap()).unwrap();
+    let mut dance = gltf["animations"][0].clone();
+    dance["name"] = "Dance".into();
+    gltf["animations"].as_array_mut().unwrap().push(dance);
+    let folder = figure.parent().unwrap();
+    for b in gltf["buffers"].as_array_mut().unwrap() {
+        let uri = folder.join(b["uri"].as_str().unwrap());
+        b["uri"] = uri.display().to_string().into();
+    }
+    let dancing = dir.path().join("dancing.gltf");
+    std::fs::write(&dancing, gltf.to_string()).unwrap();
+    let shot = common::figure_shot(dir.path(), &common::five_walkers(), "pose_step = 8.0\npose_error_max = 0.0001");
+    let text =
+        std::fs::read_to_string(&shot).unwrap().replace(&figure.display().to_string(), &dancing.display().to_string());
+    std::fs::write(&shot, &text).unwrap();
+    let (code, out, err) = common::run(&["cast".as_ref(), shot.as_os_str(), "--stats".as_ref()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("pose_step 8 gives a pose error") && err.contains("cycle `Walk`"), "{err}");
+    assert!(!err.contains("Dance"), "a clip no cycle plays is not warned of: {err}");
+    // Posed meshes are the skinned shot's geometry: counted, and no "0x".
+    let line = out.lines().find(|l| l.starts_with("unique geometry")).unwrap();
+    assert!(!line.contains(" 0.00 MiB") && !out.contains("(0x"), "{out}");
+
+    // One file under two rig names.
+    let twin = format!("{text}\n").replacen(
+        "[camera]",
+        &format!("[rigs.twin]\nfile = \"{}\"\n\n[camera]", dancing.display()),
+        1,
+    );
+    std::fs::write(&shot, twin).unwrap();
+    let (code, _, err) = common::run(&["cast".as_ref(), shot.as_os_str()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("rigs.twin.file") && err.contains("the same file as `rigs.figure.file`"), "{err}");
+    let (code, _, err) = common::run(&["--strict".as_ref(), "cast".as_ref(), shot.as_os_str()]);
+    assert_eq!(code, 2, "--strict refuses the warning:\n{err}");
+}

@@ -455,3 +455,63 @@ focal_length = 35.0
     assert!(walked > 0.1, "agent 1 walks ({walked} m)");
     assert!((advance - walked / 1.4 * 32.0).abs() < 0.05, "advance {advance} frames for {walked} m");
 }
+
+/// `queue_m.txt` (a slow queue in metres) with every number after the
+/// frame scaled by `k`, as another recording of the same crowd.
+fn scaled_queue(dir: &Path, name: &str, k: f64) -> PathBuf {
+    let text = std::fs::read_to_string(table("queue_m.txt")).unwrap();
+    let out: Vec<String> = text
+        .lines()
+        .map(|l| match l.starts_with('#') {
+            true => l.to_string(),
+            false => {
+                let w: Vec<&str> = l.split_whitespace().collect();
+                let xs = w[2..].iter().map(|v| format!("{:.3}", v.parse::<f64>().unwrap() * k));
+                w[..2].iter().map(|v| v.to_string()).chain(xs).collect::<Vec<_>>().join(" ")
+            }
+        })
+        .collect();
+    let p = dir.join(name);
+    std::fs::write(&p, out.join("\n") + "\n").unwrap();
+    p
+}
+
+/// Issue 49 item A: units are judged from speed, spacing, body distances
+/// and path lengths together, and a header naming its unit is believed. A
+/// slow queue in metres (0.13-0.17 m/s, 0.5 m apart) is no warning, not even
+/// under --strict; the same crowd x100 is centimetres, x1000 millimetres
+/// (warned, naming the unit), x3.28084 feet (named, too close to metres to
+/// warn); `queue_cm.txt`, whose header says `units: cm`, is read in cm.
+#[test]
+fn units_are_judged_from_speed_spacing_and_the_header() {
+    let dir = common::tempdir().unwrap();
+    let info = |p: &Path, strict: bool| {
+        let mut argv = vec!["cache", "info", s(p), "--preset", "petrack", "--json"];
+        if strict {
+            argv.insert(0, "--strict");
+        }
+        let (code, out, err) = run(&argv);
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap_or_default();
+        (code, v, err)
+    };
+    let (code, v, err) = info(&table("queue_m.txt"), true);
+    assert_eq!(code, 0, "a slow queue in metres is no warning under --strict: {err}");
+    assert_eq!(v["units"]["likeliest"], "as read", "{v}");
+    assert_eq!(v["warnings"].as_array().map(Vec::len), Some(0));
+    for (k, unit) in [(100.0, "cm"), (1000.0, "mm")] {
+        let p = scaled_queue(dir.path(), &format!("q{k}.txt"), k);
+        let (code, v, err) = info(&p, false);
+        assert_eq!(code, 0, "{err}");
+        let likeliest = v["units"]["likeliest"].as_str().unwrap().to_string();
+        assert!(likeliest.starts_with(unit), "x{k}: {likeliest}");
+        assert!(err.contains("units look wrong") && err.contains(&format!("set units = \"{unit}\"")), "{err}");
+        assert!(!err.contains("feet"), "{err}");
+    }
+    let ft = scaled_queue(dir.path(), "qft.txt", 3.28084);
+    let (code, v, err) = info(&ft, false);
+    assert_eq!((code, v["units"]["likeliest"].as_str()), (0, Some("ft")), "{v}\n{err}");
+    let (code, v, err) = info(&table("queue_cm.txt"), true);
+    assert_eq!(code, 0, "the header's cm is believed: {err}");
+    assert_eq!(v["units"]["likeliest"], "as read");
+    assert!(v["bounds"]["max"][0].as_f64().unwrap() < 1.0, "read in cm: {}", v["bounds"]);
+}

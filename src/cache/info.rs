@@ -1,11 +1,12 @@
 //! What a cache holds: frame range, agent counts, rigs, cycles and bounds
 //! (`throng cache info` prints it).
 
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{BTreeMap, HashSet};
 use std::fmt::Write as _;
 
 use serde::Serialize;
 
+use super::units::{bounds_warning, Plausible, UnitJudgement};
 use super::{CacheReader, CrowdCache, Format};
 use crate::error::Result;
 
@@ -82,133 +83,14 @@ pub struct CacheInfo {
     pub import: Option<ImportInfo>,
     /// Doubts about the data, e.g. bounds that look like the wrong units.
     pub warnings: Vec<String>,
+    /// The likeliest unit of the numbers and its evidence (docs/cache-format.md,
+    /// "Units"); null without evidence (too few moving or crowded agents).
+    pub units: Option<UnitJudgement>,
 }
 
-/// Widest plausible crowd, metres: wider looks like centimetres (or feet)
-/// read as metres.
-pub(crate) const MAX_PLAUSIBLE_WIDTH: f32 = 2000.0;
-/// Narrowest plausible spread of [`MIN_AGENTS_FOR_SPREAD`] or more agents, metres.
-pub(crate) const MIN_PLAUSIBLE_SPREAD: f32 = 0.5;
-/// Agents needed before a small spread is suspicious.
-pub(crate) const MIN_AGENTS_FOR_SPREAD: usize = 10;
-
-/// A warning when bounds look like the wrong units: a crowd wider than
-/// [`MAX_PLAUSIBLE_WIDTH`] or many agents packed in less than
-/// [`MIN_PLAUSIBLE_SPREAD`].
-pub(crate) fn bounds_warning(b: &Bounds, agents: usize) -> Option<String> {
-    let (w, d) = (b.max[0] - b.min[0], b.max[2] - b.min[2]);
-    let wide = w.max(d);
-    let at = format!("x {:.1}..{:.1}, z {:.1}..{:.1}", b.min[0], b.max[0], b.min[2], b.max[2]);
-    if !wide.is_finite() || wide > MAX_PLAUSIBLE_WIDTH {
-        return Some(format!(
-            "the crowd is {wide:.0} m wide ({at}): wider than {:.0} km, so the units look wrong \
-             (centimetres read as metres? set the cache's units, e.g. units = \"cm\")",
-            MAX_PLAUSIBLE_WIDTH / 1000.0
-        ));
-    }
-    if agents >= MIN_AGENTS_FOR_SPREAD && wide < MIN_PLAUSIBLE_SPREAD {
-        return Some(format!(
-            "{agents} agents stand within {wide:.3} m ({at}): the units look wrong (metres read as millimetres?)"
-        ));
-    }
-    None
-}
-
-/// Plausible median walking speed of people, m/s.
-pub(crate) const PLAUSIBLE_SPEED: (f32, f32) = (0.2, 3.0);
-/// Closest two people stand, metres.
-pub(crate) const MIN_SPACING: f32 = 0.2;
-/// Frames the spacing check samples, evenly spread (bounds its cost).
-const SPACING_FRAMES: usize = 32;
-/// Most speed samples kept for the median.
-const MAX_SPEED_SAMPLES: usize = 4_000_000;
-
-/// Speeds and spacing of people, gathered frame by frame for [`Plausible::warnings`].
-#[derive(Default)]
-pub(crate) struct Plausible {
-    last: HashMap<u32, (i32, glam::Vec3)>,
-    speeds: Vec<f32>,
-    checked: usize,
-    crowded: usize,
-}
-
-impl Plausible {
-    /// Adds one frame; `sample` says whether its spacing is checked. Speeds
-    /// count frames at the shot's 24 fps; only moving agents count.
-    pub(crate) fn add(&mut self, block: &super::FrameBlock, sample: bool) {
-        for a in block.agents.iter().filter(|a| !a.seated() && !a.hidden()) {
-            if let Some((f, p)) = self.last.insert(a.id, (block.frame, a.position)) {
-                let d = (a.position - p).with_y(0.0).length();
-                if f + 1 == block.frame && d > 1e-6 && self.speeds.len() < MAX_SPEED_SAMPLES {
-                    self.speeds.push(d * super::jupedsim::SHOT_FPS);
-                }
-            }
-        }
-        if !sample || block.agents.len() < MIN_AGENTS_FOR_SPREAD {
-            return;
-        }
-        // A grid of MIN_SPACING cells: a closer neighbour is in the 3 x 3 cells around.
-        let cell = |p: glam::Vec3| ((p.x / MIN_SPACING).floor() as i64, (p.z / MIN_SPACING).floor() as i64);
-        let mut grid: HashMap<(i64, i64), Vec<glam::Vec3>> = HashMap::new();
-        for a in &block.agents {
-            grid.entry(cell(a.position)).or_default().push(a.position);
-        }
-        for a in &block.agents {
-            let (cx, cz) = cell(a.position);
-            self.checked += 1;
-            let near = (-1..=1).flat_map(|dx| (-1..=1).map(move |dz| (cx + dx, cz + dz))).any(|c| {
-                grid.get(&c).is_some_and(|ps| {
-                    ps.iter().any(|q| {
-                        let d = (*q - a.position).with_y(0.0).length();
-                        d > 0.0 && d < MIN_SPACING
-                    })
-                })
-            });
-            self.crowded += usize::from(near);
-        }
-    }
-
-    /// Which frames of `frames` the spacing check samples.
-    pub(crate) fn sampled(frames: usize, i: usize) -> bool {
-        frames <= SPACING_FRAMES || i.is_multiple_of(frames.div_ceil(SPACING_FRAMES))
-    }
-
-    /// Warnings naming the likely unit when speeds or spacing are not a person's.
-    pub(crate) fn warnings(mut self) -> Vec<String> {
-        let mut out = Vec::new();
-        if self.speeds.len() >= 20 {
-            let mid = self.speeds.len() / 2;
-            let median = *self.speeds.select_nth_unstable_by(mid, f32::total_cmp).1;
-            let (lo, hi) = PLAUSIBLE_SPEED;
-            let unit = if median > hi * 300.0 {
-                Some("millimetres? set units = \"mm\"")
-            } else if median > hi * 10.0 {
-                Some("centimetres? set units = \"cm\"")
-            } else if median > hi {
-                Some("feet? set units = \"ft\"; or a wrong source_fps")
-            } else if median < lo {
-                Some("metres read as a smaller unit? check units")
-            } else {
-                None
-            };
-            if let Some(unit) = unit {
-                out.push(format!(
-                    "median walking speed {median:.3} m/s (at 24 fps), outside the {lo}-{hi} m/s of people: is the data in {unit}"
-                ));
-            }
-        }
-        if self.checked > 0 && self.crowded * 10 > self.checked {
-            out.push(format!(
-                "{} of {} sampled agents stand closer than {MIN_SPACING} m to another: closer than people stand; \
-                 is the data in a smaller unit than it is read in (metres read as centimetres?)",
-                self.crowded, self.checked
-            ));
-        }
-        out
-    }
-}
-
-/// [`bounds_warning`] for a crowd in memory.
+/// The unit warnings of a crowd in memory ([`super::units`], one rule for
+/// every import): the likeliest unit when the case is strong, else bounds
+/// or spacing no unit explains.
 pub fn bounds_warnings(crowd: &CrowdCache) -> Vec<String> {
     let mut ids = HashSet::new();
     let mut bounds: Option<Bounds> = None;
@@ -219,13 +101,22 @@ pub fn bounds_warnings(crowd: &CrowdCache) -> Vec<String> {
         b.min = glam::Vec3::from(b.min).min(a.position).to_array();
         b.max = glam::Vec3::from(b.max).max(a.position).to_array();
     }
-    let mut plausible = Plausible::default();
+    let mut plausible = Plausible::new(super::jupedsim::SHOT_FPS);
     for (i, f) in crowd.frames.iter().enumerate() {
         plausible.add(f, Plausible::sampled(crowd.frames.len(), i));
     }
-    let mut out: Vec<String> = bounds.and_then(|b| bounds_warning(&b, ids.len())).into_iter().collect();
-    out.extend(plausible.warnings());
-    out
+    unit_warnings(plausible, bounds.as_ref(), ids.len()).1
+}
+
+/// The judgement and warnings of [`super::units`]: a strong judgement
+/// names the unit and stands alone; without one, the hard limits of bounds
+/// and spacing speak.
+fn unit_warnings(mut p: Plausible, bounds: Option<&Bounds>, agents: usize) -> (Option<UnitJudgement>, Vec<String>) {
+    let (judged, mut out) = p.warnings();
+    if !judged.as_ref().is_some_and(|j| j.strong) {
+        out.splice(0..0, bounds.and_then(|b| bounds_warning(b, agents)));
+    }
+    (judged, out)
 }
 
 /// Summarises a cache, reading one frame at a time.
@@ -240,7 +131,7 @@ pub fn info(reader: &CacheReader) -> Result<CacheInfo> {
     let (mut total, mut seated_frames, mut hidden_frames) = (0u64, 0u64, 0u64);
     let (mut min_n, mut max_n) = (usize::MAX, 0);
     let mut bounds: Option<Bounds> = None;
-    let mut plausible = Plausible::default();
+    let mut plausible = Plausible::new(super::jupedsim::SHOT_FPS);
     for (i, &f) in frames.iter().enumerate() {
         let block = reader.read_frame(f)?;
         plausible.add(&block, Plausible::sampled(frames.len(), i));
@@ -284,6 +175,7 @@ pub fn info(reader: &CacheReader) -> Result<CacheInfo> {
             .collect()
     };
     let path = reader.path();
+    let (units, warnings) = unit_warnings(plausible, bounds.as_ref(), ids.len());
     Ok(CacheInfo {
         file: path.display().to_string(),
         format: Format::of(path).map(Format::name).unwrap_or("unknown").to_string(),
@@ -299,12 +191,8 @@ pub fn info(reader: &CacheReader) -> Result<CacheInfo> {
         hidden_agent_frames: hidden_frames,
         rigs: counts(reader.rigs(), &rig_frames, &rig_agents),
         cycles: counts(reader.cycles(), &cycle_frames, &cycle_agents),
-        warnings: bounds
-            .as_ref()
-            .and_then(|b| bounds_warning(b, ids.len()))
-            .into_iter()
-            .chain(plausible.warnings())
-            .collect(),
+        units,
+        warnings,
         bounds,
         import: None,
     })
@@ -347,6 +235,10 @@ impl CacheInfo {
                     b.min[0], b.max[0], b.min[1], b.max[1], b.min[2], b.max[2]
                 ),
             );
+        }
+        if let Some(u) = &self.units {
+            let strength = if u.strong { "" } else { ", not strong enough to warn" };
+            line("units", format!("likeliest {}{strength}: {}", u.likeliest, u.evidence));
         }
         let w = self.rigs.iter().chain(&self.cycles).map(|n| n.name.len()).max().unwrap_or(0);
         for (key, list) in [("rigs", &self.rigs), ("cycles", &self.cycles)] {

@@ -12,8 +12,11 @@
 //! Heading comes from the orientation vector (ori_x, ori_y); where that is
 //! (0, 0) (JuPedSim writes it before an agent first moves) it comes from the
 //! agent's motion since its previous row, or for its first row from its next
-//! movement; an agent that never moves nor turns keeps the nearest known
-//! heading, or 0.
+//! movement. Below the hold speed (the tables' rule, `tabular::may_turn`:
+//! ground speed over the heading window) the heading is held: JuPedSim's
+//! orientation of a near-stationary agent follows its jitter and would spin
+//! it. Held frames keep the last known heading, before the first one the
+//! next; an agent never fast enough to turn keeps its first written one.
 //!
 //! Cycle frame: feet must not slide, so the walk cycle advances by distance
 //! walked / stride * cycle length, modulo the cycle length. Each agent starts
@@ -35,8 +38,10 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use rusqlite::{Connection, OpenFlags};
 
-use super::tabular::turn_toward;
-use super::tabular_options::{DEFAULT_CYCLE_LENGTH, DEFAULT_STRIDE, DEFAULT_TURN_RATE};
+use super::tabular::{fill_held, may_turn, turn_toward, window, window_half};
+use super::tabular_options::{
+    DEFAULT_CYCLE_LENGTH, DEFAULT_HEADING_WINDOW, DEFAULT_HOLD_SPEED, DEFAULT_STRIDE, DEFAULT_TURN_RATE,
+};
 use super::{validate, AgentSample, CrowdCache, FrameBlock};
 use crate::error::{Error, IoContext, Result};
 
@@ -73,6 +78,9 @@ pub struct ImportOptions {
     pub rig_clip: Option<RigClip>,
     /// Fastest heading change, degrees per second ([`DEFAULT_TURN_RATE`]).
     pub turn_rate: f32,
+    /// Speed (m/s) below which the heading is held, the tables' rule
+    /// ([`DEFAULT_HOLD_SPEED`]; 0 never holds).
+    pub hold_speed: f32,
 }
 
 impl Default for ImportOptions {
@@ -84,6 +92,7 @@ impl Default for ImportOptions {
             cycle_length: None,
             rig_clip: None,
             turn_rate: DEFAULT_TURN_RATE,
+            hold_speed: DEFAULT_HOLD_SPEED,
         }
     }
 }
@@ -105,6 +114,7 @@ impl ImportOptions {
             cycle_length,
             rig_clip,
             turn_rate: DEFAULT_TURN_RATE,
+            hold_speed: DEFAULT_HOLD_SPEED,
         };
         opts.check()?;
         Ok(opts)
@@ -154,6 +164,9 @@ impl ImportOptions {
                 return Err(Error::setting(option, format!("must be a positive number, not {v}")));
             }
         }
+        if !(self.hold_speed.is_finite() && self.hold_speed >= 0.0) {
+            return Err(Error::setting("hold_speed", format!("must be 0 or more, not {}", self.hold_speed)));
+        }
         for (name, option) in [(&self.rig, "rig"), (&self.cycle, "cycle")] {
             super::check_name(name).map_err(|m| Error::setting(option, m))?;
         }
@@ -179,10 +192,14 @@ fn heading_of(dx: f64, dy: f64) -> Option<f64> {
 pub(crate) const DEFAULT_JUPEDSIM_FPS: f64 = 25.0;
 
 /// Headings for one agent's samples (see the module comment), turning at
-/// most `step` radians per frame (frames apart count as many frames).
-fn headings(s: &[Sample], step: f64) -> Vec<f32> {
+/// most `step` radians per frame (frames apart count as many frames), and
+/// held below the hold speed by the rule every import shares
+/// ([`may_turn`]: ground speed over the heading window, `window_half`
+/// frames either side within a run of consecutive frames, at `fps`).
+fn headings(s: &[Sample], step: f64, hold: f64, window_half: usize, fps: f64) -> Vec<f32> {
     let motion = |a: &Sample, b: &Sample| heading_of(b.x - a.x, b.y - a.y);
-    let mut h: Vec<Option<f64>> = s
+    let speeds = window_speeds(s, window_half, fps);
+    let written: Vec<Option<f64>> = s
         .iter()
         .enumerate()
         .map(|(i, p)| {
@@ -192,17 +209,10 @@ fn headings(s: &[Sample], step: f64) -> Vec<f32> {
             })
         })
         .collect();
-    // Fill gaps: forward from the last known heading, then backward.
-    let mut last = None;
-    for v in h.iter_mut() {
-        *v = v.or(last);
-        last = *v;
-    }
-    let mut next = None;
-    for v in h.iter_mut().rev() {
-        *v = v.or(next);
-        next = *v;
-    }
+    let standing = written.iter().flatten().next().copied();
+    let mut h: Vec<Option<f64>> =
+        written.into_iter().zip(&speeds).map(|(w, &v)| w.filter(|_| may_turn(v, hold))).collect();
+    fill_held(&mut h, standing);
     let mut prev: Option<(i32, f64)> = None;
     s.iter()
         .zip(h)
@@ -215,6 +225,28 @@ fn headings(s: &[Sample], step: f64) -> Vec<f32> {
             v as f32
         })
         .collect()
+}
+
+/// Each sample's ground speed (m/s) over the heading window, within its run
+/// of consecutive frames (a lone sample: 0).
+fn window_speeds(s: &[Sample], half: usize, fps: f64) -> Vec<f64> {
+    let mut out = Vec::with_capacity(s.len());
+    let mut start = 0;
+    while start < s.len() {
+        let mut end = start + 1;
+        while end < s.len() && s[end].frame == s[end - 1].frame.saturating_add(1) {
+            end += 1;
+        }
+        let run = &s[start..end];
+        for i in 0..run.len() {
+            let (j0, j1) = window(i, run.len(), half);
+            let span = f64::from(run[j1].frame - run[j0].frame) / fps;
+            let d = (run[j1].x - run[j0].x).hypot(run[j1].y - run[j0].y);
+            out.push(if span > 0.0 { d / span } else { 0.0 });
+        }
+        start = end;
+    }
+    out
 }
 
 /// Cycle frames for one agent: start phase from the id, then distance.
@@ -285,6 +317,7 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
         }
     }
     let step = f64::from(opts.turn_rate).to_radians() / fps;
+    let (hold, half) = (f64::from(opts.hold_speed), window_half(f64::from(DEFAULT_HEADING_WINDOW), fps));
 
     // Rows by agent, then frame, so each trajectory is walked in order.
     let mut stmt = conn
@@ -328,7 +361,7 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
     let (stride, length) = (f64::from(opts.stride()), f64::from(opts.cycle_length()));
     let mut frames: BTreeMap<i32, Vec<AgentSample>> = BTreeMap::new();
     for (id, s) in &agents {
-        let hs = headings(s, step);
+        let hs = headings(s, step, hold, half, fps);
         let cs = cycle_frames(*id, s, stride, length);
         for ((p, heading), cycle_frame) in s.iter().zip(hs).zip(cs) {
             frames.entry(p.frame).or_default().push(AgentSample {

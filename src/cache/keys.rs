@@ -261,7 +261,7 @@ import_keys! {
     /// Columns by role: frame|time, id, x, y, z, heading, vx, vy, vz, rig,
     /// cycle = header name or 1-based position, e.g. frame=frame,id=agent_id,x=3.
     columns: ColumnChoices => Columns, Layout;
-    /// Source units: m, cm, mm, ft.
+    /// Source units: m, cm, mm, ft, in.
     units: Option<Units> => Text, Layout;
     /// Source up axis: y or z.
     up: Option<UpAxis> => Text, Layout;
@@ -478,7 +478,7 @@ mod tests {
     #[test]
     fn flag_values_are_checked_by_the_fields_type() {
         let units = key("units").unwrap();
-        assert_eq!(units.parse("parsecs").unwrap_err(), "unknown value `parsecs`; expected one of: m, cm, mm, ft");
+        assert_eq!(units.parse("parsecs").unwrap_err(), "unknown value `parsecs`; expected one of: m, cm, mm, ft, in");
         assert!(key("source_fps").unwrap().parse("0").unwrap_err().contains("between 0 and"));
         assert!(key("header").unwrap().parse("yes").is_err());
         assert!(key("columns").unwrap().parse("x=0").unwrap_err().contains("count from 1"));

@@ -75,6 +75,7 @@ pub(crate) mod jupedsim;
 pub mod keys;
 pub mod tabular;
 mod tabular_options;
+mod units;
 pub(crate) mod usd;
 
 use std::collections::HashSet;
@@ -83,10 +84,11 @@ use std::sync::Mutex;
 
 use crate::error::{Error, Result};
 
-pub(crate) use info::bounds_warning;
 pub use info::{bounds_warnings, info, Bounds, CacheInfo, ImportInfo, NameCount};
 pub use jupedsim::{ImportOptions, RigClip};
 pub use tabular::{place, Placement, TabularOptions, TabularReport, TabularSpec};
+pub(crate) use units::bounds_warning;
+pub use units::UnitJudgement;
 
 /// Longest rig or cycle name, in UTF-8 bytes.
 pub(crate) const MAX_NAME_LEN: usize = 255;

@@ -174,23 +174,18 @@ pub(crate) fn read_text(path: &Path) -> Result<String> {
     })
 }
 
-/// What PeTrack's comment header says: `# framerate: 25 fps` and the units
-/// of `# id frame x/cm y/cm z/cm`.
-fn sniff_comments(text: &str, comment: u8) -> (Option<f32>, Option<Units>) {
-    let (mut fps, mut units) = (None, None);
+/// What PeTrack's comment header says: `# framerate: 25 fps`, and the units
+/// a header names ([`super::units::header_units`]).
+fn sniff_comments(text: &str, comment: Option<u8>, header: bool) -> (Option<f32>, Option<Units>) {
+    let mut fps = None;
     for line in text.lines().take(200).map(str::trim_start) {
-        let Some(rest) = line.strip_prefix(comment as char) else { continue };
+        let Some(rest) = comment.and_then(|c| line.strip_prefix(c as char)) else { continue };
         let rest = rest.trim().to_ascii_lowercase();
         if let Some(v) = rest.strip_prefix("framerate:") {
             fps = fps.or(v.split_whitespace().next().and_then(|n| n.parse::<f32>().ok()));
         }
-        for word in rest.split_whitespace() {
-            if let Some(u) = word.strip_prefix("x/").and_then(|u| u.parse::<Units>().ok()) {
-                units = units.or(Some(u));
-            }
-        }
     }
-    (fps, units)
+    (fps, super::units::header_units(text, comment, header))
 }
 
 fn wrap(a: f64) -> f64 {
@@ -220,7 +215,7 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
     let max_gap = f64::from(o.max_gap);
     check_output_size(path, &tracks.agents, fps, max_gap)?;
 
-    let window_half = ((f64::from(o.heading_window) * fps / 2.0).round() as usize).max(1);
+    let window_half = window_half(f64::from(o.heading_window), fps);
     let heading_from = match o.heading {
         HeadingFrom::Auto if o.columns.heading.is_some() => HeadingFrom::Column,
         HeadingFrom::Auto if o.columns.vx.is_some() => HeadingFrom::Velocity,
@@ -261,9 +256,10 @@ pub fn parse_str(path: &Path, text: &str, o: &TabularOptions) -> Result<(CrowdCa
 }
 
 /// The source's units and frame rate (`None` with a time column): the
-/// options', else what the file's comments say (PeTrack), else metres.
+/// options', else what the file's header says (PeTrack's comments, a
+/// column name), else metres.
 fn units_and_rate(path: &Path, text: &str, o: &TabularOptions) -> Result<(Units, Option<f64>)> {
-    let (sniffed_fps, sniffed_units) = o.comment.map(|c| sniff_comments(text, c)).unwrap_or_default();
+    let (sniffed_fps, sniffed_units) = sniff_comments(text, o.comment, o.header);
     let units = o.units.or(sniffed_units).unwrap_or(Units::M);
     let source_fps =
         match (&o.columns.frame, o.source_fps.or(sniffed_fps)) {
@@ -636,8 +632,9 @@ fn headings(
         // Ground-plane travel direction over the window (length ~ speed),
         // kept only where the agent moves at full hold speed.
         let mut travel: Vec<Option<DVec3>> = Vec::with_capacity(n);
+        let mut turns: Vec<bool> = Vec::with_capacity(n);
         for i in 0..n {
-            let (j0, j1) = (i.saturating_sub(window_half), (i + window_half).min(n - 1));
+            let (j0, j1) = window(i, n, window_half);
             let span = (j1 - j0) as f64 / fps;
             let (speed, mut dir) = match heading_from {
                 HeadingFrom::Velocity => {
@@ -654,15 +651,20 @@ fn headings(
             // so a dawdler does not flicker between walk and idle.
             state = if state { speed >= hold * 0.5 } else { speed >= hold && speed > 0.0 };
             moving.push(state);
-            travel.push((speed >= hold && speed > 1e-9).then_some(dir));
+            turns.push(may_turn(speed, hold));
+            travel.push((may_turn(speed, hold) && speed > 1e-9).then_some(dir));
         }
         for i in 0..n {
-            let (j0, j1) = (i.saturating_sub(window_half), (i + window_half).min(n - 1));
+            let (j0, j1) = window(i, n, window_half);
             let h = match heading_from {
-                HeadingFrom::Column => {
+                // A heading column is held too while the agent stands: a
+                // simulator's or tracker's orientation of a standing person
+                // is noise, not a turn.
+                HeadingFrom::Column if turns[i] => {
                     let v: DVec3 = run[j0..=j1].iter().filter_map(|q| q.heading.map(|h| h.normalize_or_zero())).sum();
                     (v.x.hypot(v.z) > 1e-9).then(|| v.x.atan2(v.z))
                 }
+                HeadingFrom::Column => None,
                 // Turn only at full hold speed, and average the window's travel
                 // weighted by speed, so the slow frames of a stop (where
                 // tracking noise is a large share of the motion) barely count.
@@ -674,7 +676,23 @@ fn headings(
             headings.push(h);
         }
     }
-    // Held headings: the last known one, else the first one ahead, else 0.
+    let standing = match heading_from {
+        HeadingFrom::Column => runs.iter().flatten().find_map(|q| q.heading.map(|h| h.x.atan2(h.z))),
+        _ => None,
+    };
+    fill_held(&mut headings, standing);
+    (headings, moving)
+}
+
+/// Held headings, for every import: the last known one, else the first one
+/// ahead; an agent never fast enough to turn keeps `standing` (its first
+/// heading as written, where the source has one), else 0 later.
+pub(crate) fn fill_held(headings: &mut [Option<f64>], standing: Option<f64>) {
+    if headings.iter().all(Option::is_none) {
+        if let Some(h) = headings.first_mut() {
+            *h = standing;
+        }
+    }
     let mut last = None;
     for h in headings.iter_mut() {
         *h = h.or(last);
@@ -685,7 +703,27 @@ fn headings(
         *h = h.or(next);
         next = *h;
     }
-    (headings, moving)
+}
+
+/// The hold rule, one definition for every import (tables, whatever the
+/// heading comes from, and JuPedSim): an agent may turn only where its
+/// ground speed over the heading window is at least `hold` m/s; below it
+/// the heading is held, so a person standing still does not spin on
+/// tracking noise or a simulator's jittering orientation. A `hold` of 0
+/// never holds.
+pub(crate) fn may_turn(speed: f64, hold: f64) -> bool {
+    speed >= hold
+}
+
+/// The frames `(first, last)` of the heading window around frame `i` of a
+/// run of `n`, `half` either side, clipped to the run.
+pub(crate) fn window(i: usize, n: usize, half: usize) -> (usize, usize) {
+    (i.saturating_sub(half), (i + half).min(n.saturating_sub(1)))
+}
+
+/// Frames either side of the heading window of `seconds` at `fps` (at least 1).
+pub(crate) fn window_half(seconds: f64, fps: f64) -> usize {
+    ((seconds * fps / 2.0).round() as usize).max(1)
 }
 
 /// Limits one agent's run of headings (radians, one per consecutive frame)
@@ -926,7 +964,8 @@ mod tests {
 
     #[test]
     fn sniffs_petrack_header() {
-        let (fps, units) = sniff_comments("# framerate: 16 fps\n# id frame x/cm y/cm z/cm\n1 0 1 2 3\n", b'#');
+        let (fps, units) =
+            sniff_comments("# framerate: 16 fps\n# id frame x/cm y/cm z/cm\n1 0 1 2 3\n", Some(b'#'), false);
         assert_eq!((fps, units), (Some(16.0), Some(Units::Cm)));
     }
 }

@@ -91,7 +91,9 @@ named_enum!(
         /// Millimetres.
         Mm = ["mm"],
         /// International feet.
-        Ft = ["ft", "feet"],
+        Ft = ["ft", "feet", "foot"],
+        /// Inches.
+        In = ["in", "inch", "inches"],
     }
 );
 
@@ -103,6 +105,7 @@ impl Units {
             Units::Cm => 0.01,
             Units::Mm => 0.001,
             Units::Ft => 0.3048,
+            Units::In => 0.0254,
         }
     }
 }

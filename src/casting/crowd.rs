@@ -16,6 +16,7 @@
 //! nearest its cycle frame (`casting::skin`); every pose step is posed once
 //! and shared by every agent, frame and layer on it.
 
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -222,6 +223,15 @@ impl LoadedLights {
 /// value but `u16::MAX` (which marks the unnamed rest).
 pub(crate) const SET_OBJECTS_NAMED: usize = u16::MAX as usize;
 
+/// The (rig, clip) pairs that pose steps play: a clip's warnings (its pose
+/// error) are given only for these.
+fn played_clips(rigs: &ShotRigs, steps: &BTreeSet<crate::casting::cast::PoseStep>) -> BTreeSet<(String, usize)> {
+    steps
+        .iter()
+        .filter_map(|(rig, _, cycle, _)| Some((rig.to_string(), rigs.skinned(rig)?.cycles().get(*cycle)?.clip)))
+        .collect()
+}
+
 impl ShotCrowd {
     /// Loads the shot and everything it names, and casts every agent that
     /// appears in the shot's frame range, posed for still frames.
@@ -253,6 +263,7 @@ impl ShotCrowd {
         let mut skins = PosedSkins::default();
         let still = crate::casting::steps::still_steps(&shot, &cache, &casting, &rigs, &timing)?;
         skins.pose(&still, &worn, (&rigs, &dressing), &mut assets);
+        let mut played = played_clips(&rigs, &still);
         let set = ShotSet::load(&shot, &mut assets, &mut warnings)?;
         let lights = LoadedLights::load(&shot, &mut assets)?;
         let gltf_camera = match &shot.camera.gltf {
@@ -265,9 +276,10 @@ impl ShotCrowd {
             if rigs.any_skinned() {
                 let steps = crate::casting::steps::shutter_steps(&shot, &cache, &casting, &rigs, &timing, shutter)?;
                 skins.pose(&steps, &worn, (&rigs, &dressing), &mut assets);
+                played.extend(played_clips(&rigs, &steps));
             }
         }
-        warnings.extend(rigs.warnings(dressing.worn()).cloned());
+        warnings.extend(rigs.warnings(dressing.worn(), &played).cloned());
         // A scheme of no parts is legal (every slot left empty) but dresses its agents in nothing.
         for (name, r) in &shot.rigs {
             for (scheme, _) in r.schemes.iter().filter(|(_, w)| **w > 0.0) {

@@ -2,7 +2,7 @@
 //! character posed from its node animation (skinned, or rigid: meshes riding
 //! their nodes), one closed kind per rig so every stage matches on it.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use crate::casting::kind::is_character_rig;
 use crate::casting::rig::Rig;
@@ -104,7 +104,8 @@ impl ShotRigs {
             };
             rigs.insert(name.clone(), (rig, height));
         }
-        let warnings = check_slot_rigs(shot, &rigs)?;
+        let mut warnings = shared_files(shot);
+        warnings.extend(check_slot_rigs(shot, &rigs)?);
         Ok(ShotRigs { rigs, warnings })
     }
 
@@ -135,13 +136,38 @@ impl ShotRigs {
 
     /// What loading the rigs noticed but accepted, in rig order, each
     /// skinned rig's followed by what loading its worn parts noticed
-    /// (`worn`, the dressing's; empty before dressing).
-    pub(crate) fn warnings<'a>(&'a self, worn: &'a WornParts) -> impl Iterator<Item = &'a String> {
-        let skinned = (self.iter())
-            .filter_map(|(name, rig)| Some((name, rig.skinned()?)))
-            .flat_map(|(name, r)| r.warnings().iter().chain(worn.warnings(name)));
+    /// (`worn`, the dressing's; empty before dressing). A warning about one
+    /// clip (its pose error) is given only when `played` holds (rig, clip):
+    /// a clip no cycle of the shot plays is never posed.
+    pub(crate) fn warnings<'a>(
+        &'a self,
+        worn: &'a WornParts,
+        played: &'a BTreeSet<(String, usize)>,
+    ) -> impl Iterator<Item = &'a String> {
+        let skinned =
+            (self.iter()).filter_map(|(name, rig)| Some((name, rig.skinned()?))).flat_map(move |(name, r)| {
+                r.warnings_played(move |clip| played.contains(&(name.to_string(), clip))).chain(worn.warnings(name))
+            });
         self.warnings.iter().chain(skinned)
     }
+}
+
+/// One rig file loaded under two or more rig names, of any kind: legal (one
+/// character cast under two names, e.g. with other schemes) but surprising,
+/// so a warning per name after the first, naming both keys.
+fn shared_files(shot: &Shot) -> Vec<String> {
+    let rigs: Vec<(&String, &std::path::Path)> = shot.rigs.iter().map(|(n, r)| (n, r.file.as_path())).collect();
+    let mut warnings = Vec::new();
+    for (i, (name, file)) in rigs.iter().enumerate() {
+        if let Some((first, _)) = rigs[..i].iter().find(|(_, f)| same_file(f, file)) {
+            warnings.push(format!(
+                "{}: field `rigs.{name}.file`: the same file as `rigs.{first}.file`: rigs `{first}` and `{name}` are \
+                 one character under two names",
+                file.display()
+            ));
+        }
+    }
+    warnings
 }
 
 /// Checks each slot rig file: proxy boxes far larger than the rest of the

@@ -125,6 +125,9 @@ pub struct SkinnedRig {
     /// Bodies 1 and up (`casting::body`); body 0, the rig as modelled, is not stored.
     bodies: Vec<Body>,
     warnings: Vec<String>,
+    /// The warnings about one clip (its pose error), as (index into
+    /// `warnings`, clip): printed only for a clip the shot's cycles play.
+    clip_warnings: Vec<(usize, usize)>,
 }
 
 /// Whether `file` is read as a rigid character (else skinned): the shot's
@@ -214,6 +217,7 @@ impl SkinnedRig {
             max_height_scale: options.max_height_scale,
             bodies: Vec::new(),
             warnings: Vec::new(),
+            clip_warnings: Vec::new(),
         };
         rig.load_delivered(&file, options)?;
         rig.stand_on_ground(&file)?;
@@ -357,7 +361,9 @@ impl SkinnedRig {
             let (steps, chosen, error) = match per_clip.get(&clip) {
                 Some(&known) => known,
                 None => {
+                    let before = self.warnings.len();
                     let known = self.clip_steps(file, &own, clip, &name)?;
+                    self.clip_warnings.extend((before..self.warnings.len()).map(|w| (w, clip)));
                     per_clip.insert(clip, known);
                     known
                 }
@@ -735,9 +741,24 @@ impl SkinnedRig {
     pub fn piece_count(&self) -> usize {
         self.own.piece_count()
     }
-    /// Warnings from loading (weights renormalised, morph targets ignored).
+    /// Warnings from loading (weights renormalised, morph targets ignored,
+    /// a clip's pose error).
     pub fn warnings(&self) -> &[String] {
         &self.warnings
+    }
+    /// [`Self::warnings`] a shot prints: those about one clip (its pose
+    /// error) only when `plays(clip)`, so a clip no cycle of the shot plays
+    /// (a rig's Dance in a shot of walkers) is not warned of.
+    pub(crate) fn warnings_played<'a>(
+        &'a self,
+        plays: impl Fn(usize) -> bool + 'a,
+    ) -> impl Iterator<Item = &'a String> {
+        self.warnings.iter().enumerate().filter_map(move |(i, w)| {
+            match self.clip_warnings.iter().find(|(at, _)| *at == i) {
+                Some(&(_, clip)) if !plays(clip) => None,
+                _ => Some(w),
+            }
+        })
     }
 
     /// Index of the cycle a cache cycle name plays; the error lists the
