@@ -93,7 +93,11 @@ fn a_denoised_render_keeps_its_noisy_beauty_and_is_closer_to_the_reference() {
     let (clean, meta) = read(&layer_file(&denoised, "full"));
     let (truth, _) = read(&layer_file(&reference, "full"));
     assert!(meta.denoiser.starts_with("Open Image Denoise 2."), "throng/denoiser: {:?}", meta.denoiser);
-    assert_eq!(pass(&clean, "noisy"), rgb(&plain).as_slice(), "the noisy beauty is the undenoised render's, bit for bit");
+    assert_eq!(
+        pass(&clean, "noisy"),
+        rgb(&plain).as_slice(),
+        "the noisy beauty is the undenoised render's, bit for bit"
+    );
     for field in [&clean.z, &plain.z] {
         assert_eq!(field.len(), 160 * 90);
     }

@@ -50,17 +50,10 @@
 //!
 //! # Cost
 //!
-//! Measured with `examples/oidn_bench.rs` (OIDN 2.5.1, AVX2 AMD EPYC, `num_threads` 2, the 2
-//! cores shared with other builds at load average 4.6-5.7, so +-20 %): each filter (albedo
-//! prefilter, normal prefilter, HDR beauty with clean guides) takes about the same time, ~1.2 s
-//! at 480x270 and ~4.6 s at 960x540 with [`Quality::High`]; ~0.5 s and ~1.9 s with
-//! [`Quality::Balanced`]. Peak RSS of the whole process: ~190 / ~540 MB (High), ~120 / ~420 MB
-//! (Balanced); the library and a device alone are ~12 MB. Creating and committing a filter
-//! costs 1-13 ms, re-binding its images and re-committing 0.4-33 ms, and a [`Denoiser`] pass's
-//! two plane copies 0.1-7 ms: all under 1 % of an execute, and a reused filter and a new filter
-//! per pass were not told apart by alternated runs. [`Denoiser`] copies (no caller pointer
-//! ever reaches OIDN) and keeps its filter (no re-allocation); the real saving for many passes
-//! of one image is prefiltering the guides once: two of the three filters.
+//! Each filter (albedo prefilter, normal prefilter, HDR beauty with clean guides) costs about the
+//! same; [`Denoiser`] keeps the prefiltered guides and its committed filter, so the many passes of
+//! one image pay for the guides once (two of the three filters). Measured figures:
+//! docs/benchmarks.md, "Denoising".
 //!
 //! # Example
 //!

@@ -101,7 +101,8 @@ impl Denoiser {
         if w == 0 || h == 0 {
             return Ok(());
         }
-        let options = oidn::Options { hdr: true, quality: quality(preset), clean_aux: true, ..oidn::Options::default() };
+        let options =
+            oidn::Options { hdr: true, quality: quality(preset), clean_aux: true, ..oidn::Options::default() };
         let albedo = flatten(&film.albedo);
         let normal = flatten(&film.normal);
         let mut filter = oidn::Denoiser::prefiltered(&self.device, w, h, Some(&albedo), Some(&normal), options)

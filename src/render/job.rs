@@ -491,8 +491,7 @@ pub fn render_fingerprint<C>(
     if let Some(d) = job.denoise {
         f.text("denoise", d.name());
     }
-    f.value("manifest", &manifest)
-        .text("throng", env!("CARGO_PKG_VERSION"));
+    f.value("manifest", &manifest).text("throng", env!("CARGO_PKG_VERSION"));
     f.hex()
 }
 

@@ -53,8 +53,7 @@ pub fn run(args: &DenoiseArgs, threads: Option<usize>) -> Result<()> {
         outputs.push(out);
     }
     // No output over any input, and one writer per output file.
-    let inputs =
-        throng::output::InputFiles::new(args.files.iter().map(|f| ("file to denoise".to_string(), f.clone())));
+    let inputs = throng::output::InputFiles::new(args.files.iter().map(|f| ("file to denoise".to_string(), f.clone())));
     inputs.check_all(outputs.iter().map(PathBuf::as_path))?;
     let _claims = throng::output::WriterLock::claim_files(outputs.iter().map(PathBuf::as_path))?;
     // Every file checked before any is written or the library is looked for.

@@ -522,7 +522,11 @@ pub(crate) fn pass_layout(names: &[String]) -> Vec<(String, [&'static str; 3])> 
     let mut passes: Vec<(String, [&'static str; 3])> = Vec::new();
     for name in names {
         let Some(layer) = name.strip_suffix(".R") else { continue };
-        if LightPath::ALL.iter().any(|p| p.name() == layer) || layer.starts_with("lg_") || layer == SHADOW || layer == NOISY {
+        if LightPath::ALL.iter().any(|p| p.name() == layer)
+            || layer.starts_with("lg_")
+            || layer == SHADOW
+            || layer == NOISY
+        {
             passes.push((layer.to_string(), ["R", "G", "B"]));
         }
     }
