@@ -42,17 +42,17 @@ def main(files):
     failed = 0
     for path in files:
         with OpenEXR.File(path, separate_channels=True) as f:
+            denoised = "throng/denoiser" in f.header()
             ch = f.channels()
-            header = f.header()
-        if "throng/denoiser" not in header:
+            noisy = np.ascontiguousarray(planes(ch, ["noisy.R", "noisy.G", "noisy.B"])) if denoised else None
+            albedo = np.ascontiguousarray(planes(ch, ["albedo.R", "albedo.G", "albedo.B"]))
+            normal = np.ascontiguousarray(planes(ch, ["N.X", "N.Y", "N.Z"]))
+            ours = planes(ch, ["R", "G", "B"])
+            alpha = np.asarray(ch["A"].pixels, dtype=np.float32)
+        if not denoised:
             print(f"FAIL: {path}: no throng/denoiser attribute: not denoised")
             failed += 1
             continue
-        noisy = np.ascontiguousarray(planes(ch, ["noisy.R", "noisy.G", "noisy.B"]))
-        albedo = np.ascontiguousarray(planes(ch, ["albedo.R", "albedo.G", "albedo.B"]))
-        normal = np.ascontiguousarray(planes(ch, ["N.X", "N.Y", "N.Z"]))
-        ours = planes(ch, ["R", "G", "B"])
-        alpha = np.asarray(ch["A"].pixels, dtype=np.float32)
         py = pyoidn.denoise(noisy, prefilter("albedo", albedo), prefilter("normal", normal),
                             hdr=True, clean_aux=True, quality="high")
         py = np.where(alpha[..., None] > 0, np.maximum(py, 0), 0)
