@@ -80,6 +80,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
         passes: None,
         adaptive: None,
         tracing: Default::default(),
+        denoise: None,
     };
     job::run(crowd, Some(manifest), &job, &job::Silent).unwrap();
 }

@@ -124,6 +124,7 @@ fn render_with_shutter(
         passes: None,
         adaptive: None,
         tracing: Default::default(),
+        denoise: None,
     };
     let done = job::run(crowd, Some(manifest), &job, &job::Silent).expect("demo renders").layers;
     done.into_iter().map(|r| (r.layer, r.path)).collect()
