@@ -684,9 +684,12 @@ fn casting_warns_of_played_clips_and_shared_rig_files_and_counts_posed_geometry(
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("pose_step 8 gives a pose error") && err.contains("cycle `Walk`"), "{err}");
     assert!(!err.contains("Dance"), "a clip no cycle plays is not warned of: {err}");
-    // Posed meshes are the skinned shot's geometry: counted, and no "0x".
+    // A skinned shot has no slot parts: the figure says what it covers and
+    // gives no "(0x more)"; its posed geometry is counted on its own line.
     let line = out.lines().find(|l| l.starts_with("unique geometry")).unwrap();
-    assert!(!line.contains(" 0.00 MiB") && !out.contains("(0x"), "{out}");
+    assert!(line.contains("(slot parts; posed geometry below)") && !out.contains("(0x"), "{out}");
+    let posed = out.lines().find(|l| l.starts_with("posed geometry")).unwrap();
+    assert!(!posed.contains(" 0.00 MiB"), "{out}");
 
     // One file under two rig names.
     let twin = format!("{text}\n").replacen(

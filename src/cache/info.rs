@@ -237,7 +237,7 @@ impl CacheInfo {
             );
         }
         if let Some(u) = &self.units {
-            let strength = if u.strong { "" } else { ", not strong enough to warn" };
+            let strength = if u.strong || u.scale == 1.0 { "" } else { ", not strong enough to warn" };
             line("units", format!("likeliest {}{strength}: {}", u.likeliest, u.evidence));
         }
         let w = self.rigs.iter().chain(&self.cycles).map(|n| n.name.len()).max().unwrap_or(0);

@@ -68,11 +68,11 @@ pub struct CastStats {
     pub unique_parts: usize,
     /// Unique materials.
     pub unique_materials: usize,
-    /// Bytes of unique geometry: slot parts' meshes, and skinned and rigid
-    /// agents' posed meshes (every pose the shot's frames take, held once).
+    /// Bytes of unique slot part geometry (skinned and rigid agents' posed
+    /// meshes are [`SkinStats`]'s: they cover every pose of the shot's
+    /// frames, so they do not compare with one copy per agent).
     pub unique_geometry_bytes: usize,
-    /// Bytes if every agent had its own copy: of its slot parts, or of its
-    /// posed meshes for one frame.
+    /// Bytes if every slot agent had its own copy of its parts.
     pub copied_geometry_bytes: usize,
     /// Skinned agents and their pose instancing, when the shot has any.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -206,18 +206,14 @@ pub fn cast_stats(crowd: &ShotCrowd) -> CastStats {
             }
         }
     }
-    // Skinned and rigid agents' geometry is their posed meshes: held once
-    // for the shot (unique), one posed copy per agent without sharing.
-    let skinned = skin_stats(crowd);
-    let (posed, posed_copied) = skinned.as_ref().map_or((0, 0), |k| (k.posed_geometry_bytes, k.posed_per_agent_bytes));
     CastStats {
-        skinned,
+        skinned: skin_stats(crowd),
         agents: crowd.casting().len(),
         part_instances: instances,
         unique_parts: meshes.len(),
         unique_materials: materials.len(),
-        unique_geometry_bytes: meshes.iter().map(|&m| lib.meshes[m as usize].bytes()).sum::<usize>() + posed,
-        copied_geometry_bytes: copied + posed_copied,
+        unique_geometry_bytes: meshes.iter().map(|&m| lib.meshes[m as usize].bytes()).sum(),
+        copied_geometry_bytes: copied,
     }
 }
 
@@ -306,12 +302,13 @@ pub fn format_stats(s: &CastStats) -> String {
     let _ = writeln!(o, "part instances       {}", s.part_instances);
     let _ = writeln!(o, "unique parts         {}", s.unique_parts);
     let _ = writeln!(o, "unique materials     {}", s.unique_materials);
-    let _ = writeln!(o, "unique geometry      {}  (parts and posed meshes)", mib(s.unique_geometry_bytes));
-    let ratio = s.copied_geometry_bytes as f64 / s.unique_geometry_bytes as f64;
-    let _ = match ratio.is_finite() {
-        true => writeln!(o, "if copied per agent  {}  ({ratio:.1}x as much)", mib(s.copied_geometry_bytes)),
-        false => writeln!(o, "if copied per agent  {}", mib(s.copied_geometry_bytes)),
-    };
+    // Slot parts only: skinned and rigid agents' posed geometry has lines of its own below.
+    let posed = if s.skinned.is_some() { "; posed geometry below" } else { "" };
+    let _ = writeln!(o, "unique geometry      {}  (slot parts{posed})", mib(s.unique_geometry_bytes));
+    if s.unique_geometry_bytes > 0 {
+        let ratio = s.copied_geometry_bytes as f64 / s.unique_geometry_bytes as f64;
+        let _ = writeln!(o, "if copied per agent  {}  ({ratio:.0}x more)", mib(s.copied_geometry_bytes));
+    }
     if let Some(k) = &s.skinned {
         let _ = writeln!(o, "skinned agents       {}", k.agents - k.rigid_agents);
         if k.rigid_agents > 0 {
