@@ -171,11 +171,18 @@ fn the_stack_of_denoised_layers_is_the_denoised_full_render() {
     assert_eq!(code, 0, "{stderr}");
     let (stacked, _) = read(&comp);
     let (full, _) = read(&layer_file(&out, "full"));
-    // docs/render.md, "Denoising": each layer is denoised on its own, so
-    // edges where layers meet differ; over the frame the two agree to the
-    // measured tolerance.
-    let rel = relative_mse(&rgb(&stacked), &rgb(&full));
-    assert!(rel < 0.01, "relative MSE of the denoised stack against the denoised full render: {rel:.5}");
+    // docs/render.md, "Denoising": each layer is rendered with its own
+    // holdouts and denoised on its own, so the two differ by their sample
+    // noise left after denoising and by what the denoiser does where layers
+    // meet. Measured on the display scale (clipped to 0..1, as a viewer and
+    // FLIP see it) and against the noisy stack's own difference, which the
+    // denoised stack must cut to well under a half.
+    let clip = |v: Vec<[f32; 3]>| v.into_iter().map(|p| p.map(|c| c.clamp(0.0, 1.0))).collect::<Vec<_>>();
+    let shown = relative_mse(&clip(rgb(&stacked)), &clip(rgb(&full)));
+    assert!(shown < 0.05, "relative MSE of the denoised stack against the denoised full render, 0..1: {shown:.5}");
+    let denoised = relative_mse(&rgb(&stacked), &rgb(&full));
+    let noisy = relative_mse(pass(&stacked, "noisy"), pass(&full, "noisy"));
+    assert!(denoised * 3.0 < noisy, "relative MSE stack against full: {denoised:.5} denoised, {noisy:.5} noisy");
 }
 
 #[test]
