@@ -1267,6 +1267,58 @@ matrix! {
         &["set.gltf", "huge.png", "100000 x 100000"],
         &[],
     ),
+    wardrobe_texture_declares_100000_squared => c(
+        "wardrobe TOML",
+        "a wardrobe material's texture PNG declaring 100000 x 100000",
+        |d| {
+            use_wardrobe(d);
+            std::fs::write(d.join("huge.png"), png_header(100_000, 100_000)).unwrap();
+            edit(d, "w.toml", "base_color = [0.6, 0.05, 0.04]", "base_color = [0.6, 0.05, 0.04]\nbase_color_texture = \"huge.png\"");
+        },
+        CAST,
+        &["w.toml", "huge.png", "materials.red.base_color_texture", "100000 x 100000"],
+        &[],
+    ),
+    // A warning under --strict stops a verb before its first output, never after.
+    strict_render_resume_judges_every_file_before_it_writes => c(
+        "flags render",
+        "--strict render --resume beside a frame of other settings",
+        |d| {
+            ok(d, &["layers", "shot.toml"]);
+            ok(d, &["render", "shot.toml", "--frames", "1002", "--spp", "2", "--progress", "off", "--out", "r"]);
+        },
+        &["--strict", "render", "{d}/shot.toml", "--resume", "--frames", "1001-1002", "--spp", "1", "--progress", "off", "--out", "{d}/r"],
+        &["--strict", "resume: re-rendering", "bad.set.1002.exr", "other settings"],
+        &["r/set/bad.set.1001.exr", "r/set/bad.set.1001.png"],
+    ),
+    strict_demo_warns_before_its_first_file => c(
+        "flags demo",
+        "--strict demo into a folder holding a frame of another render",
+        |d| {
+            std::fs::create_dir_all(d.join("demo/render/full")).unwrap();
+            let exr = repo_path("tests/fixtures/cryptomatte/special_chars.exr");
+            std::fs::copy(exr, d.join("demo/render/full/demo.full.1002.exr")).unwrap();
+        },
+        &["--strict", "demo", "--spp", "1", "--out", "{d}/demo"],
+        &["--strict", "will mix two renders", "full"],
+        &["demo/demo.layers.json", "demo/layers_map.png", "demo/demo.1024.glb"],
+    ),
+    strict_export_warns_before_it_writes => c(
+        "flags export",
+        "--strict export (glTF and USD) of a shot that loads with a warning",
+        |d| edit(d, "shot.toml", &demo("rigs/bipedThinA.glb"), &demo("rigs/bipedTallB.glb")),
+        &["--strict", "export", "{d}/shot.toml", "--frame", "1001", "--out", "{d}/o.glb"],
+        &["rigs.bipedThinA.file", "--strict"],
+        &["o.glb"],
+    ),
+    strict_export_usd_warns_before_it_writes => c(
+        "flags export",
+        "--strict export --format usd of a shot that loads with a warning",
+        |d| edit(d, "shot.toml", &demo("rigs/bipedThinA.glb"), &demo("rigs/bipedTallB.glb")),
+        &["--strict", "export", "{d}/shot.toml", "--format", "usd", "--out", "{d}/o.usda"],
+        &["rigs.bipedThinA.file", "--strict"],
+        &["o.usda"],
+    ),
 }
 
 /// The first bytes of a PNG declaring `width` x `height` (8-bit RGBA): its
@@ -1298,7 +1350,7 @@ const HARNESS: Harness = Harness {
 
 #[test]
 fn the_matrix_keeps_every_case() {
-    assert_eq!(cases().len(), 116);
+    assert_eq!(cases().len(), 121);
 }
 
 /// The table of every case, as issue 15 closed with: written to

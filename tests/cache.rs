@@ -996,9 +996,7 @@ fn plot_turns(raw: &CrowdCache, turned: &CrowdCache, png: &Path) -> usize {
 fn jupedsim_refuses_the_keys_it_cannot_apply() {
     let dir = common::tempdir().unwrap();
     let out_path = dir.path().join("j.crowd");
-    for (flag, value) in
-        [("--hold-speed", "0.5"), ("--heading", "motion"), ("--idle-cycle", "IdleA"), ("--units", "cm")]
-    {
+    for (flag, value) in [("--heading", "motion"), ("--idle-cycle", "IdleA"), ("--units", "cm")] {
         let out = throng(&["cache", "convert", s(&fixture()), s(&out_path), flag, value]);
         assert_eq!(out.status.code(), Some(2), "{flag}");
         assert_has(&String::from_utf8(out.stderr).unwrap(), &[flag, "JuPedSim", "cannot apply"]);
@@ -1006,9 +1004,43 @@ fn jupedsim_refuses_the_keys_it_cannot_apply() {
     }
     let out = throng(&["cache", "convert", s(&fixture()), s(&out_path), "--turn-rate", "90", "--rotate", "90"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let spec = cache::TabularSpec { hold_speed: Some(0.5), ..Default::default() };
-    assert_eq!(spec.jupedsim_refuses().map(|r| r.0), Some("hold_speed"));
-    assert_eq!(cache::TabularSpec { turn_rate: Some(90.0), ..Default::default() }.jupedsim_refuses(), None);
+    for applies in [
+        cache::TabularSpec { turn_rate: Some(90.0), ..Default::default() },
+        cache::TabularSpec { hold_speed: Some(0.5), ..Default::default() },
+    ] {
+        assert_eq!(applies.jupedsim_refuses(), None);
+    }
+}
+
+/// Issue 49 item 5: `hold_speed` holds JuPedSim headings on every path
+/// that imports one (`cache convert --hold-speed`, a shot's `[cache]`
+/// key), as it does for tables; it used to be refused, so a standing
+/// crowd could not be made to spin less (or more) than the default.
+#[test]
+fn jupedsim_hold_speed_is_applied_from_the_flag_and_the_shot() {
+    let dir = common::tempdir().unwrap();
+    let p = dir.path().join("standing.sqlite");
+    standing_jupedsim(&p);
+    // The flag: 0 never holds (the standing agents spin), the default holds.
+    let convert = |extra: &[&str]| {
+        let out_path = dir.path().join("standing.crowd");
+        let mut args = vec!["cache", "convert", s(&p), s(&out_path)];
+        args.extend_from_slice(extra);
+        let out = throng(&args);
+        assert!(out.status.success(), "{extra:?}: {}", String::from_utf8_lossy(&out.stderr));
+        slow_turning(&cache::read(&out_path).unwrap(), 25.0).0
+    };
+    let (never, default) = (convert(&["--hold-speed", "0"]), convert(&[]));
+    assert!(never > 50.0 && default < 1.0, "--hold-speed 0: {never:.1} %, default: {default:.1} %");
+    // The shot's key, through casting's import.
+    let mut shot = throng::shot::Shot::load(&common::demo_shot()).unwrap();
+    shot.cache.path = p.clone();
+    shot.cache.import = cache::TabularSpec { hold_speed: Some(0.0), ..Default::default() };
+    let never = throng::casting::shot_cache::open(&shot).unwrap().read_all().unwrap();
+    assert!(slow_turning(&never, 25.0).0 > 50.0, "shot hold_speed = 0 is applied");
+    shot.cache.import = cache::TabularSpec { hold_speed: Some(-1.0), ..Default::default() };
+    let e = throng::casting::shot_cache::open(&shot).unwrap_err().to_string();
+    assert_has(&e, &["cache.hold_speed", "0 or more"]);
 }
 
 /// Issue 27 item 7, issue 49 item A: `cache info` warns, naming the likely

@@ -128,6 +128,14 @@ impl ImportOptions {
         Ok(self)
     }
 
+    /// These options with the motion keys a JuPedSim import applies, as a
+    /// shot's `[cache]` table or the import flags give them: `turn_rate`
+    /// and `hold_speed` (unset: their defaults), checked.
+    pub fn with_motion(mut self, keys: &super::TabularSpec) -> Result<ImportOptions> {
+        self.hold_speed = keys.hold_speed.unwrap_or(DEFAULT_HOLD_SPEED);
+        self.with_turn_rate(keys.turn_rate)
+    }
+
     /// Metres per cycle: `--stride`, else the rig clip's, else [`DEFAULT_STRIDE`].
     pub fn stride(&self) -> f32 {
         self.stride.or(self.rig_clip.as_ref().map(|c| c.stride)).unwrap_or(DEFAULT_STRIDE)
@@ -146,13 +154,14 @@ impl ImportOptions {
             (None, None) => " (default)".into(),
         };
         format!(
-            "rig {}, cycle {}, stride {} m{}, cycle length {} frames{}",
+            "rig {}, cycle {}, stride {} m{}, cycle length {} frames{}, heading held below {} m/s",
             self.rig,
             self.cycle,
             self.stride(),
             from(self.stride),
             self.cycle_length(),
-            from(self.cycle_length)
+            from(self.cycle_length),
+            self.hold_speed
         )
     }
 

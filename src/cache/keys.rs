@@ -295,13 +295,15 @@ import_keys! {
     scale: Option<f32> => Number, Placement;
 }
 
-/// The keys a JuPedSim import applies: its format, names, turn rate and placement.
-const JUPEDSIM_KEYS: [&str; 7] = ["preset", "rig", "cycle", "turn_rate", "translate", "rotate", "scale"];
+/// The keys a JuPedSim import applies: its format, names, turn rate, hold
+/// speed and placement.
+const JUPEDSIM_KEYS: [&str; 8] = ["preset", "rig", "cycle", "turn_rate", "hold_speed", "translate", "rotate", "scale"];
 
 impl TabularSpec {
     /// The first key set here that a JuPedSim import cannot apply (it reads
-    /// metres at the file's frames, headings from the file's orientation,
-    /// and has no idle cycle), with why; `None` when it applies them all.
+    /// metres at the file's frames, headings from the file's orientation
+    /// (held below `hold_speed`), and has no idle cycle), with why; `None`
+    /// when it applies them all.
     pub fn jupedsim_refuses(&self) -> Option<(&'static str, String)> {
         self.set_keys().find(|k| !JUPEDSIM_KEYS.contains(&k.name)).map(|k| {
             (

@@ -197,12 +197,12 @@ fn check_props(rig: &crate::shot::RigRef, wardrobes: &Wardrobes, assets: &mut As
     Ok(())
 }
 
-/// Whether `path` reads as an image (its format and size, not its pixels).
+/// Whether `path` reads as an image of a size throng loads (its format and
+/// size, not its pixels): the bound every texture has
+/// ([`crate::scene::gltf::texture_size`]), so a wardrobe's texture too
+/// large to load is refused here, not when an agent wears it.
 fn check_image(path: &std::path::Path) -> Result<()> {
-    let bad = |e: String| Error::invalid(path, format!("texture is not an image throng reads: {e}"));
-    let reader = image::ImageReader::open(path).map_err(|e| Error::io(path, e))?;
-    let reader = reader.with_guessed_format().map_err(|e| bad(e.to_string()))?;
-    reader.into_dimensions().map(|_| ()).map_err(|e| bad(e.to_string()))
+    crate::scene::gltf::texture_size(path).map(drop)
 }
 
 /// Each piece of part `part` of skinned rig `rig` (its own, or `worn`)

@@ -110,7 +110,7 @@ pub(crate) fn shot_import(shot: &Shot) -> Result<Import> {
     }
     // A refusal names the shot's key (`cache.turn_rate`), not a flag.
     let mut jupedsim = ImportOptions { rig: rig.clone(), cycle: walk.clone(), ..Default::default() }
-        .with_turn_rate(spec.turn_rate)
+        .with_motion(spec)
         .map_err(|e| match e {
             Error::Setting { option, msg } => key_err((option.to_string(), msg)),
             e => e,

@@ -42,8 +42,9 @@ pub const BLAS_BYTES_PER_TRIANGLE: u64 = 170;
 pub const DEFORM_BYTES_PER_TRIANGLE: u64 = 195;
 /// Bytes per texel of the dome map (`[lights.dome]`): the loaded texels
 /// (12, RGB f32), and as much again transiently: the file's decoded buffer
-/// beside them while it loads, then a per-frame copy of the texels when
-/// the frame's light colours are set (`render::colour::scene_lights`).
+/// beside them while it loads, then (ACEScg) the render's copy of the
+/// texels in the working colourspace, made once per job
+/// (`render::colour::scene_lights_once`).
 /// Measured on a 16384 x 8192 map (docs/lights.md, "Memory"): 22.7 bytes
 /// per texel at load, 20.7 during the frame.
 pub const DOME_BYTES_PER_TEXEL: u64 = 24;

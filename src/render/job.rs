@@ -582,6 +582,71 @@ fn other_settings(
     out
 }
 
+/// The warning for each layer folder holding frames of other settings
+/// ([`other_settings`]).
+fn mixing_warnings(shot: &str, job: &RenderJob, fingerprints: &std::collections::HashMap<&str, String>) -> Vec<String> {
+    other_settings(shot, job, fingerprints)
+        .into_iter()
+        .map(|(layer, others)| {
+            format!(
+                "{} holds frames of layer {layer} rendered with other settings ({} of the nearest, first {}): the \
+                 folder will mix two renders; render every frame again, or into another folder, to keep it whole",
+                job.out.join(&layer).display(),
+                others.len(),
+                others[0]
+            )
+        })
+        .collect()
+}
+
+/// The layer-frames of the job already rendered as it would render them
+/// (a resumed job skips them), each other one found telling `warn` it is
+/// rendered again; nothing when the job does not resume. Asked of every
+/// layer-frame before the first is written, so a warning that stops the
+/// job (a pipeline's strict mode) stops it with nothing written.
+fn rendered_already(
+    shot: &str,
+    job: &RenderJob,
+    fingerprints: &std::collections::HashMap<&str, String>,
+    warn: &mut dyn FnMut(String) -> Result<()>,
+) -> Result<std::collections::HashSet<(i32, String)>> {
+    let mut complete = std::collections::HashSet::new();
+    if !job.resume {
+        return Ok(complete);
+    }
+    for &frame in &job.frames {
+        for layer in &job.layers {
+            let fingerprint = fingerprints.get(layer.as_str()).map_or("", String::as_str);
+            if is_rendered(&layer_path(&job.out, shot, layer, frame), fingerprint, warn)? {
+                complete.insert((frame, layer.clone()));
+            }
+        }
+    }
+    Ok(complete)
+}
+
+/// What [`run`] would warn of before it writes its first file: layer
+/// folders holding frames of other settings and, resuming, layer-frames
+/// rendered again. Read only (no claim taken, no temporary removed), for a
+/// caller that writes files of its own before the render and must not
+/// write them when a warning is an error (`run` warns of these itself).
+pub fn warnings_before_writing<C: Space>(
+    crowd: &ShotCrowd<C>,
+    manifest: Option<&Manifest>,
+    job: &RenderJob,
+) -> Result<Vec<String>> {
+    // Any library colourspace: the job's choices are checked when it runs.
+    let fingerprints: std::collections::HashMap<&str, String> =
+        job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
+    let shot = &crowd.shot().name;
+    let mut warnings = mixing_warnings(shot, job, &fingerprints);
+    rendered_already(shot, job, &fingerprints, &mut |w| {
+        warnings.push(w);
+        Ok(())
+    })?;
+    Ok(warnings)
+}
+
 /// Removes the temporaries that a killed run left beside this job's targets
 /// (`.<file>.<pid>.tmp`, as `write_atomic` names them, for a frame of the
 /// job in a layer of the job) whose process is gone: not this one, not
@@ -627,14 +692,8 @@ fn claim_and_clean<C: Space>(
     warn: &mut dyn FnMut(String) -> Result<()>,
 ) -> Result<Vec<(String, WriterLock)>> {
     let claims = claim_layer_folders(&crowd.shot().name, job, fingerprints)?;
-    for (layer, others) in other_settings(&crowd.shot().name, job, fingerprints) {
-        warn(format!(
-            "{} holds frames of layer {layer} rendered with other settings ({} of the nearest, first {}): the \
-             folder will mix two renders; render every frame again, or into another folder, to keep it whole",
-            job.out.join(&layer).display(),
-            others.len(),
-            others[0]
-        ))?;
+    for w in mixing_warnings(&crowd.shot().name, job, fingerprints) {
+        warn(w)?;
     }
     let stale = remove_stale_temporaries(&crowd.shot().name, job, &claims)?;
     if !stale.is_empty() {
@@ -851,8 +910,12 @@ pub fn run<C: Space>(
         job.layers.iter().map(|l| (l.as_str(), render_fingerprint(crowd, manifest, job, l))).collect();
     // Held until the job returns: one writer per file and per layer's settings.
     let _claims = claim_and_clean(crowd, job, &fingerprints, &mut warn)?;
+    // Every warning before the first write: a resume's files are judged now.
+    let complete = rendered_already(&crowd.shot().name, job, &fingerprints, &mut warn)?;
     // BLASes are built as layer-frames need them (and kept for later frames).
     let mut blas = BlasSet::lazy(crowd.library());
+    // The dome in the working colourspace, converted once for the job.
+    let mut dome = colour::ConvertedDome::default();
     let total = job.frames.len() * job.layers.len();
     let mut out = Vec::new();
     for &frame in &job.frames {
@@ -863,8 +926,7 @@ pub fn run<C: Space>(
         for layer in &job.layers {
             let path = layer_path(&job.out, &crowd.shot().name, layer, frame);
             let fingerprint = fingerprints.get(layer.as_str()).cloned().unwrap_or_default();
-            let complete = job.resume && is_rendered(&path, &fingerprint, &mut warn)?;
-            if complete {
+            if complete.contains(&(frame, layer.clone())) {
                 out.push(RenderedLayer::skipped(layer, frame, path));
                 observer.layer_finished(RenderProgress { frame, layer, done: out.len() - 1, total }, true);
                 continue;
@@ -894,7 +956,7 @@ pub fn run<C: Space>(
                     frame_scene(crowd, manifest, layer, posed)?
                 }
             };
-            colour::scene_lights(&mut scene, job.colourspace);
+            colour::scene_lights_once(&mut scene, job.colourspace, &mut dome);
             if job.layers.last() == Some(layer) {
                 // The frame's last layer has its instances: free the poses
                 // before its trees are built (a million agents' slots).

@@ -193,10 +193,10 @@ impl ImportArgs {
         let (rig, cycle) = self.names();
         let g = &self.gait;
         // The flags are checked before the rig file is read.
-        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, None)?.with_turn_rate(self.keys.turn_rate)?;
+        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, None)?.with_motion(&self.keys)?;
         let skin = self.skin();
         let clip = g.rig_file.as_deref().map(|f| import_clip(f, &rig, &cycle, skin.as_ref(), g.stride)).transpose()?;
-        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, clip)?.with_turn_rate(self.keys.turn_rate)
+        ImportOptions::new(&rig, &cycle, g.stride, g.cycle_length, clip)?.with_motion(&self.keys)
     }
 
     /// How to read `input`: a table when its extension or the layout flags
@@ -213,8 +213,7 @@ impl ImportArgs {
         let table = format == Format::Tabular || (format == Format::Csv && spec.describes_layout());
         // The gait and turn-rate flags are checked whatever the format uses.
         let (rig, cycle) = self.names();
-        ImportOptions::new(&rig, &cycle, self.gait.stride, self.gait.cycle_length, None)?
-            .with_turn_rate(spec.turn_rate)?;
+        ImportOptions::new(&rig, &cycle, self.gait.stride, self.gait.cycle_length, None)?.with_motion(spec)?;
         if !table {
             if format == Format::JuPedSim {
                 if let Some(refused) = spec.jupedsim_refuses() {

@@ -41,12 +41,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let shot_path = match &args.shot {
         Some(p) => p.clone(),
         None => {
-            // From the repository, or wherever the binary was built from.
+            // From the repository, or the checkout the binary was built
+            // from (this crate is its `cli/`: the demo is beside it).
             let here = PathBuf::from("demo/shot.toml");
             if here.exists() {
                 here
             } else {
-                Path::new(env!("CARGO_MANIFEST_DIR")).join("demo/shot.toml")
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("../demo/shot.toml")
             }
         }
     };
@@ -105,6 +106,12 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     throng::output::InputFiles::new(crowd.input_files()).check_all(
         [manifest_path.as_path(), map.as_path(), glb.as_path()].into_iter().chain(outputs.iter().map(PathBuf::as_path)),
     )?;
+    // Under --strict the render's warnings stop the demo before its first file.
+    if super::STRICT.load(std::sync::atomic::Ordering::Relaxed) {
+        for w in job::warnings_before_writing(&crowd, Some(&manifest), &render)? {
+            super::warn(&w)?;
+        }
+    }
     throng::layers::write_manifest(&manifest_path, &manifest)?;
     throng::layers::draw_map(
         &manifest,

@@ -51,7 +51,7 @@ pub struct Cli {
     #[arg(long, global = true, value_parser = values::threads)]
     pub threads: Option<usize>,
     /// Treat every warning as an error, for pipelines: the command stops at the first one with exit
-    /// status 2, before it writes anything more (an output already written stays).
+    /// status 2; every verb gives its warnings before it writes its first output, so it writes none.
     #[arg(long, global = true)]
     pub strict: bool,
 }
