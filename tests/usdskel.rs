@@ -41,9 +41,17 @@ fn joints_match_usd_core(file: &str) {
         assert_eq!(agents.len(), prims.len());
         for (a, prim) in agents.iter().zip(&prims) {
             let cycle = rig.cycle_index(&crowd.cycles[a.cycle as usize]).unwrap();
-            // One pose step a frame: the step is the cycle frame.
-            assert_eq!(rig.cycles()[cycle].steps as f32, rig.cycle_frames(cycle).round());
-            let joints = rig.step_joints(cycle, a.cycle_frame.round() as u32);
+            // Pose steps are chosen for pose_error_max, a whole number a frame
+            // here: a still frame is a step, its exact pose.
+            let per_frame = rig.cycles()[cycle].steps as f32 / rig.cycle_frames(cycle);
+            assert_eq!(
+                per_frame,
+                per_frame.round(),
+                "{} steps over {} frames",
+                rig.cycles()[cycle].steps,
+                rig.cycle_frames(cycle)
+            );
+            let joints = rig.step_joints(cycle, (a.cycle_frame * per_frame).round() as u32);
             let world_from_agent = Affine3A::from_rotation_translation(Quat::from_rotation_y(a.heading), a.position);
             let frame = &want[*prim]["frames"][block.frame.to_string()];
             for (j, w) in frame.as_array().unwrap().iter().enumerate() {
@@ -102,15 +110,28 @@ fn the_crowd_renders_with_its_own_character_and_botinfo() {
     let dir = common::tempdir().unwrap();
     let (shot, _) = edited_shot(dir.path(), "skel_crowd.usda", str::to_string);
     let out = dir.path().join("r");
-    let args = ["render", shot.to_str().unwrap(), "--layer", "full", "--frames", "1002", "--spp", "1"];
-    let (code, _, err) = run(&[&args[..], &["--resolution", "48x27", "--out", out.to_str().unwrap()]].concat());
+    // Motion-blurred with the shutter centred on the crowd's first and last
+    // frames: the clip's held ends keep both in the animation.
+    let args = ["render", shot.to_str().unwrap(), "--layer", "full", "--frames", "1001,1008", "--spp", "1"];
+    let more = ["--shutter", "-0.25,0.25", "--resolution", "96x54", "--out", out.to_str().unwrap()];
+    let (code, _, err) = run(&[&args[..], &more[..]].concat());
     assert_eq!(code, 0, "render of the UsdSkel crowd failed: {err}");
-    assert!(out.join("full/skel.full.1002.exr").exists());
-    let (code, stdout, err) = run(&["botinfo", shot.to_str().unwrap(), "7", "--frame", "1002", "--json"]);
+    let crowd = throng::cache::read(fixture("usd/skel_crowd.usda")).unwrap();
+    for f in [1001, 1008] {
+        let (film, _) = throng::render::exr::read_layer(&out.join(format!("full/skel.full.{f}.exr"))).unwrap();
+        let mut seen: Vec<u32> = film.agent_id.iter().filter_map(|&i| i.checked_sub(1)).collect();
+        seen.sort_unstable();
+        seen.dedup();
+        let ids: Vec<u32> = crowd.frames[0].agents.iter().map(|a| a.id).collect();
+        assert_eq!(seen, ids, "frame {f}: every agent is in the picture");
+        let moving = (film.agent_id.iter().zip(&film.motion)).filter(|(&i, m)| i > 0 && (m[0] != 0.0 || m[1] != 0.0));
+        assert!(moving.count() > 0, "frame {f}: the agents' pixels carry motion");
+    }
+    let (code, stdout, err) = run(&["botinfo", shot.to_str().unwrap(), "7", "--frame", "1008", "--json"]);
     assert_eq!(code, 0, "{err}");
     assert!(stdout.contains("\"prim\": \"/Crowd/agent_1\""), "botinfo names the prim: {stdout}");
     assert!(stdout.contains("\"animation\": \"/Crowd/agent_1/Skel/Anim\""), "and the animation: {stdout}");
-    assert!(stdout.contains("\"time_code\": 1002"), "and the time code: {stdout}");
+    assert!(stdout.contains("\"time_code\": 1008"), "and the time code: {stdout}");
 }
 
 #[test]

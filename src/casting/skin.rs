@@ -132,6 +132,8 @@ pub struct SkinnedRig {
     /// A UsdSkel character's materials, by a piece's `material` (a glTF
     /// rig's come from its file: empty).
     materials: Vec<crate::scene::Material>,
+    /// A UsdSkel character: its clips are baked frames, each a pose step.
+    baked: bool,
 }
 
 /// Whether `file` is read as a rigid character (else skinned): the shot's
@@ -226,6 +228,7 @@ impl SkinnedRig {
             warnings: Vec::new(),
             clip_warnings: Vec::new(),
             materials: Vec::new(),
+            baked: false,
         };
         rig.load_delivered(&file, options)?;
         rig.stand_on_ground(&file)?;
@@ -263,6 +266,7 @@ impl SkinnedRig {
             warnings: c.warnings,
             clip_warnings: Vec::new(),
             materials: c.materials,
+            baked: true,
         };
         let (lo, hi) = rig.rest_span(0);
         if !(lo.is_finite() && hi > lo) {
@@ -528,6 +532,13 @@ impl SkinnedRig {
             if jumps {
                 return Ok((first, true, first_error));
             }
+        }
+        // A baked clip (a UsdSkel animation) keeps every frame a step, so a
+        // still frame is the exact pose the crowd department baked.
+        let frames = length.round().max(1.0) as u32;
+        let whole = steps.div_ceil(frames) * frames;
+        if self.baked && whole != steps && whole <= MAX_STEPS_PER_CYCLE {
+            return Ok((whole, true, error(self, whole)));
         }
         Ok((steps, true, e))
     }
