@@ -75,14 +75,14 @@ pub(crate) struct UsdSkelRow {
 }
 
 /// Each UsdSkel agent's prims by id, when the shot's cache is a UsdSkel crowd.
-fn usd_prims(crowd: &ShotCrowd) -> Result<std::collections::HashMap<u32, (String, String, Option<String>)>> {
+fn usd_prims(crowd: &ShotCrowd) -> Result<std::collections::HashMap<u32, crate::cache::usdskel::SkelAgent>> {
     let path = &crowd.shot().cache.path;
     if crate::cache::Format::of(path).ok() != Some(crate::cache::Format::Usd)
         || !crate::cache::usdskel::has_skel_roots(path)?
     {
         return Ok(Default::default());
     }
-    Ok(crate::cache::usdskel::agent_prims(path)?.into_iter().map(|(id, p, s, a)| (id, (p, s, a))).collect())
+    Ok(crate::cache::usdskel::agent_prims(path)?.into_iter().map(|a| (a.id, a)).collect())
 }
 
 /// An agent's body: which of the rig's bodies, and its draws.
@@ -172,10 +172,10 @@ pub fn bot_info_each(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<(Vec<
             parts: row.parts,
             props: row.props,
             pose: crowd.pose_key(a),
-            usd: usd.get(&id).map(|(prim, skeleton, animation)| UsdSkelRow {
-                prim: prim.clone(),
-                skeleton: skeleton.clone(),
-                animation: animation.clone(),
+            usd: usd.get(&id).map(|u| UsdSkelRow {
+                prim: u.prim.clone(),
+                skeleton: u.skeleton.clone(),
+                animation: u.animation.clone(),
                 time_code: crowd.shot().cache.cache_frame(frame),
             }),
         });

@@ -105,9 +105,8 @@ pub(crate) fn has_skel_roots(path: &Path) -> Result<bool> {
 }
 
 /// Each agent's (id, SkelRoot prim, Skeleton prim, bound animation), for botinfo.
-pub(crate) fn agent_prims(path: &Path) -> Result<Vec<(u32, String, String, Option<String>)>> {
-    let ctx = usd::open(path)?;
-    Ok(agents(&ctx)?.into_iter().map(|a| (a.id, a.prim, a.skeleton, a.animation)).collect())
+pub(crate) fn agent_prims(path: &Path) -> Result<Vec<SkelAgent>> {
+    agents(&usd::open(path)?)
 }
 
 /// Every composed prim path, instance proxies included, in traversal order.

@@ -26,6 +26,9 @@ use crate::casting::pieces::{joint_boxes, PartTable, SkinPart, SkinPiece, MAX_IN
 use crate::error::{Error, Result};
 use crate::scene::{Material, Mesh};
 
+/// (slot, mesh prim, part) of each skinned mesh.
+type Delivered = Vec<(String, String, usize)>;
+
 /// A UsdSkel character ready to be a `SkinnedRig`.
 pub(crate) struct UsdCharacter {
     /// Skeleton nodes and one clip per distinct animation.
@@ -33,7 +36,7 @@ pub(crate) struct UsdCharacter {
     /// Its skinned meshes as parts (one per Mesh prim).
     pub(crate) own: PartTable,
     /// (slot, mesh prim, part) of each mesh, what an agent wears.
-    pub(crate) delivered: Vec<(String, String, usize)>,
+    pub(crate) delivered: Delivered,
     /// Materials, by a piece's `material`.
     pub(crate) materials: Vec<Material>,
     /// What reading noticed but accepted.
@@ -116,7 +119,7 @@ fn clip(a: &SkelAnim, tcps: f64) -> Clip {
 
 /// Every skinned mesh as a part of one piece, influences cut to the
 /// [`MAX_INFLUENCES`] heaviest (renormalised, with a warning).
-fn pieces(path: &Path, c: &SkelCharacter) -> Result<(PartTable, Vec<(String, String, usize)>, Vec<String>)> {
+fn pieces(path: &Path, c: &SkelCharacter) -> Result<(PartTable, Delivered, Vec<String>)> {
     let canonical = std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?;
     let inverse_bind: Vec<Affine3A> = c.skeleton.bind.iter().map(|m| Affine3A::from_mat4(m.inverse())).collect();
     if inverse_bind.iter().any(|m| !m.is_finite()) {
