@@ -56,6 +56,33 @@ pub struct BotInfo {
     /// absent for slot rigs.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub(crate) pose: Option<String>,
+    /// Where a UsdSkel crowd's agent comes from (docs/usd.md, "UsdSkel crowds").
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub(crate) usd: Option<UsdSkelRow>,
+}
+
+/// A UsdSkel agent's prims and the time code it is read at.
+#[derive(Debug, Clone, serde::Serialize)]
+pub(crate) struct UsdSkelRow {
+    /// The SkelRoot prim.
+    pub(crate) prim: String,
+    /// Its Skeleton prim.
+    pub(crate) skeleton: String,
+    /// The SkelAnimation bound to it (`None`: it holds the rest pose).
+    pub(crate) animation: Option<String>,
+    /// The stage time code of the shot frame.
+    pub(crate) time_code: i32,
+}
+
+/// Each UsdSkel agent's prims by id, when the shot's cache is a UsdSkel crowd.
+fn usd_prims(crowd: &ShotCrowd) -> Result<std::collections::HashMap<u32, crate::cache::usdskel::SkelAgent>> {
+    let path = &crowd.shot().cache.path;
+    if crate::cache::Format::of(path).ok() != Some(crate::cache::Format::Usd)
+        || !crate::cache::usdskel::has_skel_roots(path)?
+    {
+        return Ok(Default::default());
+    }
+    Ok(crate::cache::usdskel::agent_prims(path)?.into_iter().map(|a| (a.id, a)).collect())
 }
 
 /// An agent's body: which of the rig's bodies, and its draws.
@@ -94,6 +121,7 @@ pub fn bot_info_each(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<(Vec<
     let camera = crowd.camera(frame)?;
     let mut out = Vec::new();
     let mut missing = Vec::new();
+    let usd = usd_prims(crowd)?;
     for &id in ids {
         let Some(cast) = crowd.cast(id) else {
             let near = nearest_ids(crowd.casting().ids(), id, 5);
@@ -144,6 +172,12 @@ pub fn bot_info_each(crowd: &ShotCrowd, ids: &[u32], frame: i32) -> Result<(Vec<
             parts: row.parts,
             props: row.props,
             pose: crowd.pose_key(a),
+            usd: usd.get(&id).map(|u| UsdSkelRow {
+                prim: u.prim.clone(),
+                skeleton: u.skeleton.clone(),
+                animation: u.animation.clone(),
+                time_code: crowd.shot().cache.cache_frame(frame),
+            }),
         });
     }
     Ok((out, missing))
@@ -257,6 +291,11 @@ pub fn format_bot_info(b: &BotInfo) -> String {
     }
     if let Some(pose) = &b.pose {
         let _ = writeln!(o, "Pose      {pose}  (shared by every agent on it)");
+    }
+    if let Some(u) = &b.usd {
+        let _ = writeln!(o, "USD prim  {}  (skeleton {})", u.prim, u.skeleton);
+        let anim = u.animation.as_deref().unwrap_or("none: the rest pose");
+        let _ = writeln!(o, "USD anim  {anim}  at time code {}", u.time_code);
     }
     let _ = writeln!(o, "Parts");
     for p in &b.parts {

@@ -77,6 +77,8 @@ pub mod tabular;
 mod tabular_options;
 mod units;
 pub(crate) mod usd;
+pub(crate) mod usdskel;
+pub(crate) mod usdskel_mesh;
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
@@ -196,6 +198,7 @@ pub fn import(path: impl AsRef<Path>, how: &Import) -> Result<(CrowdCache, Optio
         Format::Binary => binary::read(path)?,
         Format::Csv => csv::read(path)?,
         Format::JuPedSim => jupedsim::read(path, &how.jupedsim)?,
+        Format::Usd if usdskel::has_skel_roots(path)? => usdskel::read(path, &how.jupedsim)?,
         Format::Usd => usd::read(path, &how.jupedsim)?,
         Format::Tabular => return Err(needs_layout(path)),
     };

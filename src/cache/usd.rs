@@ -32,22 +32,22 @@ pub(crate) const MAX_FRAMES: i64 = 1_000_000;
 /// Most agent samples (agents x frames) one USD crowd may hold.
 pub(crate) const MAX_SAMPLES: usize = 50_000_000;
 
-struct Ctx<'a> {
-    path: &'a Path,
-    stage: Stage,
+pub(super) struct Ctx<'a> {
+    pub(super) path: &'a Path,
+    pub(super) stage: Stage,
 }
 
 impl Ctx<'_> {
-    fn err(&self, prim: &str, msg: impl Into<String>) -> Error {
+    pub(super) fn err(&self, prim: &str, msg: impl Into<String>) -> Error {
         Error::invalid(self.path, msg).field(prim.to_string())
     }
 
-    fn sdf_path(&self, p: &str) -> Result<sdf::Path> {
+    pub(super) fn sdf_path(&self, p: &str) -> Result<sdf::Path> {
         sdf::Path::new(p).map_err(|e| self.err(p, format!("invalid USD path: {e}")))
     }
 
     /// The composed value of `prim.attr` at `t` (`None` when not authored).
-    fn value(&self, prim: &str, attr: &str, t: f64) -> Result<Option<Value>> {
+    pub(super) fn value(&self, prim: &str, attr: &str, t: f64) -> Result<Option<Value>> {
         let p = self.sdf_path(&format!("{prim}.{attr}"))?;
         self.stage
             .attribute(p)
@@ -56,7 +56,7 @@ impl Ctx<'_> {
     }
 
     /// Sample times of `prim.attr` (empty when it holds only a default).
-    fn times(&self, prim: &str, attr: &str) -> Result<Vec<f64>> {
+    pub(super) fn times(&self, prim: &str, attr: &str) -> Result<Vec<f64>> {
         let p = self.sdf_path(&format!("{prim}.{attr}"))?;
         self.stage
             .attribute(p)
@@ -69,7 +69,7 @@ impl Ctx<'_> {
     }
 
     /// Errors when the samples of `prim.attr` do not cover `frames`.
-    fn covers(&self, prim: &str, attr: &str, frames: (i64, i64)) -> Result<()> {
+    pub(super) fn covers(&self, prim: &str, attr: &str, frames: (i64, i64)) -> Result<()> {
         let times = self.times(prim, attr)?;
         let (Some(&first), Some(&last)) = (times.first(), times.last()) else { return Ok(()) };
         let missing = if first > frames.0 as f64 {
@@ -95,21 +95,23 @@ impl Ctx<'_> {
     }
 }
 
-fn props(stage: &Stage, path: &sdf::Path) -> BTreeSet<String> {
+pub(super) fn props(stage: &Stage, path: &sdf::Path) -> BTreeSet<String> {
     stage.prim(path.clone()).property_names().unwrap_or_default().iter().map(|t| t.as_str().to_string()).collect()
 }
 
-fn f32_of(v: &Value) -> Option<f32> {
+pub(super) fn f32_of(v: &Value) -> Option<f32> {
     match v {
         Value::Float(x) => Some(*x),
         Value::Double(x) => Some(*x as f32),
         Value::Half(x) => Some(x.to_f32()),
         Value::Int(x) => Some(*x as f32),
+        // usda time samples of a scalar are read type-blind: `1001: 0` is an Int64.
+        Value::Int64(x) => Some(*x as f32),
         _ => None,
     }
 }
 
-fn vec3_of(v: &Value) -> Option<Vec3> {
+pub(super) fn vec3_of(v: &Value) -> Option<Vec3> {
     match v {
         Value::Vec3f(p) => Some(Vec3::new(p.x, p.y, p.z)),
         Value::Vec3d(p) => Some(Vec3::new(p.x as f32, p.y as f32, p.z as f32)),
@@ -127,7 +129,7 @@ fn quat_of(v: &Value) -> Option<Quat> {
     }
 }
 
-fn quats_of(v: &Value) -> Option<Vec<Quat>> {
+pub(super) fn quats_of(v: &Value) -> Option<Vec<Quat>> {
     match v {
         Value::QuatfVec(q) => Some(q.iter().map(|q| Quat::from_xyzw(q.x, q.y, q.z, q.w)).collect()),
         Value::QuathVec(q) => {
@@ -140,7 +142,7 @@ fn quats_of(v: &Value) -> Option<Vec<Quat>> {
     }
 }
 
-fn vec3s_of(v: &Value) -> Option<Vec<Vec3>> {
+pub(super) fn vec3s_of(v: &Value) -> Option<Vec<Vec3>> {
     match v {
         Value::Vec3fVec(p) => Some(p.iter().map(|p| Vec3::new(p.x, p.y, p.z)).collect()),
         Value::Vec3dVec(p) => Some(p.iter().map(|p| Vec3::new(p.x as f32, p.y as f32, p.z as f32)).collect()),
@@ -183,14 +185,14 @@ fn names_of(v: &Value) -> Option<Names> {
     }
 }
 
-fn heading_of(m: &Mat4) -> f32 {
+pub(super) fn heading_of(m: &Mat4) -> f32 {
     let f = m.transform_vector3(Vec3::Z);
     f.x.atan2(f.z)
 }
 
 /// Rig and cycle tables in first-use order.
 #[derive(Default)]
-struct Names2 {
+pub(super) struct Names2 {
     rigs: Vec<String>,
     cycles: Vec<String>,
     rig_index: HashMap<String, u16>,
@@ -207,10 +209,10 @@ impl Names2 {
         index.insert(name.to_string(), i);
         Some(i)
     }
-    fn rig(&mut self, name: &str) -> Option<u16> {
+    pub(super) fn rig(&mut self, name: &str) -> Option<u16> {
         Self::index(&mut self.rigs, &mut self.rig_index, name)
     }
-    fn cycle(&mut self, name: &str) -> Option<u16> {
+    pub(super) fn cycle(&mut self, name: &str) -> Option<u16> {
         Self::index(&mut self.cycles, &mut self.cycle_index, name)
     }
 }
@@ -234,7 +236,7 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
 }
 
 /// Opens the stage at `path`, with its prim names and composition checked.
-fn open(path: &Path) -> Result<Ctx<'_>> {
+pub(super) fn open(path: &Path) -> Result<Ctx<'_>> {
     let text = path.to_str().ok_or_else(|| Error::invalid(path, "the USD file's path is not UTF-8"))?;
     if !path.exists() {
         return Err(Error::invalid(path, "no such USD file"));
@@ -250,7 +252,7 @@ fn open(path: &Path) -> Result<Ctx<'_>> {
 
 /// The crowd's frames: the stage's time code range, else the span of the
 /// authored samples; checked against [`MAX_FRAMES`] and the cache's i32.
-fn frame_range(ctx: &Ctx, instancers: &[String], agent_prims: &[String]) -> Result<(i64, i64)> {
+pub(super) fn frame_range(ctx: &Ctx, instancers: &[String], agent_prims: &[String]) -> Result<(i64, i64)> {
     let frames: (i64, i64) = if ctx.stage.has_authored_time_code_range() {
         (ctx.stage.start_time_code().ceil() as i64, ctx.stage.end_time_code().floor() as i64)
     } else {
@@ -281,16 +283,16 @@ fn frame_range(ctx: &Ctx, instancers: &[String], agent_prims: &[String]) -> Resu
 
 /// The agents read so far: frame blocks, the rig and cycle tables, and each
 /// agent's first frame (a cycle frame's default counts from it).
-struct Gather<'a> {
+pub(super) struct Gather<'a> {
     path: &'a Path,
-    names: Names2,
+    pub(super) names: Names2,
     blocks: BTreeMap<i32, Vec<AgentSample>>,
     samples: usize,
     first_seen: HashMap<u32, i32>,
 }
 
 impl<'a> Gather<'a> {
-    fn new(path: &'a Path, frames: (i64, i64)) -> Self {
+    pub(super) fn new(path: &'a Path, frames: (i64, i64)) -> Self {
         Gather {
             path,
             names: Names2::default(),
@@ -306,7 +308,7 @@ impl<'a> Gather<'a> {
     }
 
     /// Adds one agent at frame `f`; `prim` names the source in errors.
-    fn push(&mut self, prim: &str, f: i32, a: AgentSample) -> Result<()> {
+    pub(super) fn push(&mut self, prim: &str, f: i32, a: AgentSample) -> Result<()> {
         self.samples += 1;
         if self.samples > MAX_SAMPLES {
             return Err(
@@ -318,7 +320,7 @@ impl<'a> Gather<'a> {
     }
 
     /// The crowd: frames holding agents, agents by id, validated.
-    fn finish(self) -> Result<CrowdCache> {
+    pub(super) fn finish(self) -> Result<CrowdCache> {
         let frames = self
             .blocks
             .into_iter()
@@ -614,8 +616,8 @@ fn find_crowd(ctx: &Ctx) -> Result<(Vec<String>, Vec<String>)> {
         return Err(Error::invalid(
             path,
             format!(
-                "no crowd in this USD file: no PointInstancer and no prim with primvars:throng:agentId \
-                 among its {} prims",
+                "no crowd in this USD file: no SkelRoot, no PointInstancer and no prim with \
+                 primvars:throng:agentId among its {} prims",
                 paths.len()
             ),
         ));
@@ -711,7 +713,7 @@ fn xform_chain(ctx: &Ctx, prim: &str) -> Result<Vec<(String, Vec<String>)>> {
 }
 
 /// (prim, attribute) of every xform op in `prim`'s chain ([`xform_chain`]).
-fn xform_chain_ops(ctx: &Ctx, prim: &str) -> Result<Vec<(String, String)>> {
+pub(super) fn xform_chain_ops(ctx: &Ctx, prim: &str) -> Result<Vec<(String, String)>> {
     let mut out = Vec::new();
     for (p, ops) in xform_chain(ctx, prim)? {
         for op in ops {
@@ -797,7 +799,7 @@ fn local_matrix(ctx: &Ctx, prim: &str, ops: &[String], t: f64) -> Result<Mat4> {
 
 /// World matrix at `t`: the prim's and its ancestors' ops, composed as USD
 /// does (a `!resetXformStack!` drops the ancestors).
-fn world_matrix(ctx: &Ctx, prim: &str, t: f64) -> Result<Mat4> {
+pub(super) fn world_matrix(ctx: &Ctx, prim: &str, t: f64) -> Result<Mat4> {
     let mut m = Mat4::IDENTITY;
     for (p, ops) in xform_chain(ctx, prim)? {
         m = local_matrix(ctx, &p, &ops, t)? * m;

@@ -74,13 +74,30 @@ impl Hierarchy {
             .collect();
         // Breadth-first from the top-level nodes: parents come first.
         let children: Vec<Vec<usize>> = file.doc.nodes().map(|n| n.children().map(|c| c.index()).collect()).collect();
+        Ok(Self::ordered(nodes, &children))
+    }
+
+    /// A hierarchy of `nodes` whose parents are given (a UsdSkel skeleton's
+    /// joints): each node's children in index order.
+    pub(crate) fn new(nodes: Vec<Node>) -> Hierarchy {
+        let mut children = vec![Vec::new(); nodes.len()];
+        for (i, n) in nodes.iter().enumerate() {
+            if let Some(c) = n.parent.and_then(|p| children.get_mut(p)) {
+                c.push(i);
+            }
+        }
+        Self::ordered(nodes, &children)
+    }
+
+    /// `nodes` with every parent ordered before its children, breadth-first.
+    fn ordered(nodes: Vec<Node>, children: &[Vec<usize>]) -> Hierarchy {
         let mut order: Vec<usize> = (0..nodes.len()).filter(|&i| nodes[i].parent.is_none()).collect();
         let mut next = 0;
         while let Some(&at) = order.get(next) {
             order.extend(&children[at]);
             next += 1;
         }
-        Ok(Hierarchy { nodes, order })
+        Hierarchy { nodes, order }
     }
 
     /// Index of the first node named `name`.

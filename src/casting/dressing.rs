@@ -220,7 +220,14 @@ fn piece_materials(
     for &piece in &worn.part_at(rig_name, rig, part).pieces {
         let material = if *material == *GLTF_MATERIAL {
             let p = worn.piece(rig_name, rig, piece);
-            assets.gltf_material_at(&p.file, p.material)?
+            match rig.usd_material(p.material).filter(|_| p.file == rig.path()) {
+                // A UsdSkel character's UsdPreviewSurface, made once per material.
+                Some(m) => match made.get(&m.name) {
+                    Some(&id) => id,
+                    None => *made.entry(m.name.clone()).or_insert(assets.add_material(m.clone())),
+                },
+                None => assets.gltf_material_at(&p.file, p.material)?,
+            }
         } else {
             wardrobe_material(assets, made, wardrobes, material)?
         };

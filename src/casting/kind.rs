@@ -39,6 +39,10 @@ pub(crate) fn is_character_rig(rig: &RigRef) -> Result<bool> {
 /// node has slot extras. A skin then makes it skinned, else it is rigid
 /// (meshes on animated nodes: the Kenney alien, a car).
 pub(crate) fn is_character_file(path: &Path) -> Result<bool> {
+    // A UsdSkel crowd's file is its character (casting::usdskel_rig).
+    if crate::casting::usdskel_rig::is_usd(path) {
+        return Ok(true);
+    }
     let file = GltfFile::open(path)?;
     Ok(!has_slots(&file))
 }

@@ -22,6 +22,7 @@ pub mod skin;
 pub(crate) mod steps;
 pub mod table;
 pub(crate) mod timing;
+pub(crate) mod usdskel_rig;
 pub mod wardrobe;
 pub(crate) mod wheels;
 pub(crate) mod worn;

@@ -93,12 +93,12 @@ impl PartTable {
         self.pieces.len()
     }
 
-    fn push_piece(&mut self, piece: SkinPiece) -> usize {
+    pub(crate) fn push_piece(&mut self, piece: SkinPiece) -> usize {
         self.pieces.push(piece);
         self.first_piece + self.pieces.len() - 1
     }
 
-    fn push_part(&mut self, part: SkinPart) -> usize {
+    pub(crate) fn push_part(&mut self, part: SkinPart) -> usize {
         self.parts.push(part);
         self.first_part + self.parts.len() - 1
     }
@@ -382,14 +382,7 @@ impl PartReader<'_> {
                 file.path.display()
             ));
         }
-        // Per-joint proxy boxes: vertices weighted mostly to a joint, in its bind space.
-        let mut joint_boxes: Vec<Option<(Vec3, Vec3)>> = vec![None; joint_nodes.len()];
-        for (p, inf) in mesh.positions.iter().zip(&influences) {
-            let Some(&(j, _)) = inf.iter().max_by(|a, b| a.1.total_cmp(&b.1)) else { continue };
-            let q = inverse_bind[j as usize].transform_point3(*p);
-            let b = &mut joint_boxes[j as usize];
-            *b = Some(b.map_or((q, q), |(lo, hi)| (lo.min(q), hi.max(q))));
-        }
+        let joint_boxes = joint_boxes(&mesh.positions, &influences, inverse_bind);
         Ok(SkinPiece {
             mesh,
             influences,
@@ -401,4 +394,21 @@ impl PartReader<'_> {
             proportioned: true,
         })
     }
+}
+
+/// Per-joint proxy boxes: the vertices weighted mostly to a joint, in its
+/// bind space (`None` for joints that dominate no vertex).
+pub(crate) fn joint_boxes(
+    positions: &[Vec3],
+    influences: &[[(u16, f32); MAX_INFLUENCES]],
+    inverse_bind: &[Affine3A],
+) -> Vec<Option<(Vec3, Vec3)>> {
+    let mut boxes: Vec<Option<(Vec3, Vec3)>> = vec![None; inverse_bind.len()];
+    for (p, inf) in positions.iter().zip(influences) {
+        let Some(&(j, _)) = inf.iter().max_by(|a, b| a.1.total_cmp(&b.1)) else { continue };
+        let q = inverse_bind[j as usize].transform_point3(*p);
+        let b = &mut boxes[j as usize];
+        *b = Some(b.map_or((q, q), |(lo, hi)| (lo.min(q), hi.max(q))));
+    }
+    boxes
 }

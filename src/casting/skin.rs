@@ -50,6 +50,7 @@ use crate::casting::body::{self, Body};
 use crate::casting::kind::is_skinned;
 pub use crate::casting::pieces::SkinPiece;
 use crate::casting::pieces::{PartReader, PartTable, SkinPart, MAX_INFLUENCES};
+use crate::casting::usdskel_rig;
 use crate::casting::wheels;
 use crate::error::{Error, Result};
 use crate::scene::gltf::{orientation, GltfFile};
@@ -128,6 +129,11 @@ pub struct SkinnedRig {
     /// The warnings about one clip (its pose error), as (index into
     /// `warnings`, clip): printed only for a clip the shot's cycles play.
     clip_warnings: Vec<(usize, usize)>,
+    /// A UsdSkel character's materials, by a piece's `material` (a glTF
+    /// rig's come from its file: empty).
+    materials: Vec<crate::scene::Material>,
+    /// A UsdSkel character: its clips are baked frames, each a pose step.
+    baked: bool,
 }
 
 /// Whether `file` is read as a rigid character (else skinned): the shot's
@@ -181,6 +187,9 @@ impl SkinnedRig {
     /// from `options.cycles` (cache name -> clip name or `#index`); every
     /// clip is also available under its own name.
     pub fn load(path: &Path, options: &SkinOptions, fps: f32) -> Result<SkinnedRig> {
+        if usdskel_rig::is_usd(path) {
+            return Self::load_usd(path, options, fps);
+        }
         let file = GltfFile::open(path)?;
         let rigid = checked_kind(&file, options)?;
         let animated = Animated::from_file(&file)?;
@@ -218,10 +227,53 @@ impl SkinnedRig {
             bodies: Vec::new(),
             warnings: Vec::new(),
             clip_warnings: Vec::new(),
+            materials: Vec::new(),
+            baked: false,
         };
         rig.load_delivered(&file, options)?;
         rig.stand_on_ground(&file)?;
-        rig.load_cycles(&file, options)?;
+        rig.load_cycles(options)?;
+        Ok(rig)
+    }
+
+    /// Loads the character a UsdSkel crowd's agents share
+    /// ([`crate::casting::usdskel_rig`]): its skeleton, skinned meshes and
+    /// materials, and one clip per distinct animation. The crowd
+    /// department's placement is authoritative: the rig is not lifted to
+    /// the ground, so joints stand where the file puts them.
+    fn load_usd(path: &Path, options: &SkinOptions, fps: f32) -> Result<SkinnedRig> {
+        let c = usdskel_rig::character(path)?;
+        let orient = orientation(path, options.up, options.forward)?;
+        let canonical = std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?;
+        let slots = options.slots.clone().unwrap_or_else(|| c.delivered.iter().map(|(s, _, _)| s.clone()).collect());
+        let mut rig = SkinnedRig {
+            path: path.to_path_buf(),
+            canonical,
+            rigid: false,
+            animated: c.animated,
+            rig_from_file: Affine3A::from_scale_rotation_translation(Vec3::splat(options.scale), orient, Vec3::ZERO),
+            root: None,
+            cycles: Vec::new(),
+            own: c.own,
+            slots,
+            delivered: c.delivered,
+            height: 0.0,
+            fps,
+            pose_step: options.pose_step,
+            pose_error_max: options.pose_error_max,
+            max_height_scale: options.max_height_scale,
+            bodies: Vec::new(),
+            warnings: c.warnings,
+            clip_warnings: Vec::new(),
+            materials: c.materials,
+            baked: true,
+        };
+        let (lo, hi) = rig.rest_span(0);
+        if !(lo.is_finite() && hi > lo) {
+            return Err(Error::invalid(path, "the UsdSkel meshes have no height in the rest pose"));
+        }
+        rig.height = hi - lo;
+        rig.load_cycles(options)?;
         Ok(rig)
     }
 
@@ -311,7 +363,9 @@ impl SkinnedRig {
 
     /// Cycles: the shot's mapping first, then every clip under its own
     /// name, each with its stride and pose steps.
-    fn load_cycles(&mut self, file: &GltfFile, options: &SkinOptions) -> Result<()> {
+    fn load_cycles(&mut self, options: &SkinOptions) -> Result<()> {
+        let path = self.path.clone();
+        let err = |msg: String| Error::invalid(&path, msg);
         let clips = &self.animated.clips;
         let clip_index = |name: &str| -> Option<usize> {
             clips
@@ -323,7 +377,7 @@ impl SkinnedRig {
         for (cycle, clip) in &options.cycles {
             let i = clip_index(clip).ok_or_else(|| {
                 let names: Vec<String> = clips.iter().enumerate().map(|(i, c)| format!("{} (#{i})", c.name)).collect();
-                file.err(format!(
+                err(format!(
                     "cycle `{cycle}` maps to clip `{clip}`, which the file lacks; clips: {}",
                     if names.is_empty() { "(none)".to_string() } else { names.join(", ") }
                 ))
@@ -362,7 +416,7 @@ impl SkinnedRig {
                 Some(&known) => known,
                 None => {
                     let before = self.warnings.len();
-                    let known = self.clip_steps(file, &own, clip, &name)?;
+                    let known = self.clip_steps(&own, clip, &name)?;
                     self.clip_warnings.extend((before..self.warnings.len()).map(|w| (w, clip)));
                     per_clip.insert(clip, known);
                     known
@@ -408,7 +462,7 @@ impl SkinnedRig {
     /// `pieces` is within it (the first count tried that is; a warning when
     /// even [`MAX_STEPS_PER_CYCLE`] is not). Returns (steps, chosen, error at
     /// the tallest agent).
-    fn clip_steps(&mut self, file: &GltfFile, pieces: &[usize], clip: usize, name: &str) -> Result<(u32, bool, f32)> {
+    fn clip_steps(&mut self, pieces: &[usize], clip: usize, name: &str) -> Result<(u32, bool, f32)> {
         let length = self.animated.clips[clip].duration() * self.fps;
         if !(length > 0.0 && length.is_finite()) {
             return Ok((1, self.pose_step.is_none(), 0.0));
@@ -423,8 +477,9 @@ impl SkinnedRig {
         if let Some(step) = self.pose_step {
             let s = (length / step).round();
             if !(s.is_finite() && s <= MAX_STEPS_PER_CYCLE as f32) {
-                return Err(file
-                    .err(format!(
+                return Err(Error::invalid(
+                    &self.path,
+                    format!(
                         "pose_step {step} cuts cycle `{name}` ({length:.1} frames) into more than {MAX_STEPS_PER_CYCLE} poses"
                     ))
                     .field("pose_step"));
@@ -477,6 +532,13 @@ impl SkinnedRig {
             if jumps {
                 return Ok((first, true, first_error));
             }
+        }
+        // A baked clip (a UsdSkel animation) keeps every frame a step, so a
+        // still frame is the exact pose the crowd department baked.
+        let frames = length.round().max(1.0) as u32;
+        let whole = steps.div_ceil(frames) * frames;
+        if self.baked && whole != steps && whole <= MAX_STEPS_PER_CYCLE {
+            return Ok((whole, true, error(self, whole)));
         }
         Ok((steps, true, e))
     }
@@ -699,6 +761,11 @@ impl SkinnedRig {
         nodes.sort_unstable();
         nodes.dedup();
         nodes.iter().filter_map(|&n| self.animated.hierarchy.nodes.get(n)).map(|n| n.name.as_str()).collect()
+    }
+    /// A UsdSkel character's material `i` (`None` for a glTF rig, whose
+    /// pieces' materials are its file's).
+    pub(crate) fn usd_material(&self, i: Option<usize>) -> Option<&crate::scene::Material> {
+        self.materials.get(i?)
     }
     /// Slot names casting fills (one skinned mesh each).
     pub(crate) fn slots(&self) -> &[String] {

@@ -493,7 +493,7 @@ pub(crate) fn read_mesh(file: &GltfFile, mesh: &gltf::Mesh, name: String) -> Res
 
 /// Area-weighted vertex normals, for meshes exported without normals.
 /// Shared vertices come out smooth; split vertices (hard edges) stay flat.
-fn smooth_normals(mesh: &Mesh) -> Vec<Vec3> {
+pub(crate) fn smooth_normals(mesh: &Mesh) -> Vec<Vec3> {
     let mut normals = vec![Vec3::ZERO; mesh.positions.len()];
     for tri in mesh.indices.chunks_exact(3) {
         let [a, b, c] = [tri[0] as usize, tri[1] as usize, tri[2] as usize];

@@ -866,7 +866,9 @@ impl RigFile {
     /// `[rigs.NAME]` -> a checked rig; `pose_error_max` is the shot's (checked).
     fn check(&self, name: &str, cx: &Context, pose_error_max: f32) -> Result<RigRef> {
         let rig = self;
-        let jitter = rig.height_jitter.as_ref().map_or(default_jitter(), |j| *j.get_ref());
+        // A UsdSkel crowd's scale is the crowd department's: no jitter unless asked (docs/wardrobes.md).
+        let usd = crate::cache::Format::of(rig.file.get_ref()).ok() == Some(crate::cache::Format::Usd);
+        let jitter = rig.height_jitter.as_ref().map_or(if usd { 0.0 } else { default_jitter() }, |j| *j.get_ref());
         if !(0.0..1.0).contains(&jitter) {
             return Err(cx.at(
                 rig.height_jitter.as_ref().map_or(rig.file.span(), |j| j.span()),

@@ -1,0 +1,541 @@
+//! UsdSkel crowds in (docs/usd.md, "UsdSkel crowds"): every `SkelRoot` is
+//! an agent, as Houdini's SOP Crowd Import, Golaem's "USD Skeleton" bake and
+//! Atoms write them. This file reads the stage: the agents (id, place and
+//! heading per frame, the animation each plays) into a [`CrowdCache`], and
+//! the character they share (skeleton, skinned meshes, materials, every
+//! distinct animation) into a [`SkelCharacter`] that casting poses as it
+//! poses a glTF character (`casting::usdskel_rig`).
+//!
+//! An agent's cycle is its animation: agents whose SkelAnimations hold the
+//! same samples play one cycle (named by the first such prim), so they share
+//! every pose; its cycle frame is the frame since the animation's first
+//! sample. Its id: `primvars:throng:agentId` on the SkelRoot, else a hash of
+//! the SkelRoot's prim path (the same for every re-export of the same prim
+//! paths), the next free id on a clash, in prim path order.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::path::Path;
+
+use glam::{Mat4, Quat, Vec3};
+use openusd::sdf::Value;
+use openusd::usd::PrimPredicate;
+
+use super::usd::{self, heading_of, props, quats_of, vec3s_of, world_matrix, xform_chain_ops, Ctx, Gather};
+use super::usdskel_mesh::{SkelMaterial, SkelMesh};
+use super::{CrowdCache, ImportOptions};
+use crate::error::{Error, Result};
+use crate::fingerprint::Fingerprinter;
+
+/// Most agents (SkelRoots) one crowd may hold.
+pub(crate) const MAX_AGENTS: usize = 1_000_000;
+/// Most joints a skeleton may have (joint indices are 16-bit downstream).
+pub(crate) const MAX_JOINTS: usize = 4096;
+/// Cycle name of agents bound to no animation: they hold their rest pose.
+pub(crate) const REST_CYCLE: &str = "rest";
+
+/// One SkelRoot: its prim, id, and the prims it binds.
+#[derive(Clone, Debug)]
+pub(crate) struct SkelAgent {
+    /// The SkelRoot's prim path.
+    pub(crate) prim: String,
+    /// Its agent id.
+    pub(crate) id: u32,
+    /// The Skeleton prim under it.
+    pub(crate) skeleton: String,
+    /// The SkelAnimation its skeleton is bound to (`skel:animationSource`).
+    pub(crate) animation: Option<String>,
+    /// Skinned meshes under it (prims with `primvars:skel:jointIndices`).
+    pub(crate) meshes: Vec<String>,
+}
+
+/// A skeleton: joints (paths, parents before children), local rest and
+/// skeleton-space bind transforms, as `Mat4` for column vectors.
+#[derive(Clone, Debug)]
+pub(crate) struct SkelSkeleton {
+    /// The Skeleton prim.
+    pub(crate) prim: String,
+    /// Joint paths (`Hips/Spine`).
+    pub(crate) joints: Vec<String>,
+    /// Parent joint of each joint (`None` at a root).
+    pub(crate) parents: Vec<Option<usize>>,
+    /// `restTransforms`: each joint relative to its parent.
+    pub(crate) rest: Vec<Mat4>,
+    /// `bindTransforms`: each joint in skeleton space at bind time.
+    pub(crate) bind: Vec<Mat4>,
+    /// The Skeleton prim's transform relative to its SkelRoot.
+    pub(crate) root_from_skel: Mat4,
+}
+
+/// One distinct animation: joint-local translations, rotations and scales
+/// of the joints it names, at each of its time codes.
+#[derive(Clone, Debug)]
+pub(crate) struct SkelAnim {
+    /// The cycle name: the first SkelAnimation prim holding these samples.
+    pub(crate) name: String,
+    /// Skeleton joint of each animated joint.
+    pub(crate) joints: Vec<usize>,
+    /// Time codes, increasing.
+    pub(crate) times: Vec<f64>,
+    /// Per time code, per animated joint: (translation, rotation, scale).
+    pub(crate) poses: Vec<Vec<(Vec3, Quat, Vec3)>>,
+}
+
+/// What a UsdSkel crowd's agents are made of: one skeleton, its skinned
+/// meshes and materials, and every distinct animation.
+#[derive(Clone, Debug)]
+pub(crate) struct SkelCharacter {
+    /// The skeleton (every agent's has the same joints).
+    pub(crate) skeleton: SkelSkeleton,
+    /// The first agent's skinned meshes (instanced agents share them).
+    pub(crate) meshes: Vec<SkelMesh>,
+    /// Their materials.
+    pub(crate) materials: Vec<SkelMaterial>,
+    /// Distinct animations in first-use order.
+    pub(crate) animations: Vec<SkelAnim>,
+    /// The stage's time codes per second.
+    pub(crate) time_codes_per_second: f64,
+    /// What reading noticed but accepted (weights renormalised, influences dropped).
+    pub(crate) warnings: Vec<String>,
+}
+
+/// Whether the stage holds SkelRoots (then it is read as a UsdSkel crowd).
+pub(crate) fn has_skel_roots(path: &Path) -> Result<bool> {
+    let ctx = usd::open(path)?;
+    Ok(!skel_roots(&ctx)?.is_empty())
+}
+
+/// Each agent's (id, SkelRoot prim, Skeleton prim, bound animation), for botinfo.
+pub(crate) fn agent_prims(path: &Path) -> Result<Vec<SkelAgent>> {
+    agents(&usd::open(path)?)
+}
+
+/// Every composed prim path, instance proxies included, in traversal order.
+fn all_prims(ctx: &Ctx) -> Result<Vec<String>> {
+    let mut paths = Vec::new();
+    ctx.stage
+        .traverse(PrimPredicate::DEFAULT.with_instance_proxies(true), |p| paths.push(p.as_str().to_string()))
+        .map_err(|e| Error::invalid(ctx.path, format!("cannot traverse the USD stage: {e:#}")))?;
+    Ok(paths)
+}
+
+fn type_of(ctx: &Ctx, prim: &str) -> String {
+    let Ok(p) = ctx.sdf_path(prim) else { return String::new() };
+    ctx.stage.prim(p).type_name().ok().flatten().map(|t| t.as_str().to_string()).unwrap_or_default()
+}
+
+/// The SkelRoot prims, sorted by path.
+fn skel_roots(ctx: &Ctx) -> Result<Vec<String>> {
+    Ok(typed_prims(ctx)?.into_iter().filter(|(_, t)| t == "SkelRoot").map(|(p, _)| p).collect())
+}
+
+/// Every composed prim with its type name, sorted by path: the prims under
+/// one prim are then one run (`descendants`).
+fn typed_prims(ctx: &Ctx) -> Result<Vec<(String, String)>> {
+    let mut prims: Vec<(String, String)> =
+        all_prims(ctx)?.into_iter().map(|p| (type_of(ctx, &p), p)).map(|(t, p)| (p, t)).collect();
+    prims.sort();
+    Ok(prims)
+}
+
+/// The prims under `root` (not itself) in `prims` sorted by path.
+fn descendants<'a>(prims: &'a [(String, String)], root: &str) -> &'a [(String, String)] {
+    let prefix = format!("{root}/");
+    let start = prims.partition_point(|(p, _)| p.as_str() < prefix.as_str());
+    let len = prims[start..].iter().take_while(|(p, _)| p.starts_with(&prefix)).count();
+    &prims[start..start + len]
+}
+
+/// The first target of relationship `prim.rel`, if authored.
+fn target(ctx: &Ctx, prim: &str, rel: &str) -> Result<Option<String>> {
+    let p = ctx.sdf_path(&format!("{prim}.{rel}"))?;
+    Ok(ctx.stage.relationship(p).targets().unwrap_or_default().first().map(|t| t.as_str().to_string()))
+}
+
+/// The agents: one per SkelRoot, with ids assigned.
+fn agents(ctx: &Ctx) -> Result<Vec<SkelAgent>> {
+    let prims = typed_prims(ctx)?;
+    let roots: Vec<&String> = prims.iter().filter(|(_, t)| t == "SkelRoot").map(|(p, _)| p).collect();
+    if roots.len() > MAX_AGENTS {
+        return Err(Error::invalid(ctx.path, format!("{} SkelRoots; at most {MAX_AGENTS} agents", roots.len())));
+    }
+    let mut out = Vec::with_capacity(roots.len());
+    let mut explicit = Vec::new();
+    for root in roots {
+        let under = descendants(&prims, root);
+        let skeleton = (under.iter())
+            .find(|(_, t)| t == "Skeleton")
+            .map(|(p, _)| p.clone())
+            .ok_or_else(|| ctx.err(root, format!("SkelRoot <{root}> holds no Skeleton: an agent needs one")))?;
+        // skel:animationSource binds at the skeleton or any ancestor up to the root.
+        let mut animation = None;
+        let mut at = skeleton.as_str();
+        while animation.is_none() && at.len() >= root.len() {
+            animation = target(ctx, at, "skel:animationSource")?;
+            at = &at[..at.rfind('/').unwrap_or(0)];
+        }
+        let meshes: Vec<String> = (under.iter())
+            .map(|(p, _)| p)
+            .filter(|p| ctx.sdf_path(p).is_ok_and(|q| props(&ctx.stage, &q).contains("primvars:skel:jointIndices")))
+            .cloned()
+            .collect();
+        let id = match ctx.value(root, "primvars:throng:agentId", 0.0)? {
+            None => None,
+            Some(Value::Int(i)) if i >= 0 => Some(i as u32),
+            Some(Value::Int64(i)) if (0..i64::from(u32::MAX)).contains(&i) => Some(i as u32),
+            Some(Value::Uint(i)) if i < u32::MAX => Some(i),
+            Some(_) => {
+                return Err(ctx.err(
+                    &format!("{root}.primvars:throng:agentId"),
+                    format!("<{root}> primvars:throng:agentId is not an id (0 to {})", u32::MAX - 1),
+                ))
+            }
+        };
+        explicit.push(id);
+        out.push(SkelAgent { prim: root.clone(), id: 0, skeleton, animation, meshes });
+    }
+    assign_ids(ctx, &mut out, &explicit)?;
+    Ok(out)
+}
+
+/// Ids: the explicit ones, then a hash of each other prim path (31 bits),
+/// stepping to the next free id on a clash, in prim path order.
+fn assign_ids(ctx: &Ctx, agents: &mut [SkelAgent], explicit: &[Option<u32>]) -> Result<()> {
+    let mut taken: BTreeMap<u32, String> = BTreeMap::new();
+    for (a, id) in agents.iter_mut().zip(explicit) {
+        let Some(id) = *id else { continue };
+        if let Some(other) = taken.insert(id, a.prim.clone()) {
+            return Err(ctx.err(
+                &format!("{}.primvars:throng:agentId", a.prim),
+                format!("<{}> and <{other}> both carry primvars:throng:agentId {id}", a.prim),
+            ));
+        }
+        a.id = id;
+    }
+    for (a, id) in agents.iter_mut().zip(explicit) {
+        if id.is_some() {
+            continue;
+        }
+        let hex = Fingerprinter::new().text("usd agent prim", &a.prim).hex();
+        let mut id = (u64::from_str_radix(&hex, 16).unwrap_or(0) & 0x7fff_ffff) as u32;
+        while taken.contains_key(&id) {
+            id = (id + 1) & 0x7fff_ffff;
+        }
+        taken.insert(id, a.prim.clone());
+        a.id = id;
+    }
+    Ok(())
+}
+
+/// The crowd's frames: the stage's time code range, else the span of the
+/// agents' transform and animation samples.
+fn frames(ctx: &Ctx, agents: &[SkelAgent]) -> Result<(i64, i64)> {
+    if ctx.stage.has_authored_time_code_range() {
+        return Ok((ctx.stage.start_time_code().ceil() as i64, ctx.stage.end_time_code().floor() as i64));
+    }
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for a in agents {
+        let mut attrs = xform_chain_ops(ctx, &a.prim)?;
+        if let Some(anim) = &a.animation {
+            attrs.extend(["translations", "rotations", "scales"].map(|x| (anim.clone(), x.to_string())));
+        }
+        for (p, attr) in attrs {
+            for t in ctx.times(&p, &attr)? {
+                lo = lo.min(t);
+                hi = hi.max(t);
+            }
+        }
+    }
+    Ok(if lo.is_finite() { (lo.ceil() as i64, hi.floor() as i64) } else { (0, 0) })
+}
+
+/// Reads a UsdSkel crowd into a [`CrowdCache`]: each SkelRoot at each frame,
+/// placed and headed by its world transform, playing its animation.
+pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
+    let ctx = usd::open(path)?;
+    let agents = agents(&ctx)?;
+    let frames = frames(&ctx, &agents)?;
+    if frames.1 < frames.0 || frames.1 - frames.0 >= usd::MAX_FRAMES {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "the crowd's frame range {}-{} is empty or longer than {} frames",
+                frames.0,
+                frames.1,
+                usd::MAX_FRAMES
+            ),
+        ));
+    }
+    let skeleton = skeleton(&ctx, &agents[0], frames.0 as f64)?;
+    let mut cycles = CycleNames::default();
+    let mut gather = Gather::new(path, frames);
+    for a in &agents {
+        for (prim, op) in xform_chain_ops(&ctx, &a.prim)? {
+            ctx.covers(&prim, &op, frames)?;
+        }
+        let (cycle, start) = match &a.animation {
+            Some(anim) => {
+                let read = animation(&ctx, anim, &skeleton, frames)?;
+                (cycles.name_of(&read), read.times.first().copied().unwrap_or(frames.0 as f64))
+            }
+            None => (REST_CYCLE.to_string(), frames.0 as f64),
+        };
+        let rig = match ctx.value(&a.prim, "primvars:throng:rig", 0.0)? {
+            Some(Value::String(s)) => s,
+            Some(Value::Token(t)) => t.as_str().to_string(),
+            _ => opts.rig.clone(),
+        };
+        for f in frames.0..=frames.1 {
+            let m = world_matrix(&ctx, &a.prim, f as f64)?;
+            let too_many = || ctx.err(&a.prim, "more than 65536 rig or cycle names").frame(f);
+            let sample = super::AgentSample {
+                id: a.id,
+                position: m.w_axis.truncate(),
+                heading: heading_of(&m),
+                rig: gather.names.rig(&rig).ok_or_else(too_many)?,
+                cycle: gather.names.cycle(&cycle).ok_or_else(too_many)?,
+                // The clip holds its first pose a frame early (casting::usdskel_rig).
+                cycle_frame: (f as f64 - start) as f32 + 1.0,
+                flags: 0,
+            };
+            gather.push(&a.prim, f as i32, sample)?;
+        }
+    }
+    gather.finish()
+}
+
+/// Cycle names by animation content: the first prim with those samples.
+#[derive(Default)]
+struct CycleNames {
+    by_content: HashMap<String, String>,
+}
+
+impl CycleNames {
+    fn name_of(&mut self, anim: &SkelAnim) -> String {
+        self.by_content.entry(content_key(anim)).or_insert_with(|| anim.name.clone()).clone()
+    }
+}
+
+/// A key equal for animations holding the same samples.
+fn content_key(anim: &SkelAnim) -> String {
+    let mut f = Fingerprinter::new();
+    f.debug("joints", &anim.joints).debug("times", &anim.times);
+    for pose in &anim.poses {
+        f.floats(
+            "pose",
+            pose.iter().flat_map(|(t, r, s)| t.to_array().into_iter().chain(r.to_array()).chain(s.to_array())),
+        );
+    }
+    f.hex()
+}
+
+/// A `matrix4d[]` attribute as column-vector matrices.
+fn matrices(ctx: &Ctx, prim: &str, attr: &str) -> Result<Option<Vec<Mat4>>> {
+    Ok(match ctx.value(prim, attr, 0.0)? {
+        Some(Value::Matrix4dVec(v)) => Some(v.iter().map(|m| Mat4::from_cols_array(&m.0.map(|e| e as f32))).collect()),
+        Some(_) => return Err(ctx.err(&format!("{prim}.{attr}"), format!("<{prim}.{attr}> is not a matrix4d[]"))),
+        None => None,
+    })
+}
+
+fn tokens(ctx: &Ctx, prim: &str, attr: &str) -> Result<Option<Vec<String>>> {
+    Ok(match ctx.value(prim, attr, 0.0)? {
+        Some(Value::TokenVec(v)) => Some(v.iter().map(|t| t.as_str().to_string()).collect()),
+        Some(Value::StringVec(v)) => Some(v),
+        Some(_) => return Err(ctx.err(&format!("{prim}.{attr}"), format!("<{prim}.{attr}> is not a token[]"))),
+        None => None,
+    })
+}
+
+/// The agent's Skeleton: joints, parents, rest and bind transforms, checked;
+/// its place in the SkelRoot at time `t0` (the crowd's first frame).
+pub(super) fn skeleton(ctx: &Ctx, agent: &SkelAgent, t0: f64) -> Result<SkelSkeleton> {
+    let s = agent.skeleton.as_str();
+    let at = |attr: &str| format!("{s}.{attr}");
+    let joints =
+        tokens(ctx, s, "joints")?.ok_or_else(|| ctx.err(&at("joints"), format!("Skeleton <{s}> has no `joints`")))?;
+    if joints.is_empty() || joints.len() > MAX_JOINTS {
+        return Err(ctx.err(&at("joints"), format!("Skeleton <{s}> has {} joints (1 to {MAX_JOINTS})", joints.len())));
+    }
+    let index: HashMap<&str, usize> = joints.iter().enumerate().map(|(i, j)| (j.as_str(), i)).collect();
+    let mut parents = Vec::with_capacity(joints.len());
+    for (i, j) in joints.iter().enumerate() {
+        let parent = j.rfind('/').map(|k| &j[..k]);
+        let p = match parent {
+            None => None,
+            Some(p) => match index.get(p) {
+                Some(&pi) if pi < i => Some(pi),
+                _ => {
+                    return Err(ctx.err(
+                        &at("joints"),
+                        format!("Skeleton <{s}>: joint `{j}`'s parent `{p}` is not a joint listed before it"),
+                    ))
+                }
+            },
+        };
+        parents.push(p);
+    }
+    let n = joints.len();
+    let checked = |attr: &str, m: Option<Vec<Mat4>>| -> Result<Vec<Mat4>> {
+        let m = m.ok_or_else(|| {
+            ctx.err(&at(attr), format!("Skeleton <{s}> has no `{attr}`: throng needs the skeleton's {attr}"))
+        })?;
+        if m.len() != n {
+            return Err(ctx.err(&at(attr), format!("Skeleton <{s}>: {} {attr} for {n} joints", m.len())));
+        }
+        if let Some(j) = m.iter().position(|m| !m.is_finite()) {
+            return Err(
+                ctx.err(&at(attr), format!("Skeleton <{s}>: {attr}[{j}] (joint `{}`) is not finite", joints[j]))
+            );
+        }
+        Ok(m)
+    };
+    let bind = checked("bindTransforms", matrices(ctx, s, "bindTransforms")?)?;
+    let rest = checked("restTransforms", matrices(ctx, s, "restTransforms")?)?;
+    let root = world_matrix(ctx, &agent.prim, t0)?;
+    let skel = world_matrix(ctx, s, t0)?;
+    Ok(SkelSkeleton { prim: s.to_string(), joints, parents, rest, bind, root_from_skel: root.inverse() * skel })
+}
+
+/// A SkelAnimation's samples over `frames`, checked against `skel`.
+pub(super) fn animation(ctx: &Ctx, prim: &str, skel: &SkelSkeleton, frames: (i64, i64)) -> Result<SkelAnim> {
+    let at = |attr: &str| format!("{prim}.{attr}");
+    let names = tokens(ctx, prim, "joints")?
+        .ok_or_else(|| ctx.err(&at("joints"), format!("SkelAnimation <{prim}> has no `joints`")))?;
+    let mut joints = Vec::with_capacity(names.len());
+    for j in &names {
+        let i = skel.joints.iter().position(|s| s == j).ok_or_else(|| {
+            ctx.err(
+                &at("joints"),
+                format!("SkelAnimation <{prim}> animates joint `{j}`, which Skeleton <{}> does not have", skel.prim),
+            )
+        })?;
+        joints.push(i);
+    }
+    let attrs = ["translations", "rotations", "scales"];
+    let mut times = BTreeSet::new();
+    for a in attrs {
+        ctx.covers(prim, a, frames)?;
+        for t in ctx.times(prim, a)? {
+            if t >= frames.0 as f64 && t <= frames.1 as f64 {
+                times.insert(t.to_bits());
+            }
+        }
+    }
+    let mut times: Vec<f64> = times.into_iter().map(f64::from_bits).collect();
+    times.sort_by(f64::total_cmp);
+    if times.is_empty() {
+        times.push(frames.0 as f64);
+    }
+    let mut poses = Vec::with_capacity(times.len());
+    for &t in &times {
+        let f = t.floor() as i64;
+        let read = |attr: &str, get: &dyn Fn(&Value) -> Option<Vec<Vec3>>| -> Result<Option<Vec<Vec3>>> {
+            let Some(v) = ctx.value(prim, attr, t)? else { return Ok(None) };
+            let v =
+                get(&v).ok_or_else(|| ctx.err(&at(attr), format!("<{prim}.{attr}> has the wrong type")).frame(f))?;
+            check_len(ctx, &at(attr), v.len(), joints.len(), f)?;
+            Ok(Some(v))
+        };
+        let tr = read("translations", &|v| vec3s_of(v))?;
+        let sc = read("scales", &|v| half3s_of(v).or_else(|| vec3s_of(v)))?;
+        let rot = match ctx.value(prim, "rotations", t)? {
+            None => None,
+            Some(v) => {
+                let q = quats_of(&v).ok_or_else(|| ctx.err(&at("rotations"), "rotations is not a quat[]").frame(f))?;
+                check_len(ctx, &at("rotations"), q.len(), joints.len(), f)?;
+                Some(q)
+            }
+        };
+        let mut pose = Vec::with_capacity(joints.len());
+        for (k, &j) in joints.iter().enumerate() {
+            let (rs, rr, rt) = skel.rest[j].to_scale_rotation_translation();
+            let t = tr.as_ref().map_or(rt, |v| v[k]);
+            let r = rot.as_ref().map_or(rr, |v| v[k]);
+            let s = sc.as_ref().map_or(rs, |v| v[k]);
+            if !(t.is_finite() && r.is_finite() && s.is_finite()) || r.length_squared() < 1e-12 {
+                return Err(ctx
+                    .err(
+                        &at("translations"),
+                        format!("<{prim}>: joint `{}` has a non-finite transform at time {t:?}", names[k]),
+                    )
+                    .frame(f));
+            }
+            pose.push((t, r.normalize(), s));
+        }
+        poses.push(pose);
+    }
+    Ok(SkelAnim { name: prim.to_string(), joints, times, poses })
+}
+
+fn check_len(ctx: &Ctx, attr: &str, got: usize, want: usize, f: i64) -> Result<()> {
+    if got != want {
+        return Err(ctx.err(attr, format!("<{attr}> holds {got} values for {want} joints at frame {f}")).frame(f));
+    }
+    Ok(())
+}
+
+fn half3s_of(v: &Value) -> Option<Vec<Vec3>> {
+    match v {
+        Value::Vec3hVec(p) => Some(p.iter().map(|p| Vec3::new(p.x.to_f32(), p.y.to_f32(), p.z.to_f32())).collect()),
+        _ => None,
+    }
+}
+
+/// The character every agent of the crowd at `path` shares: the first
+/// agent's skeleton and meshes (every agent's skeleton must have the same
+/// joints), and every distinct animation over the crowd's frames.
+pub(crate) fn character(path: &Path) -> Result<SkelCharacter> {
+    let ctx = usd::open(path)?;
+    let agents = agents(&ctx)?;
+    let first = agents
+        .first()
+        .ok_or_else(|| Error::invalid(path, "no SkelRoot in this USD file: it holds no UsdSkel character"))?;
+    let frames = frames(&ctx, &agents)?;
+    let skeleton = skeleton(&ctx, first, frames.0 as f64)?;
+    let mut warnings = Vec::new();
+    let mut materials = Vec::new();
+    let mut meshes = Vec::new();
+    for m in &first.meshes {
+        meshes.push(super::usdskel_mesh::read(
+            &ctx,
+            m,
+            (&skeleton.prim, &skeleton.joints),
+            &mut materials,
+            &mut warnings,
+        )?);
+    }
+    if meshes.is_empty() {
+        return Err(ctx.err(&first.prim, format!("SkelRoot <{}> holds no skinned Mesh", first.prim)));
+    }
+    let mut animations = Vec::new();
+    let mut seen = CycleNames::default();
+    let mut checked = BTreeSet::new();
+    let mut read_anims = BTreeSet::new();
+    for a in &agents {
+        if checked.insert(a.skeleton.clone()) && a.skeleton != first.skeleton {
+            let joints = tokens(&ctx, &a.skeleton, "joints")?.unwrap_or_default();
+            if joints != skeleton.joints {
+                return Err(ctx.err(
+                    &format!("{}.joints", a.skeleton),
+                    format!(
+                        "Skeleton <{}> has other joints than <{}>: throng reads one character per UsdSkel file",
+                        a.skeleton, skeleton.prim
+                    ),
+                ));
+            }
+        }
+        let Some(anim) = a.animation.as_ref().filter(|p| read_anims.insert(p.to_string())) else { continue };
+        let read = animation(&ctx, anim, &skeleton, frames)?;
+        if seen.name_of(&read) == read.name {
+            animations.push(read);
+        }
+    }
+    Ok(SkelCharacter {
+        skeleton,
+        meshes,
+        materials,
+        animations,
+        time_codes_per_second: ctx.stage.time_codes_per_second(),
+        warnings,
+    })
+}

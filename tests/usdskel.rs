@@ -1,0 +1,212 @@
+//! UsdSkel crowds (docs/usd.md, "UsdSkel crowds"): crowds usd-core writes
+//! in the shapes Houdini and Golaem document (tests/fixtures/usd, made by
+//! make_skel_crowds.py) read as a cache and posed as their animations say:
+//! every joint's world position against usd-core's own UsdSkel evaluation
+//! (skel_expected.json); agents holding the same samples share poses; the
+//! crowd renders with botinfo; bad input refused with file, prim, attribute
+//! and frame, exit 2.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{fixture, run};
+use glam::{Affine3A, Quat, Vec3};
+use throng::casting::skin::SkinnedRig;
+use throng::shot::SkinOptions;
+
+/// usd-core's joint world positions: file -> agent prim -> frame -> joints.
+fn expected(file: &str) -> serde_json::Map<String, serde_json::Value> {
+    let text = std::fs::read_to_string(fixture("usd/skel_expected.json")).unwrap();
+    let all: serde_json::Value = serde_json::from_str(&text).unwrap();
+    all[file].as_object().unwrap().clone()
+}
+
+/// Every joint of every agent at every frame, as throng poses it (the
+/// agent's place and heading from the cache, its joints from the rig at the
+/// step its cycle frame names), against usd-core's.
+fn joints_match_usd_core(file: &str) {
+    let path = fixture(&format!("usd/{file}"));
+    let crowd = throng::cache::read(&path).unwrap();
+    let rig = SkinnedRig::load(&path, &SkinOptions::default(), 24.0).unwrap();
+    let want = expected(file);
+    // Agents in prim order are agents in x order (make_skel_crowds.py: agent i at x = 1 + 2i + ...).
+    let mut prims: Vec<&String> = want.keys().collect();
+    prims.sort();
+    assert_eq!(crowd.frames.len(), 8);
+    let mut worst = 0.0f32;
+    for block in &crowd.frames {
+        let mut agents = block.agents.clone();
+        agents.sort_by(|a, b| a.position.x.total_cmp(&b.position.x));
+        assert_eq!(agents.len(), prims.len());
+        for (a, prim) in agents.iter().zip(&prims) {
+            let cycle = rig.cycle_index(&crowd.cycles[a.cycle as usize]).unwrap();
+            // Pose steps are chosen for pose_error_max, a whole number a frame
+            // here: a still frame is a step, its exact pose.
+            let (steps, frames) = (rig.cycles()[cycle].steps, rig.cycle_frames(cycle));
+            let per_frame = steps as f32 / frames;
+            assert!((per_frame - per_frame.round()).abs() < 1e-4, "{steps} steps over {frames} frames");
+            let per_frame = per_frame.round();
+            let joints = rig.step_joints(cycle, (a.cycle_frame * per_frame).round() as u32);
+            let world_from_agent = Affine3A::from_rotation_translation(Quat::from_rotation_y(a.heading), a.position);
+            let frame = &want[*prim]["frames"][block.frame.to_string()];
+            for (j, w) in frame.as_array().unwrap().iter().enumerate() {
+                let w: Vec<f32> = w.as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect();
+                let got = (world_from_agent * joints[j]).translation;
+                let d = Vec3::from(got).distance(Vec3::new(w[0], w[1], w[2]));
+                assert!(d < 1e-4, "{file} {prim} frame {} joint {j}: throng {got:?}, usd-core {w:?}", block.frame);
+                worst = worst.max(d);
+            }
+        }
+    }
+    assert!(worst > 0.0 || prims.is_empty(), "compared nothing");
+}
+
+#[test]
+fn houdini_shaped_agents_move_as_usd_core_evaluates_them() {
+    joints_match_usd_core("skel_crowd.usda");
+}
+
+#[test]
+fn instanced_prototypes_with_subset_animations_move_as_usd_core_evaluates_them() {
+    joints_match_usd_core("skel_instanced.usda");
+}
+
+#[test]
+fn a_skel_crowd_is_a_cache_with_documented_ids_and_one_cycle_per_distinct_animation() {
+    let crowd = throng::cache::read(fixture("usd/skel_crowd.usda")).unwrap();
+    assert_eq!(crowd.rigs, ["bipedThinA"], "the import's rig when the SkelRoot names none");
+    assert_eq!(crowd.cycles, ["/Crowd/agent_0/Skel/Anim", "/Crowd/agent_1/Skel/Anim", "/Crowd/agent_2/Skel/Anim"]);
+    let ids: Vec<u32> = crowd.frames[0].agents.iter().map(|a| a.id).collect();
+    assert!(ids.contains(&7), "agent_1 carries primvars:throng:agentId = 7: {ids:?}");
+    // The others' ids come from their prim paths: the same on every read.
+    let again = throng::cache::read(fixture("usd/skel_crowd.usda")).unwrap();
+    assert_eq!(again, crowd);
+    // Cycle frame 1 at the animation's first sample (the clip holds it a frame early).
+    assert_eq!(crowd.frames[0].frame, 1001);
+    assert!(crowd.frames[0].agents.iter().all(|a| a.cycle_frame == 1.0));
+
+    let inst = throng::cache::read(fixture("usd/skel_instanced.usda")).unwrap();
+    // anim_2 holds anim_0's samples: one cycle, named by the first.
+    assert_eq!(inst.cycles, ["/Crowd/Anims/anim_0", "/Crowd/Anims/anim_1"]);
+}
+
+/// A copy of `shot.toml` and its crowd in `dir`, the crowd's text edited by `edit`.
+fn edited_shot(dir: &Path, crowd: &str, edit: impl Fn(&str) -> String) -> (PathBuf, PathBuf) {
+    let text = std::fs::read_to_string(fixture(&format!("usd/{crowd}"))).unwrap();
+    let usd = dir.join("skel_crowd.usda");
+    std::fs::write(&usd, edit(&text)).unwrap();
+    let shot = dir.join("shot.toml");
+    std::fs::copy(fixture("usd/skel_shot.toml"), &shot).unwrap();
+    (shot, usd)
+}
+
+#[test]
+fn the_crowd_renders_with_its_own_character_and_botinfo() {
+    let dir = common::tempdir().unwrap();
+    let (shot, _) = edited_shot(dir.path(), "skel_crowd.usda", str::to_string);
+    let out = dir.path().join("r");
+    // Motion-blurred with the shutter centred on the crowd's first and last
+    // frames: the clip's held ends keep both in the animation.
+    let args = ["render", shot.to_str().unwrap(), "--layer", "full", "--frames", "1001,1008", "--spp", "1"];
+    let more = ["--shutter", "-0.25,0.25", "--resolution", "96x54", "--out", out.to_str().unwrap()];
+    let (code, _, err) = run(&[&args[..], &more[..]].concat());
+    assert_eq!(code, 0, "render of the UsdSkel crowd failed: {err}");
+    let crowd = throng::cache::read(fixture("usd/skel_crowd.usda")).unwrap();
+    for f in [1001, 1008] {
+        let (film, _) = throng::render::exr::read_layer(&out.join(format!("full/skel.full.{f}.exr"))).unwrap();
+        let mut seen: Vec<u32> = film.agent_id.iter().filter_map(|&i| i.checked_sub(1)).collect();
+        seen.sort_unstable();
+        seen.dedup();
+        let ids: Vec<u32> = crowd.frames[0].agents.iter().map(|a| a.id).collect();
+        assert_eq!(seen, ids, "frame {f}: every agent is in the picture");
+        let moving = (film.agent_id.iter().zip(&film.motion)).filter(|(&i, m)| i > 0 && (m[0] != 0.0 || m[1] != 0.0));
+        assert!(moving.count() > 0, "frame {f}: the agents' pixels carry motion");
+    }
+    let (code, stdout, err) = run(&["botinfo", shot.to_str().unwrap(), "7", "--frame", "1008", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(stdout.contains("\"prim\": \"/Crowd/agent_1\""), "botinfo names the prim: {stdout}");
+    assert!(stdout.contains("\"animation\": \"/Crowd/agent_1/Skel/Anim\""), "and the animation: {stdout}");
+    assert!(stdout.contains("\"time_code\": 1008"), "and the time code: {stdout}");
+}
+
+#[test]
+fn agents_on_the_same_samples_share_posed_meshes() {
+    for (file, distinct) in [("skel_crowd.usda", 3), ("skel_instanced.usda", 2)] {
+        let dir = common::tempdir().unwrap();
+        let (shot, _) = edited_shot(dir.path(), file, str::to_string);
+        let crowd = throng::casting::ShotCrowd::load(&shot).unwrap();
+        // One mesh, 8 frames, one step a frame; the clip's held end poses are posed only if played.
+        assert_eq!(crowd.poses().skins().mesh_count(), distinct * 8, "{file}");
+    }
+}
+
+/// `throng cast` on the shot over an edited crowd: exit 2, naming what `needles` say.
+fn refused(edit: impl Fn(&str) -> String, needles: &[&str]) {
+    let dir = common::tempdir().unwrap();
+    let (shot, _) = edited_shot(dir.path(), "skel_crowd.usda", edit);
+    let (code, _, err) = run(&["cast", shot.to_str().unwrap()]);
+    assert_eq!(code, 2, "not refused: {err}");
+    assert!(err.contains("skel_crowd.usda"), "names the file: {err}");
+    for n in needles {
+        assert!(err.contains(n), "names {n}: {err}");
+    }
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+const ANIM_JOINTS: &str =
+    "uniform token[] joints = [\"Hips\", \"Hips/Spine\", \"Hips/Spine/Head\", \"Hips/Leg\"]\n                quatf[]";
+
+#[test]
+fn an_animation_of_joints_the_skeleton_lacks_is_refused() {
+    refused(
+        |t| t.replacen(ANIM_JOINTS, &ANIM_JOINTS.replace("Hips/Leg", "Hips/Tail"), 1),
+        &["/Crowd/agent_0/Skel/Anim.joints", "Hips/Tail"],
+    );
+}
+
+#[test]
+fn a_skeleton_without_bind_transforms_is_refused() {
+    refused(
+        |t| {
+            let at = t.find("uniform matrix4d[] bindTransforms").unwrap();
+            let end = at + t[at..].find('\n').unwrap();
+            format!("{}{}", &t[..at], &t[end..])
+        },
+        &["/Crowd/agent_0/Skel.bindTransforms"],
+    );
+}
+
+#[test]
+fn joint_indices_out_of_range_are_refused() {
+    refused(
+        |t| t.replacen("primvars:skel:jointIndices = [3, 3,", "primvars:skel:jointIndices = [9, 3,", 1),
+        &["/Crowd/agent_0/Body.primvars:skel:jointIndices", "joint 9"],
+    );
+}
+
+#[test]
+fn a_non_finite_joint_transform_is_refused_naming_the_frame() {
+    refused(
+        |t| t.replacen("1001: [(0, 0.9, 0), (0, 0.4, 0)", "1001: [(0, 1e39, 0), (0, 0.4, 0)", 1),
+        &["/Crowd/agent_0/Skel/Anim", "frame 1001"],
+    );
+}
+
+#[test]
+fn time_samples_short_of_the_crowd_are_refused_naming_the_frame() {
+    refused(|t| t.replacen("endTimeCode = 1008", "endTimeCode = 1010", 1), &["/Crowd/agent_0.xformOp:", "1010"]);
+}
+
+#[test]
+fn weights_that_do_not_sum_to_one_are_renormalised_with_a_warning() {
+    let dir = common::tempdir().unwrap();
+    let (_, usd) = edited_shot(dir.path(), "skel_crowd.usda", |t| {
+        t.replacen("primvars:skel:jointWeights = [1, 0,", "primvars:skel:jointWeights = [0.5, 0,", 1)
+    });
+    let rig = SkinnedRig::load(&usd, &SkinOptions::default(), 24.0).unwrap();
+    let w = rig.warnings().join("\n");
+    assert!(w.contains("/Crowd/agent_0/Body.primvars:skel:jointWeights") && w.contains("renormalised"), "{w}");
+    let piece = rig.piece(0);
+    assert!(piece.influences.iter().all(|inf| (inf.iter().map(|i| i.1).sum::<f32>() - 1.0).abs() < 1e-6));
+}
