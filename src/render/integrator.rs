@@ -202,12 +202,8 @@ struct PrevVertex {
 
 impl PrevVertex {
     /// Before the camera ray.
-    const CAMERA: PrevVertex = PrevVertex {
-        bsdf_pdf: 0.0,
-        at: (Vec3::ZERO, Vec3::ZERO),
-        delta: false,
-        lookup: Lookup::Bilinear,
-    };
+    const CAMERA: PrevVertex =
+        PrevVertex { bsdf_pdf: 0.0, at: (Vec3::ZERO, Vec3::ZERO), delta: false, lookup: Lookup::Bilinear };
 
     /// The MIS weight of light a BSDF-sampled ray found, against NEE's pdf
     /// `light_pdf` for it: 1 after a delta bounce (glass, a mirror-smooth
@@ -761,12 +757,7 @@ impl<'a> Integrator<'a> {
             st.first_bounce = FirstBounce::Lobes { diffuse: share, specular: Vec3::ONE - share };
         }
         st.throughput *= bs.weight;
-        st.prev = PrevVertex {
-            bsdf_pdf: bs.pdf,
-            at: (surface.p, surface.ng),
-            delta: false,
-            lookup: dome_lookup(bsdf),
-        };
+        st.prev = PrevVertex { bsdf_pdf: bs.pdf, at: (surface.p, surface.ng), delta: false, lookup: dome_lookup(bsdf) };
         st.continue_from(surface.p, surface.ng, wi.normalize())
     }
 }

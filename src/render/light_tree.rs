@@ -301,8 +301,7 @@ mod tests {
     /// one across the scene; one below the point's horizon never.
     #[test]
     fn near_lights_are_favoured_and_hidden_ones_never_picked() {
-        let mut lights: Vec<LightBounds> =
-            (0..32).map(|i| point(Vec3::new(i as f32 * 10.0, 3.0, 0.0), 1.0)).collect();
+        let mut lights: Vec<LightBounds> = (0..32).map(|i| point(Vec3::new(i as f32 * 10.0, 3.0, 0.0), 1.0)).collect();
         lights.push(point(Vec3::new(0.0, -3.0, 0.0), 100.0));
         let tree = LightTree::new(&lights);
         let p = Vec3::ZERO;

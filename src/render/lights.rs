@@ -627,15 +627,7 @@ impl<'a> LightSampler<'a> {
     /// A light sample of `group` for a shading point at `p` with geometric
     /// normal `n`: the light picked by `u_pick`, a point on it by `u`.
     /// `lookup`: how the dome's radiance is looked up for this shading point.
-    fn sample(
-        &self,
-        group: LightGroup,
-        p: Vec3,
-        n: Vec3,
-        u_pick: f32,
-        u: Vec2,
-        lookup: Lookup,
-    ) -> Option<LightSample> {
+    fn sample(&self, group: LightGroup, p: Vec3, n: Vec3, u_pick: f32, u: Vec2, lookup: Lookup) -> Option<LightSample> {
         let t = self.table(group);
         if t.sources.is_empty() {
             return None;
@@ -1380,8 +1372,7 @@ mod tests {
         let (lib, mut scene) = point_spot_panel();
         let sun_dir = Vec3::new(0.3, 1.0, 0.2).normalize();
         let irradiance = 0.8;
-        scene.lights.sun =
-            Some(Sun { direction: sun_dir, angular_diameter: 0.0, irradiance: Vec3::splat(irradiance) });
+        scene.lights.sun = Some(Sun { direction: sun_dir, angular_diameter: 0.0, irradiance: Vec3::splat(irradiance) });
         let sampler = LightSampler::new(&lib, &scene, Some((Vec3::splat(-5.0), Vec3::splat(5.0))), None);
         let n_samples = 4096u32;
         let (mut exact, mut mean) = (0.0, 0.0);
