@@ -11,6 +11,8 @@
 //!          --hdri FILE (.hdr/.exr lat-long; replaces --sky)  --hdri-strength S (1)  --hdri-rotate DEG (0)
 //!          --no-sun (drop the sun)  --sun-angle DEG (the sun's angular diameter, 0: delta)  --sun-direction X Y Z (towards the sun)  --point-lights N (N lamps 4 m over the scene, 2,000 W/sr in all)
 //!          --adaptive THRESHOLD MIN MAX (adaptive sampling, render.adaptive's keys; replaces --spp)
+//!          --denoise (Open Image Denoise on the render, quality high: `denoise_s`; the EXR then holds
+//!          the denoised beauty as R, G, B and the noisy one as noisy.R/G/B)
 //! ```
 //! Any .glb with a perspective camera (make_crowd.py output, `throng export`
 //! output), lit by its KHR_lights_punctual lights (directional, point, spot)
@@ -93,6 +95,7 @@ struct Args {
     point_lights: usize,
     adaptive: Option<throng::shot::Adaptive>,
     rays: bool,
+    denoise: bool,
     render: bool,
 }
 
@@ -118,6 +121,7 @@ fn parse_args() -> Result<Args, String> {
         point_lights: 0,
         adaptive: None,
         rays: true,
+        denoise: false,
         render: true,
     };
     let mut it = std::env::args().skip(1);
@@ -163,6 +167,7 @@ fn parse_args() -> Result<Args, String> {
                 a.adaptive = Some(adaptive);
             }
             "--no-rays" => a.rays = false,
+            "--denoise" => a.denoise = true,
             "--no-render" => a.render = false,
             s if s.starts_with("--") => return Err(format!("unknown flag {s}")),
             s => a.scene = Some(PathBuf::from(s)),
@@ -710,7 +715,7 @@ fn main() {
             }
         };
         let (t, cpu) = (Instant::now(), throng::bench::process_cpu_s());
-        let (film, stats) = match render_frame_with_stats(&blas, &lib, &scene, &settings, Some(&progress)) {
+        let (mut film, stats) = match render_frame_with_stats(&blas, &lib, &scene, &settings, Some(&progress)) {
             Ok(r) => r,
             Err(e) => {
                 eprintln!("peer_bench: {e}");
@@ -726,6 +731,16 @@ fn main() {
         out["first_sample_s"] = first.map(|f| f.0).into();
         out["first_sample_cpu_s"] = first.map(|f| f.1).into();
         out["render_s"] = render_s.into();
+        if args.denoise {
+            let t = Instant::now();
+            let denoised = throng::render::denoise::Denoiser::open(None, args.threads)
+                .and_then(|d| d.denoise(&mut film, throng::shot::Denoise::High));
+            if let Err(e) = denoised {
+                eprintln!("peer_bench: {e}");
+                std::process::exit(1);
+            }
+            out["denoise_s"] = t.elapsed().as_secs_f64().into();
+        }
         out["trace_s"] = stats.trace.as_secs_f64().into();
         out["rays"] = serde_json::json!({"camera": rays.camera, "bounce": rays.bounce, "shadow": rays.shadow});
         out["mrays_s_all_types"] =

@@ -191,8 +191,10 @@ fn a_constant_dome_gives_albedo_times_radiance() {
     assert_matches(&film, |_| ALBEDO * 2.0, 0.02, "constant dome");
 }
 
-/// Environment and local lights together (one shadow ray to each group):
-/// the dome's and the lamp's irradiance add up, each as alone.
+/// Environment and local lights together (one shadow ray per vertex, to
+/// the dome or the lamp, picked by what each gives the point): the dome's
+/// and the lamp's irradiance add up, each as alone. 64 samples: one ray
+/// where there were two leaves twice the variance per sample.
 #[test]
 fn a_dome_and_a_point_light_add_up() {
     let (i, h) = (30.0, 2.0);
@@ -200,7 +202,7 @@ fn a_dome_and_a_point_light_add_up() {
     let lamp = light(LightKind::Point, p0, -Vec3::Y, i);
     let lights = SceneLights { dome: Some(constant_dome(0.5, 0.0)), ..local(vec![lamp]) };
     let (lib, scene) = floor_scene(lights, vec![]);
-    let film = render(&lib, &scene, 16, 2);
+    let film = render(&lib, &scene, 64, 2);
     let expected = |p: Vec3| {
         let r = p0 - p;
         ALBEDO * 0.5 + ALBEDO / PI * i * h / r.length().powi(3)
@@ -773,7 +775,9 @@ fn adaptive_sampling_stops_each_pixel_on_its_own_samples() {
     let blas = BlasSet::build(&lib);
     let (min, max) = (4, 64);
     let mut s = settings(1, 1);
-    s.adaptive = Some(throng::shot::Adaptive { threshold: 0.1, min_spp: min, max_spp: max });
+    // The error is on a tone-mapped scale (docs/render.md): 0.085 there
+    // still stops the smooth pixels after a quarter of the noisy ones' samples.
+    s.adaptive = Some(throng::shot::Adaptive { threshold: 0.085, min_spp: min, max_spp: max });
     let one = render_frame(&blas, &lib, &scene, &s, None).expect("render");
     s.threads = 2;
     let two = render_frame(&blas, &lib, &scene, &s, None).expect("render");

@@ -384,6 +384,25 @@ impl DomeSampler {
         }
     }
 
+    /// A cone holding the sun's cells: its axis and the cosine of its half
+    /// angle (grown by a cell, so the bilinear spread at its rim is in it);
+    /// `None` without a sun. What the sun can give a shading point is bound
+    /// by its power and the widened cosine to this cone (render::lights).
+    pub(crate) fn sun_cone(&self) -> Option<(Vec3, f32)> {
+        let (w, h) = (self.dome.width as usize, self.dome.height as usize);
+        let centre = |c: u32| {
+            let (i, j) = (c as usize % w, c as usize / w);
+            self.direction(Vec2::new((i as f32 + 0.5) / w as f32, (j as f32 + 0.5) / h as f32))
+        };
+        let axis = self.sun.cells.iter().map(|&c| centre(c)).sum::<Vec3>().normalize_or_zero();
+        if axis == Vec3::ZERO {
+            return None;
+        }
+        let widest = self.sun.cells.iter().map(|&c| axis.dot(centre(c)).clamp(-1.0, 1.0).acos()).fold(0.0, f32::max);
+        let half = (widest + 2.0 * PI / w as f32).min(PI);
+        Some((axis, half.cos()))
+    }
+
     /// World direction of map coordinates `uv` (u right, v down, in [0, 1]).
     pub fn direction(&self, uv: Vec2) -> Vec3 {
         let (sin_theta, cos_theta) = (PI * uv.y).sin_cos();

@@ -59,8 +59,8 @@ const TILE: u32 = 16;
 /// Adaptive sampling checks a pixel's error every this many samples after
 /// its first `min_spp`.
 pub const ADAPTIVE_STEP: u32 = 4;
-/// Added to a pixel's mean luminance in its relative error, so that dark
-/// pixels are held to an absolute error.
+/// Added to a pixel's mean luminance under the square root its error is
+/// divided by, so that black pixels are held to an absolute error.
 pub const ADAPTIVE_FLOOR: f64 = 0.01;
 
 /// How many samples a pixel takes: `min` to `max`, stopping at `threshold`.
@@ -116,9 +116,13 @@ impl ErrorEstimate {
         self.alpha[1] += a * a;
     }
 
-    /// The larger of the relative standard error of the mean luminance and
-    /// the standard error of the mean alpha, after `n` (> 1) samples, and at
-    /// least 1 / `n`.
+    /// The larger of the standard error of the mean luminance on a
+    /// tone-mapped scale and the standard error of the mean alpha, after
+    /// `n` (> 1) samples, and at least 1 / `n`. The tone-mapped scale is
+    /// Cycles' (the error over the square root of the mean, as a display
+    /// transform compresses light): a denoiser smooths away the grain of
+    /// dark pixels that a relative error would spend samples on, while
+    /// what shows after it is the noise of bright ones.
     fn error(&self, n: u32) -> f64 {
         let n = f64::from(n);
         let se = |[s, s2]: [f64; 2]| {
@@ -126,7 +130,7 @@ impl ErrorEstimate {
             ((s2 / n - mean * mean).max(0.0) / (n - 1.0)).sqrt()
         };
         let mean = self.lum[0] / n;
-        let relative = se(self.lum) / (mean.abs() + ADAPTIVE_FLOOR);
+        let relative = se(self.lum) / (mean.abs() + ADAPTIVE_FLOOR).sqrt();
         // n samples cannot see what happens less often than once in n (a
         // shadow, a lamp through a gap): their variance says nothing of it,
         // so no pixel claims an error below 1 / n.

@@ -1,6 +1,6 @@
 //! Unidirectional path tracer (pbrt's "path" integrator, simplified): next-event
-//! estimation to one light per shading point, picked by power among the sun,
-//! the dome, local lights and emissive triangles ([`super::lights`]), with
+//! estimation to one light per shading point, drawn from one distribution
+//! over the suns, the dome, local lights and emissive triangles ([`super::lights`]), with
 //! MIS against BSDF sampling; the uniform sky picked up by BSDF-sampled rays;
 //! Russian roulette after a few bounces; a thin-lens camera for depth of field.
 //!
@@ -29,9 +29,6 @@ const RR_START: u32 = 3;
 /// Sampler dimensions used per bounce (light point 2, lobe 1, direction 2,
 /// roulette 1, light pick 1, glass-or-not pick 1).
 const DIMS_PER_BOUNCE: u32 = 8;
-/// The extra stream (`Sampler::extra_pick`) that picks the light group at
-/// vertices after the camera's; past any group index.
-const GROUP_PICK_STREAM: u32 = 7;
 
 /// What camera rays see: camera-visible instances and holdouts.
 const CAMERA_MASK: u8 = vis::CAMERA | vis::HOLDOUT;
@@ -192,11 +189,8 @@ type Step = ControlFlow<Stop>;
 struct PrevVertex {
     /// The pdf of the BSDF sample that sent the ray.
     bsdf_pdf: f32,
-    /// The chance the vertex's next-event estimation sampled a given
-    /// light's group (1 at the camera vertex, which samples every group).
-    group_pick: f32,
     /// The vertex's shading point and geometric normal, where its NEE
-    /// picked its light (render::lights: a small group's pick depends on them).
+    /// picked its light (render::lights: the pick depends on them).
     at: (Vec3, Vec3),
     /// The bounce was a delta lobe (glass): what the ray finds has MIS weight 1.
     delta: bool,
@@ -208,13 +202,8 @@ struct PrevVertex {
 
 impl PrevVertex {
     /// Before the camera ray.
-    const CAMERA: PrevVertex = PrevVertex {
-        bsdf_pdf: 0.0,
-        group_pick: 1.0,
-        at: (Vec3::ZERO, Vec3::ZERO),
-        delta: false,
-        lookup: Lookup::Bilinear,
-    };
+    const CAMERA: PrevVertex =
+        PrevVertex { bsdf_pdf: 0.0, at: (Vec3::ZERO, Vec3::ZERO), delta: false, lookup: Lookup::Bilinear };
 
     /// The MIS weight of light a BSDF-sampled ray found, against NEE's pdf
     /// `light_pdf` for it: 1 after a delta bounce (glass, a mirror-smooth
@@ -526,8 +515,8 @@ impl<'a> Integrator<'a> {
                 if glass_weight > 0.0 { v.surface.metallic / (1.0 - glass_weight) } else { v.surface.metallic };
             Bsdf::with_ior(v.surface.base_color, metallic, v.surface.roughness, v.material.ior)
         };
-        let group_pick = self.sample_lights(st, &v, &bsdf);
-        self.bounce_bsdf(st, &v, &bsdf, group_pick)
+        self.sample_lights(st, &v, &bsdf);
+        self.bounce_bsdf(st, &v, &bsdf)
     }
 
     /// A sized light the ray meets before anything else: seen from the
@@ -546,7 +535,7 @@ impl<'a> Integrator<'a> {
             if st.medium != Vec3::ZERO {
                 st.throughput *= transmittance(st.medium, light.t);
             }
-            let weight = st.prev.weight(light.pdf * st.prev.group_pick);
+            let weight = st.prev.weight(light.pdf);
             let c = self.clamp_indirect(st.throughput * light.radiance * weight);
             st.radiance += c;
             st.pass(c, st.depth == 1, light.group);
@@ -560,7 +549,7 @@ impl<'a> Integrator<'a> {
         if st.depth == 0 {
             // A dome hidden from camera leaves the background empty (alpha 0) for a plate.
             if self.settings.sky_visible && (self.scene.lights.dome.is_none() || self.lights.dome_camera_visible()) {
-                let environment = match self.lights.dome(dir, Lookup::Bilinear) {
+                let environment = match self.lights.dome(dir, Lookup::Bilinear, st.prev.at) {
                     Some((l, _)) => l,
                     None => self.scene.lights.sky.radiance,
                 };
@@ -578,14 +567,14 @@ impl<'a> Integrator<'a> {
             }
             return;
         }
-        let environment = match self.lights.dome(dir, st.prev.lookup) {
-            Some((l, pdf)) => l * st.prev.weight(pdf * st.prev.group_pick),
+        let environment = match self.lights.dome(dir, st.prev.lookup, st.prev.at) {
+            Some((l, pdf)) => l * st.prev.weight(pdf),
             None => self.scene.lights.sky.radiance,
         };
         let mut escaped = environment;
         let mut sun_light = Vec3::ZERO;
         if let Some(sun) = self.lights.sun().filter(|s| s.contains(dir)) {
-            let pdf = sun.pdf() * self.lights.sun_pick() * st.prev.group_pick;
+            let pdf = sun.pdf() * self.lights.sun_pick(st.prev.at);
             sun_light = sun.radiance() * st.prev.weight(pdf);
             escaped += sun_light;
         }
@@ -636,8 +625,7 @@ impl<'a> Integrator<'a> {
             st.radiance += surface.emission;
             st.pass(surface.emission, true, group);
         } else {
-            let pdf = self.lights.triangle_pdf(hit.instance, hit.triangle, hit.t, surface.cos_front, st.prev.at)
-                * st.prev.group_pick;
+            let pdf = self.lights.triangle_pdf(hit.instance, hit.triangle, hit.t, surface.cos_front, st.prev.at);
             let weight = if pdf > 0.0 { st.prev.weight(pdf) } else { 1.0 };
             let c = self.clamp_indirect(st.throughput * surface.emission * weight);
             st.radiance += c;
@@ -678,51 +666,24 @@ impl<'a> Integrator<'a> {
         st.continue_from(surface.p, side, wi)
     }
 
-    /// Next-event estimation: at the camera vertex one shadow ray to one
-    /// light of each group (render::lights), where the noise shows; at later
-    /// vertices, whose light is averaged over the bounce, one ray to one
-    /// group picked uniformly. The first group draws from this bounce's
-    /// dimensions (its pick only among several lights), the others from
-    /// streams of their own. Returns the chance of each group's pick.
-    fn sample_lights(&self, st: &mut PathState<'_>, v: &Vertex<'_>, bsdf: &Bsdf) -> f32 {
-        let camera = st.depth == 0;
-        let groups = self.lights.groups();
-        let (first, count) = if camera || groups.len() < 2 {
-            (0, groups.len())
-        } else {
-            let u = st.sampler.extra_pick(GROUP_PICK_STREAM, st.depth);
-            (((u * groups.len() as f32) as usize).min(groups.len() - 1), 1)
-        };
-        let group_pick = if count == groups.len() { 1.0 } else { 1.0 / groups.len() as f32 };
-        for (g, &group) in groups.iter().enumerate().skip(first).take(count) {
-            let (u_pick, u_light) = if g == 0 {
-                let u_pick = if self.lights.needs_pick(group) {
-                    st.sampler.set_dimension(v.base + 6);
-                    st.sampler.next_1d()
-                } else {
-                    0.0
-                };
-                st.sampler.set_dimension(v.base);
-                (u_pick, st.sampler.next_2d())
-            } else {
-                let u_pick =
-                    if self.lights.needs_pick(group) { st.sampler.extra_pick(group as u32, st.depth) } else { 0.0 };
-                (u_pick, st.sampler.extra_light(group as u32, st.depth))
-            };
-            let lookup = dome_lookup(bsdf);
-            let Some(ls) = self.lights.sample(group, v.surface.p, v.surface.ng, u_pick, u_light, lookup) else {
-                continue;
-            };
-            self.add_light_sample(st, v, bsdf, &ls, group_pick);
+    /// Next-event estimation: one shadow ray, to one light drawn from one
+    /// distribution over every light of the scene (render::lights), its
+    /// pick from this bounce's dimension 6 and its point from 0 and 1.
+    fn sample_lights(&self, st: &mut PathState<'_>, v: &Vertex<'_>, bsdf: &Bsdf) {
+        st.sampler.set_dimension(v.base + 6);
+        let u_pick = st.sampler.next_1d();
+        st.sampler.set_dimension(v.base);
+        let u_light = st.sampler.next_2d();
+        let lookup = dome_lookup(bsdf);
+        if let Some(ls) = self.lights.sample_one(v.surface.p, v.surface.ng, u_pick, u_light, lookup) {
+            self.add_light_sample(st, v, bsdf, &ls);
         }
         st.sampler.set_dimension(v.base + 2);
-        group_pick
     }
 
-    /// The light `ls` (of a group picked with chance `group_pick`) brings to
-    /// vertex `v` through its shadow ray, weighed against the BSDF's chance
-    /// of finding it.
-    fn add_light_sample(&self, st: &mut PathState<'_>, v: &Vertex<'_>, bsdf: &Bsdf, ls: &LightSample, group_pick: f32) {
+    /// The light `ls` brings to vertex `v` through its shadow ray, weighed
+    /// against the BSDF's chance of finding it.
+    fn add_light_sample(&self, st: &mut PathState<'_>, v: &Vertex<'_>, bsdf: &Bsdf, ls: &LightSample) {
         let (camera, surface, wo) = (st.depth == 0, &v.surface, v.wo);
         if ls.wi.dot(surface.ng) <= 0.0 {
             return;
@@ -757,13 +718,13 @@ impl<'a> Integrator<'a> {
         let contribution = if ls.delta || st.depth >= self.settings.max_bounces {
             f * wi_local.z * ls.radiance / ls.pdf
         } else {
-            let weight = power_heuristic(ls.pdf * group_pick, bsdf.pdf(wo, wi_local));
+            let weight = power_heuristic(ls.pdf, bsdf.pdf(wo, wi_local));
             f * wi_local.z * ls.radiance * (weight / ls.pdf)
         };
         let contribution = st.throughput * contribution;
-        // Clamped before the pick's 1 / probability, so the clamp takes
-        // what it took with a ray to every group.
-        let c = if camera { contribution } else { self.clamp_indirect(contribution) / group_pick };
+        // Clamped before the group pick's 1 / chance, so the clamp takes
+        // what it would with a ray to every group.
+        let c = if camera { contribution } else { self.clamp_indirect(contribution * ls.chance) / ls.chance };
         st.radiance += c;
         if let Some(split) = st.split.as_deref_mut() {
             if camera {
@@ -777,9 +738,8 @@ impl<'a> Integrator<'a> {
         }
     }
 
-    /// The bounce by BSDF sampling off an opaque vertex (NEE there having
-    /// picked each group with chance `group_pick`).
-    fn bounce_bsdf(&self, st: &mut PathState<'_>, v: &Vertex<'_>, bsdf: &Bsdf, group_pick: f32) -> Step {
+    /// The bounce by BSDF sampling off an opaque vertex.
+    fn bounce_bsdf(&self, st: &mut PathState<'_>, v: &Vertex<'_>, bsdf: &Bsdf) -> Step {
         if st.depth >= self.settings.max_bounces {
             return ControlFlow::Break(Stop::End);
         }
@@ -797,13 +757,7 @@ impl<'a> Integrator<'a> {
             st.first_bounce = FirstBounce::Lobes { diffuse: share, specular: Vec3::ONE - share };
         }
         st.throughput *= bs.weight;
-        st.prev = PrevVertex {
-            bsdf_pdf: bs.pdf,
-            group_pick,
-            at: (surface.p, surface.ng),
-            delta: false,
-            lookup: dome_lookup(bsdf),
-        };
+        st.prev = PrevVertex { bsdf_pdf: bs.pdf, at: (surface.p, surface.ng), delta: false, lookup: dome_lookup(bsdf) };
         st.continue_from(surface.p, surface.ng, wi.normalize())
     }
 }

@@ -24,6 +24,7 @@ pub mod exr;
 pub mod film;
 pub mod integrator;
 pub mod job;
+pub(crate) mod light_tree;
 pub(crate) mod lights;
 pub(crate) mod sampler;
 pub mod sampling;

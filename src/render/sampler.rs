@@ -141,9 +141,6 @@ const TIME_SALT: u32 = 0x7157_a3c1;
 /// Keys the lens stream apart from the time stream and every dimension.
 const LENS_SALT: u32 = 0x1e45_d0f7;
 
-/// Keys the streams of the light groups after the first apart from the rest.
-const EXTRA_LIGHT_SALT: u32 = 0x4c69_6768;
-
 /// Random numbers for one camera sample of one pixel.
 #[derive(Clone, Debug)]
 pub(crate) struct Sampler {
@@ -192,22 +189,6 @@ impl Sampler {
         self.point_2d(mix32(self.pixel_key ^ LENS_SALT))
     }
 
-    /// The 2D point of light group `group`'s shadow ray at bounce `depth`,
-    /// for every group after a scene's first: a stream of its own per
-    /// (group, bounce), like [`Sampler::lens`], so scenes with one group
-    /// keep their bits; each is stratified over a pixel's samples.
-    pub(crate) fn extra_light(&self, group: u32, depth: u32) -> Vec2 {
-        self.point_2d(extra_seed(self.pixel_key, group, depth))
-    }
-
-    /// The number that picks a light within group `group` (or, for the
-    /// integrator's pick stream, the group) at bounce `depth`: the same
-    /// stream as [`Sampler::extra_light`]'s point, drawn apart because most
-    /// groups hold one light and need no pick (half an extra draw saved).
-    pub(crate) fn extra_pick(&self, group: u32, depth: u32) -> f32 {
-        self.point_1d(mix32(extra_seed(self.pixel_key, group, depth) ^ 0x68e3_1da4))
-    }
-
     /// This sample's point of the Owen-scrambled, shuffled 2D Sobol
     /// sequence keyed by `seed`.
     fn point_2d(&self, seed: u32) -> Vec2 {
@@ -234,11 +215,6 @@ impl Sampler {
         let index = laine_karras(self.sample_reversed, seed).reverse_bits();
         to_unit(laine_karras(index, mix32(seed ^ 0x5bd1_e995)).reverse_bits())
     }
-}
-
-/// The seed of light group `group`'s extra stream at bounce `depth`.
-fn extra_seed(pixel_key: u32, group: u32, depth: u32) -> u32 {
-    mix32(pixel_key ^ EXTRA_LIGHT_SALT ^ mix32(depth ^ (group << 16)))
 }
 
 #[cfg(test)]
