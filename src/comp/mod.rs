@@ -120,7 +120,11 @@ impl Stack {
             passes: Vec::new(),
             samples: Vec::new(),
         };
-        let passes = first.passes.iter().map(|p| Pass { name: p.name.clone(), channels: p.channels, data: vec![[0.0; 3]; n] }).collect();
+        let passes = first
+            .passes
+            .iter()
+            .map(|p| Pass { name: p.name.clone(), channels: p.channels, data: vec![[0.0; 3]; n] })
+            .collect();
         Stack { out, passes, pushed: 0 }
     }
 

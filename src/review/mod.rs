@@ -126,7 +126,7 @@ struct Plan {
     depth: bool,
     /// `agent.id`.
     id: bool,
-    /// Every `Crypto*` rank channel.
+    /// The `CryptoAgent` rank channels (the matte the page lays over).
     mattes: bool,
     /// One light pass (or `P`).
     pass: Option<String>,
@@ -165,7 +165,7 @@ impl Plan {
             || (self.albedo && matches!(name, "albedo.R" | "albedo.G" | "albedo.B"))
             || (self.depth && name == "Z")
             || (self.id && name == "agent.id")
-            || (self.mattes && name.starts_with("Crypto"))
+            || (self.mattes && name.starts_with(crate::render::cryptomatte::AGENT_MATTE))
             || matches!(pass, Some("R" | "G" | "B" | "X" | "Y" | "Z"))
     }
 }
@@ -932,8 +932,20 @@ mod tests {
     #[test]
     fn a_request_decodes_only_the_channels_it_reads() {
         let channels = [
-            "A", "B", "G", "R", "N.X", "Z", "agent.id", "albedo.R", "CryptoAgent00.R", "diffuse_direct.R", "P.X",
-            "forward.u", "samples",
+            "A",
+            "B",
+            "G",
+            "R",
+            "N.X",
+            "Z",
+            "agent.id",
+            "albedo.R",
+            "CryptoAgent00.R",
+            "CryptoPart00.R",
+            "diffuse_direct.R",
+            "P.X",
+            "forward.u",
+            "samples",
         ];
         let kept = |p: Plan| channels.iter().filter(|c| p.keeps(c)).copied().collect::<Vec<_>>();
         for comp in [false, true] {

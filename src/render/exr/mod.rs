@@ -642,14 +642,8 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
 
 /// A layer file's header as [`LayerMeta`]: the part's own attributes, then
 /// the file's shared ones.
-fn layer_meta(
-    path: &Path,
-    attrs: &LayerAttributes,
-    shared: &exr::meta::header::ImageAttributes,
-) -> Result<LayerMeta> {
-    let other = |k: &str| {
-        attrs.other.get(&Text::new_or_none(k)?).or_else(|| shared.other.get(&Text::new_or_none(k)?))
-    };
+fn layer_meta(path: &Path, attrs: &LayerAttributes, shared: &exr::meta::header::ImageAttributes) -> Result<LayerMeta> {
+    let other = |k: &str| attrs.other.get(&Text::new_or_none(k)?).or_else(|| shared.other.get(&Text::new_or_none(k)?));
     let get_text = |k: &str| match other(k) {
         Some(AttributeValue::Text(t)) => Ok(lossy(t)),
         _ => Err(Error::invalid(path, format!("header attribute `{k}` is missing or not text")).field(k.to_string())),
@@ -696,68 +690,18 @@ fn layer_meta(
 /// channels are not kept are left empty; a kept channel [`read_layer`]
 /// requires is required here too. The first part, largest level.
 pub(crate) fn read_layer_channels(path: &Path, keep: &dyn Fn(&str) -> bool) -> Result<(Film, LayerMeta)> {
-    use exr::block::reader::ChunksReader;
-    use exr::prelude::SampleType;
-    crate::exr_guard::check_decoded_size(path)?;
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let reader = exr::block::read(std::io::BufReader::new(file), false).map_err(|e| exr_error(path, e))?;
-    let Some(header) = reader.headers().first().cloned() else {
-        return Err(Error::invalid(path, "EXR has no parts"));
-    };
+    let (header, mut channels) = read_kept_channels(path, keep)?;
     let (w, h) = (header.layer_size.width(), header.layer_size.height());
     let n = w * h;
-    // One buffer per kept channel, by the channel's index in the header.
-    let mut kept: Vec<Option<(String, Samples)>> = (header.channels.list.iter())
-        .map(|c| {
-            let name = lossy(&c.name);
-            keep(&name).then(|| {
-                let v = match c.sample_type {
-                    SampleType::U32 => Samples::U32(vec![0; n]),
-                    _ => Samples::F32(vec![0.0; n]),
-                };
-                (name, v)
-            })
-        })
-        .collect();
-    let chunks = reader
-        .filter_chunks(false, |_, _, b| b.layer == 0 && b.level == exr::math::Vec2(0, 0))
-        .map_err(|e| exr_error(path, e))?;
-    let mut line_error = None;
-    chunks
-        .decompress_sequential(false, |_, block| {
-            for line in block.lines(&header.channels) {
-                let Some((_, out)) = kept.get_mut(line.location.channel).and_then(Option::as_mut) else { continue };
-                let (x, y, count) = (line.location.position.x(), line.location.position.y(), line.location.sample_count);
-                let at = y * w + x;
-                if x + count > w || at + count > n {
-                    line_error = Some(format!("a line of channel {} lies outside the image", line.location.channel));
-                    continue;
-                }
-                let sample_type = header.channels.list[line.location.channel].sample_type;
-                match (out, sample_type) {
-                    (Samples::U32(v), _) => line.read_samples_into_slice(&mut v[at..at + count])?,
-                    (Samples::F32(v), SampleType::F32) => line.read_samples_into_slice(&mut v[at..at + count])?,
-                    (Samples::F32(v), _) => {
-                        for (o, s) in v[at..at + count].iter_mut().zip(line.read_samples::<f16>()) {
-                            *o = s?.to_f32();
-                        }
-                    }
-                }
-            }
-            Ok(())
-        })
-        .map_err(|e| exr_error(path, e))?;
-    if let Some(msg) = line_error {
-        return Err(Error::invalid(path, msg));
-    }
-    let mut channels: BTreeMap<String, Samples> = kept.into_iter().flatten().collect();
     let mut take = |name: &str| -> Result<Option<Vec<f32>>> {
         if !keep(name) {
             return Ok(None);
         }
         match channels.remove(name) {
             Some(Samples::F32(v)) => Ok(Some(v)),
-            Some(Samples::U32(_)) => Err(Error::invalid(path, format!("channel `{name}` is uint")).field(name.to_string())),
+            Some(Samples::U32(_)) => {
+                Err(Error::invalid(path, format!("channel `{name}` is uint")).field(name.to_string()))
+            }
             None => Err(Error::invalid(path, format!("channel `{name}` is missing")).field(name.to_string())),
         }
     };
@@ -796,10 +740,19 @@ pub(crate) fn read_layer_channels(path: &Path, keep: &dyn Fn(&str) -> bool) -> R
         }
         None => Vec::new(),
     };
+    let mut attributes = text_attributes(&header.shared_attributes.other, &header.own_attributes.other);
+    // The matte types whose rank channels were not asked for are not read.
+    let unread: Vec<String> = (attributes.iter())
+        .filter_map(|(k, v)| {
+            let key = k.strip_prefix("exr/").unwrap_or(k).strip_prefix("cryptomatte/")?.strip_suffix("/name")?;
+            (!keep(&format!("{v}00.R"))).then(|| format!("cryptomatte/{key}/"))
+        })
+        .collect();
+    attributes.retain(|k, _| !unread.iter().any(|u| k.strip_prefix("exr/").unwrap_or(k).starts_with(u.as_str())));
     let crypto = RawPart {
         width: w as u32,
         height: h as u32,
-        attributes: text_attributes(&header.shared_attributes.other, &header.own_attributes.other),
+        attributes,
         channels: (channels.into_iter())
             .filter(|(k, _)| k.starts_with("Crypto"))
             .filter_map(|(k, v)| match v {
@@ -808,9 +761,7 @@ pub(crate) fn read_layer_channels(path: &Path, keep: &dyn Fn(&str) -> bool) -> R
             })
             .collect(),
     };
-    // The matte types whose rank channels were not asked for are not read.
-    let cryptomatte =
-        if keep(&format!("{}00.R", cryptomatte::AGENT_MATTE)) { mattes::decode_part(&crypto, path)? } else { Vec::new() };
+    let cryptomatte = mattes::decode_part(&crypto, path)?;
     let film = Film {
         width: w as u32,
         height: h as u32,
@@ -825,6 +776,70 @@ pub(crate) fn read_layer_channels(path: &Path, keep: &dyn Fn(&str) -> bool) -> R
         samples,
     };
     Ok((film, layer_meta(path, &header.own_attributes, &header.shared_attributes)?))
+}
+
+/// The channels of a file's first part (largest level) that `keep`
+/// accepts, read block by block, with the part's header.
+fn read_kept_channels(
+    path: &Path,
+    keep: &dyn Fn(&str) -> bool,
+) -> Result<(exr::meta::header::Header, BTreeMap<String, Samples>)> {
+    use exr::block::reader::ChunksReader;
+    use exr::prelude::SampleType;
+    crate::exr_guard::check_decoded_size(path)?;
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let reader = exr::block::read(std::io::BufReader::new(file), false).map_err(|e| exr_error(path, e))?;
+    let Some(header) = reader.headers().first().cloned() else {
+        return Err(Error::invalid(path, "EXR has no parts"));
+    };
+    let (w, h) = (header.layer_size.width(), header.layer_size.height());
+    let n = w * h;
+    // One buffer per kept channel, by the channel's index in the header.
+    let mut kept: Vec<Option<(String, Samples)>> = (header.channels.list.iter())
+        .map(|c| {
+            let name = lossy(&c.name);
+            keep(&name).then(|| {
+                let v = match c.sample_type {
+                    SampleType::U32 => Samples::U32(vec![0; n]),
+                    _ => Samples::F32(vec![0.0; n]),
+                };
+                (name, v)
+            })
+        })
+        .collect();
+    let chunks = reader
+        .filter_chunks(false, |_, _, b| b.layer == 0 && b.level == exr::math::Vec2(0, 0))
+        .map_err(|e| exr_error(path, e))?;
+    let mut line_error = None;
+    chunks
+        .decompress_sequential(false, |_, block| {
+            for line in block.lines(&header.channels) {
+                let Some((_, out)) = kept.get_mut(line.location.channel).and_then(Option::as_mut) else { continue };
+                let (x, y, count) =
+                    (line.location.position.x(), line.location.position.y(), line.location.sample_count);
+                let at = y * w + x;
+                if x + count > w || at + count > n {
+                    line_error = Some(format!("a line of channel {} lies outside the image", line.location.channel));
+                    continue;
+                }
+                let sample_type = header.channels.list[line.location.channel].sample_type;
+                match (out, sample_type) {
+                    (Samples::U32(v), _) => line.read_samples_into_slice(&mut v[at..at + count])?,
+                    (Samples::F32(v), SampleType::F32) => line.read_samples_into_slice(&mut v[at..at + count])?,
+                    (Samples::F32(v), _) => {
+                        for (o, s) in v[at..at + count].iter_mut().zip(line.read_samples::<f16>()) {
+                            *o = s?.to_f32();
+                        }
+                    }
+                }
+            }
+            Ok(())
+        })
+        .map_err(|e| exr_error(path, e))?;
+    if let Some(msg) = line_error {
+        return Err(Error::invalid(path, msg));
+    }
+    Ok((header, kept.into_iter().flatten().collect()))
 }
 
 /// One channel's samples as read: half and float as f32, uint as u32.
