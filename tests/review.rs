@@ -545,7 +545,6 @@ fn a_request_decodes_what_it_reads_one_layer_at_a_time() {
         format!("/api/image.png?{comp}"),
         format!("/api/image.png?{comp}&view=normal"),
         format!("/api/image.png?{comp}&view=depth"),
-        format!("/api/image.png?{comp}&view=diffuse_direct"),
         format!("/api/pick?{comp}&x=32&y=30"),
         format!("/api/agents?{comp}"),
         format!("/api/matte.png?{comp}&id=3"),
