@@ -502,9 +502,9 @@ fn the_page_hides_what_it_hides_and_shrinks_pictures_smoothly() {
 
 #[test]
 fn the_caches_stay_under_their_bound() {
-    // 1 MiB: 7/8 for films (a 64x36 layer with its mattes is about 0.5 MB,
-    // so the comp's four layers cannot all stay), 1/8 for PNGs.
-    let (a, stop) = start(1 << 20);
+    // 128 KiB: 7/8 for films (a 64x36 layer's beauty is 36 KiB, so the
+    // comp's four layers and the comp cannot all stay), 1/8 for PNGs.
+    let (a, stop) = start(128 << 10);
     let bound = |c: &Value, k: &str| (c[k]["bytes"].as_u64().unwrap(), c[k]["bound"].as_u64().unwrap());
     for layer in ["set", "crowd2", "crowd1", "crowd0", "comp"] {
         for exposure in [0, 1, 2] {
@@ -532,6 +532,38 @@ fn the_caches_stay_under_their_bound() {
         s.read_to_end(&mut b).map(|_| b)
     });
     assert!(gone.map_or(true, |b| !b.starts_with(b"HTTP/1.1 200")), "a stopped server answered");
+}
+
+/// A request decodes only the channels its answer reads, and a comp is
+/// stacked one layer at a time: with a cache too small to keep a layer, the
+/// review never holds two decoded layers at once, whatever the view.
+#[test]
+fn a_request_decodes_what_it_reads_one_layer_at_a_time() {
+    let (a, stop) = start(4 << 10);
+    let comp = format!("frame={FRAME}&layer=comp");
+    for target in [
+        format!("/api/image.png?{comp}"),
+        format!("/api/image.png?{comp}&view=normal"),
+        format!("/api/image.png?{comp}&view=depth"),
+        format!("/api/pick?{comp}&x=32&y=30"),
+        format!("/api/agents?{comp}"),
+        format!("/api/matte.png?{comp}&id=3"),
+    ] {
+        get_ok(&a, &target);
+        let held = &get_ok(&a, "/api/cache").json()["layers_held"];
+        assert_eq!(held["now"], 0, "{target}: {held}");
+        assert_eq!(held["peak"], 1, "{target}: at most one decoded layer at once: {held}");
+    }
+    stop.stop();
+    // The cache holds what was decoded: the beauty is R G B A alone (16
+    // bytes a pixel), a pick adds `agent.id` alone (4).
+    let (a, stop) = start(1 << 30);
+    let films = |a: &str| get_ok(a, "/api/cache").json()["films"]["bytes"].as_u64().unwrap();
+    get_ok(&a, &format!("/api/image.png?frame={FRAME}&layer=set"));
+    assert_eq!(films(&a), 64 * 36 * 16);
+    get_ok(&a, &format!("/api/pick?frame={FRAME}&layer=set&x=1&y=1"));
+    assert_eq!(films(&a), 64 * 36 * (16 + 4));
+    stop.stop();
 }
 
 #[test]

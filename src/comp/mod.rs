@@ -69,48 +69,143 @@ pub fn over(films: &[&Film]) -> Result<Film> {
     let Some(first) = films.first() else {
         return Err(Error::Usage("nothing to composite: no layers".into()));
     };
-    let (w, h) = (first.width, first.height);
-    if let Some(f) = films.iter().find(|f| f.width != w || f.height != h) {
+    let mut stack = Stack::new(first);
+    for f in films {
+        stack.push(f)?;
+    }
+    let mut mattes = MatteStack::new(first.width, first.height);
+    for f in films.iter().rev() {
+        mattes.push(f)?;
+    }
+    let mut out = stack.finish();
+    out.cryptomatte = mattes.finish();
+    Ok(out)
+}
+
+fn same_size(w: u32, h: u32, f: &Film) -> Result<()> {
+    if f.width != w || f.height != h {
         return Err(Error::Usage(format!("layers differ in size: {w}x{h} and {}x{}", f.width, f.height)));
     }
-    let mut out = Film::new(w, h);
-    let with_motion = films.iter().any(|f| !f.motion.is_empty());
-    if with_motion {
-        out.motion = vec![[0.0; 2]; out.rgba.len()];
+    Ok(())
+}
+
+/// The colour side of [`over`] as a fold, one layer at a time, back to
+/// front, so a caller holds one decoded layer and the stack (`throng
+/// review`): colour, normals, albedo and light passes by over; Z, `agent.id`,
+/// motion and `P` from the nearest finite Z. A film without a channel's
+/// data (a reader that decoded only some channels) leaves it out: the stack
+/// holds what the first film has.
+pub(crate) struct Stack {
+    out: Film,
+    /// Stacked passes: those every film so far has, in the first film's order.
+    passes: Vec<Pass>,
+    pushed: usize,
+}
+
+impl Stack {
+    /// An empty stack the size of `first`, with the channels it has.
+    pub(crate) fn new(first: &Film) -> Stack {
+        let n = first.width as usize * first.height as usize;
+        let has = |len: usize| len == n && n > 0;
+        let out = Film {
+            width: first.width,
+            height: first.height,
+            rgba: if has(first.rgba.len()) { vec![[0.0; 4]; n] } else { Vec::new() },
+            z: if has(first.z.len()) { vec![f32::INFINITY; n] } else { Vec::new() },
+            normal: if has(first.normal.len()) { vec![[0.0; 3]; n] } else { Vec::new() },
+            albedo: if has(first.albedo.len()) { vec![[0.0; 3]; n] } else { Vec::new() },
+            agent_id: if has(first.agent_id.len()) { vec![0; n] } else { Vec::new() },
+            cryptomatte: Vec::new(),
+            motion: Vec::new(),
+            passes: Vec::new(),
+            samples: Vec::new(),
+        };
+        let passes = first
+            .passes
+            .iter()
+            .map(|p| Pass { name: p.name.clone(), channels: p.channels, data: vec![[0.0; 3]; n] })
+            .collect();
+        Stack { out, passes, pushed: 0 }
     }
-    for i in 0..out.rgba.len() {
-        let (mut rgba, mut n, mut albedo) = ([0.0f32; 4], [0.0f32; 3], [0.0f32; 3]);
-        let (mut z, mut id, mut motion) = (f32::INFINITY, 0u32, [0.0f32; 2]);
-        for f in films {
-            let a = f.rgba[i][3];
-            let keep = 1.0 - a;
-            for (c, v) in rgba.iter_mut().enumerate() {
-                *v = f.rgba[i][c] + keep * *v;
-            }
-            for c in 0..3 {
-                n[c] = f.normal[i][c] + keep * n[c];
-                albedo[c] = f.albedo[i][c] + keep * albedo[c];
-            }
-            // `<=`: later (nearer in comp order) layers win ties.
-            let fz = f.z[i];
-            if fz.is_finite() && fz <= z {
-                z = fz;
-                id = f.agent_id[i];
-                motion = f.motion.get(i).copied().unwrap_or([0.0; 2]);
+
+    /// Lays `f` over what is stacked.
+    pub(crate) fn push(&mut self, f: &Film) -> Result<()> {
+        let out = &mut self.out;
+        same_size(out.width, out.height, f)?;
+        let n = out.width as usize * out.height as usize;
+        if !f.motion.is_empty() && out.motion.is_empty() && !out.z.is_empty() {
+            out.motion = vec![[0.0; 2]; n];
+        }
+        let with_colour = f.rgba.len() == n;
+        let keep = |i: usize| 1.0 - f.rgba[i][3];
+        if with_colour && out.rgba.len() == n {
+            for (i, o) in out.rgba.iter_mut().enumerate() {
+                let k = keep(i);
+                for (c, v) in o.iter_mut().enumerate() {
+                    *v = f.rgba[i][c] + k * *v;
+                }
             }
         }
-        out.rgba[i] = rgba;
-        out.normal[i] = n;
-        out.albedo[i] = albedo;
-        out.z[i] = z;
-        out.agent_id[i] = id;
-        if with_motion {
-            out.motion[i] = motion;
+        for (mine, theirs) in [(&mut out.normal, &f.normal), (&mut out.albedo, &f.albedo)] {
+            if with_colour && mine.len() == n && theirs.len() == n {
+                for (i, o) in mine.iter_mut().enumerate() {
+                    let k = keep(i);
+                    for c in 0..3 {
+                        o[c] = theirs[i][c] + k * o[c];
+                    }
+                }
+            }
         }
+        // The passes every film so far has; `P` goes with the Z winner below.
+        self.passes.retain(|p| f.passes.iter().any(|q| q.name == p.name));
+        if with_colour {
+            for p in self.passes.iter_mut().filter(|p| p.name != passes::POSITION) {
+                let Some(q) = f.passes.iter().find(|q| q.name == p.name) else { continue };
+                for (i, o) in p.data.iter_mut().enumerate() {
+                    let k = keep(i);
+                    for (o, v) in o.iter_mut().zip(q.data[i]) {
+                        *o = v + k * *o;
+                    }
+                }
+            }
+        }
+        if out.z.len() == n && f.z.len() == n {
+            let position = self.passes.iter_mut().find(|p| p.name == passes::POSITION);
+            let theirs = f.passes.iter().find(|q| q.name == passes::POSITION);
+            let mut position = position.zip(theirs);
+            for i in 0..n {
+                // `<=`: later (nearer in comp order) layers win ties.
+                let fz = f.z[i];
+                if fz.is_finite() && fz <= out.z[i] {
+                    out.z[i] = fz;
+                    if let Some(id) = out.agent_id.get_mut(i) {
+                        *id = f.agent_id.get(i).copied().unwrap_or(0);
+                    }
+                    if let Some(m) = out.motion.get_mut(i) {
+                        *m = f.motion.get(i).copied().unwrap_or([0.0; 2]);
+                    }
+                    if let Some((p, q)) = position.as_mut() {
+                        p.data[i] = q.data[i];
+                    }
+                }
+            }
+        }
+        self.pushed += 1;
+        Ok(())
     }
-    out.cryptomatte = over_cryptomatte(films);
-    out.passes = over_passes(films, &out.z);
-    Ok(out)
+
+    /// The stacked film (no Cryptomatte: see [`MatteStack`]).
+    pub(crate) fn finish(self) -> Film {
+        let mut out = self.out;
+        let mut passes = self.passes;
+        if self.pushed == 0 {
+            passes.clear();
+        }
+        // Stable: ties keep the first film's order, as [`shared_passes`] does.
+        passes.sort_by(|a, b| passes::file_order(&a.name).cmp(&passes::file_order(&b.name)));
+        out.passes = passes;
+        out
+    }
 }
 
 /// The names of the passes every film has, in file order; the others.
@@ -129,95 +224,108 @@ pub(crate) fn shared_passes(films: &[&Film]) -> (Vec<(String, [&'static str; 3])
     (shared, partial.into_iter().map(|(n, _)| n).collect())
 }
 
-/// Stacks the passes every film has (see the module docs): over for light,
-/// the Z-winning layer's for `P`. `z` is the stacked depth.
-fn over_passes(films: &[&Film], z: &[f32]) -> Vec<Pass> {
-    let (names, _) = shared_passes(films);
-    names
-        .into_iter()
-        .map(|(name, channels)| {
-            let layers: Vec<&Pass> = films.iter().filter_map(|f| f.passes.iter().find(|p| p.name == name)).collect();
-            let mut data = vec![[0.0f32; 3]; z.len()];
-            if name == passes::POSITION {
-                for (i, out) in data.iter_mut().enumerate() {
-                    // The layer the comp's Z came from (the last, front-most, on ties).
-                    let winner = films.iter().rposition(|f| f.z[i].is_finite() && f.z[i] == z[i]);
-                    if let Some(k) = winner {
-                        *out = layers[k].data[i];
-                    }
-                }
-            } else {
-                for (f, pass) in films.iter().zip(&layers) {
-                    for (i, out) in data.iter_mut().enumerate() {
-                        let keep = 1.0 - f.rgba[i][3];
-                        for (o, v) in out.iter_mut().zip(pass.data[i]) {
-                            *o = v + keep * *o;
-                        }
-                    }
-                }
-            }
-            Pass { name, channels, data }
-        })
-        .collect()
+/// The Cryptomatte side of [`over`] as a fold, one layer at a time, front
+/// to back (the nearest layer first): an object's coverage in a layer
+/// counts through the layers in front of it, times `1 - A` of each (the
+/// same over as colour), coverages of one id from several layers add, and
+/// each pixel keeps its highest-coverage ranks (ties by id bits, as the
+/// renderer ranks) once every layer is in. Types are matched by name and
+/// their manifests merged (the nearest layer's entry wins). It holds the
+/// non-zero (id, coverage) pairs seen so far, never a whole layer.
+pub(crate) struct MatteStack {
+    width: u32,
+    height: u32,
+    /// `1 - A` of every layer pushed, per pixel.
+    through: Vec<f32>,
+    /// Per type: name, ranks, merged manifest, per pixel the pairs seen.
+    types: Vec<Matte>,
+    /// The type names of each layer pushed, front to back (for the order).
+    names: Vec<Vec<String>>,
 }
 
-/// Stacks the layers' Cryptomatte types (matched by name): an object's
-/// coverage in a layer counts through the layers in front of it, times
-/// `1 - A` of each (the same over as colour), coverages of one id from
-/// several layers add, and each pixel keeps its highest-coverage ranks
-/// (ties by id bits, as the renderer ranks). Manifests are merged.
-fn over_cryptomatte(films: &[&Film]) -> Vec<Cryptomatte> {
-    let mut names: Vec<&str> = Vec::new();
-    for f in films {
-        for m in &f.cryptomatte {
-            if !names.contains(&m.name.as_str()) {
-                names.push(&m.name);
-            }
-        }
+struct Matte {
+    name: String,
+    ranks: usize,
+    manifest: std::collections::BTreeMap<String, u32>,
+    acc: Vec<Vec<(u32, f32)>>,
+}
+
+impl MatteStack {
+    /// An empty stack of `width` x `height`.
+    pub(crate) fn new(width: u32, height: u32) -> MatteStack {
+        let n = width as usize * height as usize;
+        MatteStack { width, height, through: vec![1.0; n], types: Vec::new(), names: Vec::new() }
     }
-    let Some(first) = films.first() else { return Vec::new() };
-    let (w, h) = (first.width, first.height);
-    let mut out = Vec::new();
-    for name in names {
-        let layers: Vec<(usize, &Cryptomatte)> = films
-            .iter()
-            .enumerate()
-            .filter_map(|(k, f)| f.cryptomatte.iter().find(|m| m.name == name).map(|m| (k, m)))
-            .filter(|(_, m)| m.width == w && m.height == h && m.ranks > 0)
-            .collect();
-        let ranks = layers.iter().map(|(_, m)| m.ranks).max().unwrap_or(0);
-        let mut stacked = Cryptomatte::new(name, w, h, ranks);
-        for (_, m) in &layers {
-            stacked.manifest.extend(m.manifest.iter().map(|(k, &v)| (k.clone(), v)));
-        }
-        let mut acc: Vec<(u32, f32)> = Vec::new();
-        for i in 0..(w as usize * h as usize) {
-            acc.clear();
-            // Front to back: what is in front hides what is behind.
-            let mut through = 1.0f32;
-            for k in (0..films.len()).rev() {
-                if let Some((_, m)) = layers.iter().find(|(l, _)| *l == k) {
-                    for p in m.pixel(i) {
-                        let (id, cov) = (p[0].to_bits(), p[1] * through);
-                        if id == 0 || cov <= 0.0 {
-                            continue;
-                        }
-                        match acc.iter_mut().find(|a| a.0 == id) {
-                            Some(a) => a.1 += cov,
-                            None => acc.push((id, cov)),
-                        }
+
+    /// Puts `f` behind what is stacked; its alpha hides what comes after.
+    pub(crate) fn push(&mut self, f: &Film) -> Result<()> {
+        same_size(self.width, self.height, f)?;
+        let n = self.through.len();
+        self.names.push(f.cryptomatte.iter().map(|m| m.name.clone()).collect());
+        for m in f.cryptomatte.iter().filter(|m| m.width == self.width && m.height == self.height && m.ranks > 0) {
+            let k = match self.types.iter().position(|t| t.name == m.name) {
+                Some(k) => k,
+                None => {
+                    let acc = vec![Vec::new(); n];
+                    self.types.push(Matte { name: m.name.clone(), ranks: 0, manifest: Default::default(), acc });
+                    self.types.len() - 1
+                }
+            };
+            let t = &mut self.types[k];
+            t.ranks = t.ranks.max(m.ranks);
+            for (name, &v) in &m.manifest {
+                t.manifest.entry(name.clone()).or_insert(v);
+            }
+            for (i, acc) in t.acc.iter_mut().enumerate() {
+                for p in m.pixel(i) {
+                    let (id, cov) = (p[0].to_bits(), p[1] * self.through[i]);
+                    if id == 0 || cov <= 0.0 {
+                        continue;
+                    }
+                    match acc.iter_mut().find(|a| a.0 == id) {
+                        Some(a) => a.1 += cov,
+                        None => acc.push((id, cov)),
                     }
                 }
-                through *= (1.0 - films[k].rgba[i][3]).clamp(0.0, 1.0);
-            }
-            acc.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-            for (r, &(id, cov)) in acc.iter().take(ranks).enumerate() {
-                stacked.pairs[i * ranks + r] = [f32::from_bits(id), cov];
             }
         }
-        out.push(stacked);
+        if f.rgba.len() == n {
+            for (t, p) in self.through.iter_mut().zip(&f.rgba) {
+                *t *= (1.0 - p[3]).clamp(0.0, 1.0);
+            }
+        }
+        Ok(())
     }
-    out
+
+    /// The stacked types, in the order they first appear back to front.
+    pub(crate) fn finish(self) -> Vec<Cryptomatte> {
+        let mut order: Vec<&str> = Vec::new();
+        for name in self.names.iter().rev().flatten() {
+            if !order.contains(&name.as_str()) {
+                order.push(name);
+            }
+        }
+        let (w, h) = (self.width, self.height);
+        let mut types = self.types;
+        order
+            .into_iter()
+            .map(|name| {
+                let Some(k) = types.iter().position(|t| t.name == name) else {
+                    return Cryptomatte::new(name, w, h, 0);
+                };
+                let mut t = types.swap_remove(k);
+                let mut stacked = Cryptomatte::new(name, w, h, t.ranks);
+                stacked.manifest = std::mem::take(&mut t.manifest);
+                for (i, acc) in t.acc.iter_mut().enumerate() {
+                    acc.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+                    for (r, &(id, cov)) in acc.iter().take(t.ranks).enumerate() {
+                        stacked.pairs[i * t.ranks + r] = [f32::from_bits(id), cov];
+                    }
+                }
+                stacked
+            })
+            .collect()
+    }
 }
 
 /// The layers of `frame` under render output `dir`, back to front.

@@ -20,7 +20,7 @@ mod tone;
 use std::collections::BTreeMap;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use glam::Vec3;
@@ -31,7 +31,7 @@ use crate::casting::ShotCrowd;
 use crate::error::{Error, Result};
 use crate::layers::{Manifest, MapOptions};
 use crate::output::{layer_file_frame, layer_path};
-use crate::render::exr::{read_channel_names, read_layer, LayerMeta};
+use crate::render::exr::{read_channel_names, read_layer_channels, LayerMeta};
 use crate::render::Film;
 use lru::Lru;
 use safe::{percent_decode, Root};
@@ -83,6 +83,91 @@ struct Decoded {
     meta: LayerMeta,
     /// The file (a layer), or none (a comp).
     file: Option<PathBuf>,
+    /// Counts this decoded layer among those held (none: a comp).
+    _held: Option<Held>,
+}
+
+/// How many decoded layers the review holds (in its cache or for the
+/// request at hand), and the most it has held at once: what bounds a
+/// request's memory (docs/review.md, "Memory bound"), shown by `/api/cache`.
+#[derive(Debug, Default)]
+struct LayerCount {
+    now: AtomicUsize,
+    peak: AtomicUsize,
+}
+
+/// One decoded layer, counted while it lives.
+#[derive(Debug)]
+struct Held(Arc<LayerCount>);
+
+impl Held {
+    fn new(count: &Arc<LayerCount>) -> Held {
+        let now = count.now.fetch_add(1, Ordering::SeqCst) + 1;
+        count.peak.fetch_max(now, Ordering::SeqCst);
+        Held(count.clone())
+    }
+}
+
+impl Drop for Held {
+    fn drop(&mut self) {
+        self.0.now.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// The channels one request decodes: only what its answer reads, so a
+/// beauty view never holds normals, mattes or passes.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+struct Plan {
+    /// `R G B A` (the beauty, and the over of everything stacked by it).
+    colour: bool,
+    normal: bool,
+    albedo: bool,
+    /// `Z` (the depth view, and which layer's id and `P` the comp takes).
+    depth: bool,
+    /// `agent.id`.
+    id: bool,
+    /// The `CryptoAgent` rank channels (the matte the page lays over).
+    mattes: bool,
+    /// One light pass (or `P`).
+    pass: Option<String>,
+}
+
+impl Plan {
+    /// What `endpoint` (`image`, `pick`, `agents`, `agent`, `matte`) needs
+    /// for `view`, of a layer or of the comp (which stacks by alpha and Z).
+    fn of(endpoint: &str, view: &str, comp: bool) -> Plan {
+        let mut p = Plan::default();
+        match endpoint {
+            "image" => match view {
+                "beauty" | "alpha" => p.colour = true,
+                // The normal view shades by alpha.
+                "normal" => (p.normal, p.colour) = (true, true),
+                "albedo" => (p.albedo, p.colour) = (true, comp),
+                "depth" => p.depth = true,
+                "id" => (p.id, p.depth) = (true, comp),
+                pass => {
+                    p.pass = Some(pass.to_string());
+                    p.colour = comp && pass != crate::scene::passes::POSITION;
+                    p.depth = comp && pass == crate::scene::passes::POSITION;
+                }
+            },
+            "matte" => (p.mattes, p.colour) = (true, comp),
+            _ => (p.id, p.depth) = (true, comp),
+        }
+        p
+    }
+
+    /// Whether channel `name` is decoded.
+    fn keeps(&self, name: &str) -> bool {
+        let pass = self.pass.as_deref().and_then(|p| name.strip_prefix(p)?.strip_prefix('.'));
+        (self.colour && matches!(name, "R" | "G" | "B" | "A"))
+            || (self.normal && matches!(name, "N.X" | "N.Y" | "N.Z"))
+            || (self.albedo && matches!(name, "albedo.R" | "albedo.G" | "albedo.B"))
+            || (self.depth && name == "Z")
+            || (self.id && name == "agent.id")
+            || (self.mattes && name.starts_with(crate::render::cryptomatte::AGENT_MATTE))
+            || matches!(pass, Some("R" | "G" | "B" | "X" | "Y" | "Z"))
+    }
 }
 
 /// A request answered with an error: the status and a message for the page.
@@ -154,6 +239,7 @@ struct State {
     hosts: Option<Vec<String>>,
     films: Mutex<Lru<Decoded>>,
     pngs: Mutex<Lru<Vec<u8>>>,
+    layers_held: Arc<LayerCount>,
 }
 
 impl Review {
@@ -186,6 +272,7 @@ impl Review {
             hosts: None,
             films: Mutex::new(Lru::new(options.cache_bytes - options.cache_bytes / 8)),
             pngs: Mutex::new(Lru::new(options.cache_bytes / 8)),
+            layers_held: Arc::default(),
         };
         if let Some((dir, _)) = &state.renders {
             let frames = state.scan();
@@ -382,12 +469,26 @@ fn content_type(path: &Path) -> &'static str {
     }
 }
 
-/// A film's size in memory, bytes, for the cache bound.
+/// A film's size in memory, bytes, for the cache bound: the channels it
+/// holds (a request decodes only some).
 fn film_bytes(f: &Film) -> u64 {
-    let n = f.rgba.len() as u64;
     let crypto: u64 = f.cryptomatte.iter().map(|m| m.pairs.len() as u64 * 8 + m.manifest.len() as u64 * 64).sum();
     let passes: u64 = f.passes.iter().map(|p| p.data.len() as u64 * 12).sum();
-    n * (16 + 4 + 12 + 12 + 4) + f.motion.len() as u64 * 8 + f.samples.len() as u64 * 4 + crypto + passes
+    let len = |n: usize, size: u64| n as u64 * size;
+    len(f.rgba.len(), 16)
+        + len(f.z.len(), 4)
+        + len(f.normal.len(), 12)
+        + len(f.albedo.len(), 12)
+        + len(f.agent_id.len(), 4)
+        + len(f.motion.len(), 8)
+        + len(f.samples.len(), 4)
+        + crypto
+        + passes
+}
+
+/// Whether a request names the comp (the default) rather than a layer.
+fn is_comp(q: &BTreeMap<String, String>) -> bool {
+    q.get("layer").is_none_or(|l| l == COMP_VIEW)
 }
 
 /// Widest and narrowest layer map drawn, pixels.
@@ -492,14 +593,15 @@ impl State {
         root.confine(&layer_path(dir, self.name(), layer, frame)).map_err(|(status, m)| Refusal(status, m))
     }
 
-    /// A layer file decoded (cached).
-    fn decode_layer(&self, frame: i32, layer: &str) -> Answer<Arc<Decoded>> {
+    /// The channels of a layer file `plan` names, decoded (cached).
+    fn decode_layer(&self, frame: i32, layer: &str, plan: &Plan) -> Answer<Arc<Decoded>> {
         let path = self.layer_file(frame, layer)?;
-        let key = file_key(&path);
+        let key = format!("{}|{plan:?}", file_key(&path));
         if let Some(d) = self.films.lock().map_err(|_| Refusal(500, "cache poisoned".into()))?.get(&key) {
             return Ok(d);
         }
-        let (film, meta) = read_layer(&path).map_err(refusal)?;
+        let held = Held::new(&self.layers_held);
+        let (film, meta) = read_layer_channels(&path, &|c| plan.keeps(c)).map_err(refusal)?;
         if meta.shot != self.name() || meta.frame != frame {
             return Err(Refusal(
                 500,
@@ -513,19 +615,22 @@ impl State {
             ));
         }
         let bytes = film_bytes(&film);
-        let d = Decoded { film, meta, file: Some(path) };
+        let d = Decoded { film, meta, file: Some(path), _held: Some(held) };
         Ok(self.films.lock().map_err(|_| Refusal(500, "cache poisoned".into()))?.insert(key, d, bytes))
     }
 
-    /// The image a request names: a layer, or the comp of the layers it
-    /// lists (`layers=a,b`, default all), stacked by `comp::over`.
-    fn decode(&self, q: &BTreeMap<String, String>) -> Answer<Arc<Decoded>> {
+    /// The image a request names, with the channels `plan` names: a layer,
+    /// or the comp of the layers it lists (`layers=a,b`, default all),
+    /// stacked by `comp`'s folds one layer at a time (colour back to front,
+    /// mattes front to back), so a request holds one decoded layer besides
+    /// the stack (and what the cache keeps).
+    fn decode(&self, q: &BTreeMap<String, String>, plan: &Plan) -> Answer<Arc<Decoded>> {
         let frame: i32 = need(q, "frame")?;
         let layer = q.get("layer").map(String::as_str).unwrap_or(COMP_VIEW);
         if layer != COMP_VIEW {
-            return self.decode_layer(frame, layer);
+            return self.decode_layer(frame, layer, plan);
         }
-        let (_, comp) = self.ordered_layers(frame)?;
+        let (files, comp) = self.ordered_layers(frame)?;
         let order = comp?;
         let chosen: Vec<String> = match q.get("layers") {
             None => order.clone(),
@@ -540,19 +645,42 @@ impl State {
         if chosen.is_empty() {
             return Err(bad("no layers chosen for the comp"));
         }
-        let layers: Vec<Arc<Decoded>> = chosen.iter().map(|l| self.decode_layer(frame, l)).collect::<Answer<_>>()?;
-        let key = format!(
-            "comp|{frame}|{}",
-            layers.iter().filter_map(|d| d.file.as_deref()).map(file_key).collect::<Vec<_>>().join("|")
-        );
+        let keys: Vec<String> = (chosen.iter())
+            .map(|l| files.iter().find(|(n, _)| n == l).map(|(_, p)| file_key(p)).unwrap_or_default())
+            .collect();
+        let key = format!("comp|{frame}|{plan:?}|{}", keys.join("|"));
         if let Some(d) = self.films.lock().map_err(|_| Refusal(500, "cache poisoned".into()))?.get(&key) {
             return Ok(d);
         }
-        let films: Vec<&Film> = layers.iter().map(|d| &d.film).collect();
-        let film = crate::comp::over(&films).map_err(refusal)?;
-        let meta = LayerMeta { layer: COMP_VIEW.to_string(), ..layers[0].meta.clone() };
+        let mut meta = None;
+        let film = if plan.mattes {
+            // Front to back: what is in front hides what is behind.
+            let mut film = Film::new(0, 0);
+            let mut stack: Option<crate::comp::MatteStack> = None;
+            for l in chosen.iter().rev() {
+                let d = self.decode_layer(frame, l, plan)?;
+                (film.width, film.height) = (d.film.width, d.film.height);
+                let s = stack.get_or_insert_with(|| crate::comp::MatteStack::new(d.film.width, d.film.height));
+                s.push(&d.film).map_err(refusal)?;
+                // The back layer's header, as the colour stack takes.
+                meta = Some(d.meta.clone());
+            }
+            film.cryptomatte = stack.map(crate::comp::MatteStack::finish).unwrap_or_default();
+            film
+        } else {
+            let mut stack: Option<crate::comp::Stack> = None;
+            for l in &chosen {
+                let d = self.decode_layer(frame, l, plan)?;
+                let s = stack.get_or_insert_with(|| crate::comp::Stack::new(&d.film));
+                s.push(&d.film).map_err(refusal)?;
+                meta.get_or_insert_with(|| d.meta.clone());
+            }
+            stack.map(crate::comp::Stack::finish).unwrap_or_else(|| Film::new(0, 0))
+        };
+        let Some(meta) = meta else { return Err(bad("no layers chosen for the comp")) };
+        let meta = LayerMeta { layer: COMP_VIEW.to_string(), ..meta };
         let bytes = film_bytes(&film);
-        let d = Decoded { film, meta, file: None };
+        let d = Decoded { film, meta, file: None, _held: None };
         Ok(self.films.lock().map_err(|_| Refusal(500, "cache poisoned".into()))?.insert(key, d, bytes))
     }
 
@@ -627,6 +755,10 @@ impl State {
         Ok(json!({
             "films": { "entries": films.len(), "bytes": films.used(), "bound": films.bound() },
             "pngs": { "entries": pngs.len(), "bytes": pngs.used(), "bound": pngs.bound() },
+            "layers_held": {
+                "now": self.layers_held.now.load(Ordering::SeqCst),
+                "peak": self.layers_held.peak.load(Ordering::SeqCst),
+            },
         }))
     }
 
@@ -686,7 +818,7 @@ impl State {
         if !(exposure.abs() <= 20.0) {
             return Err(bad(format!("exposure {exposure} is outside -20..20 stops")));
         }
-        let d = self.decode(q)?;
+        let d = self.decode(q, &Plan::of("image", view, is_comp(q)))?;
         let key = format!("image|{}|{view}|{:08x}", Self::key_of(&d, q), exposure.to_bits());
         self.cached_png(key, || {
             let px = tone::view_pixels(&d.film, d.meta.colourspace, view, exposure).map_err(not_found)?;
@@ -708,7 +840,7 @@ impl State {
 
     fn pick(&self, q: &BTreeMap<String, String>) -> Answer<Body> {
         let (x, y): (u32, u32) = (need(q, "x")?, need(q, "y")?);
-        let d = self.decode(q)?;
+        let d = self.decode(q, &Plan::of("pick", "", is_comp(q)))?;
         let what = d.file.clone().unwrap_or_else(|| PathBuf::from(COMP_VIEW));
         let id = agent_at_pixel(&d.film.agent_id, d.film.width, d.film.height, x, y, &what).map_err(refusal)?;
         let botinfo = match id {
@@ -730,14 +862,14 @@ impl State {
         let (id, frame): (u32, i32) = (need(q, "id")?, need(q, "frame")?);
         let botinfo = self.bot_info(&[id], frame)?;
         let (pixel, pixels) = match q.get("layer") {
-            Some(_) => agent_spot(&self.decode(q)?.film, id),
+            Some(_) => agent_spot(&self.decode(q, &Plan::of("agent", "", is_comp(q)))?.film, id),
             None => (None, 0),
         };
         Ok(json_body(&json!({ "id": id, "frame": frame, "botinfo": botinfo, "pixel": pixel, "pixels": pixels })))
     }
 
     fn agents(&self, q: &BTreeMap<String, String>) -> Answer<Body> {
-        let d = self.decode(q)?;
+        let d = self.decode(q, &Plan::of("agents", "", is_comp(q)))?;
         let mut counts: BTreeMap<u32, usize> = BTreeMap::new();
         for &a in d.film.agent_id.iter().filter(|&&a| a > 0) {
             *counts.entry(a - 1).or_default() += 1;
@@ -751,7 +883,11 @@ impl State {
 
     fn matte(&self, q: &BTreeMap<String, String>) -> Answer<Body> {
         let id: u32 = need(q, "id")?;
-        let d = self.decode(q)?;
+        let mut d = self.decode(q, &Plan::of("matte", "", is_comp(q)))?;
+        if !d.film.cryptomatte.iter().any(|m| m.name == crate::render::cryptomatte::AGENT_MATTE) {
+            // No `CryptoAgent`: the matte is `agent.id`'s.
+            d = self.decode(q, &Plan::of("pick", "", is_comp(q)))?;
+        }
         let key = format!("matte|{}|{id}", Self::key_of(&d, q));
         self.cached_png(key, || {
             let (coverage, _) = tone::agent_coverage(&d.film, id);
@@ -785,5 +921,48 @@ impl State {
         let path = root.file(&rel).map_err(|(status, m)| Refusal(status, m))?;
         let file = std::fs::File::open(&path).map_err(|e| Refusal(404, format!("cannot open {rel}: {e}")))?;
         Ok(Body::File(content_type(&path), file))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Which channels each request decodes (docs/review.md, "Memory bound").
+    #[test]
+    fn a_request_decodes_only_the_channels_it_reads() {
+        let channels = [
+            "A",
+            "B",
+            "G",
+            "R",
+            "N.X",
+            "Z",
+            "agent.id",
+            "albedo.R",
+            "CryptoAgent00.R",
+            "CryptoPart00.R",
+            "diffuse_direct.R",
+            "P.X",
+            "forward.u",
+            "samples",
+        ];
+        let kept = |p: Plan| channels.iter().filter(|c| p.keeps(c)).copied().collect::<Vec<_>>();
+        for comp in [false, true] {
+            assert_eq!(kept(Plan::of("image", "beauty", comp)), ["A", "B", "G", "R"]);
+            assert_eq!(kept(Plan::of("image", "depth", comp)), ["Z"]);
+            assert_eq!(kept(Plan::of("image", "normal", comp)), ["A", "B", "G", "R", "N.X"]);
+        }
+        // A layer's pick reads the ids; the comp's also the depth that picks the layer.
+        assert_eq!(kept(Plan::of("pick", "", false)), ["agent.id"]);
+        assert_eq!(kept(Plan::of("pick", "", true)), ["Z", "agent.id"]);
+        assert_eq!(kept(Plan::of("agents", "", true)), ["Z", "agent.id"]);
+        assert_eq!(kept(Plan::of("matte", "", false)), ["CryptoAgent00.R"]);
+        assert_eq!(kept(Plan::of("matte", "", true)), ["A", "B", "G", "R", "CryptoAgent00.R"]);
+        // A pass view reads that pass (stacked over by alpha in the comp), not its namesakes.
+        assert_eq!(kept(Plan::of("image", "diffuse_direct", false)), ["diffuse_direct.R"]);
+        assert_eq!(kept(Plan::of("image", "diffuse_direct", true)), ["A", "B", "G", "R", "diffuse_direct.R"]);
+        assert_eq!(kept(Plan::of("image", "P", true)), ["Z", "P.X"]);
+        assert!(!Plan::of("image", "diffuse", false).keeps("diffuse_direct.R"));
     }
 }

@@ -636,10 +636,14 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
         },
     };
 
-    let attrs = &layer.attributes;
-    let other = |k: &str| {
-        attrs.other.get(&Text::new_or_none(k)?).or_else(|| image.attributes.other.get(&Text::new_or_none(k)?))
-    };
+    let meta = layer_meta(path, &layer.attributes, &image.attributes)?;
+    Ok((film, meta))
+}
+
+/// A layer file's header as [`LayerMeta`]: the part's own attributes, then
+/// the file's shared ones.
+fn layer_meta(path: &Path, attrs: &LayerAttributes, shared: &exr::meta::header::ImageAttributes) -> Result<LayerMeta> {
+    let other = |k: &str| attrs.other.get(&Text::new_or_none(k)?).or_else(|| shared.other.get(&Text::new_or_none(k)?));
     let get_text = |k: &str| match other(k) {
         Some(AttributeValue::Text(t)) => Ok(lossy(t)),
         _ => Err(Error::invalid(path, format!("header attribute `{k}` is missing or not text")).field(k.to_string())),
@@ -649,7 +653,7 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
         _ => Err(Error::invalid(path, format!("header attribute `{k}` is missing or not int")).field(k.to_string())),
     };
     let seed_text = get_text("throng/seed")?;
-    let meta = LayerMeta {
+    Ok(LayerMeta {
         shot: get_text("throng/shot")?,
         layer: get_text("throng/layer")?,
         frame: get_i32("throng/frame")?,
@@ -677,8 +681,185 @@ pub fn read_layer(path: &Path) -> Result<(Film, LayerMeta)> {
             })?,
             Err(_) => Colourspace::Rec709,
         },
+    })
+}
+
+/// Reads only the channels of a layer file that `keep` accepts, block by
+/// block, so no other channel is ever held: what `throng review` decodes
+/// for one request (docs/review.md, "Memory bound"). Film fields whose
+/// channels are not kept are left empty; a kept channel [`read_layer`]
+/// requires is required here too. The first part, largest level.
+pub(crate) fn read_layer_channels(path: &Path, keep: &dyn Fn(&str) -> bool) -> Result<(Film, LayerMeta)> {
+    let (header, mut channels) = read_kept_channels(path, keep)?;
+    let (w, h) = (header.layer_size.width(), header.layer_size.height());
+    let n = w * h;
+    let mut take = |name: &str| -> Result<Option<Vec<f32>>> {
+        if !keep(name) {
+            return Ok(None);
+        }
+        match channels.remove(name) {
+            Some(Samples::F32(v)) => Ok(Some(v)),
+            Some(Samples::U32(_)) => {
+                Err(Error::invalid(path, format!("channel `{name}` is uint")).field(name.to_string()))
+            }
+            None => Err(Error::invalid(path, format!("channel `{name}` is missing")).field(name.to_string())),
+        }
     };
-    Ok((film, meta))
+    let rgba = match (take("R")?, take("G")?, take("B")?, take("A")?) {
+        (Some(r), Some(g), Some(b), Some(a)) => (0..n).map(|i| [r[i], g[i], b[i], a[i]]).collect(),
+        _ => Vec::new(),
+    };
+    let mut three = |names: [&str; 3]| -> Result<Vec<[f32; 3]>> {
+        Ok(match (take(names[0])?, take(names[1])?, take(names[2])?) {
+            (Some(a), Some(b), Some(c)) => (0..n).map(|i| [a[i], b[i], c[i]]).collect(),
+            _ => Vec::new(),
+        })
+    };
+    let normal = three(["N.X", "N.Y", "N.Z"])?;
+    let albedo = three(["albedo.R", "albedo.G", "albedo.B"])?;
+    let z = take("Z")?.unwrap_or_default();
+    let agent_id = match (keep("agent.id"), channels.remove("agent.id")) {
+        (false, _) => Vec::new(),
+        (true, Some(Samples::U32(v))) => v,
+        (true, Some(_)) => return Err(Error::invalid(path, "channel `agent.id` is not uint").field("agent.id")),
+        (true, None) => return Err(Error::invalid(path, "channel `agent.id` is missing").field("agent.id")),
+    };
+    let floats = |name: &str| match channels.get(name) {
+        Some(Samples::F32(v)) => Ok(v.clone()),
+        _ => Err(Error::invalid(path, format!("channel `{name}` is missing")).field(name.to_string())),
+    };
+    let motion = match (floats(MOTION_CHANNELS[0]), floats(MOTION_CHANNELS[1])) {
+        (Ok(u), Ok(v)) => u.iter().zip(&v).map(|(&u, &v)| [u, v]).collect(),
+        _ => Vec::new(),
+    };
+    let passes = read_passes(channels.keys().cloned().collect::<Vec<_>>().into_iter(), &floats)?;
+    let samples = match channels.remove(SAMPLES_CHANNEL) {
+        Some(Samples::U32(v)) => v,
+        Some(_) => {
+            return Err(Error::invalid(path, format!("channel `{SAMPLES_CHANNEL}` is not uint")).field(SAMPLES_CHANNEL))
+        }
+        None => Vec::new(),
+    };
+    let mut attributes = text_attributes(&header.shared_attributes.other, &header.own_attributes.other);
+    // The matte types whose rank channels were not asked for are not read.
+    let unread: Vec<String> = (attributes.iter())
+        .filter_map(|(k, v)| {
+            let key = k.strip_prefix("exr/").unwrap_or(k).strip_prefix("cryptomatte/")?.strip_suffix("/name")?;
+            (!keep(&format!("{v}00.R"))).then(|| format!("cryptomatte/{key}/"))
+        })
+        .collect();
+    attributes.retain(|k, _| !unread.iter().any(|u| k.strip_prefix("exr/").unwrap_or(k).starts_with(u.as_str())));
+    let crypto = RawPart {
+        width: w as u32,
+        height: h as u32,
+        attributes,
+        channels: (channels.into_iter())
+            .filter(|(k, _)| k.starts_with("Crypto"))
+            .filter_map(|(k, v)| match v {
+                Samples::F32(v) => Some((k, v)),
+                Samples::U32(_) => None,
+            })
+            .collect(),
+    };
+    let cryptomatte = mattes::decode_part(&crypto, path)?;
+    let film = Film {
+        width: w as u32,
+        height: h as u32,
+        rgba,
+        z,
+        normal,
+        albedo,
+        agent_id,
+        cryptomatte,
+        motion,
+        passes,
+        samples,
+    };
+    Ok((film, layer_meta(path, &header.own_attributes, &header.shared_attributes)?))
+}
+
+/// The channels of a file's first part (largest level) that `keep`
+/// accepts, read block by block, with the part's header.
+fn read_kept_channels(
+    path: &Path,
+    keep: &dyn Fn(&str) -> bool,
+) -> Result<(exr::meta::header::Header, BTreeMap<String, Samples>)> {
+    use exr::block::reader::ChunksReader;
+    use exr::prelude::SampleType;
+    crate::exr_guard::check_decoded_size(path)?;
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let reader = exr::block::read(std::io::BufReader::new(file), false).map_err(|e| exr_error(path, e))?;
+    let Some(header) = reader.headers().first().cloned() else {
+        return Err(Error::invalid(path, "EXR has no parts"));
+    };
+    let (w, h) = (header.layer_size.width(), header.layer_size.height());
+    let n = w * h;
+    // One buffer per kept channel, by the channel's index in the header.
+    let mut kept: Vec<Option<(String, Samples)>> = (header.channels.list.iter())
+        .map(|c| {
+            let name = lossy(&c.name);
+            keep(&name).then(|| {
+                let v = match c.sample_type {
+                    SampleType::U32 => Samples::U32(vec![0; n]),
+                    _ => Samples::F32(vec![0.0; n]),
+                };
+                (name, v)
+            })
+        })
+        .collect();
+    let chunks = reader
+        .filter_chunks(false, |_, _, b| b.layer == 0 && b.level == exr::math::Vec2(0, 0))
+        .map_err(|e| exr_error(path, e))?;
+    let mut line_error = None;
+    chunks
+        .decompress_sequential(false, |_, block| {
+            for line in block.lines(&header.channels) {
+                let Some((_, out)) = kept.get_mut(line.location.channel).and_then(Option::as_mut) else { continue };
+                let (x, y, count) =
+                    (line.location.position.x(), line.location.position.y(), line.location.sample_count);
+                let at = y * w + x;
+                if x + count > w || at + count > n {
+                    line_error = Some(format!("a line of channel {} lies outside the image", line.location.channel));
+                    continue;
+                }
+                let sample_type = header.channels.list[line.location.channel].sample_type;
+                match (out, sample_type) {
+                    (Samples::U32(v), _) => line.read_samples_into_slice(&mut v[at..at + count])?,
+                    (Samples::F32(v), SampleType::F32) => line.read_samples_into_slice(&mut v[at..at + count])?,
+                    (Samples::F32(v), _) => {
+                        for (o, s) in v[at..at + count].iter_mut().zip(line.read_samples::<f16>()) {
+                            *o = s?.to_f32();
+                        }
+                    }
+                }
+            }
+            Ok(())
+        })
+        .map_err(|e| exr_error(path, e))?;
+    if let Some(msg) = line_error {
+        return Err(Error::invalid(path, msg));
+    }
+    Ok((header, kept.into_iter().flatten().collect()))
+}
+
+/// One channel's samples as read: half and float as f32, uint as u32.
+enum Samples {
+    F32(Vec<f32>),
+    U32(Vec<u32>),
+}
+
+/// The text attributes of a part: the file's shared ones, then its own.
+fn text_attributes<'a>(
+    shared: impl IntoIterator<Item = (&'a Text, &'a AttributeValue)>,
+    own: impl IntoIterator<Item = (&'a Text, &'a AttributeValue)>,
+) -> BTreeMap<String, String> {
+    let mut attributes = BTreeMap::new();
+    for (k, v) in shared.into_iter().chain(own) {
+        if let AttributeValue::Text(t) = v {
+            attributes.insert(lossy(k), lossy(t));
+        }
+    }
+    attributes
 }
 
 /// The size and channel names of an EXR's first part, from its header
@@ -714,12 +895,7 @@ fn raw_part(
     shared: &exr::meta::header::ImageAttributes,
     keep: impl Fn(&str) -> bool,
 ) -> RawPart {
-    let mut attributes = BTreeMap::new();
-    for (k, v) in shared.other.iter().chain(layer.attributes.other.iter()) {
-        if let AttributeValue::Text(t) = v {
-            attributes.insert(lossy(k), lossy(t));
-        }
-    }
+    let attributes = text_attributes(&shared.other, &layer.attributes.other);
     let channels = layer
         .channel_data
         .list
