@@ -458,6 +458,83 @@ pub struct RenderSettings {
     /// (docs/render.md, "Denoising").
     #[serde(default)]
     pub denoise: Option<Denoise>,
+    /// Deep output: with a `[render.deep]` table, every layer also as a deep
+    /// scanline OpenEXR (docs/render.md, "Deep output"); `None` (the
+    /// default): flat files only.
+    #[serde(default)]
+    pub deep: Option<Deep>,
+}
+
+/// `[render.deep]`: how deep samples are gathered and stored
+/// (`render::deep`, `render::exr::deep`).
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Deep {
+    /// At most this many deep samples per pixel (1..=256).
+    #[serde(default = "default_deep_max_samples")]
+    pub max_samples: u32,
+    /// Relative depth within which one object's camera samples merge.
+    #[serde(default = "default_deep_tolerance")]
+    pub tolerance: f32,
+    /// `zips` (the default) or `none`: what OpenEXR allows for deep data.
+    #[serde(default = "default_deep_compression")]
+    pub compression: String,
+}
+
+fn default_deep_max_samples() -> u32 {
+    crate::render::deep::DEFAULT_MAX_SAMPLES
+}
+
+fn default_deep_tolerance() -> f32 {
+    crate::render::deep::DEFAULT_TOLERANCE
+}
+
+fn default_deep_compression() -> String {
+    crate::render::exr::deep::DeepCompression::NAMES[0].to_string()
+}
+
+impl Default for Deep {
+    fn default() -> Self {
+        Deep {
+            max_samples: default_deep_max_samples(),
+            tolerance: default_deep_tolerance(),
+            compression: default_deep_compression(),
+        }
+    }
+}
+
+impl Deep {
+    /// Checks the keys, naming the one that is wrong (`render.deep.<key>`).
+    pub fn check(&self) -> std::result::Result<(), (&'static str, String)> {
+        use crate::render::deep::MAX_SAMPLES_LIMIT;
+        if !(1..=MAX_SAMPLES_LIMIT).contains(&self.max_samples) {
+            return Err(("render.deep.max_samples", format!("must be 1..={MAX_SAMPLES_LIMIT}, got {}", self.max_samples)));
+        }
+        if !(self.tolerance.is_finite() && (0.0..=1.0).contains(&self.tolerance)) {
+            return Err(("render.deep.tolerance", format!("must be a number in 0..=1 (relative depth), got {}", self.tolerance)));
+        }
+        if crate::render::exr::deep::DeepCompression::parse(&self.compression).is_none() {
+            return Err((
+                "render.deep.compression",
+                format!(
+                    "`{}` is not a compression deep files allow here; use one of: {}",
+                    self.compression,
+                    crate::render::exr::deep::DeepCompression::NAMES.join(", ")
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The gathering settings.
+    pub fn settings(&self) -> crate::render::deep::DeepSettings {
+        crate::render::deep::DeepSettings { max_samples: self.max_samples, tolerance: self.tolerance }
+    }
+
+    /// The file compression (checked: the default if unknown).
+    pub fn file_compression(&self) -> crate::render::exr::deep::DeepCompression {
+        crate::render::exr::deep::DeepCompression::parse(&self.compression).unwrap_or_default()
+    }
 }
 
 /// `render.denoise`: Open Image Denoise's quality preset: `high` for
@@ -543,6 +620,7 @@ impl Default for RenderSettings {
             passes: Vec::new(),
             adaptive: None,
             denoise: None,
+            deep: None,
         }
     }
 }
@@ -1074,6 +1152,9 @@ fn check_render(render: &RenderSettings, path: &Path) -> Result<()> {
         .map_err(|e| Error::invalid(path, e.to_string()).field("render.passes"))?;
     if let Some(a) = &render.adaptive {
         a.check().map_err(|(key, m)| Error::invalid(path, m).field(key))?;
+    }
+    if let Some(d) = &render.deep {
+        d.check().map_err(|(key, m)| Error::invalid(path, m).field(key))?;
     }
     Ok(())
 }
