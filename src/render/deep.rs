@@ -107,7 +107,8 @@ impl DeepImage {
     /// Whether every pixel's samples are sorted by depth and no two overlap
     /// (OpenEXR's "tidy" state); else they are only sorted.
     pub fn is_tidy(&self) -> bool {
-        self.pixels().all(|p| p.windows(2).all(|w| w[0].z_back < w[1].z || (w[0].z_back == w[1].z && w[0].z == w[0].z_back)))
+        self.pixels()
+            .all(|p| p.windows(2).all(|w| w[0].z_back < w[1].z || (w[0].z_back == w[1].z && w[0].z == w[0].z_back)))
     }
 
     /// The image flattened front to back with "over": premultiplied RGBA
@@ -118,8 +119,8 @@ impl DeepImage {
                 let mut out = [0.0f32; 4];
                 for s in p {
                     let t = 1.0 - out[3];
-                    for c in 0..4 {
-                        out[c] += t * s.rgba[c];
+                    for (o, v) in out.iter_mut().zip(s.rgba) {
+                        *o += t * v;
                     }
                 }
                 out
@@ -163,9 +164,8 @@ impl DeepPixel {
         let key = instance.unwrap_or(SKY);
         let z = if key == SKY { f32::INFINITY } else { z };
         let tol = settings.tolerance;
-        let fits = |e: &Gathered| {
-            e.key == key && (key == SKY || (z >= e.near - tol * e.near && z <= e.far + tol * e.far))
-        };
+        let fits =
+            |e: &Gathered| e.key == key && (key == SKY || (z >= e.near - tol * e.near && z <= e.far + tol * e.far));
         let at = match self.entries.iter().position(fits) {
             Some(i) => i,
             None if self.entries.len() < settings.max_samples as usize => {

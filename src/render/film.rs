@@ -256,6 +256,9 @@ struct Pixel {
     deep: u32,
 }
 
+/// One tile's pixels, pass values, ray counts and deep samples.
+type TileResult = (Vec<Pixel>, Vec<[f32; 3]>, RayCounts, Vec<DeepSample>);
+
 /// What a render gathers deep samples with: the settings, and the names
 /// whose Cryptomatte ids the samples carry.
 #[derive(Clone, Copy)]
@@ -475,7 +478,7 @@ pub fn render_frame_deep(
             (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE))).collect();
         let done = AtomicUsize::new(0);
         let start = Instant::now();
-        let rendered: Vec<(Vec<Pixel>, Vec<[f32; 3]>, RayCounts, Vec<DeepSample>)> = tiles
+        let rendered: Vec<TileResult> = tiles
             .par_iter()
             .map(|&(x0, y0)| {
                 let mut counts = RayCounts::default();
@@ -494,10 +497,8 @@ pub fn render_frame_deep(
                             split: &mut split,
                             values,
                         });
-                        let d = match deep {
-                            Some(request) => Some(DeepOut { request, pixel: &mut deep_pixel, samples: &mut deep_samples }),
-                            None => None,
-                        };
+                        let d =
+                            deep.map(|request| DeepOut { request, pixel: &mut deep_pixel, samples: &mut deep_samples });
                         pixels.push(render_pixel(&integrator, (x, y), count, crypto, &mut counts, &mut batch, out, d));
                     }
                 }
@@ -574,12 +575,7 @@ fn empty_film(w: u32, h: u32, blurred: bool, adaptive: bool) -> Film {
 
 /// The deep image of a frame from its tiles' pixels and samples (tile
 /// order) in row-major order.
-fn deep_image(
-    w: u32,
-    h: u32,
-    tiles: &[(u32, u32)],
-    rendered: &[(Vec<Pixel>, Vec<[f32; 3]>, RayCounts, Vec<DeepSample>)],
-) -> DeepImage {
+fn deep_image(w: u32, h: u32, tiles: &[(u32, u32)], rendered: &[TileResult]) -> DeepImage {
     let mut counts = vec![0u32; w as usize * h as usize];
     for (&(x0, y0), (pixels, ..)) in tiles.iter().zip(rendered) {
         let tw = (x0 + TILE).min(w) - x0;

@@ -18,8 +18,8 @@ use crate::layers::Manifest;
 use crate::output::{layer_path, WriterLock, FULL_LAYER};
 use crate::render::colour::{self, Colourspace};
 use crate::render::cryptomatte::{CryptoNames, NameTables};
-use crate::render::denoise::Denoiser;
 use crate::render::deep::DeepImage;
+use crate::render::denoise::Denoiser;
 use crate::render::film::{render_frame_deep, DeepRequest};
 use crate::render::{exr, BlasSet, Film, RenderSettings, Tracing};
 use crate::scene::passes::PassSet;
@@ -964,7 +964,8 @@ pub fn run<C: Space>(
                 first_of_frame = false;
             }
             blas.prepare(crowd.library(), scene.instances.iter().map(|i| i.mesh));
-            let names = (job.cryptomatte != CryptoOutput::Off || job.deep.is_some()).then(|| crypto_names(crowd, &scene));
+            let names =
+                (job.cryptomatte != CryptoOutput::Off || job.deep.is_some()).then(|| crypto_names(crowd, &scene));
             let deep = job.deep.as_ref().map(|d| DeepRequest { settings: d.settings(), names: names.as_ref() });
             let (film, deep, stats) = render_frame_deep(
                 &blas,

@@ -508,10 +508,16 @@ impl Deep {
     pub fn check(&self) -> std::result::Result<(), (&'static str, String)> {
         use crate::render::deep::MAX_SAMPLES_LIMIT;
         if !(1..=MAX_SAMPLES_LIMIT).contains(&self.max_samples) {
-            return Err(("render.deep.max_samples", format!("must be 1..={MAX_SAMPLES_LIMIT}, got {}", self.max_samples)));
+            return Err((
+                "render.deep.max_samples",
+                format!("must be 1..={MAX_SAMPLES_LIMIT}, got {}", self.max_samples),
+            ));
         }
         if !(self.tolerance.is_finite() && (0.0..=1.0).contains(&self.tolerance)) {
-            return Err(("render.deep.tolerance", format!("must be a number in 0..=1 (relative depth), got {}", self.tolerance)));
+            return Err((
+                "render.deep.tolerance",
+                format!("must be a number in 0..=1 (relative depth), got {}", self.tolerance),
+            ));
         }
         if crate::render::exr::deep::DeepCompression::parse(&self.compression).is_none() {
             return Err((

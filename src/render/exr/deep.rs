@@ -122,7 +122,10 @@ fn header_bytes(path: &Path, deep: &DeepImage, film: &Film, meta: &LayerMeta, c:
     let mut attrs = layer_attributes(path, film, &ids, meta, &options)?;
     let state = if deep.is_tidy() { STATE_TIDY } else { STATE_SORTED };
     // The exr crate types deepImageState as a rational; OpenEXR's is one byte.
-    attrs.other.insert(text("deepImageState"), AttributeValue::Custom { kind: text("deepImageState"), bytes: SmallVec::from_slice(&[state]) });
+    attrs.other.insert(
+        text("deepImageState"),
+        AttributeValue::Custom { kind: text("deepImageState"), bytes: SmallVec::from_slice(&[state]) },
+    );
     attrs.other.insert(text("throng/deepIds"), AttributeValue::Text(text(DEEP_IDS)));
     let channels: SmallVec<[ChannelDescription; 5]> =
         CHANNELS.iter().map(|(n, t)| ChannelDescription::new(text(n), *t, false)).collect();
@@ -308,7 +311,13 @@ pub fn read_deep(path: &Path) -> Result<(DeepImage, DeepHeader)> {
     };
     let block_type = match other("type") {
         Some(AttributeValue::Text(t)) => String::from_utf8_lossy(t.bytes()).into_owned(),
-        _ => if header.deep { "deepscanline".into() } else { String::new() },
+        _ => {
+            if header.deep {
+                "deepscanline".into()
+            } else {
+                String::new()
+            }
+        }
     };
     let mut text_attrs = BTreeMap::new();
     for (k, v) in header.own_attributes.other.iter().chain(header.shared_attributes.other.iter()) {
