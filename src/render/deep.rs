@@ -32,21 +32,12 @@
 use glam::Vec3;
 
 use super::cryptomatte::CryptoNames;
+use crate::shot::Deep;
 
-/// The largest per-pixel sample cap a shot may ask for
-/// (`render.deep.max_samples`): bounds the memory a deep image may take.
-pub const MAX_SAMPLES_LIMIT: u32 = 256;
-/// The default per-pixel cap: a 16-spp render seldom sees more distinct
-/// (object, depth) pairs in one pixel.
-pub const DEFAULT_MAX_SAMPLES: u32 = 16;
-/// The default depth tolerance (relative): camera samples of one object
-/// within 1 % of each other's depth are one deep sample.
-pub const DEFAULT_TOLERANCE: f32 = 0.01;
-
-/// How a render gathers deep samples.
+/// How a render gathers deep samples (the shot's `render.deep`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DeepSettings {
-    /// At most this many deep samples per pixel (1..=[`MAX_SAMPLES_LIMIT`]).
+    /// At most this many deep samples per pixel (1..=[`Deep::MAX_SAMPLES_LIMIT`]).
     pub max_samples: u32,
     /// Relative depth within which one object's camera samples merge.
     pub tolerance: f32,
@@ -54,7 +45,14 @@ pub struct DeepSettings {
 
 impl Default for DeepSettings {
     fn default() -> Self {
-        DeepSettings { max_samples: DEFAULT_MAX_SAMPLES, tolerance: DEFAULT_TOLERANCE }
+        DeepSettings { max_samples: Deep::DEFAULT_MAX_SAMPLES, tolerance: Deep::DEFAULT_TOLERANCE }
+    }
+}
+
+impl DeepSettings {
+    /// The settings of the shot's `render.deep` (checked when the shot was read).
+    pub fn of(deep: &Deep) -> DeepSettings {
+        DeepSettings { max_samples: deep.max_samples, tolerance: deep.tolerance }
     }
 }
 

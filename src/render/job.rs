@@ -18,7 +18,7 @@ use crate::layers::Manifest;
 use crate::output::{layer_path, WriterLock, FULL_LAYER};
 use crate::render::colour::{self, Colourspace};
 use crate::render::cryptomatte::{CryptoNames, NameTables};
-use crate::render::deep::DeepImage;
+use crate::render::deep::{DeepImage, DeepSettings};
 use crate::render::denoise::Denoiser;
 use crate::render::film::{render_frame_deep, DeepRequest};
 use crate::render::{exr, BlasSet, Film, RenderSettings, Tracing};
@@ -860,7 +860,7 @@ fn write_layer_file<C: Space>(
             let path = deep_layer_path(at.path);
             let mut deep_meta = meta.clone();
             deep_meta.denoiser = String::new();
-            exr::deep::write_deep(&path, &image, &film, &deep_meta, how.file_compression())?;
+            exr::deep::write_deep(&path, &image, &film, &deep_meta, exr::deep::DeepCompression::of(how))?;
             let file_bytes = std::fs::metadata(&path).map_or(0, |m| m.len());
             let (samples, max_samples_per_pixel) = (image.samples.len() as u64, image.max_samples());
             let pixels = u64::from(image.width) * u64::from(image.height);
@@ -966,7 +966,7 @@ pub fn run<C: Space>(
             blas.prepare(crowd.library(), scene.instances.iter().map(|i| i.mesh));
             let names =
                 (job.cryptomatte != CryptoOutput::Off || job.deep.is_some()).then(|| crypto_names(crowd, &scene));
-            let deep = job.deep.as_ref().map(|d| DeepRequest { settings: d.settings(), names: names.as_ref() });
+            let deep = job.deep.as_ref().map(|d| DeepRequest { settings: DeepSettings::of(d), names: names.as_ref() });
             let (film, deep, stats) = render_frame_deep(
                 &blas,
                 crowd.library(),

@@ -482,15 +482,15 @@ pub struct Deep {
 }
 
 fn default_deep_max_samples() -> u32 {
-    crate::render::deep::DEFAULT_MAX_SAMPLES
+    Deep::DEFAULT_MAX_SAMPLES
 }
 
 fn default_deep_tolerance() -> f32 {
-    crate::render::deep::DEFAULT_TOLERANCE
+    Deep::DEFAULT_TOLERANCE
 }
 
 fn default_deep_compression() -> String {
-    crate::render::exr::deep::DeepCompression::NAMES[0].to_string()
+    Deep::COMPRESSIONS[0].to_string()
 }
 
 impl Default for Deep {
@@ -504,9 +504,22 @@ impl Default for Deep {
 }
 
 impl Deep {
+    /// The largest per-pixel cap a shot may ask for: bounds the memory a
+    /// deep image may take.
+    pub const MAX_SAMPLES_LIMIT: u32 = 256;
+    /// The default per-pixel cap: a 16-spp render seldom sees more distinct
+    /// (object, depth) pairs in one pixel.
+    pub const DEFAULT_MAX_SAMPLES: u32 = 16;
+    /// The default depth tolerance (relative): one object's camera samples
+    /// within 1 % of each other's depth are one deep sample.
+    pub const DEFAULT_TOLERANCE: f32 = 0.01;
+    /// The compressions deep files may have (OpenEXR allows NONE, RLE and
+    /// ZIPS for deep data; throng writes these two), the default first.
+    pub const COMPRESSIONS: [&'static str; 2] = ["zips", "none"];
+
     /// Checks the keys, naming the one that is wrong (`render.deep.<key>`).
     pub fn check(&self) -> std::result::Result<(), (&'static str, String)> {
-        use crate::render::deep::MAX_SAMPLES_LIMIT;
+        const MAX_SAMPLES_LIMIT: u32 = Deep::MAX_SAMPLES_LIMIT;
         if !(1..=MAX_SAMPLES_LIMIT).contains(&self.max_samples) {
             return Err((
                 "render.deep.max_samples",
@@ -519,27 +532,17 @@ impl Deep {
                 format!("must be a number in 0..=1 (relative depth), got {}", self.tolerance),
             ));
         }
-        if crate::render::exr::deep::DeepCompression::parse(&self.compression).is_none() {
+        if !Deep::COMPRESSIONS.contains(&self.compression.as_str()) {
             return Err((
                 "render.deep.compression",
                 format!(
                     "`{}` is not a compression deep files allow here; use one of: {}",
                     self.compression,
-                    crate::render::exr::deep::DeepCompression::NAMES.join(", ")
+                    Deep::COMPRESSIONS.join(", ")
                 ),
             ));
         }
         Ok(())
-    }
-
-    /// The gathering settings.
-    pub fn settings(&self) -> crate::render::deep::DeepSettings {
-        crate::render::deep::DeepSettings { max_samples: self.max_samples, tolerance: self.tolerance }
-    }
-
-    /// The file compression (checked: the default if unknown).
-    pub fn file_compression(&self) -> crate::render::exr::deep::DeepCompression {
-        crate::render::exr::deep::DeepCompression::parse(&self.compression).unwrap_or_default()
     }
 }
 

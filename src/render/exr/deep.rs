@@ -57,8 +57,11 @@ pub enum DeepCompression {
 }
 
 impl DeepCompression {
-    /// Every choice's name, as the shot and the command line spell them.
-    pub const NAMES: [&'static str; 2] = ["zips", "none"];
+    /// The compression of the shot's `render.deep` (checked when the shot
+    /// was read: [`crate::shot::Deep::COMPRESSIONS`]).
+    pub fn of(deep: &crate::shot::Deep) -> DeepCompression {
+        DeepCompression::parse(&deep.compression).unwrap_or_default()
+    }
 
     /// The compression named `name`.
     pub fn parse(name: &str) -> Option<DeepCompression> {
