@@ -234,6 +234,7 @@ fn separate(
             pass_bytes: Vec::new(),
             file_bytes: 0,
             denoise_s: 0.0,
+            deep: None,
         });
     }
     Ok(done)

@@ -81,6 +81,7 @@ fn render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path) {
         adaptive: None,
         tracing: Default::default(),
         denoise: None,
+        deep: None,
     };
     job::run(crowd, Some(manifest), &job, &job::Silent).unwrap();
 }

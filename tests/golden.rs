@@ -125,6 +125,7 @@ fn render_with_shutter(
         adaptive: None,
         tracing: Default::default(),
         denoise: None,
+        deep: None,
     };
     let done = job::run(crowd, Some(manifest), &job, &job::Silent).expect("demo renders").layers;
     done.into_iter().map(|r| (r.layer, r.path)).collect()

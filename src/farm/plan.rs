@@ -223,7 +223,8 @@ pub(crate) fn build_plan(
     let resolution = opts.resolution.unwrap_or(shot.render.resolution);
     // Tasks pass no --shutter: they blur as the shot says, as the manifest's estimate assumed.
     let blurred = render_shutter(crowd).is_some();
-    let channels = memory::FilmChannels { blurred, passes: memory::pass_count(crowd)? };
+    let channels =
+        memory::FilmChannels { blurred, passes: memory::pass_count(crowd)?, deep: shot.render.deep.is_some() };
     let shot_file = std::fs::canonicalize(&shot.path).at(&shot.path)?;
     let render_dir = out.join("render");
     let log_dir = out.join("logs");

@@ -58,6 +58,16 @@ pub const MOTION_PIXEL_BYTES: u64 = 30;
 /// its three channels being encoded.
 pub const PASS_PIXEL_BYTES: u64 = 32;
 
+/// Extra bytes per pixel with deep output (render::deep): a pixel's count
+/// and start (12), and [`DEEP_SAMPLES_PER_PIXEL`] deep samples of 32 bytes
+/// held twice (the tiles' and the assembled image's).
+pub const DEEP_PIXEL_BYTES: u64 = 12 + DEEP_SAMPLES_PER_PIXEL * 64;
+/// Deep samples a pixel holds on average, rounded up from the demo's
+/// layers (docs/benchmarks.md, "Deep output"). A pixel may hold up to
+/// `render.deep.max_samples`; a layer whose pixels average more than this
+/// needs more than the estimate.
+pub const DEEP_SAMPLES_PER_PIXEL: u64 = 2;
+
 /// What every layer render of a shot holds whatever its agents, as counts;
 /// [`RenderFloor::bytes`] prices them.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -88,6 +98,8 @@ pub struct RenderFloor {
     pub blurred: bool,
     /// Three-channel passes per pixel (the shot's `render.passes`, [`pass_count`]).
     pub passes: u64,
+    /// Deep output (the shot's `render.deep`).
+    pub deep: bool,
 }
 
 impl RenderFloor {
@@ -107,7 +119,7 @@ impl RenderFloor {
 
     /// What the film holds per pixel.
     pub fn film(&self) -> FilmChannels {
-        FilmChannels { blurred: self.blurred, passes: self.passes }
+        FilmChannels { blurred: self.blurred, passes: self.passes, deep: self.deep }
     }
 
     /// The floor of `crowd` rendered with `shutter` (`None`: still frames)
@@ -161,6 +173,7 @@ impl RenderFloor {
             pixels,
             blurred: shutter.is_some(),
             passes: pass_count(crowd)?,
+            deep: crowd.shot().render.deep.is_some(),
         })
     }
 }
@@ -289,6 +302,8 @@ pub struct FilmChannels {
     pub blurred: bool,
     /// Three-channel passes.
     pub passes: u64,
+    /// Deep output (render::deep): the deep samples and their counts.
+    pub deep: bool,
 }
 
 /// BLAS bytes of `triangles` still and `deform_triangles` deforming triangles.
@@ -308,7 +323,8 @@ pub fn instance_bytes(instances: u64, blurred: bool) -> u64 {
 /// Bytes of the film of `pixels` pixels holding `channels`.
 pub fn film_bytes(pixels: u64, channels: FilmChannels) -> u64 {
     let motion = if channels.blurred { MOTION_PIXEL_BYTES } else { 0 };
-    let each = PIXEL_BYTES + motion + channels.passes.saturating_mul(PASS_PIXEL_BYTES);
+    let deep = if channels.deep { DEEP_PIXEL_BYTES } else { 0 };
+    let each = PIXEL_BYTES + motion + deep + channels.passes.saturating_mul(PASS_PIXEL_BYTES);
     pixels.saturating_mul(each)
 }
 
@@ -336,6 +352,7 @@ mod tests {
             pixels: 64,
             blurred: false,
             passes: 0,
+            deep: false,
         };
         let want = PROCESS_BYTES
             + 10 * AGENT_LOADED_BYTES
@@ -353,6 +370,8 @@ mod tests {
         assert_eq!(at_pixels(f.bytes(), 64, 6400, f.film()), big.bytes());
         assert_eq!(at_pixels(big.bytes(), 6400, 64, f.film()), f.bytes());
         // Each pass is three more channels on every pixel.
+        let deep = RenderFloor { deep: true, ..f };
+        assert_eq!(deep.bytes() - f.bytes(), 64 * DEEP_PIXEL_BYTES);
         let passes = RenderFloor { passes: 9, ..f };
         assert_eq!(passes.bytes() - f.bytes(), 64 * 9 * PASS_PIXEL_BYTES);
         assert_eq!(at_pixels(passes.bytes(), 64, 6400, passes.film()), RenderFloor { pixels: 6400, ..passes }.bytes());

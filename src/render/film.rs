@@ -45,6 +45,7 @@ use rayon::prelude::*;
 
 use super::accel::{BlasSet, Tlas};
 use super::cryptomatte::{CryptoNames, Cryptomatte, RankAccumulator, MATTES, RANKS};
+use super::deep::{DeepImage, DeepPixel, DeepSample, DeepSettings};
 use super::integrator::{CameraBatch, Integrator, RayCounts, SampleResult, Tally};
 use super::wide::PACKET;
 use super::RenderSettings;
@@ -255,6 +256,28 @@ struct Pixel {
     /// Ranked (id, coverage) of the agent, part and material mattes (when
     /// enabled), in [`MATTES`] order.
     crypto: [[[f32; 2]; RANKS]; 3],
+    /// Deep samples written (render::deep; 0 without deep output).
+    deep: u32,
+}
+
+/// One tile's pixels, pass values, ray counts and deep samples.
+type TileResult = (Vec<Pixel>, Vec<[f32; 3]>, RayCounts, Vec<DeepSample>);
+
+/// What a render gathers deep samples with: the settings, and the names
+/// whose Cryptomatte ids the samples carry.
+#[derive(Clone, Copy)]
+pub struct DeepRequest<'a, 'n> {
+    /// Cap and depth tolerance.
+    pub settings: DeepSettings,
+    /// Names of the scene's instances (`None`: ids 0).
+    pub names: Option<&'a CryptoNames<'n>>,
+}
+
+/// Where a pixel's deep samples go: the pixel being gathered and its tile's samples.
+struct DeepOut<'p, 'a, 'n> {
+    request: &'p DeepRequest<'a, 'n>,
+    pixel: &'p mut DeepPixel,
+    samples: &'p mut Vec<DeepSample>,
 }
 
 /// Where a pixel's passes go: the scratch split of one sample and the
@@ -265,6 +288,7 @@ struct PassOut<'p> {
     values: &'p mut [[f32; 3]],
 }
 
+#[allow(clippy::too_many_arguments, reason = "each output buffer is the caller's, reused from pixel to pixel")]
 fn render_pixel(
     integrator: &Integrator,
     (x, y): (u32, u32),
@@ -273,8 +297,12 @@ fn render_pixel(
     counts: &mut RayCounts,
     batch: &mut CameraBatch,
     mut passes: Option<PassOut>,
+    mut deep: Option<DeepOut<'_, '_, '_>>,
 ) -> Pixel {
     batch.clear();
+    if let Some(d) = &mut deep {
+        d.pixel.clear();
+    }
     let packets = integrator.camera_packets();
     let (mut rgb, mut alpha, mut normal, mut albedo) = (Vec3::ZERO, 0.0f32, Vec3::ZERO, Vec3::ZERO);
     let mut nearest = (f32::INFINITY, SampleResult { z: f32::INFINITY, ..Default::default() });
@@ -314,6 +342,9 @@ fn render_pixel(
             for (a, id) in acc.iter_mut().zip(ids) {
                 a.add(id);
             }
+        }
+        if let Some(d) = &mut deep {
+            d.pixel.add(&d.request.settings, r.rgb, r.alpha, r.z, r.instance);
         }
         rgb += r.rgb;
         alpha += r.alpha;
@@ -371,6 +402,7 @@ fn render_pixel(
         motion: nearest.1.motion.to_array(),
         samples: spp,
         crypto: ranked,
+        deep: deep.map_or(0, |d| d.pixel.finish(spp, d.request.names, d.samples)),
     }
 }
 
@@ -416,6 +448,20 @@ pub fn render_frame_with_cryptomatte(
     crypto: Option<&CryptoNames>,
     progress: Option<&(dyn Fn(usize) + Sync)>,
 ) -> Result<(Film, RenderStats)> {
+    render_frame_deep(blas, lib, scene, settings, crypto, None, progress).map(|(film, _, stats)| (film, stats))
+}
+
+/// As [`render_frame_with_cryptomatte`], also gathering the deep image
+/// (render::deep) when `deep` asks for it.
+pub fn render_frame_deep(
+    blas: &BlasSet,
+    lib: &Library,
+    scene: &FrameScene,
+    settings: &RenderSettings,
+    crypto: Option<&CryptoNames>,
+    deep: Option<&DeepRequest<'_, '_>>,
+    progress: Option<&(dyn Fn(usize) + Sync)>,
+) -> Result<(Film, Option<DeepImage>, RenderStats)> {
     check(blas, lib, scene, settings)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(settings.threads)
@@ -436,7 +482,7 @@ pub fn render_frame_with_cryptomatte(
             (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE))).collect();
         let done = AtomicUsize::new(0);
         let start = Instant::now();
-        let rendered: Vec<(Vec<Pixel>, Vec<[f32; 3]>, RayCounts)> = tiles
+        let rendered: Vec<TileResult> = tiles
             .par_iter()
             .map(|&(x0, y0)| {
                 let mut counts = RayCounts::default();
@@ -447,6 +493,7 @@ pub fn render_frame_with_cryptomatte(
                 let mut split = Split::new(if settings.passes.light_groups { group_count } else { 0 });
                 let mut chunks = values.chunks_mut(triples.max(1));
                 let mut batch = CameraBatch::default();
+                let (mut deep_pixel, mut deep_samples) = (DeepPixel::default(), Vec::new());
                 for y in y0..y1 {
                     for x in x0..x1 {
                         let out = chunks.next().filter(|_| triples > 0).map(|values| PassOut {
@@ -454,24 +501,20 @@ pub fn render_frame_with_cryptomatte(
                             split: &mut split,
                             values,
                         });
-                        pixels.push(render_pixel(&integrator, (x, y), count, crypto, &mut counts, &mut batch, out));
+                        let d =
+                            deep.map(|request| DeepOut { request, pixel: &mut deep_pixel, samples: &mut deep_samples });
+                        pixels.push(render_pixel(&integrator, (x, y), count, crypto, &mut counts, &mut batch, out, d));
                     }
                 }
                 if let Some(report) = progress {
                     report(done.fetch_add(pixels.len(), Ordering::Relaxed) + pixels.len());
                 }
-                (pixels, values, counts)
+                (pixels, values, counts, deep_samples)
             })
             .collect();
         stats.trace = start.elapsed();
 
-        let mut film = Film::new(w, h);
-        if scene.motion.is_some() {
-            film.motion = vec![[0.0; 2]; film.rgba.len()];
-        }
-        if count.threshold.is_some() {
-            film.samples = vec![0; film.rgba.len()];
-        }
+        let mut film = empty_film(w, h, scene.motion.is_some(), count.threshold.is_some());
         let mut mattes = match crypto {
             Some(_) => MATTES.iter().map(|name| Cryptomatte::new(name, w, h, RANKS)).collect(),
             None => Vec::new(),
@@ -481,7 +524,7 @@ pub fn render_frame_with_cryptomatte(
             .into_iter()
             .map(|(name, channels)| Pass { name, channels, data: vec![[0.0; 3]; film.rgba.len()] })
             .collect();
-        for (&(x0, y0), (pixels, values, counts)) in tiles.iter().zip(&rendered) {
+        for (&(x0, y0), (pixels, values, counts, _)) in tiles.iter().zip(&rendered) {
             stats.rays += *counts;
             let tw = (x0 + TILE).min(w) - x0;
             for (k, px) in values.chunks(triples.max(1)).enumerate().filter(|_| triples > 0) {
@@ -516,8 +559,52 @@ pub fn render_frame_with_cryptomatte(
         }
         mattes.sort_by(|a, b| a.name.cmp(&b.name));
         film.cryptomatte = mattes;
-        Ok((film, stats))
+        let deep = deep.map(|_| deep_image(w, h, &tiles, &rendered));
+        Ok((film, deep, stats))
     })
+}
+
+/// A black film with the buffers a render fills: motion vectors when
+/// `blurred`, sample counts when `adaptive`.
+fn empty_film(w: u32, h: u32, blurred: bool, adaptive: bool) -> Film {
+    let mut film = Film::new(w, h);
+    if blurred {
+        film.motion = vec![[0.0; 2]; film.rgba.len()];
+    }
+    if adaptive {
+        film.samples = vec![0; film.rgba.len()];
+    }
+    film
+}
+
+/// The deep image of a frame from its tiles' pixels and samples (tile
+/// order) in row-major order.
+fn deep_image(w: u32, h: u32, tiles: &[(u32, u32)], rendered: &[TileResult]) -> DeepImage {
+    let mut counts = vec![0u32; w as usize * h as usize];
+    for (&(x0, y0), (pixels, ..)) in tiles.iter().zip(rendered) {
+        let tw = (x0 + TILE).min(w) - x0;
+        for (k, px) in pixels.iter().enumerate() {
+            counts[(y0 + k as u32 / tw) as usize * w as usize + (x0 + k as u32 % tw) as usize] = px.deep;
+        }
+    }
+    let mut starts = Vec::with_capacity(counts.len());
+    let mut total = 0usize;
+    for &n in &counts {
+        starts.push(total);
+        total += n as usize;
+    }
+    let mut samples = vec![DeepSample::default(); total];
+    for (&(x0, y0), (pixels, _, _, tile_samples)) in tiles.iter().zip(rendered) {
+        let tw = (x0 + TILE).min(w) - x0;
+        let mut at = 0;
+        for (k, px) in pixels.iter().enumerate() {
+            let i = (y0 + k as u32 / tw) as usize * w as usize + (x0 + k as u32 % tw) as usize;
+            let n = px.deep as usize;
+            samples[starts[i]..starts[i] + n].copy_from_slice(&tile_samples[at..at + n]);
+            at += n;
+        }
+    }
+    DeepImage { width: w, height: h, counts, samples }
 }
 
 /// Rejects settings and scenes the renderer cannot trace, naming the culprit.

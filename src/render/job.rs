@@ -18,8 +18,10 @@ use crate::layers::Manifest;
 use crate::output::{layer_path, WriterLock, FULL_LAYER};
 use crate::render::colour::{self, Colourspace};
 use crate::render::cryptomatte::{CryptoNames, NameTables};
+use crate::render::deep::{DeepImage, DeepSettings};
 use crate::render::denoise::Denoiser;
-use crate::render::{exr, film::render_frame_with_cryptomatte, BlasSet, Film, RenderSettings, Tracing};
+use crate::render::film::{render_frame_deep, DeepRequest};
+use crate::render::{exr, BlasSet, Film, RenderSettings, Tracing};
 use crate::scene::passes::PassSet;
 use crate::scene::{vis, Camera, Deform, FrameScene, Instance, InstanceMotion, SceneMotion, Space};
 
@@ -69,6 +71,10 @@ pub struct RenderJob {
     /// (render::denoise); `None`: not denoised. `throng render` takes the
     /// shot's `render.denoise` unless told otherwise.
     pub denoise: Option<crate::shot::Denoise>,
+    /// Also write every layer-frame as a deep OpenEXR beside the flat one
+    /// (`deep_layer_path`; render::deep); `None`: flat files only.
+    /// `throng render` takes the shot's `render.deep` unless told otherwise.
+    pub deep: Option<crate::shot::Deep>,
 }
 
 impl RenderJob {
@@ -102,6 +108,7 @@ impl RenderJob {
             adaptive: None,
             tracing: Tracing::default(),
             denoise: None,
+            deep: None,
         }
     }
 }
@@ -116,6 +123,9 @@ impl RenderJob {
                 let exr_path = layer_path(&self.out, shot, layer, frame);
                 if self.png {
                     out.push(exr_path.with_extension("png"));
+                }
+                if self.deep.is_some() {
+                    out.push(deep_layer_path(&exr_path));
                 }
                 if self.cryptomatte == CryptoOutput::Sidecar {
                     let dir = exr_path.parent().map(std::path::Path::to_path_buf).unwrap_or_default();
@@ -233,6 +243,30 @@ pub struct RenderedLayer {
     pub file_bytes: u64,
     /// Seconds denoising, included in `seconds` (0 when not denoised or skipped).
     pub denoise_s: f64,
+    /// The deep file written (`None`: no deep output, or skipped), its bytes
+    /// and its deep samples.
+    pub deep: Option<DeepWritten>,
+}
+
+/// What a layer-frame's deep file holds.
+#[derive(Debug, Clone)]
+pub struct DeepWritten {
+    /// The deep EXR.
+    pub path: PathBuf,
+    /// Its bytes.
+    pub file_bytes: u64,
+    /// Deep samples in it.
+    pub samples: u64,
+    /// The most samples one pixel holds.
+    pub max_samples_per_pixel: u32,
+    /// Pixels of the image.
+    pub pixels: u64,
+}
+
+/// The deep file beside the flat layer file `flat`
+/// (`<shot>.<layer>.<frame:04>.deep.exr`).
+pub fn deep_layer_path(flat: &Path) -> PathBuf {
+    flat.with_extension("deep.exr")
 }
 
 impl RenderedLayer {
@@ -250,6 +284,7 @@ impl RenderedLayer {
             pass_bytes: Vec::new(),
             file_bytes: 0,
             denoise_s: 0.0,
+            deep: None,
         }
     }
 }
@@ -490,6 +525,9 @@ pub fn render_fingerprint<C>(
     // fingerprint it had before denoising existed.
     if let Some(d) = job.denoise {
         f.text("denoise", d.name());
+    }
+    if let Some(d) = &job.deep {
+        f.debug("deep", d);
     }
     f.value("manifest", &manifest).text("throng", env!("CARGO_PKG_VERSION"));
     f.hex()
@@ -849,16 +887,18 @@ struct Written {
     pass_bytes: Vec<(String, u64)>,
     file_bytes: u64,
     denoise_s: f64,
+    deep: Option<DeepWritten>,
 }
 
 /// Denoises `film` when the job asks (render::denoise), then writes its
-/// EXR and, when asked, its PNG preview.
+/// EXR, its deep EXR when given `deep` (never denoised: its samples are
+/// the camera's) and, when asked, its PNG preview.
 fn write_layer_file<C: Space>(
     crowd: &ShotCrowd<C>,
     job: &RenderJob,
     denoiser: Option<&Denoiser>,
     at: LayerFile<'_>,
-    mut film: Film,
+    (mut film, deep): (Film, Option<DeepImage>),
     camera: &Camera,
 ) -> Result<Written> {
     let started = Instant::now();
@@ -874,12 +914,25 @@ fn write_layer_file<C: Space>(
         CryptoOutput::Sidecar => exr::ManifestMode::Sidecar,
         _ => exr::ManifestMode::Header,
     };
+    let deep = match (deep, &job.deep) {
+        (Some(image), Some(how)) => {
+            let path = deep_layer_path(at.path);
+            let mut deep_meta = meta.clone();
+            deep_meta.denoiser = String::new();
+            exr::deep::write_deep(&path, &image, &film, &deep_meta, exr::deep::DeepCompression::of(how))?;
+            let file_bytes = std::fs::metadata(&path).map_or(0, |m| m.len());
+            let (samples, max_samples_per_pixel) = (image.samples.len() as u64, image.max_samples());
+            let pixels = u64::from(image.width) * u64::from(image.height);
+            Some(DeepWritten { path, file_bytes, samples, max_samples_per_pixel, pixels })
+        }
+        _ => None,
+    };
     exr::write_layer_with(at.path, &film, &meta, &exr::WriteOptions { manifest, compression: job.compression })?;
     if job.png {
         exr::write_preview_png_from(&at.path.with_extension("png"), &film, job.colourspace)?;
     }
     let file_bytes = std::fs::metadata(at.path).map_or(0, |m| m.len());
-    Ok(Written { pass_bytes: exr::pass_bytes(&film), file_bytes, denoise_s })
+    Ok(Written { pass_bytes: exr::pass_bytes(&film), file_bytes, denoise_s, deep })
 }
 
 /// Renders every (frame, layer) of the job, reporting to `observer`. The
@@ -902,6 +955,7 @@ pub fn run<C: Space>(
     let channels = crate::layers::memory::FilmChannels {
         blurred: job.shutter.is_some(),
         passes: crate::layers::memory::pass_count_of(crowd, &passes)?,
+        deep: job.deep.is_some(),
     };
     check_film_fits(w, h, channels)?;
     // Opened before anything is written: a missing library stops the job here.
@@ -926,7 +980,9 @@ pub fn run<C: Space>(
         for layer in &job.layers {
             let path = layer_path(&job.out, &crowd.shot().name, layer, frame);
             let fingerprint = fingerprints.get(layer.as_str()).cloned().unwrap_or_default();
-            if complete.contains(&(frame, layer.clone())) {
+            // A deep render is complete only with its deep file beside the flat one.
+            let deep_done = || job.deep.is_none() || exr::deep::read_deep(&deep_layer_path(&path)).is_ok();
+            if complete.contains(&(frame, layer.clone())) && deep_done() {
                 out.push(RenderedLayer::skipped(layer, frame, path));
                 observer.layer_finished(RenderProgress { frame, layer, done: out.len() - 1, total }, true);
                 continue;
@@ -970,17 +1026,20 @@ pub fn run<C: Space>(
                 first_of_frame = false;
             }
             blas.prepare(crowd.library(), scene.instances.iter().map(|i| i.mesh));
-            let names = (job.cryptomatte != CryptoOutput::Off).then(|| crypto_names(crowd, &scene));
-            let (film, stats) = render_frame_with_cryptomatte(
+            let names =
+                (job.cryptomatte != CryptoOutput::Off || job.deep.is_some()).then(|| crypto_names(crowd, &scene));
+            let deep = job.deep.as_ref().map(|d| DeepRequest { settings: DeepSettings::of(d), names: names.as_ref() });
+            let (film, deep, stats) = render_frame_deep(
                 &blas,
                 crowd.library(),
                 &scene,
                 &settings,
-                names.as_ref(),
+                names.as_ref().filter(|_| job.cryptomatte != CryptoOutput::Off),
+                deep.as_ref(),
                 if observer.wants_pixels() { Some(&report) } else { None },
             )?;
             let at_file = LayerFile { layer, frame, path: &path, fingerprint };
-            let written = write_layer_file(crowd, job, denoiser.as_ref(), at_file, film, &scene.camera)?;
+            let written = write_layer_file(crowd, job, denoiser.as_ref(), at_file, (film, deep), &scene.camera)?;
             out.push(RenderedLayer {
                 layer: layer.clone(),
                 frame,
@@ -993,6 +1052,7 @@ pub fn run<C: Space>(
                 pass_bytes: written.pass_bytes,
                 file_bytes: written.file_bytes,
                 denoise_s: written.denoise_s,
+                deep: written.deep,
             });
             observer.layer_finished(at, false);
         }

@@ -18,6 +18,7 @@ pub mod bsdf;
 pub mod camera;
 pub mod colour;
 pub mod cryptomatte;
+pub mod deep;
 pub mod denoise;
 pub mod dome;
 pub mod exr;

@@ -458,6 +458,92 @@ pub struct RenderSettings {
     /// (docs/render.md, "Denoising").
     #[serde(default)]
     pub denoise: Option<Denoise>,
+    /// Deep output: with a `[render.deep]` table, every layer also as a deep
+    /// scanline OpenEXR (docs/render.md, "Deep output"); `None` (the
+    /// default): flat files only.
+    #[serde(default)]
+    pub deep: Option<Deep>,
+}
+
+/// `[render.deep]`: how deep samples are gathered and stored
+/// (`render::deep`, `render::exr::deep`).
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Deep {
+    /// At most this many deep samples per pixel (1..=256).
+    #[serde(default = "default_deep_max_samples")]
+    pub max_samples: u32,
+    /// Relative depth within which one object's camera samples merge.
+    #[serde(default = "default_deep_tolerance")]
+    pub tolerance: f32,
+    /// `zips` (the default) or `none`: what OpenEXR allows for deep data.
+    #[serde(default = "default_deep_compression")]
+    pub compression: String,
+}
+
+fn default_deep_max_samples() -> u32 {
+    Deep::DEFAULT_MAX_SAMPLES
+}
+
+fn default_deep_tolerance() -> f32 {
+    Deep::DEFAULT_TOLERANCE
+}
+
+fn default_deep_compression() -> String {
+    Deep::COMPRESSIONS[0].to_string()
+}
+
+impl Default for Deep {
+    fn default() -> Self {
+        Deep {
+            max_samples: default_deep_max_samples(),
+            tolerance: default_deep_tolerance(),
+            compression: default_deep_compression(),
+        }
+    }
+}
+
+impl Deep {
+    /// The largest per-pixel cap a shot may ask for: bounds the memory a
+    /// deep image may take.
+    pub const MAX_SAMPLES_LIMIT: u32 = 256;
+    /// The default per-pixel cap: a 16-spp render seldom sees more distinct
+    /// (object, depth) pairs in one pixel.
+    pub const DEFAULT_MAX_SAMPLES: u32 = 16;
+    /// The default depth tolerance (relative): one object's camera samples
+    /// within 1 % of each other's depth are one deep sample.
+    pub const DEFAULT_TOLERANCE: f32 = 0.01;
+    /// The compressions deep files may have (OpenEXR allows NONE, RLE and
+    /// ZIPS for deep data; throng writes these two), the default first.
+    pub const COMPRESSIONS: [&'static str; 2] = ["zips", "none"];
+
+    /// Checks the keys, naming the one that is wrong (`render.deep.<key>`).
+    pub fn check(&self) -> std::result::Result<(), (&'static str, String)> {
+        const MAX_SAMPLES_LIMIT: u32 = Deep::MAX_SAMPLES_LIMIT;
+        if !(1..=MAX_SAMPLES_LIMIT).contains(&self.max_samples) {
+            return Err((
+                "render.deep.max_samples",
+                format!("must be 1..={MAX_SAMPLES_LIMIT}, got {}", self.max_samples),
+            ));
+        }
+        if !(self.tolerance.is_finite() && (0.0..=1.0).contains(&self.tolerance)) {
+            return Err((
+                "render.deep.tolerance",
+                format!("must be a number in 0..=1 (relative depth), got {}", self.tolerance),
+            ));
+        }
+        if !Deep::COMPRESSIONS.contains(&self.compression.as_str()) {
+            return Err((
+                "render.deep.compression",
+                format!(
+                    "`{}` is not a compression deep files allow here; use one of: {}",
+                    self.compression,
+                    Deep::COMPRESSIONS.join(", ")
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// `render.denoise`: Open Image Denoise's quality preset: `high` for
@@ -543,6 +629,7 @@ impl Default for RenderSettings {
             passes: Vec::new(),
             adaptive: None,
             denoise: None,
+            deep: None,
         }
     }
 }
@@ -1076,6 +1163,9 @@ fn check_render(render: &RenderSettings, path: &Path) -> Result<()> {
         .map_err(|e| Error::invalid(path, e.to_string()).field("render.passes"))?;
     if let Some(a) = &render.adaptive {
         a.check().map_err(|(key, m)| Error::invalid(path, m).field(key))?;
+    }
+    if let Some(d) = &render.deep {
+        d.check().map_err(|(key, m)| Error::invalid(path, m).field(key))?;
     }
     Ok(())
 }

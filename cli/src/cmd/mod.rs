@@ -335,8 +335,38 @@ struct LayerFrameSummary {
     denoise_s: f64,
     /// Bytes of the EXR written.
     file_bytes: u64,
+    /// The deep EXR written beside it (`--deep`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    deep: Option<DeepSummary>,
     /// Each pass written and its channels' bytes before compression.
     passes: Vec<PassSummary>,
+}
+
+/// A layer-frame's deep file in `render --json`.
+#[derive(Debug, serde::Serialize)]
+struct DeepSummary {
+    path: std::path::PathBuf,
+    file_bytes: u64,
+    /// File bytes per million pixels of the image.
+    bytes_per_megapixel: u64,
+    /// Deep samples in the file, and per pixel on average.
+    samples: u64,
+    samples_per_pixel: f64,
+    max_samples_per_pixel: u32,
+}
+
+impl DeepSummary {
+    fn of(w: &throng::render::job::DeepWritten) -> DeepSummary {
+        let pixels = w.pixels.max(1);
+        DeepSummary {
+            path: w.path.clone(),
+            file_bytes: w.file_bytes,
+            bytes_per_megapixel: (w.file_bytes as f64 * 1e6 / pixels as f64).round() as u64,
+            samples: w.samples,
+            samples_per_pixel: w.samples as f64 / pixels as f64,
+            max_samples_per_pixel: w.max_samples_per_pixel,
+        }
+    }
 }
 
 /// One pass of a layer file in `render --json`.

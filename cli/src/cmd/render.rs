@@ -192,6 +192,11 @@ pub struct RenderArgs {
     /// --target .oidn pyoidn==2.5.1.0` in the checkout, or THRONG_OIDN=<its lib folder>.
     #[arg(long, value_enum, num_args = 0..=1, default_missing_value = "high", value_name = "QUALITY")]
     pub denoise: Option<DenoiseFlag>,
+    /// Also write every layer-frame as a deep scanline OpenEXR beside the flat one,
+    /// `<shot>.<layer>.<frame>.deep.exr` (deep samples per object and depth; default: the shot's
+    /// `[render.deep]`, whose keys set the per-pixel cap, depth tolerance and compression).
+    #[arg(long)]
+    pub deep: bool,
 }
 
 /// `throng render SHOT ...`: renders the asked layers and frames.
@@ -249,6 +254,11 @@ pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
         shutter,
         colourspace,
         denoise: args.denoise.map_or(crowd.shot().render.denoise, DenoiseFlag::preset),
+        deep: match (args.deep, &crowd.shot().render.deep) {
+            (_, Some(d)) => Some(d.clone()),
+            (true, None) => Some(throng::shot::Deep::default()),
+            (false, None) => None,
+        },
         ..RenderJob::new(layers, frames, spp, args.out.clone())
     };
     // No output over an input: the shot's files and the manifest.
@@ -265,7 +275,9 @@ pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
     progress.finish();
     let done = report?.layers;
     if args.json {
-        let written = done.iter().filter(|d| !d.skipped).map(|d| d.path.clone()).collect();
+        let written = (done.iter().filter(|d| !d.skipped))
+            .flat_map(|d| std::iter::once(d.path.clone()).chain(d.deep.as_ref().map(|w| w.path.clone())))
+            .collect();
         let instances = done.iter().map(|d| d.instances as u64).sum();
         let mut summary = super::Summary::new("render", clock, instances, written);
         summary.files_skipped = done.iter().filter(|d| d.skipped).map(|d| d.path.clone()).collect();
@@ -281,6 +293,7 @@ pub fn run(args: &RenderArgs, threads: Option<usize>) -> Result<()> {
                     tlas_build_s: d.tlas_build_s,
                     denoise_s: d.denoise_s,
                     file_bytes: d.file_bytes,
+                    deep: d.deep.as_ref().map(super::DeepSummary::of),
                     passes: d
                         .pass_bytes
                         .iter()

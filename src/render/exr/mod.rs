@@ -30,6 +30,7 @@ use crate::error::{write_atomic, Error, Result};
 use crate::exr_guard::exr_error;
 use crate::scene::Camera;
 
+pub mod deep;
 pub mod mattes;
 
 /// The channel holding each pixel's sample count (adaptive sampling only).
@@ -215,7 +216,7 @@ pub(crate) fn sidecar_name(exr_path: &Path, type_name: &str) -> String {
 /// Unicode shot or agent name round-trips (the exr crate's `Text::from`
 /// would panic on it, and `new_or_none` keeps Latin-1 only). Read back with
 /// `lossy`.
-fn text(s: &str) -> Text {
+pub(crate) fn text(s: &str) -> Text {
     Text::from_slice_unchecked(s.as_bytes())
 }
 
@@ -289,9 +290,17 @@ fn film_channels(path: &Path, film: &Film) -> Result<AnyChannels<FlatSamples>> {
     Ok(AnyChannels::sort(SmallVec::from_vec(list)))
 }
 
-/// The layer's header attributes: the standard ones, throng's own and each
-/// Cryptomatte's (whose manifest `options` may write to a sidecar file).
-fn layer_attributes(path: &Path, film: &Film, meta: &LayerMeta, options: &WriteOptions) -> Result<LayerAttributes> {
+/// The layer's header attributes: the standard ones, throng's own and those
+/// of each Cryptomatte of `film` whose type name passes `matte` (whose
+/// manifest `options` may write to a sidecar file). The deep file
+/// ([`deep`]) writes the same.
+fn layer_attributes(
+    path: &Path,
+    film: &Film,
+    matte: &dyn Fn(&str) -> bool,
+    meta: &LayerMeta,
+    options: &WriteOptions,
+) -> Result<LayerAttributes> {
     let mut attrs = LayerAttributes::named(text(&meta.layer));
     attrs.software_name = Some(text(&format!("throng {}", env!("CARGO_PKG_VERSION"))));
     attrs.near_clip_plane = Some(meta.near);
@@ -323,7 +332,7 @@ fn layer_attributes(path: &Path, film: &Film, meta: &LayerMeta, options: &WriteO
     if meta.fps > 0.0 && meta.fps.is_finite() {
         attrs.frames_per_second = Some(fps_rational(meta.fps));
     }
-    for m in &film.cryptomatte {
+    for m in film.cryptomatte.iter().filter(|m| matte(&m.name)) {
         let key = m.key();
         let mut put_utf8 = |field: &str, v: &str| {
             attrs.other.insert(text(&format!("cryptomatte/{key}/{field}")), AttributeValue::Text(text(v)));
@@ -353,7 +362,7 @@ fn layer_attributes(path: &Path, film: &Film, meta: &LayerMeta, options: &WriteO
 pub fn write_layer_with(path: &Path, film: &Film, meta: &LayerMeta, options: &WriteOptions) -> Result<()> {
     let (w, h) = (film.width as usize, film.height as usize);
     let channels = film_channels(path, film)?;
-    let attrs = layer_attributes(path, film, meta, options)?;
+    let attrs = layer_attributes(path, film, &|_| true, meta, options)?;
 
     let encoding = Encoding {
         compression: options.compression.exr(),
