@@ -781,6 +781,12 @@ fn check_job<C: Space>(crowd: &ShotCrowd<C>, manifest: Option<&Manifest>, job: &
     Ok(())
 }
 
+/// A deep render is complete only with its deep file beside the flat one,
+/// readable.
+fn deep_complete(job: &RenderJob, path: &Path) -> bool {
+    job.deep.is_none() || exr::deep::read_deep(&deep_layer_path(path)).is_ok()
+}
+
 /// Whether `path` holds the layer-frame rendered as `fingerprint` says (a
 /// resumed job skips it); a file rendered otherwise is told of through `warn`.
 fn is_rendered(path: &Path, fingerprint: &str, warn: &mut dyn FnMut(String) -> Result<()>) -> Result<bool> {
@@ -980,9 +986,7 @@ pub fn run<C: Space>(
         for layer in &job.layers {
             let path = layer_path(&job.out, &crowd.shot().name, layer, frame);
             let fingerprint = fingerprints.get(layer.as_str()).cloned().unwrap_or_default();
-            // A deep render is complete only with its deep file beside the flat one.
-            let deep_done = || job.deep.is_none() || exr::deep::read_deep(&deep_layer_path(&path)).is_ok();
-            if complete.contains(&(frame, layer.clone())) && deep_done() {
+            if complete.contains(&(frame, layer.clone())) && deep_complete(job, &path) {
                 out.push(RenderedLayer::skipped(layer, frame, path));
                 observer.layer_finished(RenderProgress { frame, layer, done: out.len() - 1, total }, true);
                 continue;
