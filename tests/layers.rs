@@ -588,8 +588,8 @@ fn each_layer_is_charged_its_own_agents() {
 /// Issue 49, item 1: the estimate is never under the measured peak and at
 /// most 1.25x over it, crowd and set layers. Checked against peaks recorded
 /// (not measured here: a 960x540 render per layer is too slow for CI) with
-/// `throng render demo/shot.toml --layer L --frames 1024 --spp 1 --json`,
-/// dev build, 2026-12-06 (docs/benchmarks.md, issue 49).
+/// `throng render demo/shot.toml --layer L --frames 1024 --spp 1 --json`
+/// (when and on what: docs/benchmarks.md, issue 49).
 #[test]
 fn estimates_hold_within_a_quarter_of_recorded_peaks() {
     use throng::casting::ShotCrowd;
