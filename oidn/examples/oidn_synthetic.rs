@@ -1,5 +1,6 @@
 //! Writes the test scene and this crate's denoised result as raw little-endian f32 files, for
-//! tests/pyoidn_compare.py (the check against the official Python binding, run by .ci/run):
+//! tests/pyoidn_compare.py (this crate alone against the official Python binding, run by hand;
+//! CI's check is .ci/denoise_pyoidn.py, on throng's own renders):
 //!
 //! ```text
 //! cargo run -p throng-oidn --example oidn_synthetic -- OUT_DIR [WIDTH HEIGHT]
