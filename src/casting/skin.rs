@@ -206,15 +206,24 @@ impl SkinnedRig {
             }));
         }
         let root = root_node(&file, &animated, rigid, options)?;
+        let mut rig = SkinnedRig { rigid, root, ..SkinnedRig::bare(path, animated, options, fps)? };
+        rig.load_delivered(&file, options)?;
+        rig.stand_on_ground(&file)?;
+        rig.load_cycles(options)?;
+        Ok(rig)
+    }
+
+    /// A rig of `path` with its animation and the shot's options, and
+    /// nothing loaded yet: what both loaders start from.
+    fn bare(path: &Path, animated: Animated, options: &SkinOptions, fps: f32) -> Result<SkinnedRig> {
         let orient = orientation(path, options.up, options.forward)?;
-        let canonical = std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?;
-        let mut rig = SkinnedRig {
+        Ok(SkinnedRig {
             path: path.to_path_buf(),
-            canonical,
-            rigid,
+            canonical: std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?,
+            rigid: false,
             animated,
             rig_from_file: Affine3A::from_scale_rotation_translation(Vec3::splat(options.scale), orient, Vec3::ZERO),
-            root,
+            root: None,
             cycles: Vec::new(),
             own: PartTable::default(),
             slots: Vec::new(),
@@ -229,11 +238,7 @@ impl SkinnedRig {
             clip_warnings: Vec::new(),
             materials: Vec::new(),
             baked: false,
-        };
-        rig.load_delivered(&file, options)?;
-        rig.stand_on_ground(&file)?;
-        rig.load_cycles(options)?;
-        Ok(rig)
+        })
     }
 
     /// Loads the character a UsdSkel crowd's agents share
@@ -243,30 +248,15 @@ impl SkinnedRig {
     /// the ground, so joints stand where the file puts them.
     fn load_usd(path: &Path, options: &SkinOptions, fps: f32) -> Result<SkinnedRig> {
         let c = usdskel_rig::character(path)?;
-        let orient = orientation(path, options.up, options.forward)?;
-        let canonical = std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?;
         let slots = options.slots.clone().unwrap_or_else(|| c.delivered.iter().map(|(s, _, _)| s.clone()).collect());
         let mut rig = SkinnedRig {
-            path: path.to_path_buf(),
-            canonical,
-            rigid: false,
-            animated: c.animated,
-            rig_from_file: Affine3A::from_scale_rotation_translation(Vec3::splat(options.scale), orient, Vec3::ZERO),
-            root: None,
-            cycles: Vec::new(),
             own: c.own,
             slots,
             delivered: c.delivered,
-            height: 0.0,
-            fps,
-            pose_step: options.pose_step,
-            pose_error_max: options.pose_error_max,
-            max_height_scale: options.max_height_scale,
-            bodies: Vec::new(),
             warnings: c.warnings,
-            clip_warnings: Vec::new(),
             materials: c.materials,
             baked: true,
+            ..SkinnedRig::bare(path, c.animated, options, fps)?
         };
         let (lo, hi) = rig.rest_span(0);
         if !(lo.is_finite() && hi > lo) {
