@@ -264,15 +264,26 @@ try:
     )
     wait_for("the agent's matte and the ringed map", lambda: cdp.eval(loaded), 60)
     # The map is drawn at the size it is shown (its text the font's own 7 px
-    # and up), and pictures are shrunk with smooth sampling.
-    shown = cdp.eval(
+    # and up), and pictures are shrunk with smooth sampling. The page asks
+    # again when the shown width changes (a scrollbar appearing), so wait for
+    # the drawn width to settle on the shown one.
+    size = (
         "(() => { const p = document.getElementById('map'), i = document.getElementById('image');"
-        " return [p.naturalWidth, Math.round(p.getBoundingClientRect().width), getComputedStyle(i).imageRendering]; })()"
+        " return [p.naturalWidth, Math.round(p.getBoundingClientRect().width), getComputedStyle(i).imageRendering,"
+        " p.complete && p.src.includes('agent=' + %d)]; })()" % aid
     )
-    # Known defect (issue 49 note): the page asks for the map before a vertical
-    # scrollbar appears, so it can be drawn one scrollbar (up to 24 px) wider.
-    if abs(shown[0] - shown[1]) > 24 or shown[2] == "pixelated":
-        fail(f"the map is {shown[0]} px drawn for {shown[1]} px shown, the image renders {shown[2]}")
+    try:
+        wait_for(
+            "the map to be drawn at the width it is shown",
+            lambda: (lambda s: s[3] and abs(s[0] - s[1]) <= 2)(cdp.eval(size)),
+            30,
+            soft=True,
+        )
+    except TimeoutError:
+        shown = cdp.eval(size)
+        fail(f"the map is {shown[0]} px drawn for {shown[1]} px shown")
+    if cdp.eval(size)[2] == "pixelated":
+        fail("the image renders pixelated")
     # One layer shown: the comp's layer checkboxes are hidden (not only `hidden`).
     cdp.eval(
         "(() => { const l = document.getElementById('layer'); l.value = [...l.options].find(o => o.value !== 'comp').value;"

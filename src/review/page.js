@@ -87,6 +87,7 @@ async function init() {
   });
   $("map").addEventListener("error", () => { $("map").hidden = true; $("map-note").textContent = "No layer map: the shot has no layer manifest (run throng layers)."; });
   loadMap();
+  watchMapWidth();
   loadFigures();
   if (!state.frames.length) {
     status("No renders folder: figures and map only (docs/review.md).");
@@ -263,7 +264,24 @@ function loadMap() {
   // font's own size on screen (7 px and up) instead of a 1600-pixel map
   // shrunk to a third of that.
   const w = Math.round(img.parentElement.clientWidth || 800);
+  img.dataset.askedWidth = w;
   img.src = "/api/map.png?w=" + w + (state.agent !== null ? "&agent=" + state.agent : "");
+}
+
+// The shown width changes after the first request (a scrollbar appears as the
+// panels fill, the window is resized): ask again, once the width settles, so
+// the map stays drawn at the size it is shown.
+let mapResizeTimer = null;
+function watchMapWidth() {
+  const img = $("map");
+  new ResizeObserver(() => {
+    if (img.hidden || !img.dataset.askedWidth) return;
+    clearTimeout(mapResizeTimer);
+    mapResizeTimer = setTimeout(() => {
+      const w = Math.round(img.parentElement.clientWidth || 800);
+      if (Math.abs(w - Number(img.dataset.askedWidth)) > 1) loadMap();
+    }, 150);
+  }).observe(img.parentElement);
 }
 
 function showBotInfo(b, command, where) {
