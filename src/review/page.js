@@ -263,9 +263,17 @@ function loadMap() {
   // Drawn at the width it is shown (CSS pixels), so the map's text is the
   // font's own size on screen (7 px and up) instead of a 1600-pixel map
   // shrunk to a third of that.
-  const w = Math.round(img.parentElement.clientWidth || 800);
+  const w = mapContentWidth(img);
   img.dataset.askedWidth = w;
   img.src = "/api/map.png?w=" + w + (state.agent !== null ? "&agent=" + state.agent : "");
+}
+
+// The width the map is shown at: its panel's content box (clientWidth counts
+// the panel's padding too).
+function mapContentWidth(img) {
+  const panel = img.parentElement, cs = getComputedStyle(panel);
+  const w = panel.clientWidth - parseFloat(cs.paddingLeft) - parseFloat(cs.paddingRight);
+  return Math.round(w > 0 ? w : 800);
 }
 
 // The shown width changes after the first request (a scrollbar appears as the
@@ -278,7 +286,7 @@ function watchMapWidth() {
     if (img.hidden || !img.dataset.askedWidth) return;
     clearTimeout(mapResizeTimer);
     mapResizeTimer = setTimeout(() => {
-      const w = Math.round(img.parentElement.clientWidth || 800);
+      const w = mapContentWidth(img);
       if (Math.abs(w - Number(img.dataset.askedWidth)) > 1) loadMap();
     }, 150);
   }).observe(img.parentElement);
