@@ -263,3 +263,98 @@ fn a_file_without_guides_is_refused_naming_the_channel() {
     assert!(stderr.contains("albedo.R"), "{stderr}");
     assert!(!out.join("plain.exr").exists());
 }
+
+/// A `size` square in the plane z = `z`, facing +Z.
+fn quad_z(size: f32, z: f32) -> throng::scene::Mesh {
+    let h = size / 2.0;
+    throng::scene::Mesh {
+        name: format!("quad_z{z}"),
+        positions: [(-h, -h), (h, -h), (h, h), (-h, h)].map(|(x, y)| glam::Vec3::new(x, y, z)).to_vec(),
+        normals: vec![glam::Vec3::Z; 4],
+        indices: vec![0, 1, 2, 0, 2, 3],
+        ..Default::default()
+    }
+}
+
+#[test]
+fn the_albedo_guide_sees_through_glass_and_in_its_mirror() {
+    use glam::{Affine3A, Vec3};
+    use throng::scene::{
+        lights::SceneLights, vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Sky,
+    };
+    // Looking down -Z, at normal incidence, through a thin glass wall (z = -1)
+    // at a red wall (z = -3); a green wall behind the camera (z = +1) is what
+    // the glass reflects. OIDN's albedo of a delta surface is that of the
+    // first non-delta hit behind it: the red wall for the share the glass
+    // transmits, the green one for the share it reflects.
+    let ior = 1.5f32;
+    let (red, green) = (Vec3::new(0.8, 0.2, 0.1), Vec3::new(0.1, 0.7, 0.2));
+    let matte = |name: &str, c: Vec3| Material { name: name.into(), base_color: c, ..Default::default() };
+    let glass = Material {
+        name: "glass".into(),
+        base_color: Vec3::ONE,
+        roughness: 0.0,
+        transmission: 1.0,
+        ior,
+        ..Default::default()
+    };
+    let lib = Library {
+        meshes: vec![quad_z(10.0, -1.0), quad_z(40.0, -3.0), quad_z(40.0, 1.0)],
+        materials: vec![glass, matte("red", red), matte("green", green)],
+        textures: vec![],
+    };
+    let instance = |mesh: u32| Instance {
+        mesh,
+        material: mesh,
+        world_from_object: Affine3A::IDENTITY,
+        agent: InstanceAgent::NONE,
+        part: 0,
+        visibility: vis::ALL,
+    };
+    let lights = SceneLights {
+        sun: None,
+        sky: Sky { radiance: Vec3::splat(0.5) },
+        dome: None,
+        local: vec![],
+        groups: Default::default(),
+    };
+    let scene = FrameScene {
+        instances: (0..3).map(instance).collect(),
+        camera: Camera::pinhole(Affine3A::IDENTITY, 0.02),
+        lights,
+        motion: None,
+    };
+    let (res, spp) = (16u32, 64u32);
+    let settings = throng::render::RenderSettings {
+        width: res,
+        height: res,
+        spp,
+        max_bounces: 8,
+        seed: 5,
+        frame: 1,
+        layer: 0,
+        sky_visible: true,
+        threads: 0,
+        indirect_clamp: 0.0,
+        diffuse_only: false,
+        passes: Default::default(),
+        adaptive: None,
+        tracing: Default::default(),
+    };
+    let film =
+        throng::render::film::render_frame(&throng::render::accel::BlasSet::build(&lib), &lib, &scene, &settings, None)
+            .expect("render");
+    // A thin wall transmits (1 - R)^2 / (1 - R^2) with every internal
+    // reflection, R = ((n - 1) / (n + 1))^2, and reflects the rest.
+    let r = (((ior - 1.0) / (ior + 1.0)) as f64).powi(2);
+    let t = (1.0 - r).powi(2) / (1.0 - r * r);
+    let n = f64::from(res * res * spp);
+    for c in 0..3 {
+        let got = film.albedo.iter().map(|p| f64::from(p[c])).sum::<f64>() / film.albedo.len() as f64;
+        let want = t * f64::from(red[c]) + (1.0 - t) * f64::from(green[c]);
+        // Each sample's albedo is red or green: a Bernoulli mix.
+        let sigma = f64::from((red[c] - green[c]).abs()) * (t * (1.0 - t) / n).sqrt();
+        assert!((got - want).abs() < 5.0 * sigma + 1e-3, "albedo[{c}]: {got:.4}, want {want:.4} (sigma {sigma:.4})");
+        assert!((got - 1.0).abs() > 0.2, "albedo[{c}] {got:.4} is not the glass's own base colour");
+    }
+}

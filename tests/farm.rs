@@ -525,3 +525,70 @@ fn status_exits_the_same_into_a_closed_pipe() {
         assert!(!err.contains("panicked") && !err.contains("Broken pipe"), "{err}");
     }
 }
+
+/// Memory of each render task of a plan, by task id.
+fn task_memory(plan: &throng::farm::Plan) -> BTreeMap<String, u64> {
+    plan.tasks.iter().filter(|t| t.kind == TaskKind::Render).map(|t| (t.id.clone(), t.memory_bytes)).collect()
+}
+
+fn denoise_args(plan: &throng::farm::Plan) -> Vec<Option<String>> {
+    plan.tasks
+        .iter()
+        .filter(|t| t.kind == TaskKind::Render)
+        .map(|t| t.argv.windows(2).find(|w| w[0] == "--denoise").map(|w| w[1].clone()))
+        .collect()
+}
+
+#[test]
+fn denoising_reaches_every_render_task_from_the_flag_or_the_shot_key() {
+    let tmp = common::tempdir().unwrap();
+    let plain = read_plan(&plan_demo(&demo_shot(), &tmp.path().join("plain"), &[])).unwrap();
+    assert!(denoise_args(&plain).iter().all(Option::is_none), "the demo shot does not denoise");
+    let flagged = read_plan(&plan_demo(&demo_shot(), &tmp.path().join("flag"), &["--denoise", "balanced"])).unwrap();
+    let bare = read_plan(&plan_demo(&demo_shot(), &tmp.path().join("bare"), &["--denoise"])).unwrap();
+    assert!(denoise_args(&flagged).iter().all(|a| a.as_deref() == Some("balanced")));
+    assert!(denoise_args(&bare).iter().all(|a| a.as_deref() == Some("high")), "--denoise alone is high");
+    assert!(flagged
+        .tasks
+        .iter()
+        .filter(|t| t.kind == TaskKind::Comp)
+        .all(|t| !t.argv.iter().any(|a| a == "--denoise")));
+    // The denoiser's memory comes on top of the render's: 96 MiB and 1 KiB a
+    // pixel of the task's 32x18, in whole MiB.
+    let extra = (96u64 << 20) + 1024 * 32 * 18;
+    let (before, after) = (task_memory(&plain), task_memory(&flagged));
+    assert_eq!(before.len(), after.len());
+    for (id, m) in &before {
+        assert_eq!(after[id], m + (extra.div_ceil(1 << 20) << 20), "{id}");
+    }
+    // The shot's key reaches the tasks; the flag overrides it, `off` included.
+    let root = tmp.path().join("copy");
+    let shot = demo_copy(&root);
+    let text = std::fs::read_to_string(&shot).unwrap();
+    assert!(text.contains("\n[render]\n"));
+    std::fs::write(&shot, text.replacen("\n[render]\n", "\n[render]\ndenoise = \"fast\"\n", 1)).unwrap();
+    let keyed = read_plan(&plan_demo(&shot, &tmp.path().join("keyed"), &[])).unwrap();
+    assert!(denoise_args(&keyed).iter().all(|a| a.as_deref() == Some("fast")));
+    assert_eq!(task_memory(&keyed), after, "memory follows denoising, not its preset");
+    let off = read_plan(&plan_demo(&shot, &tmp.path().join("off"), &["--denoise", "off"])).unwrap();
+    assert!(denoise_args(&off).iter().all(|a| a.as_deref() == Some("off")));
+    assert_eq!(task_memory(&off), before);
+    // A planned task runs and denoises as it says, where the library is here.
+    match throng_oidn::Library::find(None) {
+        Ok(_) => {
+            let task = keyed.tasks.iter().find(|t| t.kind == TaskKind::Render).unwrap();
+            ok(&["farm", "run-task", s(&tmp.path().join("keyed/plan.json")), &task.id]);
+            let (_, meta) = throng::render::exr::read_layer(&task.outputs[0]).unwrap();
+            assert!(
+                meta.denoiser.starts_with("Open Image Denoise 2.") && meta.denoiser.ends_with("quality fast"),
+                "{}",
+                meta.denoiser
+            );
+        }
+        Err(e) if std::env::var("THRONG_REQUIRE_OIDN").as_deref() == Ok("1") => panic!("THRONG_REQUIRE_OIDN=1 but {e}"),
+        Err(e) => {
+            use std::io::Write;
+            let _ = writeln!(std::io::stderr(), "SKIPPED running a denoised farm task: {e}");
+        }
+    }
+}

@@ -10,6 +10,7 @@ use crate::casting::ShotCrowd;
 use crate::error::{Error, IoContext, Result};
 use crate::layers::{build_layers, memory, render_shutter, LayerOverrides, Manifest};
 use crate::output::{layer_path, COMP_LAYER};
+use crate::shot::Denoise;
 
 /// What to plan; `Default`-like values come from [`PlanOptions::new`].
 #[derive(Debug, Clone)]
@@ -32,6 +33,9 @@ pub struct PlanOptions {
     pub cores: u32,
     /// Extra attempts of a failed task.
     pub retries: u32,
+    /// Denoising of every render task: `None` follows the shot's
+    /// `render.denoise`; `Some(None)` turns it off, `Some(Some(q))` sets it.
+    pub denoise: Option<Option<Denoise>>,
 }
 
 impl PlanOptions {
@@ -47,6 +51,7 @@ impl PlanOptions {
             resolution: None,
             cores: 1,
             retries: 1,
+            denoise: None,
         }
     }
 }
@@ -55,6 +60,12 @@ impl PlanOptions {
 pub(crate) const MAX_TASKS: usize = 1_000_000;
 /// Most cores a task may ask for.
 pub(crate) const MAX_CORES: u32 = 4096;
+
+/// Open Image Denoise's peak while it filters a layer-frame: its weights
+/// and scratch, and per pixel its images and the network's tensors
+/// (docs/benchmarks.md, "Denoising": peak RSS at two image sizes).
+const DENOISE_BYTES: u64 = 96 << 20;
+const DENOISE_BYTES_PER_PIXEL: u64 = 1024;
 
 /// Bytes per pixel per layer held by a comp (every layer's film at once).
 const COMP_BYTES_PER_PIXEL: u64 = 256;
@@ -221,6 +232,18 @@ pub(crate) fn build_plan(
     }
     let spp = opts.spp.unwrap_or(shot.render.spp).max(1);
     let resolution = opts.resolution.unwrap_or(shot.render.resolution);
+    // Every task says how it denoises, so the plan reads the same whatever
+    // the shot's key; the OIDN filter's memory comes on top of the render's.
+    let denoise = opts.denoise.unwrap_or(shot.render.denoise);
+    let denoise_args: Vec<&str> = match denoise {
+        Some(q) => vec!["--denoise", q.name()],
+        None if shot.render.denoise.is_some() => vec!["--denoise", "off"],
+        None => Vec::new(),
+    };
+    let denoise_bytes = match denoise {
+        Some(_) => DENOISE_BYTES + DENOISE_BYTES_PER_PIXEL * resolution[0] as u64 * resolution[1] as u64,
+        None => 0,
+    };
     // Tasks pass no --shutter: they blur as the shot says, as the manifest's estimate assumed.
     let blurred = render_shutter(crowd).is_some();
     let channels =
@@ -247,7 +270,8 @@ pub(crate) fn build_plan(
                 ["throng", "render", &shot_arg, "--manifest", &manifest_arg, "--layer", layer, "--frames", &list];
             let tail =
                 ["--resolution", &size, "--threads", &cores, "--resume", "--progress", "plain", "--out", &out_arg];
-            let argv: Vec<String> = head.iter().chain(fixed).chain(&tail).map(|a| a.to_string()).collect();
+            let argv: Vec<String> =
+                head.iter().chain(fixed).chain(&denoise_args).chain(&tail).map(|a| a.to_string()).collect();
             for &f in frames {
                 writer.insert((layer.as_str(), f), id.clone());
             }
@@ -261,7 +285,7 @@ pub(crate) fn build_plan(
                 argv,
                 outputs: frames.iter().map(|&f| layer_path(&render_dir, &shot.name, layer, f)).collect(),
                 cores: opts.cores,
-                memory_bytes: render_memory(manifest, layer, resolution, channels)?,
+                memory_bytes: render_memory(manifest, layer, resolution, channels)? + round_mib(denoise_bytes),
                 depends_on: Vec::new(),
             });
         }

@@ -238,6 +238,10 @@ struct PathState<'s> {
     medium: Vec3,
     /// Product of the (n_t / n_i)^2 refraction divided the throughput by (Russian roulette undoes it).
     eta_scale: f32,
+    /// While the camera ray has met only delta surfaces (glass, its mirror
+    /// reflection): their tint so far. OIDN's albedo guide is that of the
+    /// first non-delta hit seen through them, times this.
+    albedo_tint: Option<Vec3>,
     sampler: &'s mut Sampler,
     counts: &'s mut RayCounts,
     split: Option<&'s mut Split>,
@@ -257,6 +261,7 @@ impl<'s> PathState<'s> {
             prev: PrevVertex::CAMERA,
             medium: Vec3::ZERO,
             eta_scale: 1.0,
+            albedo_tint: None,
             sampler,
             counts: tally.counts,
             split: tally.split,
@@ -508,6 +513,9 @@ impl<'a> Integrator<'a> {
         if glass {
             return self.bounce_glass(st, &v);
         }
+        if let Some(tint) = st.albedo_tint.take() {
+            st.out.albedo = tint * v.surface.base_color;
+        }
         let bsdf = if self.settings.diffuse_only {
             Bsdf::lambert(v.surface.base_color)
         } else {
@@ -654,6 +662,14 @@ impl<'a> Integrator<'a> {
         st.eta_scale *= ds.eta_scale;
         if st.depth == 0 {
             st.first_bounce = if ds.transmitted { FirstBounce::Transmission } else { FirstBounce::Mirror };
+            // The glass's own colour is no guide: what it shows is (a path
+            // that ends among delta surfaces guides as a miss does: zero).
+            st.out.albedo = Vec3::ZERO;
+            st.albedo_tint = Some(Vec3::ONE);
+        }
+        if let Some(tint) = &mut st.albedo_tint {
+            // The tint without the refraction's radiance scaling.
+            *tint *= ds.weight * ds.eta_scale;
         }
         if ds.transmitted && !thin {
             st.medium = match (surface.cos_front > 0.0, material.volume) {

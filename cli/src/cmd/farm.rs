@@ -53,6 +53,10 @@ pub struct PlanArgs {
     /// Extra attempts of a failed task, 0-100.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=100))]
     pub retries: u32,
+    /// Every render task denoises with Open Image Denoise at this quality, or `off` (`--denoise`
+    /// alone is `high`; default: the shot's `render.denoise`). Tasks ask for the denoiser's memory.
+    #[arg(long, value_enum, num_args = 0..=1, default_missing_value = "high", value_name = "QUALITY")]
+    pub denoise: Option<super::render::DenoiseFlag>,
     /// Plan directory: plan.json, the manifest, render/, logs/, farm/.
     #[arg(long)]
     pub out: PathBuf,
@@ -149,6 +153,7 @@ fn plan(a: &PlanArgs) -> Result<()> {
         resolution: a.resolution.map(|Resolution(r)| r),
         cores: a.cores,
         retries: a.retries,
+        denoise: a.denoise.map(super::render::DenoiseFlag::preset),
         ..PlanOptions::new(a.shot.clone(), a.out.clone())
     };
     let (path, plan) = farm::write_new_plan(&opts)?;
