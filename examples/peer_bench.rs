@@ -688,6 +688,7 @@ fn main() {
         passes: Default::default(),
         adaptive: args.adaptive,
         tracing,
+        atmosphere: None,
     };
     let mut out = serde_json::json!({
         "tool": "throng peer_bench",
