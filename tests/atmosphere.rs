@@ -162,7 +162,8 @@ fn a_floor_through_absorbing_air_is_lit_and_seen_through_it() {
     let got = mean_red(&render(&lib, &scene, &settings(64, 2, a)));
     // albedo / pi x irradiance x (10 m of air down to the floor) x (4 m back up to the camera).
     let want = 0.5 / std::f64::consts::PI * 2.0 * (-0.1f64 * 10.0).exp() * (-0.1f64 * 4.0).exp();
-    assert!(((got - want) / want).abs() < 1e-3, "{got} vs {want}");
+    // The camera ray's attenuation by distance sampling: a share of paths ends, within noise.
+    assert!(((got - want) / want).abs() < 1e-2, "{got} vs {want}");
     // Haze only attenuates the camera ray alone (bounce and shadow rays see no air).
     let haze = Atmosphere { mode: AtmosphereMode::Haze, ..a };
     let got = mean_red(&render(&lib, &scene, &settings(4, 2, haze)));
@@ -187,4 +188,67 @@ fn hazy_renders_are_bit_identical_for_any_thread_count() {
     let four = render(&lib, &scene, &s(4));
     assert!(one.rgba.iter().any(|p| p[0] > 0.0));
     assert!(one.rgba.iter().zip(&four.rgba).all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)));
+}
+
+/// The floor scene of [`a_floor_through_absorbing_air_is_lit_and_seen_through_it`],
+/// wide, with a point light and a sun.
+fn hazy_floor() -> (Library, FrameScene) {
+    let grey = Material { name: "floor".into(), base_color: Vec3::splat(0.5), ..Default::default() };
+    let lib = Library { meshes: vec![floor()], materials: vec![grey], textures: vec![] };
+    let instance = Instance {
+        mesh: 0,
+        material: 0,
+        world_from_object: Affine3A::IDENTITY,
+        agent: InstanceAgent::NONE,
+        part: 0,
+        visibility: vis::ALL,
+    };
+    let down = Affine3A::from_cols(Vec3::X.into(), (-Vec3::Z).into(), Vec3::Y.into(), (Vec3::Y * 4.0).into());
+    let sun =
+        Sun { direction: Vec3::new(0.2, 1.0, 0.1).normalize(), angular_diameter: 0.02, irradiance: Vec3::splat(2.0) };
+    let mut lamp = point_light(Vec3::new(0.3, 1.5, -0.2), 8.0);
+    lamp.light_group = Some("key".into());
+    let scene = FrameScene {
+        instances: vec![instance],
+        camera: Camera::pinhole(down, 1.0),
+        lights: lights(Some(sun), vec![lamp]),
+        motion: None,
+    };
+    (lib, scene)
+}
+
+#[test]
+fn passes_and_light_groups_add_up_to_the_beauty_in_haze() {
+    let (lib, scene) = hazy_floor();
+    for mode in [AtmosphereMode::Full, AtmosphereMode::Haze] {
+        let a = air(0.15, 0.8, 0.3, 6.0, mode);
+        let s = RenderSettings {
+            width: 16,
+            height: 16,
+            max_bounces: 2,
+            indirect_clamp: 10.0,
+            passes: throng::scene::passes::PassSet::all(),
+            ..settings(8, 2, a)
+        };
+        let film = render(&lib, &scene, &s);
+        let is_path = |n: &str| throng::scene::passes::LightPath::ALL.iter().any(|l| l.name() == n);
+        let paths: Vec<_> = film.passes.iter().filter(|p| is_path(&p.name)).collect();
+        let groups: Vec<_> = film.passes.iter().filter(|p| p.name.starts_with("lg_")).collect();
+        assert!(groups.iter().any(|p| p.name == "lg_key") && groups.iter().any(|p| p.name == "lg_sun"));
+        for i in 0..film.rgba.len() {
+            let beauty = Vec3::from_slice(&film.rgba[i][..3]);
+            for family in [&paths, &groups] {
+                let sum: Vec3 = family.iter().map(|p| Vec3::from(p.data[i])).sum();
+                let size: f32 = family.iter().map(|p| Vec3::from(p.data[i]).abs().max_element()).sum();
+                assert!(
+                    (sum - beauty).abs().max_element() <= 1e-5 * size + 1e-6,
+                    "{mode:?} pixel {i}: {sum} vs {beauty}"
+                );
+            }
+        }
+        let total =
+            |n: &str| film.passes.iter().find(|p| p.name == n).unwrap().data.iter().map(|v| v[0] as f64).sum::<f64>();
+        assert!(total("atmosphere") > 0.0, "{mode:?}: no light in the atmosphere pass");
+        assert!(total("diffuse_direct") > 0.0);
+    }
 }
