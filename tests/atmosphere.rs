@@ -252,3 +252,30 @@ fn passes_and_light_groups_add_up_to_the_beauty_in_haze() {
         assert!(total("diffuse_direct") > 0.0);
     }
 }
+
+#[test]
+fn bad_atmosphere_keys_are_refused_by_name() {
+    let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/stack_shot/shot.toml"));
+    let base = std::fs::read_to_string(path).unwrap();
+    let parse = |table: &str| throng::shot::Shot::parse(&format!("{base}\n[atmosphere]\n{table}\n"), path);
+    let good =
+        parse("density = 0.05\ncolor = [0.9, 0.8, 0.7]\nanisotropy = 0.3\nheight = 10.0\nmode = \"haze\"").unwrap();
+    let air = good.atmosphere.expect("the table is read");
+    assert_eq!((air.density, air.top, air.mode), (0.05, 10.0, AtmosphereMode::Haze));
+    assert_eq!(air.albedo, Vec3::new(0.9, 0.8, 0.7));
+    for (table, key) in [
+        ("density = -0.1", "atmosphere.density"),
+        ("density = nan", "atmosphere.density"),
+        ("density = inf", "atmosphere.density"),
+        ("density = 0.1\nanisotropy = 1.0", "atmosphere.anisotropy"),
+        ("density = 0.1\nanisotropy = -1.5", "atmosphere.anisotropy"),
+        ("density = 0.1\ncolor = [0.5, 1.2, 0.5]", "atmosphere.color"),
+        ("density = 0.1\ncolor = [-0.1, 0.5, 0.5]", "atmosphere.color"),
+        ("density = 0.1\nheight = nan", "atmosphere.height"),
+    ] {
+        let err = parse(table).expect_err(table).to_string();
+        assert!(err.contains(key) && err.contains("shot.toml"), "{table}: {err}");
+    }
+    // An unknown key names itself too.
+    assert!(parse("density = 0.1\nfog = 1").unwrap_err().to_string().contains("fog"));
+}

@@ -162,6 +162,14 @@ pub(crate) struct LightSample {
     pub(crate) source: u32,
 }
 
+impl LightSample {
+    /// A sample of a light at infinity (the sun, the dome) towards `wi`;
+    /// its group and source are the sampler's to fill in.
+    fn at_infinity(wi: Vec3, radiance: Vec3, pdf: f32, delta: bool) -> LightSample {
+        LightSample { wi, distance: f32::INFINITY, radiance, pdf, delta, group: 0, chance: 1.0, source: 0 }
+    }
+}
+
 /// Where a ray meets a sized light (rect, disk, sphere).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct AreaHit {
@@ -688,30 +696,12 @@ impl<'a> LightSampler<'a> {
                 let wi = d.sample(u);
                 let delta = d.pdf == 0.0;
                 let pdf = if delta { pick } else { d.pdf * pick };
-                Some(LightSample {
-                    wi,
-                    distance: f32::INFINITY,
-                    radiance: d.radiance,
-                    pdf,
-                    delta,
-                    group,
-                    chance: 1.0,
-                    source: 0,
-                })
+                Some(LightSample::at_infinity(wi, d.radiance, pdf, delta))
             }
             Source::Dome(part) => {
                 let (dome, _) = self.dome.as_ref()?;
                 let (wi, radiance, pdf) = dome.sample_part(*part, u, lookup)?;
-                Some(LightSample {
-                    wi,
-                    distance: f32::INFINITY,
-                    radiance,
-                    pdf: pdf * pick,
-                    delta: false,
-                    group,
-                    chance: 1.0,
-                    source: 0,
-                })
+                Some(LightSample::at_infinity(wi, radiance, pdf * pick, false))
             }
             Source::Local(light) => sample_local(light, p, u).map(|s| LightSample { pdf: s.pdf * pick, ..s }),
             Source::Triangle(tri) => {

@@ -13,7 +13,7 @@ use toml::Spanned;
 use crate::cache::keys::CacheTable;
 use crate::cache::{TabularOptions, TabularSpec};
 use crate::error::{line_of, Error, IoContext, Result};
-use crate::render::atmosphere::{Atmosphere, AtmosphereMode};
+use crate::scene::atmosphere::{Atmosphere, AtmosphereMode};
 use crate::scene::{Camera, Sky, Sun};
 
 mod lights;
