@@ -10,6 +10,7 @@
 //!          --camera NODE (first node with a perspective camera)  --no-rays  --no-render
 //!          --hdri FILE (.hdr/.exr lat-long; replaces --sky)  --hdri-strength S (1)  --hdri-rotate DEG (0)
 //!          --no-sun (drop the sun)  --sun-angle DEG (the sun's angular diameter, 0: delta)  --sun-direction X Y Z (towards the sun)  --point-lights N (N lamps 4 m over the scene, 2,000 W/sr in all)
+//!          --atmosphere DENSITY ALBEDO G HEIGHT (haze below HEIGHT, mode full: render::atmosphere)
 //!          --adaptive THRESHOLD MIN MAX (adaptive sampling, render.adaptive's keys; replaces --spp)
 //!          --denoise (Open Image Denoise on the render, quality high: `denoise_s`; the EXR then holds
 //!          the denoised beauty as R, G, B and the noisy one as noisy.R/G/B)
@@ -93,6 +94,7 @@ struct Args {
     sun_angle: Option<f32>,
     sun_direction: Option<Vec3>,
     point_lights: usize,
+    atmosphere: Option<throng::render::atmosphere::Atmosphere>,
     adaptive: Option<throng::shot::Adaptive>,
     rays: bool,
     denoise: bool,
@@ -119,6 +121,7 @@ fn parse_args() -> Result<Args, String> {
         sun_angle: None,
         sun_direction: None,
         point_lights: 0,
+        atmosphere: None,
         adaptive: None,
         rays: true,
         denoise: false,
@@ -157,6 +160,17 @@ fn parse_args() -> Result<Args, String> {
                 a.sun_direction = Some(d.try_normalize().ok_or("--sun-direction: a zero vector")?);
             }
             "--point-lights" => a.point_lights = num(&mut it, &arg)?,
+            "--atmosphere" => {
+                let air = throng::render::atmosphere::Atmosphere {
+                    density: num(&mut it, &arg)?,
+                    albedo: Vec3::splat(num(&mut it, &arg)?),
+                    anisotropy: num(&mut it, &arg)?,
+                    top: num(&mut it, &arg)?,
+                    mode: Default::default(),
+                };
+                air.check().map_err(|(key, m)| format!("--atmosphere ({key}): {m}"))?;
+                a.atmosphere = Some(air);
+            }
             "--adaptive" => {
                 let adaptive = throng::shot::Adaptive {
                     threshold: num(&mut it, &arg)?,
@@ -688,6 +702,7 @@ fn main() {
         passes: Default::default(),
         adaptive: args.adaptive,
         tracing,
+        atmosphere: args.atmosphere,
     };
     let mut out = serde_json::json!({
         "tool": "throng peer_bench",

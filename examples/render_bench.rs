@@ -223,6 +223,7 @@ fn main() {
             passes: Default::default(),
             adaptive: None,
             tracing: Default::default(),
+            atmosphere: None,
         };
         let cpu = throng::bench::process_cpu_s();
         let (film, stats) = render_frame_with_stats(&blas, &lib, &scene, &settings, None).expect("render");

@@ -136,6 +136,7 @@ fn settings(diffuse_only: bool, max_bounces: u32) -> RenderSettings {
         passes: Default::default(),
         adaptive: None,
         tracing: Default::default(),
+        atmosphere: None,
     }
 }
 

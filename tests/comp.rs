@@ -506,3 +506,50 @@ fn comp_mattes_match_the_full_render() {
         assert_eq!((&a.name, &a.manifest), (&b.name, &b.manifest));
     }
 }
+
+/// The stack property in haze (docs/compositing.md, "Atmosphere"): the same
+/// shot under air 3 m deep, scattering the low sun and the sky between and
+/// behind the agents; the set and crowd layers stacked match the full
+/// render within noise, in the mean and per block.
+#[test]
+fn hazy_stack_matches_full_render_within_noise() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("comp-haze");
+    let _ = std::fs::remove_dir_all(&dir);
+    let air = throng::render::atmosphere::Atmosphere {
+        density: 0.08,
+        albedo: glam::Vec3::splat(0.9),
+        anisotropy: 0.3,
+        top: 3.0,
+        mode: Default::default(),
+    };
+    let crowd = ShotCrowd::load(Path::new(SHOT)).unwrap().with_shot(|shot| shot.atmosphere = Some(air)).unwrap();
+    let manifest = throng::layers::build_layers(&crowd, &layers_args()).unwrap();
+    render(&crowd, &manifest, &["set", "crowd2", "crowd1", "crowd0", "full"], &dir.join("a"));
+    let seed = crowd.shot().seed;
+    let other = crowd.with_shot(|shot| shot.seed = seed + 1).unwrap();
+    render(&other, &manifest, &["full"], &dir.join("b"));
+    let full_a = read(&dir.join("a"), "full");
+    let full_b = read(&dir.join("b"), "full");
+    let layers = ["set", "crowd2", "crowd1", "crowd0"].map(|l| read(&dir.join("a"), l));
+    let stack = comp::over(&layers.iter().collect::<Vec<_>>()).unwrap();
+    let noise = (&full_a, &full_b);
+    let all: Vec<usize> = (0..full_a.rgba.len()).collect();
+    let (m, se) = diff_stats(&stack, &full_a, noise, &all, lum);
+    let level = all.iter().map(|&i| lum(&full_a.rgba[i])).sum::<f64>() / all.len() as f64;
+    eprintln!("haze: mean lum full {level:.4}, stack - full {m:+.5} (se {se:.5}, {:.2} sigma)", m / se);
+    assert!((m / se).abs() < K_MEAN, "mean differs by {:.2} sigma", m / se);
+    assert!((m / level).abs() < 0.005, "mean differs by {:.3}%", 100.0 * m / level);
+    let crowd_layers = &layers[1..];
+    let is_edge = |i: usize| crowd_layers.iter().any(|l| l.rgba[i][3] > 0.02 && l.rgba[i][3] < 0.98);
+    for (b, px) in blocks(&full_a).iter().enumerate() {
+        let interior: Vec<usize> = px.iter().copied().filter(|&i| !is_edge(i)).collect();
+        if interior.len() >= 16 {
+            let (m, se) = diff_stats(&stack, &full_a, noise, &interior, lum);
+            assert!((m / se).abs() < K_BLOCK, "haze: interior of block {b} differs by {:.2} sigma", m / se);
+        }
+    }
+    // The air is really there: the hazy full render is not the clear one.
+    let clear = read(&renders().a, "full");
+    let clear_level = all.iter().map(|&i| lum(&clear.rgba[i])).sum::<f64>() / all.len() as f64;
+    assert!((level - clear_level).abs() > 0.02 * clear_level, "haze {level} vs clear {clear_level}");
+}

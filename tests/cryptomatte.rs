@@ -276,6 +276,7 @@ fn settings(spp: u32, threads: usize) -> RenderSettings {
         passes: Default::default(),
         adaptive: None,
         tracing: Default::default(),
+        atmosphere: None,
     }
 }
 

@@ -86,6 +86,7 @@ fn settings(spp: u32, threads: usize, max_bounces: u32, diffuse_only: bool) -> R
         passes: Default::default(),
         adaptive: None,
         tracing: Default::default(),
+        atmosphere: None,
     }
 }
 

@@ -89,6 +89,7 @@ fn settings(width: u32, height: u32, spp: u32) -> RenderSettings {
         passes: Default::default(),
         adaptive: None,
         tracing: Default::default(),
+        atmosphere: None,
     }
 }
 

@@ -23,6 +23,7 @@
 //!   /Lights/sun                  DistantLight, normalized: intensity x color is the irradiance
 //!   /Lights/<light>              Sphere (treatAsPoint for point and spot), Rect, Disk or DistantLight
 //!   /Lights/dome or /Lights/sky  DomeLight: the HDRI (copied beside the export) turned by rotateY, or the sky
+//!   /Atmosphere                  Scope with the shot's haze as throng:atmosphere:* attributes (with `[atmosphere]`)
 //! ```
 //!
 //! Every light in UsdLux's units (docs/usd.md, "Lights").
@@ -41,6 +42,7 @@ use super::usd_layer::{identifier, LayerBuilder, PrimId, UsdEncoding};
 use crate::casting::{Lod, ShotCrowd};
 use crate::error::{write_atomic, Error, IoContext, Result};
 use crate::layers::Manifest;
+use crate::render::atmosphere::{Atmosphere, AtmosphereMode};
 use crate::render::cryptomatte::{agent_name, part_name};
 use crate::scene::lights::{Dome, Light, LightKind, SceneLights};
 use crate::scene::passes::LightGroups;
@@ -279,6 +281,9 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     instances += agent_instances;
     write_camera(&mut root, crowd, &times)?;
     write_lights(&mut root, &lights, groups.as_ref(), textures.dome_asset().as_deref());
+    if let Some(air) = crowd.shot().atmosphere.filter(|a| a.is_active()) {
+        write_atmosphere(&mut root, &air);
+    }
 
     // No output over an input: a texture folder or a layer file beside
     // `out` may be a file the shot reads (the shot itself, a texture).
@@ -1280,6 +1285,24 @@ fn write_lights(l: &mut LayerBuilder, lights: &SceneLights, groups: Option<&Ligh
             }
         }
     }
+}
+
+/// The shot's atmosphere as documented attributes on `/World/Atmosphere`
+/// (docs/usd.md, "Atmosphere"): UsdVol has no homogeneous medium without
+/// a field asset, and a renderer's world volume is its own schema.
+fn write_atmosphere(l: &mut LayerBuilder, air: &Atmosphere) {
+    let p = l.def("/World/Atmosphere", "Scope");
+    l.attr(p, "throng:atmosphere:density", "float", Value::Float(air.density));
+    l.attr(p, "throng:atmosphere:albedo", "color3f", Value::Vec3f(vec3(air.albedo)));
+    l.attr(p, "throng:atmosphere:anisotropy", "float", Value::Float(air.anisotropy));
+    if air.top.is_finite() {
+        l.attr(p, "throng:atmosphere:height", "float", Value::Float(air.top));
+    }
+    let mode = match air.mode {
+        AtmosphereMode::Full => "full",
+        AtmosphereMode::Haze => "haze",
+    };
+    l.attr(p, "throng:atmosphere:mode", "token", Value::Token(mode.into()));
 }
 
 #[cfg(test)]

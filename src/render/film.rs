@@ -50,7 +50,7 @@ use super::integrator::{CameraBatch, Integrator, RayCounts, SampleResult, Tally}
 use super::wide::PACKET;
 use super::RenderSettings;
 use crate::error::{Error, Result};
-use crate::scene::passes::{LightGroups, PassSet, Split};
+use crate::scene::passes::{LightGroups, LightPath, PassSet, Split};
 use crate::scene::{FrameScene, Library};
 
 /// Tile edge in pixels: small enough to balance load, large enough to keep a
@@ -308,7 +308,7 @@ fn render_pixel(
     let mut nearest = (f32::INFINITY, SampleResult { z: f32::INFINITY, ..Default::default() });
     let mut acc: [RankAccumulator; 3] = Default::default();
     // Samples summed in index order: the float result is independent of threading.
-    let mut sums = [Vec3::ZERO; 7];
+    let mut sums = [Vec3::ZERO; LightPath::ALL.len()];
     let mut group_sums = vec![Vec3::ZERO; passes.as_ref().map_or(0, |p| p.split.groups.len())];
     let mut shadow = Vec3::ZERO;
     let mut estimate = ErrorEstimate::default();

@@ -13,6 +13,7 @@ use std::ops::ControlFlow;
 use glam::{Vec2, Vec3};
 
 use super::accel::{Hit, Tlas, WorldRay};
+use super::atmosphere::{phase_hg, sample_hg, Atmosphere, AtmosphereMode, Equiangular};
 use super::bsdf::{Bsdf, Dielectric, ShadingFrame};
 use super::camera::{CameraSample, FilmCamera};
 use super::dome::Lookup;
@@ -29,6 +30,13 @@ const RR_START: u32 = 3;
 /// Sampler dimensions used per bounce (light point 2, lobe 1, direction 2,
 /// roulette 1, light pick 1, glass-or-not pick 1).
 const DIMS_PER_BOUNCE: u32 = 8;
+
+/// Where the air's sampler dimensions start (render::atmosphere), far past
+/// the surfaces', so a shot without air draws the numbers it always did:
+/// per vertex, distance 1, equiangular light pick 1 and distance 1.
+const AIR_BASE: u32 = 1 << 20;
+/// Sampler dimensions the air uses per vertex.
+const AIR_DIMS: u32 = 4;
 
 /// What camera rays see: camera-visible instances and holdouts.
 const CAMERA_MASK: u8 = vis::CAMERA | vis::HOLDOUT;
@@ -90,6 +98,8 @@ enum FirstBounce {
     Transmission,
     /// A mirror reflection off glass.
     Mirror,
+    /// Scattered by the air before the first surface (render::atmosphere).
+    Air,
 }
 
 /// Adds contribution `c` of light group `group` to `split`'s passes, as
@@ -113,6 +123,7 @@ fn deposit(split: &mut Split, c: Vec3, first: FirstBounce, direct: bool, group: 
         }
         FirstBounce::Transmission => split.add(c, LightPath::Transmission, group),
         FirstBounce::Mirror => split.add(c, specular, group),
+        FirstBounce::Air => split.add(c, LightPath::Atmosphere, group),
     }
 }
 
@@ -323,6 +334,8 @@ pub(crate) struct Integrator<'a> {
     surfaces: Surfaces<'a>,
     lights: LightSampler<'a>,
     settings: &'a RenderSettings,
+    /// The mean radiance of the dome or sky, for haze only's in-scatter.
+    haze_environment: Vec3,
 }
 
 impl<'a> Integrator<'a> {
@@ -342,6 +355,13 @@ impl<'a> Integrator<'a> {
             surfaces: Surfaces::new(lib, scene),
             lights: LightSampler::new(lib, scene, tlas.bounds(), groups),
             settings,
+            haze_environment: match settings.atmosphere {
+                Some(a) if a.mode == AtmosphereMode::Haze => match &scene.lights.dome {
+                    Some(dome) => super::atmosphere::mean_radiance(dome),
+                    None => scene.lights.sky.radiance,
+                },
+                _ => Vec3::ZERO,
+            },
         }
     }
 
@@ -468,7 +488,24 @@ impl<'a> Integrator<'a> {
         };
         // A sized light (rect, disk, sphere) in front of whatever the ray hits ends the path there.
         let tmax = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
-        if let Some(light) = self.lights.hit_sized(st.origin, st.dir, tmax, camera, st.prev.at) {
+        let lamp = self.lights.hit_sized(st.origin, st.dir, tmax, camera, st.prev.at);
+        if let Some(air) = self.air_on(st, hit.as_ref(), lamp.is_some()) {
+            let end = lamp.as_ref().map_or(tmax, |l| l.t);
+            if let Some(seg) = air.segment(st.origin, st.dir, end) {
+                self.add_equiangular(st, air, seg);
+                st.sampler.set_dimension(AIR_BASE + st.depth * AIR_DIMS);
+                if let Some(t) = air.sample_distance(seg, st.sampler.next_1d()) {
+                    if camera {
+                        self.cover_behind_air(st, hit.as_ref().filter(|_| lamp.is_none()));
+                    }
+                    return self.scatter_in_air(st, air, seg, t);
+                }
+            }
+        }
+        if camera && self.camera_sees(hit.as_ref(), lamp.is_some()) {
+            self.add_haze(st, lamp.as_ref().map_or(tmax, |l| l.t));
+        }
+        if let Some(light) = lamp {
             return ControlFlow::Break(self.add_sized_light(st, &light));
         }
         if st.medium != Vec3::ZERO {
@@ -536,8 +573,10 @@ impl<'a> Integrator<'a> {
             if !self.settings.sky_visible {
                 return Stop::Holdout;
             }
-            st.radiance += light.radiance;
-            st.pass(light.radiance, true, light.group);
+            // The throughput is 1 here but behind haze (x 1.0: the same bits).
+            let c = st.throughput * light.radiance;
+            st.radiance += c;
+            st.pass(c, true, light.group);
             st.out.alpha = 1.0;
         } else {
             if st.medium != Vec3::ZERO {
@@ -561,14 +600,17 @@ impl<'a> Integrator<'a> {
                     Some((l, _)) => l,
                     None => self.scene.lights.sky.radiance,
                 };
+                // The throughput is 1 here but behind haze (x 1.0: the same bits).
+                let environment = st.throughput * environment;
                 st.radiance += environment;
                 if let Some(split) = st.split.as_deref_mut() {
                     split.add(environment, LightPath::Environment, self.lights.environment_group());
                 }
                 if let Some(sun) = self.lights.sun().filter(|s| s.contains(dir)) {
-                    st.radiance += sun.radiance();
+                    let c = st.throughput * sun.radiance();
+                    st.radiance += c;
                     if let Some(split) = st.split.as_deref_mut() {
-                        split.add(sun.radiance(), LightPath::Environment, self.lights.sun_group());
+                        split.add(c, LightPath::Environment, self.lights.sun_group());
                     }
                 }
                 st.out.alpha = 1.0;
@@ -725,7 +767,8 @@ impl<'a> Integrator<'a> {
                     st.counts.shadow += 1;
                     // Light sampling alone (no MIS): the bounce ray
                     // that would find this light is blocked as well.
-                    split.shadow += st.throughput * f * wi_local.z * ls.radiance / ls.pdf;
+                    let air = self.air().map_or(1.0, |a| a.transmittance(surface.p, ls.wi, ls.distance));
+                    split.shadow += st.throughput * f * wi_local.z * ls.radiance * (air / ls.pdf);
                 }
             }
             return;
@@ -737,7 +780,10 @@ impl<'a> Integrator<'a> {
             let weight = power_heuristic(ls.pdf, bsdf.pdf(wo, wi_local));
             f * wi_local.z * ls.radiance * (weight / ls.pdf)
         };
-        let contribution = st.throughput * contribution;
+        let mut contribution = st.throughput * contribution;
+        if let Some(air) = self.air() {
+            contribution *= air.transmittance(surface.p, ls.wi, ls.distance);
+        }
         // Clamped before the group pick's 1 / chance, so the clamp takes
         // what it would with a ray to every group.
         let c = if camera { contribution } else { self.clamp_indirect(contribution * ls.chance) / ls.chance };
@@ -775,6 +821,182 @@ impl<'a> Integrator<'a> {
         st.throughput *= bs.weight;
         st.prev = PrevVertex { bsdf_pdf: bs.pdf, at: (surface.p, surface.ng), delta: false, lookup: dome_lookup(bsdf) };
         st.continue_from(surface.p, surface.ng, wi.normalize())
+    }
+}
+
+impl Integrator<'_> {
+    /// The air every ray scatters in (mode full); `None` for clear air or haze only.
+    fn air(&self) -> Option<&Atmosphere> {
+        self.settings.atmosphere.as_ref().filter(|a| a.mode == AtmosphereMode::Full && a.is_active())
+    }
+
+    /// The air this ray is traced through: after a bounce, all of it; on
+    /// a camera ray, only in front of what the layer's camera sees (its own
+    /// surfaces, or the sky and lamps where it shows them), so each pixel's
+    /// air is in exactly one layer of a stack (docs/compositing.md).
+    fn air_on(&self, st: &PathState<'_>, hit: Option<&Hit>, lamp: bool) -> Option<&Atmosphere> {
+        let air = self.air()?;
+        (st.depth > 0 || self.camera_sees(hit, lamp)).then_some(air)
+    }
+
+    /// Whether a camera ray that meets `hit` (or a lamp in front of it)
+    /// shows something in this layer: its own surface, or the sky and
+    /// lamps where the layer shows them; not a holdout, not an empty background.
+    fn camera_sees(&self, hit: Option<&Hit>, lamp: bool) -> bool {
+        match hit {
+            _ if lamp => self.settings.sky_visible,
+            Some(h) => self.scene.instances[h.instance as usize].visibility & vis::HOLDOUT == 0,
+            None => {
+                self.settings.sky_visible && (self.scene.lights.dome.is_none() || self.lights.dome_camera_visible())
+            }
+        }
+    }
+
+    /// Haze only (render::atmosphere::AtmosphereMode::Haze), on the camera
+    /// ray up to `end`: the sun's and the environment's in-scatter in closed
+    /// form, and the throughput of everything behind cut by the transmittance.
+    fn add_haze(&self, st: &mut PathState<'_>, end: f32) {
+        let Some(air) = self.settings.atmosphere.as_ref().filter(|a| a.mode == AtmosphereMode::Haze) else { return };
+        let Some(seg) = air.segment(st.origin, st.dir, end) else { return };
+        let sun = self.scene.lights.sun.as_ref().map(|s| (s.direction.normalize_or_zero(), s.irradiance));
+        let (sun, environment) = air.haze_in_scatter(st.origin, st.dir, seg, sun, self.haze_environment);
+        st.radiance += sun + environment;
+        if let Some(split) = st.split.as_deref_mut() {
+            split.add(sun, LightPath::Atmosphere, self.lights.sun_group());
+            split.add(environment, LightPath::Atmosphere, self.lights.environment_group());
+        }
+        st.throughput *= air.transmittance(st.origin, st.dir, end);
+    }
+
+    /// A camera ray that scatters in the air covers its pixel as what is
+    /// behind the air would: its coverage and AOVs are that surface's
+    /// (`hit`), or the sky's or lamp's.
+    fn cover_behind_air(&self, st: &mut PathState<'_>, hit: Option<&Hit>) {
+        st.out.alpha = 1.0;
+        let Some(hit) = hit else { return };
+        let point = TrianglePoint { instance: hit.instance, triangle: hit.triangle, u: hit.u, v: hit.v };
+        if let Some(surface) = self.surfaces.evaluate(&point, st.dir, st.time) {
+            // Not a holdout: the air is traced only in front of what the camera sees.
+            let _ = self.record_first_hit(st, hit, &surface);
+        }
+    }
+
+    /// The path scatters at distance `t` along its ray, in the part `seg`
+    /// of it in the air: the light sampled there, then a new direction by
+    /// the phase function. Grey extinction: the event weighs the
+    /// throughput by the albedo alone.
+    fn scatter_in_air(&self, st: &mut PathState<'_>, air: &Atmosphere, seg: (f32, f32), t: f32) -> Step {
+        let p = st.origin + st.dir * t;
+        st.throughput *= air.albedo;
+        if st.depth == 0 {
+            st.first_bounce = FirstBounce::Air;
+        }
+        let base = 2 + st.depth * DIMS_PER_BOUNCE;
+        self.light_in_air(st, air, seg, t, base);
+        if st.depth >= self.settings.max_bounces || st.throughput == Vec3::ZERO {
+            return ControlFlow::Break(Stop::End);
+        }
+        st.sampler.set_dimension(base + 3);
+        let (wi, pdf) = sample_hg(st.dir, air.anisotropy, st.sampler.next_2d());
+        st.prev = PrevVertex { bsdf_pdf: pdf, at: (p, Vec3::ZERO), delta: false, lookup: Lookup::Blocks };
+        st.sampler.set_dimension(base + 5);
+        // A point in the air has no surface to leave: no offset (a zero normal).
+        st.continue_from(p, Vec3::ZERO, wi)
+    }
+
+    /// Next-event estimation at the air point `t` along the ray: one light
+    /// from the distribution every shading point draws from (render::lights,
+    /// with no normal: lit from every side), weighed against the phase
+    /// function's chance of finding it and, for a point or spot light,
+    /// against equiangular sampling's chance of this point
+    /// ([`Integrator::add_equiangular`]).
+    fn light_in_air(&self, st: &mut PathState<'_>, air: &Atmosphere, seg: (f32, f32), t: f32, base: u32) {
+        let p = st.origin + st.dir * t;
+        st.sampler.set_dimension(base + 6);
+        let u_pick = st.sampler.next_1d();
+        st.sampler.set_dimension(base);
+        let u_light = st.sampler.next_2d();
+        let Some(ls) = self.lights.sample_one(p, Vec3::ZERO, u_pick, u_light, Lookup::Blocks) else { return };
+        let phase = phase_hg(st.dir.dot(ls.wi), air.anisotropy);
+        let weight = if ls.delta {
+            // Equiangular sampling's density of this point, for the light it would pick.
+            let other = self.equiangular_pdf(st.origin, st.dir, seg, ls.source, t);
+            if other > 0.0 {
+                power_heuristic(air.distance_pdf(seg, t) * ls.pdf, other)
+            } else {
+                1.0
+            }
+        } else if st.depth >= self.settings.max_bounces {
+            1.0
+        } else {
+            power_heuristic(ls.pdf, phase)
+        };
+        let light = phase * weight / ls.pdf;
+        self.add_air_light(st, air, p, &ls, st.throughput * light);
+    }
+
+    /// Light `ls` at air point `p`, scaled by `scale`, when its shadow ray
+    /// gets through: attenuated by the air on the way, added to the sample
+    /// and its passes.
+    fn add_air_light(&self, st: &mut PathState<'_>, air: &Atmosphere, p: Vec3, ls: &LightSample, scale: Vec3) {
+        st.counts.shadow += 1;
+        let tmax = if ls.distance.is_finite() { ls.distance * (1.0 - 1e-4) } else { f32::INFINITY };
+        let shadow = WorldRay { origin: p, direction: ls.wi, tmax, time: st.time };
+        if self.tlas.occluded(&shadow, vis::SHADOW) {
+            return;
+        }
+        let tr = air.transmittance(p, ls.wi, ls.distance);
+        let contribution = scale * ls.radiance * tr;
+        let camera = st.depth == 0;
+        let c = if camera { contribution } else { self.clamp_indirect(contribution * ls.chance) / ls.chance };
+        if !c.is_finite() || c == Vec3::ZERO {
+            return;
+        }
+        st.radiance += c;
+        if !camera {
+            st.pass(c, false, ls.group);
+        } else if let Some(split) = st.split.as_deref_mut() {
+            split.add(c, LightPath::Atmosphere, ls.group);
+        }
+    }
+
+    /// Equiangular sampling of the ray's part `seg` in the air (before
+    /// distance sampling moves the path on): a point or spot light picked
+    /// by what it can give the segment, a point on the segment with density
+    /// falling as 1 / distance^2 to it, the light's in-scatter there,
+    /// weighed by MIS against distance sampling's chance of the same point
+    /// and light (Kulla and Fajardo 2012). What converges a lamp's cone.
+    fn add_equiangular(&self, st: &mut PathState<'_>, air: &Atmosphere, seg: (f32, f32)) {
+        if !self.lights.has_point_lights() {
+            return;
+        }
+        st.sampler.set_dimension(AIR_BASE + st.depth * AIR_DIMS + 1);
+        let u_pick = st.sampler.next_1d();
+        let u_t = st.sampler.next_1d();
+        let Some((source, pick, centre)) = self.lights.pick_point_light(st.origin, st.dir, seg, u_pick) else {
+            return;
+        };
+        let Some(eq) = Equiangular::new(st.origin, st.dir, centre, seg) else { return };
+        let t = eq.sample(u_t);
+        let pdf = eq.pdf(t) * pick;
+        let p = st.origin + st.dir * t;
+        let Some((_, ls)) = self.lights.point_light(source, p) else { return };
+        // Distance sampling's density of this point, times the pick NEE makes there.
+        let other = air.distance_pdf(seg, t) * self.lights.pick_at(source as usize, (p, Vec3::ZERO));
+        let weight = power_heuristic(pdf, other);
+        let along = air.transmittance(st.origin, st.dir, t);
+        let phase = phase_hg(st.dir.dot(ls.wi), air.anisotropy);
+        let scale = st.throughput * air.scattering() * (along * phase * weight / pdf);
+        let ls = LightSample { chance: 1.0, ..ls };
+        self.add_air_light(st, air, p, &ls, scale);
+    }
+
+    /// The density with which [`Integrator::add_equiangular`] on the ray
+    /// (`origin`, `dir`, part `seg` in the air) picks light `source` and
+    /// distance `t`; 0 for a light it never picks.
+    fn equiangular_pdf(&self, origin: Vec3, dir: Vec3, seg: (f32, f32), source: u32, t: f32) -> f32 {
+        let Some((pick, centre)) = self.lights.point_light_pick(origin, dir, seg, source) else { return 0.0 };
+        Equiangular::new(origin, dir, centre, seg).map_or(0.0, |eq| eq.pdf(t) * pick)
     }
 }
 

@@ -832,6 +832,7 @@ fn layer_settings<C: Space>(
         passes: passes.clone(),
         adaptive: job.adaptive,
         tracing: job.tracing,
+        atmosphere: crowd.shot().atmosphere.filter(|a| a.is_active()),
         ..RenderSettings::default()
     }
 }

@@ -106,7 +106,8 @@ impl LightBounds {
             return 0.0;
         }
         // The receiver's side: one-sided (light arrives from above its horizon).
-        let cos_i = (-wi).dot(n);
+        // A point in the air (n zero) takes light from every side.
+        let cos_i = if n == Vec3::ZERO { 1.0 } else { (-wi).dot(n) };
         let cos_pi = cos_sub_clamped(sin_of(cos_i), cos_i, sin_b, cos_b).max(0.0);
         self.phi * cos_p as f64 * cos_pi as f64 / dist2 as f64
     }

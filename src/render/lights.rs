@@ -157,6 +157,17 @@ pub(crate) struct LightSample {
     pub(crate) group: u16,
     /// The chance its group of [`LightGroup`] was picked (part of `pdf`).
     pub(crate) chance: f32,
+    /// The light's index in the sampler's sources (render::atmosphere's
+    /// equiangular sampling weighs it again at another point).
+    pub(crate) source: u32,
+}
+
+impl LightSample {
+    /// A sample of a light at infinity (the sun, the dome) towards `wi`;
+    /// its group and source are the sampler's to fill in.
+    fn at_infinity(wi: Vec3, radiance: Vec3, pdf: f32, delta: bool) -> LightSample {
+        LightSample { wi, distance: f32::INFINITY, radiance, pdf, delta, group: 0, chance: 1.0, source: 0 }
+    }
 }
 
 /// Where a ray meets a sized light (rect, disk, sphere).
@@ -218,6 +229,18 @@ enum Reach {
     Planar { centre: Vec3, radius: f32, normal: Vec3, two_sided: bool, intensity: f64 },
     /// A sphere light: radiance x its disc's area.
     Sphere { centre: Vec3, radius: f32, intensity: f64 },
+}
+
+/// The cosine between a receiver's normal `n` and unit direction `w`
+/// towards a light; 1 for `n` zero, a point in the air (render::atmosphere),
+/// which light reaches from every side.
+#[inline]
+fn facing(n: Vec3, w: Vec3) -> f32 {
+    if n == Vec3::ZERO {
+        1.0
+    } else {
+        n.dot(w)
+    }
 }
 
 /// cos(max(0, theta - theta_u)) clamped at 0, for cos theta = `cos` and
@@ -322,7 +345,7 @@ impl Reach {
                     return 0.0;
                 }
                 let dist = dist2.sqrt();
-                let cos = d.dot(n) / dist;
+                let cos = if n == Vec3::ZERO { 1.0 } else { d.dot(n) / dist };
                 if !(cos > 0.0) {
                     return 0.0;
                 }
@@ -347,7 +370,7 @@ impl Reach {
                 let sin_u = radius / dist;
                 let cos_u = (1.0 - sin_u * sin_u).max(0.0).sqrt();
                 let emitter = widened(s / dist, sin_u, cos_u);
-                let receiver = widened(d.dot(n) / dist, sin_u, cos_u);
+                let receiver = widened(if n == Vec3::ZERO { 1.0 } else { d.dot(n) / dist }, sin_u, cos_u);
                 intensity * emitter as f64 * receiver as f64 / dist2 as f64
             }
             Reach::Sphere { centre, radius, intensity } => {
@@ -359,7 +382,8 @@ impl Reach {
                 let dist = dist2.sqrt();
                 let sin_u = radius / dist;
                 let cos_u = (1.0 - sin_u * sin_u).max(0.0).sqrt();
-                intensity * widened(d.dot(n) / dist, sin_u, cos_u) as f64 / dist2 as f64
+                let cos = if n == Vec3::ZERO { 1.0 } else { d.dot(n) / dist };
+                intensity * widened(cos, sin_u, cos_u) as f64 / dist2 as f64
             }
         }
     }
@@ -423,6 +447,8 @@ pub(crate) struct LightSampler<'a> {
     /// Each source's light group, and the groups (None: not split).
     group: Vec<u16>,
     light_groups: Option<&'a LightGroups>,
+    /// Source indices of the point and spot lights (equiangular sampling in the air).
+    points: Vec<u32>,
 }
 
 /// Luminance for a light's power: the f32 sum, or, for a huge light whose
@@ -533,8 +559,12 @@ impl<'a> LightSampler<'a> {
         }
         let first_triangle = emissive_triangles(lib, scene, light_groups, &mut sources, &mut power, &mut group);
         let (tables, pmf, slot) = group_tables(lib, &sources, &power);
+        let points = (0..sources.len() as u32)
+            .filter(|&i| matches!(sources[i as usize], Source::Local(l) if is_point(l)))
+            .collect();
         LightSampler {
             lib,
+            points,
             tables,
             pmf,
             slot,
@@ -586,7 +616,8 @@ impl<'a> LightSampler<'a> {
     /// [`EVEN_SHARE`] spread evenly over the groups that can give any; all
     /// zero where none can (below every light's horizon).
     fn chances(&self, p: Vec3, n: Vec3) -> [f64; 3] {
-        let sun = self.suns.iter().map(|&(axis, sin_u, cos_u, e)| e * widened(n.dot(axis), sin_u, cos_u) as f64).sum();
+        let sun =
+            self.suns.iter().map(|&(axis, sin_u, cos_u, e)| e * widened(facing(n, axis), sin_u, cos_u) as f64).sum();
         let bound: [f64; 3] = [sun, self.sky, self.local_bound(p, n)];
         let lit = bound.iter().filter(|&&b| b > 0.0).count();
         let total: f64 = bound.iter().sum();
@@ -665,20 +696,12 @@ impl<'a> LightSampler<'a> {
                 let wi = d.sample(u);
                 let delta = d.pdf == 0.0;
                 let pdf = if delta { pick } else { d.pdf * pick };
-                Some(LightSample { wi, distance: f32::INFINITY, radiance: d.radiance, pdf, delta, group, chance: 1.0 })
+                Some(LightSample::at_infinity(wi, d.radiance, pdf, delta))
             }
             Source::Dome(part) => {
                 let (dome, _) = self.dome.as_ref()?;
                 let (wi, radiance, pdf) = dome.sample_part(*part, u, lookup)?;
-                Some(LightSample {
-                    wi,
-                    distance: f32::INFINITY,
-                    radiance,
-                    pdf: pdf * pick,
-                    delta: false,
-                    group,
-                    chance: 1.0,
-                })
+                Some(LightSample::at_infinity(wi, radiance, pdf * pick, false))
             }
             Source::Local(light) => sample_local(light, p, u).map(|s| LightSample { pdf: s.pdf * pick, ..s }),
             Source::Triangle(tri) => {
@@ -706,6 +729,7 @@ impl<'a> LightSampler<'a> {
                         delta: false,
                         group,
                         chance: 1.0,
+                        source: 0,
                     });
                 }
                 let su = u.x.sqrt();
@@ -731,16 +755,17 @@ impl<'a> LightSampler<'a> {
                     delta: false,
                     group,
                     chance: 1.0,
+                    source: 0,
                 })
             }
         };
-        sample.map(|s| LightSample { group, ..s })
+        sample.map(|s| LightSample { group, source: index as u32, ..s })
     }
 
     /// The probability the pick of a shading point at `from` (its position
     /// and geometric normal, as [`LightSampler::sample_one`] took them)
     /// chooses source `index`: its group's chance times its own in the group.
-    fn pick_at(&self, index: usize, from: (Vec3, Vec3)) -> f32 {
+    pub(crate) fn pick_at(&self, index: usize, from: (Vec3, Vec3)) -> f32 {
         let Some(group) = self.sources.get(index).map(LightGroup::of) else { return 0.0 };
         let chance = self.chances(from.0, from.1)[group as usize] as f32;
         chance * self.pick_in_group(index, from)
@@ -829,6 +854,85 @@ impl<'a> LightSampler<'a> {
     /// The light group of material `m`'s emission.
     pub(crate) fn material_group(&self, m: u32) -> u16 {
         self.light_groups.map_or(0, |g| g.material(m))
+    }
+
+    /// Whether any point or spot light is among the sources (what
+    /// equiangular sampling in the air is for: render::atmosphere).
+    pub(crate) fn has_point_lights(&self) -> bool {
+        !self.points.is_empty()
+    }
+
+    /// Point or spot light `source`'s centre and its weight for a ray's
+    /// part `seg` (ray `origin`, `dir`): its power over its squared
+    /// distance to the nearest point of the part, what its in-scatter
+    /// there peaks at.
+    fn segment_weight(&self, source: u32, origin: Vec3, dir: Vec3, (a, b): (f32, f32)) -> (Vec3, f64) {
+        let Some(Source::Local(light)) = self.sources.get(source as usize) else { return (Vec3::ZERO, 0.0) };
+        let centre = light.position();
+        let foot = (centre - origin).dot(dir).clamp(a, b);
+        let d2 = (origin + dir * foot - centre).length_squared().max(1e-6);
+        (centre, power_luminance(light.emission) / d2 as f64)
+    }
+
+    /// A point or spot light for a ray's part `seg` in the air, picked by
+    /// `u` in proportion to [`LightSampler::segment_weight`]: its source
+    /// index, the chance of the pick and its centre. Linear in the number
+    /// of point and spot lights.
+    pub(crate) fn pick_point_light(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        seg: (f32, f32),
+        u: f32,
+    ) -> Option<(u32, f32, Vec3)> {
+        let total: f64 = self.points.iter().map(|&i| self.segment_weight(i, origin, dir, seg).1).sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return None;
+        }
+        let target = u as f64 * total;
+        let mut sum = 0.0;
+        let mut last = None;
+        for &i in &self.points {
+            let (centre, w) = self.segment_weight(i, origin, dir, seg);
+            if w > 0.0 {
+                sum += w;
+                last = Some((i, (w / total) as f32, centre));
+                if target < sum {
+                    break;
+                }
+            }
+        }
+        last
+    }
+
+    /// The chance [`LightSampler::pick_point_light`] picks `source` for
+    /// the same ray part, with the light's centre; `None` for a light it never picks.
+    pub(crate) fn point_light_pick(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        seg: (f32, f32),
+        source: u32,
+    ) -> Option<(f32, Vec3)> {
+        if !self.points.contains(&source) {
+            return None;
+        }
+        let total: f64 = self.points.iter().map(|&i| self.segment_weight(i, origin, dir, seg).1).sum();
+        let (centre, w) = self.segment_weight(source, origin, dir, seg);
+        (total > 0.0 && total.is_finite() && w > 0.0).then(|| ((w / total) as f32, centre))
+    }
+
+    /// Point or spot light `source` seen from `p`: its centre and the
+    /// sample towards it (the pick's chance not in its pdf); `None` for any
+    /// other light or where it gives `p` nothing.
+    pub(crate) fn point_light(&self, source: u32, p: Vec3) -> Option<(Vec3, LightSample)> {
+        match self.sources.get(source as usize)? {
+            Source::Local(light) if is_point(light) => {
+                let ls = sample_local(light, p, Vec2::ZERO)?;
+                Some((light.position(), LightSample { group: self.group[source as usize], source, ..ls }))
+            }
+            _ => None,
+        }
     }
 
     /// Whether camera rays that miss see the dome.
@@ -1042,7 +1146,13 @@ fn sample_spherical_rect(light: &Light, p: Vec3, u: Vec2, quad: SphericalQuad) -
         delta: false,
         group: 0,
         chance: 1.0,
+        source: 0,
     })
+}
+
+/// A point or spot light: a point with no size, which no ray can hit.
+fn is_point(light: &Light) -> bool {
+    matches!(light.kind, LightKind::Point | LightKind::Spot { .. })
 }
 
 fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
@@ -1064,7 +1174,7 @@ fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
             if radiance == Vec3::ZERO {
                 return None;
             }
-            Some(LightSample { wi, distance, radiance, pdf: 1.0, delta: true, group: 0, chance: 1.0 })
+            Some(LightSample { wi, distance, radiance, pdf: 1.0, delta: true, group: 0, chance: 1.0, source: 0 })
         }
         LightKind::Rect { .. } | LightKind::Disk { .. } => {
             if let LightKind::Rect { size } = light.kind {
@@ -1094,6 +1204,7 @@ fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
                 delta: false,
                 group: 0,
                 chance: 1.0,
+                source: 0,
             })
         }
         LightKind::Sphere { radius } => {
@@ -1125,6 +1236,7 @@ fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
                 delta: false,
                 group: 0,
                 chance: 1.0,
+                source: 0,
             })
         }
         LightKind::Distant { .. } => None,

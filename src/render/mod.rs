@@ -14,6 +14,7 @@
 //! pixel, sample, dimension), so it is bit-identical for any thread count.
 
 pub mod accel;
+pub mod atmosphere;
 pub mod bsdf;
 pub mod camera;
 pub mod colour;
@@ -72,6 +73,8 @@ pub struct RenderSettings {
     pub adaptive: Option<crate::shot::Adaptive>,
     /// How rays are traced (the image is the same bits on every choice).
     pub tracing: Tracing,
+    /// The shot's air (haze, fog), traced as its mode says; `None`: clear.
+    pub atmosphere: Option<atmosphere::Atmosphere>,
 }
 
 /// How rays are traced: choices that change the speed of a render, never
@@ -111,6 +114,7 @@ impl Default for RenderSettings {
             passes: crate::scene::passes::PassSet::default(),
             adaptive: None,
             tracing: Tracing::default(),
+            atmosphere: None,
         }
     }
 }

@@ -4,6 +4,7 @@
 //!
 //! INTERFACE (shared by casting, export and the renderer; keep stable).
 
+pub mod atmosphere;
 pub mod dome;
 pub mod gltf;
 pub mod lights;

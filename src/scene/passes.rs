@@ -15,7 +15,9 @@
 //!   of the BSDF value in its direction, so each pass is unbiased on its
 //!   own; light found by that bounce ray is direct, the rest indirect;
 //! - through glass at the camera vertex (a delta lobe, one event picked
-//!   with its probability): transmission, or specular for its reflection.
+//!   with its probability): transmission, or specular for its reflection;
+//! - scattered by the air on the camera ray (render::atmosphere): atmosphere,
+//!   whatever light it brings, so comp can regrade or remove the haze.
 
 use std::collections::BTreeMap;
 
@@ -42,11 +44,14 @@ pub enum LightPath {
     Emission,
     /// The dome, sky or sun the camera sees behind everything.
     Environment,
+    /// Light the air (render::atmosphere) scatters into the camera ray,
+    /// by every light, direct and indirect.
+    Atmosphere,
 }
 
 impl LightPath {
     /// Every light-path pass, in file order.
-    pub const ALL: [LightPath; 7] = [
+    pub const ALL: [LightPath; 8] = [
         LightPath::DiffuseDirect,
         LightPath::DiffuseIndirect,
         LightPath::SpecularDirect,
@@ -54,6 +59,7 @@ impl LightPath {
         LightPath::Transmission,
         LightPath::Emission,
         LightPath::Environment,
+        LightPath::Atmosphere,
     ];
 
     /// Its name in files and in `render.passes` (Nuke's layer name).
@@ -66,6 +72,7 @@ impl LightPath {
             LightPath::Transmission => "transmission",
             LightPath::Emission => "emission",
             LightPath::Environment => "environment",
+            LightPath::Atmosphere => "atmosphere",
         }
     }
 }
@@ -277,7 +284,7 @@ impl LightGroups {
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Split {
     /// Per [`LightPath`] (all seven, whichever are written).
-    pub(crate) paths: [Vec3; 7],
+    pub(crate) paths: [Vec3; LightPath::ALL.len()],
     /// Per light group.
     pub(crate) groups: Vec<Vec3>,
     /// Direct light at a set surface that the crowd's shadows took away
@@ -290,12 +297,17 @@ pub(crate) struct Split {
 impl Split {
     /// Empty, with room for `groups` light groups.
     pub(crate) fn new(groups: usize) -> Split {
-        Split { paths: [Vec3::ZERO; 7], groups: vec![Vec3::ZERO; groups], shadow: Vec3::ZERO, position: Vec3::ZERO }
+        Split {
+            paths: [Vec3::ZERO; LightPath::ALL.len()],
+            groups: vec![Vec3::ZERO; groups],
+            shadow: Vec3::ZERO,
+            position: Vec3::ZERO,
+        }
     }
 
     /// Back to empty for the next sample.
     pub(crate) fn clear(&mut self) {
-        self.paths = [Vec3::ZERO; 7];
+        self.paths = [Vec3::ZERO; LightPath::ALL.len()];
         self.groups.fill(Vec3::ZERO);
         self.shadow = Vec3::ZERO;
         self.position = Vec3::ZERO;

@@ -13,6 +13,7 @@ use toml::Spanned;
 use crate::cache::keys::CacheTable;
 use crate::cache::{TabularOptions, TabularSpec};
 use crate::error::{line_of, Error, IoContext, Result};
+use crate::scene::atmosphere::{Atmosphere, AtmosphereMode};
 use crate::scene::{Camera, Sky, Sun};
 
 mod lights;
@@ -45,6 +46,8 @@ pub struct Shot {
     pub(crate) camera: CameraSpec,
     /// Sun, sky, dome and local lights.
     pub lights: Lights,
+    /// `[atmosphere]`: haze or fog (render::atmosphere); `None`: clear air.
+    pub atmosphere: Option<Atmosphere>,
     /// How to split agents into layers.
     pub layers: LayerSettings,
     /// Render settings.
@@ -716,10 +719,44 @@ struct ShotFile {
     camera: CameraFile,
     #[serde(default)]
     lights: LightsFile,
+    atmosphere: Option<AtmosphereFile>,
     #[serde(default)]
     layers: LayerSettings,
     #[serde(default)]
     render: RenderSettings,
+}
+
+/// `[atmosphere]` as written (docs/shot.md, "Atmosphere").
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AtmosphereFile {
+    density: f32,
+    #[serde(default = "white")]
+    color: [f32; 3],
+    #[serde(default)]
+    anisotropy: f32,
+    height: Option<f32>,
+    #[serde(default)]
+    mode: AtmosphereMode,
+}
+
+fn white() -> [f32; 3] {
+    [1.0; 3]
+}
+
+impl AtmosphereFile {
+    /// The checked medium; a bad value names its key (`atmosphere.<key>`).
+    fn check(&self, path: &Path) -> Result<Atmosphere> {
+        let a = Atmosphere {
+            density: self.density,
+            albedo: Vec3::from(self.color),
+            anisotropy: self.anisotropy,
+            top: self.height.unwrap_or(f32::INFINITY),
+            mode: self.mode,
+        };
+        a.check().map_err(|(key, m)| Error::invalid(path, m).field(format!("atmosphere.{key}")))?;
+        Ok(a)
+    }
 }
 
 #[derive(Deserialize)]
@@ -1230,6 +1267,7 @@ impl Shot {
         };
         let camera = file.camera.check(&cx)?;
         let lights = file.lights.check(&cx)?;
+        let atmosphere = file.atmosphere.as_ref().map(|a| a.check(path)).transpose()?;
         check_layers(&file.layers, path)?;
         check_render(&file.render, path)?;
         Ok(Shot {
@@ -1243,6 +1281,7 @@ impl Shot {
             set,
             camera,
             lights,
+            atmosphere,
             layers: file.layers,
             render: file.render,
             removed: file.removed,

@@ -1,0 +1,281 @@
+//! The atmosphere (render::atmosphere) in whole renders against closed
+//! forms: a point light's single scattering in an infinite medium (the
+//! integral along the camera ray, by quadrature); the closed-form haze
+//! against the path tracer's own single scattering of a sun; a floor seen
+//! through absorbing air, lit through it; and bit-identical renders for any
+//! thread count.
+
+use glam::{Affine3A, Vec2, Vec3};
+use throng::render::accel::BlasSet;
+use throng::render::atmosphere::{Atmosphere, AtmosphereMode};
+use throng::render::film::{render_frame, Film};
+use throng::render::RenderSettings;
+use throng::scene::lights::{Light, LightKind, SceneLights};
+use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun};
+
+const RES: u32 = 8;
+
+fn air(density: f32, albedo: f32, g: f32, top: f32, mode: AtmosphereMode) -> Atmosphere {
+    Atmosphere { density, albedo: Vec3::splat(albedo), anisotropy: g, top, mode }
+}
+
+fn settings(spp: u32, threads: usize, atmosphere: Atmosphere) -> RenderSettings {
+    RenderSettings {
+        width: RES,
+        height: RES,
+        spp,
+        max_bounces: 0,
+        seed: 3,
+        frame: 1,
+        layer: 0,
+        sky_visible: true,
+        threads,
+        indirect_clamp: 0.0,
+        diffuse_only: true,
+        atmosphere: Some(atmosphere),
+        ..Default::default()
+    }
+}
+
+/// Looking down -Z from `at`, with a field of view so narrow every ray is the centre ray.
+fn narrow_camera(at: Vec3) -> Camera {
+    Camera::pinhole(Affine3A::from_translation(at), 1e-4)
+}
+
+fn lights(sun: Option<Sun>, local: Vec<Light>) -> SceneLights {
+    SceneLights { sun, sky: Sky { radiance: Vec3::ZERO }, dome: None, local, groups: Default::default() }
+}
+
+fn point_light(at: Vec3, intensity: f32) -> Light {
+    Light {
+        name: "lamp".into(),
+        kind: LightKind::Point,
+        world_from_light: Affine3A::from_translation(at),
+        emission: Vec3::splat(intensity),
+        two_sided: false,
+        camera_visible: false,
+        light_group: None,
+    }
+}
+
+fn render(lib: &Library, scene: &FrameScene, s: &RenderSettings) -> Film {
+    render_frame(&BlasSet::build(lib), lib, scene, s, None).expect("render")
+}
+
+fn mean_red(film: &Film) -> f64 {
+    film.rgba.iter().map(|p| p[0] as f64).sum::<f64>() / film.rgba.len() as f64
+}
+
+fn hg(cos: f64, g: f64) -> f64 {
+    (1.0 - g * g) / (4.0 * std::f64::consts::PI * (1.0 + g * g - 2.0 * g * cos).powf(1.5))
+}
+
+/// Single scattering along the ray t -> t (0, 0, -1) of a point light of
+/// intensity `i` at (0, h, -foot), infinite medium: int_0^inf sigma_s
+/// e^(-sigma_t t) p(cos) i e^(-sigma_t r) / r^2 dt, in t = foot + h tan(theta).
+fn point_in_scatter(sigma_t: f64, albedo: f64, g: f64, i: f64, h: f64, foot: f64) -> f64 {
+    let (lo, hi) = ((-foot / h).atan(), std::f64::consts::FRAC_PI_2);
+    let n = 200_000;
+    let step = (hi - lo) / n as f64;
+    (0..n)
+        .map(|k| {
+            let theta = lo + (k as f64 + 0.5) * step;
+            let t = foot + h * theta.tan();
+            let r = h / theta.cos();
+            // Towards the light from the point: (0, h, -(foot - t)) / r; the ray runs along -Z.
+            let cos = (foot - t) / r;
+            sigma_t * albedo * (-sigma_t * (t + r)).exp() * hg(cos, g) * i / h * step
+        })
+        .sum()
+}
+
+#[test]
+fn a_point_lights_single_scattering_is_its_integral() {
+    let lib = Library::default();
+    for g in [0.0f32, 0.6] {
+        let scene = FrameScene {
+            instances: vec![],
+            camera: narrow_camera(Vec3::ZERO),
+            lights: lights(None, vec![point_light(Vec3::new(0.0, 0.5, -2.0), 10.0)]),
+            motion: None,
+        };
+        let a = air(0.3, 0.8, g, f32::INFINITY, AtmosphereMode::Full);
+        let got = mean_red(&render(&lib, &scene, &settings(256, 2, a)));
+        let want = point_in_scatter(0.3, 0.8, g as f64, 10.0, 0.5, 2.0);
+        assert!(((got - want) / want).abs() < 0.01, "g {g}: {got} vs integral {want}");
+    }
+}
+
+#[test]
+fn haze_in_closed_form_is_the_path_tracers_single_scattering_of_the_sun() {
+    let lib = Library::default();
+    let sun =
+        Sun { direction: Vec3::new(0.3, 1.0, 0.2).normalize(), angular_diameter: 0.0, irradiance: Vec3::splat(3.0) };
+    // Looking level and a little down and up, in air 12 m deep over the camera.
+    for (at, tilt) in [(Vec3::new(0.0, 2.0, 0.0), 0.0f32), (Vec3::new(0.0, 2.0, 0.0), 0.2), (Vec3::ZERO, -0.15)] {
+        let camera = Camera::pinhole(Affine3A::from_translation(at) * Affine3A::from_rotation_x(tilt), 1e-4);
+        let scene = FrameScene { instances: vec![], camera, lights: lights(Some(sun), vec![]), motion: None };
+        let full = air(0.05, 0.9, 0.4, 12.0, AtmosphereMode::Full);
+        let haze = Atmosphere { mode: AtmosphereMode::Haze, ..full };
+        let traced = mean_red(&render(&lib, &scene, &settings(1024, 2, full)));
+        let closed = mean_red(&render(&lib, &scene, &settings(1, 2, haze)));
+        assert!(closed > 0.0);
+        assert!(((traced - closed) / closed).abs() < 0.02, "tilt {tilt}: traced {traced} vs closed form {closed}");
+    }
+}
+
+/// A square in the y = 0 plane, front face up.
+fn floor() -> Mesh {
+    let h = 100.0;
+    Mesh {
+        name: "floor".into(),
+        positions: [(-h, -h), (h, -h), (h, h), (-h, h)].map(|(x, z)| Vec3::new(x, 0.0, z)).to_vec(),
+        normals: vec![Vec3::Y; 4],
+        uvs: vec![Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y],
+        tangents: vec![],
+        indices: vec![0, 2, 1, 0, 3, 2],
+    }
+}
+
+#[test]
+fn a_floor_through_absorbing_air_is_lit_and_seen_through_it() {
+    // Straight down from 4 m at a floor lit by a sun overhead, under air 10 m deep that only absorbs.
+    let grey = Material { name: "floor".into(), base_color: Vec3::splat(0.5), ..Default::default() };
+    let lib = Library { meshes: vec![floor()], materials: vec![grey], textures: vec![] };
+    let instance = Instance {
+        mesh: 0,
+        material: 0,
+        world_from_object: Affine3A::IDENTITY,
+        agent: InstanceAgent::NONE,
+        part: 0,
+        visibility: vis::ALL,
+    };
+    let down = Affine3A::from_cols(Vec3::X.into(), (-Vec3::Z).into(), Vec3::Y.into(), (Vec3::Y * 4.0).into());
+    let sun = Sun { direction: Vec3::Y, angular_diameter: 0.0, irradiance: Vec3::splat(2.0) };
+    let scene = FrameScene {
+        instances: vec![instance],
+        camera: Camera::pinhole(down, 1e-4),
+        lights: lights(Some(sun), vec![]),
+        motion: None,
+    };
+    let a = air(0.1, 0.0, 0.0, 10.0, AtmosphereMode::Full);
+    let got = mean_red(&render(&lib, &scene, &settings(64, 2, a)));
+    // albedo / pi x irradiance x (10 m of air down to the floor) x (4 m back up to the camera).
+    let want = 0.5 / std::f64::consts::PI * 2.0 * (-0.1f64 * 10.0).exp() * (-0.1f64 * 4.0).exp();
+    // The camera ray's attenuation by distance sampling: a share of paths ends, within noise.
+    assert!(((got - want) / want).abs() < 1e-2, "{got} vs {want}");
+    // Haze only attenuates the camera ray alone (bounce and shadow rays see no air).
+    let haze = Atmosphere { mode: AtmosphereMode::Haze, ..a };
+    let got = mean_red(&render(&lib, &scene, &settings(4, 2, haze)));
+    let want = 0.5 / std::f64::consts::PI * 2.0 * (-0.1f64 * 4.0).exp();
+    assert!(((got - want) / want).abs() < 1e-3, "haze: {got} vs {want}");
+}
+
+#[test]
+fn hazy_renders_are_bit_identical_for_any_thread_count() {
+    let lib = Library::default();
+    let sun =
+        Sun { direction: Vec3::new(0.3, 1.0, 0.2).normalize(), angular_diameter: 0.02, irradiance: Vec3::splat(3.0) };
+    let scene = FrameScene {
+        instances: vec![],
+        camera: Camera::pinhole(Affine3A::from_translation(Vec3::Y), 1.0),
+        lights: lights(Some(sun), vec![point_light(Vec3::new(0.5, 1.5, -3.0), 5.0)]),
+        motion: None,
+    };
+    let a = air(0.2, 0.8, 0.3, 6.0, AtmosphereMode::Full);
+    let s = |threads| RenderSettings { max_bounces: 3, ..settings(8, threads, a) };
+    let one = render(&lib, &scene, &s(1));
+    let four = render(&lib, &scene, &s(4));
+    assert!(one.rgba.iter().any(|p| p[0] > 0.0));
+    assert!(one.rgba.iter().zip(&four.rgba).all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)));
+}
+
+/// The floor scene of [`a_floor_through_absorbing_air_is_lit_and_seen_through_it`],
+/// wide, with a point light and a sun.
+fn hazy_floor() -> (Library, FrameScene) {
+    let grey = Material { name: "floor".into(), base_color: Vec3::splat(0.5), ..Default::default() };
+    let lib = Library { meshes: vec![floor()], materials: vec![grey], textures: vec![] };
+    let instance = Instance {
+        mesh: 0,
+        material: 0,
+        world_from_object: Affine3A::IDENTITY,
+        agent: InstanceAgent::NONE,
+        part: 0,
+        visibility: vis::ALL,
+    };
+    let down = Affine3A::from_cols(Vec3::X.into(), (-Vec3::Z).into(), Vec3::Y.into(), (Vec3::Y * 4.0).into());
+    let sun =
+        Sun { direction: Vec3::new(0.2, 1.0, 0.1).normalize(), angular_diameter: 0.02, irradiance: Vec3::splat(2.0) };
+    let mut lamp = point_light(Vec3::new(0.3, 1.5, -0.2), 8.0);
+    lamp.light_group = Some("key".into());
+    let scene = FrameScene {
+        instances: vec![instance],
+        camera: Camera::pinhole(down, 1.0),
+        lights: lights(Some(sun), vec![lamp]),
+        motion: None,
+    };
+    (lib, scene)
+}
+
+#[test]
+fn passes_and_light_groups_add_up_to_the_beauty_in_haze() {
+    let (lib, scene) = hazy_floor();
+    for mode in [AtmosphereMode::Full, AtmosphereMode::Haze] {
+        let a = air(0.15, 0.8, 0.3, 6.0, mode);
+        let s = RenderSettings {
+            width: 16,
+            height: 16,
+            max_bounces: 2,
+            indirect_clamp: 10.0,
+            passes: throng::scene::passes::PassSet::all(),
+            ..settings(8, 2, a)
+        };
+        let film = render(&lib, &scene, &s);
+        let is_path = |n: &str| throng::scene::passes::LightPath::ALL.iter().any(|l| l.name() == n);
+        let paths: Vec<_> = film.passes.iter().filter(|p| is_path(&p.name)).collect();
+        let groups: Vec<_> = film.passes.iter().filter(|p| p.name.starts_with("lg_")).collect();
+        assert!(groups.iter().any(|p| p.name == "lg_key") && groups.iter().any(|p| p.name == "lg_sun"));
+        for i in 0..film.rgba.len() {
+            let beauty = Vec3::from_slice(&film.rgba[i][..3]);
+            for family in [&paths, &groups] {
+                let sum: Vec3 = family.iter().map(|p| Vec3::from(p.data[i])).sum();
+                let size: f32 = family.iter().map(|p| Vec3::from(p.data[i]).abs().max_element()).sum();
+                assert!(
+                    (sum - beauty).abs().max_element() <= 1e-5 * size + 1e-6,
+                    "{mode:?} pixel {i}: {sum} vs {beauty}"
+                );
+            }
+        }
+        let total =
+            |n: &str| film.passes.iter().find(|p| p.name == n).unwrap().data.iter().map(|v| v[0] as f64).sum::<f64>();
+        assert!(total("atmosphere") > 0.0, "{mode:?}: no light in the atmosphere pass");
+        assert!(total("diffuse_direct") > 0.0);
+    }
+}
+
+#[test]
+fn bad_atmosphere_keys_are_refused_by_name() {
+    let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/stack_shot/shot.toml"));
+    let base = std::fs::read_to_string(path).unwrap();
+    let parse = |table: &str| throng::shot::Shot::parse(&format!("{base}\n[atmosphere]\n{table}\n"), path);
+    let good =
+        parse("density = 0.05\ncolor = [0.9, 0.8, 0.7]\nanisotropy = 0.3\nheight = 10.0\nmode = \"haze\"").unwrap();
+    let air = good.atmosphere.expect("the table is read");
+    assert_eq!((air.density, air.top, air.mode), (0.05, 10.0, AtmosphereMode::Haze));
+    assert_eq!(air.albedo, Vec3::new(0.9, 0.8, 0.7));
+    for (table, key) in [
+        ("density = -0.1", "atmosphere.density"),
+        ("density = nan", "atmosphere.density"),
+        ("density = inf", "atmosphere.density"),
+        ("density = 0.1\nanisotropy = 1.0", "atmosphere.anisotropy"),
+        ("density = 0.1\nanisotropy = -1.5", "atmosphere.anisotropy"),
+        ("density = 0.1\ncolor = [0.5, 1.2, 0.5]", "atmosphere.color"),
+        ("density = 0.1\ncolor = [-0.1, 0.5, 0.5]", "atmosphere.color"),
+        ("density = 0.1\nheight = nan", "atmosphere.height"),
+    ] {
+        let err = parse(table).expect_err(table).to_string();
+        assert!(err.contains(key) && err.contains("shot.toml"), "{table}: {err}");
+    }
+    // An unknown key names itself too.
+    assert!(parse("density = 0.1\nfog = 1").unwrap_err().to_string().contains("fog"));
+}
