@@ -6,6 +6,7 @@
 
 pub mod dome;
 pub mod gltf;
+pub mod light_gains;
 pub mod lights;
 pub mod passes;
 
