@@ -94,9 +94,9 @@ pub fn apply_to_lights(lights: &mut SceneLights, groups: &LightGroups, factors: 
     if let Some(sun) = &mut lights.sun {
         sun.irradiance = scaled(sun.irradiance, f(groups.sun()));
     }
-    if lights.dome.is_none() {
-        lights.sky.radiance = scaled(lights.sky.radiance, f(groups.environment()));
-    }
+    // With a dome the sky is what a dome without power falls back to:
+    // a dome turned off (gain 0) must not bring the sky back.
+    lights.sky.radiance = scaled(lights.sky.radiance, f(groups.environment()));
     for (i, light) in lights.local.iter_mut().enumerate() {
         light.emission = scaled(light.emission, f(groups.local(i)));
     }
