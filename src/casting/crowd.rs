@@ -32,7 +32,9 @@ use crate::casting::wardrobe::Wardrobes;
 use crate::error::{Error, Result};
 use crate::scene::dome::load_dome;
 use crate::scene::gltf::AssetCache;
+use crate::scene::light_gains;
 use crate::scene::lights::{Dome, Light, LightKind, SceneLights};
+use crate::scene::passes::LightGroups;
 use crate::scene::{vis, Camera, Instance, InstanceAgent, Library, Material, Rec709, Space, Texture};
 use crate::shot::DomeSpec;
 use crate::shot::Shot;
@@ -125,6 +127,9 @@ pub struct ShotCrowd<C = Rec709> {
     lights: LoadedLights,
     /// The wardrobes' part files and textures (`input_files`).
     wardrobe_files: Vec<(String, PathBuf)>,
+    /// Each material's emission as authored, kept once the shot's
+    /// light-group gains scaled it (so another gain starts from it).
+    authored_emission: Option<Vec<Vec3>>,
 }
 
 /// Refuses a name in the shot's lists that names nothing (a typo would
@@ -294,7 +299,7 @@ impl ShotCrowd {
         }
         let poses = PoseLibrary::new(assets, skins, shutter);
         let wardrobe_files = wardrobes.input_files();
-        Ok(ShotCrowd {
+        let crowd = ShotCrowd {
             shot,
             cache,
             rigs,
@@ -307,7 +312,34 @@ impl ShotCrowd {
             gltf_camera,
             lights,
             wardrobe_files,
-        })
+            authored_emission: None,
+        };
+        crowd.with_gains()
+    }
+
+    /// The shot's light-group gains applied to the dome's scale and the
+    /// materials' emission (the other lights take theirs in [`Self::lights`]).
+    /// A crowd whose shot never had gains is left untouched.
+    fn with_gains(mut self) -> Result<ShotCrowd> {
+        if self.shot.lights.gains.is_empty() && self.authored_emission.is_none() {
+            return Ok(self);
+        }
+        let unscaled = self.unscaled_lights();
+        let groups = LightGroups::new(&unscaled, self.library())?;
+        let factors = light_gains::factors(&self.shot.lights.gains, &groups, &self.shot.path)?;
+        if let (Some(dome), Some(spec)) = (&mut self.lights.dome, &self.shot.lights.dome) {
+            let f = factors.get(groups.environment() as usize).copied().unwrap_or(Vec3::ONE);
+            if dome.scale != spec.scale * f {
+                Arc::make_mut(dome).scale = spec.scale * f;
+            }
+        }
+        let authored = match self.authored_emission.take() {
+            Some(a) => a,
+            None => self.library().materials.iter().map(|m| m.emission).collect(),
+        };
+        light_gains::apply_to_materials(self.poses.materials_mut(), &authored, &groups, &factors);
+        self.authored_emission = Some(authored);
+        Ok(self)
     }
 
     /// The same cast shot with `edit` applied to its shot, for what later
@@ -318,7 +350,7 @@ impl ShotCrowd {
     pub fn with_shot(mut self, edit: impl FnOnce(&mut Shot)) -> Result<ShotCrowd> {
         edit(&mut self.shot);
         self.lights.refresh_dome(self.shot.lights.dome.as_ref())?;
-        Ok(self)
+        self.with_gains()
     }
 
     /// The same cast shot with its library's colours converted by `convert`
@@ -340,6 +372,7 @@ impl ShotCrowd {
             gltf_camera,
             lights,
             wardrobe_files,
+            authored_emission,
         } = self;
         let poses = poses.convert(convert);
         ShotCrowd {
@@ -355,6 +388,7 @@ impl ShotCrowd {
             gltf_camera,
             lights,
             wardrobe_files,
+            authored_emission,
         }
     }
 }
@@ -405,9 +439,24 @@ impl<C> ShotCrowd<C> {
         &self.poses
     }
 
-    /// Every light of the shot, as authored (linear Rec.709): the sun, the
+    /// Every light of the shot, as authored (linear Rec.709) x its light
+    /// group's gain (`[lights.gains]`): the sun, the
     /// sky, the dome, the shot's local lights, then the set glTF's.
     pub fn lights(&self) -> SceneLights {
+        let mut lights = self.unscaled_lights();
+        if !self.shot.lights.gains.is_empty() {
+            // Checked when the crowd was made (with_gains): no error here.
+            if let Ok(groups) = LightGroups::new(&lights, self.library()) {
+                if let Ok(f) = light_gains::factors(&self.shot.lights.gains, &groups, &self.shot.path) {
+                    light_gains::apply_to_lights(&mut lights, &groups, &f);
+                }
+            }
+        }
+        lights
+    }
+
+    /// [`Self::lights`] before the shot's light-group gains (the dome has its gain).
+    fn unscaled_lights(&self) -> SceneLights {
         let l = &self.shot.lights;
         let mut local = l.local.clone();
         // The shot's sun is the sun: the set's directional lights light the

@@ -116,6 +116,11 @@ impl PoseLibrary<Rec709> {
         convert(materials, textures);
         PoseLibrary { assets: self.assets, skins: self.skins, shutter: self.shutter, space: PhantomData }
     }
+
+    /// The materials, for the shot's light-group gains on their emission.
+    pub(crate) fn materials_mut(&mut self) -> &mut [Material] {
+        self.assets.colours_mut().0
+    }
 }
 
 impl<C> PoseLibrary<C> {

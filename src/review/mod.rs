@@ -14,6 +14,7 @@
 
 mod figures;
 mod lru;
+mod mixer;
 mod safe;
 mod tone;
 
@@ -130,6 +131,8 @@ struct Plan {
     mattes: bool,
     /// One light pass (or `P`).
     pass: Option<String>,
+    /// Every light-group pass (`lg_*`: the mixer).
+    groups: bool,
 }
 
 impl Plan {
@@ -152,6 +155,7 @@ impl Plan {
                 }
             },
             "matte" => (p.mattes, p.colour) = (true, comp),
+            "mix" => (p.groups, p.colour) = (true, comp),
             _ => (p.id, p.depth) = (true, comp),
         }
         p
@@ -167,6 +171,10 @@ impl Plan {
             || (self.id && name == "agent.id")
             || (self.mattes && name.starts_with(crate::render::cryptomatte::AGENT_MATTE))
             || matches!(pass, Some("R" | "G" | "B" | "X" | "Y" | "Z"))
+            || (self.groups
+                && name
+                    .strip_prefix(mixer::GROUP_PREFIX)
+                    .is_some_and(|n| n.ends_with(".R") || n.ends_with(".G") || n.ends_with(".B")))
     }
 }
 
@@ -344,7 +352,7 @@ impl Review {
     /// answered with its status and message; the server carries on.
     pub fn serve(&self) {
         while !self.stop.load(Ordering::SeqCst) {
-            let Ok(request) = self.server.recv() else {
+            let Ok(mut request) = self.server.recv() else {
                 if self.stop.load(Ordering::SeqCst) {
                     break;
                 }
@@ -352,7 +360,7 @@ impl Review {
                 std::thread::sleep(std::time::Duration::from_millis(20));
                 continue;
             };
-            let answer = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.state.answer(&request)))
+            let answer = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.state.answer(&mut request)))
                 .unwrap_or_else(|_| Err(Refusal(500, "internal error while answering this request".into())));
             // Written on a thread of its own, so a client that reads slowly
             // (or never) holds up only itself; one that went away is no
@@ -704,11 +712,13 @@ impl State {
     }
 
     /// Routes one request.
-    fn answer(&self, request: &tiny_http::Request) -> Answer<Body> {
-        if !matches!(request.method(), tiny_http::Method::Get | tiny_http::Method::Head) {
+    fn answer(&self, request: &mut tiny_http::Request) -> Answer<Body> {
+        let post = request.method() == &tiny_http::Method::Post;
+        let saving = post && request.url().split('?').next() == Some("/api/save-shot");
+        if !saving && !matches!(request.method(), tiny_http::Method::Get | tiny_http::Method::Head) {
             return Err(Refusal(
                 405,
-                format!("{} is not served: the review is read-only (GET only)", request.method()),
+                format!("{} is not served: the review reads (GET) but for POST /api/save-shot", request.method()),
             ));
         }
         if let Some(hosts) = &self.hosts {
@@ -716,6 +726,9 @@ impl State {
             if let Some(host) = host.filter(|h| !hosts.contains(h)) {
                 return Err(Refusal(403, format!("Host `{host}` is not this server's address")));
             }
+        }
+        if saving {
+            return self.save_shot(request);
         }
         let url = request.url();
         let path = url.split('?').next().unwrap_or("");
@@ -732,6 +745,7 @@ impl State {
             "/api/agent" => self.agent(&q),
             "/api/agents" => self.agents(&q),
             "/api/matte.png" => self.matte(&q),
+            "/api/mix.png" => self.mix(&q),
             "/api/map.png" => self.map(&q),
             "/api/cache" => Ok(json_body(&self.cache_figures()?)),
             "/api/figures" => Ok(json_body(&figures::figures(
@@ -775,6 +789,7 @@ impl State {
             "start_frame": self.start_frame,
             "comp_view": COMP_VIEW,
             "views": tone::BASIC_VIEWS,
+            "gains": s.lights.gains,
         })
     }
 
@@ -824,6 +839,75 @@ impl State {
             let px = tone::view_pixels(&d.film, d.meta.colourspace, view, exposure).map_err(not_found)?;
             tone::png(d.film.width, d.film.height, 3, px).map_err(|m| Refusal(500, m))
         })
+    }
+
+    /// `/api/mix.png`: the image's light groups regraded by `mix`
+    /// (`group:gain:r:g:b,...`, linear), exposed by `exposure` stops.
+    fn mix(&self, q: &BTreeMap<String, String>) -> Answer<Body> {
+        let exposure: f32 = param(q, "exposure")?.unwrap_or(0.0);
+        if !(exposure.abs() <= 20.0) {
+            return Err(bad(format!("exposure {exposure} is outside -20..20 stops")));
+        }
+        let mix_text = q.get("mix").map(String::as_str).unwrap_or("");
+        let gains = mixer::parse(mix_text).map_err(bad)?;
+        let d = self.decode(q, &Plan::of("mix", "", is_comp(q)))?;
+        let key = format!("mix|{}|{mix_text}|{:08x}", Self::key_of(&d, q), exposure.to_bits());
+        self.cached_png(key, || {
+            let light = mixer::mix(&d.film, d.meta.colourspace, &gains).map_err(not_found)?;
+            let mut film = Film::new(d.film.width, d.film.height);
+            film.rgba = light.into_iter().map(|[r, g, b]| [r, g, b, 1.0]).collect();
+            let px = tone::view_pixels(&film, d.meta.colourspace, "beauty", exposure).map_err(not_found)?;
+            tone::png(d.film.width, d.film.height, 3, px).map_err(|m| Refusal(500, m))
+        })
+    }
+
+    /// `POST /api/save-shot` `{"name": FILE, "mix": "group:gain:r:g:b,..."}`:
+    /// the shot with the mix folded into its `[lights.gains]`, written as a
+    /// new file beside it (never over one), and the command that renders it.
+    fn save_shot(&self, request: &mut tiny_http::Request) -> Answer<Body> {
+        // A page elsewhere cannot send JSON here without asking first (CORS
+        // preflight, which gets 405); its own origin must be this server.
+        let header = |name: &'static str| {
+            request.headers().iter().find(|h| h.field.equiv(name)).map(|h| h.value.as_str().to_string())
+        };
+        if !header("Content-Type").is_some_and(|c| c.starts_with("application/json")) {
+            return Err(Refusal(415, "save-shot takes application/json".into()));
+        }
+        if let (Some(origin), Some(hosts)) = (header("Origin"), &self.hosts) {
+            if !hosts.iter().any(|h| origin == format!("http://{h}")) {
+                return Err(Refusal(403, format!("Origin `{origin}` is not this server")));
+            }
+        }
+        let mut body = Vec::new();
+        std::io::Read::read_to_end(&mut std::io::Read::take(request.as_reader(), 64 * 1024 + 1), &mut body)
+            .map_err(|e| bad(format!("cannot read the request: {e}")))?;
+        if body.len() > 64 * 1024 {
+            return Err(Refusal(413, "the request is over 64 KiB".into()));
+        }
+        let v: Value = serde_json::from_slice(&body).map_err(|e| bad(format!("not JSON: {e}")))?;
+        let name = v["name"].as_str().ok_or_else(|| bad("missing `name` (the new shot's file name)"))?;
+        let name = mixer::shot_file_name(name).map_err(bad)?;
+        let gains = mixer::parse(v["mix"].as_str().unwrap_or("")).map_err(bad)?;
+        let shot = self.crowd.shot();
+        let groups =
+            crate::scene::passes::LightGroups::new(&self.crowd.lights(), self.crowd.library()).map_err(refusal)?;
+        if let Some(g) = gains.keys().find(|g| !groups.names.contains(g)) {
+            return Err(not_found(format!("`{g}` is no light group of the shot ({})", groups.names.join(", "))));
+        }
+        let text =
+            std::fs::read_to_string(&shot.path).map_err(|e| Refusal(500, format!("cannot read the shot: {e}")))?;
+        let text = mixer::with_gains(&text, &shot.lights.gains, &gains).map_err(|m| Refusal(409, m))?;
+        let dir = &self.shot_root.dir;
+        let path = mixer::write_new(dir, &name, &text).map_err(|(status, m)| Refusal(status, m))?;
+        let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("look").replace(' ', "_");
+        let out = match &self.renders {
+            Some((r, _)) => {
+                r.with_file_name(format!("{}_{stem}", r.file_name().and_then(|n| n.to_str()).unwrap_or("render")))
+            }
+            None => dir.join(format!("render_{stem}")),
+        };
+        let command = format!("throng render '{}' --passes light_groups --out '{}'", path.display(), out.display());
+        Ok(json_body(&json!({ "file": path, "command": command, "gains": gains })))
     }
 
     /// botInfo of `ids` at `frame`: exactly `throng botinfo --json`'s array.

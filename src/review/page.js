@@ -3,7 +3,7 @@
 "use strict";
 
 const $ = (id) => document.getElementById(id);
-const state = { shot: null, frames: [], frame: null, layers: null, layer: null, comp: [], on: new Set(), agent: null };
+const state = { shot: null, frames: [], frame: null, layers: null, layer: null, comp: [], on: new Set(), agent: null, mix: {} };
 
 function status(msg, error) {
   const s = $("status");
@@ -74,6 +74,9 @@ async function init() {
   slider.addEventListener("input", () => { state.frame = state.frames[+slider.value]; loadFrame(); });
   $("layer").addEventListener("change", () => { state.layer = $("layer").value; showLayer(); });
   $("view").addEventListener("change", refreshImage);
+  $("noisy").addEventListener("change", refreshImage);
+  $("save").addEventListener("submit", (e) => { e.preventDefault(); saveShot(); });
+  $("mixer-reset").addEventListener("click", () => { state.mix = {}; buildMixer(); refreshImage(); });
   $("exposure").addEventListener("input", () => { $("exposure-label").textContent = $("exposure").value; refreshImage(); });
   $("stage").addEventListener("click", onClick);
   $("search").addEventListener("submit", (e) => {
@@ -147,13 +150,107 @@ async function showLayer() {
   view.textContent = "";
   currentViews().forEach((v) => view.append(new Option(v, v)));
   view.value = currentViews().includes(was) ? was : "beauty";
+  $("noisy-toggle").hidden = !currentViews().includes("noisy");
+  buildMixer();
   await refreshImage();
+}
+
+// The light mixer: a row per light group of the image (its lg_* passes).
+function mixGroups() {
+  return currentViews().filter((v) => v.startsWith("lg_")).map((v) => v.slice(3));
+}
+
+function groupState(g) {
+  if (!state.mix[g]) state.mix[g] = { stops: 0, tint: "#ffffff", solo: false, mute: false };
+  return state.mix[g];
+}
+
+// sRGB-encoded 0..1 to linear (the colour picker's swatch is sRGB).
+function srgbToLinear(c) {
+  return c <= 0.04045 ? c / 12.92 : Math.pow((c + 0.055) / 1.055, 2.4);
+}
+
+// `group:gain:r:g:b,...` for the groups not at gain 1 and white: what
+// /api/mix.png sums and Save as shot writes.
+function mixString() {
+  const groups = mixGroups();
+  const solo = groups.some((g) => groupState(g).solo);
+  const out = [];
+  for (const g of groups) {
+    const m = groupState(g);
+    const gain = m.mute || (solo && !m.solo) ? 0 : Math.pow(2, m.stops);
+    const hex = m.tint;
+    const tint = [1, 3, 5].map((i) => +srgbToLinear(parseInt(hex.slice(i, i + 2), 16) / 255).toPrecision(6));
+    if (gain !== 1 || tint.some((t) => t !== 1)) out.push([g, +gain.toPrecision(7)].concat(tint).join(":"));
+  }
+  return out.join(",");
+}
+
+function buildMixer() {
+  const groups = mixGroups();
+  const t = $("mixer");
+  t.textContent = "";
+  $("save").hidden = !groups.length;
+  $("mixer-note").textContent = groups.length
+    ? "Gains in stops, regrading the beauty from the light-group passes (the sum a render with these gains gives)."
+    : "This image has no light-group passes: render it with --passes light_groups (or render.passes = [\"light_groups\"] in the shot) to mix its lights.";
+  for (const g of groups) {
+    const m = groupState(g);
+    const tr = el("tr");
+    tr.dataset.group = g;
+    const slider = el("input");
+    Object.assign(slider, { type: "range", min: -8, max: 8, step: 0.25, value: m.stops });
+    slider.className = "gain";
+    const out = el("output", (m.stops > 0 ? "+" : "") + m.stops);
+    slider.addEventListener("input", () => { m.stops = +slider.value; out.textContent = (m.stops > 0 ? "+" : "") + m.stops; refreshImage(); });
+    const tint = el("input");
+    Object.assign(tint, { type: "color", value: m.tint, title: "tint" });
+    tint.className = "tint";
+    tint.addEventListener("input", () => { m.tint = tint.value; refreshImage(); });
+    const box = (key, label) => {
+      const l = el("label");
+      const b = el("input");
+      b.type = "checkbox";
+      b.checked = m[key];
+      b.className = key;
+      b.addEventListener("change", () => { m[key] = b.checked; refreshImage(); });
+      l.append(b, " " + label);
+      return l;
+    };
+    const cells = [el("th", g), slider, out, tint, box("solo", "solo"), box("mute", "mute")];
+    cells.forEach((c) => { const td = c.tagName === "TH" ? c : el("td"); if (td !== c) td.append(c); tr.append(td); });
+    t.append(tr);
+  }
+}
+
+async function saveShot() {
+  const name = $("save-name").value.trim();
+  const r = $("save-result");
+  r.textContent = "";
+  try {
+    const resp = await fetch("/api/save-shot", {
+      method: "POST",
+      headers: { "Content-Type": "application/json" },
+      body: JSON.stringify({ name: name, mix: mixString() }),
+    });
+    const body = await resp.json().catch(() => ({ error: resp.statusText }));
+    if (!resp.ok) throw new Error(body.error || resp.statusText);
+    r.append(el("span", "Saved " + body.file + ". Render it with:"), el("code", body.command));
+    r.dataset.file = body.file;
+  } catch (e) {
+    r.append(el("span", "Not saved: " + e.message, "error"));
+  }
 }
 
 async function refreshImage() {
   if (!state.layers) return;
   const q = imageQuery();
-  $("image").src = "/api/image.png?" + q + "&view=" + encodeURIComponent($("view").value) + "&exposure=" + $("exposure").value;
+  let view = $("view").value;
+  if (view === "beauty" && $("noisy").checked && currentViews().includes("noisy")) view = "noisy";
+  const mix = view === "beauty" ? mixString() : "";
+  $("image").src = mix
+    ? "/api/mix.png?" + q + "&mix=" + encodeURIComponent(mix) + "&exposure=" + $("exposure").value
+    : "/api/image.png?" + q + "&view=" + encodeURIComponent(view) + "&exposure=" + $("exposure").value;
   loadVisible(q);
   if (state.agent !== null) await selectAgent(state.agent, true);
 }

@@ -7,6 +7,7 @@
 pub mod atmosphere;
 pub mod dome;
 pub mod gltf;
+pub mod light_gains;
 pub mod lights;
 pub mod passes;
 

@@ -10,6 +10,7 @@ use toml::Spanned;
 
 use super::{look_at, Context};
 use crate::error::{Error, Result};
+use crate::scene::light_gains::LightGains;
 use crate::scene::lights::{check_product, Light, LightKind, NamedGroups};
 use crate::scene::passes::check_group_name;
 use crate::scene::{Sky, Sun};
@@ -28,6 +29,8 @@ pub struct Lights {
     pub(crate) local: Vec<Light>,
     /// `[lights.groups]`: the light groups of the sun, sky, dome and emissive materials.
     pub(crate) groups: NamedGroups,
+    /// `[lights.gains]`: each light group's gain x tint (scene::light_gains).
+    pub gains: LightGains,
 }
 
 /// `[lights.groups]` as written.
@@ -180,6 +183,8 @@ pub(super) struct LightsFile {
     sphere: Vec<LocalFile>,
     #[serde(default)]
     groups: GroupsFile,
+    #[serde(default)]
+    gains: LightGains,
 }
 
 /// Most local lights a shot may declare (the set's glTF may add more).
@@ -266,7 +271,12 @@ impl LightsFile {
             dome: named("lights.groups.dome", &g.dome)?,
             materials: g.materials.clone(),
         };
-        Ok(Lights { sun: self.sun, sky: self.sky, dome, local, groups })
+        for (name, gain) in &self.gains {
+            let key = format!("lights.gains.{name}");
+            check_group_name(name, &key).map_err(|e| Error::invalid(path, e.to_string()).field(key.clone()))?;
+            gain.check().map_err(|(k, m)| Error::invalid(path, m).field(format!("{key}.{k}")))?;
+        }
+        Ok(Lights { sun: self.sun, sky: self.sky, dome, local, groups, gains: self.gains.clone() })
     }
 }
 
