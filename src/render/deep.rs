@@ -103,10 +103,14 @@ impl DeepImage {
     }
 
     /// Whether every pixel's samples are sorted by depth and no two overlap
-    /// (OpenEXR's "tidy" state); else they are only sorted.
+    /// (OpenEXR's "tidy" state): each ends where or before the next begins
+    /// (a volume's range is open at its back), and no two point samples
+    /// share a depth; else they are only sorted.
     pub fn is_tidy(&self) -> bool {
-        self.pixels()
-            .all(|p| p.windows(2).all(|w| w[0].z_back < w[1].z || (w[0].z_back == w[1].z && w[0].z == w[0].z_back)))
+        let point = |s: &DeepSample| s.z == s.z_back;
+        self.pixels().all(|p| {
+            p.windows(2).all(|w| w[0].z_back < w[1].z || (w[0].z_back == w[1].z && !(point(&w[0]) && point(&w[1]))))
+        })
     }
 
     /// The image flattened front to back with "over": premultiplied RGBA

@@ -59,6 +59,10 @@ pub struct PlanArgs {
     /// Machine-readable output: the plan itself.
     #[arg(long)]
     pub json: bool,
+    /// Render tasks also write deep OpenEXRs (`render --deep`) and comps merge them (`comp
+    /// --deep`); a shot with a `[render.deep]` table does so without it.
+    #[arg(long)]
+    pub deep: bool,
 }
 
 /// `--engine`.
@@ -149,6 +153,7 @@ fn plan(a: &PlanArgs) -> Result<()> {
         resolution: a.resolution.map(|Resolution(r)| r),
         cores: a.cores,
         retries: a.retries,
+        deep: a.deep,
         ..PlanOptions::new(a.shot.clone(), a.out.clone())
     };
     let (path, plan) = farm::write_new_plan(&opts)?;
