@@ -14,7 +14,8 @@
 //! defocused object spreads over the depths it was seen at. A pixel keeps at
 //! most `max_samples` deep samples: once full, a camera sample that matches
 //! none joins the deep sample nearest its depth (its colour and coverage
-//! kept, so flattening is unchanged; its object id is that sample's).
+//! kept, so flattening is unchanged; its object id is that sample's; a sky
+//! sample joining a surface's leaves its depth range finite).
 //! Refractive glass is an opaque surface to the camera (its colour is what
 //! it refracts), as in the flat beauty.
 //!
@@ -187,8 +188,12 @@ impl DeepPixel {
             }
         };
         let e = &mut self.entries[at];
-        e.near = e.near.min(z);
-        e.far = e.far.max(z);
+        // A full pixel's sky sample joining a surface (or the reverse) keeps
+        // the entry's range: a surface sample must not reach to infinity.
+        if z.is_finite() == e.near.is_finite() {
+            e.near = e.near.min(z);
+            e.far = e.far.max(z);
+        }
         e.rgb += rgb;
         e.count += 1;
     }
