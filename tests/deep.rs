@@ -23,11 +23,11 @@ use common::stack_stats::{blocks, diff_stats, lum, worst_block};
 use common::{demo_shot, text, throng};
 use throng::casting::ShotCrowd;
 use throng::layers::Manifest;
-use throng::render::job::{self, RenderJob};
 use throng::render::deep::{DeepImage, DeepSample};
 use throng::render::exr::deep::{read_deep, write_deep, DeepCompression};
 use throng::render::exr::{read_layer, LayerMeta};
 use throng::render::job::deep_layer_path;
+use throng::render::job::{self, RenderJob};
 use throng::render::Film;
 
 const FRAME: i32 = 1024;
@@ -272,7 +272,10 @@ fn deep_merging_every_layer_flattens_to_the_full_render() {
     assert_eq!(comped.deep_files.len(), 4);
     let deep = &comped.deep;
     for p in deep.pixels() {
-        assert!(p.windows(2).all(|w| (w[0].z, w[0].z_back) < (w[1].z, w[1].z_back)), "sorted, coincident ones combined");
+        assert!(
+            p.windows(2).all(|w| (w[0].z, w[0].z_back) < (w[1].z, w[1].z_back)),
+            "sorted, coincident ones combined"
+        );
     }
     let merged_samples = deep.samples.len();
     let layer_samples: usize = STACK_LAYERS.iter().map(|l| stack_deep(l).samples.len()).sum();
@@ -376,8 +379,8 @@ fn an_external_sphere_merges_among_the_agents_per_pixel() {
     };
     assert!(crowd1_depths.len() > 50, "agent 2 is in crowd1's deep layer");
     let zc = crowd1_depths[crowd1_depths.len() / 2];
-    let p = glam::Mat4::from_cols_array(&meta.world_to_ndc)
-        * glam::Mat4::from_cols_array(&meta.world_to_camera).inverse();
+    let p =
+        glam::Mat4::from_cols_array(&meta.world_to_ndc) * glam::Mat4::from_cols_array(&meta.world_to_camera).inverse();
     assert_eq!((w, h), (96, 54), "the fixture's image size");
     let (cx, cy, r_px) = (23.5f32, 22.5f32, 6.0f32);
     let centre = Vec3::new((cx / w as f32 - 0.5) / p.x_axis.x * zc, (cy / h as f32 - 0.5) / p.y_axis.y * zc, zc);
@@ -408,7 +411,8 @@ fn an_external_sphere_merges_among_the_agents_per_pixel() {
         let agents: Vec<&DeepSample> = crowd_pixels[i].iter().flat_map(|p| p.iter()).collect();
         // Agents' coverage entirely in front of the sphere, by over.
         let front = agents.iter().filter(|a| a.z_back < s.z).fold(0.0f32, |t, a| t + (1.0 - t) * a.rgba[3]);
-        let close = |x: [f32; 4], y: [f32; 4]| (0..4).all(|c| (x[c] - y[c]).abs() <= 2e-3 * x[c].abs().max(y[c].abs()) + 1e-4);
+        let close =
+            |x: [f32; 4], y: [f32; 4]| (0..4).all(|c| (x[c] - y[c]).abs() <= 2e-3 * x[c].abs().max(y[c].abs()) + 1e-4);
         if front >= 0.999 {
             // Agents in front cover it: the sphere adds nothing.
             covered_by_agents += 1;
@@ -423,8 +427,13 @@ fn an_external_sphere_merges_among_the_agents_per_pixel() {
             assert_eq!(m[0].object_id.to_bits(), 0x4f00_0001, "pixel {i}: the front sample is the sphere's");
         }
     }
-    eprintln!("sphere pixels covered by agents in front: {covered_by_agents}; covering agents behind: {covering_agents}");
-    assert!(covered_by_agents >= 10 && covering_agents >= 10, "both cases happen ({covered_by_agents}, {covering_agents})");
+    eprintln!(
+        "sphere pixels covered by agents in front: {covered_by_agents}; covering agents behind: {covering_agents}"
+    );
+    assert!(
+        covered_by_agents >= 10 && covering_agents >= 10,
+        "both cases happen ({covered_by_agents}, {covering_agents})"
+    );
 }
 
 #[test]

@@ -44,13 +44,11 @@ pub fn merge(images: &[&DeepImage]) -> Result<DeepImage> {
     };
     let (w, h) = (first.width, first.height);
     if let Some(other) = images.iter().find(|i| (i.width, i.height) != (w, h)) {
-        return Err(Error::Usage(format!(
-            "deep layers differ in size: {w}x{h} and {}x{}",
-            other.width, other.height
-        )));
+        return Err(Error::Usage(format!("deep layers differ in size: {w}x{h} and {}x{}", other.width, other.height)));
     }
     let mut pixels: Vec<_> = images.iter().map(|i| i.pixels()).collect();
-    let mut out = DeepImage { width: w, height: h, counts: Vec::with_capacity(first.counts.len()), samples: Vec::new() };
+    let mut out =
+        DeepImage { width: w, height: h, counts: Vec::with_capacity(first.counts.len()), samples: Vec::new() };
     let mut gathered = Vec::new();
     for _ in 0..first.counts.len() {
         gathered.clear();
