@@ -6,7 +6,12 @@ Z <= ZBack, sorted by Z, alpha in (0, 1]), flattened front to back with
 beside it (R, G, B, A) within half-float precision. Crowd layers must hold
 agent samples only (id.agent != 0).
 
-Usage: deep_check.py RENDER_DIR   (RENDER_DIR/<layer>/<shot>.<layer>.<frame>.deep.exr)
+With --compression NAME every file must be stored with that compression
+(as OpenImageIO names it: zips, rle, none).
+
+Usage: deep_check.py RENDER_DIR [--compression NAME]
+       (RENDER_DIR/<layer>/<shot>.<layer>.<frame>.deep.exr, and a comp's
+       X.deep.exr beside X.exr)
 """
 
 import os
@@ -29,7 +34,7 @@ def flat_rgba(path):
     return np.stack([pixels[:, :, names.index(c)] for c in "RGBA"], axis=-1)
 
 
-def check(deep_path):
+def check(deep_path, compression):
     flat_path = deep_path[: -len(".deep.exr")] + ".exr"
     inp = oiio.ImageInput.open(deep_path)
     if inp is None:
@@ -44,6 +49,9 @@ def check(deep_path):
             problems.append(f"no channel {c}")
     if problems:
         return problems
+    stored = spec.getattribute("compression")
+    if compression is not None and stored != compression:
+        problems.append(f"compression {stored}, expected {compression}")
     cap = spec.getattribute("openexr:maxSamplesPerPixel")
     deep = inp.read_native_deep_image(0, 0)
     inp.close()
@@ -88,13 +96,14 @@ def check(deep_path):
     err_oiio = float(np.max(np.abs(theirs - want) / tol))
     if err_oiio > 1.0:
         problems.append(f"oiiotool --flatten differs from {flat_path} ({err_oiio:.2f} of the tolerance)")
-    print(f"{os.path.basename(deep_path)}: {samples} samples, {samples / (w * h):.2f} per pixel, "
+    print(f"{os.path.basename(deep_path)} ({stored}): {samples} samples, {samples / (w * h):.2f} per pixel, "
           f"flattened vs flat {err:.3f}, oiiotool --flatten vs flat {err_oiio:.3f} (of the tolerance)")
     return problems
 
 
 def main():
     root = sys.argv[1]
+    compression = sys.argv[3] if len(sys.argv) > 3 and sys.argv[2] == "--compression" else None
     files = sorted(
         os.path.join(d, f) for d, _, fs in os.walk(root) for f in fs if f.endswith(".deep.exr")
     )
@@ -102,7 +111,7 @@ def main():
         raise SystemExit(f"FAIL: no .deep.exr under {root}")
     failed = False
     for f in files:
-        for p in check(f):
+        for p in check(f, compression):
             print(f"FAIL: {f}: {p}")
             failed = True
     if failed:

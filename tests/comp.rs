@@ -13,6 +13,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+use common::stack_stats::{blocks, diff_stats, lum, worst_block};
 use throng::casting::ShotCrowd;
 use throng::comp;
 use throng::layers::{LayerOverrides, Manifest};
@@ -29,8 +30,6 @@ const SPP: u32 = 128;
 fn spp() -> u32 {
     std::env::var("THRONG_COMP_SPP").ok().and_then(|s| s.parse().ok()).unwrap_or(SPP)
 }
-/// Block edge for the per-region test.
-const BLOCK: u32 = 8;
 /// Per-block bound in standard errors. 84 blocks: a 5-sigma excursion of
 /// pure noise has odds of about 1 in 40 000 per run.
 const K_BLOCK: f64 = 5.0;
@@ -123,48 +122,6 @@ fn renders() -> &'static Renders {
             a,
         }
     })
-}
-
-fn lum(p: &[f32; 4]) -> f64 {
-    (0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]) as f64
-}
-
-/// Mean and standard error of `x - y` over `pixels`, where the pixel
-/// variance of one render is estimated from two independent full renders
-/// (`(a - b)^2 / 2`) and `x`, `y` are independent renders of that noise.
-fn diff_stats(x: &Film, y: &Film, noise: (&Film, &Film), pixels: &[usize], f: fn(&[f32; 4]) -> f64) -> (f64, f64) {
-    let n = pixels.len().max(1) as f64;
-    let mean = pixels.iter().map(|&i| f(&x.rgba[i]) - f(&y.rgba[i])).sum::<f64>() / n;
-    let var: f64 = pixels.iter().map(|&i| (f(&noise.0.rgba[i]) - f(&noise.1.rgba[i])).powi(2) / 2.0).sum();
-    // Two renders' worth of variance; a floor for half-float rounding.
-    let se = (2.0 * var).sqrt() / n + 1e-4;
-    (mean, se)
-}
-
-fn blocks(f: &Film) -> Vec<Vec<usize>> {
-    let mut out = Vec::new();
-    for by in (0..f.height).step_by(BLOCK as usize) {
-        for bx in (0..f.width).step_by(BLOCK as usize) {
-            let px = (by..(by + BLOCK).min(f.height))
-                .flat_map(|y| (bx..(bx + BLOCK).min(f.width)).map(move |x| (x, y)))
-                .map(|(x, y)| f.index(x, y))
-                .collect();
-            out.push(px);
-        }
-    }
-    out
-}
-
-/// Largest |z| over blocks, and its block.
-fn worst_block(x: &Film, y: &Film, noise: (&Film, &Film), f: fn(&[f32; 4]) -> f64) -> (f64, usize, f64) {
-    blocks(x)
-        .iter()
-        .enumerate()
-        .map(|(b, px)| {
-            let (m, se) = diff_stats(x, y, noise, px, f);
-            ((m / se).abs(), b, m)
-        })
-        .fold((0.0, 0, 0.0), |acc, v| if v.0 > acc.0 { v } else { acc })
 }
 
 fn comped(set: Option<&Film>) -> Film {

@@ -5,16 +5,29 @@
 //! flattens front to back to its flat beauty, and bad `render.deep` keys
 //! exit 2 naming the key. `.ci/deep_check.py` reads the same files with
 //! OpenImageIO.
+//!
+//! Deep compositing (docs/compositing.md, "Deep comp"), on the comp
+//! property test's shot (tests/fixtures/stack_shot, with the statistics of
+//! tests/comp.rs): deep-merging every layer of a frame and flattening gives
+//! the full render within noise, and today's flat comp; an external element
+//! (an analytic sphere among the agents, its own deep image) merges into the
+//! crowd per pixel with no holdout render; `throng comp --deep` writes both
+//! files and refuses a deep file that is not throng's.
 
 mod common;
 
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
+use common::stack_stats::{blocks, diff_stats, lum, worst_block};
 use common::{demo_shot, text, throng};
+use throng::casting::ShotCrowd;
+use throng::layers::Manifest;
 use throng::render::deep::{DeepImage, DeepSample};
 use throng::render::exr::deep::{read_deep, write_deep, DeepCompression};
 use throng::render::exr::{read_layer, LayerMeta};
 use throng::render::job::deep_layer_path;
+use throng::render::job::{self, RenderJob};
 use throng::render::Film;
 
 const FRAME: i32 = 1024;
@@ -83,7 +96,7 @@ fn the_writer_round_trips_through_the_reader_of_record() {
     let dir = out_dir("unit");
     let img = synthetic(13, 5);
     let film = Film::new(13, 5);
-    for (c, name) in [(DeepCompression::Zips, "zips"), (DeepCompression::None, "none")] {
+    for (c, name) in [(DeepCompression::Zips, "zips"), (DeepCompression::Rle, "rle"), (DeepCompression::None, "none")] {
         let path = dir.join(format!("unit.{name}.deep.exr"));
         write_deep(&path, &img, &film, &meta(), c).unwrap();
         let (back, head) = read_deep(&path).unwrap();
@@ -196,7 +209,274 @@ fn bad_deep_keys_exit_2_naming_the_key() {
         assert_eq!(o.status.code(), Some(2), "{tag}: {err}");
         assert!(err.contains(key), "{tag}: the error names {key}: {err}");
         if tag == "zip" {
-            assert!(err.contains("zips, none"), "the allowed ones are named: {err}");
+            assert!(err.contains("zips, rle, none"), "the allowed ones are named: {err}");
         }
     }
+}
+
+const STACK_SHOT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/stack_shot/shot.toml");
+const STACK_FRAME: i32 = 1001;
+/// The comp property test's sample count and bounds (tests/comp.rs).
+const STACK_SPP: u32 = 128;
+const K_BLOCK: f64 = 5.0;
+const K_MEAN: f64 = 4.0;
+const STACK_LAYERS: [&str; 4] = ["set", "crowd2", "crowd1", "crowd0"];
+
+/// The stack shot's layers and full render with deep output (seed A), and
+/// the full render again with another seed (the noise estimate).
+struct Stack {
+    a: PathBuf,
+    manifest: Manifest,
+    full_b: Film,
+}
+
+fn stack_render(crowd: &ShotCrowd, manifest: &Manifest, layers: &[&str], out: &Path, deep: bool) {
+    let job = RenderJob {
+        cryptomatte: job::CryptoOutput::Header,
+        deep: deep.then(throng::shot::Deep::default),
+        ..RenderJob::new(layers.iter().map(|s| s.to_string()).collect(), vec![STACK_FRAME], STACK_SPP, out.into())
+    };
+    job::run(crowd, Some(manifest), &job, &job::Silent).unwrap();
+}
+
+fn stack() -> &'static Stack {
+    static S: OnceLock<Stack> = OnceLock::new();
+    S.get_or_init(|| {
+        let dir = out_dir("stack");
+        let crowd = ShotCrowd::load(Path::new(STACK_SHOT)).unwrap();
+        let manifest = throng::layers::build_layers(&crowd, &Default::default()).unwrap();
+        let a = dir.join("a");
+        stack_render(&crowd, &manifest, &[&STACK_LAYERS[..], &["full"]].concat(), &a, true);
+        let seed = crowd.shot().seed;
+        let crowd = crowd.with_shot(|shot| shot.seed = seed + 1).unwrap();
+        let b = dir.join("b");
+        stack_render(&crowd, &manifest, &["full"], &b, false);
+        let full_b = stack_flat(&b, "full");
+        Stack { a, manifest, full_b }
+    })
+}
+
+fn stack_flat(dir: &Path, layer: &str) -> Film {
+    read_layer(&throng::output::layer_path(dir, "stack", layer, STACK_FRAME)).unwrap().0
+}
+
+fn stack_deep(layer: &str) -> DeepImage {
+    let flat = throng::output::layer_path(&stack().a, "stack", layer, STACK_FRAME);
+    read_deep(&deep_layer_path(&flat)).unwrap().0
+}
+
+#[test]
+fn deep_merging_every_layer_flattens_to_the_full_render() {
+    let st = stack();
+    let comped = throng::comp::deep::comp_frame_deep(&st.a, STACK_FRAME, Some(&st.manifest)).unwrap();
+    assert_eq!(comped.deep_files.len(), 4);
+    let deep = &comped.deep;
+    for p in deep.pixels() {
+        assert!(
+            p.windows(2).all(|w| (w[0].z, w[0].z_back) < (w[1].z, w[1].z_back)),
+            "sorted, coincident ones combined"
+        );
+    }
+    let merged_samples = deep.samples.len();
+    let layer_samples: usize = STACK_LAYERS.iter().map(|l| stack_deep(l).samples.len()).sum();
+    assert!(merged_samples > 0 && merged_samples <= layer_samples, "combining only removes samples");
+    let stacked = &comped.flat.film;
+    let full_a = stack_flat(&st.a, "full");
+    let noise = (&full_a, &st.full_b);
+    let all: Vec<usize> = (0..full_a.rgba.len()).collect();
+    let level = all.iter().map(|&i| lum(&full_a.rgba[i])).sum::<f64>() / all.len() as f64;
+    let (m, se) = diff_stats(stacked, &full_a, noise, &all, lum);
+    eprintln!("deep comp - full: {m:+.5} (se {se:.5}, {:.2} sigma, {:+.3}%)", m / se, 100.0 * m / level);
+    assert!((m / se).abs() < K_MEAN && (m / level).abs() < 0.005, "mean: {m:+.5}, se {se:.5}");
+    // Every block within noise, and a margin of 2% of its level for the
+    // edges (as the flat stack: docs/compositing.md).
+    for (b, px) in blocks(&full_a).iter().enumerate() {
+        let (m, se) = diff_stats(stacked, &full_a, noise, px, lum);
+        let block_level = px.iter().map(|&i| lum(&full_a.rgba[i])).sum::<f64>() / px.len() as f64;
+        assert!(m.abs() < K_BLOCK * se + 0.02 * block_level, "block {b}: deep comp - full {m:+.5} (se {se:.5})");
+    }
+    let (z, b, d) = worst_block(stacked, &full_a, noise, |p| p[3] as f64);
+    assert!(z < K_BLOCK, "alpha block {b} differs by {z:.2} sigma ({d:+.5})");
+    // Equal to today's flat comp within noise: the same layers' samples.
+    let flat = throng::comp::comp_frame(&st.a, STACK_FRAME, Some(&st.manifest)).unwrap().film;
+    let (m, se) = diff_stats(stacked, &flat, noise, &all, lum);
+    eprintln!("deep comp - flat comp: {m:+.5} (se {se:.5}, {:.2} sigma)", m / se);
+    assert!((m / se).abs() < K_MEAN, "deep comp differs from the flat comp by {:.2} sigma", m / se);
+    let (z, b, d) = worst_block(stacked, &flat, noise, lum);
+    assert!(z < K_BLOCK, "block {b}: deep comp - flat comp {d:+.5} ({z:.2} sigma)");
+    // Negative control: the merge without the set layer is far off.
+    let crowd: Vec<DeepImage> = STACK_LAYERS[1..].iter().map(|l| stack_deep(l)).collect();
+    let no_set = throng::comp::deep::merge(&crowd.iter().collect::<Vec<_>>()).unwrap();
+    let mut no_set_film = stacked.clone();
+    no_set_film.rgba = no_set.flatten();
+    let (z, _, _) = worst_block(&no_set_film, &full_a, noise, lum);
+    assert!(z > 4.0 * K_BLOCK, "dropping the set must fail the block test ({z:.1} sigma)");
+}
+
+/// A sphere of radius `radius` centred at `centre` (OpenEXR camera space:
+/// +z forward, y up) rendered analytically as its own deep image with the
+/// camera of `meta`: 4 x 4 rays a pixel, each intersected with the sphere
+/// exactly; a pixel's hits make one deep sample of flat colour `rgb`,
+/// alpha the share of rays that hit, `Z`/`ZBack` their nearest and
+/// farthest depth.
+fn sphere_deep(meta: &LayerMeta, w: u32, h: u32, centre: glam::Vec3, radius: f32, rgb: [f32; 3]) -> DeepImage {
+    use glam::{Mat4, Vec3};
+    // NDC = P * camera (docs/render.md, "Header"): ndc.x = m00 x / z + 0.5, ndc.y = m11 y / z + 0.5.
+    let p = Mat4::from_cols_array(&meta.world_to_ndc) * Mat4::from_cols_array(&meta.world_to_camera).inverse();
+    let (m00, m11) = (p.x_axis.x, p.y_axis.y);
+    const RAYS: u32 = 4;
+    let mut img = DeepImage { width: w, height: h, ..Default::default() };
+    for y in 0..h {
+        for x in 0..w {
+            let (mut hits, mut near, mut far) = (0u32, f32::INFINITY, 0.0f32);
+            for k in 0..RAYS * RAYS {
+                let u = (x as f32 + ((k % RAYS) as f32 + 0.5) / RAYS as f32) / w as f32;
+                let v = (y as f32 + ((k / RAYS) as f32 + 0.5) / RAYS as f32) / h as f32;
+                let d = Vec3::new((u - 0.5) / m00, (v - 0.5) / m11, 1.0);
+                // |t d - c|^2 = r^2, nearest root; depth = t (d.z = 1).
+                let (a, b, c) = (d.length_squared(), d.dot(centre), centre.length_squared() - radius * radius);
+                let disc = b * b - a * c;
+                if disc >= 0.0 {
+                    let t = (b - disc.sqrt()) / a;
+                    hits += 1;
+                    near = near.min(t);
+                    far = far.max(t);
+                }
+            }
+            let n = if hits > 0 { 1 } else { 0 };
+            img.counts.push(n);
+            if hits > 0 {
+                let alpha = hits as f32 / (RAYS * RAYS) as f32;
+                img.samples.push(DeepSample {
+                    rgba: [rgb[0] * alpha, rgb[1] * alpha, rgb[2] * alpha, alpha],
+                    z: near,
+                    z_back: far,
+                    agent_id: 0.0,
+                    object_id: f32::from_bits(0x4f00_0001),
+                });
+            }
+        }
+    }
+    img
+}
+
+#[test]
+fn an_external_sphere_merges_among_the_agents_per_pixel() {
+    use glam::Vec3;
+    let st = stack();
+    let layers: Vec<DeepImage> = STACK_LAYERS.iter().map(|l| stack_deep(l)).collect();
+    let set_path = throng::output::layer_path(&st.a, "stack", "set", STACK_FRAME);
+    let (set_flat, meta) = read_layer(&set_path).unwrap();
+    let (w, h) = (set_flat.width, set_flat.height);
+    // The sphere stands at crowd1's depth (agent 2's median) between the
+    // left crowd0 agent (nearer, x 15-24 at 96x54) and the left crowd2 agent
+    // (farther, x 26-31), overlapping both in the image: centre pixel
+    // (23, 22), a radius of 6 pixels.
+    let crowd1_depths = {
+        let mut z: Vec<f32> = layers[2].pixels().filter_map(|p| p.first().map(|s| s.z)).collect();
+        z.sort_by(f32::total_cmp);
+        z
+    };
+    assert!(crowd1_depths.len() > 50, "agent 2 is in crowd1's deep layer");
+    let zc = crowd1_depths[crowd1_depths.len() / 2];
+    let p =
+        glam::Mat4::from_cols_array(&meta.world_to_ndc) * glam::Mat4::from_cols_array(&meta.world_to_camera).inverse();
+    assert_eq!((w, h), (96, 54), "the fixture's image size");
+    let (cx, cy, r_px) = (23.5f32, 22.5f32, 6.0f32);
+    let centre = Vec3::new((cx / w as f32 - 0.5) / p.x_axis.x * zc, (cy / h as f32 - 0.5) / p.y_axis.y * zc, zc);
+    let radius = r_px / (w as f32 * p.x_axis.x) * zc;
+    const MAGENTA: [f32; 3] = [1.0, 0.0, 1.0];
+    let sphere = sphere_deep(&meta, w, h, centre, radius, MAGENTA);
+    // Through the file, as an element from another renderer would come.
+    let path = out_dir("sphere").join("sphere.deep.exr");
+    write_deep(&path, &sphere, &set_flat, &LayerMeta { layer: "sphere".into(), ..meta.clone() }, DeepCompression::Zips)
+        .unwrap();
+    let sphere = read_deep(&path).unwrap().0;
+    // Layer order does not matter in a deep merge: the sphere goes last.
+    let mut with: Vec<&DeepImage> = layers.iter().collect();
+    let without = throng::comp::deep::merge(&with).unwrap().flatten();
+    with.push(&sphere);
+    let merged = throng::comp::deep::merge(&with).unwrap();
+    let flat = merged.flatten();
+    let crowd_pixels: Vec<Vec<&[DeepSample]>> = {
+        let mut it: Vec<_> = layers[1..].iter().map(|l| l.pixels()).collect();
+        (0..w * h).map(|_| it.iter_mut().map(|p| p.next().unwrap()).collect()).collect()
+    };
+    let (mut covered_by_agents, mut covering_agents) = (0, 0);
+    for ((i, s), m) in sphere.pixels().enumerate().zip(merged.pixels()) {
+        let [s] = s else { continue };
+        if s.rgba[3] < 1.0 {
+            continue; // the sphere's silhouette: partly covered pixels
+        }
+        let agents: Vec<&DeepSample> = crowd_pixels[i].iter().flat_map(|p| p.iter()).collect();
+        // Agents' coverage entirely in front of the sphere, by over.
+        let front = agents.iter().filter(|a| a.z_back < s.z).fold(0.0f32, |t, a| t + (1.0 - t) * a.rgba[3]);
+        let close =
+            |x: [f32; 4], y: [f32; 4]| (0..4).all(|c| (x[c] - y[c]).abs() <= 2e-3 * x[c].abs().max(y[c].abs()) + 1e-4);
+        if front >= 0.999 {
+            // Agents in front cover it: the sphere adds nothing.
+            covered_by_agents += 1;
+            assert!(close(flat[i], without[i]), "pixel {i}: agents in front, yet {:?} vs {:?}", flat[i], without[i]);
+            assert!(m[0].agent_id != 0.0, "pixel {i}: the front sample is an agent's");
+        } else if !agents.is_empty() && agents.iter().all(|a| a.z > s.z_back) {
+            // Agents behind are covered: only the sphere shows.
+            covering_agents += 1;
+            let want = [MAGENTA[0], MAGENTA[1], MAGENTA[2], 1.0];
+            assert!(close(flat[i], want), "pixel {i}: agents behind, yet {:?}", flat[i]);
+            assert!(!close(without[i], want), "pixel {i}: the agent showed before");
+            assert_eq!(m[0].object_id.to_bits(), 0x4f00_0001, "pixel {i}: the front sample is the sphere's");
+        }
+    }
+    eprintln!(
+        "sphere pixels covered by agents in front: {covered_by_agents}; covering agents behind: {covering_agents}"
+    );
+    assert!(
+        covered_by_agents >= 10 && covering_agents >= 10,
+        "both cases happen ({covered_by_agents}, {covering_agents})"
+    );
+}
+
+#[test]
+fn comp_deep_writes_both_files_and_refuses_a_deep_file_not_throngs() {
+    let st = stack();
+    let dir = out_dir("comp_cli");
+    let out = dir.join("comp.1001.exr");
+    let a = s(&st.a);
+    let o = throng(&["comp", a, "--frame", "1001", "--out", s(&out), "--deep", "--json"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let (deep, head) = read_deep(&deep_layer_path(&out)).unwrap();
+    assert_eq!(head.state == 3, deep.is_tidy(), "deepImageState is truthful");
+    assert_eq!(head.text.get("throng/layer").map(String::as_str), Some("comp"));
+    let (flat, _) = read_layer(&out).unwrap();
+    assert!(flatten_error(&deep, &flat) <= 1.0, "the flat comp is the deep comp flattened");
+    assert!(text(&o.stdout).contains("comp.1001.deep.exr"), "{}", text(&o.stdout));
+    // Layers copied, then crowd1's deep file replaced by ones that are not throng's.
+    let copy = dir.join("layers");
+    for layer in STACK_LAYERS {
+        let flat = throng::output::layer_path(&st.a, "stack", layer, STACK_FRAME);
+        let to = throng::output::layer_path(&copy, "stack", layer, STACK_FRAME);
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::copy(&flat, &to).unwrap();
+        std::fs::copy(deep_layer_path(&flat), deep_layer_path(&to)).unwrap();
+    }
+    let victim = deep_layer_path(&throng::output::layer_path(&copy, "stack", "crowd1", STACK_FRAME));
+    let crowd0 = deep_layer_path(&throng::output::layer_path(&copy, "stack", "crowd0", STACK_FRAME));
+    let flat_crowd1 = throng::output::layer_path(&copy, "stack", "crowd1", STACK_FRAME);
+    let out2 = dir.join("bad.exr");
+    for (what, bytes) in [
+        ("another layer's deep file", std::fs::read(&crowd0).unwrap()),
+        ("a flat EXR", std::fs::read(&flat_crowd1).unwrap()),
+        ("not an EXR", b"P6 not an image".to_vec()),
+    ] {
+        std::fs::write(&victim, bytes).unwrap();
+        let o = throng(&["comp", s(&copy), "--frame", "1001", "--out", s(&out2), "--deep"]);
+        let err = text(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{what}: {err}");
+        assert!(err.contains("stack.crowd1.1001.deep.exr"), "{what}: the error names the file: {err}");
+        assert!(!out2.exists() && !deep_layer_path(&out2).exists(), "{what}: nothing written");
+    }
+    std::fs::remove_file(&victim).unwrap();
+    let o = throng(&["comp", s(&copy), "--frame", "1001", "--out", s(&out2), "--deep"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o.stderr).contains("no deep file"), "{}", text(&o.stderr));
 }

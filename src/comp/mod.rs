@@ -39,6 +39,8 @@
 //! name is `comp`, `spp` the smallest of the layers', and near/far span the
 //! layers' (with `worldToNDC` rebuilt for them).
 
+pub mod deep;
+
 use std::path::{Path, PathBuf};
 
 use glam::Mat4;

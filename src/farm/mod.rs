@@ -311,9 +311,18 @@ pub fn open_plan(path: &Path, shot: Option<&Path>) -> Result<Plan> {
 }
 
 /// Whether every output of `task` exists and reads back whole (an EXR that
-/// decodes completely); the one definition of "done" for every engine.
+/// decodes completely, a deep EXR whole: [`crate::render::exr::deep::is_whole`]);
+/// the one definition of "done" for every engine.
 pub(crate) fn task_done(task: &Task) -> bool {
-    !task.outputs.is_empty() && task.outputs.iter().all(|p| crate::render::exr::read_layer(p).is_ok())
+    use crate::render::exr;
+    let whole = |p: &PathBuf| {
+        if p.to_string_lossy().ends_with(".deep.exr") {
+            exr::deep::is_whole(p)
+        } else {
+            exr::read_layer(p).is_ok()
+        }
+    };
+    !task.outputs.is_empty() && task.outputs.iter().all(whole)
 }
 
 /// The tasks a (re)submission must run: every task not done, and every task

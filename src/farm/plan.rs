@@ -10,6 +10,7 @@ use crate::casting::ShotCrowd;
 use crate::error::{Error, IoContext, Result};
 use crate::layers::{build_layers, memory, render_shutter, LayerOverrides, Manifest};
 use crate::output::{layer_path, COMP_LAYER};
+use crate::render::job::deep_layer_path;
 use crate::shot::Denoise;
 
 /// What to plan; `Default`-like values come from [`PlanOptions::new`].
@@ -36,6 +37,9 @@ pub struct PlanOptions {
     /// Denoising of every render task: `None` follows the shot's
     /// `render.denoise`; `Some(None)` turns it off, `Some(Some(q))` sets it.
     pub denoise: Option<Option<Denoise>>,
+    /// Deep output in every render task and comp (docs/render.md, "Deep
+    /// output"); a shot with a `render.deep` table has it whatever this says.
+    pub deep: bool,
 }
 
 impl PlanOptions {
@@ -52,6 +56,7 @@ impl PlanOptions {
             cores: 1,
             retries: 1,
             denoise: None,
+            deep: false,
         }
     }
 }
@@ -246,8 +251,13 @@ pub(crate) fn build_plan(
     };
     // Tasks pass no --shutter: they blur as the shot says, as the manifest's estimate assumed.
     let blurred = render_shutter(crowd).is_some();
+    // The manifest's estimates hold a deep image when the shot asks for one.
     let channels =
         memory::FilmChannels { blurred, passes: memory::pass_count(crowd)?, deep: shot.render.deep.is_some() };
+    let deep = opts.deep || channels.deep;
+    let pixels = resolution[0] as u64 * resolution[1] as u64;
+    let deep_only_here = if deep && !channels.deep { pixels * memory::DEEP_PIXEL_BYTES } else { 0 };
+    let deep_flag: &[&str] = if deep { &["--deep"] } else { &[] };
     let shot_file = std::fs::canonicalize(&shot.path).at(&shot.path)?;
     let render_dir = out.join("render");
     let log_dir = out.join("logs");
@@ -270,8 +280,14 @@ pub(crate) fn build_plan(
                 ["throng", "render", &shot_arg, "--manifest", &manifest_arg, "--layer", layer, "--frames", &list];
             let tail =
                 ["--resolution", &size, "--threads", &cores, "--resume", "--progress", "plain", "--out", &out_arg];
-            let argv: Vec<String> =
-                head.iter().chain(fixed).chain(&denoise_args).chain(&tail).map(|a| a.to_string()).collect();
+            let argv: Vec<String> = head
+                .iter()
+                .chain(fixed)
+                .chain(deep_flag)
+                .chain(&denoise_args)
+                .chain(&tail)
+                .map(|a| a.to_string())
+                .collect();
             for &f in frames {
                 writer.insert((layer.as_str(), f), id.clone());
             }
@@ -283,9 +299,14 @@ pub(crate) fn build_plan(
                 chunk: Some(chunk),
                 frames: frames.to_vec(),
                 argv,
-                outputs: frames.iter().map(|&f| layer_path(&render_dir, &shot.name, layer, f)).collect(),
+                outputs: frames
+                    .iter()
+                    .map(|&f| layer_path(&render_dir, &shot.name, layer, f))
+                    .flat_map(|p| [Some(deep_layer_path(&p)).filter(|_| deep), Some(p)].into_iter().flatten())
+                    .collect(),
                 cores: opts.cores,
-                memory_bytes: render_memory(manifest, layer, resolution, channels)? + round_mib(denoise_bytes),
+                memory_bytes: round_mib(render_memory(manifest, layer, resolution, channels)? + deep_only_here)
+                    + round_mib(denoise_bytes),
                 depends_on: Vec::new(),
             });
         }
@@ -294,7 +315,7 @@ pub(crate) fn build_plan(
         for &f in &frames {
             let id = format!("comp.{f}");
             let out_path = layer_path(&render_dir, &shot.name, COMP_LAYER, f);
-            let argv = [
+            let mut argv = [
                 "throng",
                 "comp",
                 &s(&render_dir),
@@ -307,6 +328,7 @@ pub(crate) fn build_plan(
             ]
             .map(String::from)
             .to_vec();
+            argv.extend(deep_flag.iter().map(|a| a.to_string()));
             let mut deps: Vec<String> = layers.iter().filter_map(|l| writer.get(&(l.as_str(), f)).cloned()).collect();
             deps.dedup();
             tasks.push(Task {
@@ -317,12 +339,17 @@ pub(crate) fn build_plan(
                 chunk: None,
                 frames: vec![f],
                 argv,
-                outputs: vec![out_path],
+                outputs: [Some(deep_layer_path(&out_path)).filter(|_| deep), Some(out_path)]
+                    .into_iter()
+                    .flatten()
+                    .collect(),
                 cores: 1,
+                // Deep: every layer's deep image and the merge, a render's deep image each.
                 memory_bytes: round_mib(
-                    resolution[0] as u64
-                        * resolution[1] as u64
-                        * (COMP_BYTES_PER_PIXEL + channels.passes * COMP_BYTES_PER_PASS_PIXEL)
+                    pixels
+                        * (COMP_BYTES_PER_PIXEL
+                            + channels.passes * COMP_BYTES_PER_PASS_PIXEL
+                            + if deep { memory::DEEP_PIXEL_BYTES } else { 0 })
                         * (layers.len() as u64 + 1)
                         + memory::PROCESS_BYTES,
                 ),

@@ -14,7 +14,8 @@
 //! defocused object spreads over the depths it was seen at. A pixel keeps at
 //! most `max_samples` deep samples: once full, a camera sample that matches
 //! none joins the deep sample nearest its depth (its colour and coverage
-//! kept, so flattening is unchanged; its object id is that sample's).
+//! kept, so flattening is unchanged; its object id is that sample's; a sky
+//! sample joining a surface's leaves its depth range finite).
 //! Refractive glass is an opaque surface to the camera (its colour is what
 //! it refracts), as in the flat beauty.
 //!
@@ -103,10 +104,14 @@ impl DeepImage {
     }
 
     /// Whether every pixel's samples are sorted by depth and no two overlap
-    /// (OpenEXR's "tidy" state); else they are only sorted.
+    /// (OpenEXR's "tidy" state): each ends where or before the next begins
+    /// (a volume's range is open at its back), and no two point samples
+    /// share a depth; else they are only sorted.
     pub fn is_tidy(&self) -> bool {
-        self.pixels()
-            .all(|p| p.windows(2).all(|w| w[0].z_back < w[1].z || (w[0].z_back == w[1].z && w[0].z == w[0].z_back)))
+        let point = |s: &DeepSample| s.z == s.z_back;
+        self.pixels().all(|p| {
+            p.windows(2).all(|w| w[0].z_back < w[1].z || (w[0].z_back == w[1].z && !(point(&w[0]) && point(&w[1]))))
+        })
     }
 
     /// The image flattened front to back with "over": premultiplied RGBA
@@ -183,8 +188,12 @@ impl DeepPixel {
             }
         };
         let e = &mut self.entries[at];
-        e.near = e.near.min(z);
-        e.far = e.far.max(z);
+        // A full pixel's sky sample joining a surface (or the reverse) keeps
+        // the entry's range: a surface sample must not reach to infinity.
+        if z.is_finite() == e.near.is_finite() {
+            e.near = e.near.min(z);
+            e.far = e.far.max(z);
+        }
         e.rgb += rgb;
         e.count += 1;
     }

@@ -784,7 +784,7 @@ fn check_job<C: Space>(crowd: &ShotCrowd<C>, manifest: Option<&Manifest>, job: &
 /// A deep render is complete only with its deep file beside the flat one,
 /// readable.
 fn deep_complete(job: &RenderJob, path: &Path) -> bool {
-    job.deep.is_none() || exr::deep::read_deep(&deep_layer_path(path)).is_ok()
+    job.deep.is_none() || exr::deep::is_whole(&deep_layer_path(path))
 }
 
 /// Whether `path` holds the layer-frame rendered as `fingerprint` says (a

@@ -479,7 +479,7 @@ pub struct Deep {
     /// Relative depth within which one object's camera samples merge.
     #[serde(default = "default_deep_tolerance")]
     pub tolerance: f32,
-    /// `zips` (the default) or `none`: what OpenEXR allows for deep data.
+    /// `zips` (the default), `rle` or `none`: what OpenEXR allows for deep data.
     #[serde(default = "default_deep_compression")]
     pub compression: String,
 }
@@ -517,8 +517,8 @@ impl Deep {
     /// within 1 % of each other's depth are one deep sample.
     pub const DEFAULT_TOLERANCE: f32 = 0.01;
     /// The compressions deep files may have (OpenEXR allows NONE, RLE and
-    /// ZIPS for deep data; throng writes these two), the default first.
-    pub const COMPRESSIONS: [&'static str; 2] = ["zips", "none"];
+    /// ZIPS for deep data), the default first.
+    pub const COMPRESSIONS: [&'static str; 3] = ["zips", "rle", "none"];
 
     /// Checks the keys, naming the one that is wrong (`render.deep.<key>`).
     pub fn check(&self) -> std::result::Result<(), (&'static str, String)> {

@@ -4,6 +4,7 @@
 #![allow(dead_code)]
 
 pub mod matrix;
+pub mod stack_stats;
 
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};

@@ -63,6 +63,10 @@ pub struct PlanArgs {
     /// Machine-readable output: the plan itself.
     #[arg(long)]
     pub json: bool,
+    /// Render tasks also write deep OpenEXRs (`render --deep`) and comps merge them (`comp
+    /// --deep`); a shot with a `[render.deep]` table does so without it.
+    #[arg(long)]
+    pub deep: bool,
 }
 
 /// `--engine`.
@@ -154,6 +158,7 @@ fn plan(a: &PlanArgs) -> Result<()> {
         cores: a.cores,
         retries: a.retries,
         denoise: a.denoise.map(super::render::DenoiseFlag::preset),
+        deep: a.deep,
         ..PlanOptions::new(a.shot.clone(), a.out.clone())
     };
     let (path, plan) = farm::write_new_plan(&opts)?;

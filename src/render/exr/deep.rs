@@ -20,10 +20,11 @@
 //!   offset table (per pixel the i32 count of samples up to and including
 //!   it), then each channel's samples in channel (name) order, pixel after
 //!   pixel;
-//! - ZIPS compresses the table and the sample data each as OpenEXR's ZIP
-//!   does (bytes split into even and odd halves, differences of neighbours,
-//!   zlib); a part whose compressed form is no smaller is stored raw (the
-//!   reader knows it by packed size = unpacked size).
+//! - ZIPS and RLE compress the table and the sample data each as OpenEXR's
+//!   ZIP and RLE do (bytes split into even and odd halves, differences of
+//!   neighbours, then zlib, or run lengths as ImfRle.cpp's); a part whose
+//!   compressed form is no smaller is stored raw (the reader knows it by
+//!   packed size = unpacked size).
 //!
 //! Channels: `A B G R` (half, premultiplied, as the flat file), `Z` and
 //! `ZBack` (float, camera-space depth), `id.agent` and `id.object` (float:
@@ -52,6 +53,8 @@ pub enum DeepCompression {
     /// ZIP per scanline: lossless, the default.
     #[default]
     Zips,
+    /// Run lengths of the reordered bytes: lossless, fast, larger.
+    Rle,
     /// No compression.
     None,
 }
@@ -67,6 +70,7 @@ impl DeepCompression {
     pub fn parse(name: &str) -> Option<DeepCompression> {
         match name {
             "zips" => Some(DeepCompression::Zips),
+            "rle" => Some(DeepCompression::Rle),
             "none" => Some(DeepCompression::None),
             _ => None,
         }
@@ -75,6 +79,7 @@ impl DeepCompression {
     fn exr(self) -> Compression {
         match self {
             DeepCompression::Zips => Compression::ZIP1,
+            DeepCompression::Rle => Compression::RLE,
             DeepCompression::None => Compression::Uncompressed,
         }
     }
@@ -157,9 +162,9 @@ fn header_bytes(path: &Path, deep: &DeepImage, film: &Film, meta: &LayerMeta, c:
     Ok(out)
 }
 
-/// OpenEXR's ZIP: even bytes then odd bytes, each byte as the difference
-/// from the one before (+128), then zlib.
-fn zip_compress(raw: &[u8]) -> Vec<u8> {
+/// The byte reordering OpenEXR's ZIP and RLE share: even bytes then odd
+/// bytes, each byte as the difference from the one before (+128).
+fn predict(raw: &[u8]) -> Vec<u8> {
     let half = raw.len().div_ceil(2);
     let mut t = vec![0u8; raw.len()];
     for (i, &b) in raw.iter().enumerate() {
@@ -171,9 +176,23 @@ fn zip_compress(raw: &[u8]) -> Vec<u8> {
         prev = *v;
         *v = d;
     }
+    t
+}
+
+/// The inverse of [`predict`].
+fn unpredict(mut t: Vec<u8>) -> Vec<u8> {
+    for i in 1..t.len() {
+        t[i] = t[i - 1].wrapping_add(t[i]).wrapping_sub(128);
+    }
+    let half = t.len().div_ceil(2);
+    (0..t.len()).map(|i| t[if i % 2 == 0 { i / 2 } else { half + i / 2 }]).collect()
+}
+
+/// OpenEXR's ZIP: [`predict`], then zlib.
+fn zip_compress(raw: &[u8]) -> Vec<u8> {
     let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
     // Writing to a Vec cannot fail.
-    let _ = z.write_all(&t);
+    let _ = z.write_all(&predict(raw));
     z.finish().unwrap_or_default()
 }
 
@@ -181,28 +200,76 @@ fn zip_compress(raw: &[u8]) -> Vec<u8> {
 fn zip_decompress(packed: &[u8], size: usize) -> Option<Vec<u8>> {
     let mut t = Vec::with_capacity(size);
     flate2::read::ZlibDecoder::new(packed).take(size as u64 + 1).read_to_end(&mut t).ok()?;
-    if t.len() != size {
-        return None;
+    (t.len() == size).then(|| unpredict(t))
+}
+
+/// OpenEXR's RLE (`rleCompress` in ImfRle.cpp): [`predict`], then runs of
+/// 3 to 128 equal bytes as (length - 1, byte) and other stretches of up to
+/// 127 bytes as (-length, bytes).
+fn rle_compress(raw: &[u8]) -> Vec<u8> {
+    const MIN_RUN: usize = 3;
+    const MAX_RUN: usize = 127;
+    let t = predict(raw);
+    let mut out = Vec::with_capacity(t.len() + t.len() / 64 + 2);
+    let (mut start, mut end) = (0usize, 1usize);
+    while start < t.len() {
+        while end < t.len() && t[start] == t[end] && end - start - 1 < MAX_RUN {
+            end += 1;
+        }
+        if end - start >= MIN_RUN {
+            out.push((end - start - 1) as u8);
+            out.push(t[start]);
+            start = end;
+        } else {
+            // A literal stretch ends where a run of three equal bytes begins.
+            while end < t.len()
+                && (end + 1 >= t.len() || t[end] != t[end + 1] || end + 2 >= t.len() || t[end + 1] != t[end + 2])
+                && end - start < MAX_RUN
+            {
+                end += 1;
+            }
+            out.push((-((end - start) as i32)) as u8);
+            out.extend_from_slice(&t[start..end]);
+            start = end;
+        }
+        end += 1;
     }
-    for i in 1..t.len() {
-        t[i] = t[i - 1].wrapping_add(t[i]).wrapping_sub(128);
+    out
+}
+
+/// The inverse of [`rle_compress`], for exactly `size` bytes.
+fn rle_decompress(packed: &[u8], size: usize) -> Option<Vec<u8>> {
+    let mut t = Vec::with_capacity(size);
+    let mut at = 0;
+    while at < packed.len() {
+        let n = packed[at] as i8;
+        if n < 0 {
+            let count = -(n as i32) as usize;
+            t.extend_from_slice(packed.get(at + 1..at + 1 + count)?);
+            at += 1 + count;
+        } else {
+            let count = n as usize + 1;
+            t.extend(std::iter::repeat_n(*packed.get(at + 1)?, count));
+            at += 2;
+        }
+        if t.len() > size {
+            return None;
+        }
     }
-    let half = size.div_ceil(2);
-    Some((0..size).map(|i| t[if i % 2 == 0 { i / 2 } else { half + i / 2 }]).collect())
+    (t.len() == size).then(|| unpredict(t))
 }
 
 /// `raw` as `c` stores it: compressed only where that is smaller.
 fn pack(raw: Vec<u8>, c: DeepCompression) -> Vec<u8> {
-    match c {
-        DeepCompression::None => raw,
-        DeepCompression::Zips => {
-            let z = zip_compress(&raw);
-            if z.len() < raw.len() {
-                z
-            } else {
-                raw
-            }
-        }
+    let packed = match c {
+        DeepCompression::None => return raw,
+        DeepCompression::Zips => zip_compress(&raw),
+        DeepCompression::Rle => rle_compress(&raw),
+    };
+    if packed.len() < raw.len() {
+        packed
+    } else {
+        raw
     }
 }
 
@@ -289,6 +356,8 @@ pub struct DeepHeader {
     pub world_to_ndc: Option<[f32; 16]>,
     /// Whether `chromaticities` is present.
     pub chromaticities: bool,
+    /// `throng/frame`.
+    pub frame: Option<i32>,
 }
 
 fn u64_at(b: &[u8], at: usize) -> Option<u64> {
@@ -330,10 +399,11 @@ pub fn read_deep(path: &Path) -> Result<(DeepImage, DeepHeader)> {
     }
     let compression = match header.compression {
         Compression::ZIP1 => Some(DeepCompression::Zips),
+        Compression::RLE => Some(DeepCompression::Rle),
         Compression::Uncompressed => Some(DeepCompression::None),
         _ => None,
     };
-    let Some(c) = compression else { return Err(bad("a compression other than NONE or ZIPS")) };
+    let Some(c) = compression else { return Err(bad("a compression other than NONE, RLE or ZIPS")) };
     let names: Vec<String> = header.channels.list.iter().map(|ch| super::lossy(&ch.name)).collect();
     if names != CHANNELS.map(|(n, _)| n.to_string()) {
         return Err(bad("channels other than throng's"));
@@ -355,8 +425,18 @@ pub fn read_deep(path: &Path) -> Result<(DeepImage, DeepHeader)> {
         text: text_attrs,
         world_to_ndc: header.own_attributes.world_to_normalized_device,
         chromaticities: header.shared_attributes.chromaticities.is_some(),
+        frame: match other("throng/frame") {
+            Some(AttributeValue::I32(f)) => Some(*f),
+            _ => None,
+        },
     };
     Ok((image, head))
+}
+
+/// Whether `path` is a whole deep file throng can read (a resumed render
+/// and the farm count it as done).
+pub fn is_whole(path: &Path) -> bool {
+    read_deep(path).is_ok()
 }
 
 /// Reads scanline `y`'s chunk at `off` into `image`.
@@ -372,6 +452,7 @@ fn read_line(b: &[u8], off: usize, y: usize, w: usize, c: DeepCompression, image
         match c {
             _ if raw.len() == size => Some(raw.to_vec()),
             DeepCompression::Zips => zip_decompress(raw, size),
+            DeepCompression::Rle => rle_decompress(raw, size),
             DeepCompression::None => None,
         }
     };
@@ -420,9 +501,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn zip_round_trips() {
-        for raw in [Vec::new(), vec![7u8], (0..1000u32).map(|i| (i * 37 % 251) as u8).collect::<Vec<_>>()] {
+    fn zip_and_rle_round_trip() {
+        let runs: Vec<u8> = (0..3000u32).map(|i| if i % 700 < 400 { 9 } else { (i * 37 % 251) as u8 }).collect();
+        for raw in [Vec::new(), vec![7u8], vec![1, 1], (0..1000u32).map(|i| (i * 37 % 251) as u8).collect(), runs] {
             assert_eq!(zip_decompress(&zip_compress(&raw), raw.len()).as_deref(), Some(&raw[..]));
+            assert_eq!(rle_decompress(&rle_compress(&raw), raw.len()).as_deref(), Some(&raw[..]));
         }
+        // A run of 300 equal bytes (constant after prediction) packs into runs of at most 128.
+        let flat = vec![5u8; 300];
+        let packed = rle_compress(&flat);
+        assert!(packed.len() <= 8, "{packed:?}");
+        assert!(rle_decompress(&packed, 299).is_none() && rle_decompress(&packed[..3], 300).is_none());
     }
 }
