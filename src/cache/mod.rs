@@ -79,6 +79,7 @@ mod units;
 pub(crate) mod usd;
 pub(crate) mod usdskel;
 pub(crate) mod usdskel_mesh;
+pub(crate) mod usdskel_track;
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};

@@ -22,6 +22,7 @@ use openusd::usd::PrimPredicate;
 
 use super::usd::{self, heading_of, props, quats_of, vec3s_of, world_matrix, xform_chain_ops, Ctx, Gather};
 use super::usdskel_mesh::{SkelMaterial, SkelMesh};
+use super::usdskel_track::{Track, WorldTrack};
 use super::{CrowdCache, ImportOptions};
 use crate::error::{Error, Result};
 use crate::fingerprint::Fingerprinter;
@@ -267,16 +268,24 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
     }
     let skeleton = skeleton(&ctx, &agents[0], frames.0 as f64)?;
     let mut cycles = CycleNames::default();
+    // Agents bound to one SkelAnimation prim share its reading: (cycle, first time).
+    let mut played: HashMap<&str, (String, f64)> = HashMap::new();
     let mut gather = Gather::new(path, frames);
     for a in &agents {
-        for (prim, op) in xform_chain_ops(&ctx, &a.prim)? {
-            ctx.covers(&prim, &op, frames)?;
+        let world = WorldTrack::read(&ctx, &a.prim)?;
+        for track in world.tracks() {
+            track.covers(&ctx, frames)?;
         }
         let (cycle, start) = match &a.animation {
-            Some(anim) => {
-                let read = animation(&ctx, anim, &skeleton, frames)?;
-                (cycles.name_of(&read), read.times.first().copied().unwrap_or(frames.0 as f64))
-            }
+            Some(anim) => match played.get(anim.as_str()) {
+                Some(known) => known.clone(),
+                None => {
+                    let read = animation(&ctx, anim, &skeleton, frames)?;
+                    let known = (cycles.name_of(&read), read.times.first().copied().unwrap_or(frames.0 as f64));
+                    played.insert(anim, known.clone());
+                    known
+                }
+            },
             None => (REST_CYCLE.to_string(), frames.0 as f64),
         };
         let rig = match ctx.value(&a.prim, "primvars:throng:rig", 0.0)? {
@@ -285,7 +294,7 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
             _ => opts.rig.clone(),
         };
         for f in frames.0..=frames.1 {
-            let m = world_matrix(&ctx, &a.prim, f as f64)?;
+            let m = world.at(&ctx, f as f64)?;
             let too_many = || ctx.err(&a.prim, "more than 65536 rig or cycle names").frame(f);
             let sample = super::AgentSample {
                 id: a.id,
@@ -411,11 +420,13 @@ pub(super) fn animation(ctx: &Ctx, prim: &str, skel: &SkelSkeleton, frames: (i64
         })?;
         joints.push(i);
     }
-    let attrs = ["translations", "rotations", "scales"];
+    // Each array's samples read once ([`Track`]), not once a time code.
+    let [tr_track, rot_track, sc_track] = ["translations", "rotations", "scales"].map(|a| Track::read(ctx, prim, a));
+    let tracks = [tr_track?, rot_track?, sc_track?];
     let mut times = BTreeSet::new();
-    for a in attrs {
-        ctx.covers(prim, a, frames)?;
-        for t in ctx.times(prim, a)? {
+    for track in &tracks {
+        track.covers(ctx, frames)?;
+        for &t in &track.times {
             if t >= frames.0 as f64 && t <= frames.1 as f64 {
                 times.insert(t.to_bits());
             }
@@ -429,16 +440,17 @@ pub(super) fn animation(ctx: &Ctx, prim: &str, skel: &SkelSkeleton, frames: (i64
     let mut poses = Vec::with_capacity(times.len());
     for &t in &times {
         let f = t.floor() as i64;
-        let read = |attr: &str, get: &dyn Fn(&Value) -> Option<Vec<Vec3>>| -> Result<Option<Vec<Vec3>>> {
-            let Some(v) = ctx.value(prim, attr, t)? else { return Ok(None) };
+        let read = |k: usize, get: &dyn Fn(&Value) -> Option<Vec<Vec3>>| -> Result<Option<Vec<Vec3>>> {
+            let attr = ["translations", "rotations", "scales"][k];
+            let Some(v) = tracks[k].at(ctx, t)? else { return Ok(None) };
             let v =
                 get(&v).ok_or_else(|| ctx.err(&at(attr), format!("<{prim}.{attr}> has the wrong type")).frame(f))?;
             check_len(ctx, &at(attr), v.len(), joints.len(), f)?;
             Ok(Some(v))
         };
-        let tr = read("translations", &|v| vec3s_of(v))?;
-        let sc = read("scales", &|v| half3s_of(v).or_else(|| vec3s_of(v)))?;
-        let rot = match ctx.value(prim, "rotations", t)? {
+        let tr = read(0, &|v| vec3s_of(v))?;
+        let sc = read(2, &|v| half3s_of(v).or_else(|| vec3s_of(v)))?;
+        let rot = match tracks[1].at(ctx, t)? {
             None => None,
             Some(v) => {
                 let q = quats_of(&v).ok_or_else(|| ctx.err(&at("rotations"), "rotations is not a quat[]").frame(f))?;
