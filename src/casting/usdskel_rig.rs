@@ -53,9 +53,10 @@ fn trs_of(m: &Mat4) -> Trs {
     Trs { translation, rotation, scale }
 }
 
-/// The UsdSkel crowd at `path`'s character.
-pub(crate) fn character(path: &Path) -> Result<UsdCharacter> {
-    let c = usdskel::character(path)?;
+/// A character of the UsdSkel crowd at `path`: SkelRoot `root`'s (the
+/// rig's `root`), else the first agent's.
+pub(crate) fn character(path: &Path, root: Option<&str>) -> Result<UsdCharacter> {
+    let c = usdskel::character(path, root)?;
     let skel = &c.skeleton;
     let top = skel.joints.len();
     let mut nodes: Vec<Node> = (skel.joints.iter().zip(&skel.parents).zip(&skel.rest))
