@@ -264,3 +264,28 @@ fn a_shot_over_two_agent_types_renders_every_agent() {
     ids.sort_unstable();
     assert_eq!(seen, ids, "every agent of both types is in the picture");
 }
+
+#[test]
+fn copies_of_one_animation_within_the_pose_grid_share_a_cycle_and_posed_meshes() {
+    // anim_2 holds anim_0's samples; nudge one rotation of anim_2 below the
+    // grid (2e-6), then above it (1e-3).
+    fn nudged(to: &'static str) -> impl Fn(&str) -> String {
+        move |t: &str| {
+            let at = t.find("def SkelAnimation \"anim_2\"").unwrap();
+            let (head, tail) = t.split_at(at);
+            format!(
+                "{head}{}",
+                tail.replacen("1003: [(0.97751504, 0.21086581,", &format!("1003: [(0.97751504, {to},"), 1)
+            )
+        }
+    }
+    for (to, cycles) in [("0.2108660", 2), ("0.2118658", 3)] {
+        let dir = common::tempdir().unwrap();
+        let (shot, usd) = edited_shot(dir.path(), "skel_instanced.usda", nudged(to));
+        assert!(std::fs::read_to_string(&usd).unwrap().contains(to), "the edit took");
+        let crowd = throng::cache::read(&usd).unwrap();
+        assert_eq!(crowd.cycles.len(), cycles, "{to}: {:?}", crowd.cycles);
+        let cast = throng::casting::ShotCrowd::load(&shot).unwrap();
+        assert_eq!(cast.poses().skins().mesh_count(), cycles * 8, "{to}");
+    }
+}

@@ -442,15 +442,29 @@ impl CycleNames {
     }
 }
 
-/// A key equal for animations holding the same samples.
+/// Grid on which animations are compared ([`content_key`]): joint-local
+/// translations in stage units, quaternion components and scales.
+const POSE_GRID: f32 = 1e-4;
+
+/// A key equal for animations holding the same samples on the
+/// [`POSE_GRID`]: each joint's translation, rotation (sign-canonical
+/// quaternion) and scale rounded to it, so copies of one clip written with
+/// float noise between them share one cycle (docs/usd.md, "Baked motion as a
+/// cycle"). Values either side of a grid line part two animations: less
+/// sharing, never a wrong pose.
 fn content_key(anim: &SkelAnim) -> String {
+    let grid = |v: f32| (v / POSE_GRID).round() as i64;
     let mut f = Fingerprinter::new();
     f.debug("joints", &anim.joints).debug("times", &anim.times);
     for pose in &anim.poses {
-        f.floats(
-            "pose",
-            pose.iter().flat_map(|(t, r, s)| t.to_array().into_iter().chain(r.to_array()).chain(s.to_array())),
-        );
+        let cells: Vec<i64> = (pose.iter())
+            .flat_map(|(t, r, s)| {
+                let r = if r.w < 0.0 { -*r } else { *r };
+                t.to_array().into_iter().chain(r.to_array()).chain(s.to_array())
+            })
+            .map(grid)
+            .collect();
+        f.debug("pose", &cells);
     }
     f.hex()
 }
