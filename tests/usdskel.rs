@@ -26,17 +26,18 @@ fn expected(file: &str) -> serde_json::Map<String, serde_json::Value> {
 /// agent's place and heading from the cache, its joints from the rig at the
 /// step its cycle frame names), against usd-core's.
 fn joints_match_usd_core(file: &str) {
-    joints_match_usd_core_with(file, &[None]);
+    joints_match_usd_core_with(file, &[None], 24.0);
 }
 
-/// [`joints_match_usd_core`] with the cache's rig `k` loaded with `root = roots[k]`.
-fn joints_match_usd_core_with(file: &str, roots: &[Option<&str>]) {
+/// [`joints_match_usd_core`] with the cache's rig `k` loaded with `root =
+/// roots[k]`, for a shot at `fps`.
+fn joints_match_usd_core_with(file: &str, roots: &[Option<&str>], fps: f32) {
     let path = fixture(&format!("usd/{file}"));
     let crowd = throng::cache::read(&path).unwrap();
     assert_eq!(crowd.rigs.len(), roots.len(), "{file}: {:?}", crowd.rigs);
     let rigs: Vec<SkinnedRig> = (roots.iter())
         .map(|r| SkinOptions { root: r.map(str::to_string), ..SkinOptions::default() })
-        .map(|options| SkinnedRig::load(&path, &options, 24.0).unwrap())
+        .map(|options| SkinnedRig::load(&path, &options, fps).unwrap())
         .collect();
     let want = expected(file);
     // Agents in prim order are agents in x order (make_skel_crowds.py: agent i at x = 1 + 2i + ...).
@@ -75,6 +76,14 @@ fn joints_match_usd_core_with(file: &str, roots: &[Option<&str>]) {
 #[test]
 fn houdini_shaped_agents_move_as_usd_core_evaluates_them() {
     joints_match_usd_core("skel_crowd.usda");
+}
+
+#[test]
+fn a_shot_at_another_fps_than_the_stage_still_plays_each_time_code_at_its_frame() {
+    // The fixtures' timeCodesPerSecond is 24: a 25 or 30 fps shot's frame f is still time code f.
+    for fps in [25.0, 30.0] {
+        joints_match_usd_core_with("skel_crowd.usda", &[None], fps);
+    }
 }
 
 #[test]
@@ -231,7 +240,7 @@ fn two_agent_types_in_one_file_are_two_characters_each_moving_as_usd_core_says()
     // make_skel_crowds.py: agent i at x = 1 + 2i; even agents walkers, odd ones soldiers.
     assert_eq!([1.0, 3.0, 5.0, 7.0].map(rig_of), [0, 1, 0, 1]);
     // Each rig is its own character, chosen by `root`: its skeleton, mesh and material.
-    joints_match_usd_core_with("skel_two_types.usda", &[None, Some("/Crowd/agent_1")]);
+    joints_match_usd_core_with("skel_two_types.usda", &[None, Some("/Crowd/agent_1")], 24.0);
     let soldier = SkinOptions { root: Some("/Crowd/agent_3".into()), ..SkinOptions::default() };
     for (options, joints) in [(SkinOptions::default(), 4), (soldier, 5)] {
         let rig = SkinnedRig::load(&path, &options, 24.0).unwrap();

@@ -96,8 +96,6 @@ pub(crate) struct SkelCharacter {
     pub(crate) materials: Vec<SkelMaterial>,
     /// Distinct animations in first-use order.
     pub(crate) animations: Vec<SkelAnim>,
-    /// The stage's time codes per second.
-    pub(crate) time_codes_per_second: f64,
     /// What reading noticed but accepted (weights renormalised, influences dropped).
     pub(crate) warnings: Vec<String>,
 }
@@ -688,12 +686,5 @@ pub(crate) fn character(path: &Path, root: Option<&str>) -> Result<SkelCharacter
             animations.push(read);
         }
     }
-    Ok(SkelCharacter {
-        skeleton,
-        meshes,
-        materials,
-        animations,
-        time_codes_per_second: ctx.stage.time_codes_per_second(),
-        warnings,
-    })
+    Ok(SkelCharacter { skeleton, meshes, materials, animations, warnings })
 }
