@@ -26,9 +26,19 @@ fn expected(file: &str) -> serde_json::Map<String, serde_json::Value> {
 /// agent's place and heading from the cache, its joints from the rig at the
 /// step its cycle frame names), against usd-core's.
 fn joints_match_usd_core(file: &str) {
+    joints_match_usd_core_with(file, &[None], 24.0);
+}
+
+/// [`joints_match_usd_core`] with the cache's rig `k` loaded with `root =
+/// roots[k]`, for a shot at `fps`.
+fn joints_match_usd_core_with(file: &str, roots: &[Option<&str>], fps: f32) {
     let path = fixture(&format!("usd/{file}"));
     let crowd = throng::cache::read(&path).unwrap();
-    let rig = SkinnedRig::load(&path, &SkinOptions::default(), 24.0).unwrap();
+    assert_eq!(crowd.rigs.len(), roots.len(), "{file}: {:?}", crowd.rigs);
+    let rigs: Vec<SkinnedRig> = (roots.iter())
+        .map(|r| SkinOptions { root: r.map(str::to_string), ..SkinOptions::default() })
+        .map(|options| SkinnedRig::load(&path, &options, fps).unwrap())
+        .collect();
     let want = expected(file);
     // Agents in prim order are agents in x order (make_skel_crowds.py: agent i at x = 1 + 2i + ...).
     let mut prims: Vec<&String> = want.keys().collect();
@@ -40,6 +50,7 @@ fn joints_match_usd_core(file: &str) {
         agents.sort_by(|a, b| a.position.x.total_cmp(&b.position.x));
         assert_eq!(agents.len(), prims.len());
         for (a, prim) in agents.iter().zip(&prims) {
+            let rig = &rigs[a.rig as usize];
             let cycle = rig.cycle_index(&crowd.cycles[a.cycle as usize]).unwrap();
             // Pose steps are chosen for pose_error_max, a whole number a frame
             // here: a still frame is a step, its exact pose.
@@ -65,6 +76,14 @@ fn joints_match_usd_core(file: &str) {
 #[test]
 fn houdini_shaped_agents_move_as_usd_core_evaluates_them() {
     joints_match_usd_core("skel_crowd.usda");
+}
+
+#[test]
+fn a_shot_at_another_fps_than_the_stage_still_plays_each_time_code_at_its_frame() {
+    // The fixtures' timeCodesPerSecond is 24: a 25 or 30 fps shot's frame f is still time code f.
+    for fps in [25.0, 30.0] {
+        joints_match_usd_core_with("skel_crowd.usda", &[None], fps);
+    }
 }
 
 #[test]
@@ -209,4 +228,73 @@ fn weights_that_do_not_sum_to_one_are_renormalised_with_a_warning() {
     assert!(w.contains("/Crowd/agent_0/Body.primvars:skel:jointWeights") && w.contains("renormalised"), "{w}");
     let piece = rig.piece(0);
     assert!(piece.influences.iter().all(|inf| (inf.iter().map(|i| i.1).sum::<f32>() - 1.0).abs() < 1e-6));
+}
+
+#[test]
+fn two_agent_types_in_one_file_are_two_characters_each_moving_as_usd_core_says() {
+    let path = fixture("usd/skel_two_types.usda");
+    let crowd = throng::cache::read(&path).unwrap();
+    // The first character is the import's rig, the second that name with _2.
+    assert_eq!(crowd.rigs, ["bipedThinA", "bipedThinA_2"]);
+    let rig_of = |x: f32| crowd.frames[0].agents.iter().find(|a| (a.position.x - x).abs() < 0.5).unwrap().rig;
+    // make_skel_crowds.py: agent i at x = 1 + 2i; even agents walkers, odd ones soldiers.
+    assert_eq!([1.0, 3.0, 5.0, 7.0].map(rig_of), [0, 1, 0, 1]);
+    // Each rig is its own character, chosen by `root`: its skeleton, mesh and material.
+    joints_match_usd_core_with("skel_two_types.usda", &[None, Some("/Crowd/agent_1")], 24.0);
+    let soldier = SkinOptions { root: Some("/Crowd/agent_3".into()), ..SkinOptions::default() };
+    for (options, joints) in [(SkinOptions::default(), 4), (soldier, 5)] {
+        let rig = SkinnedRig::load(&path, &options, 24.0).unwrap();
+        // The soldier's top ring rides its arm, joint 4, which the walker lacks.
+        let top = (rig.piece(0).influences.iter().flatten()).filter(|i| i.1 > 0.0).map(|i| i.0).max().unwrap();
+        assert_eq!(usize::from(top) + 1, joints, "{:?}: highest joint a vertex rides", options.root);
+    }
+    let bad = SkinOptions { root: Some("/Crowd/Anims".into()), ..SkinOptions::default() };
+    let err = SkinnedRig::load(&path, &bad, 24.0).unwrap_err().to_string();
+    assert!(err.contains("root") && err.contains("/Crowd/agent_0, /Crowd/agent_1"), "{err}");
+}
+
+#[test]
+fn a_shot_over_two_agent_types_renders_every_agent() {
+    let dir = common::tempdir().unwrap();
+    let (shot, _) = edited_shot(dir.path(), "skel_two_types.usda", str::to_string);
+    let text = std::fs::read_to_string(&shot).unwrap();
+    let more = "\n[rigs.crowd_2]\nfile = \"skel_crowd.usda\"\nroot = \"/Crowd/agent_1\"\n";
+    std::fs::write(&shot, text.replace("[camera]", &format!("{more}\n[camera]"))).unwrap();
+    let out = dir.path().join("r");
+    let args = ["render", shot.to_str().unwrap(), "--layer", "full", "--frames", "1001", "--spp", "1"];
+    let (code, _, err) = run(&[&args[..], &["--resolution", "96x54", "--out", out.to_str().unwrap()][..]].concat());
+    assert_eq!(code, 0, "render of two agent types failed: {err}");
+    let crowd = throng::cache::read(fixture("usd/skel_two_types.usda")).unwrap();
+    let (film, _) = throng::render::exr::read_layer(&out.join("full/skel.full.1001.exr")).unwrap();
+    let mut seen: Vec<u32> = film.agent_id.iter().filter_map(|&i| i.checked_sub(1)).collect();
+    seen.sort_unstable();
+    seen.dedup();
+    let mut ids: Vec<u32> = crowd.frames[0].agents.iter().map(|a| a.id).collect();
+    ids.sort_unstable();
+    assert_eq!(seen, ids, "every agent of both types is in the picture");
+}
+
+#[test]
+fn copies_of_one_animation_within_the_pose_grid_share_a_cycle_and_posed_meshes() {
+    // anim_2 holds anim_0's samples; nudge one rotation of anim_2 below the
+    // grid (2e-6), then above it (1e-3).
+    fn nudged(to: &'static str) -> impl Fn(&str) -> String {
+        move |t: &str| {
+            let at = t.find("def SkelAnimation \"anim_2\"").unwrap();
+            let (head, tail) = t.split_at(at);
+            format!(
+                "{head}{}",
+                tail.replacen("1003: [(0.97751504, 0.21086581,", &format!("1003: [(0.97751504, {to},"), 1)
+            )
+        }
+    }
+    for (to, cycles) in [("0.2108660", 2), ("0.2118658", 3)] {
+        let dir = common::tempdir().unwrap();
+        let (shot, usd) = edited_shot(dir.path(), "skel_instanced.usda", nudged(to));
+        assert!(std::fs::read_to_string(&usd).unwrap().contains(to), "the edit took");
+        let crowd = throng::cache::read(&usd).unwrap();
+        assert_eq!(crowd.cycles.len(), cycles, "{to}: {:?}", crowd.cycles);
+        let cast = throng::casting::ShotCrowd::load(&shot).unwrap();
+        assert_eq!(cast.poses().skins().mesh_count(), cycles * 8, "{to}");
+    }
 }

@@ -79,6 +79,7 @@ mod units;
 pub(crate) mod usd;
 pub(crate) mod usdskel;
 pub(crate) mod usdskel_mesh;
+pub(crate) mod usdskel_track;
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
@@ -198,8 +199,11 @@ pub fn import(path: impl AsRef<Path>, how: &Import) -> Result<(CrowdCache, Optio
         Format::Binary => binary::read(path)?,
         Format::Csv => csv::read(path)?,
         Format::JuPedSim => jupedsim::read(path, &how.jupedsim)?,
-        Format::Usd if usdskel::has_skel_roots(path)? => usdskel::read(path, &how.jupedsim)?,
-        Format::Usd => usd::read(path, &how.jupedsim)?,
+        // One opening of the stage when it is a UsdSkel crowd.
+        Format::Usd => match usdskel::read(path, &how.jupedsim)? {
+            Some(crowd) => crowd,
+            None => usd::read(path, &how.jupedsim)?,
+        },
         Format::Tabular => return Err(needs_layout(path)),
     };
     place(&mut crowd, &how.placement);

@@ -70,7 +70,11 @@ impl Ctx<'_> {
 
     /// Errors when the samples of `prim.attr` do not cover `frames`.
     pub(super) fn covers(&self, prim: &str, attr: &str, frames: (i64, i64)) -> Result<()> {
-        let times = self.times(prim, attr)?;
+        self.covers_times(prim, attr, &self.times(prim, attr)?, frames)
+    }
+
+    /// Errors when `times`, the samples of `prim.attr`, do not cover `frames`.
+    pub(super) fn covers_times(&self, prim: &str, attr: &str, times: &[f64], frames: (i64, i64)) -> Result<()> {
         let (Some(&first), Some(&last)) = (times.first(), times.last()) else { return Ok(()) };
         let missing = if first > frames.0 as f64 {
             Some(frames.0)
@@ -697,7 +701,7 @@ fn xform_ops(ctx: &Ctx, prim: &str) -> Result<Vec<String>> {
 
 /// The prims whose ops make `prim`'s world matrix, `prim` first, up to the
 /// root or to the first prim whose ops start with `!resetXformStack!`.
-fn xform_chain(ctx: &Ctx, prim: &str) -> Result<Vec<(String, Vec<String>)>> {
+pub(super) fn xform_chain(ctx: &Ctx, prim: &str) -> Result<Vec<(String, Vec<String>)>> {
     let mut chain = Vec::new();
     let mut p = prim;
     loop {
@@ -739,8 +743,19 @@ fn axis_rotation(axis: char, deg: f32) -> Mat4 {
 /// The prim's local matrix at `t` from `ops` (column vectors: the first op
 /// in `xformOpOrder` is the outermost).
 fn local_matrix(ctx: &Ctx, prim: &str, ops: &[String], t: f64) -> Result<Mat4> {
+    local_matrix_with(ctx, prim, ops, t, &mut |_, attr| ctx.value(prim, attr, t))
+}
+
+/// [`local_matrix`] with op `k`'s value (attribute `attr`) at `t` from `value`.
+pub(super) fn local_matrix_with(
+    ctx: &Ctx,
+    prim: &str,
+    ops: &[String],
+    t: f64,
+    value: &mut dyn FnMut(usize, &str) -> Result<Option<Value>>,
+) -> Result<Mat4> {
     let mut m = Mat4::IDENTITY;
-    for op in ops {
+    for (k, op) in ops.iter().enumerate() {
         if op == "!resetXformStack!" {
             continue;
         }
@@ -749,7 +764,7 @@ fn local_matrix(ctx: &Ctx, prim: &str, ops: &[String], t: f64) -> Result<Mat4> {
             None => (false, op.as_str()),
         };
         let bad = || ctx.err(&format!("{prim}.{attr}"), format!("<{prim}.{attr}> has no usable value at time {t}"));
-        let v = ctx.value(prim, attr, t)?.ok_or_else(bad)?;
+        let v = value(k, attr)?.ok_or_else(bad)?;
         let kind = attr.strip_prefix("xformOp:").unwrap_or(attr).split(':').next().unwrap_or("");
         let step = match kind {
             "transform" => match &v {

@@ -22,6 +22,7 @@ use openusd::usd::PrimPredicate;
 
 use super::usd::{self, heading_of, props, quats_of, vec3s_of, world_matrix, xform_chain_ops, Ctx, Gather};
 use super::usdskel_mesh::{SkelMaterial, SkelMesh};
+use super::usdskel_track::{Track, WorldTrack};
 use super::{CrowdCache, ImportOptions};
 use crate::error::{Error, Result};
 use crate::fingerprint::Fingerprinter;
@@ -46,6 +47,9 @@ pub(crate) struct SkelAgent {
     pub(crate) animation: Option<String>,
     /// Skinned meshes under it (prims with `primvars:skel:jointIndices`).
     pub(crate) meshes: Vec<String>,
+    /// Its character: agents of one prototype, or of the same skeleton and
+    /// meshes, share one ([`character_key`]); numbered by first agent.
+    pub(crate) character: usize,
 }
 
 /// A skeleton: joints (paths, parents before children), local rest and
@@ -92,8 +96,6 @@ pub(crate) struct SkelCharacter {
     pub(crate) materials: Vec<SkelMaterial>,
     /// Distinct animations in first-use order.
     pub(crate) animations: Vec<SkelAnim>,
-    /// The stage's time codes per second.
-    pub(crate) time_codes_per_second: f64,
     /// What reading noticed but accepted (weights renormalised, influences dropped).
     pub(crate) warnings: Vec<String>,
 }
@@ -101,7 +103,7 @@ pub(crate) struct SkelCharacter {
 /// Whether the stage holds SkelRoots (then it is read as a UsdSkel crowd).
 pub(crate) fn has_skel_roots(path: &Path) -> Result<bool> {
     let ctx = usd::open(path)?;
-    Ok(!skel_roots(&ctx)?.is_empty())
+    Ok(StagePrims::read(&ctx)?.prims.iter().any(|(_, t)| t == "SkelRoot"))
 }
 
 /// Each agent's (id, SkelRoot prim, Skeleton prim, bound animation), for botinfo.
@@ -109,11 +111,12 @@ pub(crate) fn agent_prims(path: &Path) -> Result<Vec<SkelAgent>> {
     agents(&usd::open(path)?)
 }
 
-/// Every composed prim path, instance proxies included, in traversal order.
-fn all_prims(ctx: &Ctx) -> Result<Vec<String>> {
+/// Every composed prim path in traversal order; inside instances (their
+/// prototypes' prims as instance proxies) only when `proxies`.
+fn all_prims(ctx: &Ctx, proxies: bool) -> Result<Vec<String>> {
     let mut paths = Vec::new();
     ctx.stage
-        .traverse(PrimPredicate::DEFAULT.with_instance_proxies(true), |p| paths.push(p.as_str().to_string()))
+        .traverse(PrimPredicate::DEFAULT.with_instance_proxies(proxies), |p| paths.push(p.as_str().to_string()))
         .map_err(|e| Error::invalid(ctx.path, format!("cannot traverse the USD stage: {e:#}")))?;
     Ok(paths)
 }
@@ -123,16 +126,11 @@ fn type_of(ctx: &Ctx, prim: &str) -> String {
     ctx.stage.prim(p).type_name().ok().flatten().map(|t| t.as_str().to_string()).unwrap_or_default()
 }
 
-/// The SkelRoot prims, sorted by path.
-fn skel_roots(ctx: &Ctx) -> Result<Vec<String>> {
-    Ok(typed_prims(ctx)?.into_iter().filter(|(_, t)| t == "SkelRoot").map(|(p, _)| p).collect())
-}
-
 /// Every composed prim with its type name, sorted by path: the prims under
 /// one prim are then one run (`descendants`).
-fn typed_prims(ctx: &Ctx) -> Result<Vec<(String, String)>> {
+fn typed_prims(ctx: &Ctx, proxies: bool) -> Result<Vec<(String, String)>> {
     let mut prims: Vec<(String, String)> =
-        all_prims(ctx)?.into_iter().map(|p| (type_of(ctx, &p), p)).map(|(t, p)| (p, t)).collect();
+        all_prims(ctx, proxies)?.into_iter().map(|p| (type_of(ctx, &p), p)).map(|(t, p)| (p, t)).collect();
     prims.sort();
     Ok(prims)
 }
@@ -145,6 +143,74 @@ fn descendants<'a>(prims: &'a [(String, String)], root: &str) -> &'a [(String, S
     &prims[start..start + len]
 }
 
+/// The stage's prims as agents are found among them. Listing every prim of
+/// every instance (instance proxies) costs a traversal of each agent's
+/// prototype per agent: when every instance is a SkelRoot (instanced agents,
+/// as Houdini writes them), each prototype's prims are listed once and each
+/// instance's are its prototype's under its own path.
+struct StagePrims {
+    /// (path, type name), sorted by path.
+    prims: Vec<(String, String)>,
+    /// Instance SkelRoot -> its prototype.
+    prototype_of: HashMap<String, String>,
+    /// Prototype -> its prims (path under the prototype, type name).
+    prototypes: HashMap<String, Vec<(String, String)>>,
+}
+
+impl StagePrims {
+    fn read(ctx: &Ctx) -> Result<StagePrims> {
+        let prims = typed_prims(ctx, false)?;
+        let mut prototype_of = HashMap::new();
+        let mut prototypes = HashMap::new();
+        for (p, t) in &prims {
+            let prim = ctx.stage.prim(ctx.sdf_path(p)?);
+            if !prim.is_instance().unwrap_or(false) {
+                continue;
+            }
+            let proto = prim.prototype().ok().flatten();
+            let (Some(proto), "SkelRoot") = (proto, t.as_str()) else {
+                // An instance that is no agent may hold agents: list every prim.
+                let prims = typed_prims(ctx, true)?;
+                return Ok(StagePrims { prims, prototype_of: HashMap::new(), prototypes: HashMap::new() });
+            };
+            let key = proto.as_str().to_string();
+            if !prototypes.contains_key(&key) {
+                prototypes.insert(key.clone(), subtree(ctx, &key)?);
+            }
+            prototype_of.insert(p.clone(), key);
+        }
+        Ok(StagePrims { prims, prototype_of, prototypes })
+    }
+
+    /// The prims under SkelRoot `root` (not itself), sorted by path.
+    fn under(&self, root: &str) -> Vec<(String, String)> {
+        match self.prototype_of.get(root).and_then(|p| self.prototypes.get(p)) {
+            Some(proto) => proto.iter().map(|(rel, t)| (format!("{root}{rel}"), t.clone())).collect(),
+            None => descendants(&self.prims, root).to_vec(),
+        }
+    }
+}
+
+/// The prims under `root` (paths relative to it, starting `/`), with their
+/// type names, sorted by path; at most [`MAX_AGENTS`] of them.
+fn subtree(ctx: &Ctx, root: &str) -> Result<Vec<(String, String)>> {
+    let mut out = Vec::new();
+    let mut stack = vec![root.to_string()];
+    while let Some(at) = stack.pop() {
+        for c in ctx.stage.prim(ctx.sdf_path(&at)?).children().unwrap_or_default() {
+            let path = c.path().as_str().to_string();
+            let kind = c.type_name().ok().flatten().map(|t| t.as_str().to_string()).unwrap_or_default();
+            out.push((path[root.len()..].to_string(), kind));
+            if out.len() > MAX_AGENTS {
+                return Err(ctx.err(root, format!("prototype <{root}> holds more than {MAX_AGENTS} prims")));
+            }
+            stack.push(path);
+        }
+    }
+    out.sort();
+    Ok(out)
+}
+
 /// The first target of relationship `prim.rel`, if authored.
 fn target(ctx: &Ctx, prim: &str, rel: &str) -> Result<Option<String>> {
     let p = ctx.sdf_path(&format!("{prim}.{rel}"))?;
@@ -153,15 +219,17 @@ fn target(ctx: &Ctx, prim: &str, rel: &str) -> Result<Option<String>> {
 
 /// The agents: one per SkelRoot, with ids assigned.
 fn agents(ctx: &Ctx) -> Result<Vec<SkelAgent>> {
-    let prims = typed_prims(ctx)?;
+    let stage = StagePrims::read(ctx)?;
+    let prims = &stage.prims;
     let roots: Vec<&String> = prims.iter().filter(|(_, t)| t == "SkelRoot").map(|(p, _)| p).collect();
     if roots.len() > MAX_AGENTS {
         return Err(Error::invalid(ctx.path, format!("{} SkelRoots; at most {MAX_AGENTS} agents", roots.len())));
     }
     let mut out = Vec::with_capacity(roots.len());
     let mut explicit = Vec::new();
+    let mut characters: HashMap<String, usize> = HashMap::new();
     for root in roots {
-        let under = descendants(&prims, root);
+        let under = stage.under(root);
         let skeleton = (under.iter())
             .find(|(_, t)| t == "Skeleton")
             .map(|(p, _)| p.clone())
@@ -191,10 +259,46 @@ fn agents(ctx: &Ctx) -> Result<Vec<SkelAgent>> {
             }
         };
         explicit.push(id);
-        out.push(SkelAgent { prim: root.clone(), id: 0, skeleton, animation, meshes });
+        let key = character_key(ctx, root, &skeleton, &meshes)?;
+        let next = characters.len();
+        let character = *characters.entry(key).or_insert(next);
+        out.push(SkelAgent { prim: root.clone(), id: 0, skeleton, animation, meshes, character });
     }
     assign_ids(ctx, &mut out, &explicit)?;
     Ok(out)
+}
+
+/// What makes agents one character: an instanceable SkelRoot's prototype
+/// (its instances share the prototype's skeleton and meshes); else its
+/// Skeleton's and meshes' paths under the SkelRoot, the skeleton's joints
+/// and the meshes' points (a crowd exported without instancing repeats each
+/// character's data under every agent). Materials are not in the key: agents
+/// differing only in material wear their character's first agent's.
+fn character_key(ctx: &Ctx, root: &str, skeleton: &str, meshes: &[String]) -> Result<String> {
+    let prim = ctx.stage.prim(ctx.sdf_path(root)?);
+    if let Ok(Some(proto)) = prim.prototype() {
+        return Ok(format!("prototype {}", proto.as_str()));
+    }
+    let under = |p: &str| p.strip_prefix(root).unwrap_or(p).to_string();
+    let mut f = Fingerprinter::new();
+    f.text("skeleton", &under(skeleton)).debug("joints", &tokens(ctx, skeleton, "joints")?);
+    for m in meshes {
+        f.text("mesh", &under(m));
+        if let Some(points) = ctx.value(m, "points", 0.0)?.and_then(|v| vec3s_of(&v)) {
+            f.floats("points", points.iter().flat_map(|p| p.to_array()));
+        }
+    }
+    Ok(f.hex())
+}
+
+/// The cache's rig name for character `k` of `count`: the import's rig when
+/// the file holds one character, else the first's is the import's rig and
+/// the k-th's (from 2) is that name with `_k` (docs/usd.md).
+pub(crate) fn character_rig(rig: &str, k: usize, count: usize) -> String {
+    match (k, count) {
+        (0, _) | (_, 0 | 1) => rig.to_string(),
+        (k, _) => format!("{rig}_{}", k + 1),
+    }
 }
 
 /// Ids: the explicit ones, then a hash of each other prim path (31 bits),
@@ -228,7 +332,7 @@ fn assign_ids(ctx: &Ctx, agents: &mut [SkelAgent], explicit: &[Option<u32>]) -> 
 
 /// The crowd's frames: the stage's time code range, else the span of the
 /// agents' transform and animation samples.
-fn frames(ctx: &Ctx, agents: &[SkelAgent]) -> Result<(i64, i64)> {
+fn frames<'a>(ctx: &Ctx, agents: impl IntoIterator<Item = &'a SkelAgent>) -> Result<(i64, i64)> {
     if ctx.stage.has_authored_time_code_range() {
         return Ok((ctx.stage.start_time_code().ceil() as i64, ctx.stage.end_time_code().floor() as i64));
     }
@@ -249,10 +353,14 @@ fn frames(ctx: &Ctx, agents: &[SkelAgent]) -> Result<(i64, i64)> {
 }
 
 /// Reads a UsdSkel crowd into a [`CrowdCache`]: each SkelRoot at each frame,
-/// placed and headed by its world transform, playing its animation.
-pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
+/// placed and headed by its world transform, playing its animation. `None`
+/// when the stage holds no SkelRoot (it is read as another USD crowd).
+pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<Option<CrowdCache>> {
     let ctx = usd::open(path)?;
     let agents = agents(&ctx)?;
+    if agents.is_empty() {
+        return Ok(None);
+    }
     let frames = frames(&ctx, &agents)?;
     if frames.1 < frames.0 || frames.1 - frames.0 >= usd::MAX_FRAMES {
         return Err(Error::invalid(
@@ -265,27 +373,44 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
             ),
         ));
     }
-    let skeleton = skeleton(&ctx, &agents[0], frames.0 as f64)?;
-    let mut cycles = CycleNames::default();
+    // Each character's skeleton, from its first agent (characters are numbered in agent order).
+    let mut skeletons = Vec::new();
+    for a in &agents {
+        if a.character == skeletons.len() {
+            skeletons.push(skeleton(&ctx, a, frames.0 as f64)?);
+        }
+    }
+    let count = skeletons.len();
+    // Cycle names by content within a character (another character's clip is another rig's).
+    let mut cycles: Vec<CycleNames> = (0..count).map(|_| CycleNames::default()).collect();
+    // Agents bound to one SkelAnimation prim share its reading: (cycle, first time).
+    let mut played: HashMap<(usize, &str), (String, f64)> = HashMap::new();
     let mut gather = Gather::new(path, frames);
     for a in &agents {
-        for (prim, op) in xform_chain_ops(&ctx, &a.prim)? {
-            ctx.covers(&prim, &op, frames)?;
+        let world = WorldTrack::read(&ctx, &a.prim)?;
+        for track in world.tracks() {
+            track.covers(&ctx, frames)?;
         }
         let (cycle, start) = match &a.animation {
-            Some(anim) => {
-                let read = animation(&ctx, anim, &skeleton, frames)?;
-                (cycles.name_of(&read), read.times.first().copied().unwrap_or(frames.0 as f64))
-            }
+            Some(anim) => match played.get(&(a.character, anim.as_str())) {
+                Some(known) => known.clone(),
+                None => {
+                    let read = animation(&ctx, anim, &skeletons[a.character], frames)?;
+                    let known =
+                        (cycles[a.character].name_of(&read), read.times.first().copied().unwrap_or(frames.0 as f64));
+                    played.insert((a.character, anim), known.clone());
+                    known
+                }
+            },
             None => (REST_CYCLE.to_string(), frames.0 as f64),
         };
         let rig = match ctx.value(&a.prim, "primvars:throng:rig", 0.0)? {
             Some(Value::String(s)) => s,
             Some(Value::Token(t)) => t.as_str().to_string(),
-            _ => opts.rig.clone(),
+            _ => character_rig(&opts.rig, a.character, count),
         };
         for f in frames.0..=frames.1 {
-            let m = world_matrix(&ctx, &a.prim, f as f64)?;
+            let m = world.at(&ctx, f as f64)?;
             let too_many = || ctx.err(&a.prim, "more than 65536 rig or cycle names").frame(f);
             let sample = super::AgentSample {
                 id: a.id,
@@ -300,7 +425,7 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<CrowdCache> {
             gather.push(&a.prim, f as i32, sample)?;
         }
     }
-    gather.finish()
+    gather.finish().map(Some)
 }
 
 /// Cycle names by animation content: the first prim with those samples.
@@ -315,15 +440,29 @@ impl CycleNames {
     }
 }
 
-/// A key equal for animations holding the same samples.
+/// Grid on which animations are compared ([`content_key`]): joint-local
+/// translations in stage units, quaternion components and scales.
+const POSE_GRID: f32 = 1e-4;
+
+/// A key equal for animations holding the same samples on the
+/// [`POSE_GRID`]: each joint's translation, rotation (sign-canonical
+/// quaternion) and scale rounded to it, so copies of one clip written with
+/// float noise between them share one cycle (docs/usd.md, "Baked motion as a
+/// cycle"). Values either side of a grid line part two animations: less
+/// sharing, never a wrong pose.
 fn content_key(anim: &SkelAnim) -> String {
+    let grid = |v: f32| (v / POSE_GRID).round() as i64;
     let mut f = Fingerprinter::new();
     f.debug("joints", &anim.joints).debug("times", &anim.times);
     for pose in &anim.poses {
-        f.floats(
-            "pose",
-            pose.iter().flat_map(|(t, r, s)| t.to_array().into_iter().chain(r.to_array()).chain(s.to_array())),
-        );
+        let cells: Vec<i64> = (pose.iter())
+            .flat_map(|(t, r, s)| {
+                let r = if r.w < 0.0 { -*r } else { *r };
+                t.to_array().into_iter().chain(r.to_array()).chain(s.to_array())
+            })
+            .map(grid)
+            .collect();
+        f.debug("pose", &cells);
     }
     f.hex()
 }
@@ -411,11 +550,13 @@ pub(super) fn animation(ctx: &Ctx, prim: &str, skel: &SkelSkeleton, frames: (i64
         })?;
         joints.push(i);
     }
-    let attrs = ["translations", "rotations", "scales"];
+    // Each array's samples read once ([`Track`]), not once a time code.
+    let [tr_track, rot_track, sc_track] = ["translations", "rotations", "scales"].map(|a| Track::read(ctx, prim, a));
+    let tracks = [tr_track?, rot_track?, sc_track?];
     let mut times = BTreeSet::new();
-    for a in attrs {
-        ctx.covers(prim, a, frames)?;
-        for t in ctx.times(prim, a)? {
+    for track in &tracks {
+        track.covers(ctx, frames)?;
+        for &t in &track.times {
             if t >= frames.0 as f64 && t <= frames.1 as f64 {
                 times.insert(t.to_bits());
             }
@@ -429,16 +570,17 @@ pub(super) fn animation(ctx: &Ctx, prim: &str, skel: &SkelSkeleton, frames: (i64
     let mut poses = Vec::with_capacity(times.len());
     for &t in &times {
         let f = t.floor() as i64;
-        let read = |attr: &str, get: &dyn Fn(&Value) -> Option<Vec<Vec3>>| -> Result<Option<Vec<Vec3>>> {
-            let Some(v) = ctx.value(prim, attr, t)? else { return Ok(None) };
+        let read = |k: usize, get: &dyn Fn(&Value) -> Option<Vec<Vec3>>| -> Result<Option<Vec<Vec3>>> {
+            let attr = ["translations", "rotations", "scales"][k];
+            let Some(v) = tracks[k].at(ctx, t)? else { return Ok(None) };
             let v =
                 get(&v).ok_or_else(|| ctx.err(&at(attr), format!("<{prim}.{attr}> has the wrong type")).frame(f))?;
             check_len(ctx, &at(attr), v.len(), joints.len(), f)?;
             Ok(Some(v))
         };
-        let tr = read("translations", &|v| vec3s_of(v))?;
-        let sc = read("scales", &|v| half3s_of(v).or_else(|| vec3s_of(v)))?;
-        let rot = match ctx.value(prim, "rotations", t)? {
+        let tr = read(0, &|v| vec3s_of(v))?;
+        let sc = read(2, &|v| half3s_of(v).or_else(|| vec3s_of(v)))?;
+        let rot = match tracks[1].at(ctx, t)? {
             None => None,
             Some(v) => {
                 let q = quats_of(&v).ok_or_else(|| ctx.err(&at("rotations"), "rotations is not a quat[]").frame(f))?;
@@ -481,16 +623,43 @@ fn half3s_of(v: &Value) -> Option<Vec<Vec3>> {
     }
 }
 
-/// The character every agent of the crowd at `path` shares: the first
-/// agent's skeleton and meshes (every agent's skeleton must have the same
-/// joints), and every distinct animation over the crowd's frames.
-pub(crate) fn character(path: &Path) -> Result<SkelCharacter> {
+/// A character of the crowd at `path`: the one of SkelRoot `root` (any of
+/// its agents), else the first agent's: its skeleton and skinned meshes
+/// (the first such agent's), and every distinct animation its agents play
+/// over the crowd's frames.
+pub(crate) fn character(path: &Path, root: Option<&str>) -> Result<SkelCharacter> {
     let ctx = usd::open(path)?;
     let agents = agents(&ctx)?;
-    let first = agents
-        .first()
-        .ok_or_else(|| Error::invalid(path, "no SkelRoot in this USD file: it holds no UsdSkel character"))?;
+    let first = match root {
+        None => agents.first(),
+        Some(r) => agents
+            .iter()
+            .find(|a| a.prim == r)
+            .or_else(|| agents.iter().find(|a| a.prim.starts_with(&format!("{}/", r.trim_end_matches('/'))))),
+    };
+    let Some(first) = first else {
+        if agents.is_empty() {
+            return Err(Error::invalid(path, "no SkelRoot in this USD file: it holds no UsdSkel character"));
+        }
+        let mut firsts: Vec<&str> = Vec::new();
+        for a in &agents {
+            if a.character == firsts.len() {
+                firsts.push(&a.prim);
+            }
+        }
+        return Err(Error::invalid(
+            path,
+            format!(
+                "root <{}> is no SkelRoot of this crowd (nor a prim above one); its characters' first SkelRoots: {}",
+                root.unwrap_or_default(),
+                firsts.join(", ")
+            ),
+        )
+        .field("root"));
+    };
+    // The crowd's frames are every agent's, as the cache reads them.
     let frames = frames(&ctx, &agents)?;
+    let agents: Vec<&SkelAgent> = agents.iter().filter(|a| a.character == first.character).collect();
     let skeleton = skeleton(&ctx, first, frames.0 as f64)?;
     let mut warnings = Vec::new();
     let mut materials = Vec::new();
@@ -509,33 +678,13 @@ pub(crate) fn character(path: &Path) -> Result<SkelCharacter> {
     }
     let mut animations = Vec::new();
     let mut seen = CycleNames::default();
-    let mut checked = BTreeSet::new();
     let mut read_anims = BTreeSet::new();
-    for a in &agents {
-        if checked.insert(a.skeleton.clone()) && a.skeleton != first.skeleton {
-            let joints = tokens(&ctx, &a.skeleton, "joints")?.unwrap_or_default();
-            if joints != skeleton.joints {
-                return Err(ctx.err(
-                    &format!("{}.joints", a.skeleton),
-                    format!(
-                        "Skeleton <{}> has other joints than <{}>: throng reads one character per UsdSkel file",
-                        a.skeleton, skeleton.prim
-                    ),
-                ));
-            }
-        }
+    for a in agents {
         let Some(anim) = a.animation.as_ref().filter(|p| read_anims.insert(p.to_string())) else { continue };
         let read = animation(&ctx, anim, &skeleton, frames)?;
         if seen.name_of(&read) == read.name {
             animations.push(read);
         }
     }
-    Ok(SkelCharacter {
-        skeleton,
-        meshes,
-        materials,
-        animations,
-        time_codes_per_second: ctx.stage.time_codes_per_second(),
-        warnings,
-    })
+    Ok(SkelCharacter { skeleton, meshes, materials, animations, warnings })
 }

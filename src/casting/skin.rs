@@ -247,7 +247,7 @@ impl SkinnedRig {
     /// department's placement is authoritative: the rig is not lifted to
     /// the ground, so joints stand where the file puts them.
     fn load_usd(path: &Path, options: &SkinOptions, fps: f32) -> Result<SkinnedRig> {
-        let c = usdskel_rig::character(path)?;
+        let c = usdskel_rig::character(path, options.root.as_deref(), fps)?;
         let slots = options.slots.clone().unwrap_or_else(|| c.delivered.iter().map(|(s, _, _)| s.clone()).collect());
         let mut rig = SkinnedRig {
             own: c.own,

@@ -53,9 +53,11 @@ fn trs_of(m: &Mat4) -> Trs {
     Trs { translation, rotation, scale }
 }
 
-/// The UsdSkel crowd at `path`'s character.
-pub(crate) fn character(path: &Path) -> Result<UsdCharacter> {
-    let c = usdskel::character(path)?;
+/// A character of the UsdSkel crowd at `path`: SkelRoot `root`'s (the
+/// rig's `root`), else the first agent's; its clips timed for the shot's
+/// `fps`.
+pub(crate) fn character(path: &Path, root: Option<&str>, fps: f32) -> Result<UsdCharacter> {
+    let c = usdskel::character(path, root)?;
     let skel = &c.skeleton;
     let top = skel.joints.len();
     let mut nodes: Vec<Node> = (skel.joints.iter().zip(&skel.parents).zip(&skel.rest))
@@ -67,7 +69,7 @@ pub(crate) fn character(path: &Path) -> Result<UsdCharacter> {
         .collect();
     nodes.push(Node { name: skel.prim.clone(), parent: None, rest: trs_of(&skel.root_from_skel) });
     let hierarchy = Hierarchy::new(nodes);
-    let mut clips: Vec<Clip> = c.animations.iter().map(|a| clip(a, c.time_codes_per_second)).collect();
+    let mut clips: Vec<Clip> = c.animations.iter().map(|a| clip(a, f64::from(fps))).collect();
     // Agents bound to no animation hold the rest pose.
     clips.push(Clip { name: usdskel::REST_CYCLE.to_string(), channels: Vec::new(), start: 0.0, end: 0.0 });
     let animated = Animated { path: path.to_path_buf(), hierarchy, clips };
@@ -87,12 +89,15 @@ pub(crate) fn character(path: &Path) -> Result<UsdCharacter> {
 }
 
 /// One animation as a clip: linear keys (rotations slerped, as USD
-/// interpolates quaternions), its ends held a frame either side.
-fn clip(a: &SkelAnim, tcps: f64) -> Clip {
+/// interpolates quaternions), its ends held a frame either side. A time code
+/// is a shot frame (the cache's frames are the stage's time codes), so the
+/// keys are timed at the shot's `fps`, not the stage's timeCodesPerSecond:
+/// cycle frame 1 + k plays time code first + k whatever either rate is.
+fn clip(a: &SkelAnim, fps: f64) -> Clip {
     let first = a.times.first().copied().unwrap_or(0.0);
-    let frame = (1.0 / tcps) as f32;
+    let frame = (1.0 / fps) as f32;
     let mut times = vec![0.0f32];
-    times.extend(a.times.iter().map(|&t| ((t - first) / tcps) as f32 + frame));
+    times.extend(a.times.iter().map(|&t| ((t - first) / fps) as f32 + frame));
     times.push(times[times.len() - 1] + frame);
     let held = |k: usize| k.saturating_sub(1).min(a.poses.len().saturating_sub(1));
     let mut channels = Vec::with_capacity(3 * a.joints.len());
