@@ -340,6 +340,7 @@ fn the_albedo_guide_sees_through_glass_and_in_its_mirror() {
         passes: Default::default(),
         adaptive: None,
         tracing: Default::default(),
+        atmosphere: None,
     };
     let film =
         throng::render::film::render_frame(&throng::render::accel::BlasSet::build(&lib), &lib, &scene, &settings, None)

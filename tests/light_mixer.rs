@@ -170,10 +170,10 @@ fn a_render_with_gains_is_the_sum_of_gain_x_tint_x_each_groups_pass_within_noise
         noise * 100.0
     );
     // The gained render's own groups still add up to its beauty.
-    for i in 0..n {
+    for (i, &b) in beauty.iter().enumerate() {
         let sum: Vec3 = all.iter().map(|g| Vec3::from(pass(&with, g)[i])).sum();
-        let tol = (sum + beauty[i]) * 2f32.powi(-10) + Vec3::splat(1e-6);
-        assert!(((sum - beauty[i]).abs() - tol).max_element() <= 0.0, "pixel {i}: {sum} vs {}", beauty[i]);
+        let tol = (sum + b) * 2f32.powi(-10) + Vec3::splat(1e-6);
+        assert!(((sum - b).abs() - tol).max_element() <= 0.0, "pixel {i}: {sum} vs {b}");
     }
 }
 

@@ -92,8 +92,8 @@ fn combine(same: &[DeepSample]) -> DeepSample {
     let opaque: Vec<&DeepSample> = same.iter().filter(|s| s.rgba[3] >= 1.0).collect();
     if !opaque.is_empty() {
         for s in &opaque {
-            for c in 0..3 {
-                rgba[c] += s.rgba[c] / opaque.len() as f32;
+            for (out, v) in rgba.iter_mut().zip(&s.rgba[..3]) {
+                *out += v / opaque.len() as f32;
             }
         }
         rgba[3] = 1.0;
@@ -105,8 +105,8 @@ fn combine(same: &[DeepSample]) -> DeepSample {
             let a = s.rgba[3] as f64;
             let ui = -(-a).ln_1p();
             u += ui;
-            for k in 0..3 {
-                c[k] += s.rgba[k] as f64 * ui / a;
+            for (ck, &v) in c.iter_mut().zip(&s.rgba[..3]) {
+                *ck += v as f64 * ui / a;
             }
         }
         let a = -(-u).exp_m1();
