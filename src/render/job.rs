@@ -484,7 +484,7 @@ pub fn all_layers(manifest: &Manifest) -> Vec<String> {
 /// channels of a layer file: samples per pixel, resolution, seed, bounces,
 /// the camera and lights of the shot, the shutter, the working colourspace,
 /// Cryptomatte (with its matte types and set object naming) and compression
-/// choices, the layer name, the manifest (whose `made_from` covers the
+/// choices, the atmosphere, the layer name, the manifest (whose `made_from` covers the
 /// cache, its import keys and the casting) and the throng version.
 /// `--resume` skips a file only when its fingerprint matches.
 pub fn render_fingerprint<C>(
@@ -528,6 +528,10 @@ pub fn render_fingerprint<C>(
     }
     if let Some(d) = &job.deep {
         f.debug("deep", d);
+    }
+    // Likewise only hazy shots name their air.
+    if let Some(a) = &shot.atmosphere {
+        f.debug("atmosphere", a);
     }
     f.value("manifest", &manifest).text("throng", env!("CARGO_PKG_VERSION"));
     f.hex()
