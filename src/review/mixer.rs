@@ -79,8 +79,8 @@ pub(crate) fn mix(film: &Film, space: Colourspace, gains: &LightGains) -> Result
 }
 
 /// What the page says when an image has no light groups to mix.
-pub(crate) const NO_GROUPS: &str = "this image has no light-group passes: render it with `--passes light_groups` \
-     (or `render.passes = [\"light_groups\"]` in the shot) to mix its lights";
+pub(crate) const NO_GROUPS: &str = "this image has no light-group passes to mix: render it with the \
+     light_groups pass (docs/review.md, \"The mixer\")";
 
 /// A file name the lighter gave for the saved shot: plain (no folder), not
 /// hidden, `.toml` added when missing.

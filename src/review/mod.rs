@@ -906,8 +906,8 @@ impl State {
             }
             None => dir.join(format!("render_{stem}")),
         };
-        let command = format!("throng render '{}' --passes light_groups --out '{}'", path.display(), out.display());
-        Ok(json_body(&json!({ "file": path, "command": command, "gains": gains })))
+        // The page words the render command (the library never names a flag).
+        Ok(json_body(&json!({ "file": path, "out": out, "gains": gains })))
     }
 
     /// botInfo of `ids` at `frame`: exactly `throng botinfo --json`'s array.

@@ -235,7 +235,8 @@ async function saveShot() {
     });
     const body = await resp.json().catch(() => ({ error: resp.statusText }));
     if (!resp.ok) throw new Error(body.error || resp.statusText);
-    r.append(el("span", "Saved " + body.file + ". Render it with:"), el("code", body.command));
+    const command = "throng render '" + body.file + "' --passes light_groups --out '" + body.out + "'";
+    r.append(el("span", "Saved " + body.file + ". Render it with:"), el("code", command));
     r.dataset.file = body.file;
   } catch (e) {
     r.append(el("span", "Not saved: " + e.message, "error"));
