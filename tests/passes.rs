@@ -37,7 +37,7 @@ fn light_groups(film: &Film) -> Vec<&throng::render::film::Pass> {
 /// 2^-18 of it at most; the absolute 1e-6 per rounding covers half denormals.
 fn assert_adds_up(film: &Film, what: &str, roundings: f32) {
     let (paths, groups) = (light_paths(film), light_groups(film));
-    assert_eq!(paths.len(), 7, "{what}: light-path passes");
+    assert_eq!(paths.len(), throng::scene::passes::LightPath::ALL.len(), "{what}: light-path passes");
     assert!(groups.len() >= 6, "{what}: light groups {}", groups.len());
     let mut lit = 0;
     let mut worst = 0.0f32;
