@@ -693,16 +693,14 @@ fn main() {
         spp: args.spp,
         max_bounces: args.bounces,
         seed: args.seed,
-        frame: 0,
-        layer: 0,
         sky_visible: true,
         threads,
         indirect_clamp: 0.0,
         diffuse_only: args.diffuse,
-        passes: Default::default(),
         adaptive: args.adaptive,
         tracing,
         atmosphere: args.atmosphere,
+        ..Default::default()
     };
     let mut out = serde_json::json!({
         "tool": "throng peer_bench",

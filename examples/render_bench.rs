@@ -215,15 +215,9 @@ fn main() {
             max_bounces: 4,
             seed: 1,
             frame: 1001,
-            layer: 0,
             sky_visible: true,
-            threads: 0,
             indirect_clamp: 10.0,
-            diffuse_only: false,
-            passes: Default::default(),
-            adaptive: None,
-            tracing: Default::default(),
-            atmosphere: None,
+            ..Default::default()
         };
         let cpu = throng::bench::process_cpu_s();
         let (film, stats) = render_frame_with_stats(&blas, &lib, &scene, &settings, None).expect("render");

@@ -128,15 +128,11 @@ fn settings(diffuse_only: bool, max_bounces: u32) -> RenderSettings {
         max_bounces,
         seed: 7,
         frame: 1001,
-        layer: 0,
         sky_visible: true,
         threads: 2,
         indirect_clamp: 10.0,
         diffuse_only,
-        passes: Default::default(),
-        adaptive: None,
-        tracing: Default::default(),
-        atmosphere: None,
+        ..Default::default()
     }
 }
 

@@ -268,15 +268,10 @@ fn settings(spp: u32, threads: usize) -> RenderSettings {
         max_bounces: 1,
         seed: 7,
         frame: 1001,
-        layer: 0,
         sky_visible: false,
         threads,
         indirect_clamp: 10.0,
-        diffuse_only: false,
-        passes: Default::default(),
-        adaptive: None,
-        tracing: Default::default(),
-        atmosphere: None,
+        ..Default::default()
     }
 }
 

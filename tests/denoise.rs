@@ -332,15 +332,9 @@ fn the_albedo_guide_sees_through_glass_and_in_its_mirror() {
         max_bounces: 8,
         seed: 5,
         frame: 1,
-        layer: 0,
         sky_visible: true,
-        threads: 0,
         indirect_clamp: 0.0,
-        diffuse_only: false,
-        passes: Default::default(),
-        adaptive: None,
-        tracing: Default::default(),
-        atmosphere: None,
+        ..Default::default()
     };
     let film =
         throng::render::film::render_frame(&throng::render::accel::BlasSet::build(&lib), &lib, &scene, &settings, None)

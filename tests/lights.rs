@@ -66,15 +66,11 @@ fn settings(spp: u32, threads: usize) -> RenderSettings {
         max_bounces: 0,
         seed: 7,
         frame: 1,
-        layer: 0,
         sky_visible: false,
         threads,
         indirect_clamp: 0.0,
         diffuse_only: true,
-        passes: Default::default(),
-        adaptive: None,
-        tracing: Default::default(),
-        atmosphere: None,
+        ..Default::default()
     }
 }
 

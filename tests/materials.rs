@@ -78,15 +78,11 @@ fn settings(spp: u32, threads: usize, max_bounces: u32, diffuse_only: bool) -> R
         max_bounces,
         seed: 11,
         frame: 1,
-        layer: 0,
         sky_visible: true,
         threads,
         indirect_clamp: 0.0,
         diffuse_only,
-        passes: Default::default(),
-        adaptive: None,
-        tracing: Default::default(),
-        atmosphere: None,
+        ..Default::default()
     }
 }
 

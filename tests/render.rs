@@ -81,15 +81,10 @@ fn settings(width: u32, height: u32, spp: u32) -> RenderSettings {
         max_bounces: 3,
         seed: 1234,
         frame: 1001,
-        layer: 0,
         sky_visible: false,
         threads: 2,
         indirect_clamp: 10.0,
-        diffuse_only: false,
-        passes: Default::default(),
-        adaptive: None,
-        tracing: Default::default(),
-        atmosphere: None,
+        ..Default::default()
     }
 }
 
