@@ -140,24 +140,8 @@ fn floor() -> Mesh {
 #[test]
 fn a_floor_through_absorbing_air_is_lit_and_seen_through_it() {
     // Straight down from 4 m at a floor lit by a sun overhead, under air 10 m deep that only absorbs.
-    let grey = Material { name: "floor".into(), base_color: Vec3::splat(0.5), ..Default::default() };
-    let lib = Library { meshes: vec![floor()], materials: vec![grey], textures: vec![] };
-    let instance = Instance {
-        mesh: 0,
-        material: 0,
-        world_from_object: Affine3A::IDENTITY,
-        agent: InstanceAgent::NONE,
-        part: 0,
-        visibility: vis::ALL,
-    };
-    let down = Affine3A::from_cols(Vec3::X.into(), (-Vec3::Z).into(), Vec3::Y.into(), (Vec3::Y * 4.0).into());
     let sun = Sun { direction: Vec3::Y, angular_diameter: 0.0, irradiance: Vec3::splat(2.0) };
-    let scene = FrameScene {
-        instances: vec![instance],
-        camera: Camera::pinhole(down, 1e-4),
-        lights: lights(Some(sun), vec![]),
-        motion: None,
-    };
+    let (lib, scene) = grey_floor_from_above(sun, vec![], 1e-4);
     let a = air(0.1, 0.0, 0.0, 10.0, AtmosphereMode::Full);
     let got = mean_red(&render(&lib, &scene, &settings(64, 2, a)));
     // albedo / pi x irradiance x (10 m of air down to the floor) x (4 m back up to the camera).
@@ -190,9 +174,8 @@ fn hazy_renders_are_bit_identical_for_any_thread_count() {
     assert!(one.rgba.iter().zip(&four.rgba).all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)));
 }
 
-/// The floor scene of [`a_floor_through_absorbing_air_is_lit_and_seen_through_it`],
-/// wide, with a point light and a sun.
-fn hazy_floor() -> (Library, FrameScene) {
+/// A grey floor seen straight down from 4 m (a pinhole of field `fov`) under `sun` and `local` lights.
+fn grey_floor_from_above(sun: Sun, local: Vec<Light>, fov: f32) -> (Library, FrameScene) {
     let grey = Material { name: "floor".into(), base_color: Vec3::splat(0.5), ..Default::default() };
     let lib = Library { meshes: vec![floor()], materials: vec![grey], textures: vec![] };
     let instance = Instance {
@@ -204,17 +187,23 @@ fn hazy_floor() -> (Library, FrameScene) {
         visibility: vis::ALL,
     };
     let down = Affine3A::from_cols(Vec3::X.into(), (-Vec3::Z).into(), Vec3::Y.into(), (Vec3::Y * 4.0).into());
+    let scene = FrameScene {
+        instances: vec![instance],
+        camera: Camera::pinhole(down, fov),
+        lights: lights(Some(sun), local),
+        motion: None,
+    };
+    (lib, scene)
+}
+
+/// The floor of [`a_floor_through_absorbing_air_is_lit_and_seen_through_it`],
+/// wide, with a point light in group `key` and a sun.
+fn hazy_floor() -> (Library, FrameScene) {
     let sun =
         Sun { direction: Vec3::new(0.2, 1.0, 0.1).normalize(), angular_diameter: 0.02, irradiance: Vec3::splat(2.0) };
     let mut lamp = point_light(Vec3::new(0.3, 1.5, -0.2), 8.0);
     lamp.light_group = Some("key".into());
-    let scene = FrameScene {
-        instances: vec![instance],
-        camera: Camera::pinhole(down, 1.0),
-        lights: lights(Some(sun), vec![lamp]),
-        motion: None,
-    };
-    (lib, scene)
+    grey_floor_from_above(sun, vec![lamp], 1.0)
 }
 
 #[test]
