@@ -22,13 +22,13 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import time
 import urllib.error
 import urllib.request
 
 import numpy as np
 import OpenEXR
-import websocket
+import browser as browser_harness
+from browser import fail, get_json, launch_chromium, start_review, wait_for
 
 THRONG, SHOT, WORK, SHOT_PNG = sys.argv[1:5]
 FRAME = 1024
@@ -36,49 +36,7 @@ SIZE = (96, 54)
 SPP = 32
 
 
-def fail(msg):
-    print(f"FAIL: mixer browser: {msg}")
-    sys.exit(1)
-
-
-def get_json(url):
-    with urllib.request.urlopen(url, timeout=60) as r:
-        return json.load(r)
-
-
-def wait_for(what, test, timeout=60.0):
-    end = time.time() + timeout
-    while time.time() < end:
-        v = test()
-        if v:
-            return v
-        time.sleep(0.1)
-    fail(f"timed out waiting for {what}")
-
-
-class Cdp:
-    def __init__(self, ws_url):
-        self.ws = websocket.create_connection(ws_url, timeout=60, suppress_origin=True)
-        self.next = 0
-        self.events = []
-
-    def __call__(self, method, **params):
-        self.next += 1
-        me = self.next
-        self.ws.send(json.dumps({"id": me, "method": method, "params": params}))
-        while True:
-            msg = json.loads(self.ws.recv())
-            if msg.get("id") == me:
-                if "error" in msg:
-                    fail(f"{method}: {msg['error']}")
-                return msg.get("result", {})
-            self.events.append(msg)
-
-    def eval(self, expr):
-        r = self("Runtime.evaluate", expression=expr, returnByValue=True, awaitPromise=True)
-        if "exceptionDetails" in r:
-            return None
-        return r["result"].get("value")
+browser_harness.NAME = "mixer browser"
 
 
 def render(shot, out):
@@ -121,14 +79,9 @@ server = browser = None
 try:
     exr = render(edited, os.path.join(WORK, "mixer_base"))
     ch = channels(exr)
-    server = subprocess.Popen(
-        [THRONG, "review", edited, "--renders", os.path.join(WORK, "mixer_base"), "--port", "0", "--frame", str(FRAME)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    server, url = start_review(
+        [THRONG, "review", edited, "--renders", os.path.join(WORK, "mixer_base"), "--port", "0", "--frame", str(FRAME)]
     )
-    line = server.stdout.readline()
-    url = next((w for w in line.split() if w.startswith("http://127.0.0.1:")), None)
-    if not url:
-        fail(f"throng review printed no URL: {line!r}")
     # A malformed mix: 400, and the server answers the next request.
     for bad in ["lamp_1:-1:1:1:1", "lamp_1:1", "nope:1:1:1:1", "lamp_1:nan:1:1:1"]:
         try:
@@ -139,21 +92,7 @@ try:
                 fail(f"mix={bad}: status {e.code}")
     get_json(url + "api/frames")
 
-    browser = subprocess.Popen(
-        [shutil.which("chromium") or "chromium", "--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run",
-         "--no-default-browser-check", "--remote-debugging-port=0", f"--user-data-dir={profile}",
-         "--window-size=1400,1000", "about:blank"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )
-    port_file = os.path.join(profile, "DevToolsActivePort")
-    wait_for("Chromium's DevTools port", lambda: os.path.exists(port_file) and open(port_file).read().strip(), 60)
-    port = open(port_file).read().split()[0]
-    pages = wait_for("a page target",
-                     lambda: [t for t in get_json(f"http://127.0.0.1:{port}/json/list") if t.get("type") == "page"], 30)
-    cdp = Cdp(pages[0]["webSocketDebuggerUrl"])
-    cdp("Page.enable")
-    cdp("Runtime.enable")
-    cdp("Emulation.setDeviceMetricsOverride", width=1400, height=1000, deviceScaleFactor=1, mobile=False)
+    browser, cdp = launch_chromium(profile, lenient=True)
     cdp("Page.navigate", url=url)
     wait_for("the mixer rows", lambda: cdp.eval(
         "(() => { const i = document.getElementById('image'); return i && i.complete && i.naturalWidth > 0"

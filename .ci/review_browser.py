@@ -22,92 +22,25 @@ import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
 
-import websocket
+import browser as browser_harness
+from browser import fail, get_json, launch_chromium, start_review, wait_for
 from PIL import Image, ImageStat
 
 THRONG, SHOT, RENDERS, MANIFEST, SHOT_PNG = sys.argv[1:6]
 FRAME = 1024
 
 
-def fail(msg):
-    print(f"FAIL: review browser: {msg}")
-    sys.exit(1)
+browser_harness.NAME = "review browser"
 
 
-def get_json(url):
-    with urllib.request.urlopen(url, timeout=60) as r:
-        return json.load(r)
-
-
-def wait_for(what, test, timeout=60.0, soft=False):
-    end = time.time() + timeout
-    while time.time() < end:
-        v = test()
-        if v:
-            return v
-        time.sleep(0.1)
-    if soft:
-        raise TimeoutError(what)
-    fail(f"timed out waiting for {what}")
-
-
-class Cdp:
-    """The DevTools protocol over one page's websocket: commands by id, events kept."""
-
-    def __init__(self, ws_url):
-        self.ws = websocket.create_connection(ws_url, timeout=60, suppress_origin=True)
-        self.next = 0
-        self.events = []
-
-    def __call__(self, method, **params):
-        self.next += 1
-        me = self.next
-        self.ws.send(json.dumps({"id": me, "method": method, "params": params}))
-        while True:
-            msg = json.loads(self.ws.recv())
-            if msg.get("id") == me:
-                if "error" in msg:
-                    fail(f"{method}: {msg['error']}")
-                return msg.get("result", {})
-            self.events.append(msg)
-
-    def eval(self, expr):
-        r = self("Runtime.evaluate", expression=expr, returnByValue=True, awaitPromise=True)
-        if "exceptionDetails" in r:
-            fail(f"evaluating {expr!r}: {r['exceptionDetails']}")
-        return r["result"].get("value")
-
-    def poll(self, expr):
-        """`eval` for waiting loops: None while the page is between documents."""
-        self.next += 1
-        me = self.next
-        self.ws.send(json.dumps({"id": me, "method": "Runtime.evaluate",
-                                 "params": {"expression": expr, "returnByValue": True}}))
-        while True:
-            msg = json.loads(self.ws.recv())
-            if msg.get("id") == me:
-                r = msg.get("result", {})
-                if "error" in msg or "exceptionDetails" in r:
-                    return None
-                return r.get("result", {}).get("value")
-            self.events.append(msg)
-
-
-server = subprocess.Popen(
-    [THRONG, "review", SHOT, "--renders", RENDERS, "--manifest", MANIFEST, "--port", "0", "--frame", str(FRAME)],
-    stdout=subprocess.PIPE,
-    stderr=subprocess.PIPE,
-    text=True,
-)
+server = None
 profile = tempfile.mkdtemp(prefix="throng-review-chromium-")
 browser = None
 try:
-    line = server.stdout.readline()
-    url = next((w for w in line.split() if w.startswith("http://127.0.0.1:")), None)
-    if not url:
-        fail(f"throng review printed no URL: {line!r} {server.stderr.read() if server.poll() is not None else ''}")
+    server, url = start_review(
+        [THRONG, "review", SHOT, "--renders", RENDERS, "--manifest", MANIFEST, "--port", "0", "--frame", str(FRAME)]
+    )
     shot = get_json(url + "api/shot")
     if shot["start_frame"] != FRAME:
         fail(f"the page opens on frame {shot['start_frame']}, not {FRAME}")
@@ -117,34 +50,7 @@ try:
     target = agents[0]
     aid, (px, py) = target["id"], target["pixel"]
 
-    browser = subprocess.Popen(
-        [
-            shutil.which("chromium") or "chromium",
-            "--headless=new",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--no-first-run",
-            "--no-default-browser-check",
-            "--remote-debugging-port=0",
-            f"--user-data-dir={profile}",
-            "--window-size=1400,1000",
-            "about:blank",
-        ],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    port_file = os.path.join(profile, "DevToolsActivePort")
-    wait_for("Chromium's DevTools port", lambda: os.path.exists(port_file) and open(port_file).read().strip(), 60)
-    port = open(port_file).read().split()[0]
-    pages = wait_for(
-        "a page target",
-        lambda: [t for t in get_json(f"http://127.0.0.1:{port}/json/list") if t.get("type") == "page"],
-        30,
-    )
-    cdp = Cdp(pages[0]["webSocketDebuggerUrl"])
-    cdp("Page.enable")
-    cdp("Runtime.enable")
-    cdp("Emulation.setDeviceMetricsOverride", width=1400, height=1000, deviceScaleFactor=1, mobile=False)
+    browser, cdp = launch_chromium(profile)
     # Navigate, again if the first navigation raced the initial about:blank.
     for attempt in range(3):
         cdp("Page.navigate", url=url)
