@@ -689,3 +689,116 @@ fn the_comp_offers_the_passes_its_layers_share() {
     }
     stop.stop();
 }
+
+/// Sends `method target` with `headers` (each a full `Name: value` line)
+/// and `body`, as written.
+fn send(addr: &str, method: &str, target: &str, headers: &[&str], body: &[u8]) -> Reply {
+    let mut head = format!("{method} {target} HTTP/1.1\r\nHost: {addr}\r\nContent-Length: {}", body.len());
+    for h in headers {
+        head.push_str("\r\n");
+        head.push_str(h);
+    }
+    let mut stream = TcpStream::connect(addr).unwrap();
+    stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+    stream.write_all(format!("{head}\r\nConnection: close\r\n\r\n").as_bytes()).unwrap();
+    stream.write_all(body).unwrap();
+    let mut bytes = Vec::new();
+    stream.read_to_end(&mut bytes).unwrap();
+    let split = bytes.windows(4).position(|w| w == b"\r\n\r\n").expect("a complete HTTP answer");
+    let status = String::from_utf8_lossy(&bytes[..split]).split(' ').nth(1).unwrap().parse().unwrap();
+    Reply { status, headers: BTreeMap::new(), body: bytes[split + 4..].to_vec() }
+}
+
+/// Issue 50, the mixer's two endpoints: `/api/mix.png` is the light groups
+/// regraded and summed (a doubled gain on every group is one stop of
+/// exposure, byte for byte; a muted group leaves the others, as each
+/// group's own view shows them), bad mixes are 4xx with the server still
+/// answering, and `POST /api/save-shot` writes a new shot beside the
+/// original, never over a file, that renders what the mix showed.
+#[test]
+fn the_mixer_regrades_the_groups_and_saves_a_shot_that_renders_the_mix() {
+    let dir = tempdir().unwrap();
+    let shot = common::DemoShot {
+        name: "mix",
+        frames: (1001, 1002),
+        spp: 16,
+        extra: "passes = [\"light_groups\"]\nindirect_clamp = 0",
+        ..Default::default()
+    }
+    .write(dir.path(), &common::two_robots(1..=2));
+    let original = std::fs::read(&shot).unwrap();
+    let renders = dir.path().join("r");
+    let render = |shot: &Path, out: &Path| {
+        let (code, _, err) =
+            run(&["render", s(shot), "--layer", "full", "--frames", "1001", "--progress", "off", "--out", s(out)]);
+        assert_eq!(code, 0, "{err}");
+    };
+    render(&shot, &renders);
+    let (film, _) = throng::render::exr::read_layer(&renders.join("full/mix.full.1001.exr")).unwrap();
+    let groups: Vec<&str> = film.passes.iter().filter_map(|p| p.name.strip_prefix("lg_")).collect();
+    assert!(groups.len() >= 2, "{groups:?}");
+    // The set's shop windows are grouped by their own material name, not by the set file's path.
+    assert!(groups.iter().all(|g| !g.contains("set_glb")), "{groups:?}");
+    let (a, stop) =
+        start_shot(shot.clone(), ReviewOptions { renders: Some(renders.clone()), port: 0, ..ReviewOptions::default() });
+    let base = "/api/mix.png?frame=1001&layer=full";
+    let mix = |q: &str| get(&a, &format!("{base}&{q}")).png().to_rgb8().into_raw();
+
+    let all_doubled: Vec<String> = groups.iter().map(|g| format!("{g}:2:1:1:1")).collect();
+    assert_eq!(mix(&format!("mix={}", all_doubled.join(","))), mix("mix=&exposure=1"));
+    assert_ne!(mix("mix="), mix("mix=&exposure=1"));
+    let (kept, muted) = (groups[0], &groups[1..]);
+    let mutes: Vec<String> = muted.iter().map(|g| format!("{g}:0:1:1:1")).collect();
+    let alone = get(&a, &format!("/api/image.png?frame=1001&layer=full&view=lg_{kept}")).png().to_rgb8().into_raw();
+    assert_eq!(mix(&format!("mix={}", mutes.join(","))), alone, "muting all but `{kept}` shows `{kept}`");
+
+    for (q, status) in
+        [("mix=a:1", 400), ("mix=nope:1:1:1:1", 404), ("mix=&exposure=NaN", 400), ("mix=x:-1:1:1:1", 400)]
+    {
+        let r = get(&a, &format!("{base}&{q}"));
+        assert_eq!(r.status, status, "{q}: {}", r.text());
+    }
+
+    let json = "Content-Type: application/json";
+    let save = |name: &str, headers: &[&str]| {
+        let body = serde_json::json!({ "name": name, "mix": format!("{kept}:2:1:0.5:0.25") }).to_string();
+        send(&a, "POST", "/api/save-shot", headers, body.as_bytes())
+    };
+    let r = save("warm look", &[json]);
+    assert_eq!(r.status, 200, "{}", r.text());
+    let saved = PathBuf::from(r.json()["file"].as_str().unwrap());
+    assert_eq!(saved, dir.path().join("warm look.toml"));
+    for (name, headers, status) in [
+        ("warm look", &[json][..], 409),
+        ("../escape", &[json][..], 400),
+        ("plain", &[][..], 415),
+        ("plain", &[json, "Origin: http://evil.example"][..], 403),
+    ] {
+        let r = save(name, headers);
+        assert_eq!(r.status, status, "{name} {headers:?}: {}", r.text());
+    }
+    assert!(!dir.path().join("plain.toml").exists() && !dir.path().join("escape.toml").exists());
+    assert_eq!(std::fs::read(&shot).unwrap(), original, "the original shot is untouched");
+    assert_eq!(get(&a, "/api/shot").status, 200, "the server still answers");
+    stop.stop();
+
+    // The saved shot bakes the mix: its beauty is gain x tint x the group's
+    // pass plus the other groups, within noise (light selection weighs by power).
+    let baked = dir.path().join("baked");
+    render(&saved, &baked);
+    let (look, _) = throng::render::exr::read_layer(&baked.join("full/mix.full.1001.exr")).unwrap();
+    let mut want = [0.0f64; 3];
+    for p in film.passes.iter().filter(|p| p.name.starts_with("lg_")) {
+        let k: [f64; 3] = if p.name == format!("lg_{kept}") { [2.0, 1.0, 0.5] } else { [1.0; 3] };
+        for px in &p.data {
+            (0..3).for_each(|c| want[c] += k[c] * px[c] as f64);
+        }
+    }
+    let mut got = [0.0f64; 3];
+    for px in &look.rgba {
+        (0..3).for_each(|c| got[c] += px[c] as f64);
+    }
+    for c in 0..3 {
+        assert!((got[c] / want[c] - 1.0).abs() < 0.03, "channel {c}: baked {} against the mix {}", got[c], want[c]);
+    }
+}

@@ -103,18 +103,21 @@ pub(crate) fn matte_pixels(coverage: &[f32]) -> Vec<u8> {
     coverage.iter().flat_map(|&c| [255, 214, 10, (c.clamp(0.0, 1.0) * 153.0 + 0.5) as u8]).collect()
 }
 
-/// PNG bytes of RGB8 (`channels` 3) or RGBA8 (4) pixels.
+/// PNG bytes of RGB8 (`channels` 3) or RGBA8 (4) pixels. Fast deflate with
+/// the Up filter: a review image goes once over a local socket, so encoding
+/// time (the most of a mixer change at the default level) counts, not bytes.
 pub(crate) fn png(width: u32, height: u32, channels: u8, pixels: Vec<u8>) -> Result<Vec<u8>, String> {
-    let mut out = std::io::Cursor::new(Vec::new());
-    let r = match channels {
-        3 => image::RgbImage::from_raw(width, height, pixels).map(|i| i.write_to(&mut out, image::ImageFormat::Png)),
-        _ => image::RgbaImage::from_raw(width, height, pixels).map(|i| i.write_to(&mut out, image::ImageFormat::Png)),
-    };
-    match r {
-        Some(Ok(())) => Ok(out.into_inner()),
-        Some(Err(e)) => Err(format!("cannot encode PNG: {e}")),
-        None => Err("image buffer does not match its size".into()),
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    use image::{ExtendedColorType, ImageEncoder};
+    let colour = if channels == 3 { ExtendedColorType::Rgb8 } else { ExtendedColorType::Rgba8 };
+    if pixels.len() as u64 != width as u64 * height as u64 * channels as u64 {
+        return Err("image buffer does not match its size".into());
     }
+    let mut out = Vec::new();
+    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Up)
+        .write_image(&pixels, width, height, colour)
+        .map_err(|e| format!("cannot encode PNG: {e}"))?;
+    Ok(out)
 }
 
 #[cfg(test)]

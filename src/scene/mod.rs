@@ -304,6 +304,13 @@ impl Default for Material {
 }
 
 impl Material {
+    /// The name a lighter gives the material: a glTF material's own name
+    /// (its unique name is `<file as the shot spells it>#<name>`, which
+    /// changes with the folder the shot is read from), else the whole name.
+    pub fn label(&self) -> &str {
+        self.name.split_once('#').map_or(&self.name, |(_, label)| label)
+    }
+
     /// Whether rays may pass through holes in it (alpha MASK or BLEND).
     pub(crate) fn has_cutouts(&self) -> bool {
         self.alpha_mode != AlphaMode::Opaque

@@ -217,7 +217,7 @@ impl LightGroups {
         let local: Vec<String> =
             lights.local.iter().map(|l| l.light_group.clone().unwrap_or_else(|| default_group(&l.name))).collect();
         for name in named.materials.keys() {
-            if !lib.materials.iter().any(|m| &m.name == name) {
+            if !lib.materials.iter().any(|m| &m.name == name || m.label() == name) {
                 return Err(Error::Usage(format!(
                     "lights.groups.materials: no material is named `{name}` (in the set, the wardrobes or the rigs)"
                 )));
@@ -227,8 +227,12 @@ impl LightGroups {
             .materials
             .iter()
             .map(|m| {
-                (m.emission.max_element() > 0.0)
-                    .then(|| named.materials.get(&m.name).cloned().unwrap_or_else(|| default_group(&m.name)))
+                // Named by the material's own name, not its file's path, so a
+                // saved gain holds wherever the shot is read from.
+                (m.emission.max_element() > 0.0).then(|| {
+                    let given = named.materials.get(&m.name).or_else(|| named.materials.get(m.label()));
+                    given.cloned().unwrap_or_else(|| default_group(m.label()))
+                })
             })
             .collect();
         let mut all: BTreeMap<&str, u16> = BTreeMap::new();
@@ -346,5 +350,31 @@ mod tests {
         assert!(check_group_name("street_lamps", "lights.point[0].light_group").is_ok());
         let e = check_group_name("street lamps", "lights.point[0].light_group").unwrap_err().to_string();
         assert!(e.contains("lights.point[0].light_group") && e.contains("`street lamps`"), "{e}");
+    }
+
+    #[test]
+    fn an_emissive_material_is_grouped_by_its_own_name_wherever_the_shot_is_read_from() {
+        use crate::scene::Material;
+        let lib = |set: &str| Library {
+            materials: vec![
+                Material { name: format!("{set}#ShopWindow"), emission: Vec3::ONE, ..Material::default() },
+                Material { name: format!("{set}#Sign"), emission: Vec3::ONE, ..Material::default() },
+                Material { name: format!("{set}#Wall"), ..Material::default() },
+            ],
+            ..Library::default()
+        };
+        let lights = SceneLights::default();
+        let here = LightGroups::new(&lights, &lib("set/set.glb")).unwrap();
+        let there = LightGroups::new(&lights, &lib("../shots/demo/set/set.glb")).unwrap();
+        assert_eq!(here.names, ["ShopWindow", "Sign", "sky"]);
+        assert_eq!(here, there);
+        // `lights.groups.materials` takes the material's own name or its whole one.
+        let mut named = lights.clone();
+        named.groups.materials.insert("ShopWindow".into(), "windows".into());
+        named.groups.materials.insert("set/set.glb#Sign".into(), "windows".into());
+        assert_eq!(LightGroups::new(&named, &lib("set/set.glb")).unwrap().names, ["sky", "windows"]);
+        named.groups.materials.insert("Door".into(), "windows".into());
+        let e = LightGroups::new(&named, &lib("set/set.glb")).unwrap_err().to_string();
+        assert!(e.contains("`Door`"), "{e}");
     }
 }
