@@ -14,28 +14,11 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{demo_shot, run, tempdir};
+use common::{demo_shot, oidn_available, run, tempdir};
 use throng::render::exr;
 use throng::render::Film;
 
 const FRAME: &str = "1024";
-
-/// Whether OIDN is here; without it a test returns early (and says so), or
-/// fails under `THRONG_REQUIRE_OIDN=1`.
-fn oidn_available(test: &str) -> bool {
-    match throng_oidn::Library::find(None) {
-        Ok(_) => true,
-        Err(e) if std::env::var("THRONG_REQUIRE_OIDN").as_deref() == Ok("1") => {
-            panic!("{test}: THRONG_REQUIRE_OIDN=1 but {e}")
-        }
-        Err(e) => {
-            // Straight to stderr: cargo's capture would hide a skip.
-            use std::io::Write;
-            let _ = writeln!(std::io::stderr(), "SKIPPED {test}: {e}");
-            false
-        }
-    }
-}
 
 fn read(path: &Path) -> (Film, exr::LayerMeta) {
     exr::read_layer(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))

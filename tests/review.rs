@@ -802,3 +802,49 @@ fn the_mixer_regrades_the_groups_and_saves_a_shot_that_renders_the_mix() {
         assert!((got[c] / want[c] - 1.0).abs() < 0.03, "channel {c}: baked {} against the mix {}", got[c], want[c]);
     }
 }
+
+/// Issue 52's review item: a denoised render offers its noisy beauty as a
+/// view (the page's "noisy" toggle asks for it), and picking still reads
+/// the agent under the pixel.
+#[test]
+fn a_denoised_render_shows_noisy_and_denoised_and_still_picks() {
+    if !common::oidn_available("a_denoised_render_shows_noisy_and_denoised_and_still_picks") {
+        return;
+    }
+    let dir = tempdir().unwrap();
+    let renders = dir.path().join("r");
+    let (code, _, err) = run(&[
+        "render",
+        s(&demo_shot()),
+        "--layer",
+        "full",
+        "--frames",
+        "1024",
+        "--spp",
+        "2",
+        "--resolution",
+        "64x36",
+        "--denoise",
+        "fast",
+        "--progress",
+        "off",
+        "--out",
+        s(&renders),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (a, stop) =
+        start_shot(demo_shot(), ReviewOptions { renders: Some(renders.clone()), port: 0, ..ReviewOptions::default() });
+    let layers = get_ok(&a, "/api/layers?frame=1024").json();
+    let full = layers["layers"].as_array().unwrap().iter().find(|l| l["name"] == "full").unwrap();
+    assert!(full["views"].as_array().unwrap().iter().any(|v| v == "noisy"), "{full}");
+    let image = |view: &str| get(&a, &format!("/api/image.png?frame=1024&layer=full&view={view}")).png().to_rgb8();
+    let (denoised, noisy) = (image("beauty"), image("noisy"));
+    let differ = denoised.pixels().zip(noisy.pixels()).filter(|(d, n)| d != n).count();
+    assert!(differ > 64 * 36 / 4, "only {differ} pixels differ between denoised and noisy");
+    let (film, _) = throng::render::exr::read_layer(&renders.join("full/demo.full.1024.exr")).unwrap();
+    let i = film.agent_id.iter().position(|&v| v > 0).unwrap() as u32;
+    let (x, y) = (i % film.width, i / film.width);
+    let r = get_ok(&a, &format!("/api/pick?frame=1024&layer=full&x={x}&y={y}")).json();
+    assert_eq!(r["botinfo"][0]["id"], film.agent_id[i as usize] - 1, "{r}");
+    stop.stop();
+}

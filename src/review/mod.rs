@@ -854,9 +854,7 @@ impl State {
         let key = format!("mix|{}|{mix_text}|{:08x}", Self::key_of(&d, q), exposure.to_bits());
         self.cached_png(key, || {
             let light = mixer::mix(&d.film, d.meta.colourspace, &gains).map_err(not_found)?;
-            let mut film = Film::new(d.film.width, d.film.height);
-            film.rgba = light.into_iter().map(|[r, g, b]| [r, g, b, 1.0]).collect();
-            let px = tone::view_pixels(&film, d.meta.colourspace, "beauty", exposure).map_err(not_found)?;
+            let px = tone::light_pixels(d.meta.colourspace, light.iter(), exposure);
             tone::png(d.film.width, d.film.height, 3, px).map_err(|m| Refusal(500, m))
         })
     }

@@ -24,6 +24,17 @@ fn display(space: Colourspace, c: [f32; 3]) -> [u8; 3] {
     colour::to_rec709(space, Vec3::from(c)).to_array().map(srgb_encode)
 }
 
+/// Linear light (working space) as RGB8 display pixels, exposed by
+/// `exposure` stops.
+pub(crate) fn light_pixels<'a>(
+    space: Colourspace,
+    light: impl Iterator<Item = &'a [f32; 3]>,
+    exposure: f32,
+) -> Vec<u8> {
+    let gain = exposure.exp2();
+    light.flat_map(|p| display(space, p.map(|c| c * gain))).collect()
+}
+
 /// A view of `film` as RGB8 pixels (row-major), or why not. `exposure` is
 /// in stops and applies to light (beauty and light passes).
 pub(crate) fn view_pixels(film: &Film, space: Colourspace, view: &str, exposure: f32) -> Result<Vec<u8>, String> {
@@ -103,21 +114,18 @@ pub(crate) fn matte_pixels(coverage: &[f32]) -> Vec<u8> {
     coverage.iter().flat_map(|&c| [255, 214, 10, (c.clamp(0.0, 1.0) * 153.0 + 0.5) as u8]).collect()
 }
 
-/// PNG bytes of RGB8 (`channels` 3) or RGBA8 (4) pixels. Fast deflate with
-/// the Up filter: a review image goes once over a local socket, so encoding
-/// time (the most of a mixer change at the default level) counts, not bytes.
+/// PNG bytes of RGB8 (`channels` 3) or RGBA8 (4) pixels.
 pub(crate) fn png(width: u32, height: u32, channels: u8, pixels: Vec<u8>) -> Result<Vec<u8>, String> {
-    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
-    use image::{ExtendedColorType, ImageEncoder};
-    let colour = if channels == 3 { ExtendedColorType::Rgb8 } else { ExtendedColorType::Rgba8 };
-    if pixels.len() as u64 != width as u64 * height as u64 * channels as u64 {
-        return Err("image buffer does not match its size".into());
+    let mut out = std::io::Cursor::new(Vec::new());
+    let r = match channels {
+        3 => image::RgbImage::from_raw(width, height, pixels).map(|i| i.write_to(&mut out, image::ImageFormat::Png)),
+        _ => image::RgbaImage::from_raw(width, height, pixels).map(|i| i.write_to(&mut out, image::ImageFormat::Png)),
+    };
+    match r {
+        Some(Ok(())) => Ok(out.into_inner()),
+        Some(Err(e)) => Err(format!("cannot encode PNG: {e}")),
+        None => Err("image buffer does not match its size".into()),
     }
-    let mut out = Vec::new();
-    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Up)
-        .write_image(&pixels, width, height, colour)
-        .map_err(|e| format!("cannot encode PNG: {e}"))?;
-    Ok(out)
 }
 
 #[cfg(test)]

@@ -319,3 +319,20 @@ pub fn cuboid(lo: glam::Vec3, hi: glam::Vec3) -> throng::export::glb::MeshData {
     }
     m
 }
+
+/// Whether Open Image Denoise is here; without it a test returns early (and
+/// says so), or fails under `THRONG_REQUIRE_OIDN=1` (CI installs it).
+pub fn oidn_available(test: &str) -> bool {
+    match throng_oidn::Library::find(None) {
+        Ok(_) => true,
+        Err(e) if std::env::var("THRONG_REQUIRE_OIDN").as_deref() == Ok("1") => {
+            panic!("{test}: THRONG_REQUIRE_OIDN=1 but {e}")
+        }
+        Err(e) => {
+            // Straight to stderr: cargo's capture would hide a skip.
+            use std::io::Write;
+            let _ = writeln!(std::io::stderr(), "SKIPPED {test}: {e}");
+            false
+        }
+    }
+}

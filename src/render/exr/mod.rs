@@ -931,11 +931,58 @@ pub fn read_parts(path: &Path, keep: impl Fn(&str) -> bool) -> Result<Vec<RawPar
     Ok(image.layer_data.iter().map(|l| raw_part(l, &image.attributes, &keep)).collect())
 }
 
-/// sRGB transfer function (IEC 61966-2-1).
+/// sRGB transfer function (IEC 61966-2-1) as an 8-bit code: exactly
+/// [`srgb_formula`], looked up (a review image or preview encodes millions
+/// of values, and `powf` was most of a light-mixer change).
 pub(crate) fn srgb_encode(linear: f32) -> u8 {
     let c = linear.clamp(0.0, 1.0);
+    if c.is_nan() {
+        return 0;
+    }
+    let t = srgb_table();
+    let mut code = t.bucket[(c * SRGB_BUCKETS as f32) as usize];
+    while code < 255 && c >= t.steps[code as usize] {
+        code += 1;
+    }
+    code
+}
+
+/// The formula [`srgb_encode`] looks up.
+fn srgb_formula(c: f32) -> u8 {
     let v = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
     (v * 255.0 + 0.5) as u8
+}
+
+const SRGB_BUCKETS: usize = 4096;
+
+/// `steps[k]`: the least linear value in [0, 1] whose code is over k;
+/// `bucket[i]`: the code of `i / SRGB_BUCKETS` (the formula is monotonic, so
+/// a value's code is its bucket's plus the steps it passes).
+struct SrgbTable {
+    steps: [f32; 255],
+    bucket: [u8; SRGB_BUCKETS + 1],
+}
+
+fn srgb_table() -> &'static SrgbTable {
+    static TABLE: std::sync::OnceLock<SrgbTable> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        let mut steps = [0.0; 255];
+        for (k, step) in steps.iter_mut().enumerate() {
+            // Bisect the bit patterns of [0, 1] (ordered as the floats are).
+            let (mut lo, mut hi) = (0u32, 1.0f32.to_bits());
+            while lo < hi {
+                let mid = lo + (hi - lo) / 2;
+                if srgb_formula(f32::from_bits(mid)) as usize > k {
+                    hi = mid;
+                } else {
+                    lo = mid + 1;
+                }
+            }
+            *step = f32::from_bits(lo);
+        }
+        let bucket = std::array::from_fn(|i| srgb_formula(i as f32 / SRGB_BUCKETS as f32));
+        SrgbTable { steps, bucket }
+    })
 }
 
 /// Writes an 8-bit sRGB PNG preview: premultiplied RGB over black, clamped.
@@ -956,4 +1003,27 @@ pub fn write_preview_png_from(path: &Path, film: &Film, space: Colourspace) -> R
     write_atomic(path, |out| {
         img.write_to(out, image::ImageFormat::Png).map_err(|e| Error::invalid(path, format!("PNG: {e}")))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_srgb_lookup_is_the_formula_exactly() {
+        // Every threshold and its neighbours, then a strided sweep of [0, 1].
+        for &t in &srgb_table().steps {
+            for bits in t.to_bits().saturating_sub(2)..=t.to_bits() + 2 {
+                let c = f32::from_bits(bits).min(1.0);
+                assert_eq!(srgb_encode(c), srgb_formula(c), "{c:e}");
+            }
+        }
+        for bits in (0..=1.0f32.to_bits()).step_by(251) {
+            let c = f32::from_bits(bits);
+            assert_eq!(srgb_encode(c), srgb_formula(c), "{c:e}");
+        }
+        for c in [-1.0, 0.0, 1.0, 2.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN] {
+            assert_eq!(srgb_encode(c), srgb_formula(c.clamp(0.0, 1.0)), "{c}");
+        }
+    }
 }
