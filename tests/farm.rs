@@ -644,9 +644,10 @@ fn a_deep_plan_writes_deep_outputs_and_redoes_a_cut_deep_file() {
     std::fs::write(cut, &bytes[..bytes.len() - 1]).unwrap();
     assert!(!is_whole(cut));
     let (code, out, _) = run(&["farm", "status", s(&plan_path)]);
-    assert_eq!(code, 1, "a cut deep file: not done\n{out}");
+    // It ran and its outputs are not whole: failed (exit 3), not done.
+    assert_eq!(code, 3, "a cut deep file: not done\n{out}");
     let line = out.lines().find(|l| l.starts_with(&format!("{} ", victim.id))).unwrap_or_default();
-    assert!(!line.contains("done"), "{out}");
+    assert!(line.contains("failed") && !line.contains("done"), "{out}");
     let (code, json, err) = run(&["farm", "submit", s(&plan_path), "--engine", "local", "--json"]);
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_str(&json).unwrap();
