@@ -506,16 +506,20 @@ fn is_whole_judges_from_the_header_and_offsets_and_refuses_any_cut() {
         assert!(counts.samples.is_empty());
         assert_eq!(counts_head, head);
         assert_eq!(read_deep_header(&path).unwrap(), head, "{name}");
-        // Cut anywhere, from the magic number to the last byte: not whole.
+        // Cut anywhere, from the last byte to the magic number: not whole
+        // (one copy cut shorter and shorter).
         let whole = std::fs::read(&path).unwrap();
         let cut = dir.join(format!("cut.{name}.deep.exr"));
-        for len in 0..whole.len() {
-            std::fs::write(&cut, &whole[..len]).unwrap();
+        std::fs::write(&cut, &whole).unwrap();
+        let shortened = std::fs::OpenOptions::new().write(true).open(&cut).unwrap();
+        for len in (0..whole.len()).rev() {
+            shortened.set_len(len as u64).unwrap();
             assert!(!is_whole(&cut), "{name}: cut to {len} of {} bytes counted whole", whole.len());
         }
+        drop(shortened);
+        let chunks_at = first_chunk(&whole, 9);
         // An offset table not yet filled in (zeros), or one offset pointing
         // past the end: not whole.
-        let chunks_at = first_chunk(&whole, 9);
         let mut zeroed = whole.clone();
         zeroed[chunks_at - 72..chunks_at].fill(0);
         std::fs::write(&cut, &zeroed).unwrap();
@@ -530,6 +534,18 @@ fn is_whole_judges_from_the_header_and_offsets_and_refuses_any_cut() {
         relabelled[chunks_at..chunks_at + 4].copy_from_slice(&5i32.to_le_bytes());
         std::fs::write(&cut, &relabelled).unwrap();
         assert!(is_whole(&cut) && read_deep(&cut).is_err(), "{name}: judged from the header and offsets");
+    }
+    // A header longer than the first read (64 KiB): read on until it ends.
+    let long = LayerMeta { shot: "x".repeat(300_000), ..meta() };
+    let path = dir.join("long.deep.exr");
+    write_deep(&path, &img, &film, &long, DeepCompression::Zips).unwrap();
+    assert!(is_whole(&path));
+    assert_eq!(read_deep_header(&path).unwrap(), read_deep(&path).unwrap().1);
+    let whole = std::fs::read(&path).unwrap();
+    let cut = dir.join("cut.long.deep.exr");
+    for len in [70_000, 299_000, whole.len() - 1] {
+        std::fs::write(&cut, &whole[..len]).unwrap();
+        assert!(!is_whole(&cut), "a long header cut to {len} of {} bytes", whole.len());
     }
     // Not a deep file at all.
     let flat = dir.join("flat.exr");
