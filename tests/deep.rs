@@ -515,6 +515,11 @@ fn is_whole_judges_from_the_header_and_offsets_and_refuses_any_cut() {
         for len in (0..whole.len()).rev() {
             shortened.set_len(len as u64).unwrap();
             assert!(!is_whole(&cut), "{name}: cut to {len} of {} bytes counted whole", whole.len());
+            // The readers refuse it (the counts alone may still be whole), never panic.
+            assert!(read_deep(&cut).is_err());
+            if let Ok((counts, _)) = read_sample_counts(&cut) {
+                assert_eq!(counts.counts, img.counts, "{name}: cut to {len}");
+            }
         }
         drop(shortened);
         let chunks_at = first_chunk(&whole, 9);

@@ -440,16 +440,6 @@ fn not_ours(path: &Path, what: &str) -> Error {
 /// Reads a deep file [`write_deep`] wrote (our reader of record: the tests'
 /// round trip). Every size is checked against the file before it is used.
 pub fn read_deep(path: &Path) -> Result<(DeepImage, DeepHeader)> {
-    read_deep_file(path, true)
-}
-
-/// A deep file's sample counts alone (each scanline's pixel offset table,
-/// its samples left packed), and its header: `samples` is left empty.
-pub fn read_sample_counts(path: &Path) -> Result<(DeepImage, DeepHeader)> {
-    read_deep_file(path, false)
-}
-
-fn read_deep_file(path: &Path, samples: bool) -> Result<(DeepImage, DeepHeader)> {
     crate::error::check_readable_file(path)?;
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let bad = |what: &str| not_ours(path, what);
@@ -459,8 +449,34 @@ fn read_deep_file(path: &Path, samples: bool) -> Result<(DeepImage, DeepHeader)>
     let mut image = DeepImage { width: w as u32, height: h as u32, counts: Vec::new(), samples: Vec::new() };
     for y in 0..h {
         let off = u64_at(&bytes, head.table_at + 8 * y).ok_or_else(|| bad("line offset table"))? as usize;
-        read_line(&bytes, off, (y, w), head.compression, samples, &mut image)
+        read_line(&bytes, off, (y, w), head.compression, true, &mut image)
             .ok_or_else(|| bad(&format!("scanline {y}")))?;
+    }
+    Ok((image, described))
+}
+
+/// A deep file's sample counts alone, and its header: only the header,
+/// the line offset table and each chunk's pixel offset table are read
+/// (the samples are neither read nor decoded; `samples` is left empty).
+pub fn read_sample_counts(path: &Path) -> Result<(DeepImage, DeepHeader)> {
+    use std::io::{Seek, SeekFrom};
+    let mut start = read_start(path)?;
+    let described = describe(&start.head, &start.bytes).map_err(|e| not_ours(path, &e))?;
+    let (w, h) = (start.head.header.layer_size.width(), start.head.header.layer_size.height());
+    let mut image = DeepImage { width: w as u32, height: h as u32, counts: Vec::new(), samples: Vec::new() };
+    let bad = |y: usize| not_ours(path, &format!("scanline {y}"));
+    let mut chunk = Vec::new();
+    for (y, &off) in start.offsets.iter().enumerate() {
+        // The chunk's fixed part (y and three sizes), then its pixel offset table.
+        chunk.clear();
+        start.file.seek(SeekFrom::Start(off)).map_err(|e| Error::io(path, e))?;
+        (&mut start.file).take(28).read_to_end(&mut chunk).map_err(|e| Error::io(path, e))?;
+        let table_len = u64_at(&chunk, 4).ok_or_else(|| bad(y))?;
+        if table_len > start.len.saturating_sub(off.saturating_add(28)) {
+            return Err(bad(y));
+        }
+        (&mut start.file).take(table_len).read_to_end(&mut chunk).map_err(|e| Error::io(path, e))?;
+        read_line(&chunk, 0, (y, w), start.head.compression, false, &mut image).ok_or_else(|| bad(y))?;
     }
     Ok((image, described))
 }
@@ -561,7 +577,6 @@ fn read_line(
     let (table_len, data_len) = (u64_at(b, off + 4)? as usize, u64_at(b, off + 12)? as usize);
     let unpacked = u64_at(b, off + 20)? as usize;
     let table_raw = b.get(off + 28..(off + 28).checked_add(table_len)?)?;
-    let data_raw = b.get(off + 28 + table_len..(off + 28 + table_len).checked_add(data_len)?)?;
     // No more than compression can expand these packed bytes to, before anything is allocated.
     let most = |packed: usize| (packed.max(1) as u64).saturating_mul(crate::exr_guard::MAX_EXR_EXPANSION);
     if (w as u64).saturating_mul(4) > most(table_len) || unpacked as u64 > most(data_len) {
@@ -592,6 +607,7 @@ fn read_line(
         image.counts.extend(counts);
         return Some(());
     }
+    let data_raw = b.get(off + 28 + table_len..(off + 28 + table_len).checked_add(data_len)?)?;
     let data = unpack(data_raw, unpacked)?;
     let mut samples = vec![DeepSample::default(); n];
     let mut at = 0;
