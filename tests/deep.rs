@@ -540,6 +540,25 @@ fn is_whole_judges_from_the_header_and_offsets_and_refuses_any_cut() {
         std::fs::write(&cut, &relabelled).unwrap();
         assert!(is_whole(&cut) && read_deep(&cut).is_err(), "{name}: judged from the header and offsets");
     }
+    // Bytes flipped anywhere (a fixed xorshift sequence): every reader
+    // answers, none panics, and a file the whole read accepts is whole.
+    let whole = std::fs::read(dir.join("w.rle.deep.exr")).unwrap();
+    let flipped = dir.join("flipped.deep.exr");
+    let mut x = 0x9e37_79b9_7f4a_7c15u64;
+    for _ in 0..300 {
+        let mut bytes = whole.clone();
+        for _ in 0..3 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let at = (x % bytes.len() as u64) as usize;
+            bytes[at] ^= (x >> 32) as u8 | 1;
+        }
+        std::fs::write(&flipped, &bytes).unwrap();
+        let read = read_deep(&flipped);
+        let _ = (read_sample_counts(&flipped), read_deep_header(&flipped));
+        assert!(read.is_err() || is_whole(&flipped));
+    }
     // A header longer than the first read (64 KiB): read on until it ends.
     let long = LayerMeta { shot: "x".repeat(300_000), ..meta() };
     let path = dir.join("long.deep.exr");
