@@ -3,7 +3,8 @@
 # (munged, slurmctld, slurmd; a generated slurm.conf; every state, spool,
 # log and socket under one temp dir), the demo shot planned and submitted at
 # a tiny resolution, outputs compared byte for byte with a local
-# `throng render` + `throng comp`, `farm status` exit 0; then a task killed
+# `throng render` + `throng comp`, `farm status` exit 0; a deep plan
+# (`--deep`) likewise against `render --deep` + `comp --deep`; then a task killed
 # mid-render (scancel), `status` naming it failed with its log, a re-submit,
 # and completion. Fails with the reason when the scheduler cannot start.
 #
@@ -135,6 +136,23 @@ n=$(wc -l <"$tmp/farm.sums")
 [ "$n" -eq 10 ] || fail "expected 10 EXRs (4 layers x 2 frames + 2 comps), found $n"
 "$bin" farm status "$work/farm/plan.json" >/dev/null || fail "farm status does not exit 0 on a finished plan"
 echo "slurm: $n EXRs byte-identical to local render + comp; farm status exit 0"
+
+# ---- 1b. a deep plan (--deep): render tasks write deep files beside their
+# flat ones, the comp the deep comp; byte-identical to a local
+# `render --deep` + `comp --deep` (one frame, 32x18)
+"$bin" farm plan demo/shot.toml --frames 1024 --chunk 1 --spp 1 --resolution 32x18 --deep --out "$work/deep" >/dev/null
+"$bin" farm submit "$work/deep/plan.json" --engine slurm >/dev/null
+wait_done "$work/deep/plan.json" 90
+m="$work/deep/demo.layers.json"
+"$bin" render demo/shot.toml --manifest "$m" --frames 1024 --spp 1 --resolution 32x18 --deep --progress off --out "$work/deep_local" >/dev/null
+mkdir -p "$work/deep_local/comp"
+"$bin" comp "$work/deep_local" --frame 1024 --manifest "$m" --out "$work/deep_local/comp/demo.comp.1024.exr" --deep >/dev/null
+(cd "$work/deep/render" && find . -name '*.deep.exr' | sort | xargs sha256sum) >"$tmp/deep_farm.sums"
+(cd "$work/deep_local" && find . -name '*.deep.exr' | sort | xargs sha256sum) >"$tmp/deep_local.sums"
+diff "$tmp/deep_farm.sums" "$tmp/deep_local.sums" || fail "farm deep outputs differ from the local render --deep + comp --deep"
+n=$(wc -l <"$tmp/deep_farm.sums")
+[ "$n" -eq 5 ] || fail "expected 5 deep EXRs (4 layers + the deep comp), found $n"
+echo "slurm: deep plan: $n deep EXRs byte-identical to local render --deep + comp --deep"
 
 # ---- 2. kill a render task mid-render, status names it, re-submit completes
 kplan="$work/kill/plan.json"

@@ -13,6 +13,12 @@
 //! (an analytic sphere among the agents, its own deep image) merges into the
 //! crowd per pixel with no holdout render; `throng comp --deep` writes both
 //! files and refuses a deep file that is not throng's.
+//!
+//! Also: the completeness check (`is_whole`) judges from the header and the
+//! line offset table, refusing a file cut anywhere; a frame rendered with
+//! RLE and with ZIPS holds the same samples bit for bit, and `render
+//! --json` reports the deep file's size and samples; `throng review` shows
+//! a deep layer's samples per pixel (docs/review.md).
 
 mod common;
 
@@ -24,7 +30,9 @@ use common::{demo_shot, text, throng};
 use throng::casting::ShotCrowd;
 use throng::layers::Manifest;
 use throng::render::deep::{DeepImage, DeepSample};
-use throng::render::exr::deep::{read_deep, write_deep, DeepCompression};
+use throng::render::exr::deep::{
+    is_whole, read_deep, read_deep_header, read_sample_counts, write_deep, DeepCompression,
+};
 use throng::render::exr::{read_layer, LayerMeta};
 use throng::render::job::deep_layer_path;
 use throng::render::job::{self, RenderJob};
@@ -479,4 +487,242 @@ fn comp_deep_writes_both_files_and_refuses_a_deep_file_not_throngs() {
     let o = throng(&["comp", s(&copy), "--frame", "1001", "--out", s(&out2), "--deep"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(text(&o.stderr).contains("no deep file"), "{}", text(&o.stderr));
+}
+
+#[test]
+fn is_whole_judges_from_the_header_and_offsets_and_refuses_any_cut() {
+    let dir = out_dir("whole");
+    // Taller than one chunk per compression's run, with empty lines between.
+    let img = synthetic(21, 9);
+    let film = Film::new(21, 9);
+    for (c, name) in [(DeepCompression::Zips, "zips"), (DeepCompression::Rle, "rle"), (DeepCompression::None, "none")] {
+        let path = dir.join(format!("w.{name}.deep.exr"));
+        write_deep(&path, &img, &film, &meta(), c).unwrap();
+        assert!(is_whole(&path), "{name}: a whole file");
+        // The counts alone and the header alone say what the whole read says.
+        let (full, head) = read_deep(&path).unwrap();
+        let (counts, counts_head) = read_sample_counts(&path).unwrap();
+        assert_eq!((counts.width, counts.height, &counts.counts), (full.width, full.height, &full.counts));
+        assert!(counts.samples.is_empty());
+        assert_eq!(counts_head, head);
+        assert_eq!(read_deep_header(&path).unwrap(), head, "{name}");
+        // Cut anywhere, from the last byte to the magic number: not whole
+        // (one copy cut shorter and shorter).
+        let whole = std::fs::read(&path).unwrap();
+        let cut = dir.join(format!("cut.{name}.deep.exr"));
+        std::fs::write(&cut, &whole).unwrap();
+        let shortened = std::fs::OpenOptions::new().write(true).open(&cut).unwrap();
+        for len in (0..whole.len()).rev() {
+            shortened.set_len(len as u64).unwrap();
+            assert!(!is_whole(&cut), "{name}: cut to {len} of {} bytes counted whole", whole.len());
+            // The readers refuse it (the counts alone may still be whole), never panic.
+            assert!(read_deep(&cut).is_err());
+            if let Ok((counts, _)) = read_sample_counts(&cut) {
+                assert_eq!(counts.counts, img.counts, "{name}: cut to {len}");
+            }
+        }
+        drop(shortened);
+        let chunks_at = first_chunk(&whole, 9);
+        // An offset table not yet filled in (zeros), or one offset pointing
+        // past the end: not whole.
+        let mut zeroed = whole.clone();
+        zeroed[chunks_at - 72..chunks_at].fill(0);
+        std::fs::write(&cut, &zeroed).unwrap();
+        assert!(!is_whole(&cut), "{name}: a zeroed offset table");
+        let mut far = whole.clone();
+        far[chunks_at - 8..chunks_at].copy_from_slice(&(whole.len() as u64).to_le_bytes());
+        std::fs::write(&cut, &far).unwrap();
+        assert!(!is_whole(&cut), "{name}: an offset past the end");
+        // Judged without reading every chunk: a first chunk that says it is
+        // another line passes the check and fails the whole read.
+        let mut relabelled = whole.clone();
+        relabelled[chunks_at..chunks_at + 4].copy_from_slice(&5i32.to_le_bytes());
+        std::fs::write(&cut, &relabelled).unwrap();
+        assert!(is_whole(&cut) && read_deep(&cut).is_err(), "{name}: judged from the header and offsets");
+    }
+    // Bytes flipped anywhere (a fixed xorshift sequence): every reader
+    // answers, none panics, and a file the whole read accepts is whole.
+    let whole = std::fs::read(dir.join("w.rle.deep.exr")).unwrap();
+    let flipped = dir.join("flipped.deep.exr");
+    let mut x = 0x9e37_79b9_7f4a_7c15u64;
+    for _ in 0..300 {
+        let mut bytes = whole.clone();
+        for _ in 0..3 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let at = (x % bytes.len() as u64) as usize;
+            bytes[at] ^= (x >> 32) as u8 | 1;
+        }
+        std::fs::write(&flipped, &bytes).unwrap();
+        let read = read_deep(&flipped);
+        let _ = (read_sample_counts(&flipped), read_deep_header(&flipped));
+        assert!(read.is_err() || is_whole(&flipped));
+    }
+    // A header longer than the first read (64 KiB): read on until it ends.
+    let long = LayerMeta { shot: "x".repeat(300_000), ..meta() };
+    let path = dir.join("long.deep.exr");
+    write_deep(&path, &img, &film, &long, DeepCompression::Zips).unwrap();
+    assert!(is_whole(&path));
+    assert_eq!(read_deep_header(&path).unwrap(), read_deep(&path).unwrap().1);
+    let whole = std::fs::read(&path).unwrap();
+    let cut = dir.join("cut.long.deep.exr");
+    for len in [70_000, 299_000, whole.len() - 1] {
+        std::fs::write(&cut, &whole[..len]).unwrap();
+        assert!(!is_whole(&cut), "a long header cut to {len} of {} bytes", whole.len());
+    }
+    // Not a deep file at all.
+    let flat = dir.join("flat.exr");
+    std::fs::write(&flat, b"P6 not an image").unwrap();
+    assert!(!is_whole(&flat) && !is_whole(&dir.join("missing.deep.exr")));
+}
+
+/// Where a deep file's first chunk starts (the line offset table of
+/// `height` entries ends there): the first place whose u64 is its own
+/// position plus the table's length.
+fn first_chunk(file: &[u8], height: usize) -> usize {
+    (8..file.len() - 8)
+        .find(|&at| u64::from_le_bytes(file[at..at + 8].try_into().unwrap()) as usize == at + 8 * height)
+        .expect("a line offset table")
+        + 8 * height
+}
+
+/// `render --json` of `shot` (demo `full`, frame 1024, 160x90 at 4 spp, as
+/// `.ci/run` renders it) into `out`: the summary.
+fn render_full_json(shot: &Path, manifest: &Path, out: &Path) -> serde_json::Value {
+    let f = FRAME.to_string();
+    let args = ["render", s(shot), "--manifest", s(manifest), "--layer", "full", "--frames", &f];
+    let rest = ["--spp", "4", "--resolution", "160x90", "--progress", "off", "--json", "--out", s(out)];
+    let o = throng(&[&args[..], &rest[..]].concat());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+#[test]
+fn rle_and_zips_renders_of_a_frame_hold_the_same_samples() {
+    let dir = out_dir("rle_zips");
+    let manifest = dir.join("demo.layers.json");
+    let o = throng(&["layers", s(&demo_shot()), "--out", s(&manifest)]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let mut images = Vec::new();
+    for name in ["rle", "zips"] {
+        let shot = shot_with(name, &format!("{{ compression = \"{name}\" }}"));
+        let out = dir.join(name);
+        let v = render_full_json(&shot, &manifest, &out);
+        let _ = std::fs::remove_file(&shot);
+        let path = deep_layer_path(&throng::output::layer_path(&out, "demo", "full", FRAME));
+        let (image, head) = read_deep(&path).unwrap();
+        assert_eq!(head.compression, Some(if name == "rle" { DeepCompression::Rle } else { DeepCompression::Zips }));
+        // render --json: the deep file's size per megapixel and samples, and the peak memory.
+        let row = &v["layer_frames"][0];
+        let d = &row["deep"];
+        let bytes = std::fs::metadata(&path).unwrap().len();
+        assert_eq!(d["file_bytes"].as_u64(), Some(bytes), "{name}: {d}");
+        assert_eq!(d["bytes_per_megapixel"].as_u64(), Some((bytes as f64 * 1e6 / (160.0 * 90.0)).round() as u64));
+        assert_eq!(d["samples"].as_u64(), Some(image.samples.len() as u64), "{name}: {d}");
+        assert_eq!(d["max_samples_per_pixel"].as_u64(), Some(image.max_samples() as u64));
+        assert!(row["peak_rss_bytes"].as_u64().is_some_and(|b| b > 1 << 20), "{row}");
+        images.push(image);
+    }
+    let (rle, zips) = (&images[0], &images[1]);
+    assert!(rle.samples.len() > 1000, "{} samples", rle.samples.len());
+    assert_eq!(rle.counts, zips.counts, "per-pixel sample counts");
+    // Bit for bit (NaN-free: compared as bits so -0 and 0 differ too).
+    let bits = |i: &DeepImage| -> Vec<[u32; 8]> {
+        i.samples
+            .iter()
+            .map(|s| {
+                let [r, g, b, a] = s.rgba.map(f32::to_bits);
+                [r, g, b, a, s.z.to_bits(), s.z_back.to_bits(), s.agent_id.to_bits(), s.object_id.to_bits()]
+            })
+            .collect()
+    };
+    assert!(bits(rle) == bits(zips), "every sample's values");
+}
+
+/// A GET of `target` from the review server at `addr`: status and body.
+fn http_get(addr: &str, target: &str) -> (u16, Vec<u8>) {
+    use std::io::{Read, Write};
+    let mut stream = std::net::TcpStream::connect(addr).unwrap();
+    stream.set_read_timeout(Some(std::time::Duration::from_secs(120))).unwrap();
+    // HTTP/1.0: the body ends with the connection, never chunked.
+    stream.write_all(format!("GET {target} HTTP/1.0\r\nHost: {addr}\r\n\r\n").as_bytes()).unwrap();
+    let mut bytes = Vec::new();
+    stream.read_to_end(&mut bytes).unwrap();
+    let split = bytes.windows(4).position(|w| w == b"\r\n\r\n").expect("a complete HTTP answer");
+    let head = String::from_utf8_lossy(&bytes[..split]).into_owned();
+    let status = head.split(' ').nth(1).unwrap().parse().unwrap();
+    (status, bytes[split + 4..].to_vec())
+}
+
+#[test]
+fn review_shows_a_deep_layers_samples_per_pixel() {
+    let dir = out_dir("review");
+    let manifest = dir.join("demo.layers.json");
+    let o = throng(&["layers", s(&demo_shot()), "--out", s(&manifest)]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let renders = dir.join("render");
+    let (f, shot) = (FRAME.to_string(), demo_shot());
+    let args = ["render", s(&shot), "--manifest", s(&manifest), "--layer", "all", "--frames", &f];
+    let rest = ["--spp", "2", "--resolution", "64x36", "--deep", "--progress", "off", "--out", s(&renders)];
+    let o = throng(&[&args[..], &rest[..]].concat());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    // crowd2 without its deep file: no samples view.
+    std::fs::remove_file(deep_layer_path(&throng::output::layer_path(&renders, "demo", "crowd2", FRAME))).unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let options = throng::review::ReviewOptions {
+        renders: Some(renders.clone()),
+        manifest: Some(manifest.clone()),
+        port: 0,
+        ..Default::default()
+    };
+    std::thread::spawn(move || {
+        let shot = demo_shot();
+        let review = throng::review::Review::open(ShotCrowd::load(&shot).unwrap(), &shot, &options).unwrap();
+        tx.send((review.addr().to_string(), review.stopper())).unwrap();
+        review.serve();
+    });
+    let (addr, stopper) = rx.recv_timeout(std::time::Duration::from_secs(120)).expect("the review server started");
+    let (status, body) = http_get(&addr, &format!("/api/layers?frame={FRAME}"));
+    assert_eq!(status, 200, "{}", text(&body));
+    let v: serde_json::Value = serde_json::from_slice(&body).unwrap();
+    let mut shown = 0;
+    for l in v["layers"].as_array().unwrap() {
+        let layer = l["name"].as_str().unwrap();
+        let q = format!("/api/deep.png?frame={FRAME}&layer={layer}");
+        if layer == "crowd2" {
+            assert!(l["deep"].is_null(), "{l}");
+            assert_eq!(http_get(&addr, &q).0, 404, "crowd2 has no deep file");
+            continue;
+        }
+        let flat = throng::output::layer_path(&renders, "demo", layer, FRAME);
+        let (deep, _) = read_deep(&deep_layer_path(&flat)).unwrap();
+        let max = deep.max_samples();
+        assert_eq!(l["deep"]["view"], "samples", "{l}");
+        assert_eq!(l["deep"]["max"].as_u64(), Some(max as u64), "{layer}: the legend's max");
+        let ramp: Vec<&str> = l["deep"]["ramp"].as_array().unwrap().iter().map(|c| c.as_str().unwrap()).collect();
+        let (status, png) = http_get(&addr, &q);
+        assert_eq!(status, 200, "{layer}: {}", text(&png));
+        let img = image::load_from_memory(&png).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (64, 36));
+        let hex = |p: &image::Rgb<u8>| format!("#{:02x}{:02x}{:02x}", p[0], p[1], p[2]);
+        // Black where a pixel holds no sample, the ramp's foot at 1 and its
+        // top at the layer's most.
+        let mut by_count: std::collections::BTreeMap<u32, String> = Default::default();
+        for (p, &n) in img.pixels().zip(&deep.counts) {
+            assert_eq!(n == 0, hex(p) == "#000000", "{layer}: {n} samples drawn {}", hex(p));
+            let seen = by_count.entry(n).or_insert_with(|| hex(p));
+            assert_eq!(*seen, hex(p), "{layer}: one colour per count");
+        }
+        assert_eq!(by_count.get(&max).map(String::as_str), Some(*ramp.last().unwrap()), "{layer}");
+        if max > 1 {
+            assert_eq!(by_count.get(&1).map(String::as_str), Some(ramp[0]), "{layer}");
+        }
+        shown += 1;
+    }
+    assert_eq!(shown, 3, "set, crowd1 and crowd0 have deep files");
+    assert_eq!(http_get(&addr, &format!("/api/deep.png?frame={FRAME}&layer=comp")).0, 404);
+    let (_, js) = http_get(&addr, "/page.js");
+    assert!(text(&js).contains("/api/deep.png"), "the page offers the view");
+    stopper.stop();
 }

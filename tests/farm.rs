@@ -3,7 +3,8 @@
 //! render + comp, status (done, waiting, failed with the log), re-submit of
 //! only what is missing, engine errors, and the `--json` summaries and
 //! `--progress plain` lines the farm logs rely on. Tiny renders only
-//! (32x18, spp 1). The real Slurm run is .ci/slurm_test.sh.
+//! (32x18, spp 1). A deep plan (`--deep`): deep files are task outputs and a
+//! cut one is redone. The real Slurm run is .ci/slurm_test.sh.
 
 mod common;
 
@@ -591,4 +592,68 @@ fn denoising_reaches_every_render_task_from_the_flag_or_the_shot_key() {
             let _ = writeln!(std::io::stderr(), "SKIPPED running a denoised farm task: {e}");
         }
     }
+}
+
+#[test]
+fn a_deep_plan_writes_deep_outputs_and_redoes_a_cut_deep_file() {
+    use throng::render::exr::deep::{is_whole, read_deep};
+    use throng::render::job::deep_layer_path;
+    let tmp = common::tempdir().unwrap();
+    let plan_path = plan_demo(&demo_shot(), tmp.path(), &["--deep", "--frames", "1024"]);
+    let plan = read_plan(&plan_path).unwrap();
+    // Every task is told --deep, and its deep files are outputs beside its flat ones.
+    let (mut renders, mut comps) = (0, 0);
+    for t in &plan.tasks {
+        assert!(t.argv.iter().any(|a| a == "--deep"), "{}: {:?}", t.id, t.argv);
+        let (deep, flat): (Vec<&PathBuf>, Vec<&PathBuf>) =
+            t.outputs.iter().partition(|p| p.to_string_lossy().ends_with(".deep.exr"));
+        assert!(!flat.is_empty(), "{}", t.id);
+        let beside: Vec<PathBuf> = flat.iter().map(|p| deep_layer_path(p)).collect();
+        assert_eq!(deep.into_iter().cloned().collect::<Vec<_>>(), beside, "{}: a deep file per flat one", t.id);
+        match t.kind {
+            TaskKind::Render => renders += 1,
+            TaskKind::Comp => comps += 1,
+        }
+    }
+    assert_eq!((renders, comps), (4, 1));
+    ok(&["farm", "submit", s(&plan_path), "--engine", "local", "--workers", "2"]);
+    for t in &plan.tasks {
+        for p in t.outputs.iter().filter(|p| p.to_string_lossy().ends_with(".deep.exr")) {
+            let (deep, head) = read_deep(p).unwrap_or_else(|e| panic!("{}: {e}", t.id));
+            assert_eq!((deep.width, deep.height), (32, 18), "{}", p.display());
+            let layer = if t.kind == TaskKind::Comp { "comp" } else { t.layer.as_deref().unwrap() };
+            assert_eq!(head.text.get("throng/layer").map(String::as_str), Some(layer));
+        }
+    }
+    // The comp task's deep comp flattens to its flat comp.
+    let comp = plan.tasks.iter().find(|t| t.kind == TaskKind::Comp).unwrap();
+    let flat_comp = comp.outputs.iter().find(|p| !p.to_string_lossy().ends_with(".deep.exr")).unwrap();
+    let (deep, _) = read_deep(&deep_layer_path(flat_comp)).unwrap();
+    let (flat, _) = throng::render::exr::read_layer(flat_comp).unwrap();
+    for (d, f) in deep.flatten().iter().zip(&flat.rgba) {
+        for c in 0..4 {
+            assert!((d[c] - f[c]).abs() <= 2e-3 * d[c].abs().max(f[c].abs()) + 1e-3, "{d:?} vs {f:?}");
+        }
+    }
+    assert_eq!(run(&["farm", "status", s(&plan_path)]).0, 0);
+    // crowd0's deep file one byte short: its task is not done, and a
+    // re-submit runs it and the comp over it, and nothing else.
+    let victim = plan.tasks.iter().find(|t| t.layer.as_deref() == Some("crowd0")).unwrap();
+    let cut = victim.outputs.iter().find(|p| p.to_string_lossy().ends_with(".deep.exr")).unwrap();
+    let bytes = std::fs::read(cut).unwrap();
+    std::fs::write(cut, &bytes[..bytes.len() - 1]).unwrap();
+    assert!(!is_whole(cut));
+    let (code, out, _) = run(&["farm", "status", s(&plan_path)]);
+    // It ran and its outputs are not whole: failed (exit 3), not done.
+    assert_eq!(code, 3, "a cut deep file: not done\n{out}");
+    let line = out.lines().find(|l| l.starts_with(&format!("{} ", victim.id))).unwrap_or_default();
+    assert!(line.contains("failed") && !line.contains("done"), "{out}");
+    let (code, json, err) = run(&["farm", "submit", s(&plan_path), "--engine", "local", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let mut ran: Vec<&str> = v["ran"].as_array().unwrap().iter().filter_map(|r| r.as_str()).collect();
+    ran.sort_unstable();
+    assert_eq!(ran, [comp.id.as_str(), victim.id.as_str()]);
+    assert_eq!(std::fs::read(cut).unwrap(), bytes, "re-rendered whole, the same bytes");
+    assert_eq!(run(&["farm", "status", s(&plan_path)]).0, 0);
 }

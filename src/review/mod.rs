@@ -12,6 +12,7 @@
 //! answers a bad request with a 4xx and a message and carries on, and keeps
 //! decoded films and their PNGs in byte-bounded caches ([`lru`]).
 
+mod deep_view;
 mod figures;
 mod lru;
 mod mixer;
@@ -746,6 +747,7 @@ impl State {
             "/api/agents" => self.agents(&q),
             "/api/matte.png" => self.matte(&q),
             "/api/mix.png" => self.mix(&q),
+            "/api/deep.png" => self.deep_png(&q),
             "/api/map.png" => self.map(&q),
             "/api/cache" => Ok(json_body(&self.cache_figures()?)),
             "/api/figures" => Ok(json_body(&figures::figures(
@@ -809,6 +811,7 @@ impl State {
                 "views": tone::views(passes),
                 "cryptomatte": channels.iter().any(|c| c.starts_with(crate::render::cryptomatte::AGENT_MATTE)),
                 "in_comp": comp.as_ref().is_ok_and(|c| c.contains(name)),
+                "deep": self.deep_legend(path),
             }));
         }
         let comp = match comp {

@@ -140,7 +140,28 @@ async function loadFrame() {
 function currentViews() {
   if (state.layer === state.shot.comp_view) return state.layers.comp.views || state.shot.views;
   const l = state.layers.layers.find((x) => x.name === state.layer);
-  return l ? l.views : state.shot.views;
+  // A layer rendered with deep output also shows its deep samples per pixel.
+  return l ? (l.deep ? l.views.concat([l.deep.view]) : l.views) : state.shot.views;
+}
+
+// The samples view's legend: the heat ramp from 1 sample to the layer's most
+// (deep samples per pixel, /api/deep.png); hidden for every other view.
+function deepLegend(view) {
+  let legend = $("deep-legend");
+  const l = state.layers.layers.find((x) => x.name === state.layer);
+  const deep = l && l.deep && view === l.deep.view ? l.deep : null;
+  if (!legend) {
+    legend = el("p", null, "hint");
+    legend.id = "deep-legend";
+    $("stage").after(legend);
+  }
+  legend.hidden = !deep;
+  if (!deep) return false;
+  legend.textContent = "";
+  const bar = el("span");
+  bar.style.cssText = "display:inline-block;width:12em;height:0.9em;vertical-align:middle;margin:0 0.5em;background:linear-gradient(to right," + deep.ramp.join(",") + ")";
+  legend.append("Deep samples per pixel: black 0, 1", bar, deep.max + " (the most in this layer)");
+  return true;
 }
 
 async function showLayer() {
@@ -249,7 +270,9 @@ async function refreshImage() {
   let view = $("view").value;
   if (view === "beauty" && $("noisy").checked && currentViews().includes("noisy")) view = "noisy";
   const mix = view === "beauty" ? mixString() : "";
-  $("image").src = mix
+  $("image").src = deepLegend(view)
+    ? "/api/deep.png?" + q
+    : mix
     ? "/api/mix.png?" + q + "&mix=" + encodeURIComponent(mix) + "&exposure=" + $("exposure").value
     : "/api/image.png?" + q + "&view=" + encodeURIComponent(view) + "&exposure=" + $("exposure").value;
   loadVisible(q);

@@ -364,32 +364,51 @@ fn u64_at(b: &[u8], at: usize) -> Option<u64> {
     Some(u64::from_le_bytes(b.get(at..at + 8)?.try_into().ok()?))
 }
 
-/// Reads a deep file [`write_deep`] wrote (our reader of record: the tests'
-/// round trip). Every size is checked against the file before it is used.
-pub fn read_deep(path: &Path) -> Result<(DeepImage, DeepHeader)> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let bad = |what: &str| Error::invalid(path, format!("not a deep scanline EXR throng can read: {what}"));
+/// A deep file's header as throng reads it: the exr crate's, and where
+/// the line offset table begins.
+struct Head {
+    header: Header,
+    compression: DeepCompression,
+    table_at: usize,
+}
+
+/// Parses the header `bytes` begin with (the whole file, or at least its
+/// headers): a single-part deep scanline file with throng's channels and a
+/// compression deep files allow; else why not.
+fn parse_head(bytes: &[u8]) -> std::result::Result<Head, String> {
     if bytes.get(..4) != Some(&[0x76, 0x2f, 0x31, 0x01][..]) {
-        return Err(bad("no OpenEXR magic number"));
+        return Err("no OpenEXR magic number".into());
     }
-    let mut read = exr::io::PeekRead::new(std::io::Cursor::new(&bytes[4..]));
-    let req = exr::meta::Requirements::read(&mut read).map_err(|e| bad(&e.to_string()))?;
-    let headers = Header::read_all(&mut read, &req, false).map_err(|e| bad(&e.to_string()))?;
-    let [header] = headers.as_slice() else { return Err(bad("more than one part")) };
+    let table_at = super::headers_end(bytes).ok_or("header")?;
+    let mut read = exr::io::PeekRead::new(std::io::Cursor::new(&bytes[4..table_at]));
+    let req = exr::meta::Requirements::read(&mut read).map_err(|e| e.to_string())?;
+    let headers = Header::read_all(&mut read, &req, false).map_err(|e| e.to_string())?;
+    let [header] = <[Header; 1]>::try_from(headers.into_vec()).map_err(|_| "more than one part")?;
+    let compression = match header.compression {
+        Compression::ZIP1 => DeepCompression::Zips,
+        Compression::RLE => DeepCompression::Rle,
+        Compression::Uncompressed => DeepCompression::None,
+        _ => return Err("a compression other than NONE, RLE or ZIPS".into()),
+    };
+    let names: Vec<String> = header.channels.list.iter().map(|ch| super::lossy(&ch.name)).collect();
+    if names != CHANNELS.map(|(n, _)| n.to_string()) {
+        return Err("channels other than throng's".into());
+    }
+    Ok(Head { header, compression, table_at })
+}
+
+/// What [`DeepHeader`] says of a parsed header (`bytes`: the file's start).
+fn describe(head: &Head, bytes: &[u8]) -> std::result::Result<DeepHeader, String> {
+    let header = &head.header;
     let other = |k: &str| header.own_attributes.other.get(&text(k));
     let state = match other("deepImageState") {
         Some(AttributeValue::Custom { bytes, .. }) if bytes.len() == 1 => bytes[0],
-        _ => return Err(bad("no deepImageState")),
+        _ => return Err("no deepImageState".into()),
     };
     let block_type = match other("type") {
         Some(AttributeValue::Text(t)) => String::from_utf8_lossy(t.bytes()).into_owned(),
-        _ => {
-            if header.deep {
-                "deepscanline".into()
-            } else {
-                String::new()
-            }
-        }
+        _ if header.deep => "deepscanline".into(),
+        _ => String::new(),
     };
     let mut text_attrs = BTreeMap::new();
     for (k, v) in header.own_attributes.other.iter().chain(header.shared_attributes.other.iter()) {
@@ -397,31 +416,13 @@ pub fn read_deep(path: &Path) -> Result<(DeepImage, DeepHeader)> {
             text_attrs.insert(super::lossy(k), super::lossy(t));
         }
     }
-    let compression = match header.compression {
-        Compression::ZIP1 => Some(DeepCompression::Zips),
-        Compression::RLE => Some(DeepCompression::Rle),
-        Compression::Uncompressed => Some(DeepCompression::None),
-        _ => None,
-    };
-    let Some(c) = compression else { return Err(bad("a compression other than NONE, RLE or ZIPS")) };
-    let names: Vec<String> = header.channels.list.iter().map(|ch| super::lossy(&ch.name)).collect();
-    if names != CHANNELS.map(|(n, _)| n.to_string()) {
-        return Err(bad("channels other than throng's"));
-    }
-    let (w, h) = (header.layer_size.width(), header.layer_size.height());
-    let table_at = super::headers_end(&bytes).ok_or_else(|| bad("header"))?;
-    let mut image = DeepImage { width: w as u32, height: h as u32, counts: Vec::new(), samples: Vec::new() };
-    for y in 0..h {
-        let off = u64_at(&bytes, table_at + 8 * y).ok_or_else(|| bad("line offset table"))? as usize;
-        read_line(&bytes, off, y, w, c, &mut image).ok_or_else(|| bad(&format!("scanline {y}")))?;
-    }
-    let head = DeepHeader {
+    Ok(DeepHeader {
         version: u32::from_le_bytes([bytes[4], bytes[5], bytes[6], bytes[7]]),
         block_type,
         max_samples_per_pixel: header.max_samples_per_pixel.unwrap_or(0),
         state,
-        compression,
-        channels: names,
+        compression: Some(head.compression),
+        channels: header.channels.list.iter().map(|ch| super::lossy(&ch.name)).collect(),
         text: text_attrs,
         world_to_ndc: header.own_attributes.world_to_normalized_device,
         chromaticities: header.shared_attributes.chromaticities.is_some(),
@@ -429,25 +430,158 @@ pub fn read_deep(path: &Path) -> Result<(DeepImage, DeepHeader)> {
             Some(AttributeValue::I32(f)) => Some(*f),
             _ => None,
         },
+    })
+}
+
+fn not_ours(path: &Path, what: &str) -> Error {
+    Error::invalid(path, format!("not a deep scanline EXR throng can read: {what}"))
+}
+
+/// Reads a deep file [`write_deep`] wrote (our reader of record: the tests'
+/// round trip). Every size is checked against the file before it is used.
+pub fn read_deep(path: &Path) -> Result<(DeepImage, DeepHeader)> {
+    crate::error::check_readable_file(path)?;
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bad = |what: &str| not_ours(path, what);
+    let head = parse_head(&bytes).map_err(|e| bad(&e))?;
+    let described = describe(&head, &bytes).map_err(|e| bad(&e))?;
+    let (w, h) = (head.header.layer_size.width(), head.header.layer_size.height());
+    let mut image = DeepImage { width: w as u32, height: h as u32, counts: Vec::new(), samples: Vec::new() };
+    for y in 0..h {
+        let off = u64_at(&bytes, head.table_at + 8 * y).ok_or_else(|| bad("line offset table"))? as usize;
+        read_line(&bytes, off, (y, w), head.compression, true, &mut image)
+            .ok_or_else(|| bad(&format!("scanline {y}")))?;
+    }
+    Ok((image, described))
+}
+
+/// A deep file's sample counts alone, and its header: only the header,
+/// the line offset table and each chunk's pixel offset table are read
+/// (the samples are neither read nor decoded; `samples` is left empty).
+pub fn read_sample_counts(path: &Path) -> Result<(DeepImage, DeepHeader)> {
+    use std::io::{Seek, SeekFrom};
+    let mut start = read_start(path)?;
+    let described = describe(&start.head, &start.bytes).map_err(|e| not_ours(path, &e))?;
+    let (w, h) = (start.head.header.layer_size.width(), start.head.header.layer_size.height());
+    let mut image = DeepImage { width: w as u32, height: h as u32, counts: Vec::new(), samples: Vec::new() };
+    let bad = |y: usize| not_ours(path, &format!("scanline {y}"));
+    let mut chunk = Vec::new();
+    for (y, &off) in start.offsets.iter().enumerate() {
+        // The chunk's fixed part (y and three sizes), then its pixel offset table.
+        chunk.clear();
+        start.file.seek(SeekFrom::Start(off)).map_err(|e| Error::io(path, e))?;
+        (&mut start.file).take(28).read_to_end(&mut chunk).map_err(|e| Error::io(path, e))?;
+        let table_len = u64_at(&chunk, 4).ok_or_else(|| bad(y))?;
+        if table_len > start.len.saturating_sub(off.saturating_add(28)) {
+            return Err(bad(y));
+        }
+        (&mut start.file).take(table_len).read_to_end(&mut chunk).map_err(|e| Error::io(path, e))?;
+        read_line(&chunk, 0, (y, w), start.head.compression, false, &mut image).ok_or_else(|| bad(y))?;
+    }
+    Ok((image, described))
+}
+
+/// The header of a deep file, read without its pixels.
+pub fn read_deep_header(path: &Path) -> Result<DeepHeader> {
+    let start = read_start(path)?;
+    describe(&start.head, &start.bytes).map_err(|e| not_ours(path, &e))
+}
+
+/// A deep file's start: its header and line offset table, read as far as
+/// they go and no further.
+struct Start {
+    head: Head,
+    /// The file's first bytes: at least the headers and the offset table.
+    bytes: Vec<u8>,
+    /// Each scanline's chunk offset.
+    offsets: Vec<u64>,
+    file: std::fs::File,
+    len: u64,
+}
+
+fn read_start(path: &Path) -> Result<Start> {
+    use std::io::{Seek, SeekFrom};
+    crate::error::check_readable_file(path)?;
+    let io = |e| Error::io(path, e);
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let len = file.metadata().map_err(io)?.len();
+    // Headers hold Cryptomatte manifests, so their size is unknown: read a
+    // growing prefix (never past the file's end) until they are whole.
+    let mut bytes = Vec::new();
+    let mut want = 64u64 << 10;
+    let table_at = loop {
+        let have = bytes.len() as u64;
+        (&mut file).take(want.min(len).saturating_sub(have)).read_to_end(&mut bytes).map_err(io)?;
+        if let Some(end) = super::headers_end(&bytes) {
+            break end;
+        }
+        if bytes.len() as u64 >= len {
+            return Err(not_ours(path, "the header ends past the end of the file"));
+        }
+        want = want.saturating_mul(4);
     };
-    Ok((image, head))
+    let head = parse_head(&bytes[..table_at]).map_err(|e| not_ours(path, &e))?;
+    let h = head.header.layer_size.height();
+    let table_end = (h as u64).checked_mul(8).and_then(|n| n.checked_add(table_at as u64));
+    let table_end = table_end.filter(|&e| e <= len).ok_or_else(|| not_ours(path, "line offset table"))?;
+    file.seek(SeekFrom::Start(bytes.len() as u64)).map_err(io)?;
+    (&mut file).take(table_end.saturating_sub(bytes.len() as u64)).read_to_end(&mut bytes).map_err(io)?;
+    let table = bytes.get(table_at..table_end as usize).ok_or_else(|| not_ours(path, "line offset table"))?;
+    let offsets = table.chunks_exact(8).map(|b| u64::from_le_bytes(b.try_into().unwrap_or_default())).collect();
+    Ok(Start { head, bytes, offsets, file, len })
 }
 
 /// Whether `path` is a whole deep file throng can read (a resumed render
-/// and the farm count it as done).
+/// and the farm count it as done), judged from its header and line offset
+/// table without decoding a sample: every chunk starts past the table and
+/// inside the file, and the last chunk (the one furthest in) ends inside
+/// it. A file cut short anywhere fails; a chunk corrupted inside its
+/// bounds is found only by [`read_deep`].
 pub fn is_whole(path: &Path) -> bool {
-    read_deep(path).is_ok()
+    chunks_inside(path).is_some()
 }
 
-/// Reads scanline `y`'s chunk at `off` into `image`.
-fn read_line(b: &[u8], off: usize, y: usize, w: usize, c: DeepCompression, image: &mut DeepImage) -> Option<()> {
+fn chunks_inside(path: &Path) -> Option<()> {
+    use std::io::{Seek, SeekFrom};
+    let mut start = read_start(path).ok()?;
+    let h = start.offsets.len();
+    let first = start.head.table_at as u64 + 8 * h as u64;
+    // A chunk's fixed part: y, and the three u64 sizes.
+    const CHUNK_HEAD: u64 = 28;
+    if start.offsets.iter().any(|&o| o < first || o.checked_add(CHUNK_HEAD).is_none_or(|e| e > start.len)) {
+        return None;
+    }
+    let last = start.offsets.iter().copied().max()?;
+    let mut fixed = [0u8; CHUNK_HEAD as usize];
+    start.file.seek(SeekFrom::Start(last)).ok()?;
+    start.file.read_exact(&mut fixed).ok()?;
+    let y = i32::from_le_bytes(fixed[..4].try_into().ok()?);
+    let (table_len, data_len) = (u64_at(&fixed, 4)?, u64_at(&fixed, 12)?);
+    let end = last.checked_add(CHUNK_HEAD)?.checked_add(table_len)?.checked_add(data_len)?;
+    (usize::try_from(y).is_ok_and(|y| y < h) && end <= start.len).then_some(())
+}
+
+/// Reads scanline `y`'s chunk (of `w` pixels) at `off` into `image`: its
+/// counts, and its samples when `samples` asks for them.
+fn read_line(
+    b: &[u8],
+    off: usize,
+    (y, w): (usize, usize),
+    c: DeepCompression,
+    samples: bool,
+    image: &mut DeepImage,
+) -> Option<()> {
     if i32::from_le_bytes(b.get(off..off + 4)?.try_into().ok()?) != y as i32 {
         return None;
     }
     let (table_len, data_len) = (u64_at(b, off + 4)? as usize, u64_at(b, off + 12)? as usize);
     let unpacked = u64_at(b, off + 20)? as usize;
     let table_raw = b.get(off + 28..(off + 28).checked_add(table_len)?)?;
-    let data_raw = b.get(off + 28 + table_len..(off + 28 + table_len).checked_add(data_len)?)?;
+    // No more than compression can expand these packed bytes to, before anything is allocated.
+    let most = |packed: usize| (packed.max(1) as u64).saturating_mul(crate::exr_guard::MAX_EXR_EXPANSION);
+    if (w as u64).saturating_mul(4) > most(table_len) || unpacked as u64 > most(data_len) {
+        return None;
+    }
     let unpack = |raw: &[u8], size: usize| -> Option<Vec<u8>> {
         match c {
             _ if raw.len() == size => Some(raw.to_vec()),
@@ -469,6 +603,11 @@ fn read_line(b: &[u8], off: usize, y: usize, w: usize, c: DeepCompression, image
     if unpacked != n.checked_mul(bytes_per_sample)? {
         return None;
     }
+    if !samples {
+        image.counts.extend(counts);
+        return Some(());
+    }
+    let data_raw = b.get(off + 28 + table_len..(off + 28 + table_len).checked_add(data_len)?)?;
     let data = unpack(data_raw, unpacked)?;
     let mut samples = vec![DeepSample::default(); n];
     let mut at = 0;
