@@ -141,7 +141,8 @@ pub fn open(shot: &Shot) -> Result<CacheReader> {
 pub(crate) fn open_for_rigs(shot: &Shot) -> Result<(CacheReader, SkelFiles)> {
     let path = &shot.cache.path;
     let mut usd = SkelFiles::default();
-    if Format::of(path)? != Format::Usd || !shot.rigs.values().any(|r| same_file(&r.file, path)) {
+    // Anything else (and a path that is no file) opens, and errs, as `open` does.
+    if Format::of(path).ok() != Some(Format::Usd) || !shot.rigs.values().any(|r| same_file(&r.file, path)) {
         return Ok((open(shot)?, usd));
     }
     let (cache, file) = CacheReader::open_usd_skel(path, &shot_import(shot)?)?;
