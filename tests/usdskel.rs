@@ -431,3 +431,55 @@ fn golaems_entity_id_is_an_agents_id_after_throngs_own() {
     assert!(ids.contains(&7) && !ids.contains(&43), "agent_1's primvars:throng:agentId wins: {ids:?}");
     assert!(ids.contains(&hashed), "agent_0's entityId -1 is no id: its path's hash stays: {ids:?}");
 }
+
+#[test]
+fn face_varying_uvs_and_a_diffuse_texture_reach_the_skinned_meshes() {
+    let dir = common::tempdir().unwrap();
+    let (shot, _) = edited_shot(dir.path(), "skel_textured.usda", str::to_string);
+    // The texture sits beside the crowd, as its `inputs:file` says (make_skel_crowds.py).
+    std::fs::copy(fixture("usd/skel_texture.png"), dir.path().join("skel_texture.png")).unwrap();
+    let crowd = throng::casting::ShotCrowd::load(&shot).unwrap();
+    let lib = crowd.library();
+    // 2 x 1 texels, red then blue (linear).
+    let texture = lib.textures.iter().position(|t| (t.width, t.height) == (2, 1)).expect("the texture is loaded");
+    let t = &lib.textures[texture].texels;
+    assert!(t[0][0] > 0.99 && t[0][2] < 0.01 && t[1][2] > 0.99 && t[1][0] < 0.01, "{t:?}");
+    let textured: Vec<&throng::scene::Material> =
+        lib.materials.iter().filter(|m| m.base_color_texture == Some(texture as u32)).collect();
+    // One character, wearing its first agent's material (docs/usd.md).
+    assert_eq!(textured.len(), 1, "the character's Skin material reads it");
+    assert!(textured[0].name.ends_with("#/Crowd/agent_0/Looks/Skin"), "{}", textured[0].name);
+    assert!(textured.iter().all(|m| m.base_color == glam::Vec3::ONE), "a connected diffuseColor is the texture's");
+    // Ring heights 0, 0.5, 1, 1.5, 1.8 of 1.8 m, v pointing down.
+    let rings = [0.0f32, 0.5, 1.0, 1.5, 1.8].map(|y| 1.0 - y / 1.8);
+    let bodies: Vec<&throng::scene::Mesh> = lib.meshes.iter().filter(|m| m.name.contains("/Body")).collect();
+    assert!(!bodies.is_empty());
+    for m in bodies {
+        assert_eq!(m.uvs.len(), m.positions.len(), "{}", m.name);
+        // 20 points; faces alternate u, so points where they meet are split.
+        assert!(m.positions.len() > 20, "{}: {} vertices", m.name, m.positions.len());
+        for tri in m.indices.chunks(3) {
+            let u: Vec<f32> = tri.iter().map(|&i| m.uvs[i as usize].x).collect();
+            assert!(
+                u.iter().all(|&x| x == u[0]) && (u[0] == 0.25 || u[0] == 0.75),
+                "{}: a face's corners: {u:?}",
+                m.name
+            );
+        }
+        for uv in &m.uvs {
+            assert!(rings.iter().any(|v| (uv.y - v).abs() < 1e-5), "{}: v {} is no ring's", m.name, uv.y);
+        }
+    }
+    // Rendered, the agents' albedo is the texture's: red faces and blue faces.
+    let out = dir.path().join("r");
+    let args = ["render", shot.to_str().unwrap(), "--layer", "full", "--frames", "1001", "--spp", "1"];
+    let (code, _, err) = run(&[&args[..], &["--resolution", "96x54", "--out", out.to_str().unwrap()][..]].concat());
+    assert_eq!(code, 0, "render of the textured crowd failed: {err}");
+    let (film, _) = throng::render::exr::read_layer(&out.join("full/skel.full.1001.exr")).unwrap();
+    let agent = |i: usize| film.agent_id[i] > 0;
+    let red =
+        (0..film.albedo.len()).filter(|&i| agent(i) && film.albedo[i][0] > 0.9 && film.albedo[i][2] < 0.1).count();
+    let blue =
+        (0..film.albedo.len()).filter(|&i| agent(i) && film.albedo[i][2] > 0.9 && film.albedo[i][0] < 0.1).count();
+    assert!(red > 0 && blue > 0, "red {red} and blue {blue} agent pixels");
+}

@@ -129,9 +129,9 @@ pub struct SkinnedRig {
     /// The warnings about one clip (its pose error), as (index into
     /// `warnings`, clip): printed only for a clip the shot's cycles play.
     clip_warnings: Vec<(usize, usize)>,
-    /// A UsdSkel character's materials, by a piece's `material` (a glTF
-    /// rig's come from its file: empty).
-    materials: Vec<crate::scene::Material>,
+    /// A UsdSkel character's materials, by a piece's `material`, each with
+    /// its base colour texture's file (a glTF rig's come from its file: empty).
+    materials: Vec<(crate::scene::Material, Option<PathBuf>)>,
     /// A UsdSkel character: its clips are baked frames, each a pose step.
     baked: bool,
 }
@@ -770,9 +770,9 @@ impl SkinnedRig {
         nodes.dedup();
         nodes.iter().filter_map(|&n| self.animated.hierarchy.nodes.get(n)).map(|n| n.name.as_str()).collect()
     }
-    /// A UsdSkel character's material `i` (`None` for a glTF rig, whose
-    /// pieces' materials are its file's).
-    pub(crate) fn usd_material(&self, i: Option<usize>) -> Option<&crate::scene::Material> {
+    /// A UsdSkel character's material `i` and its base colour texture's
+    /// file (`None` for a glTF rig, whose pieces' materials are its file's).
+    pub(crate) fn usd_material(&self, i: Option<usize>) -> Option<&(crate::scene::Material, Option<PathBuf>)> {
         self.materials.get(i?)
     }
     /// Slot names casting fills (one skinned mesh each).

@@ -38,8 +38,8 @@ pub(crate) struct UsdCharacter {
     pub(crate) own: PartTable,
     /// (slot, mesh prim, part) of each mesh, what an agent wears.
     pub(crate) delivered: Delivered,
-    /// Materials, by a piece's `material`.
-    pub(crate) materials: Vec<Material>,
+    /// Materials, by a piece's `material`, each with its base colour texture's file.
+    pub(crate) materials: Vec<(Material, Option<PathBuf>)>,
     /// What reading noticed but accepted.
     pub(crate) warnings: Vec<String>,
     /// The uniform scale of the agents' world transforms (the joints are scaled by it).
@@ -110,13 +110,17 @@ pub(crate) fn character(file: &SkelFile, path: &Path, root: Option<&str>, fps: f
     let (own, delivered, cut) = pieces(path, c)?;
     let warnings = c.warnings.iter().cloned().chain(cut).collect();
     let materials = (c.materials.iter())
-        .map(|m| Material {
-            name: format!("{}#{}", path.display(), m.prim),
-            base_color: m.diffuse,
-            roughness: m.roughness.clamp(0.0, 1.0),
-            metallic: m.metallic.clamp(0.0, 1.0),
-            alpha: m.opacity.clamp(0.0, 1.0),
-            ..Material::default()
+        .map(|m| {
+            let material = Material {
+                name: format!("{}#{}", path.display(), m.prim),
+                // A connected diffuseColor ignores its own value: the texture is the colour.
+                base_color: if m.diffuse_texture.is_some() { glam::Vec3::ONE } else { m.diffuse },
+                roughness: m.roughness.clamp(0.0, 1.0),
+                metallic: m.metallic.clamp(0.0, 1.0),
+                alpha: m.opacity.clamp(0.0, 1.0),
+                ..Material::default()
+            };
+            (material, m.diffuse_texture.clone())
         })
         .collect();
     Ok(UsdCharacter { animated, own, delivered, materials, warnings, scale: c.scale })
@@ -197,7 +201,7 @@ fn pieces(path: &Path, c: &SkelCharacter) -> Result<(PartTable, Delivered, Vec<S
             name: format!("{}#{}", path.display(), m.prim),
             positions: m.points.clone(),
             normals: Vec::new(),
-            uvs: Vec::new(),
+            uvs: m.uvs.clone(),
             tangents: Vec::new(),
             indices: m.triangles.clone(),
         };
