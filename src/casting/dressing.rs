@@ -227,7 +227,7 @@ fn piece_materials(
                     None => {
                         let mut m = m.clone();
                         if let Some(t) = texture {
-                            m.base_color_texture = Some(assets.texture_png(t).map_err(|e| e.field(m.name.clone()))?);
+                            m.base_color_texture = Some(assets.texture_png(t)?);
                         }
                         *made.entry(m.name.clone()).or_insert(assets.add_material(m))
                     }
