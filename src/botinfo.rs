@@ -74,8 +74,12 @@ pub(crate) struct UsdSkelRow {
     pub(crate) time_code: i32,
 }
 
-/// Each UsdSkel agent's prims by id, when the shot's cache is a UsdSkel crowd.
+/// Each UsdSkel agent's prims by id, when the shot's cache is a UsdSkel
+/// crowd: the agents the shot read with it, else read from the file.
 fn usd_prims(crowd: &ShotCrowd) -> Result<std::collections::HashMap<u32, crate::cache::usdskel::SkelAgent>> {
+    if let Some(agents) = crowd.usd_agents() {
+        return Ok(agents.iter().map(|a| (a.id, a.clone())).collect());
+    }
     let path = &crowd.shot().cache.path;
     if crate::cache::Format::of(path).ok() != Some(crate::cache::Format::Usd)
         || !crate::cache::usdskel::has_skel_roots(path)?

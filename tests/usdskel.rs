@@ -142,11 +142,89 @@ fn the_crowd_renders_with_its_own_character_and_botinfo() {
         let moving = (film.agent_id.iter().zip(&film.motion)).filter(|(&i, m)| i > 0 && (m[0] != 0.0 || m[1] != 0.0));
         assert!(moving.count() > 0, "frame {f}: the agents' pixels carry motion");
     }
-    let (code, stdout, err) = run(&["botinfo", shot.to_str().unwrap(), "7", "--frame", "1008", "--json"]);
+    // The Cryptomatte manifest names every agent (`agent_<id>`, docs/render.md).
+    let mattes = throng::render::exr::mattes::read(&out.join("full/skel.full.1008.exr")).unwrap();
+    let agents = mattes.iter().find(|m| m.name == throng::render::cryptomatte::AGENT_MATTE).expect("an agent matte");
+    for a in &crowd.frames[0].agents {
+        let name = throng::render::cryptomatte::agent_name(a.id);
+        assert!(agents.manifest.contains_key(&name), "the manifest names {name}: {:?}", agents.manifest.keys());
+    }
+    // botinfo of every agent: its id, SkelRoot, Skeleton, animation and time code.
+    let ids: Vec<String> = crowd.frames[0].agents.iter().map(|a| a.id.to_string()).collect();
+    let mut args = vec!["botinfo", shot.to_str().unwrap()];
+    args.extend(ids.iter().map(String::as_str));
+    args.extend(["--frame", "1008", "--json"]);
+    let (code, stdout, err) = run(&args);
     assert_eq!(code, 0, "{err}");
-    assert!(stdout.contains("\"prim\": \"/Crowd/agent_1\""), "botinfo names the prim: {stdout}");
-    assert!(stdout.contains("\"animation\": \"/Crowd/agent_1/Skel/Anim\""), "and the animation: {stdout}");
-    assert!(stdout.contains("\"time_code\": 1008"), "and the time code: {stdout}");
+    let json: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let rows = json.as_array().or_else(|| json["agents"].as_array()).expect("one row per agent");
+    assert_eq!(rows.len(), 3, "{stdout}");
+    for row in rows {
+        let id = row["id"].as_u64().unwrap();
+        let usd = &row["usd"];
+        let prim = usd["prim"].as_str().unwrap();
+        // make_skel_crowds.py: agent_1 carries primvars:throng:agentId 7; the others' ids hash their paths.
+        assert_eq!(id == 7, prim == "/Crowd/agent_1", "{row}");
+        assert_eq!(usd["skeleton"], format!("{prim}/Skel").as_str(), "{row}");
+        assert_eq!(usd["animation"], format!("{prim}/Skel/Anim").as_str(), "{row}");
+        assert_eq!(usd["time_code"], 1008, "{row}");
+        assert_eq!(row["shot_frame"], 1008, "{row}");
+    }
+}
+
+#[test]
+fn a_farm_plan_of_a_skel_shot_renders_its_tasks() {
+    let dir = common::tempdir().unwrap();
+    let (shot, _) = edited_shot(dir.path(), "skel_crowd.usda", str::to_string);
+    let farm = dir.path().join("farm");
+    let args = ["farm", "plan", shot.to_str().unwrap(), "--frames", "1001-1002", "--spp", "1"];
+    let more = ["--resolution", "48x27", "--out", farm.to_str().unwrap()];
+    let (code, out, err) = run(&[&args[..], &more[..]].concat());
+    assert_eq!(code, 0, "farm plan of the UsdSkel shot failed: {out}{err}");
+    let plan = farm.join("plan.json");
+    let (code, out, err) = run(&["farm", "submit", plan.to_str().unwrap(), "--engine", "local", "--workers", "1"]);
+    assert_eq!(code, 0, "the plan's tasks failed: {out}{err}");
+    let crowd = throng::cache::read(fixture("usd/skel_crowd.usda")).unwrap();
+    let mut ids: Vec<u32> = crowd.frames[0].agents.iter().map(|a| a.id).collect();
+    ids.sort_unstable();
+    let mut seen = std::collections::BTreeSet::new();
+    let mut exrs = 0;
+    for layer in std::fs::read_dir(farm.join("render")).unwrap() {
+        for file in std::fs::read_dir(layer.unwrap().path()).unwrap() {
+            let path = file.unwrap().path();
+            if path.extension().is_some_and(|e| e == "exr") && !path.to_string_lossy().contains(".comp.") {
+                let (film, _) = throng::render::exr::read_layer(&path).unwrap();
+                seen.extend(film.agent_id.iter().filter_map(|&i| i.checked_sub(1)));
+                exrs += 1;
+            }
+        }
+    }
+    assert!(exrs >= 2, "a layer file per frame at least: {exrs}");
+    assert_eq!(seen.into_iter().collect::<Vec<_>>(), ids, "the farm's layers hold every agent");
+    assert_eq!(run(&["farm", "status", plan.to_str().unwrap()]).0, 0, "every task done");
+}
+
+#[test]
+fn throngs_usd_export_of_a_skel_shot_reads_back_as_the_same_crowd() {
+    let dir = common::tempdir().unwrap();
+    let (shot, usd) = edited_shot(dir.path(), "skel_crowd.usda", str::to_string);
+    let out = dir.path().join("export.usda");
+    let args = ["export", shot.to_str().unwrap(), "--format", "usd", "--frames", "1001-1008"];
+    let (code, _, err) = run(&[&args[..], &["--out", out.to_str().unwrap()][..]].concat());
+    assert_eq!(code, 0, "export of the UsdSkel shot failed: {err}");
+    let back = throng::cache::read(&out).unwrap();
+    let crowd = throng::cache::read(&usd).unwrap();
+    assert_eq!(back.frames.len(), crowd.frames.len());
+    for (b, c) in back.frames.iter().zip(&crowd.frames) {
+        assert_eq!(b.frame, c.frame);
+        let ids = |f: &throng::cache::FrameBlock| f.agents.iter().map(|a| a.id).collect::<Vec<_>>();
+        assert_eq!(ids(b), ids(c), "frame {}: the same agents", b.frame);
+        for (x, y) in b.agents.iter().zip(&c.agents) {
+            assert!(x.position.distance(y.position) < 1e-4, "frame {} agent {}: {x:?} vs {y:?}", b.frame, x.id);
+            let turn = (x.heading - y.heading).rem_euclid(std::f32::consts::TAU);
+            assert!(turn.min(std::f32::consts::TAU - turn) < 1e-4, "frame {} agent {}: heading", b.frame, x.id);
+        }
+    }
 }
 
 #[test]
@@ -297,4 +375,111 @@ fn copies_of_one_animation_within_the_pose_grid_share_a_cycle_and_posed_meshes()
         let cast = throng::casting::ShotCrowd::load(&shot).unwrap();
         assert_eq!(cast.poses().skins().mesh_count(), cycles * 8, "{to}");
     }
+}
+
+#[test]
+fn an_ancestors_unit_scale_scales_the_agents_joints_as_usd_core_evaluates_them() {
+    // skel_scaled.usda: skel_crowd.usda's agents under a /Crowd scaled by 1.5.
+    joints_match_usd_core("skel_scaled.usda");
+}
+
+const AGENT_OPS: &str = "uniform token[] xformOpOrder = [\"xformOp:translate\", \"xformOp:rotateY\"]";
+
+#[test]
+fn a_tilted_skel_root_is_refused_naming_its_prim_and_frame() {
+    refused(
+        |t| {
+            let tilted = "float xformOp:rotateX = 10\n        uniform token[] xformOpOrder = [\"xformOp:translate\", \
+                          \"xformOp:rotateY\", \"xformOp:rotateX\"]";
+            t.replacen(AGENT_OPS, tilted, 1)
+        },
+        &["/Crowd/agent_0", "tilts the agent 10.00 degrees", "frame 1001"],
+    );
+}
+
+#[test]
+fn an_agent_scaled_apart_from_its_character_is_drawn_at_the_characters_scale_with_a_warning() {
+    let dir = common::tempdir().unwrap();
+    let (shot, _) = edited_shot(dir.path(), "skel_crowd.usda", |t| {
+        let scaled = "float3 xformOp:scale = (1.1, 1.1, 1.1)\n        uniform token[] xformOpOrder = \
+                      [\"xformOp:translate\", \"xformOp:rotateY\", \"xformOp:scale\"]";
+        // The second agent's ops (the first's scale would be the character's).
+        let at = t.find(AGENT_OPS).unwrap() + AGENT_OPS.len();
+        format!("{}{}", &t[..at], t[at..].replacen(AGENT_OPS, scaled, 1))
+    });
+    let (code, _, err) = run(&["cast", shot.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("1 agent(s) of the character of Skeleton </Crowd/agent_0/Skel> are scaled 1.1000"), "{err}");
+}
+
+#[test]
+fn golaems_entity_id_is_an_agents_id_after_throngs_own() {
+    let dir = common::tempdir().unwrap();
+    // Golaem's USD Skeleton bake writes `int64 entityId` on each entity's prim (docs/usd.md).
+    let (_, usd) = edited_shot(dir.path(), "skel_crowd.usda", |t| {
+        let with = |t: &str, agent: &str, id: i64| {
+            let at = format!("def SkelRoot \"{agent}\"\n    {{\n");
+            t.replacen(&at, &format!("{at}        int64 entityId = {id}\n"), 1)
+        };
+        with(&with(&with(t, "agent_0", -1), "agent_1", 43), "agent_2", 42)
+    });
+    let crowd = throng::cache::read(&usd).unwrap();
+    let ids: Vec<u32> = crowd.frames[0].agents.iter().map(|a| a.id).collect();
+    let plain = throng::cache::read(fixture("usd/skel_crowd.usda")).unwrap();
+    let hashed = plain.frames[0].agents.iter().find(|a| a.id != 7 && a.position.x < 2.0).unwrap().id;
+    assert!(ids.contains(&42), "agent_2's entityId: {ids:?}");
+    assert!(ids.contains(&7) && !ids.contains(&43), "agent_1's primvars:throng:agentId wins: {ids:?}");
+    assert!(ids.contains(&hashed), "agent_0's entityId -1 is no id: its path's hash stays: {ids:?}");
+}
+
+#[test]
+fn face_varying_uvs_and_a_diffuse_texture_reach_the_skinned_meshes() {
+    let dir = common::tempdir().unwrap();
+    let (shot, _) = edited_shot(dir.path(), "skel_textured.usda", str::to_string);
+    // The texture sits beside the crowd, as its `inputs:file` says (make_skel_crowds.py).
+    std::fs::copy(fixture("usd/skel_texture.png"), dir.path().join("skel_texture.png")).unwrap();
+    let crowd = throng::casting::ShotCrowd::load(&shot).unwrap();
+    let lib = crowd.library();
+    // 2 x 1 texels, red then blue (linear).
+    let texture = lib.textures.iter().position(|t| (t.width, t.height) == (2, 1)).expect("the texture is loaded");
+    let t = &lib.textures[texture].texels;
+    assert!(t[0][0] > 0.99 && t[0][2] < 0.01 && t[1][2] > 0.99 && t[1][0] < 0.01, "{t:?}");
+    let textured: Vec<&throng::scene::Material> =
+        lib.materials.iter().filter(|m| m.base_color_texture == Some(texture as u32)).collect();
+    // One character, wearing its first agent's material (docs/usd.md).
+    assert_eq!(textured.len(), 1, "the character's Skin material reads it");
+    assert!(textured[0].name.ends_with("#/Crowd/agent_0/Looks/Skin"), "{}", textured[0].name);
+    assert!(textured.iter().all(|m| m.base_color == glam::Vec3::ONE), "a connected diffuseColor is the texture's");
+    // Ring heights 0, 0.5, 1, 1.5, 1.8 of 1.8 m, v pointing down.
+    let rings = [0.0f32, 0.5, 1.0, 1.5, 1.8].map(|y| 1.0 - y / 1.8);
+    let bodies: Vec<&throng::scene::Mesh> = lib.meshes.iter().filter(|m| m.name.contains("/Body")).collect();
+    assert!(!bodies.is_empty());
+    for m in bodies {
+        assert_eq!(m.uvs.len(), m.positions.len(), "{}", m.name);
+        // 20 points; faces alternate u, so points where they meet are split.
+        assert!(m.positions.len() > 20, "{}: {} vertices", m.name, m.positions.len());
+        for tri in m.indices.chunks(3) {
+            let u: Vec<f32> = tri.iter().map(|&i| m.uvs[i as usize].x).collect();
+            assert!(
+                u.iter().all(|&x| x == u[0]) && (u[0] == 0.25 || u[0] == 0.75),
+                "{}: a face's corners: {u:?}",
+                m.name
+            );
+        }
+        for uv in &m.uvs {
+            assert!(rings.iter().any(|v| (uv.y - v).abs() < 1e-5), "{}: v {} is no ring's", m.name, uv.y);
+        }
+    }
+    // Rendered, the agents' albedo is the texture's: red faces and blue faces.
+    let out = dir.path().join("r");
+    let args = ["render", shot.to_str().unwrap(), "--layer", "full", "--frames", "1001", "--spp", "1"];
+    let (code, _, err) = run(&[&args[..], &["--resolution", "96x54", "--out", out.to_str().unwrap()][..]].concat());
+    assert_eq!(code, 0, "render of the textured crowd failed: {err}");
+    let (film, _) = throng::render::exr::read_layer(&out.join("full/skel.full.1001.exr")).unwrap();
+    let agent = |i: usize| film.agent_id[i] > 0;
+    let red =
+        (0..film.albedo.len()).filter(|&i| agent(i) && film.albedo[i][0] > 0.9 && film.albedo[i][2] < 0.1).count();
+    let blue =
+        (0..film.albedo.len()).filter(|&i| agent(i) && film.albedo[i][2] > 0.9 && film.albedo[i][0] < 0.1).count();
+    assert!(red > 0 && blue > 0, "red {red} and blue {blue} agent pixels");
 }

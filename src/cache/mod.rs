@@ -268,6 +268,19 @@ impl CacheReader {
         Ok(Self::from_crowd(path, import(path, how)?.0))
     }
 
+    /// Opens a USD cache as [`CacheReader::open_import`] does, keeping, when
+    /// it is a UsdSkel crowd, that one reading of the stage with its
+    /// characters' meshes (for the shot's rigs on the same file).
+    pub(crate) fn open_usd_skel(path: &Path, how: &Import) -> Result<(CacheReader, Option<usdskel::SkelFile>)> {
+        crate::error::check_readable_file(path)?;
+        let (mut crowd, file) = match usdskel::read_stage(path, Some(&how.jupedsim), true)? {
+            Some(usdskel::SkelRead { crowd: Some(crowd), file }) => (crowd, Some(file)),
+            _ => (usd::read(path, &how.jupedsim)?, None),
+        };
+        place(&mut crowd, &how.placement);
+        Ok((Self::from_crowd(path, crowd), file))
+    }
+
     /// Wraps an in-memory crowd (already validated) that came from `path`.
     pub fn from_crowd(path: impl Into<PathBuf>, crowd: CrowdCache) -> CacheReader {
         let frames = crowd.frames.iter().map(|b| b.frame).collect();

@@ -98,6 +98,32 @@ pub(crate) struct SkelCharacter {
     pub(crate) animations: Vec<SkelAnim>,
     /// What reading noticed but accepted (weights renormalised, influences dropped).
     pub(crate) warnings: Vec<String>,
+    /// The uniform scale of its first agent's world transform at the
+    /// crowd's first frame (an ancestor's unit scale): the rig's joints
+    /// are scaled by it ([`upright_scale`]).
+    pub(crate) scale: f32,
+}
+
+/// How far an agent's world transform may part from an upright, uniformly
+/// scaled one (each entry of its rotation-and-scale part over the scale).
+const UPRIGHT_TOLERANCE: f32 = 1e-3;
+/// Relative difference within which an agent's scale is its character's.
+const SCALE_TOLERANCE: f32 = 1e-4;
+
+/// The uniform scale of world transform `m` when it is upright (a turn
+/// about +Y, a uniform positive scale, a translation); else what it does
+/// besides, for the error: its tilt from upright and its axes' scales.
+fn upright_scale(m: &Mat4) -> std::result::Result<f32, String> {
+    let local = glam::Mat3::from_rotation_y(-heading_of(m)) * glam::Mat3::from_mat4(*m);
+    let axes = [local.x_axis, local.y_axis, local.z_axis].map(Vec3::length);
+    let s = (axes[0] + axes[1] + axes[2]) / 3.0;
+    let off = (local * (1.0 / s) - glam::Mat3::IDENTITY).to_cols_array().iter().fold(0.0f32, |a, e| a.max(e.abs()));
+    if s.is_finite() && s > 0.0 && off <= UPRIGHT_TOLERANCE {
+        return Ok(s);
+    }
+    let up = local.y_axis.normalize_or_zero();
+    let tilt = up.dot(Vec3::Y).clamp(-1.0, 1.0).acos().to_degrees();
+    Err(format!("tilts the agent {tilt:.2} degrees from upright and scales its axes by {axes:?}"))
 }
 
 /// Whether the stage holds SkelRoots (then it is read as a UsdSkel crowd).
@@ -246,18 +272,7 @@ fn agents(ctx: &Ctx) -> Result<Vec<SkelAgent>> {
             .filter(|p| ctx.sdf_path(p).is_ok_and(|q| props(&ctx.stage, &q).contains("primvars:skel:jointIndices")))
             .cloned()
             .collect();
-        let id = match ctx.value(root, "primvars:throng:agentId", 0.0)? {
-            None => None,
-            Some(Value::Int(i)) if i >= 0 => Some(i as u32),
-            Some(Value::Int64(i)) if (0..i64::from(u32::MAX)).contains(&i) => Some(i as u32),
-            Some(Value::Uint(i)) if i < u32::MAX => Some(i),
-            Some(_) => {
-                return Err(ctx.err(
-                    &format!("{root}.primvars:throng:agentId"),
-                    format!("<{root}> primvars:throng:agentId is not an id (0 to {})", u32::MAX - 1),
-                ))
-            }
-        };
+        let id = explicit_id(ctx, root)?;
         explicit.push(id);
         let key = character_key(ctx, root, &skeleton, &meshes)?;
         let next = characters.len();
@@ -301,16 +316,43 @@ pub(crate) fn character_rig(rig: &str, k: usize, count: usize) -> String {
     }
 }
 
+/// The attributes an agent's id is read from, in order (docs/usd.md,
+/// "UsdSkel crowds"): throng's own, then Golaem's USD Skeleton bake's
+/// `entityId` on each entity's prim (int64, -1 for none).
+const ID_ATTRIBUTES: [&str; 2] = ["primvars:throng:agentId", "entityId"];
+
+/// SkelRoot `root`'s id from the first of [`ID_ATTRIBUTES`] it carries
+/// (with that attribute), `None` when it carries none.
+fn explicit_id(ctx: &Ctx, root: &str) -> Result<Option<(u32, &'static str)>> {
+    for attr in ID_ATTRIBUTES {
+        let id = match ctx.value(root, attr, 0.0)? {
+            None => continue,
+            // Golaem writes -1 for an entity without an id.
+            Some(Value::Int64(-1)) if attr == "entityId" => continue,
+            Some(Value::Int(i)) if i >= 0 => i as u32,
+            Some(Value::Int64(i)) if (0..i64::from(u32::MAX)).contains(&i) => i as u32,
+            Some(Value::Uint(i)) if i < u32::MAX => i,
+            Some(_) => {
+                return Err(
+                    ctx.err(&format!("{root}.{attr}"), format!("<{root}> {attr} is not an id (0 to {})", u32::MAX - 1))
+                )
+            }
+        };
+        return Ok(Some((id, attr)));
+    }
+    Ok(None)
+}
+
 /// Ids: the explicit ones, then a hash of each other prim path (31 bits),
 /// stepping to the next free id on a clash, in prim path order.
-fn assign_ids(ctx: &Ctx, agents: &mut [SkelAgent], explicit: &[Option<u32>]) -> Result<()> {
+fn assign_ids(ctx: &Ctx, agents: &mut [SkelAgent], explicit: &[Option<(u32, &str)>]) -> Result<()> {
     let mut taken: BTreeMap<u32, String> = BTreeMap::new();
     for (a, id) in agents.iter_mut().zip(explicit) {
-        let Some(id) = *id else { continue };
+        let Some((id, attr)) = *id else { continue };
         if let Some(other) = taken.insert(id, a.prim.clone()) {
             return Err(ctx.err(
-                &format!("{}.primvars:throng:agentId", a.prim),
-                format!("<{}> and <{other}> both carry primvars:throng:agentId {id}", a.prim),
+                &format!("{}.{attr}", a.prim),
+                format!("<{}> and <{other}> both carry the agent id {id} (<{}.{attr}>)", a.prim, a.prim),
             ));
         }
         a.id = id;
@@ -352,10 +394,37 @@ fn frames<'a>(ctx: &Ctx, agents: impl IntoIterator<Item = &'a SkelAgent>) -> Res
     Ok(if lo.is_finite() { (lo.ceil() as i64, hi.floor() as i64) } else { (0, 0) })
 }
 
+/// A UsdSkel file read once (docs/usd.md, "Reading cost"): its agents and
+/// characters, which the cache and the shot's rigs on the file both take,
+/// so a shot never opens nor decodes the stage twice.
+#[derive(Clone, Debug)]
+pub(crate) struct SkelFile {
+    /// Every agent, in prim path order.
+    pub(crate) agents: Vec<SkelAgent>,
+    /// Each character (indexed by [`SkelAgent::character`]): skeleton and
+    /// distinct animations; its meshes and materials when read for a rig.
+    pub(crate) characters: Vec<SkelCharacter>,
+}
+
+/// What one reading gives: the crowd when asked for, and the file.
+pub(crate) struct SkelRead {
+    /// The agents at every frame (when read with import options).
+    pub(crate) crowd: Option<CrowdCache>,
+    /// Agents and characters.
+    pub(crate) file: SkelFile,
+}
+
 /// Reads a UsdSkel crowd into a [`CrowdCache`]: each SkelRoot at each frame,
 /// placed and headed by its world transform, playing its animation. `None`
 /// when the stage holds no SkelRoot (it is read as another USD crowd).
 pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<Option<CrowdCache>> {
+    Ok(read_stage(path, Some(opts), false)?.and_then(|r| r.crowd))
+}
+
+/// Reads the stage at `path` once: its agents and characters (with their
+/// skinned meshes when `meshes`) and, with `opts`, the crowd. `None` when
+/// it holds no SkelRoot.
+pub(crate) fn read_stage(path: &Path, opts: Option<&ImportOptions>, meshes: bool) -> Result<Option<SkelRead>> {
     let ctx = usd::open(path)?;
     let agents = agents(&ctx)?;
     if agents.is_empty() {
@@ -374,58 +443,144 @@ pub(crate) fn read(path: &Path, opts: &ImportOptions) -> Result<Option<CrowdCach
         ));
     }
     // Each character's skeleton, from its first agent (characters are numbered in agent order).
-    let mut skeletons = Vec::new();
+    let mut characters = Vec::new();
     for a in &agents {
-        if a.character == skeletons.len() {
-            skeletons.push(skeleton(&ctx, a, frames.0 as f64)?);
+        if a.character == characters.len() {
+            let skeleton = skeleton(&ctx, a, frames.0 as f64)?;
+            let m = world_matrix(&ctx, &a.prim, frames.0 as f64)?;
+            let scale = upright_scale(&m).map_err(|why| refuse_tilt(&ctx, &a.prim, frames.0, &why))?;
+            characters.push(SkelCharacter {
+                skeleton,
+                meshes: Vec::new(),
+                materials: Vec::new(),
+                animations: Vec::new(),
+                warnings: Vec::new(),
+                scale,
+            });
         }
     }
-    let count = skeletons.len();
+    // Per character: agents whose own scale is not the character's, and the range of their scales.
+    let mut rescaled: Vec<(usize, f32, f32)> = vec![(0, f32::INFINITY, f32::NEG_INFINITY); characters.len()];
+    let count = characters.len();
     // Cycle names by content within a character (another character's clip is another rig's).
     let mut cycles: Vec<CycleNames> = (0..count).map(|_| CycleNames::default()).collect();
     // Agents bound to one SkelAnimation prim share its reading: (cycle, first time).
     let mut played: HashMap<(usize, &str), (String, f64)> = HashMap::new();
-    let mut gather = Gather::new(path, frames);
+    let mut gather = opts.map(|_| Gather::new(path, frames));
     for a in &agents {
-        let world = WorldTrack::read(&ctx, &a.prim)?;
-        for track in world.tracks() {
+        // The agent's place first: its samples' coverage is checked before its animation's.
+        let world = match gather {
+            Some(_) => Some(WorldTrack::read(&ctx, &a.prim)?),
+            None => None,
+        };
+        for track in world.iter().flat_map(WorldTrack::tracks) {
             track.covers(&ctx, frames)?;
         }
         let (cycle, start) = match &a.animation {
             Some(anim) => match played.get(&(a.character, anim.as_str())) {
                 Some(known) => known.clone(),
                 None => {
-                    let read = animation(&ctx, anim, &skeletons[a.character], frames)?;
-                    let known =
-                        (cycles[a.character].name_of(&read), read.times.first().copied().unwrap_or(frames.0 as f64));
+                    let read = animation(&ctx, anim, &characters[a.character].skeleton, frames)?;
+                    let name = cycles[a.character].name_of(&read);
+                    let known = (name.clone(), read.times.first().copied().unwrap_or(frames.0 as f64));
+                    if name == read.name {
+                        characters[a.character].animations.push(read);
+                    }
                     played.insert((a.character, anim), known.clone());
                     known
                 }
             },
             None => (REST_CYCLE.to_string(), frames.0 as f64),
         };
-        let rig = match ctx.value(&a.prim, "primvars:throng:rig", 0.0)? {
-            Some(Value::String(s)) => s,
-            Some(Value::Token(t)) => t.as_str().to_string(),
-            _ => character_rig(&opts.rig, a.character, count),
-        };
-        for f in frames.0..=frames.1 {
-            let m = world.at(&ctx, f as f64)?;
-            let too_many = || ctx.err(&a.prim, "more than 65536 rig or cycle names").frame(f);
-            let sample = super::AgentSample {
-                id: a.id,
-                position: m.w_axis.truncate(),
-                heading: heading_of(&m),
-                rig: gather.names.rig(&rig).ok_or_else(too_many)?,
-                cycle: gather.names.cycle(&cycle).ok_or_else(too_many)?,
-                // The clip holds its first pose a frame early (casting::usdskel_rig).
-                cycle_frame: (f as f64 - start) as f32 + 1.0,
-                flags: 0,
+        if let (Some(gather), Some(world), Some(opts)) = (&mut gather, &world, opts) {
+            let rig = match ctx.value(&a.prim, "primvars:throng:rig", 0.0)? {
+                Some(Value::String(s)) => s,
+                Some(Value::Token(t)) => t.as_str().to_string(),
+                _ => character_rig(&opts.rig, a.character, count),
             };
-            gather.push(&a.prim, f as i32, sample)?;
+            let scale = characters[a.character].scale;
+            let (lo, hi) = push_agent(&ctx, a, world, (&rig, &cycle, start), frames, gather)?;
+            if (lo / scale - 1.0).abs() > SCALE_TOLERANCE || (hi / scale - 1.0).abs() > SCALE_TOLERANCE {
+                let r = &mut rescaled[a.character];
+                *r = (r.0 + 1, r.1.min(lo), r.2.max(hi));
+            }
         }
     }
-    gather.finish().map(Some)
+    for ((n, lo, hi), c) in rescaled.into_iter().zip(&mut characters).filter(|(r, _)| r.0 > 0) {
+        c.warnings.push(format!(
+            "{}: {n} agent(s) of the character of Skeleton <{}> are scaled {lo:.4} to {hi:.4} by their world \
+             transforms, not {:.4} as its first agent is: they are drawn at {:.4} (throng scales a UsdSkel \
+             character's agents alike)",
+            path.display(),
+            c.skeleton.prim,
+            c.scale,
+            c.scale
+        ));
+    }
+    if meshes {
+        for (k, c) in characters.iter_mut().enumerate() {
+            let first = agents.iter().find(|a| a.character == k).expect("every character has a first agent");
+            read_meshes(&ctx, first, c)?;
+        }
+    }
+    let crowd = gather.map(Gather::finish).transpose()?;
+    Ok(Some(SkelRead { crowd, file: SkelFile { agents, characters } }))
+}
+
+/// The error for SkelRoot `prim`, whose world transform at frame `f` is not upright (`why`).
+fn refuse_tilt(ctx: &Ctx, prim: &str, f: i64, why: &str) -> Error {
+    ctx.err(
+        prim,
+        format!(
+            "SkelRoot <{prim}>'s world transform at frame {f} {why}: throng stands agents upright, turned \
+             about +Y and scaled alike (bake the tilt into the skeleton's animation, or keep the scale uniform)"
+        ),
+    )
+    .frame(f)
+}
+
+/// Agent `a` at every frame of `frames`, playing `cycle` of `rig` from time
+/// `start`; the least and greatest scale of its world transform.
+fn push_agent(
+    ctx: &Ctx,
+    a: &SkelAgent,
+    world: &WorldTrack,
+    (rig, cycle, start): (&str, &str, f64),
+    frames: (i64, i64),
+    gather: &mut Gather,
+) -> Result<(f32, f32)> {
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for f in frames.0..=frames.1 {
+        let m = world.at(ctx, f as f64)?;
+        let s = upright_scale(&m).map_err(|why| refuse_tilt(ctx, &a.prim, f, &why))?;
+        (lo, hi) = (lo.min(s), hi.max(s));
+        let too_many = || ctx.err(&a.prim, "more than 65536 rig or cycle names").frame(f);
+        let sample = super::AgentSample {
+            id: a.id,
+            position: m.w_axis.truncate(),
+            heading: heading_of(&m),
+            rig: gather.names.rig(rig).ok_or_else(too_many)?,
+            cycle: gather.names.cycle(cycle).ok_or_else(too_many)?,
+            // The clip holds its first pose a frame early (casting::usdskel_rig).
+            cycle_frame: (f as f64 - start) as f32 + 1.0,
+            flags: 0,
+        };
+        gather.push(&a.prim, f as i32, sample)?;
+    }
+    Ok((lo, hi))
+}
+
+/// Character `c`'s skinned meshes and materials, those of its agent `first`.
+fn read_meshes(ctx: &Ctx, first: &SkelAgent, c: &mut SkelCharacter) -> Result<()> {
+    for m in &first.meshes {
+        let skel = (c.skeleton.prim.as_str(), c.skeleton.joints.as_slice());
+        let mesh = super::usdskel_mesh::read(ctx, m, skel, &mut c.materials, &mut c.warnings)?;
+        c.meshes.push(mesh);
+    }
+    if c.meshes.is_empty() {
+        return Err(ctx.err(&first.prim, format!("SkelRoot <{}> holds no skinned Mesh", first.prim)));
+    }
+    Ok(())
 }
 
 /// Cycle names by animation content: the first prim with those samples.
@@ -623,31 +778,37 @@ fn half3s_of(v: &Value) -> Option<Vec<Vec3>> {
     }
 }
 
-/// A character of the crowd at `path`: the one of SkelRoot `root` (any of
-/// its agents), else the first agent's: its skeleton and skinned meshes
-/// (the first such agent's), and every distinct animation its agents play
-/// over the crowd's frames.
-pub(crate) fn character(path: &Path, root: Option<&str>) -> Result<SkelCharacter> {
-    let ctx = usd::open(path)?;
-    let agents = agents(&ctx)?;
-    let first = match root {
-        None => agents.first(),
-        Some(r) => agents
-            .iter()
-            .find(|a| a.prim == r)
-            .or_else(|| agents.iter().find(|a| a.prim.starts_with(&format!("{}/", r.trim_end_matches('/'))))),
-    };
-    let Some(first) = first else {
-        if agents.is_empty() {
-            return Err(Error::invalid(path, "no SkelRoot in this USD file: it holds no UsdSkel character"));
+impl SkelFile {
+    /// Reads the agents and characters (meshes included) of the UsdSkel
+    /// crowd at `path`, as a rig on the file needs them.
+    pub(crate) fn read(path: &Path) -> Result<SkelFile> {
+        match read_stage(path, None, true)? {
+            Some(r) => Ok(r.file),
+            None => Err(Error::invalid(path, "no SkelRoot in this USD file: it holds no UsdSkel character")),
+        }
+    }
+
+    /// The character of SkelRoot `root` (any of its agents, or a prim
+    /// above one: the first agent under it), else the first agent's.
+    pub(crate) fn character(&self, path: &Path, root: Option<&str>) -> Result<&SkelCharacter> {
+        let agents = &self.agents;
+        let found = match root {
+            None => agents.first(),
+            Some(r) => agents
+                .iter()
+                .find(|a| a.prim == r)
+                .or_else(|| agents.iter().find(|a| a.prim.starts_with(&format!("{}/", r.trim_end_matches('/'))))),
+        };
+        if let Some(c) = found.and_then(|a| self.characters.get(a.character)) {
+            return Ok(c);
         }
         let mut firsts: Vec<&str> = Vec::new();
-        for a in &agents {
+        for a in agents {
             if a.character == firsts.len() {
                 firsts.push(&a.prim);
             }
         }
-        return Err(Error::invalid(
+        Err(Error::invalid(
             path,
             format!(
                 "root <{}> is no SkelRoot of this crowd (nor a prim above one); its characters' first SkelRoots: {}",
@@ -655,36 +816,6 @@ pub(crate) fn character(path: &Path, root: Option<&str>) -> Result<SkelCharacter
                 firsts.join(", ")
             ),
         )
-        .field("root"));
-    };
-    // The crowd's frames are every agent's, as the cache reads them.
-    let frames = frames(&ctx, &agents)?;
-    let agents: Vec<&SkelAgent> = agents.iter().filter(|a| a.character == first.character).collect();
-    let skeleton = skeleton(&ctx, first, frames.0 as f64)?;
-    let mut warnings = Vec::new();
-    let mut materials = Vec::new();
-    let mut meshes = Vec::new();
-    for m in &first.meshes {
-        meshes.push(super::usdskel_mesh::read(
-            &ctx,
-            m,
-            (&skeleton.prim, &skeleton.joints),
-            &mut materials,
-            &mut warnings,
-        )?);
+        .field("root"))
     }
-    if meshes.is_empty() {
-        return Err(ctx.err(&first.prim, format!("SkelRoot <{}> holds no skinned Mesh", first.prim)));
-    }
-    let mut animations = Vec::new();
-    let mut seen = CycleNames::default();
-    let mut read_anims = BTreeSet::new();
-    for a in agents {
-        let Some(anim) = a.animation.as_ref().filter(|p| read_anims.insert(p.to_string())) else { continue };
-        let read = animation(&ctx, anim, &skeleton, frames)?;
-        if seen.name_of(&read) == read.name {
-            animations.push(read);
-        }
-    }
-    Ok(SkelCharacter { skeleton, meshes, materials, animations, warnings })
 }

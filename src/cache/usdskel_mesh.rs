@@ -2,10 +2,15 @@
 //! with `primvars:skel:geomBindTransform` applied, polygons fanned into
 //! triangles, `primvars:skel:jointIndices`/`jointWeights` (`elementSize`
 //! influences a point, or one set for all with `constant` interpolation,
-//! through the mesh's own `skel:joints` order when it has one), and its bound
-//! UsdPreviewSurface's constant inputs.
+//! through the mesh's own `skel:joints` order when it has one), its
+//! `primvars:st` (vertex or faceVarying, indexed or not: a point whose
+//! corners differ in UV is split, its influences copied), and its bound
+//! UsdPreviewSurface's constant inputs and `diffuseColor` texture.
 
-use glam::{Mat4, Vec3};
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use glam::{Mat4, Vec2, Vec3};
 use openusd::sdf::Value;
 
 use super::usd::{f32_of, vec3_of, vec3s_of, Ctx};
@@ -28,6 +33,9 @@ pub(crate) struct SkelMesh {
     pub(crate) triangles: Vec<u32>,
     /// Per point: (skeleton joint, weight) pairs, `elementSize` of them, normalised.
     pub(crate) influences: Vec<Vec<(u16, f32)>>,
+    /// Per point, its texture coordinate (v down, as throng's meshes hold
+    /// them); empty without `primvars:st`.
+    pub(crate) uvs: Vec<Vec2>,
     /// Index into the character's materials.
     pub(crate) material: Option<usize>,
 }
@@ -45,6 +53,9 @@ pub(crate) struct SkelMaterial {
     pub(crate) metallic: f32,
     /// `opacity`.
     pub(crate) opacity: f32,
+    /// The image a UsdUVTexture connected to `diffuseColor` reads (its
+    /// `inputs:file`, relative to the USD file's folder).
+    pub(crate) diffuse_texture: Option<PathBuf>,
 }
 
 /// Weight sums further than this from 1 are renormalised with a warning.
@@ -96,18 +107,102 @@ pub(super) fn read(
     if let Some(v) = points.iter().position(|p| !p.is_finite()) {
         return Err(ctx.err(&at("points"), format!("Mesh <{prim}>: point {v} is not finite")));
     }
-    let triangles = triangles(ctx, prim, points.len())?;
+    let (corners, corner_points) = triangles(ctx, prim, points.len())?;
     let influences = influences(ctx, prim, skel, points.len(), warnings)?;
     let material = match bound_material(ctx, prim)? {
         Some(m) => Some(material(ctx, &m, materials)?),
         None => None,
     };
-    Ok(SkelMesh { prim: prim.to_string(), points, triangles, influences, material })
+    let mut mesh =
+        SkelMesh { prim: prim.to_string(), points, triangles: Vec::new(), influences, uvs: Vec::new(), material };
+    match st(ctx, prim, mesh.points.len(), corner_points.len())? {
+        St::PerCorner(uvs) => mesh.split_corners(&corners, &corner_points, &uvs),
+        St::PerPoint(uvs) => {
+            mesh.triangles = corners.iter().map(|&c| corner_points[c as usize]).collect();
+            mesh.uvs = uvs;
+        }
+        St::None => mesh.triangles = corners.iter().map(|&c| corner_points[c as usize]).collect(),
+    }
+    Ok(mesh)
+}
+
+/// A mesh's texture coordinates as authored.
+enum St {
+    None,
+    /// One a point (`vertex` or `varying`).
+    PerPoint(Vec<Vec2>),
+    /// One a face corner (`faceVarying`).
+    PerCorner(Vec<Vec2>),
+}
+
+/// `primvars:st` (through `primvars:st:indices` when given), v flipped to
+/// point down; `None` when not authored or neither per point nor per corner.
+fn st(ctx: &Ctx, prim: &str, points: usize, corners: usize) -> Result<St> {
+    let attr = "primvars:st";
+    let at = format!("{prim}.{attr}");
+    let values: Vec<Vec2> = match ctx.value(prim, attr, 0.0)? {
+        None => return Ok(St::None),
+        Some(Value::Vec2fVec(v)) => v.iter().map(|p| Vec2::new(p.x, p.y)).collect(),
+        Some(Value::Vec2dVec(v)) => v.iter().map(|p| Vec2::new(p.x as f32, p.y as f32)).collect(),
+        Some(Value::Vec2hVec(v)) => v.iter().map(|p| Vec2::new(p.x.to_f32(), p.y.to_f32())).collect(),
+        Some(_) => return Err(ctx.err(&at, format!("<{at}> is not a texCoord2f[]"))),
+    };
+    let values = match ints(ctx, prim, "primvars:st:indices")? {
+        None => values,
+        Some(ix) => (ix.iter())
+            .map(|&i| usize::try_from(i).ok().and_then(|i| values.get(i)).copied())
+            .collect::<Option<Vec<Vec2>>>()
+            .ok_or_else(|| ctx.err(&at, format!("<{at}:indices> names a value past the {} of <{at}>", values.len())))?,
+    };
+    if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+        return Err(ctx.err(&at, format!("<{at}>: value {i} is not finite")));
+    }
+    let flipped = || values.iter().map(|v| Vec2::new(v.x, 1.0 - v.y)).collect();
+    let interpolation = match metadata::<Value>(ctx, prim, attr, "interpolation") {
+        Some(Value::Token(t)) => t.as_str().to_string(),
+        Some(Value::String(s)) => s,
+        _ => "constant".to_string(),
+    };
+    let (want, st) = match interpolation.as_str() {
+        "vertex" | "varying" => (points, St::PerPoint(flipped())),
+        "faceVarying" => (corners, St::PerCorner(flipped())),
+        // One UV for the whole mesh (or a face) textures nothing.
+        _ => return Ok(St::None),
+    };
+    if values.len() != want {
+        return Err(
+            ctx.err(&at, format!("<{at}> holds {} {interpolation} values; the mesh needs {want}", values.len()))
+        );
+    }
+    Ok(st)
+}
+
+impl SkelMesh {
+    /// Triangles over face corners (`corners`, indices into `corner_points`)
+    /// with a UV each: a point is one vertex per distinct UV of its corners
+    /// (points, influences copied), numbered in corner order.
+    fn split_corners(&mut self, corners: &[u32], corner_points: &[u32], uvs: &[Vec2]) {
+        let mut made: HashMap<(u32, [u32; 2]), u32> = HashMap::new();
+        let (mut points, mut influences, mut out_uvs) = (Vec::new(), Vec::new(), Vec::new());
+        let mut triangles = Vec::with_capacity(corners.len());
+        for &c in corners {
+            let (p, uv) = (corner_points[c as usize], uvs[c as usize]);
+            let v = *made.entry((p, [uv.x.to_bits(), uv.y.to_bits()])).or_insert_with(|| {
+                points.push(self.points[p as usize]);
+                influences.push(self.influences[p as usize].clone());
+                out_uvs.push(uv);
+                (points.len() - 1) as u32
+            });
+            triangles.push(v);
+        }
+        (self.points, self.influences, self.uvs, self.triangles) = (points, influences, out_uvs, triangles);
+    }
 }
 
 /// `faceVertexCounts`/`faceVertexIndices` fanned into triangles (reversed
-/// for `orientation = "leftHanded"`).
-fn triangles(ctx: &Ctx, prim: &str, points: usize) -> Result<Vec<u32>> {
+/// for `orientation = "leftHanded"`), as face corners (indices into
+/// `faceVertexIndices`), with the point of each corner.
+fn triangles(ctx: &Ctx, prim: &str, points: usize) -> Result<(Vec<u32>, Vec<u32>)> {
     let at = |attr: &str| format!("{prim}.{attr}");
     let counts = ints(ctx, prim, "faceVertexCounts")?.unwrap_or_default();
     let indices = ints(ctx, prim, "faceVertexIndices")?.unwrap_or_default();
@@ -122,6 +217,7 @@ fn triangles(ctx: &Ctx, prim: &str, points: usize) -> Result<Vec<u32>> {
                 format!("Mesh <{prim}>: face {face} runs past faceVertexIndices ({} entries)", indices.len()),
             ));
         };
+        let first = next as u32;
         next += c;
         if let Some(&bad) = corners.iter().find(|&&i| i < 0 || i as usize >= points) {
             return Err(ctx.err(
@@ -130,14 +226,16 @@ fn triangles(ctx: &Ctx, prim: &str, points: usize) -> Result<Vec<u32>> {
             ));
         }
         for k in 1..c.saturating_sub(1) {
-            let (a, b, d) = (corners[0] as u32, corners[k] as u32, corners[k + 1] as u32);
+            let (a, b, d) = (first, first + k as u32, first + k as u32 + 1);
             out.extend(if left { [a, d, b] } else { [a, b, d] });
         }
     }
     if out.is_empty() {
         return Err(ctx.err(&at("faceVertexCounts"), format!("Mesh <{prim}> has no polygon")));
     }
-    Ok(out)
+    // Every index was checked against the points above.
+    let corner_points = indices[..next].iter().map(|&i| i as u32).collect();
+    Ok((out, corner_points))
 }
 
 /// Per point, its (skeleton joint, weight) pairs, normalised.
@@ -245,6 +343,7 @@ fn material(ctx: &Ctx, prim: &str, materials: &mut Vec<SkelMaterial>) -> Result<
         roughness: 0.5,
         metallic: 0.0,
         opacity: 1.0,
+        diffuse_texture: None,
     };
     if let Some(shader) = preview_surface(ctx, prim)? {
         if let Some(c) = ctx.value(&shader, "inputs:diffuseColor", 0.0)?.and_then(|v| vec3_of(&v)) {
@@ -254,12 +353,34 @@ fn material(ctx: &Ctx, prim: &str, materials: &mut Vec<SkelMaterial>) -> Result<
         m.roughness = get("inputs:roughness")?.unwrap_or(m.roughness);
         m.metallic = get("inputs:metallic")?.unwrap_or(m.metallic);
         m.opacity = get("inputs:opacity")?.unwrap_or(m.opacity);
+        m.diffuse_texture = diffuse_texture(ctx, &shader)?;
     }
     if !(m.diffuse.is_finite() && m.roughness.is_finite() && m.metallic.is_finite() && m.opacity.is_finite()) {
         return Err(ctx.err(prim, format!("Material <{prim}>: a UsdPreviewSurface input is not finite")));
     }
     materials.push(m);
     Ok(materials.len() - 1)
+}
+
+/// The image file of the UsdUVTexture connected to `shader`'s
+/// `inputs:diffuseColor`, if one is: its `inputs:file`, relative to the USD
+/// file's folder (a crowd's textures sit beside it).
+fn diffuse_texture(ctx: &Ctx, shader: &str) -> Result<Option<PathBuf>> {
+    let input = ctx.sdf_path(&format!("{shader}.inputs:diffuseColor"))?;
+    let Some(source) = ctx.stage.attribute(input).connections().unwrap_or_default().into_iter().next() else {
+        return Ok(None);
+    };
+    let texture = source.as_str().split('.').next().unwrap_or_default().to_string();
+    if !matches!(ctx.value(&texture, "info:id", 0.0)?, Some(Value::Token(t)) if t.as_str() == "UsdUVTexture") {
+        return Ok(None);
+    }
+    let file = match ctx.value(&texture, "inputs:file", 0.0)? {
+        Some(Value::AssetPath(a)) => a.authored_path,
+        Some(Value::String(s)) => s,
+        _ => return Ok(None),
+    };
+    let dir = ctx.path.parent().unwrap_or(std::path::Path::new("."));
+    Ok(Some(dir.join(file)))
 }
 
 /// The Material bound to `prim` (`material:binding`, on it or an ancestor).

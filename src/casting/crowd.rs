@@ -22,12 +22,14 @@ use std::sync::Arc;
 
 use glam::{Affine3A, Quat, Vec3};
 
+use crate::cache::usdskel::SkelAgent;
 use crate::cache::{AgentSample, CacheReader, FrameBlock};
 use crate::casting::cast::{AgentCast, Casting};
 use crate::casting::dressing::{AgentDress, Dressing};
 use crate::casting::poses::{PoseLibrary, PosedSkins};
 use crate::casting::rigs::{ShotRig, ShotRigs};
 use crate::casting::timing::{cycle_name, CycleTiming};
+use crate::casting::usdskel_rig::SkelFiles;
 use crate::casting::wardrobe::Wardrobes;
 use crate::error::{Error, Result};
 use crate::scene::dome::load_dome;
@@ -130,6 +132,9 @@ pub struct ShotCrowd<C = Rec709> {
     /// Each material's emission as authored, kept once the shot's
     /// light-group gains scaled it (so another gain starts from it).
     authored_emission: Option<Vec<Vec3>>,
+    /// A UsdSkel cache's agents (prims, skeleton, animation) from the one
+    /// reading its rigs shared (`None`: not a UsdSkel cache, or not kept).
+    usd_agents: Option<Vec<SkelAgent>>,
 }
 
 /// Refuses a name in the shot's lists that names nothing (a typo would
@@ -247,16 +252,24 @@ impl ShotCrowd {
     /// Opens the shot's cache and casts it, posed for still frames and,
     /// with `shutter` (frames relative to each frame), for that shutter.
     pub fn open(shot: Shot, shutter: Option<[f32; 2]>) -> Result<ShotCrowd> {
-        let cache = crate::casting::shot_cache::open(&shot)?;
-        ShotCrowd::new(shot, cache, shutter)
+        let (cache, usd) = crate::casting::shot_cache::open_for_rigs(&shot)?;
+        ShotCrowd::new_reading(shot, cache, usd, shutter)
     }
 
     /// Casts a shot against an already opened cache (tests use this to
     /// remove or reorder agents without writing files), posed for still
     /// frames and, with `shutter`, for that shutter.
     pub fn new(shot: Shot, cache: CacheReader, shutter: Option<[f32; 2]>) -> Result<ShotCrowd> {
+        ShotCrowd::new_reading(shot, cache, SkelFiles::default(), shutter)
+    }
+
+    /// [`ShotCrowd::new`], UsdSkel rig files' readings taken from `usd`
+    /// (the cache's own, when the cache is such a file).
+    fn new_reading(shot: Shot, cache: CacheReader, mut usd: SkelFiles, shutter: Option<[f32; 2]>) -> Result<ShotCrowd> {
         let wardrobes = Wardrobes::load(&shot.wardrobes)?;
-        let rigs = ShotRigs::load(&shot, &wardrobes)?;
+        let rigs = ShotRigs::load(&shot, &wardrobes, &mut usd)?;
+        let usd_agents = usd.take(&shot.cache.path).map(|f| f.agents);
+        drop(usd);
         let cast = Casting::cast(&shot, &cache, &rigs, &wardrobes)?;
         let (casting, mut warnings) = (cast.casting, cast.warnings);
         check_shot_lists(&shot, &cache, &rigs, &wardrobes, &casting)?;
@@ -313,6 +326,7 @@ impl ShotCrowd {
             lights,
             wardrobe_files,
             authored_emission: None,
+            usd_agents,
         };
         crowd.with_gains()
     }
@@ -373,6 +387,7 @@ impl ShotCrowd {
             lights,
             wardrobe_files,
             authored_emission,
+            usd_agents,
         } = self;
         let poses = poses.convert(convert);
         ShotCrowd {
@@ -389,6 +404,7 @@ impl ShotCrowd {
             lights,
             wardrobe_files,
             authored_emission,
+            usd_agents,
         }
     }
 }
@@ -412,6 +428,12 @@ impl<C> ShotCrowd<C> {
     /// The simulation cache.
     pub fn cache(&self) -> &CacheReader {
         &self.cache
+    }
+
+    /// A UsdSkel cache's agents as the shot read them (`None`: another
+    /// cache, or a crowd cast over a cache opened elsewhere).
+    pub(crate) fn usd_agents(&self) -> Option<&[SkelAgent]> {
+        self.usd_agents.as_deref()
     }
 
     /// The shot's rigs.

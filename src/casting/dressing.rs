@@ -222,9 +222,15 @@ fn piece_materials(
             let p = worn.piece(rig_name, rig, piece);
             match rig.usd_material(p.material).filter(|_| p.file == rig.path()) {
                 // A UsdSkel character's UsdPreviewSurface, made once per material.
-                Some(m) => match made.get(&m.name) {
+                Some((m, texture)) => match made.get(&m.name) {
                     Some(&id) => id,
-                    None => *made.entry(m.name.clone()).or_insert(assets.add_material(m.clone())),
+                    None => {
+                        let mut m = m.clone();
+                        if let Some(t) = texture {
+                            m.base_color_texture = Some(assets.texture_png(t)?);
+                        }
+                        *made.entry(m.name.clone()).or_insert(assets.add_material(m))
+                    }
                 },
                 None => assets.gltf_material_at(&p.file, p.material)?,
             }

@@ -7,6 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use crate::casting::kind::is_character_rig;
 use crate::casting::rig::Rig;
 use crate::casting::skin::SkinnedRig;
+use crate::casting::usdskel_rig::SkelFiles;
 use crate::casting::wardrobe::Wardrobes;
 use crate::casting::worn::WornParts;
 use crate::error::{same_file, Error, Result};
@@ -74,12 +75,14 @@ pub struct ShotRigs {
 }
 
 impl ShotRigs {
-    /// Loads every rig of the shot and checks its schemes fill slots it has.
-    pub(crate) fn load(shot: &Shot, wardrobes: &Wardrobes) -> Result<ShotRigs> {
+    /// Loads every rig of the shot and checks its schemes fill slots it has;
+    /// a UsdSkel rig file's reading comes from `usd` (the cache's, when the
+    /// cache is that file).
+    pub(crate) fn load(shot: &Shot, wardrobes: &Wardrobes, usd: &mut SkelFiles) -> Result<ShotRigs> {
         let mut rigs = BTreeMap::new();
         for (name, r) in &shot.rigs {
             let rig = if is_character_rig(r)? {
-                let rig = SkinnedRig::load_shot_rig(name, r, shot.frames.fps)?;
+                let rig = SkinnedRig::load_shot_rig(name, r, shot.frames.fps, usd)?;
                 ShotRig::Skinned(match &r.proportions {
                     Some(p) => rig.with_bodies(name, p, shot.seed)?,
                     None => rig,

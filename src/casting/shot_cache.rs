@@ -14,7 +14,8 @@ use crate::casting::gait::{skinned_file_gait, skinned_gait};
 use crate::casting::kind::{is_character_import, is_character_rig};
 use crate::casting::rig::Rig;
 use crate::casting::skin::SkinnedRig;
-use crate::error::{Error, Result};
+use crate::casting::usdskel_rig::SkelFiles;
+use crate::error::{same_file, Error, Result};
 use crate::shot::{Shot, SkinOptions};
 
 /// A rig's gait from its glTF: the walk cycle's stride and length, and the
@@ -86,7 +87,7 @@ pub(crate) fn shot_import(shot: &Shot) -> Result<Import> {
         let mut out = BTreeMap::new();
         for (name, r) in &shot.rigs {
             if is_character_rig(r)? {
-                let rig = SkinnedRig::load_shot_rig(name, r, SHOT_FPS)?;
+                let rig = SkinnedRig::load_shot_rig(name, r, SHOT_FPS, &mut SkelFiles::default())?;
                 if let Some(g) = skinned_gait(&rig, walk, spec.idle_cycle.as_deref())? {
                     out.insert(name.clone(), g);
                 }
@@ -131,6 +132,24 @@ pub(crate) fn shot_import(shot: &Shot) -> Result<Import> {
 /// Opens the shot's cache (see [`shot_import`]).
 pub fn open(shot: &Shot) -> Result<CacheReader> {
     CacheReader::open_import(&shot.cache.path, &shot_import(shot)?)
+}
+
+/// Opens the shot's cache as [`open`] does, and when it is a UsdSkel crowd
+/// that a rig of the shot names as its file, keeps that one reading of the
+/// stage (agents, characters and their meshes) for the rigs: the file is
+/// opened and decoded once (docs/usd.md, "Reading cost").
+pub(crate) fn open_for_rigs(shot: &Shot) -> Result<(CacheReader, SkelFiles)> {
+    let path = &shot.cache.path;
+    let mut usd = SkelFiles::default();
+    // Anything else (and a path that is no file) opens, and errs, as `open` does.
+    if Format::of(path).ok() != Some(Format::Usd) || !shot.rigs.values().any(|r| same_file(&r.file, path)) {
+        return Ok((open(shot)?, usd));
+    }
+    let (cache, file) = CacheReader::open_usd_skel(path, &shot_import(shot)?)?;
+    if let Some(file) = file {
+        usd.insert(path, file)?;
+    }
+    Ok((cache, usd))
 }
 
 #[cfg(test)]

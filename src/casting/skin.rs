@@ -129,9 +129,9 @@ pub struct SkinnedRig {
     /// The warnings about one clip (its pose error), as (index into
     /// `warnings`, clip): printed only for a clip the shot's cycles play.
     clip_warnings: Vec<(usize, usize)>,
-    /// A UsdSkel character's materials, by a piece's `material` (a glTF
-    /// rig's come from its file: empty).
-    materials: Vec<crate::scene::Material>,
+    /// A UsdSkel character's materials, by a piece's `material`, each with
+    /// its base colour texture's file (a glTF rig's come from its file: empty).
+    materials: Vec<(crate::scene::Material, Option<PathBuf>)>,
     /// A UsdSkel character: its clips are baked frames, each a pose step.
     baked: bool,
 }
@@ -187,8 +187,19 @@ impl SkinnedRig {
     /// from `options.cycles` (cache name -> clip name or `#index`); every
     /// clip is also available under its own name.
     pub fn load(path: &Path, options: &SkinOptions, fps: f32) -> Result<SkinnedRig> {
+        Self::load_reading(path, options, fps, &mut usdskel_rig::SkelFiles::default())
+    }
+
+    /// [`SkinnedRig::load`], a UsdSkel file's reading taken from `usd` (or
+    /// read into it), so rigs on one file and the shot's cache share it.
+    pub(crate) fn load_reading(
+        path: &Path,
+        options: &SkinOptions,
+        fps: f32,
+        usd: &mut usdskel_rig::SkelFiles,
+    ) -> Result<SkinnedRig> {
         if usdskel_rig::is_usd(path) {
-            return Self::load_usd(path, options, fps);
+            return Self::load_usd(path, options, fps, usd);
         }
         let file = GltfFile::open(path)?;
         let rigid = checked_kind(&file, options)?;
@@ -246,8 +257,8 @@ impl SkinnedRig {
     /// materials, and one clip per distinct animation. The crowd
     /// department's placement is authoritative: the rig is not lifted to
     /// the ground, so joints stand where the file puts them.
-    fn load_usd(path: &Path, options: &SkinOptions, fps: f32) -> Result<SkinnedRig> {
-        let c = usdskel_rig::character(path, options.root.as_deref(), fps)?;
+    fn load_usd(path: &Path, options: &SkinOptions, fps: f32, usd: &mut usdskel_rig::SkelFiles) -> Result<SkinnedRig> {
+        let c = usdskel_rig::character(usd.get(path)?, path, options.root.as_deref(), fps)?;
         let slots = options.slots.clone().unwrap_or_else(|| c.delivered.iter().map(|(s, _, _)| s.clone()).collect());
         let mut rig = SkinnedRig {
             own: c.own,
@@ -258,6 +269,8 @@ impl SkinnedRig {
             baked: true,
             ..SkinnedRig::bare(path, c.animated, options, fps)?
         };
+        // The agents' own (ancestors') uniform scale: their place comes scaled already, their joints not.
+        rig.rig_from_file = Affine3A::from_scale(Vec3::splat(c.scale)) * rig.rig_from_file;
         let (lo, hi) = rig.rest_span(0);
         if !(lo.is_finite() && hi > lo) {
             return Err(Error::invalid(path, "the UsdSkel meshes have no height in the rest pose"));
@@ -418,8 +431,13 @@ impl SkinnedRig {
     }
 
     /// Loads the shot's rig `name` (`[rigs.NAME]`), its errors' fields under `rigs.NAME`.
-    pub(crate) fn load_shot_rig(name: &str, rig: &crate::shot::RigRef, fps: f32) -> Result<SkinnedRig> {
-        SkinnedRig::load(&rig.file, &rig.skin, fps)
+    pub(crate) fn load_shot_rig(
+        name: &str,
+        rig: &crate::shot::RigRef,
+        fps: f32,
+        usd: &mut usdskel_rig::SkelFiles,
+    ) -> Result<SkinnedRig> {
+        SkinnedRig::load_reading(&rig.file, &rig.skin, fps, usd)
             .map_err(|e| e.field_prefix(&format!("rigs.{name}")).or_field(format!("rigs.{name}.file")))
     }
 
@@ -752,9 +770,9 @@ impl SkinnedRig {
         nodes.dedup();
         nodes.iter().filter_map(|&n| self.animated.hierarchy.nodes.get(n)).map(|n| n.name.as_str()).collect()
     }
-    /// A UsdSkel character's material `i` (`None` for a glTF rig, whose
-    /// pieces' materials are its file's).
-    pub(crate) fn usd_material(&self, i: Option<usize>) -> Option<&crate::scene::Material> {
+    /// A UsdSkel character's material `i` and its base colour texture's
+    /// file (`None` for a glTF rig, whose pieces' materials are its file's).
+    pub(crate) fn usd_material(&self, i: Option<usize>) -> Option<&(crate::scene::Material, Option<PathBuf>)> {
         self.materials.get(i?)
     }
     /// Slot names casting fills (one skinned mesh each).

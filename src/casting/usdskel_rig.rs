@@ -16,11 +16,12 @@
 //! since the first sample, so neither a still frame nor a shutter at either
 //! end wraps to the other end of the clip.
 
-use std::path::Path;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
 
 use glam::{Affine3A, Mat4, Vec4};
 
-use crate::cache::usdskel::{self, SkelAnim, SkelCharacter};
+use crate::cache::usdskel::{self, SkelAnim, SkelCharacter, SkelFile};
 use crate::casting::animation::{Animated, Channel, Clip, Hierarchy, Interpolation, Node, Property, Trs};
 use crate::casting::pieces::{joint_boxes, PartTable, SkinPart, SkinPiece, MAX_INFLUENCES};
 use crate::error::{Error, Result};
@@ -37,10 +38,12 @@ pub(crate) struct UsdCharacter {
     pub(crate) own: PartTable,
     /// (slot, mesh prim, part) of each mesh, what an agent wears.
     pub(crate) delivered: Delivered,
-    /// Materials, by a piece's `material`.
-    pub(crate) materials: Vec<Material>,
+    /// Materials, by a piece's `material`, each with its base colour texture's file.
+    pub(crate) materials: Vec<(Material, Option<PathBuf>)>,
     /// What reading noticed but accepted.
     pub(crate) warnings: Vec<String>,
+    /// The uniform scale of the agents' world transforms (the joints are scaled by it).
+    pub(crate) scale: f32,
 }
 
 /// Whether `path` names a USD file (by extension, as caches are read).
@@ -53,11 +56,42 @@ fn trs_of(m: &Mat4) -> Trs {
     Trs { translation, rotation, scale }
 }
 
-/// A character of the UsdSkel crowd at `path`: SkelRoot `root`'s (the
-/// rig's `root`), else the first agent's; its clips timed for the shot's
-/// `fps`.
-pub(crate) fn character(path: &Path, root: Option<&str>, fps: f32) -> Result<UsdCharacter> {
-    let c = usdskel::character(path, root)?;
+/// The UsdSkel files a shot reads, each read once, by canonical path: the
+/// cache's reading (`shot_cache::open_for_rigs`) and any other rig file's,
+/// so the cache and every rig on one file share one reading of its stage.
+#[derive(Default)]
+pub(crate) struct SkelFiles {
+    files: HashMap<PathBuf, SkelFile>,
+}
+
+impl SkelFiles {
+    /// Keeps `file`, the reading of `path` (with its characters' meshes).
+    pub(crate) fn insert(&mut self, path: &Path, file: SkelFile) -> Result<()> {
+        let canonical = std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?;
+        self.files.insert(canonical, file);
+        Ok(())
+    }
+
+    /// The reading of `path`: the one kept, else read now and kept.
+    pub(crate) fn get(&mut self, path: &Path) -> Result<&SkelFile> {
+        let canonical = std::fs::canonicalize(path).map_err(|e| Error::io(path, e))?;
+        if !self.files.contains_key(&canonical) {
+            self.files.insert(canonical.clone(), SkelFile::read(path)?);
+        }
+        Ok(&self.files[&canonical])
+    }
+
+    /// The reading of `path` if kept, taken out (the shot keeps its cache's agents for botinfo).
+    pub(crate) fn take(&mut self, path: &Path) -> Option<SkelFile> {
+        self.files.remove(&std::fs::canonicalize(path).ok()?)
+    }
+}
+
+/// A character of the UsdSkel crowd at `path` (its reading `file`):
+/// SkelRoot `root`'s (the rig's `root`), else the first agent's; its clips
+/// timed for the shot's `fps`.
+pub(crate) fn character(file: &SkelFile, path: &Path, root: Option<&str>, fps: f32) -> Result<UsdCharacter> {
+    let c = file.character(path, root)?;
     let skel = &c.skeleton;
     let top = skel.joints.len();
     let mut nodes: Vec<Node> = (skel.joints.iter().zip(&skel.parents).zip(&skel.rest))
@@ -73,19 +107,23 @@ pub(crate) fn character(path: &Path, root: Option<&str>, fps: f32) -> Result<Usd
     // Agents bound to no animation hold the rest pose.
     clips.push(Clip { name: usdskel::REST_CYCLE.to_string(), channels: Vec::new(), start: 0.0, end: 0.0 });
     let animated = Animated { path: path.to_path_buf(), hierarchy, clips };
-    let (own, delivered, cut) = pieces(path, &c)?;
+    let (own, delivered, cut) = pieces(path, c)?;
     let warnings = c.warnings.iter().cloned().chain(cut).collect();
     let materials = (c.materials.iter())
-        .map(|m| Material {
-            name: format!("{}#{}", path.display(), m.prim),
-            base_color: m.diffuse,
-            roughness: m.roughness.clamp(0.0, 1.0),
-            metallic: m.metallic.clamp(0.0, 1.0),
-            alpha: m.opacity.clamp(0.0, 1.0),
-            ..Material::default()
+        .map(|m| {
+            let material = Material {
+                name: format!("{}#{}", path.display(), m.prim),
+                // A connected diffuseColor ignores its own value: the texture is the colour.
+                base_color: if m.diffuse_texture.is_some() { glam::Vec3::ONE } else { m.diffuse },
+                roughness: m.roughness.clamp(0.0, 1.0),
+                metallic: m.metallic.clamp(0.0, 1.0),
+                alpha: m.opacity.clamp(0.0, 1.0),
+                ..Material::default()
+            };
+            (material, m.diffuse_texture.clone())
         })
         .collect();
-    Ok(UsdCharacter { animated, own, delivered, materials, warnings })
+    Ok(UsdCharacter { animated, own, delivered, materials, warnings, scale: c.scale })
 }
 
 /// One animation as a clip: linear keys (rotations slerped, as USD
@@ -163,7 +201,7 @@ fn pieces(path: &Path, c: &SkelCharacter) -> Result<(PartTable, Delivered, Vec<S
             name: format!("{}#{}", path.display(), m.prim),
             positions: m.points.clone(),
             normals: Vec::new(),
-            uvs: Vec::new(),
+            uvs: m.uvs.clone(),
             tangents: Vec::new(),
             indices: m.triangles.clone(),
         };
