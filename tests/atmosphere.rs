@@ -5,11 +5,14 @@
 //! through absorbing air, lit through it; and bit-identical renders for any
 //! thread count.
 
+use std::f32::consts::{FRAC_PI_2, PI};
+
 use glam::{Affine3A, Vec2, Vec3};
 use throng::render::accel::BlasSet;
 use throng::render::atmosphere::{Atmosphere, AtmosphereMode};
 use throng::render::film::{render_frame, Film};
 use throng::render::RenderSettings;
+use throng::scene::passes::{LightPath, PassSet};
 use throng::scene::lights::{Light, LightKind, SceneLights};
 use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun};
 
@@ -267,4 +270,94 @@ fn bad_atmosphere_keys_are_refused_by_name() {
     }
     // An unknown key names itself too.
     assert!(parse("density = 0.1\nfog = 1").unwrap_err().to_string().contains("fog"));
+}
+
+/// The light and transmittance passes of `film`: `name`'s red channel per pixel.
+fn pass_red(film: &Film, name: &str) -> Vec<f64> {
+    let pass = film.passes.iter().find(|p| p.name == name).unwrap_or_else(|| panic!("no pass {name}"));
+    pass.data.iter().map(|v| v[0] as f64).collect()
+}
+
+/// The air's two passes (docs/compositing.md, "Removing and regrading the air").
+fn air_passes() -> PassSet {
+    PassSet { light_paths: vec![LightPath::Atmosphere], transmittance: true, ..Default::default() }
+}
+
+#[test]
+fn removing_the_air_with_its_passes_gives_the_clear_render() {
+    // Looking straight up from the floor at a grey ceiling 4 m up, lit by a
+    // lamp 1 m under it; the air fills the lowest 2 m: the camera ray crosses
+    // it, the lamp lights it from above, and the ceiling's own light (lamp to
+    // ceiling, no bounce) never enters it. So beauty = T x ceiling + atmosphere,
+    // and (beauty - atmosphere) / T is the clear render, within the noise of
+    // distance sampling.
+    let grey = Material { name: "ceiling".into(), base_color: Vec3::splat(0.5), ..Default::default() };
+    let lib = Library { meshes: vec![floor()], materials: vec![grey], textures: vec![] };
+    let ceiling = Instance {
+        mesh: 0,
+        material: 0,
+        world_from_object: Affine3A::from_translation(Vec3::Y * 4.0) * Affine3A::from_rotation_x(PI),
+        agent: InstanceAgent::NONE,
+        part: 0,
+        visibility: vis::ALL,
+    };
+    let up = Camera::pinhole(Affine3A::from_rotation_x(FRAC_PI_2), 1e-4);
+    let lamp = point_light(Vec3::new(0.5, 3.0, 0.0), 5.0);
+    let scene = FrameScene { instances: vec![ceiling], camera: up, lights: lights(None, vec![lamp]), motion: None };
+    let a = air(0.2, 0.8, 0.3, 2.0, AtmosphereMode::Full);
+    let hazy = render(&lib, &scene, &RenderSettings { passes: air_passes(), ..settings(256, 2, a) });
+    let clear = render(&lib, &scene, &RenderSettings { atmosphere: None, ..settings(4, 2, a) });
+    let t = pass_red(&hazy, "atmosphere_transmittance");
+    let glow = pass_red(&hazy, "atmosphere");
+    let want_t = (-0.2f64 * 2.0).exp();
+    assert!(t.iter().all(|&t| (t - want_t).abs() < 1e-4), "transmittance {:?} vs {want_t}", &t[..4]);
+    let n = t.len() as f64;
+    let removed: f64 = hazy.rgba.iter().zip(&glow).zip(&t).map(|((p, g), t)| (p[0] as f64 - g) / t).sum::<f64>() / n;
+    let (beauty, glow_mean) = (mean_red(&hazy), glow.iter().sum::<f64>() / n);
+    let clear = mean_red(&clear);
+    assert!(glow_mean > 0.05 * beauty, "the air glows: {glow_mean} of {beauty}");
+    assert!(((removed - clear) / clear).abs() < 0.03, "haze removed {removed} vs clear air {clear}");
+    // And the beauty is not the clear render: the air is there.
+    assert!(((beauty - clear) / clear).abs() > 0.1, "{beauty} vs {clear}");
+}
+
+#[test]
+fn haze_only_removed_with_its_passes_is_the_clear_render_exactly() {
+    // Haze only attenuates the camera ray alone and adds a closed-form glow:
+    // beauty = T x surface + atmosphere sample by sample, with nothing random in the air.
+    let sun = Sun { direction: Vec3::new(0.3, 1.0, 0.1).normalize(), angular_diameter: 0.0, irradiance: Vec3::ONE };
+    let (lib, scene) = grey_floor_from_above(sun, vec![], 1e-4);
+    let a = air(0.1, 0.8, 0.3, 10.0, AtmosphereMode::Haze);
+    let hazy = render(&lib, &scene, &RenderSettings { passes: air_passes(), ..settings(4, 2, a) });
+    let clear = render(&lib, &scene, &RenderSettings { atmosphere: None, ..settings(4, 2, a) });
+    let (t, glow) = (pass_red(&hazy, "atmosphere_transmittance"), pass_red(&hazy, "atmosphere"));
+    for i in 0..t.len() {
+        let (beauty, want) = (hazy.rgba[i][0] as f64, clear.rgba[i][0] as f64);
+        assert!(glow[i] > 0.0 && (t[i] - (-0.4f64).exp()).abs() < 1e-5, "pixel {i}: T {} glow {}", t[i], glow[i]);
+        let removed = (beauty - glow[i]) / t[i];
+        assert!((removed - want).abs() <= 1e-5 * want, "pixel {i}: {removed} vs {want}");
+    }
+}
+
+#[test]
+fn clear_air_writes_no_air_passes_and_hazy_air_both() {
+    use throng::render::job::RenderJob;
+    let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/stack_shot/shot.toml"));
+    let base = std::fs::read_to_string(path).unwrap();
+    let clear = throng::shot::Shot::parse(&base, path).unwrap();
+    let hazy = throng::shot::Shot::parse(&format!("{base}\n[atmosphere]\ndensity = 0.05\n"), path).unwrap();
+    let none = throng::shot::Shot::parse(&format!("{base}\n[atmosphere]\ndensity = 0.0\n"), path).unwrap();
+    for names in [vec!["all"], vec!["atmosphere", "atmosphere_transmittance", "diffuse_direct"]] {
+        let job = RenderJob {
+            passes: Some(PassSet::parse(&names, "--passes").unwrap()),
+            ..RenderJob::new(vec![], vec![], 1, Default::default())
+        };
+        let air = job.passes_of(&hazy).unwrap();
+        assert!(air.transmittance && air.light_paths.contains(&LightPath::Atmosphere), "{names:?}");
+        for shot in [&clear, &none] {
+            let set = job.passes_of(shot).unwrap();
+            assert!(!set.transmittance && !set.light_paths.contains(&LightPath::Atmosphere), "{names:?}");
+            assert!(set.light_paths.contains(&LightPath::DiffuseDirect));
+        }
+    }
 }

@@ -33,7 +33,8 @@
 //!   the mean over the samples the pixel took.
 //! - `passes`: the light-path passes and light groups asked for (means over
 //!   all samples, like RGB, from the same samples: scene::passes), the
-//!   shadow pass (set surfaces' direct light the crowd's shadows took), then the
+//!   shadow pass (set surfaces' direct light the crowd's shadows took), the
+//!   camera rays' transmittance through the air (a mean like RGB), then the
 //!   world position `P` of the nearest sample's first hit (never filtered,
 //!   like `z`; zero where it missed).
 
@@ -202,6 +203,9 @@ impl Pass {
         if set.shadow {
             names.push((crate::scene::passes::SHADOW.into(), RGB));
         }
+        if set.transmittance {
+            names.push((crate::scene::passes::TRANSMITTANCE.into(), RGB));
+        }
         if set.position {
             names.push(("P".into(), ["X", "Y", "Z"]));
         }
@@ -311,6 +315,7 @@ fn render_pixel(
     let mut sums = [Vec3::ZERO; LightPath::ALL.len()];
     let mut group_sums = vec![Vec3::ZERO; passes.as_ref().map_or(0, |p| p.split.groups.len())];
     let mut shadow = Vec3::ZERO;
+    let mut transmittance = 0.0f32;
     let mut estimate = ErrorEstimate::default();
     let mut spp = 0;
     for s in 0..count.max {
@@ -334,6 +339,7 @@ fn render_pixel(
                     *sum += *c;
                 }
                 shadow += p.split.shadow;
+                transmittance += p.split.transmittance;
             }
         }
         if let Some(names) = crypto {
@@ -379,6 +385,11 @@ fn render_pixel(
         if p.set.shadow {
             if let Some(v) = out.next() {
                 *v = (shadow * inv).to_array();
+            }
+        }
+        if p.set.transmittance {
+            if let Some(v) = out.next() {
+                *v = [transmittance * inv; 3];
             }
         }
         if p.set.position {

@@ -253,6 +253,9 @@ struct PathState<'s> {
     /// reflection): their tint so far. OIDN's albedo guide is that of the
     /// first non-delta hit seen through them, times this.
     albedo_tint: Option<Vec3>,
+    /// The camera ray's transmittance through the air up to what it shows
+    /// (the transmittance pass; 1 in clear air).
+    camera_transmittance: f32,
     sampler: &'s mut Sampler,
     counts: &'s mut RayCounts,
     split: Option<&'s mut Split>,
@@ -273,6 +276,7 @@ impl<'s> PathState<'s> {
             medium: Vec3::ZERO,
             eta_scale: 1.0,
             albedo_tint: None,
+            camera_transmittance: 1.0,
             sampler,
             counts: tally.counts,
             split: tally.split,
@@ -470,7 +474,13 @@ impl<'a> Integrator<'a> {
         };
         match stop {
             Stop::Holdout => SampleResult { z: f32::INFINITY, ..Default::default() },
-            Stop::End => SampleResult { rgb: st.radiance, ..st.out },
+            Stop::End => {
+                if let Some(split) = st.split.as_deref_mut() {
+                    // Premultiplied: nothing shown, nothing seen through the air.
+                    split.transmittance = st.camera_transmittance * st.out.alpha;
+                }
+                SampleResult { rgb: st.radiance, ..st.out }
+            }
         }
     }
 
@@ -489,6 +499,9 @@ impl<'a> Integrator<'a> {
         // A sized light (rect, disk, sphere) in front of whatever the ray hits ends the path there.
         let tmax = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
         let lamp = self.lights.hit_sized(st.origin, st.dir, tmax, camera, st.prev.at);
+        if camera && self.settings.passes.transmittance {
+            st.camera_transmittance = self.camera_transmittance(st, lamp.as_ref().map_or(tmax, |l| l.t));
+        }
         if let Some(air) = self.air_on(st, hit.as_ref(), lamp.is_some()) {
             let end = lamp.as_ref().map_or(tmax, |l| l.t);
             if let Some(seg) = air.segment(st.origin, st.dir, end) {
@@ -850,6 +863,14 @@ impl Integrator<'_> {
                 self.settings.sky_visible && (self.scene.lights.dome.is_none() || self.lights.dome_camera_visible())
             }
         }
+    }
+
+    /// The camera ray's transmittance through the air (full or haze only)
+    /// up to `end`, where what it shows is: what the beauty holds of that
+    /// surface, sky or lamp is this times its radiance (docs/compositing.md).
+    fn camera_transmittance(&self, st: &PathState<'_>, end: f32) -> f32 {
+        let air = self.settings.atmosphere.as_ref().filter(|a| a.is_active());
+        air.map_or(1.0, |a| a.transmittance(st.origin, st.dir, end))
     }
 
     /// Haze only (render::atmosphere::AtmosphereMode::Haze), on the camera

@@ -1208,6 +1208,12 @@ fn check_render(render: &RenderSettings, path: &Path) -> Result<()> {
 }
 
 impl Shot {
+    /// Whether the shot has air that changes anything (`[atmosphere]` with
+    /// a density above zero): what its render traces and its air passes.
+    pub fn hazy(&self) -> bool {
+        self.atmosphere.is_some_and(|a| a.is_active())
+    }
+
     /// Reads and validates a shot file.
     pub fn load(path: &Path) -> Result<Shot> {
         crate::error::check_readable_file(path)?;
