@@ -161,12 +161,18 @@ fn a_floor_through_absorbing_air_is_lit_and_seen_through_it() {
 #[test]
 fn hazy_renders_are_bit_identical_for_any_thread_count() {
     let lib = Library::default();
+    let sphere = Light {
+        kind: LightKind::Sphere { radius: 0.1 },
+        emission: Vec3::splat(40.0),
+        camera_visible: true,
+        ..point_light(Vec3::new(-0.5, 1.2, -2.0), 0.0)
+    };
     let sun =
         Sun { direction: Vec3::new(0.3, 1.0, 0.2).normalize(), angular_diameter: 0.02, irradiance: Vec3::splat(3.0) };
     let scene = FrameScene {
         instances: vec![],
         camera: Camera::pinhole(Affine3A::from_translation(Vec3::Y), 1.0),
-        lights: lights(Some(sun), vec![point_light(Vec3::new(0.5, 1.5, -3.0), 5.0)]),
+        lights: lights(Some(sun), vec![point_light(Vec3::new(0.5, 1.5, -3.0), 5.0), sphere]),
         motion: None,
     };
     let a = air(0.2, 0.8, 0.3, 6.0, AtmosphereMode::Full);
@@ -359,5 +365,69 @@ fn clear_air_writes_no_air_passes_and_hazy_air_both() {
             assert!(!set.transmittance && !set.light_paths.contains(&LightPath::Atmosphere), "{names:?}");
             assert!(set.light_paths.contains(&LightPath::DiffuseDirect));
         }
+    }
+}
+
+/// Single scattering along the ray t -> t (0, 0, -1) of a sphere light of
+/// radiance `l`, radius `r`, centre (0, h, -foot), infinite medium: int_0^inf
+/// sigma_s e^(-sigma_t t) int_cone p(cos) l e^(-sigma_t s) dw dt, s the distance
+/// to the sphere along w; t = foot + h tan(psi) outside, the cone by (cos, phi) inside.
+fn sphere_in_scatter(sigma_t: f64, albedo: f64, g: f64, l: f64, r: f64, h: f64, foot: f64) -> f64 {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    let (lo, hi) = ((-foot / h).atan(), FRAC_PI_2);
+    let (n, m) = (4000, 48);
+    let step = (hi - lo) / n as f64;
+    let centre = glam::DVec3::new(0.0, h, -foot);
+    let dir = glam::DVec3::new(0.0, 0.0, -1.0);
+    (0..n)
+        .map(|k| {
+            let psi = lo + (k as f64 + 0.5) * step;
+            let t = foot + h * psi.tan();
+            let x = dir * t;
+            let to = centre - x;
+            let dc = to.length();
+            let axis = to / dc;
+            let cos_max = (1.0 - (r / dc).powi(2)).max(0.0).sqrt();
+            let e1 = axis.cross(glam::DVec3::X).normalize();
+            let e2 = axis.cross(e1);
+            let mut cone = 0.0;
+            for i in 0..m {
+                let c = cos_max + (1.0 - cos_max) * (i as f64 + 0.5) / m as f64;
+                let sin = (1.0 - c * c).max(0.0).sqrt();
+                let s = dc * c - (r * r - dc * dc * sin * sin).max(0.0).sqrt();
+                for j in 0..m {
+                    let phi = 2.0 * PI * (j as f64 + 0.5) / m as f64;
+                    let w = axis * c + (e1 * phi.cos() + e2 * phi.sin()) * sin;
+                    cone += hg(w.dot(dir), g) * (-sigma_t * s).exp();
+                }
+            }
+            let cone = cone * l * (1.0 - cos_max) * 2.0 * PI / (m * m) as f64;
+            // dt = h / cos^2(psi) dpsi.
+            sigma_t * albedo * (-sigma_t * t).exp() * cone * h / psi.cos().powi(2) * step
+        })
+        .sum()
+}
+
+#[test]
+fn a_sphere_lights_single_scattering_is_its_integral() {
+    // Equiangular sampling towards its centre, a point on it by solid angle,
+    // weighed against distance sampling with NEE (render::atmosphere).
+    let lib = Library::default();
+    for g in [0.0f32, 0.6] {
+        let lamp = Light {
+            kind: LightKind::Sphere { radius: 0.2 },
+            emission: Vec3::splat(10.0),
+            ..point_light(Vec3::new(0.0, 0.5, -2.0), 0.0)
+        };
+        let scene = FrameScene {
+            instances: vec![],
+            camera: narrow_camera(Vec3::ZERO),
+            lights: lights(None, vec![lamp]),
+            motion: None,
+        };
+        let a = air(0.3, 0.8, g, f32::INFINITY, AtmosphereMode::Full);
+        let got = mean_red(&render(&lib, &scene, &settings(256, 2, a)));
+        let want = sphere_in_scatter(0.3, 0.8, g as f64, 10.0, 0.2, 0.5, 2.0);
+        assert!(((got - want) / want).abs() < 0.015, "g {g}: {got} vs integral {want}");
     }
 }

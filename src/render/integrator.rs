@@ -33,10 +33,11 @@ const DIMS_PER_BOUNCE: u32 = 8;
 
 /// Where the air's sampler dimensions start (render::atmosphere), far past
 /// the surfaces', so a shot without air draws the numbers it always did:
-/// per vertex, distance 1, equiangular light pick 1 and distance 1.
+/// per vertex, distance 1, equiangular light pick 1, distance 1 and a
+/// point on a sphere light 2.
 const AIR_BASE: u32 = 1 << 20;
 /// Sampler dimensions the air uses per vertex.
-const AIR_DIMS: u32 = 4;
+const AIR_DIMS: u32 = 5;
 
 /// What camera rays see: camera-visible instances and holdouts.
 const CAMERA_MASK: u8 = vis::CAMERA | vis::HOLDOUT;
@@ -928,8 +929,8 @@ impl Integrator<'_> {
     /// Next-event estimation at the air point `t` along the ray: one light
     /// from the distribution every shading point draws from (render::lights,
     /// with no normal: lit from every side), weighed against the phase
-    /// function's chance of finding it and, for a point or spot light,
-    /// against equiangular sampling's chance of this point
+    /// function's chance of finding it and, for a point, spot or sphere
+    /// light, against equiangular sampling's chance of this point
     /// ([`Integrator::add_equiangular`]).
     fn light_in_air(&self, st: &mut PathState<'_>, air: &Atmosphere, seg: (f32, f32), t: f32, base: u32) {
         let p = st.origin + st.dir * t;
@@ -939,18 +940,17 @@ impl Integrator<'_> {
         let u_light = st.sampler.next_2d();
         let Some(ls) = self.lights.sample_one(p, Vec3::ZERO, u_pick, u_light, Lookup::Blocks) else { return };
         let phase = phase_hg(st.dir.dot(ls.wi), air.anisotropy);
-        let weight = if ls.delta {
-            // Equiangular sampling's density of this point, for the light it would pick.
-            let other = self.equiangular_pdf(st.origin, st.dir, seg, ls.source, t);
-            if other > 0.0 {
-                power_heuristic(air.distance_pdf(seg, t) * ls.pdf, other)
-            } else {
-                1.0
-            }
-        } else if st.depth >= self.settings.max_bounces {
-            1.0
+        // Against the phase function's rays (which find sized lights only,
+        // and only where a bounce follows).
+        let by_light = if ls.delta || st.depth >= self.settings.max_bounces { 1.0 } else { power_heuristic(ls.pdf, phase) };
+        // Equiangular sampling's density of this point, for the light it would pick.
+        let other = self.equiangular_pdf(st.origin, st.dir, seg, ls.source, t);
+        let weight = if other > 0.0 {
+            // Distance sampling's density of the point times NEE's pick of the light.
+            let pick = if ls.delta { ls.pdf } else { self.lights.pick_at(ls.source as usize, (p, Vec3::ZERO)) };
+            by_light * power_heuristic(air.distance_pdf(seg, t) * pick, other)
         } else {
-            power_heuristic(ls.pdf, phase)
+            by_light
         };
         let light = phase * weight / ls.pdf;
         self.add_air_light(st, air, p, &ls, st.throughput * light);
@@ -982,11 +982,20 @@ impl Integrator<'_> {
     }
 
     /// Equiangular sampling of the ray's part `seg` in the air (before
-    /// distance sampling moves the path on): a point or spot light picked
-    /// by what it can give the segment, a point on the segment with density
-    /// falling as 1 / distance^2 to it, the light's in-scatter there,
-    /// weighed by MIS against distance sampling's chance of the same point
-    /// and light (Kulla and Fajardo 2012). What converges a lamp's cone.
+    /// distance sampling moves the path on): a point, spot or sphere light
+    /// picked by what it can give the segment, a point on the segment with
+    /// density falling as 1 / distance^2 to its centre, the light's
+    /// in-scatter there (a sphere's by a point on it, sampled by solid
+    /// angle), weighed by MIS against distance sampling's chance of the same
+    /// point and light (Kulla and Fajardo 2012). What converges a lamp's cone.
+    ///
+    /// A sphere light is also found by the phase function's rays from a
+    /// distance-sampled point, weighed there against NEE alone
+    /// ([`PrevVertex::weight`]). So, per point `t` and direction, the three
+    /// weights are: this one `(1 - w(t)) v`, NEE's `w(t) v` and the phase
+    /// ray's `1 - v`, with `w` the distance/equiangular weight and `v` the
+    /// light/phase weight NEE uses; they sum to 1 (and `v` is 1 where no
+    /// bounce follows).
     fn add_equiangular(&self, st: &mut PathState<'_>, air: &Atmosphere, seg: (f32, f32)) {
         if !self.lights.has_point_lights() {
             return;
@@ -994,6 +1003,7 @@ impl Integrator<'_> {
         st.sampler.set_dimension(AIR_BASE + st.depth * AIR_DIMS + 1);
         let u_pick = st.sampler.next_1d();
         let u_t = st.sampler.next_1d();
+        let u_light = st.sampler.next_2d();
         let Some((source, pick, centre)) = self.lights.pick_point_light(st.origin, st.dir, seg, u_pick) else {
             return;
         };
@@ -1001,13 +1011,19 @@ impl Integrator<'_> {
         let t = eq.sample(u_t);
         let pdf = eq.pdf(t) * pick;
         let p = st.origin + st.dir * t;
-        let Some((_, ls)) = self.lights.point_light(source, p) else { return };
+        let Some(ls) = self.lights.point_light(source, p, u_light) else { return };
         // Distance sampling's density of this point, times the pick NEE makes there.
-        let other = air.distance_pdf(seg, t) * self.lights.pick_at(source as usize, (p, Vec3::ZERO));
-        let weight = power_heuristic(pdf, other);
-        let along = air.transmittance(st.origin, st.dir, t);
+        let nee_pick = self.lights.pick_at(source as usize, (p, Vec3::ZERO));
+        let weight = power_heuristic(pdf, air.distance_pdf(seg, t) * nee_pick);
         let phase = phase_hg(st.dir.dot(ls.wi), air.anisotropy);
-        let scale = st.throughput * air.scattering() * (along * phase * weight / pdf);
+        let weight = if ls.delta || st.depth >= self.settings.max_bounces {
+            weight
+        } else {
+            weight * power_heuristic(nee_pick * ls.pdf, phase)
+        };
+        let along = air.transmittance(st.origin, st.dir, t);
+        // ls.pdf: 1 for a point or spot, the solid-angle density of a sphere's point.
+        let scale = st.throughput * air.scattering() * (along * phase * weight / (pdf * ls.pdf));
         let ls = LightSample { chance: 1.0, ..ls };
         self.add_air_light(st, air, p, &ls, scale);
     }
