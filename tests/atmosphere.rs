@@ -431,3 +431,76 @@ fn a_sphere_lights_single_scattering_is_its_integral() {
         assert!(((got - want) / want).abs() < 0.015, "g {g}: {got} vs integral {want}");
     }
 }
+
+mod common;
+
+fn s(p: &std::path::Path) -> &str {
+    p.to_str().expect("utf-8 temp path")
+}
+
+/// A small demo-asset shot under a grey sun and sky, with `extra` after its `[render]` keys.
+fn small_shot(dir: &std::path::Path, extra: &str) -> std::path::PathBuf {
+    let lights = "[lights.sun]\ndirection = [-0.4, 0.6, 0.5]\nintensity = 3.0\n[lights.sky]\ncolor = [0.4, 0.4, 0.4]\n";
+    let shot = common::DemoShot { name: "air", lights, spp: 4, extra, ..Default::default() };
+    shot.write(dir, &common::two_robots(1001..=1001))
+}
+
+fn render_cli(shot: &std::path::Path, out: &std::path::Path, extra: &[&str]) -> (i32, String) {
+    let mut args = vec!["render", s(shot), "--layer", "full", "--frames", "1001", "--progress", "off", "--out", s(out)];
+    args.extend_from_slice(extra);
+    let (code, o, e) = common::run(&args);
+    (code, format!("{o}{e}"))
+}
+
+#[test]
+fn resume_rerenders_a_frame_made_in_other_air() {
+    let dir = common::tempdir().unwrap();
+    let out = dir.path().join("o");
+    let clear = small_shot(dir.path(), "");
+    assert_eq!(render_cli(&clear, &out, &[]).0, 0);
+    let (code, text) = render_cli(&clear, &out, &["--resume"]);
+    assert!(code == 0 && text.contains("1 skipped"), "{text}");
+    // Air added, then the air changed, then the same air again.
+    for (atmosphere, skipped) in [
+        ("[atmosphere]\ndensity = 0.05\nheight = 5.0\n", "0 skipped"),
+        ("[atmosphere]\ndensity = 0.08\nheight = 5.0\n", "0 skipped"),
+        ("[atmosphere]\ndensity = 0.08\nheight = 5.0\nmode = \"haze\"\n", "0 skipped"),
+        ("[atmosphere]\ndensity = 0.08\nheight = 5.0\nmode = \"haze\"\n", "1 skipped"),
+    ] {
+        let shot = small_shot(dir.path(), atmosphere);
+        let (code, text) = render_cli(&shot, &out, &["--resume"]);
+        assert!(code == 0 && text.contains(skipped), "{atmosphere}: {text}");
+        if skipped == "0 skipped" {
+            assert!(text.contains("other settings"), "{atmosphere}: {text}");
+        }
+    }
+}
+
+#[test]
+fn acescg_renders_convert_the_airs_albedo() {
+    // Grey lights, no bounce: the atmosphere pass is the albedo times a
+    // grey value, sample by sample, so in ACEScg it is the Rec.709 one
+    // through the matrix (the same samples: only colours differ).
+    let dir = common::tempdir().unwrap();
+    let extra = "max_bounces = 0\npasses = [\"atmosphere\"]\n[atmosphere]\ndensity = 0.08\ncolor = [0.9, 0.5, 0.2]\nheight = 5.0\n";
+    let shot = small_shot(dir.path(), extra);
+    // Without the set: its shop windows would light the air in colour.
+    let text = std::fs::read_to_string(&shot).unwrap();
+    let set = text.find("[set]").unwrap();
+    let end = set + text[set..].find("\n\n").unwrap();
+    std::fs::write(&shot, format!("{}{}", &text[..set], &text[end..])).unwrap();
+    let mean_atmosphere = |cs: &str| -> Vec3 {
+        let out = dir.path().join(cs);
+        let (code, text) = render_cli(&shot, &out, &["--colourspace", cs]);
+        assert_eq!(code, 0, "{text}");
+        let (film, _) = throng::render::exr::read_layer(&out.join("full/air.full.1001.exr")).unwrap();
+        let pass = film.passes.iter().find(|p| p.name == "atmosphere").expect("the atmosphere pass");
+        pass.data.iter().map(|&v| Vec3::from(v)).sum::<Vec3>() / pass.data.len() as f32
+    };
+    let (rec, aces) = (mean_atmosphere("rec709"), mean_atmosphere("acescg"));
+    let want = throng::render::colour::rec709_to_acescg(rec);
+    assert!(rec.min_element() > 0.0);
+    assert!((aces - want).abs().max_element() < 2e-3 * want.max_element(), "{aces} vs M x {rec} = {want}");
+    // Unconverted it would differ by far more.
+    assert!((rec - want).abs().max_element() > 0.05 * want.max_element());
+}

@@ -838,7 +838,7 @@ fn layer_settings<C: Space>(
         passes: passes.clone(),
         adaptive: job.adaptive,
         tracing: job.tracing,
-        atmosphere: crowd.shot().atmosphere.filter(|a| a.is_active()),
+        atmosphere: crowd.shot().atmosphere.filter(|a| a.is_active()).map(|a| colour::atmosphere(a, job.colourspace)),
         ..RenderSettings::default()
     }
 }
