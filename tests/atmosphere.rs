@@ -19,7 +19,7 @@ use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, M
 const RES: u32 = 8;
 
 fn air(density: f32, albedo: f32, g: f32, top: f32, mode: AtmosphereMode) -> Atmosphere {
-    Atmosphere { density, albedo: Vec3::splat(albedo), anisotropy: g, top, mode }
+    Atmosphere { density, albedo: Vec3::splat(albedo), anisotropy: g, top, mode, ..Default::default() }
 }
 
 fn settings(spp: u32, threads: usize, atmosphere: Atmosphere) -> RenderSettings {
@@ -106,6 +106,44 @@ fn a_point_lights_single_scattering_is_its_integral() {
         let got = mean_red(&render(&lib, &scene, &settings(256, 2, a)));
         let want = point_in_scatter(0.3, 0.8, g as f64, 10.0, 0.5, 2.0);
         assert!(((got - want) / want).abs() < 0.01, "g {g}: {got} vs integral {want}");
+    }
+}
+
+#[test]
+fn haze_by_quadrature_is_the_path_tracers_single_scattering_of_the_sun_in_thinning_air() {
+    // Air thinning with height from 1 m up (scale height 3 m), no top: the
+    // sun reaches into it through a finite depth. Haze only's quadrature
+    // against the path tracer's exact distance sampling.
+    let lib = Library::default();
+    let sun =
+        Sun { direction: Vec3::new(0.3, 1.0, 0.2).normalize(), angular_diameter: 0.0, irradiance: Vec3::splat(3.0) };
+    for (at, tilt) in [(Vec3::new(0.0, 2.0, 0.0), 0.0f32), (Vec3::new(0.0, 0.5, 0.0), 0.3), (Vec3::new(0.0, 4.0, 0.0), -0.2)] {
+        let camera = Camera::pinhole(Affine3A::from_translation(at) * Affine3A::from_rotation_x(tilt), 1e-4);
+        let scene = FrameScene { instances: vec![], camera, lights: lights(Some(sun), vec![]), motion: None };
+        let full = Atmosphere { falloff: 3.0, base: 1.0, ..air(0.08, 0.9, 0.4, f32::INFINITY, AtmosphereMode::Full) };
+        let haze = Atmosphere { mode: AtmosphereMode::Haze, ..full };
+        let traced = mean_red(&render(&lib, &scene, &settings(1024, 2, full)));
+        let closed = mean_red(&render(&lib, &scene, &settings(1, 2, haze)));
+        assert!(closed > 0.0);
+        assert!(((traced - closed) / closed).abs() < 0.02, "tilt {tilt}: traced {traced} vs quadrature {closed}");
+    }
+}
+
+#[test]
+fn a_start_distance_keeps_the_camera_rays_first_metres_clear() {
+    // The floor 4 m below the camera through air 10 m deep that starts 1.5 m out.
+    let sun = Sun { direction: Vec3::Y, angular_diameter: 0.0, irradiance: Vec3::splat(2.0) };
+    let (lib, scene) = grey_floor_from_above(sun, vec![], 1e-4);
+    for mode in [AtmosphereMode::Haze, AtmosphereMode::Full] {
+        let a = Atmosphere { start: 1.5, ..air(0.1, 0.0, 0.0, 10.0, mode) };
+        let film = render(&lib, &scene, &RenderSettings { passes: air_passes(), ..settings(64, 2, a) });
+        let t = pass_red(&film, "atmosphere_transmittance");
+        assert!(t.iter().all(|&t| (t - (-0.1f64 * 2.5).exp()).abs() < 1e-5), "{mode:?}: {:?}", &t[..2]);
+        // What the camera sees is dimmed by 2.5 m of air, its light by all 10 (full) or none (haze).
+        let lit = if mode == AtmosphereMode::Full { (-0.1f64 * 10.0).exp() } else { 1.0 };
+        let want = 0.5 / std::f64::consts::PI * 2.0 * lit * (-0.1f64 * 2.5).exp();
+        let got = mean_red(&film);
+        assert!(((got - want) / want).abs() < 1e-2, "{mode:?}: {got} vs {want}");
     }
 }
 
@@ -260,6 +298,9 @@ fn bad_atmosphere_keys_are_refused_by_name() {
         parse("density = 0.05\ncolor = [0.9, 0.8, 0.7]\nanisotropy = 0.3\nheight = 10.0\nmode = \"haze\"").unwrap();
     let air = good.atmosphere.expect("the table is read");
     assert_eq!((air.density, air.top, air.mode), (0.05, 10.0, AtmosphereMode::Haze));
+    assert_eq!((air.falloff, air.base, air.start), (f32::INFINITY, 0.0, 0.0));
+    let thin = parse("density = 0.05\nfalloff = 6.0\nbase = -1.0\nstart = 3.5").unwrap().atmosphere.unwrap();
+    assert_eq!((thin.falloff, thin.base, thin.start), (6.0, -1.0, 3.5));
     assert_eq!(air.albedo, Vec3::new(0.9, 0.8, 0.7));
     for (table, key) in [
         ("density = -0.1", "atmosphere.density"),
@@ -270,6 +311,11 @@ fn bad_atmosphere_keys_are_refused_by_name() {
         ("density = 0.1\ncolor = [0.5, 1.2, 0.5]", "atmosphere.color"),
         ("density = 0.1\ncolor = [-0.1, 0.5, 0.5]", "atmosphere.color"),
         ("density = 0.1\nheight = nan", "atmosphere.height"),
+        ("density = 0.1\nfalloff = 0.0", "atmosphere.falloff"),
+        ("density = 0.1\nfalloff = -3.0", "atmosphere.falloff"),
+        ("density = 0.1\nfalloff = 5.0\nbase = inf", "atmosphere.base"),
+        ("density = 0.1\nstart = -1.0", "atmosphere.start"),
+        ("density = 0.1\nstart = nan", "atmosphere.start"),
     ] {
         let err = parse(table).expect_err(table).to_string();
         assert!(err.contains(key) && err.contains("shot.toml"), "{table}: {err}");

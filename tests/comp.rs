@@ -477,7 +477,7 @@ fn hazy_stack_matches_full_render_within_noise() {
         albedo: glam::Vec3::splat(0.9),
         anisotropy: 0.3,
         top: 3.0,
-        mode: Default::default(),
+        ..Default::default()
     };
     let crowd = ShotCrowd::load(Path::new(SHOT)).unwrap().with_shot(|shot| shot.atmosphere = Some(air)).unwrap();
     let manifest = throng::layers::build_layers(&crowd, &layers_args()).unwrap();

@@ -240,7 +240,7 @@ mod tests {
             albedo: Vec3::new(0.9, 0.5, 0.2),
             anisotropy: 0.3,
             top: 5.0,
-            mode: Default::default(),
+            ..Default::default()
         };
         assert_eq!(atmosphere(air, Colourspace::Rec709), air);
         let aces = atmosphere(air, Colourspace::Acescg);

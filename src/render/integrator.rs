@@ -505,10 +505,15 @@ impl<'a> Integrator<'a> {
         }
         if let Some(air) = self.air_on(st, hit.as_ref(), lamp.is_some()) {
             let end = lamp.as_ref().map_or(tmax, |l| l.t);
-            if let Some(seg) = air.segment(st.origin, st.dir, end) {
+            let seg = if camera {
+                air.camera_segment(st.origin, st.dir, end)
+            } else {
+                air.segment(st.origin, st.dir, end)
+            };
+            if let Some(seg) = seg {
                 self.add_equiangular(st, air, seg);
                 st.sampler.set_dimension(AIR_BASE + st.depth * AIR_DIMS);
-                if let Some(t) = air.sample_distance(seg, st.sampler.next_1d()) {
+                if let Some(t) = air.sample_distance(st.origin, st.dir, seg, st.sampler.next_1d()) {
                     if camera {
                         self.cover_behind_air(st, hit.as_ref().filter(|_| lamp.is_none()));
                     }
@@ -871,7 +876,7 @@ impl Integrator<'_> {
     /// surface, sky or lamp is this times its radiance (docs/compositing.md).
     fn camera_transmittance(&self, st: &PathState<'_>, end: f32) -> f32 {
         let air = self.settings.atmosphere.as_ref().filter(|a| a.is_active());
-        air.map_or(1.0, |a| a.transmittance(st.origin, st.dir, end))
+        air.map_or(1.0, |a| a.camera_transmittance(st.origin, st.dir, end))
     }
 
     /// Haze only (render::atmosphere::AtmosphereMode::Haze), on the camera
@@ -879,7 +884,7 @@ impl Integrator<'_> {
     /// form, and the throughput of everything behind cut by the transmittance.
     fn add_haze(&self, st: &mut PathState<'_>, end: f32) {
         let Some(air) = self.settings.atmosphere.as_ref().filter(|a| a.mode == AtmosphereMode::Haze) else { return };
-        let Some(seg) = air.segment(st.origin, st.dir, end) else { return };
+        let Some(seg) = air.camera_segment(st.origin, st.dir, end) else { return };
         let sun = self.scene.lights.sun.as_ref().map(|s| (s.direction.normalize_or_zero(), s.irradiance));
         let (sun, environment) = air.haze_in_scatter(st.origin, st.dir, seg, sun, self.haze_environment);
         st.radiance += sun + environment;
@@ -887,7 +892,7 @@ impl Integrator<'_> {
             split.add(sun, LightPath::Atmosphere, self.lights.sun_group());
             split.add(environment, LightPath::Atmosphere, self.lights.environment_group());
         }
-        st.throughput *= air.transmittance(st.origin, st.dir, end);
+        st.throughput *= air.transmittance_over(st.origin, st.dir, seg);
     }
 
     /// A camera ray that scatters in the air covers its pixel as what is
@@ -948,7 +953,7 @@ impl Integrator<'_> {
         let weight = if other > 0.0 {
             // Distance sampling's density of the point times NEE's pick of the light.
             let pick = if ls.delta { ls.pdf } else { self.lights.pick_at(ls.source as usize, (p, Vec3::ZERO)) };
-            by_light * power_heuristic(air.distance_pdf(seg, t) * pick, other)
+            by_light * power_heuristic(air.distance_pdf(st.origin, st.dir, seg, t) * pick, other)
         } else {
             by_light
         };
@@ -1014,16 +1019,16 @@ impl Integrator<'_> {
         let Some(ls) = self.lights.point_light(source, p, u_light) else { return };
         // Distance sampling's density of this point, times the pick NEE makes there.
         let nee_pick = self.lights.pick_at(source as usize, (p, Vec3::ZERO));
-        let weight = power_heuristic(pdf, air.distance_pdf(seg, t) * nee_pick);
+        let weight = power_heuristic(pdf, air.distance_pdf(st.origin, st.dir, seg, t) * nee_pick);
         let phase = phase_hg(st.dir.dot(ls.wi), air.anisotropy);
         let weight = if ls.delta || st.depth >= self.settings.max_bounces {
             weight
         } else {
             weight * power_heuristic(nee_pick * ls.pdf, phase)
         };
-        let along = air.transmittance(st.origin, st.dir, t);
+        let along = air.transmittance_over(st.origin, st.dir, (seg.0, t));
         // ls.pdf: 1 for a point or spot, the solid-angle density of a sphere's point.
-        let scale = st.throughput * air.scattering() * (along * phase * weight / (pdf * ls.pdf));
+        let scale = st.throughput * air.scattering_at(p) * (along * phase * weight / (pdf * ls.pdf));
         let ls = LightSample { chance: 1.0, ..ls };
         self.add_air_light(st, air, p, &ls, scale);
     }

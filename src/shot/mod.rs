@@ -738,6 +738,11 @@ struct AtmosphereFile {
     height: Option<f32>,
     #[serde(default)]
     mode: AtmosphereMode,
+    falloff: Option<f32>,
+    #[serde(default)]
+    base: f32,
+    #[serde(default)]
+    start: f32,
 }
 
 fn white() -> [f32; 3] {
@@ -753,6 +758,9 @@ impl AtmosphereFile {
             anisotropy: self.anisotropy,
             top: self.height.unwrap_or(f32::INFINITY),
             mode: self.mode,
+            falloff: self.falloff.unwrap_or(f32::INFINITY),
+            base: self.base,
+            start: self.start,
         };
         a.check().map_err(|(key, m)| Error::invalid(path, m).field(format!("atmosphere.{key}")))?;
         Ok(a)
