@@ -487,8 +487,8 @@ fn s(p: &std::path::Path) -> &str {
 /// A small demo-asset shot under a grey sun and sky, with `extra` after its `[render]` keys.
 fn small_shot(dir: &std::path::Path, extra: &str) -> std::path::PathBuf {
     let lights = "[lights.sun]\ndirection = [-0.4, 0.6, 0.5]\nintensity = 3.0\n[lights.sky]\ncolor = [0.4, 0.4, 0.4]\n";
-    let shot = common::DemoShot { name: "air", lights, spp: 4, extra, ..Default::default() };
-    shot.write(dir, &common::two_robots(1001..=1001))
+    let shot = common::DemoShot { name: "air", frames: (1001, 1001), lights, spp: 4, extra, ..Default::default() };
+    shot.write(dir, &common::two_robots(1..=1))
 }
 
 fn render_cli(shot: &std::path::Path, out: &std::path::Path, extra: &[&str]) -> (i32, String) {
@@ -503,7 +503,8 @@ fn resume_rerenders_a_frame_made_in_other_air() {
     let dir = common::tempdir().unwrap();
     let out = dir.path().join("o");
     let clear = small_shot(dir.path(), "");
-    assert_eq!(render_cli(&clear, &out, &[]).0, 0);
+    let (code, text) = render_cli(&clear, &out, &[]);
+    assert_eq!(code, 0, "{text}");
     let (code, text) = render_cli(&clear, &out, &["--resume"]);
     assert!(code == 0 && text.contains("1 skipped"), "{text}");
     // Air added, then the air changed, then the same air again.
