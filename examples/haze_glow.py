@@ -6,7 +6,12 @@ no OpenEXR module needed), finds the lamps as the brightest spots of the
 clear render, and prints, per lamp, the mean luminance (Rec.709 weights) of
 a ring around it (inner and outer radius in pixels: the lamp's own pixels
 left out) in both renders and their ratio; then the same for the whole
-frame. docs/render.md, "Atmosphere" ("Demo"), has the commands.
+frame; and each ring's contrast, its mean over that of the ring around it
+(from the outer radius to twice it), in both: a halo is a contrast the
+clear render does not have; with an `atmosphere` pass in the hazy file,
+the air's glow in each ring over its median over the frame.
+docs/render.md, "Atmosphere" ("Demo"), has
+the commands.
 
     python3 examples/haze_glow.py HAZY.exr CLEAR.exr [--lamps 4] [--ring 3 12]
 """
@@ -63,9 +68,10 @@ def read_exr(path):
     return w, h, out
 
 
-def luminance(img):
+def luminance(img, layer=""):
     _, _, c = img
-    return [0.2126 * r + 0.7152 * g + 0.0722 * b for r, g, b in zip(c["R"], c["G"], c["B"])]
+    p = f"{layer}." if layer else ""
+    return [0.2126 * r + 0.7152 * g + 0.0722 * b for r, g, b in zip(c[p + "R"], c[p + "G"], c[p + "B"])]
 
 
 def main():
@@ -90,17 +96,30 @@ def main():
             lamps.append((x, y))
         if len(lamps) == a.lamps:
             break
-    print(f"{'lamp (x, y)':>14} {'hazy':>9} {'clear':>9} {'ratio':>7}")
-    for u, v in sorted(lamps):
-        ring = [
+    def ring(u, v, inner, outer):
+        return [
             y * w + x
-            for y in range(max(0, int(v - a.ring[1])), min(h, int(v + a.ring[1]) + 1))
-            for x in range(max(0, int(u - a.ring[1])), min(w, int(u + a.ring[1]) + 1))
-            if a.ring[0] ** 2 <= (x - u) ** 2 + (y - v) ** 2 <= a.ring[1] ** 2
+            for y in range(max(0, int(v - outer)), min(h, int(v + outer) + 1))
+            for x in range(max(0, int(u - outer)), min(w, int(u + outer) + 1))
+            if inner**2 <= (x - u) ** 2 + (y - v) ** 2 <= outer**2
         ]
-        mh = sum(lh[i] for i in ring) / len(ring)
-        mc = sum(lc[i] for i in ring) / len(ring)
-        print(f"{f'({u}, {v})':>14} {mh:9.4f} {mc:9.4f} {mh / mc:7.2f}")
+
+    def mean(values, pixels):
+        return sum(values[i] for i in pixels) / len(pixels)
+
+    # The glow's contrast: the ring against the ring around it, as wide again.
+    inner, outer = a.ring
+    # With an atmosphere pass: the air's glow in the ring over its median in the frame.
+    glow = luminance(hazy, "atmosphere") if "atmosphere.R" in hazy[2] else None
+    median = sorted(glow)[len(glow) // 2] if glow else 0.0
+    head = f"{'lamp (x, y)':>14} {'hazy':>9} {'clear':>9} {'ratio':>7} {'contrast hazy':>14} {'clear':>7}"
+    print(head + (f" {'air glow / median':>18}" if glow else ""))
+    for u, v in sorted(lamps):
+        near, far = ring(u, v, inner, outer), ring(u, v, outer, 2 * outer)
+        mh, mc = mean(lh, near), mean(lc, near)
+        ch, cc = mh / mean(lh, far), mc / mean(lc, far)
+        line = f"{f'({u}, {v})':>14} {mh:9.4f} {mc:9.4f} {mh / mc:7.2f} {ch:14.2f} {cc:7.2f}"
+        print(line + (f" {mean(glow, near) / median:18.2f}" if glow else ""))
     mh, mc = sum(lh) / len(lh), sum(lc) / len(lc)
     print(f"{'whole frame':>14} {mh:9.4f} {mc:9.4f} {mh / mc:7.2f}")
 
