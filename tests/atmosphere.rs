@@ -12,8 +12,8 @@ use throng::render::accel::BlasSet;
 use throng::render::atmosphere::{Atmosphere, AtmosphereMode};
 use throng::render::film::{render_frame, Film};
 use throng::render::RenderSettings;
-use throng::scene::passes::{LightPath, PassSet};
 use throng::scene::lights::{Light, LightKind, SceneLights};
+use throng::scene::passes::{LightPath, PassSet};
 use throng::scene::{vis, Camera, FrameScene, Instance, InstanceAgent, Library, Material, Mesh, Sky, Sun};
 
 const RES: u32 = 8;
@@ -117,7 +117,9 @@ fn haze_by_quadrature_is_the_path_tracers_single_scattering_of_the_sun_in_thinni
     let lib = Library::default();
     let sun =
         Sun { direction: Vec3::new(0.3, 1.0, 0.2).normalize(), angular_diameter: 0.0, irradiance: Vec3::splat(3.0) };
-    for (at, tilt) in [(Vec3::new(0.0, 2.0, 0.0), 0.0f32), (Vec3::new(0.0, 0.5, 0.0), 0.3), (Vec3::new(0.0, 4.0, 0.0), -0.2)] {
+    for (at, tilt) in
+        [(Vec3::new(0.0, 2.0, 0.0), 0.0f32), (Vec3::new(0.0, 0.5, 0.0), 0.3), (Vec3::new(0.0, 4.0, 0.0), -0.2)]
+    {
         let camera = Camera::pinhole(Affine3A::from_translation(at) * Affine3A::from_rotation_x(tilt), 1e-4);
         let scene = FrameScene { instances: vec![], camera, lights: lights(Some(sun), vec![]), motion: None };
         let full = Atmosphere { falloff: 3.0, base: 1.0, ..air(0.08, 0.9, 0.4, f32::INFINITY, AtmosphereMode::Full) };
@@ -145,6 +147,32 @@ fn a_start_distance_keeps_the_camera_rays_first_metres_clear() {
         let got = mean_red(&film);
         assert!(((got - want) / want).abs() < 1e-2, "{mode:?}: {got} vs {want}");
     }
+}
+
+#[test]
+fn forty_lamps_picked_by_the_light_tree_sum_to_their_integrals() {
+    // Past 16 point lights equiangular sampling picks by the light tree at
+    // one point of the ray part (render::lights): still unbiased, so the
+    // in-scatter is the sum of each lamp's integral.
+    let lib = Library::default();
+    let lamps: Vec<Light> = (0..40)
+        .map(|k| {
+            let at = Vec3::new(0.3 * ((k % 3) as f32 - 1.0), 0.4 + 0.1 * (k % 4) as f32, -0.5 - 0.35 * k as f32);
+            point_light(at, 2.0)
+        })
+        .collect();
+    let want: f64 = lamps
+        .iter()
+        .map(|l| {
+            let at = l.world_from_light.translation;
+            point_in_scatter(0.3, 0.8, 0.3, 2.0, (at.x * at.x + at.y * at.y).sqrt() as f64, -at.z as f64)
+        })
+        .sum();
+    let scene =
+        FrameScene { instances: vec![], camera: narrow_camera(Vec3::ZERO), lights: lights(None, lamps), motion: None };
+    let a = air(0.3, 0.8, 0.3, f32::INFINITY, AtmosphereMode::Full);
+    let got = mean_red(&render(&lib, &scene, &settings(256, 2, a)));
+    assert!(((got - want) / want).abs() < 0.02, "{got} vs the lamps' integrals {want}");
 }
 
 #[test]

@@ -95,6 +95,16 @@ impl Atmosphere {
         self.optical_depth(up, Vec3::Y, 0.0, self.top - y)
     }
 
+    /// Where on the ray's part `seg` in the air a light's in-scatter counts
+    /// most, for picking lights by a tree (render::lights): a mean free
+    /// path in (where the transmittance is 1/e), or the part's middle if
+    /// that is nearer.
+    pub(crate) fn focus(&self, origin: Vec3, dir: Vec3, (a, b): (f32, f32)) -> Vec3 {
+        let free = 1.0 / self.density_at(origin.y + dir.y * a);
+        let t = if b.is_finite() { a + free.min(0.5 * (b - a)) } else { a + free };
+        origin + dir * t
+    }
+
     /// The part of a camera ray in the air: [`Atmosphere::segment`] past
     /// the start distance, so the foreground stays clear.
     pub(crate) fn camera_segment(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<(f32, f32)> {
@@ -256,9 +266,8 @@ impl Atmosphere {
             from_sky += optical(above);
         }
         let scale = self.albedo * (taken / HAZE_STEPS as f32);
-        let sun = sun.map_or(Vec3::ZERO, |(s, irradiance)| {
-            scale * irradiance * phase_hg(dir.dot(s), self.anisotropy) * to_sun
-        });
+        let sun = sun
+            .map_or(Vec3::ZERO, |(s, irradiance)| scale * irradiance * phase_hg(dir.dot(s), self.anisotropy) * to_sun);
         (sun, scale * environment * from_sky)
     }
 }
@@ -433,7 +442,8 @@ mod tests {
         // The share of distance samples that pass the slab is the transmittance.
         let seg = a.segment(Vec3::ZERO, Vec3::Y, f32::INFINITY).unwrap();
         let n = 1 << 16;
-        let passed = (0..n).filter(|&i| a.sample_distance(Vec3::ZERO, Vec3::Y, seg, radical_inverse(i)).is_none()).count();
+        let passed =
+            (0..n).filter(|&i| a.sample_distance(Vec3::ZERO, Vec3::Y, seg, radical_inverse(i)).is_none()).count();
         assert!((passed as f32 / n as f32 - expect).abs() < 1e-3, "{passed}");
         // An infinite medium: no light crosses it, every ray scatters.
         assert_eq!(air(0.1, 1.0, 0.0).transmittance(Vec3::ZERO, Vec3::X, f32::INFINITY), 0.0);

@@ -505,11 +505,8 @@ impl<'a> Integrator<'a> {
         }
         if let Some(air) = self.air_on(st, hit.as_ref(), lamp.is_some()) {
             let end = lamp.as_ref().map_or(tmax, |l| l.t);
-            let seg = if camera {
-                air.camera_segment(st.origin, st.dir, end)
-            } else {
-                air.segment(st.origin, st.dir, end)
-            };
+            let seg =
+                if camera { air.camera_segment(st.origin, st.dir, end) } else { air.segment(st.origin, st.dir, end) };
             if let Some(seg) = seg {
                 self.add_equiangular(st, air, seg);
                 st.sampler.set_dimension(AIR_BASE + st.depth * AIR_DIMS);
@@ -947,9 +944,10 @@ impl Integrator<'_> {
         let phase = phase_hg(st.dir.dot(ls.wi), air.anisotropy);
         // Against the phase function's rays (which find sized lights only,
         // and only where a bounce follows).
-        let by_light = if ls.delta || st.depth >= self.settings.max_bounces { 1.0 } else { power_heuristic(ls.pdf, phase) };
+        let by_light =
+            if ls.delta || st.depth >= self.settings.max_bounces { 1.0 } else { power_heuristic(ls.pdf, phase) };
         // Equiangular sampling's density of this point, for the light it would pick.
-        let other = self.equiangular_pdf(st.origin, st.dir, seg, ls.source, t);
+        let other = self.equiangular_pdf(air, st.origin, st.dir, seg, ls.source, t);
         let weight = if other > 0.0 {
             // Distance sampling's density of the point times NEE's pick of the light.
             let pick = if ls.delta { ls.pdf } else { self.lights.pick_at(ls.source as usize, (p, Vec3::ZERO)) };
@@ -1009,7 +1007,8 @@ impl Integrator<'_> {
         let u_pick = st.sampler.next_1d();
         let u_t = st.sampler.next_1d();
         let u_light = st.sampler.next_2d();
-        let Some((source, pick, centre)) = self.lights.pick_point_light(st.origin, st.dir, seg, u_pick) else {
+        let focus = air.focus(st.origin, st.dir, seg);
+        let Some((source, pick, centre)) = self.lights.pick_point_light(st.origin, st.dir, seg, focus, u_pick) else {
             return;
         };
         let Some(eq) = Equiangular::new(st.origin, st.dir, centre, seg) else { return };
@@ -1036,8 +1035,9 @@ impl Integrator<'_> {
     /// The density with which [`Integrator::add_equiangular`] on the ray
     /// (`origin`, `dir`, part `seg` in the air) picks light `source` and
     /// distance `t`; 0 for a light it never picks.
-    fn equiangular_pdf(&self, origin: Vec3, dir: Vec3, seg: (f32, f32), source: u32, t: f32) -> f32 {
-        let Some((pick, centre)) = self.lights.point_light_pick(origin, dir, seg, source) else { return 0.0 };
+    fn equiangular_pdf(&self, air: &Atmosphere, origin: Vec3, dir: Vec3, seg: (f32, f32), source: u32, t: f32) -> f32 {
+        let focus = air.focus(origin, dir, seg);
+        let Some((pick, centre)) = self.lights.point_light_pick(origin, dir, seg, focus, source) else { return 0.0 };
         Equiangular::new(origin, dir, centre, seg).map_or(0.0, |eq| eq.pdf(t) * pick)
     }
 }

@@ -212,6 +212,11 @@ impl LightGroup {
 /// pick's cost does not grow with the number of lights.
 const SHADED_PICK_MAX: usize = 16;
 
+/// Up to this many point, spot and sphere lights, equiangular sampling in
+/// the air picks one by what it gives the whole ray part, light by light;
+/// past it by the light tree at one point of the part (render::atmosphere).
+const SEGMENT_PICK_MAX: usize = 16;
+
 /// The share of the group pick spread evenly over the groups that can
 /// light a shading point (the rest follows their bounds): the bounds do not
 /// see shadows, so a shadowed point still samples its sky.
@@ -880,17 +885,39 @@ impl<'a> LightSampler<'a> {
         (centre, intensity * power_luminance(light.emission) / d2 as f64)
     }
 
-    /// A point, spot or sphere light for a ray's part `seg` in the air, picked by
-    /// `u` in proportion to [`LightSampler::segment_weight`]: its source
-    /// index, the chance of the pick and its centre. Linear in the number
-    /// of point, spot and sphere lights.
+    /// Whether a ray's part in the air picks its light by the local
+    /// group's light tree ([`SEGMENT_PICK_MAX`]).
+    fn picks_by_tree(&self) -> bool {
+        self.points.len() > SEGMENT_PICK_MAX && !self.table(LightGroup::Local).tree.is_empty()
+    }
+
+    /// Whether source `index` is a point, spot or sphere light.
+    fn is_point_light(&self, index: u32) -> bool {
+        matches!(self.sources.get(index as usize), Some(Source::Local(l)) if is_equiangular(l))
+    }
+
+    /// A point, spot or sphere light for a ray's part `seg` in the air,
+    /// picked by `u`: its source index, the chance of the pick and its
+    /// centre. Up to [`SEGMENT_PICK_MAX`] of them, in proportion to
+    /// [`LightSampler::segment_weight`] (linear in their number); past
+    /// that by the local group's light tree at `focus`, a point of the part
+    /// where its in-scatter counts most (O(log n); a pick of another kind
+    /// of light is no pick).
     pub(crate) fn pick_point_light(
         &self,
         origin: Vec3,
         dir: Vec3,
         seg: (f32, f32),
+        focus: Vec3,
         u: f32,
     ) -> Option<(u32, f32, Vec3)> {
+        if self.picks_by_tree() {
+            let t = self.table(LightGroup::Local);
+            let (slot, pmf) = t.tree.sample(focus, Vec3::ZERO, u)?;
+            let source = *t.sources.get(slot as usize)?;
+            let Some(Source::Local(light)) = self.sources.get(source as usize) else { return None };
+            return (is_equiangular(light) && pmf > 0.0).then(|| (source, pmf as f32, light.position()));
+        }
         let total: f64 = self.points.iter().map(|&i| self.segment_weight(i, origin, dir, seg).1).sum();
         if !(total > 0.0 && total.is_finite()) {
             return None;
@@ -912,16 +939,23 @@ impl<'a> LightSampler<'a> {
     }
 
     /// The chance [`LightSampler::pick_point_light`] picks `source` for
-    /// the same ray part, with the light's centre; `None` for a light it never picks.
+    /// the same ray part and `focus`, with the light's centre; `None` for a
+    /// light it never picks.
     pub(crate) fn point_light_pick(
         &self,
         origin: Vec3,
         dir: Vec3,
         seg: (f32, f32),
+        focus: Vec3,
         source: u32,
     ) -> Option<(f32, Vec3)> {
-        if !self.points.contains(&source) {
+        if !self.is_point_light(source) {
             return None;
+        }
+        if self.picks_by_tree() {
+            let Some(Source::Local(light)) = self.sources.get(source as usize) else { return None };
+            let pmf = self.table(LightGroup::Local).tree.pmf(self.slot[source as usize], focus, Vec3::ZERO);
+            return (pmf > 0.0).then(|| (pmf as f32, light.position()));
         }
         let total: f64 = self.points.iter().map(|&i| self.segment_weight(i, origin, dir, seg).1).sum();
         let (centre, w) = self.segment_weight(source, origin, dir, seg);
