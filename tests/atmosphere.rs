@@ -579,3 +579,25 @@ fn acescg_renders_convert_the_airs_albedo() {
     // Unconverted it would differ by far more.
     assert!((rec - want).abs().max_element() > 0.05 * want.max_element());
 }
+
+#[test]
+fn usd_export_writes_the_air_with_its_falloff_and_start() {
+    let dir = common::tempdir().unwrap();
+    let export = |extra: &str, name: &str| -> String {
+        let shot = small_shot(dir.path(), extra);
+        let out = dir.path().join(name);
+        let (code, o, e) =
+            common::run(&["export", s(&shot), "--format", "usd", "--frames", "1001-1001", "--out", s(&out)]);
+        assert_eq!(code, 0, "{o}{e}");
+        std::fs::read_to_string(&out).unwrap()
+    };
+    let thin = export("[atmosphere]\ndensity = 0.05\nfalloff = 6.0\nbase = 1.5\nstart = 2.0\n", "thin.usda");
+    for attr in ["density = 0.05", "falloff = 6", "base = 1.5", "start = 2", "mode = \"full\""] {
+        let line = thin.lines().find(|l| l.contains(&format!("throng:atmosphere:{}", attr.split(' ').next().unwrap())));
+        assert!(line.is_some_and(|l| l.contains(attr)), "{attr}: {line:?}");
+    }
+    // Homogeneous air from the camera on writes neither; clear air no scope at all.
+    let flat = export("[atmosphere]\ndensity = 0.05\n", "flat.usda");
+    assert!(flat.contains("throng:atmosphere:density") && !flat.contains("falloff") && !flat.contains(":start"));
+    assert!(!export("", "clear.usda").contains("Atmosphere"));
+}
