@@ -349,6 +349,19 @@ impl Split {
         self.transmittance = 0.0;
     }
 
+    /// Adds another sample's split to this sum of a pixel's samples
+    /// (position aside: a pixel takes its nearest sample's).
+    pub(crate) fn add_sample(&mut self, sample: &Split) {
+        for (sum, c) in self.paths.iter_mut().zip(&sample.paths) {
+            *sum += *c;
+        }
+        for (sum, c) in self.groups.iter_mut().zip(&sample.groups) {
+            *sum += *c;
+        }
+        self.shadow += sample.shadow;
+        self.transmittance += sample.transmittance;
+    }
+
     /// Adds contribution `c` of light group `group` along path `path`.
     #[inline]
     pub(crate) fn add(&mut self, c: Vec3, path: LightPath, group: u16) {
