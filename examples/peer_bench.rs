@@ -166,7 +166,7 @@ fn parse_args() -> Result<Args, String> {
                     albedo: Vec3::splat(num(&mut it, &arg)?),
                     anisotropy: num(&mut it, &arg)?,
                     top: num(&mut it, &arg)?,
-                    mode: Default::default(),
+                    ..Default::default()
                 };
                 air.check().map_err(|(key, m)| format!("--atmosphere ({key}): {m}"))?;
                 a.atmosphere = Some(air);

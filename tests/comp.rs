@@ -477,9 +477,15 @@ fn hazy_stack_matches_full_render_within_noise() {
         albedo: glam::Vec3::splat(0.9),
         anisotropy: 0.3,
         top: 3.0,
-        mode: Default::default(),
+        ..Default::default()
     };
-    let crowd = ShotCrowd::load(Path::new(SHOT)).unwrap().with_shot(|shot| shot.atmosphere = Some(air)).unwrap();
+    let crowd = ShotCrowd::load(Path::new(SHOT))
+        .unwrap()
+        .with_shot(|shot| {
+            shot.atmosphere = Some(air);
+            shot.render.passes = vec!["atmosphere".into(), "atmosphere_transmittance".into()];
+        })
+        .unwrap();
     let manifest = throng::layers::build_layers(&crowd, &layers_args()).unwrap();
     render(&crowd, &manifest, &["set", "crowd2", "crowd1", "crowd0", "full"], &dir.join("a"));
     let seed = crowd.shot().seed;
@@ -505,6 +511,28 @@ fn hazy_stack_matches_full_render_within_noise() {
             assert!((m / se).abs() < K_BLOCK, "haze: interior of block {b} differs by {:.2} sigma", m / se);
         }
     }
+    // The air's passes stack too (docs/compositing.md, "Removing and
+    // regrading the air"): the comp's transmittance and glow are the full
+    // render's, in the mean, and so is what removing the air leaves.
+    let mean_pass = |f: &Film, name: &str| {
+        let p = f.passes.iter().find(|p| p.name == name).unwrap_or_else(|| panic!("no {name}"));
+        p.data.iter().map(|v| v[0] as f64).sum::<f64>() / p.data.len() as f64
+    };
+    let removed = |f: &Film| {
+        let [t, glow] =
+            ["atmosphere_transmittance", "atmosphere"].map(|n| &f.passes.iter().find(|p| p.name == n).unwrap().data);
+        let behind = f.rgba.iter().zip(glow).zip(t).map(|((p, g), t)| (p[0] - g[0]) as f64 / (t[0] as f64).max(1e-3));
+        behind.sum::<f64>() / f.rgba.len() as f64
+    };
+    for name in ["atmosphere_transmittance", "atmosphere"] {
+        let (s, f, b) = (mean_pass(&stack, name), mean_pass(&full_a, name), mean_pass(&full_b, name));
+        assert!(
+            s > 0.0 && (s - f).abs() < 0.01 * f + 3.0 * (f - b).abs(),
+            "{name}: stack {s}, full {f} (other seed {b})"
+        );
+    }
+    let (s, f, b) = (removed(&stack), removed(&full_a), removed(&full_b));
+    assert!((s - f).abs() < 0.01 * f + 3.0 * (f - b).abs(), "haze removed: stack {s}, full {f} (other seed {b})");
     // The air is really there: the hazy full render is not the clear one.
     let clear = read(&renders().a, "full");
     let clear_level = all.iter().map(|&i| lum(&clear.rgba[i])).sum::<f64>() / all.len() as f64;

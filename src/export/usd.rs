@@ -1303,6 +1303,13 @@ fn write_atmosphere(l: &mut LayerBuilder, air: &Atmosphere) {
         AtmosphereMode::Haze => "haze",
     };
     l.attr(p, "throng:atmosphere:mode", "token", Value::Token(mode.into()));
+    if air.falloff.is_finite() {
+        l.attr(p, "throng:atmosphere:falloff", "float", Value::Float(air.falloff));
+        l.attr(p, "throng:atmosphere:base", "float", Value::Float(air.base));
+    }
+    if air.start > 0.0 {
+        l.attr(p, "throng:atmosphere:start", "float", Value::Float(air.start));
+    }
 }
 
 #[cfg(test)]

@@ -284,7 +284,8 @@ impl AgentTraces {
 /// The three-channel passes a render of `crowd` writes per pixel with its
 /// shot's `render.passes` ([`pass_count_of`]).
 pub fn pass_count<C>(crowd: &ShotCrowd<C>) -> Result<u64> {
-    pass_count_of(crowd, &PassSet::parse(&crowd.shot().render.passes, "render.passes")?)
+    let set = PassSet::parse(&crowd.shot().render.passes, "render.passes")?;
+    pass_count_of(crowd, &set.in_air(crowd.shot().hazy()))
 }
 
 /// The three-channel passes a render of `crowd` writing `set` (the shot's

@@ -13,6 +13,13 @@
 //! light ([`Equiangular`], Kulla and Fajardo 2012, "Importance Sampling
 //! Techniques for Path Tracing in Participating Media") and the
 //! Henyey-Greenstein phase function ([`phase_hg`], [`sample_hg`]).
+//!
+//! With a height falloff the density is constant up to `base` and
+//! exponential in height above it, so along any ray it is at most two
+//! pieces, each constant or exponential in the distance: the optical depth
+//! is a closed form per piece and distance sampling inverts it exactly
+//! (no majorant, no null collisions). A start distance clips camera rays'
+//! part in the air ([`Atmosphere::camera_segment`]).
 
 use std::f32::consts::PI;
 
@@ -28,9 +35,92 @@ impl Atmosphere {
         self.density > 0.0
     }
 
-    /// Scattering coefficient per channel, 1/m.
+    /// Scattering coefficient per channel where the air is densest (at
+    /// and below `base`), 1/m.
     pub(crate) fn scattering(&self) -> Vec3 {
         self.albedo * self.density
+    }
+
+    /// Whether the density falls with height.
+    fn thins(&self) -> bool {
+        self.falloff.is_finite()
+    }
+
+    /// Extinction at world height `y`, 1/m.
+    pub(crate) fn density_at(&self, y: f32) -> f32 {
+        if self.thins() && y > self.base {
+            self.density * (-(y - self.base) / self.falloff).exp()
+        } else {
+            self.density
+        }
+    }
+
+    /// Scattering coefficient per channel at world point `p`, 1/m.
+    pub(crate) fn scattering_at(&self, p: Vec3) -> Vec3 {
+        self.albedo * self.density_at(p.y)
+    }
+
+    /// The ray's part `[a, b)` in the air cut into the stretches where the
+    /// density is one closed form: below `base` and above it.
+    fn pieces(&self, origin: Vec3, dir: Vec3, a: f32, b: f32) -> impl Iterator<Item = Piece> + '_ {
+        let cross = (self.base - origin.y) / dir.y; // NaN or infinite for a level ray: no split
+        let ranges = if cross > a && cross < b { [(a, cross), (cross, b)] } else { [(a, b), (b, b)] };
+        let k = dir.y / self.falloff;
+        ranges.into_iter().filter(|(p, q)| p < q).map(move |(p, q)| {
+            let mid = if q.is_finite() { 0.5 * (p + q) } else { p + 1.0 };
+            if origin.y + dir.y * mid > self.base {
+                // At its start (the crossing rounded onto the base at most).
+                let y = (origin.y + dir.y * p).max(self.base);
+                Piece { a: p, b: q, rho: self.density_at(y), k }
+            } else {
+                Piece { a: p, b: q, rho: self.density, k: 0.0 }
+            }
+        })
+    }
+
+    /// The optical depth of the ray `origin + t dir` over `a <= t < b`, all in the air.
+    fn optical_depth(&self, origin: Vec3, dir: Vec3, a: f32, b: f32) -> f32 {
+        if !self.thins() {
+            return self.density * (b - a);
+        }
+        self.pieces(origin, dir, a, b).map(|p| p.depth()).sum()
+    }
+
+    /// The optical depth straight up from height `y` to the top of the air.
+    fn depth_above(&self, y: f32) -> f32 {
+        if y >= self.top {
+            return 0.0;
+        }
+        let up = Vec3::new(0.0, y, 0.0);
+        self.optical_depth(up, Vec3::Y, 0.0, self.top - y)
+    }
+
+    /// Where on the ray's part `seg` in the air a light's in-scatter counts
+    /// most, for picking lights by a tree (render::lights): a mean free
+    /// path in (where the transmittance is 1/e), or the part's middle if
+    /// that is nearer.
+    pub(crate) fn focus(&self, origin: Vec3, dir: Vec3, (a, b): (f32, f32)) -> Vec3 {
+        let free = 1.0 / self.density_at(origin.y + dir.y * a);
+        let t = if b.is_finite() { a + free.min(0.5 * (b - a)) } else { a + free };
+        origin + dir * t
+    }
+
+    /// The part of a camera ray in the air: [`Atmosphere::segment`] past
+    /// the start distance, so the foreground stays clear.
+    pub(crate) fn camera_segment(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<(f32, f32)> {
+        let (a, b) = self.segment(origin, dir, tmax)?;
+        let a = a.max(self.start);
+        (a < b).then_some((a, b))
+    }
+
+    /// [`Atmosphere::transmittance`] of a camera ray (past the start distance).
+    pub(crate) fn camera_transmittance(&self, origin: Vec3, dir: Vec3, tmax: f32) -> f32 {
+        self.camera_segment(origin, dir, tmax).map_or(1.0, |seg| self.transmittance_over(origin, dir, seg))
+    }
+
+    /// The transmittance of the ray `origin + t dir` over its part `seg` in the air.
+    pub(crate) fn transmittance_over(&self, origin: Vec3, dir: Vec3, (a, b): (f32, f32)) -> f32 {
+        optical(self.optical_depth(origin, dir, a, b))
     }
 
     /// The part `[a, b)` of the ray `origin + t dir`, `0 <= t < tmax`,
@@ -55,26 +145,43 @@ impl Atmosphere {
     /// `0 <= t < tmax` (Beer-Lambert over its part in the air).
     pub(crate) fn transmittance(&self, origin: Vec3, dir: Vec3, tmax: f32) -> f32 {
         match self.segment(origin, dir, tmax) {
-            Some((a, b)) => optical(self.density * (b - a)),
+            Some(seg) => self.transmittance_over(origin, dir, seg),
             None => 1.0,
         }
     }
 
-    /// Distance sampling over the ray's part `[a, b)` in the air: the
-    /// distance of the first scattering or absorption event, drawn with its
-    /// probability density `density * exp(-density (t - a))`, or `None`
-    /// (the ray passes, with probability the transmittance). Grey
-    /// extinction makes the weight of either outcome exact: the albedo for
-    /// an event, 1 for passing.
-    pub(crate) fn sample_distance(&self, (a, b): (f32, f32), u: f32) -> Option<f32> {
-        // -ln(1 - u) from 1 - u in (0, 1]: finite for every u < 1.
-        let t = a - (1.0 - u).max(f32::MIN_POSITIVE).ln() / self.density;
-        (t < b).then_some(t)
+    /// Distance sampling over the part `[a, b)` in the air of the ray
+    /// `origin + t dir`: the distance of the first scattering or absorption
+    /// event, drawn with its probability density `sigma(t) exp(-tau(a, t))`
+    /// (sigma the density there, tau the optical depth), or `None` (the ray
+    /// passes, with probability the transmittance). Grey extinction makes
+    /// the weight of either outcome exact: the albedo for an event, 1 for
+    /// passing.
+    pub(crate) fn sample_distance(&self, origin: Vec3, dir: Vec3, (a, b): (f32, f32), u: f32) -> Option<f32> {
+        if !self.thins() {
+            // -ln(1 - u) from 1 - u in (0, 1]: finite for every u < 1.
+            let t = a - (1.0 - u).max(f32::MIN_POSITIVE).ln() / self.density;
+            return (t < b).then_some(t);
+        }
+        // The optical depth the event comes at, found piece by piece.
+        let mut left = -(1.0 - u).max(f32::MIN_POSITIVE).ln();
+        for piece in self.pieces(origin, dir, a, b) {
+            let depth = piece.depth();
+            if left < depth {
+                let t = piece.invert(left);
+                return (t < b).then_some(t);
+            }
+            left -= depth;
+        }
+        None
     }
 
     /// The density [`Atmosphere::sample_distance`] draws `t` in `[a, b)` with.
-    pub(crate) fn distance_pdf(&self, (a, _): (f32, f32), t: f32) -> f32 {
-        self.density * optical(self.density * (t - a))
+    pub(crate) fn distance_pdf(&self, origin: Vec3, dir: Vec3, (a, _): (f32, f32), t: f32) -> f32 {
+        if !self.thins() {
+            return self.density * optical(self.density * (t - a));
+        }
+        self.density_at(origin.y + dir.y * t) * optical(self.optical_depth(origin, dir, a, t))
     }
 }
 
@@ -94,6 +201,9 @@ impl Atmosphere {
         sun: Option<(Vec3, Vec3)>,
         environment: Vec3,
     ) -> (Vec3, Vec3) {
+        if self.thins() {
+            return self.haze_by_quadrature(origin, dir, (a, b), sun, environment);
+        }
         // Light from above arriving at a point of height y: exp(-density
         // (top - y) / cos), cos the sine of its elevation. Along the ray
         // that is exp(-density h(a) / cos) exp(density u dir.y / cos) at
@@ -121,6 +231,89 @@ impl Atmosphere {
         // The environment: the phase function integrates to 1 over the sphere.
         let environment = sigma_s * environment * from_above(1.0);
         (sun, environment)
+    }
+}
+
+/// Points of the quadrature of haze only's in-scatter in air that thins
+/// with height: the integrand is smooth in the transmittance.
+const HAZE_STEPS: u32 = 32;
+
+impl Atmosphere {
+    /// [`Atmosphere::haze_in_scatter`] where the air thins with height: no
+    /// closed form, so a midpoint rule in the share of light the air has
+    /// taken out along the ray, `u = 1 - T(a, t)`: sigma_s(t) T(a, t) dt =
+    /// albedo du, so the in-scatter is the albedo times the mean over `u`
+    /// of what reaches the point at `t(u)` (distance sampling's inversion),
+    /// times the share taken out over the whole part. Finite for any part,
+    /// infinite ones included.
+    fn haze_by_quadrature(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        seg: (f32, f32),
+        sun: Option<(Vec3, Vec3)>,
+        environment: Vec3,
+    ) -> (Vec3, Vec3) {
+        let taken = 1.0 - self.transmittance_over(origin, dir, seg);
+        let (mut to_sun, mut from_sky) = (0.0f32, 0.0f32);
+        for i in 0..HAZE_STEPS {
+            let u = (i as f32 + 0.5) / HAZE_STEPS as f32 * taken;
+            let Some(t) = self.sample_distance(origin, dir, seg, u) else { continue };
+            let above = self.depth_above(origin.y + dir.y * t);
+            if let Some((s, _)) = sun.filter(|(s, _)| s.y > 0.0) {
+                to_sun += optical(above / s.y);
+            }
+            from_sky += optical(above);
+        }
+        let scale = self.albedo * (taken / HAZE_STEPS as f32);
+        let sun = sun
+            .map_or(Vec3::ZERO, |(s, irradiance)| scale * irradiance * phase_hg(dir.dot(s), self.anisotropy) * to_sun);
+        (sun, scale * environment * from_sky)
+    }
+}
+
+/// A stretch `[a, b)` of a ray where the density is one closed form:
+/// `rho exp(-k (t - a))` (`k` = 0: constant; `k` = dir.y / falloff above
+/// the base, where the density falls with height).
+#[derive(Clone, Copy, Debug)]
+struct Piece {
+    a: f32,
+    b: f32,
+    rho: f32,
+    k: f32,
+}
+
+impl Piece {
+    /// Its optical depth (infinite for an endless stretch that does not thin).
+    fn depth(&self) -> f32 {
+        let len = self.b - self.a;
+        if self.k == 0.0 {
+            return self.rho * len;
+        }
+        if !len.is_finite() {
+            return if self.k > 0.0 { self.rho / self.k } else { f32::INFINITY };
+        }
+        let x = self.k * len;
+        if x.abs() < 1e-4 {
+            self.rho * len * (1.0 - 0.5 * x)
+        } else {
+            -self.rho * (-x).exp_m1() / self.k
+        }
+    }
+
+    /// Where along the ray the optical depth from `a` reaches `tau`
+    /// (less than [`Piece::depth`]).
+    fn invert(&self, tau: f32) -> f32 {
+        if self.k == 0.0 {
+            return self.a + tau / self.rho;
+        }
+        // rho (1 - e^(-k s)) / k = tau.
+        let x = self.k * tau / self.rho;
+        if x.abs() < 1e-4 {
+            self.a + tau / self.rho * (1.0 + 0.5 * x)
+        } else {
+            self.a - (-x).ln_1p() / self.k
+        }
     }
 }
 
@@ -224,13 +417,7 @@ mod tests {
     use crate::render::sampling::power_heuristic;
 
     fn air(density: f32, albedo: f32, g: f32) -> Atmosphere {
-        Atmosphere {
-            density,
-            albedo: Vec3::splat(albedo),
-            anisotropy: g,
-            top: f32::INFINITY,
-            mode: AtmosphereMode::Full,
-        }
+        Atmosphere { density, albedo: Vec3::splat(albedo), anisotropy: g, ..Default::default() }
     }
 
     /// A base-2 van der Corput sequence, for deterministic quadrature.
@@ -255,7 +442,8 @@ mod tests {
         // The share of distance samples that pass the slab is the transmittance.
         let seg = a.segment(Vec3::ZERO, Vec3::Y, f32::INFINITY).unwrap();
         let n = 1 << 16;
-        let passed = (0..n).filter(|&i| a.sample_distance(seg, radical_inverse(i)).is_none()).count();
+        let passed =
+            (0..n).filter(|&i| a.sample_distance(Vec3::ZERO, Vec3::Y, seg, radical_inverse(i)).is_none()).count();
         assert!((passed as f32 / n as f32 - expect).abs() < 1e-3, "{passed}");
         // An infinite medium: no light crosses it, every ray scatters.
         assert_eq!(air(0.1, 1.0, 0.0).transmittance(Vec3::ZERO, Vec3::X, f32::INFINITY), 0.0);
@@ -331,12 +519,12 @@ mod tests {
         for i in 0..n {
             let u = (i as f32 + 0.5) / n as f32;
             let te = eq.sample(u);
-            let (pe, pd) = (eq.pdf(te), a.distance_pdf(seg, te));
+            let (pe, pd) = (eq.pdf(te), a.distance_pdf(origin, dir, seg, te));
             equi += (f(te) / pe) as f64;
             mis += (f(te) / pe * power_heuristic(pe, pd)) as f64;
             // Distance sampling's event weight is the albedo; f / pdf the same thing.
-            if let Some(td) = a.sample_distance(seg, radical_inverse(i)) {
-                let (pe, pd) = (eq.pdf(td), a.distance_pdf(seg, td));
+            if let Some(td) = a.sample_distance(origin, dir, seg, radical_inverse(i)) {
+                let (pe, pd) = (eq.pdf(td), a.distance_pdf(origin, dir, seg, td));
                 dist += (f(td) / pd) as f64;
                 mis += (f(td) / pd * power_heuristic(pd, pe)) as f64;
             }
@@ -358,6 +546,110 @@ mod tests {
         }
     }
 
+    /// The optical depth of a ray from `origin` along `dir` up to `tmax`,
+    /// by a fine midpoint rule over the density, in f64.
+    fn depth_by_quadrature(a: &Atmosphere, origin: Vec3, dir: Vec3, tmax: f32) -> f64 {
+        let n = 200_000;
+        let step = tmax as f64 / n as f64;
+        (0..n)
+            .map(|i| {
+                let t = (i as f64 + 0.5) * step;
+                let y = origin.y as f64 + dir.y as f64 * t;
+                if y >= a.top as f64 {
+                    0.0
+                } else if y > a.base as f64 {
+                    a.density as f64 * (-(y - a.base as f64) / a.falloff as f64).exp() * step
+                } else {
+                    a.density as f64 * step
+                }
+            })
+            .sum()
+    }
+
+    fn thinning() -> Atmosphere {
+        Atmosphere { falloff: 2.5, base: 1.0, top: 9.0, ..air(0.4, 0.8, 0.3) }
+    }
+
+    /// Rays below, across and above the base, up, down, level and from above the top.
+    fn rays() -> Vec<(Vec3, Vec3, f32)> {
+        let slant = |x: f32, y: f32| Vec3::new(x, y, 0.3).normalize();
+        vec![
+            (Vec3::ZERO, Vec3::Y, 12.0),
+            (Vec3::new(0.0, 0.5, 0.0), slant(1.0, 0.4), 15.0),
+            (Vec3::new(0.0, 7.0, 0.0), slant(1.0, -0.5), 12.0),
+            (Vec3::new(0.0, 3.0, 0.0), Vec3::X, 20.0),
+            (Vec3::new(0.0, 0.2, 0.0), Vec3::X, 20.0),
+            (Vec3::new(0.0, 12.0, 0.0), slant(0.2, -1.0), 11.0),
+            (Vec3::new(0.0, 2.0, 0.0), slant(1.0, 1e-5), 30.0),
+        ]
+    }
+
+    #[test]
+    fn transmittance_through_a_falloff_is_the_integral_of_its_density() {
+        let a = thinning();
+        for (origin, dir, tmax) in rays() {
+            let want = (-depth_by_quadrature(&a, origin, dir, tmax)).exp();
+            let got = a.transmittance(origin, dir, tmax) as f64;
+            assert!((got - want).abs() < 2e-5 + 1e-4 * want, "{origin} {dir}: {got} vs {want}");
+        }
+        // Endless upwards with no top: a finite depth, so the sun gets through.
+        let open = Atmosphere { top: f32::INFINITY, ..a };
+        let endless = open.transmittance(Vec3::ZERO, Vec3::Y, f32::INFINITY) as f64;
+        let want = (-(0.4f64 * 1.0 + 0.4 * 2.5)).exp();
+        assert!((endless - want).abs() < 1e-5, "{endless} vs {want}");
+        // Homogeneous air is the falloff's limit.
+        let far = Atmosphere { falloff: 1e7, ..a };
+        let (o, d) = (Vec3::new(0.0, 0.5, 0.0), Vec3::new(0.6, 0.8, 0.0));
+        let flat = Atmosphere { falloff: f32::INFINITY, ..a };
+        assert!((far.transmittance(o, d, 6.0) - flat.transmittance(o, d, 6.0)).abs() < 1e-5);
+    }
+
+    #[test]
+    fn distance_sampling_through_a_falloff_inverts_its_depth() {
+        let a = thinning();
+        for (origin, dir, tmax) in rays() {
+            let Some(seg) = a.segment(origin, dir, tmax) else { continue };
+            let t_all = a.transmittance_over(origin, dir, seg);
+            let n = 4096;
+            let mut passed = 0;
+            for i in 0..n {
+                let u = (i as f32 + 0.5) / n as f32;
+                match a.sample_distance(origin, dir, seg, u) {
+                    Some(t) => {
+                        // The event comes where the optical depth is -ln(1 - u).
+                        let depth = -(a.transmittance_over(origin, dir, (seg.0, t)) as f64).ln();
+                        let want = -(1.0 - u as f64).ln();
+                        assert!((depth - want).abs() < 1e-4 * want.max(1.0), "{dir} u {u}: {depth} vs {want}");
+                    }
+                    None => passed += 1,
+                }
+            }
+            assert!((passed as f32 / n as f32 - t_all).abs() < 2.0 / n as f32, "{dir}: {passed} vs {t_all}");
+            // Its density integrates to the share that does not pass.
+            let m = 100_000;
+            let step = (seg.1 - seg.0) / m as f32;
+            let total: f64 = (0..m)
+                .map(|i| a.distance_pdf(origin, dir, seg, seg.0 + (i as f32 + 0.5) * step) as f64 * step as f64)
+                .sum();
+            assert!((total - (1.0 - t_all as f64)).abs() < 1e-3, "{dir}: {total} vs {}", 1.0 - t_all);
+        }
+    }
+
+    #[test]
+    fn a_start_distance_clears_the_camera_rays_foreground_alone() {
+        // A slab 5 m deep, looking along it; the air starts 2 m out.
+        let a = Atmosphere { top: 5.0, start: 2.0, ..air(0.3, 0.8, 0.0) };
+        let (o, d) = (Vec3::new(0.0, 1.0, 0.0), Vec3::X);
+        assert!((a.camera_transmittance(o, d, 7.0) - (-0.3f32 * 5.0).exp()).abs() < 1e-6);
+        assert_eq!(a.camera_segment(o, d, 7.0), Some((2.0, 7.0)));
+        assert_eq!(a.camera_transmittance(o, d, 1.5), 1.0);
+        // Looking down from above the slab: the start lies above it, no change.
+        let down = Vec3::new(0.0, 9.0, 0.0);
+        assert_eq!(a.camera_segment(down, -Vec3::Y, 9.0), Some((4.0, 9.0)));
+        // Other rays see all of it.
+        assert!((a.transmittance(o, d, 7.0) - (-0.3f32 * 7.0).exp()).abs() < 1e-6);
+    }
+
     #[test]
     fn bad_values_name_their_key() {
         let bad = |f: &dyn Fn(&mut Atmosphere)| {
@@ -373,6 +665,12 @@ mod tests {
         assert_eq!(bad(&|a| a.albedo = Vec3::new(0.5, 1.1, 0.5)), "color");
         assert_eq!(bad(&|a| a.albedo = Vec3::new(0.5, -0.1, 0.5)), "color");
         assert_eq!(bad(&|a| a.top = f32::NAN), "height");
+        assert_eq!(bad(&|a| a.falloff = 0.0), "falloff");
+        assert_eq!(bad(&|a| a.falloff = -2.0), "falloff");
+        assert_eq!(bad(&|a| a.falloff = f32::NAN), "falloff");
+        assert_eq!(bad(&|a| a.base = f32::INFINITY), "base");
+        assert_eq!(bad(&|a| a.start = -1.0), "start");
+        assert_eq!(bad(&|a| a.start = f32::INFINITY), "start");
         assert!(air(0.0, 0.0, 0.99).check().is_ok());
     }
 }

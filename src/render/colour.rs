@@ -20,6 +20,7 @@ use std::sync::Arc;
 use glam::{Mat3, Vec3};
 
 use crate::casting::ShotCrowd;
+use crate::scene::atmosphere::Atmosphere;
 use crate::scene::lights::Dome;
 pub(crate) use crate::scene::{Acescg, Rec709};
 use crate::scene::{FrameScene, Material, Texture};
@@ -65,6 +66,13 @@ pub(crate) fn input(space: Colourspace, c: Vec3) -> Vec3 {
         Colourspace::Rec709 => c,
         Colourspace::Acescg => rec709_to_acescg(c),
     }
+}
+
+/// The shot's air in the working space: its albedo is an input colour. A
+/// Rec.709 albedo in 0..1 stays in 0..1 (each row of the matrix is
+/// non-negative and sums to 1); the clamp only keeps f32 rounding inside.
+pub(crate) fn atmosphere(air: Atmosphere, space: Colourspace) -> Atmosphere {
+    Atmosphere { albedo: input(space, air.albedo).clamp(Vec3::ZERO, Vec3::ONE), ..air }
 }
 
 /// A working-space colour in linear Rec.709, for display (PNG previews).
@@ -224,6 +232,25 @@ pub fn scene_lights_once(scene: &mut FrameScene, space: Colourspace, converted: 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_airs_albedo_is_converted_and_stays_an_albedo() {
+        let air = Atmosphere {
+            density: 0.1,
+            albedo: Vec3::new(0.9, 0.5, 0.2),
+            anisotropy: 0.3,
+            top: 5.0,
+            ..Default::default()
+        };
+        assert_eq!(atmosphere(air, Colourspace::Rec709), air);
+        let aces = atmosphere(air, Colourspace::Acescg);
+        assert!((aces.albedo - rec709_to_acescg(air.albedo)).abs().max_element() < 1e-6);
+        assert_eq!((aces.density, aces.anisotropy, aces.top), (0.1, 0.3, 5.0));
+        for c in [Vec3::X, Vec3::Y, Vec3::Z, Vec3::ONE, Vec3::ZERO] {
+            let a = atmosphere(Atmosphere { albedo: c, ..air }, Colourspace::Acescg);
+            assert!(a.check().is_ok(), "{c} -> {}", a.albedo);
+        }
+    }
 
     #[test]
     fn the_matrices_are_inverses_and_keep_neutrals() {

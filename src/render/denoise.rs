@@ -13,8 +13,9 @@
 //!   light-group workflows define it: regrading a group in comp is then the
 //!   same as regrading it here); without them, the beauty denoised on its own;
 //! - the noisy beauty, kept as the pass [`NOISY`] (`noisy.R/G/B`);
-//! - alpha, depth, ids, normals, albedo, motion, Cryptomatte and `P`
-//!   untouched: they are not light, and a denoised id or depth means nothing.
+//! - alpha, depth, ids, normals, albedo, motion, Cryptomatte, `P` and the
+//!   air's transmittance untouched: they are not light, and a denoised id or
+//!   depth means nothing.
 //!
 //! Crowd layers are premultiplied RGBA with holdouts: wherever a pixel has
 //! no coverage (alpha 0: empty, or held out by a nearer layer) every
@@ -140,9 +141,9 @@ impl Denoiser {
 }
 
 /// A pass of light (the light paths, light groups and `shadow`): denoised;
-/// `P` is a position, not light.
+/// `P` is a position and the transmittance a fraction, not light.
 fn is_light(pass: &Pass) -> bool {
-    pass.channels == ["R", "G", "B"] && pass.name != NOISY
+    pass.channels == ["R", "G", "B"] && pass.name != NOISY && pass.name != crate::scene::passes::TRANSMITTANCE
 }
 
 /// A denoised value as a film holds it: finite and not negative.

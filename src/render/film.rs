@@ -33,7 +33,8 @@
 //!   the mean over the samples the pixel took.
 //! - `passes`: the light-path passes and light groups asked for (means over
 //!   all samples, like RGB, from the same samples: scene::passes), the
-//!   shadow pass (set surfaces' direct light the crowd's shadows took), then the
+//!   shadow pass (set surfaces' direct light the crowd's shadows took), the
+//!   camera rays' transmittance through the air (a mean like RGB), then the
 //!   world position `P` of the nearest sample's first hit (never filtered,
 //!   like `z`; zero where it missed).
 
@@ -50,7 +51,7 @@ use super::integrator::{CameraBatch, Integrator, RayCounts, SampleResult, Tally}
 use super::wide::PACKET;
 use super::RenderSettings;
 use crate::error::{Error, Result};
-use crate::scene::passes::{LightGroups, LightPath, PassSet, Split};
+use crate::scene::passes::{LightGroups, PassSet, Split};
 use crate::scene::{FrameScene, Library};
 
 /// Tile edge in pixels: small enough to balance load, large enough to keep a
@@ -202,6 +203,9 @@ impl Pass {
         if set.shadow {
             names.push((crate::scene::passes::SHADOW.into(), RGB));
         }
+        if set.transmittance {
+            names.push((crate::scene::passes::TRANSMITTANCE.into(), RGB));
+        }
         if set.position {
             names.push(("P".into(), ["X", "Y", "Z"]));
         }
@@ -288,6 +292,33 @@ struct PassOut<'p> {
     values: &'p mut [[f32; 3]],
 }
 
+/// A pixel's passes of `set` into `values` (one triple each, in file
+/// order): the means of its samples' `sums` (`inv` = 1 / samples), and the
+/// nearest sample's `position`.
+fn write_passes(set: &PassSet, sums: &Split, inv: f32, position: Vec3, values: &mut [[f32; 3]]) {
+    let mut out = values.iter_mut();
+    let mut put = |v: [f32; 3]| {
+        if let Some(slot) = out.next() {
+            *slot = v;
+        }
+    };
+    for path in &set.light_paths {
+        put((sums.paths[*path as usize] * inv).to_array());
+    }
+    if set.light_groups {
+        sums.groups.iter().for_each(|g| put((*g * inv).to_array()));
+    }
+    if set.shadow {
+        put((sums.shadow * inv).to_array());
+    }
+    if set.transmittance {
+        put([sums.transmittance * inv; 3]);
+    }
+    if set.position {
+        put(position.to_array());
+    }
+}
+
 #[allow(clippy::too_many_arguments, reason = "each output buffer is the caller's, reused from pixel to pixel")]
 fn render_pixel(
     integrator: &Integrator,
@@ -308,9 +339,7 @@ fn render_pixel(
     let mut nearest = (f32::INFINITY, SampleResult { z: f32::INFINITY, ..Default::default() });
     let mut acc: [RankAccumulator; 3] = Default::default();
     // Samples summed in index order: the float result is independent of threading.
-    let mut sums = [Vec3::ZERO; LightPath::ALL.len()];
-    let mut group_sums = vec![Vec3::ZERO; passes.as_ref().map_or(0, |p| p.split.groups.len())];
-    let mut shadow = Vec3::ZERO;
+    let mut sums = Split::new(passes.as_ref().map_or(0, |p| p.split.groups.len()));
     let mut estimate = ErrorEstimate::default();
     let mut spp = 0;
     for s in 0..count.max {
@@ -327,13 +356,7 @@ fn render_pixel(
         if let Some(p) = &passes {
             // A sample the beauty drops (not finite) the passes drop too.
             if r.rgb.is_finite() {
-                for (sum, c) in sums.iter_mut().zip(&p.split.paths) {
-                    *sum += *c;
-                }
-                for (sum, c) in group_sums.iter_mut().zip(&p.split.groups) {
-                    *sum += *c;
-                }
-                shadow += p.split.shadow;
+                sums.add_sample(p.split);
             }
         }
         if let Some(names) = crypto {
@@ -363,29 +386,7 @@ fn render_pixel(
     }
     let inv = 1.0 / spp as f32;
     if let Some(p) = passes {
-        let mut out = p.values.iter_mut();
-        for path in &p.set.light_paths {
-            if let Some(v) = out.next() {
-                *v = (sums[*path as usize] * inv).to_array();
-            }
-        }
-        if p.set.light_groups {
-            for g in &group_sums {
-                if let Some(v) = out.next() {
-                    *v = (*g * inv).to_array();
-                }
-            }
-        }
-        if p.set.shadow {
-            if let Some(v) = out.next() {
-                *v = (shadow * inv).to_array();
-            }
-        }
-        if p.set.position {
-            if let Some(v) = out.next() {
-                *v = nearest.1.position.to_array();
-            }
-        }
+        write_passes(p.set, &sums, inv, nearest.1.position, p.values);
     }
     let mut ranked = [[[0.0f32; 2]; RANKS]; 3];
     if crypto.is_some() {

@@ -33,10 +33,11 @@ const DIMS_PER_BOUNCE: u32 = 8;
 
 /// Where the air's sampler dimensions start (render::atmosphere), far past
 /// the surfaces', so a shot without air draws the numbers it always did:
-/// per vertex, distance 1, equiangular light pick 1 and distance 1.
+/// per vertex, distance 1, equiangular light pick 1, distance 1 and a
+/// point on a sphere light 2.
 const AIR_BASE: u32 = 1 << 20;
 /// Sampler dimensions the air uses per vertex.
-const AIR_DIMS: u32 = 4;
+const AIR_DIMS: u32 = 5;
 
 /// What camera rays see: camera-visible instances and holdouts.
 const CAMERA_MASK: u8 = vis::CAMERA | vis::HOLDOUT;
@@ -253,6 +254,9 @@ struct PathState<'s> {
     /// reflection): their tint so far. OIDN's albedo guide is that of the
     /// first non-delta hit seen through them, times this.
     albedo_tint: Option<Vec3>,
+    /// The camera ray's transmittance through the air up to what it shows
+    /// (the transmittance pass; 1 in clear air).
+    camera_transmittance: f32,
     sampler: &'s mut Sampler,
     counts: &'s mut RayCounts,
     split: Option<&'s mut Split>,
@@ -273,6 +277,7 @@ impl<'s> PathState<'s> {
             medium: Vec3::ZERO,
             eta_scale: 1.0,
             albedo_tint: None,
+            camera_transmittance: 1.0,
             sampler,
             counts: tally.counts,
             split: tally.split,
@@ -470,7 +475,13 @@ impl<'a> Integrator<'a> {
         };
         match stop {
             Stop::Holdout => SampleResult { z: f32::INFINITY, ..Default::default() },
-            Stop::End => SampleResult { rgb: st.radiance, ..st.out },
+            Stop::End => {
+                if let Some(split) = st.split.as_deref_mut() {
+                    // Premultiplied: nothing shown, nothing seen through the air.
+                    split.transmittance = st.camera_transmittance * st.out.alpha;
+                }
+                SampleResult { rgb: st.radiance, ..st.out }
+            }
         }
     }
 
@@ -489,12 +500,17 @@ impl<'a> Integrator<'a> {
         // A sized light (rect, disk, sphere) in front of whatever the ray hits ends the path there.
         let tmax = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
         let lamp = self.lights.hit_sized(st.origin, st.dir, tmax, camera, st.prev.at);
+        if camera && self.settings.passes.transmittance {
+            st.camera_transmittance = self.camera_transmittance(st, lamp.as_ref().map_or(tmax, |l| l.t));
+        }
         if let Some(air) = self.air_on(st, hit.as_ref(), lamp.is_some()) {
             let end = lamp.as_ref().map_or(tmax, |l| l.t);
-            if let Some(seg) = air.segment(st.origin, st.dir, end) {
+            let seg =
+                if camera { air.camera_segment(st.origin, st.dir, end) } else { air.segment(st.origin, st.dir, end) };
+            if let Some(seg) = seg {
                 self.add_equiangular(st, air, seg);
                 st.sampler.set_dimension(AIR_BASE + st.depth * AIR_DIMS);
-                if let Some(t) = air.sample_distance(seg, st.sampler.next_1d()) {
+                if let Some(t) = air.sample_distance(st.origin, st.dir, seg, st.sampler.next_1d()) {
                     if camera {
                         self.cover_behind_air(st, hit.as_ref().filter(|_| lamp.is_none()));
                     }
@@ -852,12 +868,20 @@ impl Integrator<'_> {
         }
     }
 
+    /// The camera ray's transmittance through the air (full or haze only)
+    /// up to `end`, where what it shows is: what the beauty holds of that
+    /// surface, sky or lamp is this times its radiance (docs/compositing.md).
+    fn camera_transmittance(&self, st: &PathState<'_>, end: f32) -> f32 {
+        let air = self.settings.atmosphere.as_ref().filter(|a| a.is_active());
+        air.map_or(1.0, |a| a.camera_transmittance(st.origin, st.dir, end))
+    }
+
     /// Haze only (render::atmosphere::AtmosphereMode::Haze), on the camera
     /// ray up to `end`: the sun's and the environment's in-scatter in closed
     /// form, and the throughput of everything behind cut by the transmittance.
     fn add_haze(&self, st: &mut PathState<'_>, end: f32) {
         let Some(air) = self.settings.atmosphere.as_ref().filter(|a| a.mode == AtmosphereMode::Haze) else { return };
-        let Some(seg) = air.segment(st.origin, st.dir, end) else { return };
+        let Some(seg) = air.camera_segment(st.origin, st.dir, end) else { return };
         let sun = self.scene.lights.sun.as_ref().map(|s| (s.direction.normalize_or_zero(), s.irradiance));
         let (sun, environment) = air.haze_in_scatter(st.origin, st.dir, seg, sun, self.haze_environment);
         st.radiance += sun + environment;
@@ -865,7 +889,7 @@ impl Integrator<'_> {
             split.add(sun, LightPath::Atmosphere, self.lights.sun_group());
             split.add(environment, LightPath::Atmosphere, self.lights.environment_group());
         }
-        st.throughput *= air.transmittance(st.origin, st.dir, end);
+        st.throughput *= air.transmittance_over(st.origin, st.dir, seg);
     }
 
     /// A camera ray that scatters in the air covers its pixel as what is
@@ -907,8 +931,8 @@ impl Integrator<'_> {
     /// Next-event estimation at the air point `t` along the ray: one light
     /// from the distribution every shading point draws from (render::lights,
     /// with no normal: lit from every side), weighed against the phase
-    /// function's chance of finding it and, for a point or spot light,
-    /// against equiangular sampling's chance of this point
+    /// function's chance of finding it and, for a point, spot or sphere
+    /// light, against equiangular sampling's chance of this point
     /// ([`Integrator::add_equiangular`]).
     fn light_in_air(&self, st: &mut PathState<'_>, air: &Atmosphere, seg: (f32, f32), t: f32, base: u32) {
         let p = st.origin + st.dir * t;
@@ -918,18 +942,18 @@ impl Integrator<'_> {
         let u_light = st.sampler.next_2d();
         let Some(ls) = self.lights.sample_one(p, Vec3::ZERO, u_pick, u_light, Lookup::Blocks) else { return };
         let phase = phase_hg(st.dir.dot(ls.wi), air.anisotropy);
-        let weight = if ls.delta {
-            // Equiangular sampling's density of this point, for the light it would pick.
-            let other = self.equiangular_pdf(st.origin, st.dir, seg, ls.source, t);
-            if other > 0.0 {
-                power_heuristic(air.distance_pdf(seg, t) * ls.pdf, other)
-            } else {
-                1.0
-            }
-        } else if st.depth >= self.settings.max_bounces {
-            1.0
+        // Against the phase function's rays (which find sized lights only,
+        // and only where a bounce follows).
+        let by_light =
+            if ls.delta || st.depth >= self.settings.max_bounces { 1.0 } else { power_heuristic(ls.pdf, phase) };
+        // Equiangular sampling's density of this point, for the light it would pick.
+        let other = self.equiangular_pdf(air, st.origin, st.dir, seg, ls.source, t);
+        let weight = if other > 0.0 {
+            // Distance sampling's density of the point times NEE's pick of the light.
+            let pick = if ls.delta { ls.pdf } else { self.lights.pick_at(ls.source as usize, (p, Vec3::ZERO)) };
+            by_light * power_heuristic(air.distance_pdf(st.origin, st.dir, seg, t) * pick, other)
         } else {
-            power_heuristic(ls.pdf, phase)
+            by_light
         };
         let light = phase * weight / ls.pdf;
         self.add_air_light(st, air, p, &ls, st.throughput * light);
@@ -961,11 +985,20 @@ impl Integrator<'_> {
     }
 
     /// Equiangular sampling of the ray's part `seg` in the air (before
-    /// distance sampling moves the path on): a point or spot light picked
-    /// by what it can give the segment, a point on the segment with density
-    /// falling as 1 / distance^2 to it, the light's in-scatter there,
-    /// weighed by MIS against distance sampling's chance of the same point
-    /// and light (Kulla and Fajardo 2012). What converges a lamp's cone.
+    /// distance sampling moves the path on): a point, spot or sphere light
+    /// picked by what it can give the segment, a point on the segment with
+    /// density falling as 1 / distance^2 to its centre, the light's
+    /// in-scatter there (a sphere's by a point on it, sampled by solid
+    /// angle), weighed by MIS against distance sampling's chance of the same
+    /// point and light (Kulla and Fajardo 2012). What converges a lamp's cone.
+    ///
+    /// A sphere light is also found by the phase function's rays from a
+    /// distance-sampled point, weighed there against NEE alone
+    /// ([`PrevVertex::weight`]). So, per point `t` and direction, the three
+    /// weights are: this one `(1 - w(t)) v`, NEE's `w(t) v` and the phase
+    /// ray's `1 - v`, with `w` the distance/equiangular weight and `v` the
+    /// light/phase weight NEE uses; they sum to 1 (and `v` is 1 where no
+    /// bounce follows).
     fn add_equiangular(&self, st: &mut PathState<'_>, air: &Atmosphere, seg: (f32, f32)) {
         if !self.lights.has_point_lights() {
             return;
@@ -973,20 +1006,28 @@ impl Integrator<'_> {
         st.sampler.set_dimension(AIR_BASE + st.depth * AIR_DIMS + 1);
         let u_pick = st.sampler.next_1d();
         let u_t = st.sampler.next_1d();
-        let Some((source, pick, centre)) = self.lights.pick_point_light(st.origin, st.dir, seg, u_pick) else {
+        let u_light = st.sampler.next_2d();
+        let focus = air.focus(st.origin, st.dir, seg);
+        let Some((source, pick, centre)) = self.lights.pick_point_light(st.origin, st.dir, seg, focus, u_pick) else {
             return;
         };
         let Some(eq) = Equiangular::new(st.origin, st.dir, centre, seg) else { return };
         let t = eq.sample(u_t);
         let pdf = eq.pdf(t) * pick;
         let p = st.origin + st.dir * t;
-        let Some((_, ls)) = self.lights.point_light(source, p) else { return };
+        let Some(ls) = self.lights.point_light(source, p, u_light) else { return };
         // Distance sampling's density of this point, times the pick NEE makes there.
-        let other = air.distance_pdf(seg, t) * self.lights.pick_at(source as usize, (p, Vec3::ZERO));
-        let weight = power_heuristic(pdf, other);
-        let along = air.transmittance(st.origin, st.dir, t);
+        let nee_pick = self.lights.pick_at(source as usize, (p, Vec3::ZERO));
+        let weight = power_heuristic(pdf, air.distance_pdf(st.origin, st.dir, seg, t) * nee_pick);
         let phase = phase_hg(st.dir.dot(ls.wi), air.anisotropy);
-        let scale = st.throughput * air.scattering() * (along * phase * weight / pdf);
+        let weight = if ls.delta || st.depth >= self.settings.max_bounces {
+            weight
+        } else {
+            weight * power_heuristic(nee_pick * ls.pdf, phase)
+        };
+        let along = air.transmittance_over(st.origin, st.dir, (seg.0, t));
+        // ls.pdf: 1 for a point or spot, the solid-angle density of a sphere's point.
+        let scale = st.throughput * air.scattering_at(p) * (along * phase * weight / (pdf * ls.pdf));
         let ls = LightSample { chance: 1.0, ..ls };
         self.add_air_light(st, air, p, &ls, scale);
     }
@@ -994,8 +1035,9 @@ impl Integrator<'_> {
     /// The density with which [`Integrator::add_equiangular`] on the ray
     /// (`origin`, `dir`, part `seg` in the air) picks light `source` and
     /// distance `t`; 0 for a light it never picks.
-    fn equiangular_pdf(&self, origin: Vec3, dir: Vec3, seg: (f32, f32), source: u32, t: f32) -> f32 {
-        let Some((pick, centre)) = self.lights.point_light_pick(origin, dir, seg, source) else { return 0.0 };
+    fn equiangular_pdf(&self, air: &Atmosphere, origin: Vec3, dir: Vec3, seg: (f32, f32), source: u32, t: f32) -> f32 {
+        let focus = air.focus(origin, dir, seg);
+        let Some((pick, centre)) = self.lights.point_light_pick(origin, dir, seg, focus, source) else { return 0.0 };
         Equiangular::new(origin, dir, centre, seg).map_or(0.0, |eq| eq.pdf(t) * pick)
     }
 }

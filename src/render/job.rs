@@ -80,11 +80,13 @@ pub struct RenderJob {
 impl RenderJob {
     /// The passes the job writes: its own, else the shot's `render.passes`
     /// (checked when the shot was read).
+    /// In clear air without the air's passes ([`PassSet::in_air`]).
     pub fn passes_of(&self, shot: &crate::shot::Shot) -> Result<PassSet> {
-        match &self.passes {
-            Some(p) => Ok(p.clone()),
-            None => PassSet::parse(&shot.render.passes, "render.passes"),
-        }
+        let set = match &self.passes {
+            Some(p) => p.clone(),
+            None => PassSet::parse(&shot.render.passes, "render.passes")?,
+        };
+        Ok(set.in_air(shot.hazy()))
     }
 
     /// A job for `layers` x `frames` at `spp` into `out`, with the defaults
@@ -836,7 +838,7 @@ fn layer_settings<C: Space>(
         passes: passes.clone(),
         adaptive: job.adaptive,
         tracing: job.tracing,
-        atmosphere: crowd.shot().atmosphere.filter(|a| a.is_active()),
+        atmosphere: crowd.shot().atmosphere.filter(|a| a.is_active()).map(|a| colour::atmosphere(a, job.colourspace)),
         ..RenderSettings::default()
     }
 }

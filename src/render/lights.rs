@@ -212,6 +212,11 @@ impl LightGroup {
 /// pick's cost does not grow with the number of lights.
 const SHADED_PICK_MAX: usize = 16;
 
+/// Up to this many point, spot and sphere lights, equiangular sampling in
+/// the air picks one by what it gives the whole ray part, light by light;
+/// past it by the light tree at one point of the part (render::atmosphere).
+const SEGMENT_PICK_MAX: usize = 16;
+
 /// The share of the group pick spread evenly over the groups that can
 /// light a shading point (the rest follows their bounds): the bounds do not
 /// see shadows, so a shadowed point still samples its sky.
@@ -447,7 +452,8 @@ pub(crate) struct LightSampler<'a> {
     /// Each source's light group, and the groups (None: not split).
     group: Vec<u16>,
     light_groups: Option<&'a LightGroups>,
-    /// Source indices of the point and spot lights (equiangular sampling in the air).
+    /// Source indices of the point, spot and sphere lights (equiangular
+    /// sampling in the air, towards their centres).
     points: Vec<u32>,
 }
 
@@ -560,7 +566,7 @@ impl<'a> LightSampler<'a> {
         let first_triangle = emissive_triangles(lib, scene, light_groups, &mut sources, &mut power, &mut group);
         let (tables, pmf, slot) = group_tables(lib, &sources, &power);
         let points = (0..sources.len() as u32)
-            .filter(|&i| matches!(sources[i as usize], Source::Local(l) if is_point(l)))
+            .filter(|&i| matches!(sources[i as usize], Source::Local(l) if is_equiangular(l)))
             .collect();
         LightSampler {
             lib,
@@ -856,35 +862,62 @@ impl<'a> LightSampler<'a> {
         self.light_groups.map_or(0, |g| g.material(m))
     }
 
-    /// Whether any point or spot light is among the sources (what
+    /// Whether any point, spot or sphere light is among the sources (what
     /// equiangular sampling in the air is for: render::atmosphere).
     pub(crate) fn has_point_lights(&self) -> bool {
         !self.points.is_empty()
     }
 
-    /// Point or spot light `source`'s centre and its weight for a ray's
-    /// part `seg` (ray `origin`, `dir`): its power over its squared
-    /// distance to the nearest point of the part, what its in-scatter
-    /// there peaks at.
+    /// Point, spot or sphere light `source`'s centre and its weight for a
+    /// ray's part `seg` (ray `origin`, `dir`): its intensity over its
+    /// squared distance to the nearest point of the part (no nearer than
+    /// a sphere's radius), what its in-scatter there peaks at.
     fn segment_weight(&self, source: u32, origin: Vec3, dir: Vec3, (a, b): (f32, f32)) -> (Vec3, f64) {
         let Some(Source::Local(light)) = self.sources.get(source as usize) else { return (Vec3::ZERO, 0.0) };
         let centre = light.position();
         let foot = (centre - origin).dot(dir).clamp(a, b);
         let d2 = (origin + dir * foot - centre).length_squared().max(1e-6);
-        (centre, power_luminance(light.emission) / d2 as f64)
+        // A sphere's intensity is its radiance times its disc's area.
+        let (intensity, d2) = match light.kind {
+            LightKind::Sphere { radius } => (PI as f64 * (radius * radius) as f64, d2.max(radius * radius)),
+            _ => (1.0, d2),
+        };
+        (centre, intensity * power_luminance(light.emission) / d2 as f64)
     }
 
-    /// A point or spot light for a ray's part `seg` in the air, picked by
-    /// `u` in proportion to [`LightSampler::segment_weight`]: its source
-    /// index, the chance of the pick and its centre. Linear in the number
-    /// of point and spot lights.
+    /// Whether a ray's part in the air picks its light by the local
+    /// group's light tree ([`SEGMENT_PICK_MAX`]).
+    fn picks_by_tree(&self) -> bool {
+        self.points.len() > SEGMENT_PICK_MAX && !self.table(LightGroup::Local).tree.is_empty()
+    }
+
+    /// Whether source `index` is a point, spot or sphere light.
+    fn is_point_light(&self, index: u32) -> bool {
+        matches!(self.sources.get(index as usize), Some(Source::Local(l)) if is_equiangular(l))
+    }
+
+    /// A point, spot or sphere light for a ray's part `seg` in the air,
+    /// picked by `u`: its source index, the chance of the pick and its
+    /// centre. Up to [`SEGMENT_PICK_MAX`] of them, in proportion to
+    /// [`LightSampler::segment_weight`] (linear in their number); past
+    /// that by the local group's light tree at `focus`, a point of the part
+    /// where its in-scatter counts most (O(log n); a pick of another kind
+    /// of light is no pick).
     pub(crate) fn pick_point_light(
         &self,
         origin: Vec3,
         dir: Vec3,
         seg: (f32, f32),
+        focus: Vec3,
         u: f32,
     ) -> Option<(u32, f32, Vec3)> {
+        if self.picks_by_tree() {
+            let t = self.table(LightGroup::Local);
+            let (slot, pmf) = t.tree.sample(focus, Vec3::ZERO, u)?;
+            let source = *t.sources.get(slot as usize)?;
+            let Some(Source::Local(light)) = self.sources.get(source as usize) else { return None };
+            return (is_equiangular(light) && pmf > 0.0).then(|| (source, pmf as f32, light.position()));
+        }
         let total: f64 = self.points.iter().map(|&i| self.segment_weight(i, origin, dir, seg).1).sum();
         if !(total > 0.0 && total.is_finite()) {
             return None;
@@ -906,30 +939,37 @@ impl<'a> LightSampler<'a> {
     }
 
     /// The chance [`LightSampler::pick_point_light`] picks `source` for
-    /// the same ray part, with the light's centre; `None` for a light it never picks.
+    /// the same ray part and `focus`, with the light's centre; `None` for a
+    /// light it never picks.
     pub(crate) fn point_light_pick(
         &self,
         origin: Vec3,
         dir: Vec3,
         seg: (f32, f32),
+        focus: Vec3,
         source: u32,
     ) -> Option<(f32, Vec3)> {
-        if !self.points.contains(&source) {
+        if !self.is_point_light(source) {
             return None;
+        }
+        if self.picks_by_tree() {
+            let Some(Source::Local(light)) = self.sources.get(source as usize) else { return None };
+            let pmf = self.table(LightGroup::Local).tree.pmf(self.slot[source as usize], focus, Vec3::ZERO);
+            return (pmf > 0.0).then(|| (pmf as f32, light.position()));
         }
         let total: f64 = self.points.iter().map(|&i| self.segment_weight(i, origin, dir, seg).1).sum();
         let (centre, w) = self.segment_weight(source, origin, dir, seg);
         (total > 0.0 && total.is_finite() && w > 0.0).then(|| ((w / total) as f32, centre))
     }
 
-    /// Point or spot light `source` seen from `p`: its centre and the
-    /// sample towards it (the pick's chance not in its pdf); `None` for any
-    /// other light or where it gives `p` nothing.
-    pub(crate) fn point_light(&self, source: u32, p: Vec3) -> Option<(Vec3, LightSample)> {
+    /// Point, spot or sphere light `source` seen from `p`: the sample
+    /// towards it (a sphere's point by `u`; the pick's chance not in its
+    /// pdf); `None` for any other light or where it gives `p` nothing.
+    pub(crate) fn point_light(&self, source: u32, p: Vec3, u: Vec2) -> Option<LightSample> {
         match self.sources.get(source as usize)? {
-            Source::Local(light) if is_point(light) => {
-                let ls = sample_local(light, p, Vec2::ZERO)?;
-                Some((light.position(), LightSample { group: self.group[source as usize], source, ..ls }))
+            Source::Local(light) if is_equiangular(light) => {
+                let ls = sample_local(light, p, u)?;
+                Some(LightSample { group: self.group[source as usize], source, ..ls })
             }
             _ => None,
         }
@@ -1153,6 +1193,12 @@ fn sample_spherical_rect(light: &Light, p: Vec3, u: Vec2, quad: SphericalQuad) -
 /// A point or spot light: a point with no size, which no ray can hit.
 fn is_point(light: &Light) -> bool {
     matches!(light.kind, LightKind::Point | LightKind::Spot { .. })
+}
+
+/// A light whose in-scatter falls off as 1 / distance^2 from a centre, so
+/// equiangular sampling in the air suits it: a point, spot or sphere light.
+fn is_equiangular(light: &Light) -> bool {
+    is_point(light) || matches!(light.kind, LightKind::Sphere { .. })
 }
 
 fn sample_local(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {

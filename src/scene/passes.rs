@@ -17,7 +17,10 @@
 //! - through glass at the camera vertex (a delta lobe, one event picked
 //!   with its probability): transmission, or specular for its reflection;
 //! - scattered by the air on the camera ray (render::atmosphere): atmosphere,
-//!   whatever light it brings, so comp can regrade or remove the haze.
+//!   whatever light it brings, so comp can regrade or remove the haze;
+//!   with the camera ray's transmittance through the air to what it shows
+//!   ([`TRANSMITTANCE`], not light: beauty = transmittance x what is behind
+//!   + atmosphere, docs/compositing.md).
 
 use std::collections::BTreeMap;
 
@@ -86,6 +89,8 @@ pub struct PassSet {
     pub light_groups: bool,
     /// The light the crowd's shadows took from the set (`shadow`).
     pub shadow: bool,
+    /// The camera ray's transmittance through the air ([`TRANSMITTANCE`]).
+    pub transmittance: bool,
     /// World position of the first hit (`P.X`, `P.Y`, `P.Z`).
     pub position: bool,
 }
@@ -94,6 +99,10 @@ pub struct PassSet {
 pub const LIGHT_GROUPS: &str = "light_groups";
 /// The shadow pass's name in `render.passes` and in files.
 pub const SHADOW: &str = "shadow";
+/// The transmittance pass's name in `render.passes` and in files: the
+/// camera ray's transmittance through the air (render::atmosphere) up to
+/// what it shows, per channel, premultiplied by coverage like colour.
+pub const TRANSMITTANCE: &str = "atmosphere_transmittance";
 
 /// The pass a denoised film keeps its noisy beauty in (`noisy.R/G/B`;
 /// render::denoise), first in the file.
@@ -106,7 +115,25 @@ pub const ALL: &str = "all";
 impl PassSet {
     /// Every pass: each light path, the light groups and position.
     pub fn all() -> PassSet {
-        PassSet { light_paths: LightPath::ALL.to_vec(), light_groups: true, shadow: true, position: true }
+        PassSet {
+            light_paths: LightPath::ALL.to_vec(),
+            light_groups: true,
+            shadow: true,
+            transmittance: true,
+            position: true,
+        }
+    }
+
+    /// The passes a shot writes: in clear air (`hazy` false) without the
+    /// air's two (`atmosphere` and [`TRANSMITTANCE`]), which would hold
+    /// nothing (no light, a transmittance of 1), as there is no sun pass
+    /// without a sun; named or from `all` alike.
+    pub fn in_air(mut self, hazy: bool) -> PassSet {
+        if !hazy {
+            self.light_paths.retain(|&p| p != LightPath::Atmosphere);
+            self.transmittance = false;
+        }
+        self
     }
 
     /// Parses pass names (`diffuse_direct`, ..., `light_groups`, `P`,
@@ -120,13 +147,15 @@ impl PassSet {
                 LIGHT_GROUPS => set.light_groups = true,
                 POSITION => set.position = true,
                 SHADOW => set.shadow = true,
+                TRANSMITTANCE => set.transmittance = true,
                 _ => match LightPath::ALL.iter().find(|p| p.name() == name) {
                     Some(&p) if !set.light_paths.contains(&p) => set.light_paths.push(p),
                     Some(_) => {}
                     None => {
                         let known: Vec<&str> = LightPath::ALL.iter().map(|p| p.name()).collect();
                         return Err(Error::Usage(format!(
-                            "{field}: unknown pass `{name}` (known: {}, {LIGHT_GROUPS}, {SHADOW}, {POSITION}, {ALL})",
+                            "{field}: unknown pass `{name}` (known: {}, {LIGHT_GROUPS}, {SHADOW}, {TRANSMITTANCE}, \
+                             {POSITION}, {ALL})",
                             known.join(", ")
                         )));
                     }
@@ -139,7 +168,7 @@ impl PassSet {
 
     /// Whether any pass is on (a render without passes does no pass work).
     pub fn any(&self) -> bool {
-        !self.light_paths.is_empty() || self.light_groups || self.shadow || self.position
+        !self.light_paths.is_empty() || self.light_groups || self.shadow || self.transmittance || self.position
     }
 
     /// RGB(XYZ) channel triples per pixel the film holds for these passes.
@@ -147,18 +176,20 @@ impl PassSet {
         self.light_paths.len()
             + if self.light_groups { light_groups } else { 0 }
             + self.shadow as usize
+            + self.transmittance as usize
             + self.position as usize
     }
 }
 
 /// Where a pass goes among a file's passes: light paths in [`LightPath::ALL`]
-/// order, light groups by name, the shadow pass, then `P`.
+/// order, light groups by name, the shadow pass, the transmittance, then `P`.
 pub fn file_order(name: &str) -> (usize, &str) {
     match LightPath::ALL.iter().position(|p| p.name() == name) {
         Some(i) => (i + 1, ""),
         None if name == NOISY => (0, ""),
         None if name == SHADOW => (LightPath::ALL.len() + 2, name),
-        None if name == POSITION => (LightPath::ALL.len() + 3, name),
+        None if name == TRANSMITTANCE => (LightPath::ALL.len() + 3, name),
+        None if name == POSITION => (LightPath::ALL.len() + 4, name),
         None => (LightPath::ALL.len() + 1, name),
     }
 }
@@ -296,6 +327,9 @@ pub(crate) struct Split {
     pub(crate) shadow: Vec3,
     /// World position of the first hit.
     pub(crate) position: Vec3,
+    /// The camera ray's transmittance through the air up to what it shows
+    /// (0 where the sample shows nothing: premultiplied, like colour).
+    pub(crate) transmittance: f32,
 }
 
 impl Split {
@@ -306,6 +340,7 @@ impl Split {
             groups: vec![Vec3::ZERO; groups],
             shadow: Vec3::ZERO,
             position: Vec3::ZERO,
+            transmittance: 0.0,
         }
     }
 
@@ -315,6 +350,20 @@ impl Split {
         self.groups.fill(Vec3::ZERO);
         self.shadow = Vec3::ZERO;
         self.position = Vec3::ZERO;
+        self.transmittance = 0.0;
+    }
+
+    /// Adds another sample's split to this sum of a pixel's samples
+    /// (position aside: a pixel takes its nearest sample's).
+    pub(crate) fn add_sample(&mut self, sample: &Split) {
+        for (sum, c) in self.paths.iter_mut().zip(&sample.paths) {
+            *sum += *c;
+        }
+        for (sum, c) in self.groups.iter_mut().zip(&sample.groups) {
+            *sum += *c;
+        }
+        self.shadow += sample.shadow;
+        self.transmittance += sample.transmittance;
     }
 
     /// Adds contribution `c` of light group `group` along path `path`.
@@ -341,6 +390,19 @@ mod tests {
         let e = PassSet::parse(&["diffuse"], "--passes").unwrap_err().to_string();
         assert!(e.contains("--passes: unknown pass `diffuse`") && e.contains("diffuse_direct"), "{e}");
         assert!(!PassSet::parse::<&str>(&[], "x").unwrap().any());
+        let t = PassSet::parse(&["atmosphere_transmittance"], "x").unwrap();
+        assert!(t.transmittance && t.any() && t.triples(0) == 1);
+    }
+
+    #[test]
+    fn clear_air_drops_the_air_passes_named_or_from_all() {
+        let all = PassSet::all();
+        assert_eq!(all.clone().in_air(true), all);
+        let clear = all.clone().in_air(false);
+        assert!(!clear.transmittance && !clear.light_paths.contains(&LightPath::Atmosphere));
+        assert_eq!(clear.triples(3), all.triples(3) - 2);
+        let named = PassSet::parse(&["atmosphere", "atmosphere_transmittance", "P"], "x").unwrap().in_air(false);
+        assert_eq!(named, PassSet { position: true, ..Default::default() });
     }
 
     #[test]

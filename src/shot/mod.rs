@@ -738,6 +738,11 @@ struct AtmosphereFile {
     height: Option<f32>,
     #[serde(default)]
     mode: AtmosphereMode,
+    falloff: Option<f32>,
+    #[serde(default)]
+    base: f32,
+    #[serde(default)]
+    start: f32,
 }
 
 fn white() -> [f32; 3] {
@@ -753,6 +758,9 @@ impl AtmosphereFile {
             anisotropy: self.anisotropy,
             top: self.height.unwrap_or(f32::INFINITY),
             mode: self.mode,
+            falloff: self.falloff.unwrap_or(f32::INFINITY),
+            base: self.base,
+            start: self.start,
         };
         a.check().map_err(|(key, m)| Error::invalid(path, m).field(format!("atmosphere.{key}")))?;
         Ok(a)
@@ -1208,6 +1216,12 @@ fn check_render(render: &RenderSettings, path: &Path) -> Result<()> {
 }
 
 impl Shot {
+    /// Whether the shot has air that changes anything (`[atmosphere]` with
+    /// a density above zero): what its render traces and its air passes.
+    pub fn hazy(&self) -> bool {
+        self.atmosphere.is_some_and(|a| a.is_active())
+    }
+
     /// Reads and validates a shot file.
     pub fn load(path: &Path) -> Result<Shot> {
         crate::error::check_readable_file(path)?;

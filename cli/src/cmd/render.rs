@@ -181,9 +181,10 @@ pub struct RenderArgs {
     #[arg(long, value_enum)]
     pub colourspace: Option<ColourspaceFlag>,
     /// Passes beyond beauty and the data passes, comma-separated: diffuse_direct, diffuse_indirect,
-    /// specular_direct, specular_indirect, transmission, emission, environment, light_groups (one
-    /// lg_<name> per light group), P (world position), shadow (the set layer's crowd shadows), or all
-    /// (default: the shot's `render.passes`).
+    /// specular_direct, specular_indirect, transmission, emission, environment, atmosphere,
+    /// light_groups (one lg_<name> per light group), P (world position), shadow (the set layer's
+    /// crowd shadows), atmosphere_transmittance, or all (default: the shot's `render.passes`; the
+    /// air's two only for a shot with air).
     #[arg(long, value_delimiter = ',', value_name = "NAME,...", value_parser = super::values::pass_name)]
     pub passes: Option<Vec<String>>,
     /// Denoise every layer and light pass with Intel Open Image Denoise (albedo and normal guides,

@@ -525,15 +525,16 @@ pub fn pass_bytes(film: &Film) -> Vec<(String, u64)> {
 }
 
 /// The passes among a file's channel `names` (light paths, `lg_*`,
-/// `shadow`, `P`), in file order, each with its channel suffixes.
+/// `shadow`, the air's transmittance, `P`), in file order, each with its channel suffixes.
 pub(crate) fn pass_layout(names: &[String]) -> Vec<(String, [&'static str; 3])> {
-    use crate::scene::passes::{file_order, LightPath, NOISY, SHADOW};
+    use crate::scene::passes::{file_order, LightPath, NOISY, SHADOW, TRANSMITTANCE};
     let mut passes: Vec<(String, [&'static str; 3])> = Vec::new();
     for name in names {
         let Some(layer) = name.strip_suffix(".R") else { continue };
         if LightPath::ALL.iter().any(|p| p.name() == layer)
             || layer.starts_with("lg_")
             || layer == SHADOW
+            || layer == TRANSMITTANCE
             || layer == NOISY
         {
             passes.push((layer.to_string(), ["R", "G", "B"]));
