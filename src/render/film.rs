@@ -71,13 +71,17 @@ struct SampleCount {
     max: u32,
     /// `None`: exactly `max` (no adaptive sampling).
     threshold: Option<f64>,
+    /// The index of the pixel's first sample (`RenderSettings::first_sample`).
+    first: u32,
 }
 
 impl SampleCount {
     fn of(settings: &RenderSettings) -> SampleCount {
         match settings.adaptive {
-            Some(a) => SampleCount { min: a.min_spp, max: a.max_spp, threshold: Some(f64::from(a.threshold)) },
-            None => SampleCount { min: settings.spp, max: settings.spp, threshold: None },
+            Some(a) => {
+                SampleCount { min: a.min_spp, max: a.max_spp, threshold: Some(f64::from(a.threshold)), first: 0 }
+            }
+            None => SampleCount { min: settings.spp, max: settings.spp, threshold: None, first: settings.first_sample },
         }
     }
 
@@ -319,10 +323,20 @@ fn render_pixel(
             p.split.clear();
             &mut *p.split
         });
+        // The sample's index in the pixel's sequence: a progressive pass
+        // continues where the one before it stopped.
+        let at = count.first + s;
         let (r, offset) = if packets {
-            integrator.sample_pixel_batched(x, y, s, || count.batch_end(s), batch, Tally { counts, split })
+            integrator.sample_pixel_batched(
+                x,
+                y,
+                at,
+                || count.first + count.batch_end(s),
+                batch,
+                Tally { counts, split },
+            )
         } else {
-            integrator.sample_pixel(x, y, s, Tally { counts, split })
+            integrator.sample_pixel(x, y, at, Tally { counts, split })
         };
         if let Some(p) = &passes {
             // A sample the beauty drops (not finite) the passes drop too.
@@ -615,8 +629,16 @@ fn check(blas: &BlasSet, lib: &Library, scene: &FrameScene, s: &RenderSettings) 
     }
     if let Some(a) = &s.adaptive {
         a.check().map_err(|(key, m)| Error::Usage(format!("{key}: {m}")))?;
+        if s.first_sample != 0 {
+            return Err(Error::Usage("adaptive sampling renders a pixel's samples from the first".into()));
+        }
     } else if s.spp == 0 {
         return Err(Error::Usage("render spp must be at least 1".into()));
+    } else if s.first_sample.checked_add(s.spp).is_none() {
+        return Err(Error::Usage(format!(
+            "{} samples from sample {} run past the last sample index",
+            s.spp, s.first_sample
+        )));
     }
     if blas.len() != lib.meshes.len() {
         return Err(Error::invalid(
