@@ -39,12 +39,18 @@ def status(url):
         return json.load(r)
 
 
+denoised_at = {}  # start (generation) -> when its first denoised image was seen
+
+
 def until(url, test, timeout=600):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         s = status(url)
+        now = time.monotonic()
+        if s["denoised"] and s["image_generation"] == s["generation"]:
+            denoised_at.setdefault(s["generation"], now)
         if test(s):
-            return s, time.monotonic()
+            return s, now
         time.sleep(0.01)
     raise SystemExit(f"timed out; last status {s}")
 
@@ -71,13 +77,19 @@ def seed(text):
 
 
 def edit(url, rewrite):
-    """Seconds from the save to the first image of the start it caused, and to its image at the samples."""
+    """Seconds from the save to the first image of the start it caused, to its first denoised
+    image (None without a denoiser), and to its image at the samples; the first image's status."""
     before, _ = until(url, lambda s: s["state"] == "converged")
     t0 = time.monotonic()
     save(rewrite)
     first, t1 = until(url, lambda s: s["image_generation"] > before["generation"])
-    done, t2 = until(url, lambda s: s["generation"] == first["image_generation"] and s["state"] == "converged")
-    return t1 - t0, t2 - t0, first
+    gen = first["image_generation"]
+    done, t3 = until(url, lambda s: s["generation"] == gen and s["state"] == "converged")
+    t2 = None
+    if done["denoised"]:
+        # Polled on the way: the denoised image came at or before the end.
+        t2 = denoised_at.get(gen, t3)
+    return t1 - t0, (t2 - t0) if t2 else None, t3 - t0, first
 
 
 server = None
@@ -92,21 +104,24 @@ try:
     url = next(w for w in server.stdout.readline().split() if w.startswith("http://"))
     first, t1 = until(url, lambda s: s["image"] >= 1)
     done, t2 = until(url, lambda s: s["state"] == "converged")
-    print(f"start: first image {t1 - t0:.2f} s ({first['width']}x{first['height']}, {first['spp']} spp,"
-          f" denoised {first['denoised']}), {done['spp']} spp at {t2 - t0:.2f} s")
+    print(f"start: first image {t1 - t0:.2f} s ({first['width']}x{first['height']}, {first['spp']} spp),"
+          f" {done['spp']} spp at {t2 - t0:.2f} s (denoised {done['denoised']})")
+    fmt = lambda x: "-" if x is None else f"{x:.3f} s"
     lights = []
     for i in range(a.edits):
-        f, c, s = edit(url, lamp_1(90.0 if i % 2 == 0 else 30.0))
-        lights.append((f, c))
-        print(f"lamp_1 edit {i + 1}: first image {f:.3f} s, {done['spp']} spp {c:.3f} s ({s['reload']})")
-    f, c, s = edit(url, seed)
-    print(f"seed edit: first image {f:.3f} s, {done['spp']} spp {c:.3f} s ({s['reload']})")
+        f, d, c, s = edit(url, lamp_1(90.0 if i % 2 == 0 else 30.0))
+        lights.append((f, d, c))
+        print(f"lamp_1 edit {i + 1}: first image {fmt(f)}, first denoised {fmt(d)}, {done['spp']} spp {fmt(c)}"
+              f" ({s['reload']})")
+    f, d, c, s = edit(url, seed)
+    print(f"seed edit: first image {fmt(f)}, first denoised {fmt(d)}, {done['spp']} spp {fmt(c)} ({s['reload']})")
     print(json.dumps({
         "start_first_image_s": t1 - t0, "start_converged_s": t2 - t0,
-        "size": [first["width"], first["height"]], "spp": done["spp"], "denoised": first["denoised"],
-        "lights_first_image_s": [x[0] for x in lights], "lights_converged_s": [x[1] for x in lights],
+        "size": [first["width"], first["height"]], "spp": done["spp"], "denoised": done["denoised"],
+        "lights_first_image_s": [x[0] for x in lights], "lights_first_denoised_s": [x[1] for x in lights],
+        "lights_converged_s": [x[2] for x in lights],
         "lights_first_image_median_s": statistics.median(x[0] for x in lights),
-        "recast_first_image_s": f, "recast_converged_s": c,
+        "recast_first_image_s": f, "recast_first_denoised_s": d, "recast_converged_s": c,
     }))
 finally:
     for path in (copy, copy + ".tmp"):

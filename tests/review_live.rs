@@ -164,10 +164,12 @@ fn the_live_preview_follows_edits_of_the_shot_and_writes_nothing() {
     let first = until(a, "a first image", |s| s["image"].as_u64() > Some(0));
     eprintln!("first image {:.2} s after the server was started", started.elapsed().as_secs_f64());
     assert_eq!((first["frame"].as_i64(), first["width"].as_u64()), (Some(FRAME as i64), Some(48)));
-    // The page says whether it is denoised, and why not.
-    assert!(first["denoised"] == true || first["denoise_note"].is_string(), "{first}");
-    let s0 = until(a, "4 spp", |s| s["state"] == "converged");
+    let s0 = until(a, "4 spp", |s| s["state"] == "converged" && s["image"] != first["image"]);
     assert_eq!((s0["spp"].as_u64(), s0["max_spp"].as_u64()), (Some(4), Some(4)), "{s0}");
+    // The page says whether the last image is denoised (at the end, all of
+    // its samples), and else why not.
+    let denoised = s0["denoised"] == true && s0["denoised_spp"] == 4;
+    assert!(denoised || s0["denoise_note"].is_string(), "{s0}");
     // Its passes are the render of their total samples: the job's PNG, within a code.
     let shown = image(a);
     let rendered = image::open(renders.join(format!("full/live.full.{FRAME:04}.png"))).unwrap().to_rgb8();

@@ -90,13 +90,14 @@ impl SampleCount {
         self.threshold.is_some() && spp >= self.min.max(2) && (spp - self.min).is_multiple_of(ADAPTIVE_STEP)
     }
 
-    /// The end of the run of samples from `s` whose camera rays are traced
-    /// together: at most a packet's worth, and never past a sample after
-    /// which the pixel may stop (no camera ray is traced for nothing).
+    /// The end of the run of samples from `s` (an index in the pixel's
+    /// sequence, from `first`) whose camera rays are traced together: at
+    /// most a packet's worth, and never past a sample after which the pixel
+    /// may stop (no camera ray is traced for nothing).
     fn batch_end(&self, s: u32) -> u32 {
-        let cap = s.saturating_add(PACKET as u32).min(self.max);
+        let cap = s.saturating_add(PACKET as u32).min(self.first + self.max);
         let mut end = s + 1;
-        while end < cap && !self.may_stop_after(end) {
+        while end < cap && !self.may_stop_after(end - self.first) {
             end += 1;
         }
         end
@@ -317,26 +318,18 @@ fn render_pixel(
     let mut shadow = Vec3::ZERO;
     let mut estimate = ErrorEstimate::default();
     let mut spp = 0;
-    for s in 0..count.max {
-        spp = s + 1;
+    // `s` indexes the pixel's sample sequence: a progressive pass continues
+    // where the one before it stopped.
+    for s in count.first..count.first + count.max {
+        spp = s - count.first + 1;
         let split = passes.as_mut().map(|p| {
             p.split.clear();
             &mut *p.split
         });
-        // The sample's index in the pixel's sequence: a progressive pass
-        // continues where the one before it stopped.
-        let at = count.first + s;
         let (r, offset) = if packets {
-            integrator.sample_pixel_batched(
-                x,
-                y,
-                at,
-                || count.first + count.batch_end(s),
-                batch,
-                Tally { counts, split },
-            )
+            integrator.sample_pixel_batched(x, y, s, || count.batch_end(s), batch, Tally { counts, split })
         } else {
-            integrator.sample_pixel(x, y, at, Tally { counts, split })
+            integrator.sample_pixel(x, y, s, Tally { counts, split })
         };
         if let Some(p) = &passes {
             // A sample the beauty drops (not finite) the passes drop too.

@@ -105,11 +105,11 @@ fn stamp(path: &Path) -> Stamp {
     std::fs::metadata(path).ok().map(|m| (m.len(), m.modified().unwrap_or(SystemTime::UNIX_EPOCH)))
 }
 
-/// One published image: the mean of the passes so far, and its denoised
-/// version when the denoiser ran.
+/// One published image: the mean of the passes so far, and the last
+/// denoised image of the same start with its samples per pixel.
 struct Preview {
-    noisy: Film,
-    denoised: Option<Film>,
+    noisy: Arc<Film>,
+    denoised: Option<(Arc<Film>, u32)>,
     space: Colourspace,
 }
 
@@ -137,8 +137,10 @@ struct Status {
     /// Images published so far (the page's cache key), and of which start the last.
     images: u64,
     image_generation: u64,
-    /// Whether the last image is denoised; the denoiser, or why there is none.
+    /// Whether the last image is denoised (and at how many samples); the
+    /// denoiser, or why there is none.
     denoised: bool,
+    denoised_spp: Option<u32>,
     denoiser: Option<String>,
     denoise_note: Option<String>,
     error: Option<Value>,
@@ -197,6 +199,7 @@ pub(crate) struct Live {
 impl Live {
     /// Starts rendering `frame` of the shot at `shot_file`, reading it anew.
     pub(crate) fn start(shot_file: &Path, frame: i32, options: LiveOptions) -> Result<Live> {
+        let denoise_note = (!options.denoise).then(|| "not asked".to_string());
         let shared = Arc::new(Shared {
             shot_file: shot_file.to_path_buf(),
             options,
@@ -205,7 +208,7 @@ impl Live {
                 run: Run::Running,
                 quit: false,
                 last_poll: Instant::now(),
-                status: Status { state: "loading", ..Status::default() },
+                status: Status { state: "loading", denoise_note, ..Status::default() },
                 preview: None,
             }),
             wake: Condvar::new(),
@@ -269,7 +272,10 @@ impl Live {
         let Some(p) = preview else {
             return Err(Refusal(404, "no live image yet".into()));
         };
-        let film = if noisy { &p.noisy } else { p.denoised.as_ref().unwrap_or(&p.noisy) };
+        let film = match &p.denoised {
+            Some((film, _)) if !noisy => film,
+            _ => &p.noisy,
+        };
         let px = tone::view_pixels(film, p.space, "beauty", exposure).map_err(|m| Refusal(500, m))?;
         let png = tone::png(film.width, film.height, 3, px).map_err(|m| Refusal(500, m))?;
         Ok(Body::Bytes("image/png", png))
@@ -310,6 +316,7 @@ fn status_json(s: &Status, run: Run, frame: i32) -> Value {
         "image": s.images,
         "image_generation": s.image_generation,
         "denoised": s.denoised,
+        "denoised_spp": s.denoised_spp,
         "denoiser": s.denoiser,
         "denoise_note": s.denoise_note,
         "error": s.error,
@@ -383,6 +390,8 @@ struct Progressive {
     first: Option<(Vec<f32>, Vec<u32>)>,
     /// What one sample a pixel took in the last pass.
     per_sample: Option<Duration>,
+    /// The samples of the last image denoised.
+    denoised_spp: u32,
 }
 
 impl Progressive {
@@ -425,6 +434,7 @@ impl Progressive {
             albedo: vec![[0.0; 3]; n],
             first: None,
             per_sample: None,
+            denoised_spp: 0,
         })
     }
 
@@ -701,7 +711,9 @@ impl Worker {
         }
     }
 
-    /// Renders one pass and publishes the image so far.
+    /// Renders one pass and publishes the image so far: at once, and
+    /// denoised each time its samples have doubled since the last denoised
+    /// image, and at the end (a denoise costs as much as a few passes).
     fn pass(&mut self) {
         let (Some(p), Some(crowd)) = (&mut self.progressive, &self.crowd) else { return };
         let (done, space) = match crowd {
@@ -713,10 +725,35 @@ impl Worker {
             self.shared.status(|s| (s.state, s.error) = ("error", Some(error_json(&e))));
             return;
         }
-        let noisy = p.mean();
+        let noisy = Arc::new(p.mean());
         let (pass, spp, converged) = (p.passes, p.done, p.converged());
-        let denoised = self.denoise(&noisy);
+        let due = self.shared.options.denoise && (converged || spp >= 2 * p.denoised_spp);
+        // The last pass is published once, denoised: `converged` is the end.
+        if !(due && converged) {
+            self.publish(pass, spp, converged, Preview { noisy: noisy.clone(), denoised: None, space });
+        }
+        if !due {
+            return;
+        }
+        match self.denoise(&noisy) {
+            Some(film) => {
+                if let Some(p) = &mut self.progressive {
+                    p.denoised_spp = spp;
+                }
+                self.publish(pass, spp, converged, Preview { noisy, denoised: Some((Arc::new(film), spp)), space });
+            }
+            None if converged => self.publish(pass, spp, converged, Preview { noisy, denoised: None, space }),
+            None => {}
+        }
+    }
+
+    /// Makes `preview` (of pass `pass`, at `spp`) the image the page gets;
+    /// a later pass of the same start keeps the start's denoised image.
+    fn publish(&self, pass: u32, spp: u32, converged: bool, mut preview: Preview) {
         let mut c = self.shared.lock();
+        if preview.denoised.is_none() && pass > 1 {
+            preview.denoised = c.preview.as_ref().and_then(|p| p.denoised.clone());
+        }
         let s = &mut c.status;
         let now = Instant::now();
         (s.pass, s.spp) = (pass, spp);
@@ -727,17 +764,13 @@ impl Worker {
         }
         s.images += 1;
         s.image_generation = s.generation;
-        s.denoised = denoised.is_some();
-        c.preview = Some(Arc::new(Preview { noisy, denoised, space }));
+        (s.denoised, s.denoised_spp) = (preview.denoised.is_some(), preview.denoised.as_ref().map(|d| d.1));
+        c.preview = Some(Arc::new(preview));
     }
 
     /// `film` denoised, when asked and the denoiser is found (opened once;
     /// the status says which, or why not).
     fn denoise(&mut self, film: &Film) -> Option<Film> {
-        if !self.shared.options.denoise {
-            self.shared.status(|s| s.denoise_note = Some("not asked".into()));
-            return None;
-        }
         let threads = self.shared.options.threads;
         let denoiser = self.denoiser.get_or_insert_with(|| Denoiser::open(None, threads).map_err(|e| e.to_string()));
         let out = match denoiser {

@@ -94,7 +94,7 @@ async function init() {
   loadFigures();
   initLive();
   if (!state.frames.length) {
-    status("No renders folder: figures and map only (docs/review.md).");
+    status(live.on ? "No renders folder: the live preview, figures and map (docs/review.md)." : "No renders folder: figures and map only (docs/review.md).");
     $("viewer").hidden = true;
     return;
   }
@@ -527,7 +527,7 @@ function showLive(s) {
     parts.push("frame " + s.frame + " at " + s.width + "x" + s.height + ": " + s.spp + " of " + s.max_spp + " spp (pass " + s.pass + ", " + s.elapsed_s.toFixed(1) + " s)");
   }
   if (s.image) {
-    parts.push(s.denoised ? "denoised (" + s.denoiser + ")" : "noisy" + (s.denoise_note ? " (no denoiser: " + s.denoise_note + ")" : ""));
+    parts.push(s.denoised ? "denoised at " + s.denoised_spp + " spp (" + s.denoiser + ")" : "noisy" + (s.denoise_note ? " (no denoiser: " + s.denoise_note + ")" : ""));
   }
   if (s.reload && s.reload !== "start" && s.frame !== null) parts.push("after: " + s.reload);
   $("live-status").textContent = parts.join("; ");
