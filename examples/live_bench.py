@@ -9,8 +9,9 @@ JSON summary: start to first image and to the shot's samples; then EDITS
 saves of lamp_1's intensity (alternately x3 and back, each after the last
 preview reached the shot's samples: a lights edit keeps the cast), each
 from the save (the file written whole and renamed, as editors do) to the
-first image of the start it caused, and to that start's image at the
-shot's samples; then one edit of `seed` (casting anew) the same way.
+first image of the start it caused, to its first denoised image, and to
+its image at the shot's samples; then one edit of `seed` (casting anew)
+the same way.
 
 usage: live_bench.py THRONG SHOT [--edits N] [--threads T] [--live-resolution WxH]
 """
