@@ -20,7 +20,6 @@ usage: live_browser.py THRONG SHOT SCREENSHOT.png
 import base64
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
@@ -28,7 +27,7 @@ import time
 import numpy as np
 
 import browser as browser_harness
-from browser import fail, get_json, launch_chromium, start_review, wait_for
+from browser import fail, get_json, launch_chromium, start_review, stop, wait_for
 
 THRONG, SHOT, SHOT_PNG = sys.argv[1:4]
 # The first image: the shot read and cast, the frame posed, one pass.
@@ -134,16 +133,6 @@ finally:
     for p in (copy, copy + ".tmp"):
         if os.path.exists(p):
             os.remove(p)
-    if browser is not None:
-        browser.terminate()
-        try:
-            browser.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            browser.kill()
-    if server is not None:
-        server.terminate()
-        try:
-            server.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            server.kill()
+    stop(browser)
+    stop(server)
     shutil.rmtree(profile, ignore_errors=True)
