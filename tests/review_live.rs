@@ -214,7 +214,17 @@ fn the_live_preview_follows_edits_of_the_shot_and_writes_nothing() {
     let idle = json(a, "/api/live");
     assert_eq!((idle["run"].as_str(), &idle["generation"]), (Some("stopped"), &s2["generation"]), "{idle}");
     assert_eq!(post(a, "/api/live/start", "{}").0, 200);
-    until(a, "the render after start", |s| s["generation"].as_u64() > s2["generation"].as_u64());
+    let s3 = until(a, "the render after start", |s| s["generation"].as_u64() > s2["generation"].as_u64());
+    // An edit that changes the cast (the seed), and a new write of a file
+    // the shot reads (its cache): cast anew.
+    let text = std::fs::read_to_string(&shot).unwrap();
+    std::fs::write(&shot, text.replacen("seed = 5", "seed = 6", 1)).unwrap();
+    let s4 = until(a, "the recast", |s| s["generation"].as_u64() > s3["generation"].as_u64());
+    assert_eq!(s4["reload"], "recast", "{s4}");
+    let cache = dir.path().join("c.csv");
+    std::fs::write(&cache, std::fs::read(&cache).unwrap()).unwrap();
+    let s5 = until(a, "the cache read again", |s| s["generation"].as_u64() > s4["generation"].as_u64());
+    assert_eq!(s5["reload"], "recast", "{s5}");
     // A frame of the shot, asked for; one outside it, an error.
     post(a, "/api/live/start", "{\"frame\": 1003}");
     until(a, "frame 1003", |s| s["frame"] == 1003 && s["state"] == "converged");
@@ -228,10 +238,13 @@ fn the_live_preview_follows_edits_of_the_shot_and_writes_nothing() {
     assert_eq!(json(a, "/api/shot")["shot"], "live");
     drop(server);
 
-    // Nothing written: the folder is as it was but for the shot file's edits.
+    // Nothing written: the folder is as it was but for the test's own edits.
     let after = listing(dir.path());
-    let without_shot = |l: &[(PathBuf, u64, SystemTime)]| l.iter().filter(|f| f.0 != shot).cloned().collect::<Vec<_>>();
-    assert_eq!(without_shot(&after), without_shot(&before));
+    let mine = [shot.clone(), cache];
+    let others =
+        |l: &[(PathBuf, u64, SystemTime)]| l.iter().filter(|f| !mine.contains(&f.0)).cloned().collect::<Vec<_>>();
+    assert_eq!(others(&after), others(&before));
+    assert_eq!(after.len(), before.len(), "files were added: {after:?}");
 }
 
 #[test]
