@@ -6,8 +6,9 @@
 //! `throng render --layer full` without a manifest) progressively: pass
 //! after pass, each continuing every pixel's sample sequence where the last
 //! stopped (`RenderSettings::first_sample`), so the passes so far are one
-//! render of their total samples. After each pass the mean is denoised
-//! (Open Image Denoise, when it is found) and published for the page.
+//! render of their total samples. Each pass's mean is published for the
+//! page at once, and denoised (Open Image Denoise, when it is found) when
+//! its samples have doubled since the last denoised image, and at the end.
 //!
 //! It watches the shot file and every file the cast shot was read from
 //! (sizes and modification times, polled) and starts again once they hold
