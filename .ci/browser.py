@@ -93,6 +93,17 @@ def start_review(argv):
     return server, url
 
 
+def stop(process):
+    """Ends a process this check started (a server, the browser): asked, then killed after 10 s."""
+    if process is None:
+        return
+    process.terminate()
+    try:
+        process.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        process.kill()
+
+
 def launch_chromium(profile, lenient=False):
     """Headless Chromium on a 1400x1000 page with its profile in `profile`; (the process, a Cdp on its page)."""
     browser = subprocess.Popen(

@@ -72,13 +72,17 @@ struct SampleCount {
     max: u32,
     /// `None`: exactly `max` (no adaptive sampling).
     threshold: Option<f64>,
+    /// The index of the pixel's first sample (`RenderSettings::first_sample`).
+    first: u32,
 }
 
 impl SampleCount {
     fn of(settings: &RenderSettings) -> SampleCount {
         match settings.adaptive {
-            Some(a) => SampleCount { min: a.min_spp, max: a.max_spp, threshold: Some(f64::from(a.threshold)) },
-            None => SampleCount { min: settings.spp, max: settings.spp, threshold: None },
+            Some(a) => {
+                SampleCount { min: a.min_spp, max: a.max_spp, threshold: Some(f64::from(a.threshold)), first: 0 }
+            }
+            None => SampleCount { min: settings.spp, max: settings.spp, threshold: None, first: settings.first_sample },
         }
     }
 
@@ -87,13 +91,14 @@ impl SampleCount {
         self.threshold.is_some() && spp >= self.min.max(2) && (spp - self.min).is_multiple_of(ADAPTIVE_STEP)
     }
 
-    /// The end of the run of samples from `s` whose camera rays are traced
-    /// together: at most a packet's worth, and never past a sample after
-    /// which the pixel may stop (no camera ray is traced for nothing).
+    /// The end of the run of samples from `s` (an index in the pixel's
+    /// sequence, from `first`) whose camera rays are traced together: at
+    /// most a packet's worth, and never past a sample after which the pixel
+    /// may stop (no camera ray is traced for nothing).
     fn batch_end(&self, s: u32) -> u32 {
-        let cap = s.saturating_add(PACKET as u32).min(self.max);
+        let cap = s.saturating_add(PACKET as u32).min(self.first + self.max);
         let mut end = s + 1;
-        while end < cap && !self.may_stop_after(end) {
+        while end < cap && !self.may_stop_after(end - self.first) {
             end += 1;
         }
         end
@@ -342,8 +347,10 @@ fn render_pixel(
     let mut sums = Split::new(passes.as_ref().map_or(0, |p| p.split.groups.len()));
     let mut estimate = ErrorEstimate::default();
     let mut spp = 0;
-    for s in 0..count.max {
-        spp = s + 1;
+    // `s` indexes the pixel's sample sequence: a progressive pass continues
+    // where the one before it stopped.
+    for s in count.first..count.first + count.max {
+        spp = s - count.first + 1;
         let split = passes.as_mut().map(|p| {
             p.split.clear();
             &mut *p.split
@@ -616,8 +623,16 @@ fn check(blas: &BlasSet, lib: &Library, scene: &FrameScene, s: &RenderSettings) 
     }
     if let Some(a) = &s.adaptive {
         a.check().map_err(|(key, m)| Error::Usage(format!("{key}: {m}")))?;
+        if s.first_sample != 0 {
+            return Err(Error::Usage("adaptive sampling renders a pixel's samples from the first".into()));
+        }
     } else if s.spp == 0 {
         return Err(Error::Usage("render spp must be at least 1".into()));
+    } else if s.first_sample.checked_add(s.spp).is_none() {
+        return Err(Error::Usage(format!(
+            "{} samples from sample {} run past the last sample index",
+            s.spp, s.first_sample
+        )));
     }
     if blas.len() != lib.meshes.len() {
         return Err(Error::invalid(

@@ -812,7 +812,7 @@ fn is_rendered(path: &Path, fingerprint: &str, warn: &mut dyn FnMut(String) -> R
 }
 
 /// The settings of layer `layer` of frame `frame`.
-fn layer_settings<C: Space>(
+pub(crate) fn layer_settings<C: Space>(
     crowd: &ShotCrowd<C>,
     manifest: Option<&Manifest>,
     job: &RenderJob,

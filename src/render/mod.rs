@@ -75,6 +75,12 @@ pub struct RenderSettings {
     pub tracing: Tracing,
     /// The shot's air (haze, fog), traced as its mode says; `None`: clear.
     pub atmosphere: Option<atmosphere::Atmosphere>,
+    /// The index of each pixel's first camera sample (0: a whole render).
+    /// A progressive render (`review::live`) takes passes of `spp` samples
+    /// one after another, each from where the last stopped, so passes of
+    /// n1, n2, ... samples are the samples of one n1 + n2 + ... render.
+    /// Not with adaptive sampling, which starts every pixel at 0.
+    pub first_sample: u32,
 }
 
 /// How rays are traced: choices that change the speed of a render, never
@@ -115,6 +121,7 @@ impl Default for RenderSettings {
             adaptive: None,
             tracing: Tracing::default(),
             atmosphere: None,
+            first_sample: 0,
         }
     }
 }

@@ -14,6 +14,7 @@
 
 mod deep_view;
 mod figures;
+mod live;
 mod lru;
 mod mixer;
 mod safe;
@@ -37,6 +38,8 @@ use crate::render::exr::{read_channel_names, read_layer_channels, LayerMeta};
 use crate::render::Film;
 use lru::Lru;
 use safe::{percent_decode, Root};
+
+pub use live::LiveOptions;
 
 const PAGE_HTML: &str = include_str!("page.html");
 const PAGE_JS: &str = include_str!("page.js");
@@ -63,6 +66,9 @@ pub struct ReviewOptions {
     pub port: u16,
     /// Bytes of decoded films and PNGs kept between requests.
     pub cache_bytes: u64,
+    /// A live preview of the page's frame that follows edits of the shot
+    /// (`live`); none: the renders only.
+    pub live: Option<LiveOptions>,
 }
 
 impl Default for ReviewOptions {
@@ -74,6 +80,7 @@ impl Default for ReviewOptions {
             bind: IpAddr::V4(Ipv4Addr::LOCALHOST),
             port: 8028,
             cache_bytes: 1 << 30,
+            live: None,
         }
     }
 }
@@ -179,6 +186,9 @@ impl Plan {
     }
 }
 
+/// The paths answered to `POST`: the mixer's save and the live preview's controls.
+const POSTS: [&str; 3] = ["/api/save-shot", "/api/live/start", "/api/live/stop"];
+
 /// A request answered with an error: the status and a message for the page.
 #[derive(Debug)]
 struct Refusal(u16, String);
@@ -249,6 +259,7 @@ struct State {
     films: Mutex<Lru<Decoded>>,
     pngs: Mutex<Lru<Vec<u8>>>,
     layers_held: Arc<LayerCount>,
+    live: Option<live::Live>,
 }
 
 impl Review {
@@ -282,6 +293,7 @@ impl Review {
             films: Mutex::new(Lru::new(options.cache_bytes - options.cache_bytes / 8)),
             pngs: Mutex::new(Lru::new(options.cache_bytes / 8)),
             layers_held: Arc::default(),
+            live: None,
         };
         if let Some((dir, _)) = &state.renders {
             let frames = state.scan();
@@ -312,6 +324,15 @@ impl Review {
             .server_addr()
             .to_ip()
             .ok_or_else(|| Error::setting("bind", "the server is not listening on an IP address"))?;
+        if let Some(live) = &options.live {
+            let shot = state.crowd.shot();
+            let frame = options.frame.or(state.start_frame).unwrap_or(shot.frames.start);
+            if !shot.frames.contains(frame) {
+                let (a, b) = (shot.frames.start, shot.frames.end);
+                return Err(Error::setting("frame", format!("frame {frame} is outside shot `{name}` ({a}-{b})")));
+            }
+            state.live = Some(live::Live::start(shot_file, frame, live.clone())?);
+        }
         if addr.ip().is_loopback() {
             let port = addr.port();
             state.hosts = Some(vec![
@@ -456,6 +477,15 @@ fn param<T: std::str::FromStr>(q: &BTreeMap<String, String>, key: &str) -> Answe
         None => Ok(None),
         Some(v) => v.trim().parse().map(Some).map_err(|_| bad(format!("`{key}={v}` is not a valid {key}"))),
     }
+}
+
+/// The `exposure` parameter, stops (default 0), within -20..20.
+fn exposure(q: &BTreeMap<String, String>) -> Answer<f32> {
+    let exposure: f32 = param(q, "exposure")?.unwrap_or(0.0);
+    if !(exposure.abs() <= 20.0) {
+        return Err(bad(format!("exposure {exposure} is outside -20..20 stops")));
+    }
+    Ok(exposure)
 }
 
 fn need<T: std::str::FromStr>(q: &BTreeMap<String, String>, key: &str) -> Answer<T> {
@@ -715,11 +745,16 @@ impl State {
     /// Routes one request.
     fn answer(&self, request: &mut tiny_http::Request) -> Answer<Body> {
         let post = request.method() == &tiny_http::Method::Post;
-        let saving = post && request.url().split('?').next() == Some("/api/save-shot");
-        if !saving && !matches!(request.method(), tiny_http::Method::Get | tiny_http::Method::Head) {
+        let path = request.url().split('?').next().unwrap_or("");
+        let posted = POSTS.iter().copied().find(|p| *p == path).filter(|_| post);
+        if posted.is_none() && !matches!(request.method(), tiny_http::Method::Get | tiny_http::Method::Head) {
             return Err(Refusal(
                 405,
-                format!("{} is not served: the review reads (GET) but for POST /api/save-shot", request.method()),
+                format!(
+                    "{} is not served: the review reads (GET) but for POST {}",
+                    request.method(),
+                    POSTS.join(", POST ")
+                ),
             ));
         }
         if let Some(hosts) = &self.hosts {
@@ -728,8 +763,14 @@ impl State {
                 return Err(Refusal(403, format!("Host `{host}` is not this server's address")));
             }
         }
-        if saving {
-            return self.save_shot(request);
+        match posted {
+            Some("/api/save-shot") => return self.save_shot(request),
+            Some(p) => {
+                let body = self.posted_json(request)?;
+                let live = self.live()?;
+                return if p == "/api/live/stop" { live.stop() } else { live.start_frame(&body) };
+            }
+            None => {}
         }
         let url = request.url();
         let path = url.split('?').next().unwrap_or("");
@@ -749,6 +790,8 @@ impl State {
             "/api/mix.png" => self.mix(&q),
             "/api/deep.png" => self.deep_png(&q),
             "/api/map.png" => self.map(&q),
+            "/api/live" => Ok(json_body(&self.live()?.poll())),
+            "/api/live.png" => self.live()?.png(exposure(&q)?, q.get("noisy").is_some_and(|v| v == "1")),
             "/api/cache" => Ok(json_body(&self.cache_figures()?)),
             "/api/figures" => Ok(json_body(&figures::figures(
                 &self.crowd,
@@ -761,6 +804,11 @@ impl State {
                 None => Err(not_found(format!("no page `{p}`"))),
             },
         }
+    }
+
+    /// The live preview, when the review has one.
+    fn live(&self) -> Answer<&live::Live> {
+        self.live.as_ref().ok_or_else(|| not_found("no live preview: the review was not started live"))
     }
 
     /// What the caches hold: entries, bytes and bound of each.
@@ -792,6 +840,7 @@ impl State {
             "comp_view": COMP_VIEW,
             "views": tone::BASIC_VIEWS,
             "gains": s.lights.gains,
+            "live": self.live.as_ref().map(live::Live::describe),
         })
     }
 
@@ -832,10 +881,7 @@ impl State {
 
     fn image(&self, q: &BTreeMap<String, String>) -> Answer<Body> {
         let view = q.get("view").map(String::as_str).unwrap_or("beauty");
-        let exposure: f32 = param(q, "exposure")?.unwrap_or(0.0);
-        if !(exposure.abs() <= 20.0) {
-            return Err(bad(format!("exposure {exposure} is outside -20..20 stops")));
-        }
+        let exposure = exposure(q)?;
         let d = self.decode(q, &Plan::of("image", view, is_comp(q)))?;
         let key = format!("image|{}|{view}|{:08x}", Self::key_of(&d, q), exposure.to_bits());
         self.cached_png(key, || {
@@ -847,10 +893,7 @@ impl State {
     /// `/api/mix.png`: the image's light groups regraded by `mix`
     /// (`group:gain:r:g:b,...`, linear), exposed by `exposure` stops.
     fn mix(&self, q: &BTreeMap<String, String>) -> Answer<Body> {
-        let exposure: f32 = param(q, "exposure")?.unwrap_or(0.0);
-        if !(exposure.abs() <= 20.0) {
-            return Err(bad(format!("exposure {exposure} is outside -20..20 stops")));
-        }
+        let exposure = exposure(q)?;
         let mix_text = q.get("mix").map(String::as_str).unwrap_or("");
         let gains = mixer::parse(mix_text).map_err(bad)?;
         let d = self.decode(q, &Plan::of("mix", "", is_comp(q)))?;
@@ -862,17 +905,16 @@ impl State {
         })
     }
 
-    /// `POST /api/save-shot` `{"name": FILE, "mix": "group:gain:r:g:b,..."}`:
-    /// the shot with the mix folded into its `[lights.gains]`, written as a
-    /// new file beside it (never over one), and the command that renders it.
-    fn save_shot(&self, request: &mut tiny_http::Request) -> Answer<Body> {
+    /// The JSON body of a `POST`, refused unless it is JSON (415), from this
+    /// server's page when an `Origin` is sent (403), at most 64 KiB (413).
+    fn posted_json(&self, request: &mut tiny_http::Request) -> Answer<Value> {
         // A page elsewhere cannot send JSON here without asking first (CORS
         // preflight, which gets 405); its own origin must be this server.
         let header = |name: &'static str| {
             request.headers().iter().find(|h| h.field.equiv(name)).map(|h| h.value.as_str().to_string())
         };
         if !header("Content-Type").is_some_and(|c| c.starts_with("application/json")) {
-            return Err(Refusal(415, "save-shot takes application/json".into()));
+            return Err(Refusal(415, format!("{} takes application/json", request.url())));
         }
         if let (Some(origin), Some(hosts)) = (header("Origin"), &self.hosts) {
             if !hosts.iter().any(|h| origin == format!("http://{h}")) {
@@ -885,7 +927,14 @@ impl State {
         if body.len() > 64 * 1024 {
             return Err(Refusal(413, "the request is over 64 KiB".into()));
         }
-        let v: Value = serde_json::from_slice(&body).map_err(|e| bad(format!("not JSON: {e}")))?;
+        serde_json::from_slice(&body).map_err(|e| bad(format!("not JSON: {e}")))
+    }
+
+    /// `POST /api/save-shot` `{"name": FILE, "mix": "group:gain:r:g:b,..."}`:
+    /// the shot with the mix folded into its `[lights.gains]`, written as a
+    /// new file beside it (never over one), and the command that renders it.
+    fn save_shot(&self, request: &mut tiny_http::Request) -> Answer<Body> {
+        let v = self.posted_json(request)?;
         let name = v["name"].as_str().ok_or_else(|| bad("missing `name` (the new shot's file name)"))?;
         let name = mixer::shot_file_name(name).map_err(bad)?;
         let gains = mixer::parse(v["mix"].as_str().unwrap_or("")).map_err(bad)?;

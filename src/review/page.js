@@ -92,8 +92,9 @@ async function init() {
   loadMap();
   watchMapWidth();
   loadFigures();
+  initLive();
   if (!state.frames.length) {
-    status("No renders folder: figures and map only (docs/review.md).");
+    status(live.on ? "No renders folder: the live preview, figures and map (docs/review.md)." : "No renders folder: figures and map only (docs/review.md).");
     $("viewer").hidden = true;
     return;
   }
@@ -103,6 +104,7 @@ async function init() {
 
 async function loadFrame() {
   $("frame-label").textContent = state.frame;
+  if (live.on) liveStart(state.frame);
   status("loading frame " + state.frame + "...");
   try {
     state.layers = await api("/api/layers?frame=" + state.frame);
@@ -488,6 +490,84 @@ async function loadFigures() {
   } else {
     box.append(el("p", "No layer manifest: run throng layers on the shot for layers, LOD and the map.", "dim"));
   }
+}
+
+
+// The live preview (`throng review --live`, docs/review.md): the frame
+// rendered on the server as the shot file changes, polled a few times a
+// second (a page that stops polling lets it stop).
+const live = { on: false, image: 0, timer: null };
+
+async function postJson(path, body) {
+  const r = await fetch(path, { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body || {}) });
+  const answer = await r.json().catch(() => ({ error: r.statusText }));
+  if (!r.ok) throw new Error(answer.error || r.statusText);
+  return answer;
+}
+
+function initLive() {
+  if (!state.shot.live) return;
+  live.on = true;
+  $("live").hidden = false;
+  const f = $("live-frame");
+  [f.min, f.max] = state.shot.frames;
+  f.addEventListener("change", () => liveStart(+f.value));
+  $("live-stop").addEventListener("click", async () => { try { showLive(await postJson("/api/live/stop")); } catch (e) { status(e.message, true); } });
+  $("live-start").addEventListener("click", () => liveStart(+f.value));
+  $("live-noisy").addEventListener("change", liveImage);
+  $("exposure").addEventListener("input", liveImage);
+  $("live-image").addEventListener("load", () => { $("live-image").dataset.image = $("live-image").dataset.asked; });
+  pollLive();
+}
+
+async function liveStart(frame) {
+  try {
+    showLive(await postJson("/api/live/start", Number.isFinite(frame) ? { frame: frame } : {}));
+  } catch (e) {
+    status("live: " + e.message, true);
+  }
+}
+
+async function pollLive() {
+  try {
+    showLive(await api("/api/live"));
+  } catch (e) {
+    $("live-status").textContent = "live: " + e.message;
+  }
+  live.timer = setTimeout(pollLive, 250);
+}
+
+function showLive(s) {
+  const running = s.run === "running";
+  $("live-stop").hidden = !running;
+  $("live-start").hidden = running;
+  const f = $("live-frame");
+  if (document.activeElement !== f) f.value = s.asked_frame;
+  const parts = [];
+  if (!running) parts.push(s.run === "idle" ? "stopped: no page was polling" : "stopped");
+  if (s.state === "loading") parts.push("reading the shot...");
+  if (s.frame !== null) {
+    parts.push("frame " + s.frame + " at " + s.width + "x" + s.height + ": " + s.spp + " of " + s.max_spp + " spp (pass " + s.pass + ", " + s.elapsed_s.toFixed(1) + " s)");
+  }
+  if (s.image) {
+    parts.push(s.denoised ? "denoised at " + s.denoised_spp + " spp (" + s.denoiser + ")" : "noisy" + (s.denoise_note ? " (no denoiser: " + s.denoise_note + ")" : ""));
+  }
+  if (s.reload && s.reload !== "start" && s.frame !== null) parts.push("after: " + s.reload);
+  $("live-status").textContent = parts.join("; ");
+  const err = $("live-error");
+  err.hidden = !s.error;
+  err.textContent = s.error ? s.error.message + (s.image ? " (the image is of the last shot that read)" : "") : "";
+  if (s.image !== live.image) {
+    live.image = s.image;
+    liveImage();
+  }
+}
+
+function liveImage() {
+  if (!live.image) return;
+  const img = $("live-image");
+  img.dataset.asked = live.image;
+  img.src = "/api/live.png?image=" + live.image + "&exposure=" + $("exposure").value + ($("live-noisy").checked ? "&noisy=1" : "");
 }
 
 init();

@@ -148,7 +148,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Verb::Comp(args) => comp::run(&args),
         Verb::Denoise(args) => denoise::run(&args, cli.threads),
         Verb::Export(args) => export::run(&args),
-        Verb::Review(args) => review::run(&args),
+        Verb::Review(args) => review::run(&args, cli.threads),
         Verb::Farm(verb) => farm::run(&verb),
         Verb::Completions(args) => shell::completions(&args),
         Verb::Man(args) => shell::man(&args),

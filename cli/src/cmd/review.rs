@@ -7,7 +7,9 @@ use std::path::PathBuf;
 use clap::Args;
 
 use throng::error::{Error, Result};
-use throng::review::{Review, ReviewOptions};
+use throng::review::{LiveOptions, Review, ReviewOptions};
+
+use super::values::{resolution, Resolution};
 
 /// `throng review`.
 #[derive(Debug, Args)]
@@ -35,10 +37,18 @@ pub struct ReviewArgs {
     /// Open the page in the desktop's browser.
     #[arg(long)]
     pub open: bool,
+    /// Also render the page's frame live, in memory, and render it again whenever the shot file
+    /// or a file it reads changes (docs/review.md, "Live preview"); uses at most --threads cores.
+    #[arg(long)]
+    pub live: bool,
+    /// The live preview's size, e.g. 480x270 (default: a quarter of the shot's resolution).
+    #[arg(long, value_parser = resolution, requires = "live")]
+    pub live_resolution: Option<Resolution>,
 }
 
-/// `throng review`: serves until interrupted.
-pub fn run(args: &ReviewArgs) -> Result<()> {
+/// `throng review`: serves until interrupted. `threads`: the process's
+/// `--threads` cap, if any (the live preview's pool).
+pub fn run(args: &ReviewArgs, threads: Option<usize>) -> Result<()> {
     let crowd = super::load_crowd(&args.shot)?;
     let options = ReviewOptions {
         renders: args.renders.clone(),
@@ -47,6 +57,11 @@ pub fn run(args: &ReviewArgs) -> Result<()> {
         bind: args.bind,
         port: args.port,
         cache_bytes: args.cache,
+        live: args.live.then(|| LiveOptions {
+            resolution: args.live_resolution.map(|Resolution(r)| r),
+            threads: threads.unwrap_or(0),
+            ..LiveOptions::default()
+        }),
     };
     let review = Review::open(crowd, &args.shot, &options)?;
     match review.manifest_path() {
@@ -54,13 +69,15 @@ pub fn run(args: &ReviewArgs) -> Result<()> {
         None => eprintln!("throng review: no layer manifest (no map, layers or LOD); run `throng layers` to make one"),
     }
     if args.renders.is_none() {
-        eprintln!("throng review: no --renders folder: figures and map only");
+        let what = if args.live { "the live preview, figures and map" } else { "figures and map only" };
+        eprintln!("throng review: no --renders folder: {what}");
     }
     if !args.bind.is_loopback() {
         eprintln!("throng review: warning: listening on {}: other machines can read the shot's files", args.bind);
     }
     let url = review.url();
-    outln!("throng review: {url}  (read-only; Ctrl-C to stop)");
+    let live = if args.live { "; live: renders the page's frame as the shot changes" } else { "" };
+    outln!("throng review: {url}  (read-only{live}; Ctrl-C to stop)");
     if args.open {
         let opener = if cfg!(target_os = "macos") { "open" } else { "xdg-open" };
         if let Err(e) = std::process::Command::new(opener).arg(&url).spawn() {
