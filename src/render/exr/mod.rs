@@ -933,7 +933,7 @@ pub fn read_parts(path: &Path, keep: impl Fn(&str) -> bool) -> Result<Vec<RawPar
 }
 
 /// sRGB transfer function (IEC 61966-2-1) as an 8-bit code: exactly
-/// [`srgb_formula`], looked up (a review image or preview encodes millions
+/// `srgb_formula` (IEC 61966-2-1), looked up (a review image or preview encodes millions
 /// of values, and `powf` was most of a light-mixer change).
 pub(crate) fn srgb_encode(linear: f32) -> u8 {
     let c = linear.clamp(0.0, 1.0);
@@ -945,13 +945,14 @@ pub(crate) fn srgb_encode(linear: f32) -> u8 {
 }
 
 /// The formula [`srgb_encode`] looks up.
+#[cfg(test)]
 fn srgb_formula(c: f32) -> u8 {
     let v = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
     (v * 255.0 + 0.5) as u8
 }
 
 /// `SRGB_STEPS[k]`: the bits of the least value in [0, 1] that
-/// [`srgb_formula`] gives a code over k (found by bisecting the bit
+/// `srgb_formula` gives a code over k (found by bisecting the bit
 /// patterns; the formula never steps down, checked over every f32 in
 /// [0, 1]; the test checks each step against the formula).
 const SRGB_STEPS: [u32; 255] = [
