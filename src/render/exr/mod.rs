@@ -933,7 +933,7 @@ pub fn read_parts(path: &Path, keep: impl Fn(&str) -> bool) -> Result<Vec<RawPar
 }
 
 /// sRGB transfer function (IEC 61966-2-1) as an 8-bit code: exactly
-/// `srgb_formula` (IEC 61966-2-1), looked up (a review image or preview encodes millions
+/// the formula (`srgb_formula`), looked up (a review image or preview encodes millions
 /// of values, and `powf` was most of a light-mixer change).
 pub(crate) fn srgb_encode(linear: f32) -> u8 {
     let c = linear.clamp(0.0, 1.0);
