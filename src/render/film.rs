@@ -22,9 +22,9 @@
 //! - `samples`: with adaptive sampling only (else empty), the samples each
 //!   pixel took. A tile of [`ADAPTIVE_TILE`] pixels is sampled in passes:
 //!   every pixel first takes `min_spp` (at least 2); after each pass, each
-//!   pixel's variance on a tone-mapped scale ([`ErrorEstimate::variance`]:
-//!   its luminance's over its mean plus [`ADAPTIVE_FLOOR`], or its alpha's at
-//!   edges) is pooled with its neighbours' within [`POOL_RADIUS`] (what a
+//!   pixel's variance on a logarithmic scale ([`ErrorEstimate::variance`]:
+//!   its luminance's over its mean squared plus [`ADAPTIVE_FLOOR`], or its
+//!   alpha's at edges) is pooled with its neighbours' within [`POOL_RADIUS`] (what a
 //!   denoiser averages, and enough samples to know a variance from), and the
 //!   pixel takes more while sqrt(pooled variance) / n is above the threshold
 //!   (the samples a frame's summed squared error wants: [`SampleCount::next_total`]),
@@ -66,8 +66,8 @@ const ADAPTIVE_TILE: u32 = 32;
 /// Adaptive sampling's pass totals are multiples of this many samples
 /// (below `max_spp`; the first pass takes `min_spp`, at least 2).
 pub const ADAPTIVE_STEP: u32 = 4;
-/// Added to a pixel's mean luminance, which its variance is divided by
-/// (the tone-mapped scale), so that black pixels are held to an absolute error.
+/// Added to a pixel's mean luminance squared, which its variance is divided
+/// by (a logarithmic scale), so that black pixels are held to an absolute error.
 pub const ADAPTIVE_FLOOR: f64 = 0.01;
 /// A pixel's variance is pooled over the (2r + 1)^2 pixels around it (within
 /// its tile): the denoiser averages about that far in its busiest places,
@@ -139,12 +139,12 @@ impl ErrorEstimate {
     }
 
     /// The variance of one sample after `n` of them: of its luminance on a
-    /// tone-mapped scale, or of its alpha (edges), whichever is larger; 0
-    /// for fewer than 2. The tone-mapped scale is Cycles' (the variance
-    /// over the mean, so the error over its square root, as a display
-    /// transform compresses light): a denoiser smooths away the grain of
-    /// dark pixels that a relative error would spend samples on, while what
-    /// shows after it is the noise of bright ones.
+    /// logarithmic scale (over its mean squared, plus [`ADAPTIVE_FLOOR`]),
+    /// or of its alpha (edges), whichever is larger; 0 for fewer than 2.
+    /// Logarithmic because that is how the denoiser takes light (OIDN's HDR
+    /// mode works on a log-like transfer curve) and how a relative error and
+    /// the eye measure it; Cycles' square-root scale (the variance over the
+    /// mean) spent more on bright pixels and paid less (docs/benchmarks.md).
     fn variance(&self, n: u32) -> f64 {
         if n < 2 {
             return 0.0;
@@ -152,7 +152,7 @@ impl ErrorEstimate {
         let n = f64::from(n);
         let var = |[s, s2]: [f64; 2]| (s2 / n - (s / n) * (s / n)).max(0.0) * n / (n - 1.0);
         let mean = self.lum[0] / n;
-        (var(self.lum) / (mean.abs() + ADAPTIVE_FLOOR)).max(var(self.alpha))
+        (var(self.lum) / (mean * mean + ADAPTIVE_FLOOR)).max(var(self.alpha))
     }
 }
 
@@ -876,15 +876,16 @@ mod tests {
         p
     }
 
-    /// The variance is of one sample, on the tone-mapped scale: the
-    /// luminance's over its mean plus the floor; samples that agree have none.
+    /// The variance is of one sample, on a logarithmic scale: the
+    /// luminance's over its mean squared plus the floor; samples that agree
+    /// have none.
     #[test]
     fn variance_is_of_one_sample_over_the_mean() {
         assert_eq!(sums_of(&[0.5; 8]).estimate.variance(8), 0.0);
         assert_eq!(sums_of(&[3.0]).estimate.variance(1), 0.0, "one sample has no variance");
-        // Luminance 0 and 2: mean 1, unbiased variance 2.
-        let v = sums_of(&[0.0, 2.0]).estimate.variance(2);
-        assert!((v - 2.0 / (1.0 + ADAPTIVE_FLOOR)).abs() < 1e-12, "{v}");
+        // Luminance 0 and 4: mean 2, unbiased variance 8.
+        let v = sums_of(&[0.0, 4.0]).estimate.variance(2);
+        assert!((v - 8.0 / (4.0 + ADAPTIVE_FLOOR)).abs() < 1e-12, "{v}");
         // Alpha at an edge counts when it is the larger.
         let mut edge = PixelSums::new(0);
         for a in [0.0, 1.0, 0.0, 1.0] {
