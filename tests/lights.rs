@@ -796,6 +796,28 @@ fn adaptive_sampling_spends_samples_where_the_pooled_variance_is() {
         let matched = (0..n.len()).filter(|&i| n[i] == k).inspect(|&i| assert_eq!(one.rgba[i], fixed.rgba[i])).count();
         assert!(matched > 0);
     }
+    // With every pass and deep samples gathered, the same counts, and a
+    // pixel's passes and deep samples are the fixed render's of its count
+    // (each kept between the passes of its tile).
+    use throng::render::film::{render_frame_deep, DeepRequest};
+    s.passes = throng::scene::passes::PassSet::all();
+    let request = DeepRequest { settings: Default::default(), names: None };
+    let deep_render = |s: &RenderSettings| {
+        let (film, deep, _) = render_frame_deep(&blas, &lib, &scene, s, None, Some(&request), None).expect("render");
+        (film, deep.expect("a deep image"))
+    };
+    let (all, deep) = deep_render(&s);
+    assert_eq!((&all.rgba, &all.samples), (&one.rgba, &one.samples), "passes changed the beauty or the counts");
+    let (fixed, fixed_deep) = deep_render(&RenderSettings { spp: most, adaptive: None, ..s.clone() });
+    let (ours, theirs): (Vec<_>, Vec<_>) = (deep.pixels().collect(), fixed_deep.pixels().collect());
+    assert!(ours.iter().all(|p| !p.is_empty()), "every pixel sees the floor");
+    for i in (0..n.len()).filter(|&i| n[i] == most) {
+        for (p, q) in all.passes.iter().zip(&fixed.passes) {
+            assert_eq!(p.data[i], q.data[i], "pixel {i}, pass {}", p.name);
+        }
+        assert_eq!(ours[i], theirs[i], "pixel {i}: deep samples");
+    }
+    s.passes = Default::default();
     // Bad keys are refused by name.
     s.adaptive = Some(throng::shot::Adaptive { threshold: f32::NAN, min_spp: 4, max_spp: 8 });
     let e = render_frame(&blas, &lib, &scene, &s, None).unwrap_err().to_string();
