@@ -20,17 +20,18 @@
 //!   from a fixed-size per-pixel accumulator over the samples in index order
 //!   (so also independent of threading).
 //! - `samples`: with adaptive sampling only (else empty), the samples each
-//!   pixel took. Every pixel takes `min_spp`; from there, after every
-//!   [`ADAPTIVE_STEP`] samples, it stops once its error is below the
-//!   threshold: the standard error of its mean luminance over that mean
-//!   (plus [`ADAPTIVE_FLOOR`], so dark pixels are held to an absolute
-//!   error) or the standard error of its alpha (edges), whichever is
-//!   larger, and never below 1 / n after n samples (what happens less often
-//!   than once in n samples, n samples cannot see); or at `max_spp`.
-//!   The decision reads the pixel's own samples alone, in index order, so
-//!   the image is the same for any thread count, and a pixel's first n
-//!   samples are those of a fixed n-sample render. Every other buffer is
-//!   the mean over the samples the pixel took.
+//!   pixel took. A tile of [`ADAPTIVE_TILE`] pixels is sampled in passes:
+//!   every pixel first takes `min_spp` (at least 2); after each pass, each
+//!   pixel's variance on a logarithmic scale ([`ErrorEstimate::variance`]:
+//!   its luminance's over its mean squared plus [`ADAPTIVE_FLOOR`], or its
+//!   alpha's at edges) is pooled with its neighbours' within [`POOL_RADIUS`] (what a
+//!   denoiser averages, and enough samples to know a variance from), and the
+//!   pixel takes more while sqrt(pooled variance) / n is above the threshold
+//!   (the samples a frame's summed squared error wants: [`SampleCount::next_total`]),
+//!   up to `max_spp`. The passes read the tile's samples alone, so the
+//!   image is the same for any thread count, and a pixel's n samples are
+//!   those of a fixed n-sample render, summed in the same order. Every other
+//!   buffer is the mean over the samples the pixel took.
 //! - `passes`: the light-path passes and light groups asked for (means over
 //!   all samples, like RGB, from the same samples: scene::passes), the
 //!   shadow pass (set surfaces' direct light the crowd's shadows took), the
@@ -41,7 +42,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::accel::{BlasSet, Tlas};
@@ -58,14 +59,27 @@ use crate::scene::{FrameScene, Library};
 /// thread on coherent rays.
 const TILE: u32 = 16;
 
-/// Adaptive sampling checks a pixel's error every this many samples after
-/// its first `min_spp`.
-pub const ADAPTIVE_STEP: u32 = 4;
-/// Added to a pixel's mean luminance under the square root its error is
-/// divided by, so that black pixels are held to an absolute error.
-pub const ADAPTIVE_FLOOR: f64 = 0.01;
+/// Adaptive sampling works a tile of this edge at a time: the tile's pixels
+/// keep their sums between its passes (one tile's worth per thread, not a
+/// frame's), and a pixel's variance is pooled with its neighbours in the tile.
+const ADAPTIVE_TILE: u32 = 32;
 
-/// How many samples a pixel takes: `min` to `max`, stopping at `threshold`.
+/// Adaptive sampling's pass totals are multiples of this many samples
+/// (below `max_spp`; the first pass takes `min_spp`, at least 2).
+pub const ADAPTIVE_STEP: u32 = 4;
+/// Added to a pixel's mean luminance squared, which its variance is divided
+/// by (a logarithmic scale), so that black pixels are held to an absolute error.
+pub const ADAPTIVE_FLOOR: f64 = 0.01;
+/// A pixel's variance is pooled over the (2r + 1)^2 pixels around it (within
+/// its tile): the denoiser averages about that far in its busiest places,
+/// and four samples a pixel are too few to know a variance from, 100 are not.
+const POOL_RADIUS: usize = 2;
+/// A pass takes a pixel to at most this many times the samples it has: its
+/// need is an estimate, re-made after every pass.
+const ADAPTIVE_GROWTH: f64 = 4.0;
+
+/// How many samples a pixel takes: exactly `max`, or adaptively from `min`
+/// to `max` by `threshold`.
 #[derive(Clone, Copy, Debug)]
 struct SampleCount {
     min: u32,
@@ -86,27 +100,33 @@ impl SampleCount {
         }
     }
 
-    /// Whether a pixel may stop after its first `spp` samples (as `render_pixel` decides).
-    fn may_stop_after(&self, spp: u32) -> bool {
-        self.threshold.is_some() && spp >= self.min.max(2) && (spp - self.min).is_multiple_of(ADAPTIVE_STEP)
+    /// The samples every pixel takes in the first pass: `min`, but at least
+    /// 2 (one sample has no variance), and at most `max`.
+    fn first_pass(&self) -> u32 {
+        self.min.max(2).min(self.max)
     }
 
-    /// The end of the run of samples from `s` (an index in the pixel's
-    /// sequence, from `first`) whose camera rays are traced together: at
-    /// most a packet's worth, and never past a sample after which the pixel
-    /// may stop (no camera ray is traced for nothing).
-    fn batch_end(&self, s: u32) -> u32 {
-        let cap = s.saturating_add(PACKET as u32).min(self.first + self.max);
-        let mut end = s + 1;
-        while end < cap && !self.may_stop_after(end - self.first) {
-            end += 1;
+    /// The pass total of a pixel holding `n` samples whose pooled variance is
+    /// `variance`, or `None` when it is done: it is done once the error of
+    /// one more sample's worth, sqrt(variance) / n, is under the threshold.
+    /// Stopping there, rather than once the pixel's standard error
+    /// sqrt(variance / n) is, spends samples as sqrt(variance) rather than as
+    /// variance: what minimises the summed squared error of a frame for its
+    /// number of samples (a pixel's next sample is worth variance / n^2 to
+    /// that sum), which is what a denoiser, averaging a footprint of pixels,
+    /// turns into its own error.
+    fn next_total(&self, threshold: f64, n: u32, variance: f64) -> Option<u32> {
+        let need = variance.sqrt() / threshold;
+        if n >= self.max || need <= f64::from(n) || need.is_nan() {
+            return None;
         }
-        end
+        let want = need.min(f64::from(n) * ADAPTIVE_GROWTH).ceil() as u32;
+        Some(want.max(n + 1).next_multiple_of(ADAPTIVE_STEP).min(self.max))
     }
 }
 
 /// Running sums of one pixel's luminance and alpha for its error estimate.
-#[derive(Default)]
+#[derive(Clone, Copy, Default)]
 struct ErrorEstimate {
     lum: [f64; 2],
     alpha: [f64; 2],
@@ -123,26 +143,45 @@ impl ErrorEstimate {
         self.alpha[1] += a * a;
     }
 
-    /// The larger of the standard error of the mean luminance on a
-    /// tone-mapped scale and the standard error of the mean alpha, after
-    /// `n` (> 1) samples, and at least 1 / `n`. The tone-mapped scale is
-    /// Cycles' (the error over the square root of the mean, as a display
-    /// transform compresses light): a denoiser smooths away the grain of
-    /// dark pixels that a relative error would spend samples on, while
-    /// what shows after it is the noise of bright ones.
-    fn error(&self, n: u32) -> f64 {
+    /// The variance of one sample after `n` of them: of its luminance on a
+    /// logarithmic scale (over its mean squared, plus [`ADAPTIVE_FLOOR`]),
+    /// or of its alpha (edges), whichever is larger; 0 for fewer than 2.
+    /// Logarithmic because that is how the denoiser takes light (OIDN's HDR
+    /// mode works on a log-like transfer curve) and how a relative error and
+    /// the eye measure it; Cycles' square-root scale (the variance over the
+    /// mean) spent more on bright pixels and paid less (docs/benchmarks.md).
+    fn variance(&self, n: u32) -> f64 {
+        if n < 2 {
+            return 0.0;
+        }
         let n = f64::from(n);
-        let se = |[s, s2]: [f64; 2]| {
-            let mean = s / n;
-            ((s2 / n - mean * mean).max(0.0) / (n - 1.0)).sqrt()
-        };
+        let var = |[s, s2]: [f64; 2]| (s2 / n - (s / n) * (s / n)).max(0.0) * n / (n - 1.0);
         let mean = self.lum[0] / n;
-        let relative = se(self.lum) / (mean.abs() + ADAPTIVE_FLOOR).sqrt();
-        // n samples cannot see what happens less often than once in n (a
-        // shadow, a lamp through a gap): their variance says nothing of it,
-        // so no pixel claims an error below 1 / n.
-        relative.max(se(self.alpha)).hypot(1.0 / n)
+        (var(self.lum) / (mean * mean + ADAPTIVE_FLOOR)).max(var(self.alpha))
     }
+}
+
+/// Each pixel's variance ([`ErrorEstimate::variance`]) pooled: the mean
+/// over the pixels of the tile (`width` wide, row-major) within
+/// [`POOL_RADIUS`] of it.
+fn pooled_variance(sums: &[PixelSums], width: usize) -> Vec<f64> {
+    let v: Vec<f64> = sums.iter().map(|p| p.estimate.variance(p.spp)).collect();
+    let height = v.len() / width.max(1);
+    let span = |c: usize, len: usize| c.saturating_sub(POOL_RADIUS)..(c + POOL_RADIUS + 1).min(len);
+    let mut pooled = Vec::with_capacity(v.len());
+    for y in 0..height {
+        for x in 0..width {
+            let (mut total, mut k) = (0.0, 0u32);
+            for ny in span(y, height) {
+                for value in &v[ny * width + span(x, width).start..ny * width + span(x, width).end] {
+                    total += value;
+                    k += 1;
+                }
+            }
+            pooled.push(total / f64::from(k));
+        }
+    }
+    pooled
 }
 
 /// Timings and ray counts of one frame.
@@ -282,19 +321,35 @@ pub struct DeepRequest<'a, 'n> {
     pub names: Option<&'a CryptoNames<'n>>,
 }
 
-/// Where a pixel's deep samples go: the pixel being gathered and its tile's samples.
-struct DeepOut<'p, 'a, 'n> {
-    request: &'p DeepRequest<'a, 'n>,
-    pixel: &'p mut DeepPixel,
-    samples: &'p mut Vec<DeepSample>,
+/// What a frame's pixels are sampled for, beside the beauty.
+#[derive(Clone, Copy)]
+struct Wants<'a, 'n, 'd> {
+    /// Names for the Cryptomatte mattes (`None`: none rendered).
+    crypto: Option<&'a CryptoNames<'n>>,
+    /// The passes written (`None`: none).
+    passes: Option<&'a PassSet>,
+    /// Deep samples (`None`: none gathered).
+    deep: Option<&'a DeepRequest<'a, 'd>>,
+    /// Whether samples feed the adaptive error estimate.
+    estimate: bool,
 }
 
-/// Where a pixel's passes go: the scratch split of one sample and the
-/// pixel's pass values (one triple per pass of `set`).
-struct PassOut<'p> {
-    set: &'p PassSet,
-    split: &'p mut Split,
-    values: &'p mut [[f32; 3]],
+/// One pixel's sums over the samples it has taken, added in sample index
+/// order: the floats are the same for any threading and however the samples
+/// were split into passes, so a pixel that took n samples holds what a fixed
+/// n-sample render holds there.
+struct PixelSums {
+    spp: u32,
+    rgb: Vec3,
+    alpha: f32,
+    normal: Vec3,
+    albedo: Vec3,
+    /// The sample nearest the pixel centre: squared offset and result.
+    nearest: (f32, SampleResult),
+    crypto: [RankAccumulator; 3],
+    /// The passes' sums (`position` unused: `P` is the nearest sample's).
+    light: Split,
+    estimate: ErrorEstimate,
 }
 
 /// A pixel's passes of `set` into `values` (one triple each, in file
@@ -324,94 +379,216 @@ fn write_passes(set: &PassSet, sums: &Split, inv: f32, position: Vec3, values: &
     }
 }
 
-#[allow(clippy::too_many_arguments, reason = "each output buffer is the caller's, reused from pixel to pixel")]
-fn render_pixel(
-    integrator: &Integrator,
-    (x, y): (u32, u32),
-    count: SampleCount,
-    crypto: Option<&CryptoNames>,
-    counts: &mut RayCounts,
-    batch: &mut CameraBatch,
-    mut passes: Option<PassOut>,
-    mut deep: Option<DeepOut<'_, '_, '_>>,
-) -> Pixel {
-    batch.clear();
-    if let Some(d) = &mut deep {
-        d.pixel.clear();
-    }
-    let packets = integrator.camera_packets();
-    let (mut rgb, mut alpha, mut normal, mut albedo) = (Vec3::ZERO, 0.0f32, Vec3::ZERO, Vec3::ZERO);
-    let mut nearest = (f32::INFINITY, SampleResult { z: f32::INFINITY, ..Default::default() });
-    let mut acc: [RankAccumulator; 3] = Default::default();
-    // Samples summed in index order: the float result is independent of threading.
-    let mut sums = Split::new(passes.as_ref().map_or(0, |p| p.split.groups.len()));
-    let mut estimate = ErrorEstimate::default();
-    let mut spp = 0;
-    // `s` indexes the pixel's sample sequence: a progressive pass continues
-    // where the one before it stopped.
-    for s in count.first..count.first + count.max {
-        spp = s - count.first + 1;
-        let split = passes.as_mut().map(|p| {
-            p.split.clear();
-            &mut *p.split
-        });
-        let (r, offset) = if packets {
-            integrator.sample_pixel_batched(x, y, s, || count.batch_end(s), batch, Tally { counts, split })
-        } else {
-            integrator.sample_pixel(x, y, s, Tally { counts, split })
-        };
-        if let Some(p) = &passes {
-            // A sample the beauty drops (not finite) the passes drop too.
-            if r.rgb.is_finite() {
-                sums.add_sample(p.split);
-            }
+impl PixelSums {
+    /// No samples yet, with room for `groups` light groups.
+    fn new(groups: usize) -> PixelSums {
+        PixelSums {
+            spp: 0,
+            rgb: Vec3::ZERO,
+            alpha: 0.0,
+            normal: Vec3::ZERO,
+            albedo: Vec3::ZERO,
+            nearest: (f32::INFINITY, SampleResult { z: f32::INFINITY, ..Default::default() }),
+            crypto: Default::default(),
+            light: Split::new(groups),
+            estimate: ErrorEstimate::default(),
         }
-        if let Some(names) = crypto {
+    }
+
+    /// Back to no samples (for the next pixel).
+    fn clear(&mut self) {
+        self.spp = 0;
+        (self.rgb, self.alpha, self.normal, self.albedo) = (Vec3::ZERO, 0.0, Vec3::ZERO, Vec3::ZERO);
+        self.nearest = (f32::INFINITY, SampleResult { z: f32::INFINITY, ..Default::default() });
+        self.crypto = Default::default();
+        self.light.clear();
+        self.estimate = ErrorEstimate::default();
+    }
+
+    /// Adds sample `r` taken at `offset` from the pixel centre, whose passes
+    /// `split` holds (when passes are written).
+    fn add(&mut self, r: &SampleResult, offset: Vec2, split: Option<&Split>, wants: &Wants) {
+        // A sample the beauty drops (not finite) the passes drop too.
+        if let Some(p) = split.filter(|_| r.rgb.is_finite()) {
+            self.light.add_sample(p);
+        }
+        if let Some(names) = wants.crypto {
             // Each sample has filter weight 1 (importance-sampled filter).
             let ids = r.instance.map_or([0; 3], |i| names.ids(i));
-            for (a, id) in acc.iter_mut().zip(ids) {
+            for (a, id) in self.crypto.iter_mut().zip(ids) {
                 a.add(id);
             }
         }
-        if let Some(d) = &mut deep {
-            d.pixel.add(&d.request.settings, r.rgb, r.alpha, r.z, r.instance);
-        }
-        rgb += r.rgb;
-        alpha += r.alpha;
-        normal += r.normal;
-        albedo += r.albedo;
+        self.rgb += r.rgb;
+        self.alpha += r.alpha;
+        self.normal += r.normal;
+        self.albedo += r.albedo;
         let d2 = offset.length_squared();
-        if d2 < nearest.0 {
-            nearest = (d2, r);
+        if d2 < self.nearest.0 {
+            self.nearest = (d2, *r);
         }
-        if let Some(threshold) = count.threshold {
-            estimate.add(r.rgb, r.alpha);
-            if count.may_stop_after(spp) && estimate.error(spp) < threshold {
-                break;
+        if wants.estimate {
+            self.estimate.add(r.rgb, r.alpha);
+        }
+        self.spp += 1;
+    }
+
+    /// The pixel's values: means over its samples; its passes into `values`
+    /// (one triple per pass of the set) and its deep samples, from `deep`,
+    /// onto `samples`.
+    fn finish(
+        &self,
+        wants: &Wants,
+        values: &mut [[f32; 3]],
+        deep: Option<&mut DeepPixel>,
+        samples: &mut Vec<DeepSample>,
+    ) -> Pixel {
+        let spp = self.spp;
+        let inv = 1.0 / spp as f32;
+        if let Some(set) = wants.passes {
+            write_passes(set, &self.light, inv, self.nearest.1.position, values);
+        }
+        let mut ranked = [[[0.0f32; 2]; RANKS]; 3];
+        if wants.crypto.is_some() {
+            for (a, out) in self.crypto.iter().zip(&mut ranked) {
+                a.write_ranked(spp, out);
+            }
+        }
+        let deep = match (wants.deep, deep) {
+            (Some(request), Some(pixel)) => pixel.finish(spp, request.names, samples),
+            _ => 0,
+        };
+        let nearest = &self.nearest.1;
+        Pixel {
+            rgba: (self.rgb * inv).extend(self.alpha * inv).to_array(),
+            z: nearest.z,
+            normal: (self.normal * inv).to_array(),
+            albedo: (self.albedo * inv).to_array(),
+            agent: nearest.agent,
+            motion: nearest.motion.to_array(),
+            samples: spp,
+            crypto: ranked,
+            deep,
+        }
+    }
+}
+
+/// What a tile's pixels reuse: ray counts, the camera batch, one sample's passes.
+struct Scratch {
+    counts: RayCounts,
+    batch: CameraBatch,
+    split: Split,
+}
+
+/// Takes pixel (x, y)'s samples from the ones it has up to `to` (index
+/// order, sample indices from `first`: a progressive pass continues the
+/// sequence where the one before it stopped), into `sums` and `deep`.
+/// Camera rays go in packets of at most [`PACKET`], never past `to`.
+#[allow(clippy::too_many_arguments, reason = "each output buffer is the caller's, reused from pixel to pixel")]
+fn take_samples(
+    integrator: &Integrator,
+    (x, y): (u32, u32),
+    (first, to): (u32, u32),
+    wants: &Wants,
+    sums: &mut PixelSums,
+    mut deep: Option<&mut DeepPixel>,
+    scratch: &mut Scratch,
+) {
+    scratch.batch.clear();
+    let packets = integrator.camera_packets();
+    let last = first + to;
+    for s in first + sums.spp..last {
+        let split = wants.passes.map(|_| {
+            scratch.split.clear();
+            &mut scratch.split
+        });
+        let tally = Tally { counts: &mut scratch.counts, split };
+        let (r, offset) = if packets {
+            let end = || s.saturating_add(PACKET as u32).min(last);
+            integrator.sample_pixel_batched(x, y, s, end, &mut scratch.batch, tally)
+        } else {
+            integrator.sample_pixel(x, y, s, tally)
+        };
+        if let (Some(d), Some(request)) = (deep.as_deref_mut(), wants.deep) {
+            d.add(&request.settings, r.rgb, r.alpha, r.z, r.instance);
+        }
+        sums.add(&r, offset, wants.passes.map(|_| &scratch.split), wants);
+    }
+}
+
+/// Renders the pixels `x0..x1` x `y0..y1`, row-major: each its fixed
+/// count, or, adaptively, in passes: every pixel first takes
+/// [`SampleCount::first_pass`] samples; then each pixel's variance is pooled
+/// with its neighbours' ([`pooled_variance`]) and [`SampleCount::next_total`]
+/// says how many it takes next, until no pixel takes more. Every pass
+/// depends on the tile's samples alone, so the image is the same for any
+/// thread count.
+fn render_tile(
+    integrator: &Integrator,
+    [x0, y0, x1, y1]: [u32; 4],
+    count: SampleCount,
+    wants: &Wants,
+    (groups, triples): (usize, usize),
+) -> TileResult {
+    let (tw, th) = ((x1 - x0) as usize, (y1 - y0) as usize);
+    let n = tw * th;
+    let at = |i: usize| (x0 + (i % tw) as u32, y0 + (i / tw) as u32);
+    let mut scratch =
+        Scratch { counts: RayCounts::default(), batch: CameraBatch::default(), split: Split::new(groups) };
+    let mut values = vec![[0f32; 3]; n * triples];
+    let mut deep_samples = Vec::new();
+    let mut pixels = Vec::with_capacity(n);
+    let gathers_deep = wants.deep.is_some();
+    match count.threshold {
+        None => {
+            let mut sums = PixelSums::new(groups);
+            let mut deep = DeepPixel::default();
+            for i in 0..n {
+                sums.clear();
+                deep.clear();
+                take_samples(
+                    integrator,
+                    at(i),
+                    (count.first, count.max),
+                    wants,
+                    &mut sums,
+                    gathers_deep.then_some(&mut deep),
+                    &mut scratch,
+                );
+                let out = &mut values[i * triples..(i + 1) * triples];
+                pixels.push(sums.finish(wants, out, gathers_deep.then_some(&mut deep), &mut deep_samples));
+            }
+        }
+        Some(threshold) => {
+            let mut sums: Vec<PixelSums> = (0..n).map(|_| PixelSums::new(groups)).collect();
+            let mut deep: Vec<DeepPixel> =
+                (0..if gathers_deep { n } else { 0 }).map(|_| DeepPixel::default()).collect();
+            let mut target = vec![count.first_pass(); n];
+            loop {
+                for (i, (s, &to)) in sums.iter_mut().zip(&target).enumerate() {
+                    if s.spp < to {
+                        take_samples(integrator, at(i), (0, to), wants, s, deep.get_mut(i), &mut scratch);
+                    }
+                }
+                let pooled = pooled_variance(&sums, tw);
+                let mut more = false;
+                for ((s, v), to) in sums.iter().zip(pooled).zip(&mut target) {
+                    if let Some(next) = count.next_total(threshold, s.spp, v) {
+                        *to = next;
+                        more = true;
+                    }
+                }
+                if !more {
+                    break;
+                }
+            }
+            for (i, s) in sums.iter().enumerate() {
+                let out = &mut values[i * triples..(i + 1) * triples];
+                pixels.push(s.finish(wants, out, deep.get_mut(i), &mut deep_samples));
             }
         }
     }
-    let inv = 1.0 / spp as f32;
-    if let Some(p) = passes {
-        write_passes(p.set, &sums, inv, nearest.1.position, p.values);
-    }
-    let mut ranked = [[[0.0f32; 2]; RANKS]; 3];
-    if crypto.is_some() {
-        for (a, out) in acc.iter().zip(&mut ranked) {
-            a.write_ranked(spp, out);
-        }
-    }
-    Pixel {
-        rgba: (rgb * inv).extend(alpha * inv).to_array(),
-        z: nearest.1.z,
-        normal: (normal * inv).to_array(),
-        albedo: (albedo * inv).to_array(),
-        agent: nearest.1.agent,
-        motion: nearest.1.motion.to_array(),
-        samples: spp,
-        crypto: ranked,
-        deep: deep.map_or(0, |d| d.pixel.finish(spp, d.request.names, d.samples)),
-    }
+    (pixels, values, scratch.counts, deep_samples)
 }
 
 /// The render's thread pool could not start: a bad `threads` setting (or
@@ -486,38 +663,27 @@ pub fn render_frame_deep(
         let integrator = Integrator::new(lib, scene, &tlas, settings, groups.as_ref());
         let count = SampleCount::of(settings);
         let (w, h) = (settings.width, settings.height);
+        let edge = if count.threshold.is_some() { ADAPTIVE_TILE } else { TILE };
         let tiles: Vec<(u32, u32)> =
-            (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE))).collect();
+            (0..h.div_ceil(edge)).flat_map(|ty| (0..w.div_ceil(edge)).map(move |tx| (tx * edge, ty * edge))).collect();
+        let wants = Wants {
+            crypto,
+            passes: (triples > 0).then_some(&settings.passes),
+            deep,
+            estimate: count.threshold.is_some(),
+        };
+        let split_groups = if settings.passes.light_groups { group_count } else { 0 };
         let done = AtomicUsize::new(0);
         let start = Instant::now();
         let rendered: Vec<TileResult> = tiles
             .par_iter()
             .map(|&(x0, y0)| {
-                let mut counts = RayCounts::default();
-                let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-                let n = ((x1 - x0) * (y1 - y0)) as usize;
-                let mut pixels = Vec::with_capacity(n);
-                let mut values = vec![[0f32; 3]; n * triples];
-                let mut split = Split::new(if settings.passes.light_groups { group_count } else { 0 });
-                let mut chunks = values.chunks_mut(triples.max(1));
-                let mut batch = CameraBatch::default();
-                let (mut deep_pixel, mut deep_samples) = (DeepPixel::default(), Vec::new());
-                for y in y0..y1 {
-                    for x in x0..x1 {
-                        let out = chunks.next().filter(|_| triples > 0).map(|values| PassOut {
-                            set: &settings.passes,
-                            split: &mut split,
-                            values,
-                        });
-                        let d =
-                            deep.map(|request| DeepOut { request, pixel: &mut deep_pixel, samples: &mut deep_samples });
-                        pixels.push(render_pixel(&integrator, (x, y), count, crypto, &mut counts, &mut batch, out, d));
-                    }
-                }
+                let rect = [x0, y0, (x0 + edge).min(w), (y0 + edge).min(h)];
+                let tile = render_tile(&integrator, rect, count, &wants, (split_groups, triples));
                 if let Some(report) = progress {
-                    report(done.fetch_add(pixels.len(), Ordering::Relaxed) + pixels.len());
+                    report(done.fetch_add(tile.0.len(), Ordering::Relaxed) + tile.0.len());
                 }
-                (pixels, values, counts, deep_samples)
+                tile
             })
             .collect();
         stats.trace = start.elapsed();
@@ -534,14 +700,13 @@ pub fn render_frame_deep(
             .collect();
         for (&(x0, y0), (pixels, values, counts, _)) in tiles.iter().zip(&rendered) {
             stats.rays += *counts;
-            let tw = (x0 + TILE).min(w) - x0;
+            let tw = (x0 + edge).min(w) - x0;
             for (k, px) in values.chunks(triples.max(1)).enumerate().filter(|_| triples > 0) {
                 let i = film.index(x0 + k as u32 % tw, y0 + k as u32 / tw);
                 for (pass, v) in film.passes.iter_mut().zip(px) {
                     pass.data[i] = *v;
                 }
             }
-            let tw = (x0 + TILE).min(w) - x0;
             for (k, px) in pixels.iter().enumerate() {
                 let i = film.index(x0 + k as u32 % tw, y0 + k as u32 / tw);
                 film.rgba[i] = px.rgba;
@@ -567,7 +732,7 @@ pub fn render_frame_deep(
         }
         mattes.sort_by(|a, b| a.name.cmp(&b.name));
         film.cryptomatte = mattes;
-        let deep = deep.map(|_| deep_image(w, h, &tiles, &rendered));
+        let deep = deep.map(|_| deep_image(w, h, edge, &tiles, &rendered));
         Ok((film, deep, stats))
     })
 }
@@ -585,12 +750,12 @@ fn empty_film(w: u32, h: u32, blurred: bool, adaptive: bool) -> Film {
     film
 }
 
-/// The deep image of a frame from its tiles' pixels and samples (tile
-/// order) in row-major order.
-fn deep_image(w: u32, h: u32, tiles: &[(u32, u32)], rendered: &[TileResult]) -> DeepImage {
+/// The deep image of a frame from its tiles' (of edge `edge`) pixels and
+/// samples (tile order) in row-major order.
+fn deep_image(w: u32, h: u32, edge: u32, tiles: &[(u32, u32)], rendered: &[TileResult]) -> DeepImage {
     let mut counts = vec![0u32; w as usize * h as usize];
     for (&(x0, y0), (pixels, ..)) in tiles.iter().zip(rendered) {
-        let tw = (x0 + TILE).min(w) - x0;
+        let tw = (x0 + edge).min(w) - x0;
         for (k, px) in pixels.iter().enumerate() {
             counts[(y0 + k as u32 / tw) as usize * w as usize + (x0 + k as u32 % tw) as usize] = px.deep;
         }
@@ -603,7 +768,7 @@ fn deep_image(w: u32, h: u32, tiles: &[(u32, u32)], rendered: &[TileResult]) -> 
     }
     let mut samples = vec![DeepSample::default(); total];
     for (&(x0, y0), (pixels, _, _, tile_samples)) in tiles.iter().zip(rendered) {
-        let tw = (x0 + TILE).min(w) - x0;
+        let tw = (x0 + edge).min(w) - x0;
         let mut at = 0;
         for (k, px) in pixels.iter().enumerate() {
             let i = (y0 + k as u32 / tw) as usize * w as usize + (x0 + k as u32 % tw) as usize;
@@ -720,27 +885,83 @@ mod tests {
         }
     }
 
-    /// Samples that all agree do not prove a pixel converged: a light seen
-    /// once in 20 samples is missed by 8 of them nine times in ten, so the
-    /// error of n agreeing samples is 1 / n, not 0, and a pixel whose rare
-    /// light its first samples missed samples on until it is found.
-    #[test]
-    fn agreeing_samples_claim_no_less_than_one_over_n() {
-        for n in [2u32, 8, 33, 256] {
-            let mut e = ErrorEstimate::default();
-            for _ in 0..n {
-                e.add(Vec3::splat(0.5), 1.0);
-            }
-            assert_eq!(e.error(n), 1.0 / f64::from(n));
+    fn sums_of(samples: &[f32]) -> PixelSums {
+        let mut p = PixelSums::new(0);
+        for &l in samples {
+            p.estimate.add(Vec3::splat(l), 1.0);
+            p.spp += 1;
         }
-        // One sample in 20 sees a lamp 20 times brighter than the rest.
-        let sample = |i: u32| if i % 20 == 19 { Vec3::splat(10.0) } else { Vec3::splat(0.5) };
-        let mut e = ErrorEstimate::default();
-        let stop = (1..=400u32).find(|&n| {
-            e.add(sample(n - 1), 1.0);
-            n >= 8 && n % 4 == 0 && e.error(n) < 0.05
-        });
-        assert!(stop.is_none_or(|n| n >= 20), "stopped at {stop:?}, before the lamp's first sample");
-        assert!(stop.is_none(), "once seen, the lamp keeps the pixel sampling: stopped at {stop:?}");
+        p
+    }
+
+    /// The variance is of one sample, on a logarithmic scale: the
+    /// luminance's over its mean squared plus the floor; samples that agree
+    /// have none.
+    #[test]
+    fn variance_is_of_one_sample_over_the_mean() {
+        assert_eq!(sums_of(&[0.5; 8]).estimate.variance(8), 0.0);
+        assert_eq!(sums_of(&[3.0]).estimate.variance(1), 0.0, "one sample has no variance");
+        // Luminance 0 and 4: mean 2, unbiased variance 8.
+        let v = sums_of(&[0.0, 4.0]).estimate.variance(2);
+        assert!((v - 8.0 / (4.0 + ADAPTIVE_FLOOR)).abs() < 1e-12, "{v}");
+        // Alpha at an edge counts when it is the larger.
+        let mut edge = PixelSums::new(0);
+        for a in [0.0, 1.0, 0.0, 1.0] {
+            edge.estimate.add(Vec3::ZERO, a);
+        }
+        assert!((edge.estimate.variance(4) - 1.0 / 3.0).abs() < 1e-12);
+    }
+
+    /// A pixel spends samples as the square root of its variance: four
+    /// times the variance, twice the samples; a pass at most multiplies its
+    /// samples by the growth, lands on a multiple of the step and never
+    /// passes max; a pixel whose need is met is done.
+    #[test]
+    fn samples_follow_the_square_root_of_the_variance() {
+        let count = SampleCount { min: 4, max: 256, threshold: Some(0.1), first: 0 };
+        let t = 0.1;
+        assert_eq!(count.next_total(t, 16, 1.0), None, "needs 10, has 16");
+        assert_eq!(count.next_total(t, 8, 1.0), Some(12), "needs 10: the next multiple of 4");
+        assert_eq!(count.next_total(t, 8, 4.0), Some(20), "four times the variance: needs 20");
+        assert_eq!(count.next_total(t, 4, 100.0), Some(16), "needs 100: at most 4x a pass");
+        assert_eq!(count.next_total(t, 128, 1e6), Some(256), "never past max");
+        assert_eq!(count.next_total(t, 256, 1e6), None, "done at max");
+        assert_eq!(count.next_total(t, 4, f64::NAN), None);
+        let odd = SampleCount { min: 3, max: 10, threshold: Some(0.1), first: 0 };
+        assert_eq!(odd.first_pass(), 3);
+        assert_eq!(odd.next_total(t, 9, 1.0), Some(10));
+        assert_eq!(SampleCount { min: 1, max: 1, threshold: Some(0.1), first: 0 }.first_pass(), 1);
+        assert_eq!(SampleCount { min: 1, max: 8, threshold: Some(0.1), first: 0 }.first_pass(), 2);
+    }
+
+    /// A pixel's variance is pooled with its neighbours' within the radius,
+    /// no farther: a lamp one pixel's first samples saw keeps the pixels
+    /// around it sampling too (their own first samples, which missed it,
+    /// agree and claim no error), and leaves the rest of the tile alone.
+    #[test]
+    fn variance_is_pooled_over_the_neighbourhood() {
+        let width = 9;
+        let mut sums: Vec<PixelSums> = (0..width * width).map(|_| sums_of(&[0.5; 4])).collect();
+        sums[4 * width + 4] = sums_of(&[0.5, 0.5, 0.5, 10.0]);
+        let alone = sums[4 * width + 4].estimate.variance(4);
+        let pooled = pooled_variance(&sums, width);
+        let r = POOL_RADIUS;
+        for y in 0..width {
+            for x in 0..width {
+                let v = pooled[y * width + x];
+                if x.abs_diff(4) <= r && y.abs_diff(4) <= r {
+                    let k = ((2 * r + 1) * (2 * r + 1)) as f64;
+                    assert!((v - alone / k).abs() < 1e-12, "({x}, {y}): {v}");
+                } else {
+                    assert_eq!(v, 0.0, "({x}, {y}) is beyond the radius");
+                }
+            }
+        }
+        // At the tile's edge the mean is over the pixels there are.
+        let mut corner: Vec<PixelSums> = (0..width * width).map(|_| sums_of(&[0.5; 4])).collect();
+        corner[0] = sums_of(&[0.5, 0.5, 0.5, 10.0]);
+        let v = pooled_variance(&corner, width)[0];
+        let k = ((r + 1) * (r + 1)) as f64;
+        assert!((v - alone / k).abs() < 1e-12, "{v}");
     }
 }
