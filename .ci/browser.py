@@ -1,7 +1,8 @@
-"""What the browser checks (.ci/review_browser.py, .ci/mixer_browser.py)
-share: Debian's Chromium, headless, driven over the DevTools protocol
+"""What the browser checks (.ci/review_browser.py, .ci/mixer_browser.py,
+.ci/live_browser.py) share: Debian's Chromium, headless, driven over the DevTools protocol
 (PyPI websocket-client), and `throng review` started on a free port."""
 
+import base64
 import json
 import os
 import shutil
@@ -81,6 +82,23 @@ class Cdp:
                     return None
                 return r.get("result", {}).get("value")
             self.events.append(msg)
+
+    def screenshot(self, path):
+        """Saves what the page shows, as PNG, at `path`."""
+        with open(path, "wb") as f:
+            f.write(base64.b64decode(self("Page.captureScreenshot", format="png")["data"]))
+
+    def check_page_errors(self, console=False):
+        """Fails if the page threw (with `console`, also if it logged an error)."""
+        errors = [e for e in self.events if e.get("method") == "Runtime.exceptionThrown"]
+        if console:
+            errors += [
+                e
+                for e in self.events
+                if e.get("method") == "Runtime.consoleAPICalled" and e["params"].get("type") == "error"
+            ]
+        if errors:
+            fail(f"the page threw: {errors[:3]}")
 
 
 def start_review(argv):

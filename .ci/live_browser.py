@@ -17,7 +17,6 @@ its error in the panel, naming the key, and the page must keep answering.
 usage: live_browser.py THRONG SHOT SCREENSHOT.png
 """
 
-import base64
 import os
 import shutil
 import sys
@@ -119,12 +118,8 @@ try:
         fail(f"the panel's error names neither the file nor the key: {err!r}")
     get_json(url + "api/shot")
 
-    shot_png = base64.b64decode(cdp("Page.captureScreenshot", format="png")["data"])
-    with open(SHOT_PNG, "wb") as f:
-        f.write(shot_png)
-    errors = [e for e in cdp.events if e.get("method") == "Runtime.exceptionThrown"]
-    if errors:
-        fail(f"the page threw: {errors[:3]}")
+    cdp.screenshot(SHOT_PNG)
+    cdp.check_page_errors()
     print(f"live browser: first image {first_s:.1f} s after start ({first[1].shape[1]}x{first[1].shape[0]});"
           f" at {before['spp']} spp {'denoised' if before['denoised'] else 'noisy'}; lamp_1 x10 in the shot file:"
           f" first image {edit_s:.1f} s after the save, at {after['spp']} spp {brighter * 100:.1f} % of pixels"

@@ -15,7 +15,6 @@ the server answers the next request.
 usage: mixer_browser.py THRONG SHOT WORKDIR SCREENSHOT.png
 """
 
-import base64
 import json
 import os
 import shutil
@@ -175,12 +174,8 @@ try:
     wait_for("the second save refused", lambda: "Not saved" in (cdp.eval("document.getElementById('save-result').innerText") or ""), 30)
     if open(saved).read() != text:
         fail("a second save wrote over the saved shot")
-    shot_png = base64.b64decode(cdp("Page.captureScreenshot", format="png")["data"])
-    with open(SHOT_PNG, "wb") as f:
-        f.write(shot_png)
-    errors = [e for e in cdp.events if e.get("method") == "Runtime.exceptionThrown"]
-    if errors:
-        fail(f"the page threw: {errors[:3]}")
+    cdp.screenshot(SHOT_PNG)
+    cdp.check_page_errors()
 
     # The saved shot renders to what the page showed, within noise.
     ch_saved = channels(render(saved, os.path.join(WORK, "mixer_saved")))

@@ -14,7 +14,6 @@ jumps to it.
 usage: review_browser.py THRONG SHOT RENDERS MANIFEST SCREENSHOT.png
 """
 
-import base64
 import json
 import os
 import shutil
@@ -201,9 +200,7 @@ try:
         30,
     )
     time.sleep(0.3)
-    shot_png = base64.b64decode(cdp("Page.captureScreenshot", format="png")["data"])
-    with open(SHOT_PNG, "wb") as f:
-        f.write(shot_png)
+    cdp.screenshot(SHOT_PNG)
     img = Image.open(SHOT_PNG).convert("RGB")
     colours = len(img.resize((350, 250)).getcolors(350 * 250))
     spread = max(ImageStat.Stat(img).stddev)
@@ -214,10 +211,7 @@ try:
     region = img.crop((int(r["x"]), int(r["y"]), int(r["x"] + r["w"]), int(r["y"] + r["h"])))
     if max(ImageStat.Stat(region).stddev) < 10:
         fail("the image on the page is flat")
-    errors = [e for e in cdp.events if e.get("method") in ("Runtime.exceptionThrown",)]
-    errors += [e for e in cdp.events if e.get("method") == "Runtime.consoleAPICalled" and e["params"].get("type") == "error"]
-    if errors:
-        fail(f"the page threw: {errors[:3]}")
+    cdp.check_page_errors(console=True)
     print(
         f"review browser: clicked agent {aid} at pixel {px},{py} of the comp; the botInfo panel shows it "
         f"(layer {layer}), as throng botinfo --json does; search by id found agent {agents[1]['id'] if len(agents) > 1 else '-'}; screenshot {img.size[0]}x{img.size[1]}, {colours} colours"

@@ -15,10 +15,9 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::Duration;
 
-use common::{bin, demo_shot, run, tempdir};
+use common::{bin, demo_shot, run, start_review, tempdir};
 use serde_json::Value;
-use throng::casting::ShotCrowd;
-use throng::review::{Review, ReviewOptions, Stopper};
+use throng::review::{ReviewOptions, Stopper};
 
 const FRAME: i32 = 1024;
 
@@ -103,18 +102,7 @@ fn start(cache_bytes: u64) -> (String, Stopper) {
         cache_bytes,
         ..ReviewOptions::default()
     };
-    start_shot(demo_shot(), options)
-}
-
-fn start_shot(shot: PathBuf, options: ReviewOptions) -> (String, Stopper) {
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let crowd = ShotCrowd::load(&shot).unwrap();
-        let review = Review::open(crowd, &shot, &options).unwrap();
-        tx.send((review.addr().to_string(), review.stopper())).unwrap();
-        review.serve();
-    });
-    rx.recv_timeout(Duration::from_secs(120)).expect("the review server started")
+    start_review(&demo_shot(), options)
 }
 
 /// The shared server of most tests.
@@ -612,7 +600,7 @@ fn light_passes_are_views_and_a_shot_without_manifest_has_no_comp() {
         run(&["render", s(&shot), "--layer", "full", "--frames", "1001", "--progress", "off", "--out", s(&renders)]);
     assert_eq!(code, 0, "{err}");
     let (a, stop) =
-        start_shot(shot, ReviewOptions { renders: Some(renders.clone()), port: 0, ..ReviewOptions::default() });
+        start_review(&shot, ReviewOptions { renders: Some(renders.clone()), port: 0, ..ReviewOptions::default() });
     let layers = get_ok(&a, "/api/layers?frame=1001").json();
     assert!(layers["comp"]["error"].as_str().unwrap().contains("no comp"), "{layers}");
     let full = &layers["layers"][0];
@@ -671,7 +659,7 @@ fn the_comp_offers_the_passes_its_layers_share() {
         run(&["render", s(&shot), "--layer", "all", "--frames", "1001", "--progress", "off", "--out", s(&renders)]);
     assert_eq!(code, 0, "{err}");
     let (a, stop) =
-        start_shot(shot, ReviewOptions { renders: Some(renders.clone()), port: 0, ..ReviewOptions::default() });
+        start_review(&shot, ReviewOptions { renders: Some(renders.clone()), port: 0, ..ReviewOptions::default() });
     let layers = get_ok(&a, "/api/layers?frame=1001").json();
     let views: Vec<&str> = layers["comp"]["views"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
     assert!(views.contains(&"beauty") && views.contains(&"diffuse_direct"), "{layers}");
@@ -740,7 +728,7 @@ fn the_mixer_regrades_the_groups_and_saves_a_shot_that_renders_the_mix() {
     // The set's shop windows are grouped by their own material name, not by the set file's path.
     assert!(groups.iter().all(|g| !g.contains("set_glb")), "{groups:?}");
     let (a, stop) =
-        start_shot(shot.clone(), ReviewOptions { renders: Some(renders.clone()), port: 0, ..ReviewOptions::default() });
+        start_review(&shot, ReviewOptions { renders: Some(renders.clone()), port: 0, ..ReviewOptions::default() });
     let base = "/api/mix.png?frame=1001&layer=full";
     let mix = |q: &str| get(&a, &format!("{base}&{q}")).png().to_rgb8().into_raw();
 
@@ -832,8 +820,10 @@ fn a_denoised_render_shows_noisy_and_denoised_and_still_picks() {
         s(&renders),
     ]);
     assert_eq!(code, 0, "{err}");
-    let (a, stop) =
-        start_shot(demo_shot(), ReviewOptions { renders: Some(renders.clone()), port: 0, ..ReviewOptions::default() });
+    let (a, stop) = start_review(
+        &demo_shot(),
+        ReviewOptions { renders: Some(renders.clone()), port: 0, ..ReviewOptions::default() },
+    );
     let layers = get_ok(&a, "/api/layers?frame=1024").json();
     let full = layers["layers"].as_array().unwrap().iter().find(|l| l["name"] == "full").unwrap();
     assert!(full["views"].as_array().unwrap().iter().any(|v| v == "noisy"), "{full}");

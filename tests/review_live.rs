@@ -15,12 +15,12 @@ use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant, SystemTime};
 
-use common::{tempdir, two_robots, DemoShot};
+use common::{start_review, tempdir, two_robots, DemoShot};
 use serde_json::Value;
 use throng::casting::ShotCrowd;
 use throng::render::job::{self, RenderJob, Silent};
 use throng::render::{render_frame, BlasSet, RenderSettings};
-use throng::review::{LiveOptions, Review, ReviewOptions, Stopper};
+use throng::review::{LiveOptions, ReviewOptions, Stopper};
 
 const FRAME: i32 = 1002;
 const SIZE: [u32; 2] = [48, 27];
@@ -41,18 +41,6 @@ fn set_intensity(shot: &Path, intensity: &str) {
     let text = std::fs::read_to_string(shot).unwrap();
     let line = text.lines().find(|l| l.starts_with("intensity = ")).unwrap().to_string();
     std::fs::write(shot, text.replacen(&line, &format!("intensity = {intensity}"), 1)).unwrap();
-}
-
-fn start(shot: &Path, options: ReviewOptions) -> (String, Stopper) {
-    let (tx, rx) = std::sync::mpsc::channel();
-    let shot = shot.to_path_buf();
-    std::thread::spawn(move || {
-        let crowd = ShotCrowd::load(&shot).unwrap();
-        let review = Review::open(crowd, &shot, &options).unwrap();
-        tx.send((review.addr().to_string(), review.stopper())).unwrap();
-        review.serve();
-    });
-    rx.recv_timeout(Duration::from_secs(120)).expect("the review server started")
 }
 
 /// Stops the server when dropped (its live preview's thread with it).
@@ -156,7 +144,7 @@ fn the_live_preview_follows_edits_of_the_shot_and_writes_nothing() {
         live: Some(live_options()),
         ..ReviewOptions::default()
     };
-    let (addr, stopper) = start(&shot, options);
+    let (addr, stopper) = start_review(&shot, options);
     let server = Server(addr, stopper);
     let a = server.0.as_str();
     assert!(json(a, "/api/shot")["live"].is_object());
@@ -252,7 +240,7 @@ fn a_page_that_stops_polling_stops_the_preview() {
     let dir = tempdir().unwrap();
     let shot = write_shot(dir.path());
     let live = LiveOptions { idle: Duration::from_secs(1), max_spp: Some(1 << 16), ..live_options() };
-    let (addr, stopper) = start(&shot, ReviewOptions { port: 0, live: Some(live), ..ReviewOptions::default() });
+    let (addr, stopper) = start_review(&shot, ReviewOptions { port: 0, live: Some(live), ..ReviewOptions::default() });
     let server = Server(addr, stopper);
     let a = server.0.as_str();
     let s0 = until(a, "a few passes", |s| s["pass"].as_u64() >= Some(3));
@@ -268,7 +256,7 @@ fn a_page_that_stops_polling_stops_the_preview() {
     let s2 = until(a, "the render resumed", |s| s["run"] == "running" && s["spp"].as_u64() > s1["spp"].as_u64());
     assert!(s2["spp"].as_u64() < Some(1 << 16));
     // A review that is not live has no live preview.
-    let (addr2, stopper2) = start(&shot, ReviewOptions { port: 0, ..ReviewOptions::default() });
+    let (addr2, stopper2) = start_review(&shot, ReviewOptions { port: 0, ..ReviewOptions::default() });
     let other = Server(addr2, stopper2);
     assert_eq!(request(&other.0, "GET /api/live", "", "").0, 404);
     assert!(json(&other.0, "/api/shot")["live"].is_null());

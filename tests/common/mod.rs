@@ -336,3 +336,17 @@ pub fn oidn_available(test: &str) -> bool {
         }
     }
 }
+
+/// A `throng review` server of `shot` in this process, serving on a thread
+/// of its own: its address and the stopper that ends it.
+pub fn start_review(shot: &Path, options: throng::review::ReviewOptions) -> (String, throng::review::Stopper) {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let shot = shot.to_path_buf();
+    std::thread::spawn(move || {
+        let crowd = throng::casting::ShotCrowd::load(&shot).unwrap();
+        let review = throng::review::Review::open(crowd, &shot, &options).unwrap();
+        tx.send((review.addr().to_string(), review.stopper())).unwrap();
+        review.serve();
+    });
+    rx.recv_timeout(std::time::Duration::from_secs(120)).expect("the review server started")
+}
