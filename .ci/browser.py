@@ -83,6 +83,18 @@ class Cdp:
                 return r.get("result", {}).get("value")
             self.events.append(msg)
 
+    def open(self, url):
+        """Navigates to `url`, again if the first navigation raced the new
+        tab's initial about:blank (it can be lost then)."""
+        for _ in range(3):
+            self("Page.navigate", url=url)
+            end = time.time() + 15
+            while time.time() < end:
+                if (self.poll("location.href") or "").startswith(url):
+                    return
+                time.sleep(0.1)
+        fail(f"Chromium did not open {url}")
+
     def screenshot(self, path):
         """Saves what the page shows, as PNG, at `path`."""
         with open(path, "wb") as f:

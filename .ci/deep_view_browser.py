@@ -44,7 +44,7 @@ try:
         fail(f"the layer's most samples per pixel is {most}")
 
     browser, cdp = launch_chromium(profile)
-    cdp("Page.navigate", url=url)
+    cdp.open(url)
     wait_for("the page's layer list", lambda: cdp.poll(
         f"[...document.getElementById('layer').options].some(o => o.value === '{LAYER}')"), 30)
     choose("layer", LAYER)

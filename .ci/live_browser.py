@@ -57,7 +57,7 @@ try:
     started = time.time()
     server, url = start_review([THRONG, "review", copy, "--live", "--port", "0", "--threads", "2"])
     browser, cdp = launch_chromium(profile, lenient=True)
-    cdp("Page.navigate", url=url)
+    cdp.open(url)
 
     def shown():
         """The live image the page shows, read back through a canvas: its number and H x W x 3 codes."""

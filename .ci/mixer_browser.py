@@ -92,10 +92,15 @@ try:
     get_json(url + "api/frames")
 
     browser, cdp = launch_chromium(profile, lenient=True)
-    cdp("Page.navigate", url=url)
-    wait_for("the mixer rows", lambda: cdp.eval(
-        "(() => { const i = document.getElementById('image'); return i && i.complete && i.naturalWidth > 0"
-        " && document.querySelectorAll('#mixer tr').length >= 6; })()"), 60)
+    cdp.open(url)
+    try:
+        wait_for("the mixer rows", lambda: cdp.eval(
+            "(() => { const i = document.getElementById('image'); return i && i.complete && i.naturalWidth > 0"
+            " && document.querySelectorAll('#mixer tr').length >= 6; })()"), 60, soft=True)
+    except TimeoutError:
+        rows = cdp.poll("document.querySelectorAll('#mixer tr').length")
+        says = cdp.poll("(document.getElementById('mixer') || {}).innerText")
+        fail(f"timed out waiting for the mixer rows: {cdp.poll('location.href')!r} shows {rows} rows; the mixer says {says!r}")
 
     def shown():
         """The page's image, read back through a canvas: H x W x 3 codes, and its URL."""

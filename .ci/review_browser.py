@@ -50,16 +50,7 @@ try:
     aid, (px, py) = target["id"], target["pixel"]
 
     browser, cdp = launch_chromium(profile)
-    # Navigate, again if the first navigation raced the initial about:blank.
-    for attempt in range(3):
-        cdp("Page.navigate", url=url)
-        end = time.time() + 15
-        while time.time() < end and not (cdp.poll("location.href") or "").startswith(url):
-            time.sleep(0.1)
-        if (cdp.poll("location.href") or "").startswith(url):
-            break
-    else:
-        fail(f"Chromium did not open {url}")
+    cdp.open(url)
 
     ready = (
         "(() => { const i = document.getElementById('image'), l = document.getElementById('layer'),"
