@@ -27,7 +27,7 @@ import urllib.request
 import numpy as np
 import OpenEXR
 import browser as browser_harness
-from browser import fail, get_json, launch_chromium, start_review, wait_for
+from browser import fail, get_json, launch_chromium, start_review, stop, wait_for
 
 THRONG, SHOT, WORK, SHOT_PNG = sys.argv[1:5]
 FRAME = 1024
@@ -208,16 +208,6 @@ finally:
     for p in (edited, saved):
         if os.path.exists(p):
             os.remove(p)
-    if browser is not None:
-        browser.terminate()
-        try:
-            browser.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            browser.kill()
-    if server is not None:
-        server.terminate()
-        try:
-            server.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            server.kill()
+    stop(browser)
+    stop(server)
     shutil.rmtree(profile, ignore_errors=True)

@@ -23,7 +23,7 @@ import tempfile
 import time
 
 import browser as browser_harness
-from browser import fail, get_json, launch_chromium, start_review, wait_for
+from browser import fail, get_json, launch_chromium, start_review, stop, wait_for
 from PIL import Image, ImageStat
 
 THRONG, SHOT, RENDERS, MANIFEST, SHOT_PNG = sys.argv[1:6]
@@ -208,15 +208,6 @@ try:
         f"(layer {layer}), as throng botinfo --json does; search by id found agent {agents[1]['id'] if len(agents) > 1 else '-'}; screenshot {img.size[0]}x{img.size[1]}, {colours} colours"
     )
 finally:
-    if browser is not None:
-        browser.terminate()
-        try:
-            browser.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            browser.kill()
-    server.terminate()
-    try:
-        server.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        server.kill()
+    stop(browser)
+    stop(server)
     shutil.rmtree(profile, ignore_errors=True)

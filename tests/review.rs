@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::Duration;
 
-use common::{bin, demo_shot, run, start_review, tempdir};
+use common::{bin, demo_shot, request, run, start_review, tempdir, Reply};
 use serde_json::Value;
 use throng::review::{ReviewOptions, Stopper};
 
@@ -111,58 +111,9 @@ fn server() -> &'static str {
     &S.get_or_init(|| start(1 << 30)).0
 }
 
-struct Reply {
-    status: u16,
-    headers: BTreeMap<String, String>,
-    body: Vec<u8>,
-}
-
-impl Reply {
-    fn json(&self) -> Value {
-        serde_json::from_slice(&self.body)
-            .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(&self.body)))
-    }
-    fn text(&self) -> String {
-        String::from_utf8_lossy(&self.body).into_owned()
-    }
-    fn png(&self) -> image::DynamicImage {
-        assert_eq!(self.status, 200, "{}", self.text());
-        assert_eq!(self.headers.get("content-type").map(String::as_str), Some("image/png"));
-        image::load_from_memory(&self.body).expect("a PNG")
-    }
-}
-
 /// Sends `head` (request line and headers, without the blank line) as written.
 fn raw(addr: &str, head: &str) -> Reply {
-    let mut stream = TcpStream::connect(addr).unwrap();
-    stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
-    stream.write_all(format!("{head}\r\nConnection: close\r\n\r\n").as_bytes()).unwrap();
-    let mut bytes = Vec::new();
-    stream.read_to_end(&mut bytes).unwrap();
-    let split = bytes.windows(4).position(|w| w == b"\r\n\r\n").expect("a complete HTTP answer");
-    let head = String::from_utf8_lossy(&bytes[..split]).into_owned();
-    let mut lines = head.lines();
-    let status = lines.next().unwrap().split(' ').nth(1).unwrap().parse().unwrap();
-    let headers: BTreeMap<String, String> = lines
-        .filter_map(|l| l.split_once(':'))
-        .map(|(k, v)| (k.trim().to_ascii_lowercase(), v.trim().to_string()))
-        .collect();
-    let mut body = bytes[split + 4..].to_vec();
-    if headers.get("transfer-encoding").is_some_and(|t| t.contains("chunked")) {
-        let mut out = Vec::new();
-        let mut rest = &body[..];
-        loop {
-            let eol = rest.windows(2).position(|w| w == b"\r\n").unwrap();
-            let n = usize::from_str_radix(std::str::from_utf8(&rest[..eol]).unwrap().trim(), 16).unwrap();
-            if n == 0 {
-                break;
-            }
-            out.extend_from_slice(&rest[eol + 2..eol + 2 + n]);
-            rest = &rest[eol + 4 + n..];
-        }
-        body = out;
-    }
-    Reply { status, headers, body }
+    request(addr, head, b"")
 }
 
 fn get(addr: &str, target: &str) -> Reply {
@@ -686,15 +637,7 @@ fn send(addr: &str, method: &str, target: &str, headers: &[&str], body: &[u8]) -
         head.push_str("\r\n");
         head.push_str(h);
     }
-    let mut stream = TcpStream::connect(addr).unwrap();
-    stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
-    stream.write_all(format!("{head}\r\nConnection: close\r\n\r\n").as_bytes()).unwrap();
-    stream.write_all(body).unwrap();
-    let mut bytes = Vec::new();
-    stream.read_to_end(&mut bytes).unwrap();
-    let split = bytes.windows(4).position(|w| w == b"\r\n\r\n").expect("a complete HTTP answer");
-    let status = String::from_utf8_lossy(&bytes[..split]).split(' ').nth(1).unwrap().parse().unwrap();
-    Reply { status, headers: BTreeMap::new(), body: bytes[split + 4..].to_vec() }
+    request(addr, &head, body)
 }
 
 /// Issue 50, the mixer's two endpoints: `/api/mix.png` is the light groups

@@ -10,8 +10,6 @@
 
 mod common;
 
-use std::io::{Read, Write};
-use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant, SystemTime};
 
@@ -52,35 +50,28 @@ impl Drop for Server {
     }
 }
 
-/// One request as written (`METHOD TARGET`, more header lines, the body;
-/// HTTP/1.0: one answer, read to the end): status and body.
-fn request(addr: &str, line: &str, headers: &str, body: &str) -> (u16, Vec<u8>) {
-    let mut stream = TcpStream::connect(addr).unwrap();
-    stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
-    let length = format!("Content-Length: {}\r\n", body.len());
-    let head = format!("{line} HTTP/1.0\r\nHost: {addr}\r\n{headers}{length}\r\n");
-    stream.write_all(format!("{head}{body}").as_bytes()).unwrap();
-    let mut bytes = Vec::new();
-    stream.read_to_end(&mut bytes).unwrap();
-    let split = bytes.windows(4).position(|w| w == b"\r\n\r\n").expect("a complete HTTP answer");
-    let status = String::from_utf8_lossy(&bytes[..split]).split(' ').nth(1).unwrap().parse().unwrap();
-    (status, bytes[split + 4..].to_vec())
+/// `METHOD TARGET` with more header lines and a body, through the tests'
+/// one HTTP client: status and body.
+fn call(addr: &str, line: &str, headers: &str, body: &str) -> (u16, Vec<u8>) {
+    let head = format!("{line} HTTP/1.1\r\nHost: {addr}\r\n{headers}Content-Length: {}", body.len());
+    let reply = common::request(addr, &head, body.as_bytes());
+    (reply.status, reply.body)
 }
 
 fn json(addr: &str, target: &str) -> Value {
-    let (status, body) = request(addr, &format!("GET {target}"), "", "");
+    let (status, body) = call(addr, &format!("GET {target}"), "", "");
     assert_eq!(status, 200, "GET {target}: {}", String::from_utf8_lossy(&body));
     serde_json::from_slice(&body).unwrap()
 }
 
 fn post(addr: &str, target: &str, body: &str) -> (u16, Value) {
-    let (status, body) = request(addr, &format!("POST {target}"), "Content-Type: application/json\r\n", body);
+    let (status, body) = call(addr, &format!("POST {target}"), "Content-Type: application/json\r\n", body);
     (status, serde_json::from_slice(&body).unwrap_or(Value::Null))
 }
 
 /// The live image before denoising, as RGB8.
 fn image(addr: &str) -> image::RgbImage {
-    let (status, body) = request(addr, "GET /api/live.png?noisy=1", "", "");
+    let (status, body) = call(addr, "GET /api/live.png?noisy=1", "", "");
     assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
     image::load_from_memory(&body).expect("a PNG").to_rgb8()
 }
@@ -220,9 +211,9 @@ fn the_live_preview_follows_edits_of_the_shot_and_writes_nothing() {
     let outside = until(a, "frame 999 refused", |s| !s["error"].is_null());
     assert!(outside["error"]["message"].as_str().unwrap().contains("999"), "{outside}");
     // Bad requests: 4xx, and the server answers on.
-    assert_eq!(request(a, "POST /api/live/stop", "", "{}").0, 415);
+    assert_eq!(call(a, "POST /api/live/stop", "", "{}").0, 415);
     assert_eq!(post(a, "/api/live/start", "{\"frame\": \"x\"}").0, 400);
-    assert_eq!(request(a, "GET /api/live.png?exposure=99", "", "").0, 400);
+    assert_eq!(call(a, "GET /api/live.png?exposure=99", "", "").0, 400);
     assert_eq!(json(a, "/api/shot")["shot"], "live");
     drop(server);
 
@@ -258,7 +249,7 @@ fn a_page_that_stops_polling_stops_the_preview() {
     // A review that is not live has no live preview.
     let (addr2, stopper2) = start_review(&shot, ReviewOptions { port: 0, ..ReviewOptions::default() });
     let other = Server(addr2, stopper2);
-    assert_eq!(request(&other.0, "GET /api/live", "", "").0, 404);
+    assert_eq!(call(&other.0, "GET /api/live", "", "").0, 404);
     assert!(json(&other.0, "/api/shot")["live"].is_null());
 }
 

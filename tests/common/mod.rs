@@ -7,6 +7,7 @@ pub mod matrix;
 pub mod stack_stats;
 
 use std::ffi::OsStr;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -349,4 +350,64 @@ pub fn start_review(shot: &Path, options: throng::review::ReviewOptions) -> (Str
         review.serve();
     });
     rx.recv_timeout(std::time::Duration::from_secs(120)).expect("the review server started")
+}
+
+/// An HTTP answer as [`request`] read it.
+pub struct Reply {
+    pub status: u16,
+    /// Lower-case names.
+    pub headers: std::collections::BTreeMap<String, String>,
+    /// Dechunked.
+    pub body: Vec<u8>,
+}
+
+impl Reply {
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::from_slice(&self.body)
+            .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(&self.body)))
+    }
+    pub fn text(&self) -> String {
+        String::from_utf8_lossy(&self.body).into_owned()
+    }
+    pub fn png(&self) -> image::DynamicImage {
+        assert_eq!(self.status, 200, "{}", self.text());
+        assert_eq!(self.headers.get("content-type").map(String::as_str), Some("image/png"));
+        image::load_from_memory(&self.body).expect("a PNG")
+    }
+}
+
+/// One HTTP request to a test server: `head` (request line and headers,
+/// without the blank line) as written, `Connection: close`, then `body`;
+/// the whole answer read.
+pub fn request(addr: &str, head: &str, body: &[u8]) -> Reply {
+    let mut stream = std::net::TcpStream::connect(addr).unwrap();
+    stream.set_read_timeout(Some(std::time::Duration::from_secs(120))).unwrap();
+    stream.write_all(format!("{head}\r\nConnection: close\r\n\r\n").as_bytes()).unwrap();
+    stream.write_all(body).unwrap();
+    let mut bytes = Vec::new();
+    stream.read_to_end(&mut bytes).unwrap();
+    let split = bytes.windows(4).position(|w| w == b"\r\n\r\n").expect("a complete HTTP answer");
+    let head = String::from_utf8_lossy(&bytes[..split]).into_owned();
+    let mut lines = head.lines();
+    let status = lines.next().unwrap().split(' ').nth(1).unwrap().parse().unwrap();
+    let headers: std::collections::BTreeMap<String, String> = lines
+        .filter_map(|l| l.split_once(':'))
+        .map(|(k, v)| (k.trim().to_ascii_lowercase(), v.trim().to_string()))
+        .collect();
+    let mut body = bytes[split + 4..].to_vec();
+    if headers.get("transfer-encoding").is_some_and(|t| t.contains("chunked")) {
+        let mut out = Vec::new();
+        let mut rest = &body[..];
+        loop {
+            let eol = rest.windows(2).position(|w| w == b"\r\n").unwrap();
+            let n = usize::from_str_radix(std::str::from_utf8(&rest[..eol]).unwrap().trim(), 16).unwrap();
+            if n == 0 {
+                break;
+            }
+            out.extend_from_slice(&rest[eol + 2..eol + 2 + n]);
+            rest = &rest[eol + 4 + n..];
+        }
+        body = out;
+    }
+    Reply { status, headers, body }
 }
