@@ -328,7 +328,8 @@ pub(crate) fn mean_radiance(dome: &crate::scene::lights::Dome) -> Vec3 {
     let (mut sum, mut weight) = (glam::DVec3::ZERO, 0.0f64);
     for (row, texels) in dome.texels.chunks_exact(w).take(h).enumerate() {
         let sin = ((row as f64 + 0.5) / h as f64 * std::f64::consts::PI).sin();
-        let row_sum: glam::DVec3 = texels.iter().map(|t| t.as_dvec3()).sum();
+        // Negative texels clamped, as the dome's sampler clamps them.
+        let row_sum: glam::DVec3 = texels.iter().map(|t| t.as_dvec3().max(glam::DVec3::ZERO)).sum();
         sum += row_sum * sin;
         weight += sin * w as f64;
     }

@@ -531,9 +531,10 @@ pub fn render_fingerprint<C>(
     if let Some(d) = &job.deep {
         f.debug("deep", d);
     }
-    // Likewise only hazy shots name their air.
-    if let Some(a) = &shot.atmosphere {
-        f.debug("atmosphere", a);
+    // Likewise only hazy shots name their air (air of density 0 renders
+    // nothing, as clear air does).
+    if let Some(a) = shot.atmosphere.filter(|a| a.is_active()) {
+        f.debug("atmosphere", &a);
     }
     f.value("manifest", &manifest).text("throng", env!("CARGO_PKG_VERSION"));
     f.hex()

@@ -936,11 +936,12 @@ pub fn read_parts(path: &Path, keep: impl Fn(&str) -> bool) -> Result<Vec<RawPar
 /// the formula (`srgb_formula`), looked up (a review image or preview encodes millions
 /// of values, and `powf` was most of a light-mixer change).
 pub(crate) fn srgb_encode(linear: f32) -> u8 {
-    let c = linear.clamp(0.0, 1.0);
-    if c.is_nan() {
+    // NaN, -0.0 (whose bits sort above every step) and below: black.
+    if !(linear > 0.0) {
         return 0;
     }
-    // Non-negative floats order as their bit patterns do.
+    let c = linear.min(1.0);
+    // Positive floats order as their bit patterns do.
     SRGB_STEPS.partition_point(|&step| step <= c.to_bits()) as u8
 }
 
@@ -1034,7 +1035,7 @@ mod tests {
             let c = f32::from_bits(bits);
             assert!(srgb_encode(c) == srgb_formula(c) || on_boundary(c), "{c:e}");
         }
-        for c in [-1.0, 0.0, 1.0, 2.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN] {
+        for c in [-1.0, -0.0, 0.0, 1.0, 2.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN] {
             assert_eq!(srgb_encode(c), srgb_formula(c.clamp(0.0, 1.0)), "{c}");
         }
     }
