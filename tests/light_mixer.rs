@@ -260,3 +260,31 @@ fn bad_gains_exit_2_naming_the_key() {
         assert!(!out.exists(), "{table}: nothing written");
     }
 }
+
+/// A gain of 0 on the shop windows' group (the mixer's mute, saved as a
+/// shot) turns their emission off, and the group stays a group of the
+/// shot: the other gains still hold, also after the shot is edited and the
+/// cast kept (as the live review does). The windows' group was judged from
+/// the gained emission, so it vanished, and every other gain with it.
+#[test]
+fn a_muted_material_group_stays_a_group_and_the_other_gains_hold() {
+    use throng::casting::ShotCrowd;
+    let plain = ShotCrowd::load(&common::demo_shot()).unwrap();
+    let muted = Edited::new(
+        "muted",
+        "[lights.gains]\nshop_window = { gain = 0.0 }\ndome = { gain = 0.5 }\nlamp_1 = { gain = 2.0 }\n",
+    );
+    let check = |crowd: &ShotCrowd| {
+        assert!(crowd.light_groups().unwrap().names.iter().any(|g| g == "shop_window"));
+        let (lights, base) = (crowd.lights(), plain.lights());
+        assert_eq!(lights.dome.as_ref().unwrap().scale, base.dome.as_ref().unwrap().scale * 0.5);
+        let lamp =
+            |l: &throng::scene::lights::SceneLights| l.local.iter().find(|l| l.name == "lamp_1").unwrap().emission;
+        assert_eq!(lamp(&lights), lamp(&base) * 2.0);
+        let windows: Vec<_> = crowd.library().materials.iter().filter(|m| m.label() == "shop_window").collect();
+        assert!(!windows.is_empty() && windows.iter().all(|m| m.emission == Vec3::ZERO));
+    };
+    let crowd = ShotCrowd::load(Path::new(muted.path())).unwrap();
+    check(&crowd);
+    check(&crowd.with_shot(|s| s.seed = 77).unwrap());
+}

@@ -338,8 +338,11 @@ impl ShotCrowd {
         if self.shot.lights.gains.is_empty() && self.authored_emission.is_none() {
             return Ok(self);
         }
-        let unscaled = self.unscaled_lights();
-        let groups = LightGroups::new(&unscaled, self.library())?;
+        let authored = match self.authored_emission.take() {
+            Some(a) => a,
+            None => self.library().materials.iter().map(|m| m.emission).collect(),
+        };
+        let groups = LightGroups::with_emission(&self.unscaled_lights(), self.library(), &authored)?;
         let factors = light_gains::factors(&self.shot.lights.gains, &groups, &self.shot.path)?;
         if let (Some(dome), Some(spec)) = (&mut self.lights.dome, &self.shot.lights.dome) {
             let f = factors.get(groups.environment() as usize).copied().unwrap_or(Vec3::ONE);
@@ -347,10 +350,6 @@ impl ShotCrowd {
                 Arc::make_mut(dome).scale = spec.scale * f;
             }
         }
-        let authored = match self.authored_emission.take() {
-            Some(a) => a,
-            None => self.library().materials.iter().map(|m| m.emission).collect(),
-        };
         light_gains::apply_to_materials(self.poses.materials_mut(), &authored, &groups, &factors);
         self.authored_emission = Some(authored);
         Ok(self)
@@ -468,13 +467,23 @@ impl<C> ShotCrowd<C> {
         let mut lights = self.unscaled_lights();
         if !self.shot.lights.gains.is_empty() {
             // Checked when the crowd was made (with_gains): no error here.
-            if let Ok(groups) = LightGroups::new(&lights, self.library()) {
+            if let Ok(groups) = self.light_groups() {
                 if let Ok(f) = light_gains::factors(&self.shot.lights.gains, &groups, &self.shot.path) {
                     light_gains::apply_to_lights(&mut lights, &groups, &f);
                 }
             }
         }
         lights
+    }
+
+    /// The shot's light groups: its lights' and its emissive materials',
+    /// judged by the emission as authored, so a group the gains turn off
+    /// (gain 0) stays a group (its pass black, its gain still valid).
+    pub fn light_groups(&self) -> Result<LightGroups> {
+        match &self.authored_emission {
+            Some(authored) => LightGroups::with_emission(&self.unscaled_lights(), self.library(), authored),
+            None => LightGroups::new(&self.unscaled_lights(), self.library()),
+        }
     }
 
     /// [`Self::lights`] before the shot's light-group gains (the dome has its gain).

@@ -270,7 +270,7 @@ pub fn export_usd(crowd: &ShotCrowd, opts: &UsdExportOptions, out: &Path) -> Res
     let lights = crowd.lights();
     // The light groups a render's `lg_<name>` passes use, named on each light
     // and emissive material (a shot with more groups than a render writes has none to name).
-    let groups = LightGroups::new(&lights, lib).ok();
+    let groups = crowd.light_groups().ok();
     let textures = Textures::of(lib, &g.materials, lights.dome.as_deref(), encoding, out)?;
     write_materials(&mut root, lib, &mat_names, groups.as_ref(), &textures);
 

@@ -17,7 +17,7 @@ use std::sync::Arc;
 
 use crate::casting::{AgentDress, AgentPose, Lod, ShotCrowd};
 use crate::error::Result;
-use crate::scene::passes::{LightGroups, PassSet};
+use crate::scene::passes::PassSet;
 
 /// Bytes of a render process before it loads a shot: the binary's resident
 /// pages, allocator arenas, the worker threads.
@@ -292,7 +292,7 @@ pub fn pass_count<C>(crowd: &ShotCrowd<C>) -> Result<u64> {
 /// passes, or a job's own) holds per pixel: one per light group of its
 /// lights and materials when `set` has the light groups.
 pub fn pass_count_of<C>(crowd: &ShotCrowd<C>, set: &PassSet) -> Result<u64> {
-    let groups = if set.light_groups { LightGroups::new(&crowd.lights(), crowd.library())?.names.len() } else { 0 };
+    let groups = if set.light_groups { crowd.light_groups()?.names.len() } else { 0 };
     Ok(set.triples(groups) as u64)
 }
 

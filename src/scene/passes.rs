@@ -238,6 +238,14 @@ pub fn check_group_name(name: &str, field: &str) -> Result<()> {
 impl LightGroups {
     /// The groups of `lights` and of the emissive materials of `lib`.
     pub fn new(lights: &SceneLights, lib: &Library) -> Result<LightGroups> {
+        let emission: Vec<Vec3> = lib.materials.iter().map(|m| m.emission).collect();
+        LightGroups::with_emission(lights, lib, &emission)
+    }
+
+    /// [`Self::new`] with each material's emission as authored
+    /// (`emission[i]` for material i): a group whose gain is 0 still is a
+    /// group of the shot, though its materials no longer emit.
+    pub fn with_emission(lights: &SceneLights, lib: &Library, emission: &[Vec3]) -> Result<LightGroups> {
         let named = &lights.groups;
         let sun = named.sun.clone().unwrap_or_else(|| "sun".into());
         let environment = if lights.dome.is_some() {
@@ -257,10 +265,11 @@ impl LightGroups {
         let materials: Vec<Option<String>> = lib
             .materials
             .iter()
-            .map(|m| {
+            .zip(emission.iter().chain(std::iter::repeat(&Vec3::ZERO)))
+            .map(|(m, e)| {
                 // Named by the material's own name, not its file's path, so a
                 // saved gain holds wherever the shot is read from.
-                (m.emission.max_element() > 0.0).then(|| {
+                (e.max_element() > 0.0).then(|| {
                     let given = named.materials.get(&m.name).or_else(|| named.materials.get(m.label()));
                     given.cloned().unwrap_or_else(|| default_group(m.label()))
                 })
