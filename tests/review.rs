@@ -710,6 +710,14 @@ fn the_mixer_regrades_the_groups_and_saves_a_shot_that_renders_the_mix() {
     }
     assert!(!dir.path().join("plain.toml").exists() && !dir.path().join("escape.toml").exists());
     assert_eq!(std::fs::read(&shot).unwrap(), original, "the original shot is untouched");
+    // Gains edited on disk since the review read the shot: the page's mix is
+    // of the old ones, so saving is refused rather than folding in either.
+    let edited = format!("{}\n[lights.gains]\n{kept} = {{ gain = 3.0 }}\n", String::from_utf8_lossy(&original));
+    std::fs::write(&shot, edited).unwrap();
+    let r = save("after an edit", &[json]);
+    assert!(r.status == 409 && r.text().contains("changed since"), "{}: {}", r.status, r.text());
+    assert!(!dir.path().join("after an edit.toml").exists());
+    std::fs::write(&shot, &original).unwrap();
     assert_eq!(get(&a, "/api/shot").status, 200, "the server still answers");
     stop.stop();
 

@@ -370,7 +370,13 @@ fn cast_unchanged(old: &Shot, new: &Shot) -> bool {
     probe.lights = old.lights.clone();
     probe.atmosphere = old.atmosphere;
     probe.layers = old.layers.clone();
-    probe.render = crate::shot::RenderSettings { shutter: new.render.shutter, ..old.render.clone() };
+    // The shutter and the working colourspace change what the cast holds
+    // (motion samples; input colours converted as the crowd loads).
+    probe.render = crate::shot::RenderSettings {
+        shutter: new.render.shutter,
+        working_colourspace: new.render.working_colourspace,
+        ..old.render.clone()
+    };
     probe.camera = crate::shot::CameraSpec { gltf: new.camera.gltf.clone(), ..old.camera.clone() };
     // Debug prints every field (maps are ordered): equal text, equal shots.
     format!("{probe:?}") == format!("{old:?}")
@@ -702,6 +708,7 @@ impl Worker {
                     (s.pass, s.spp, s.max_spp) = (0, 0, p.max_spp);
                     (s.started, s.changed) = (Some(started), changed);
                     (s.elapsed_s, s.first_image_s) = (0.0, None);
+                    s.error = None;
                 });
                 self.progressive = Some(p);
             }

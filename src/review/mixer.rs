@@ -125,13 +125,7 @@ pub(crate) fn with_gains(text: &str, shot: &LightGains, mix: &LightGains) -> Res
         out.push_str(line);
         out.push('\n');
     }
-    let mut merged = shot.clone();
-    for (name, g) in mix {
-        let base = shot.get(name).copied().unwrap_or_default();
-        let tint = [0, 1, 2].map(|i| base.tint[i] * g.tint[i]);
-        merged.insert(name.clone(), LightGain { gain: base.gain * g.gain, tint });
-    }
-    merged.retain(|_, g| *g != LightGain::default());
+    let merged = merged(shot, mix);
     if !merged.is_empty() {
         out.push_str("\n[lights.gains]\n");
         for (name, g) in &merged {
@@ -142,6 +136,19 @@ pub(crate) fn with_gains(text: &str, shot: &LightGains, mix: &LightGains) -> Res
         }
     }
     Ok(out)
+}
+
+/// The gains of a shot whose own are `shot` regraded by `mix` (each
+/// group's gain and tint multiplied; groups left at 1 dropped).
+pub(crate) fn merged(shot: &LightGains, mix: &LightGains) -> LightGains {
+    let mut merged = shot.clone();
+    for (name, g) in mix {
+        let base = shot.get(name).copied().unwrap_or_default();
+        let tint = [0, 1, 2].map(|i| base.tint[i] * g.tint[i]);
+        merged.insert(name.clone(), LightGain { gain: base.gain * g.gain, tint });
+    }
+    merged.retain(|_, g| *g != LightGain::default());
+    merged
 }
 
 /// Writes `text` as `dir/name`, never over a file that is there: written

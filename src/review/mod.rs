@@ -900,7 +900,7 @@ impl State {
         let key = format!("mix|{}|{mix_text}|{:08x}", Self::key_of(&d, q), exposure.to_bits());
         self.cached_png(key, || {
             let light = mixer::mix(&d.film, d.meta.colourspace, &gains).map_err(not_found)?;
-            let px = tone::light_pixels(d.meta.colourspace, light.iter(), exposure);
+            let px = tone::light_pixels(d.meta.colourspace, light.into_iter(), exposure);
             tone::png(d.film.width, d.film.height, 3, px).map_err(|m| Refusal(500, m))
         })
     }
@@ -939,15 +939,35 @@ impl State {
         let name = mixer::shot_file_name(name).map_err(bad)?;
         let gains = mixer::parse(v["mix"].as_str().unwrap_or("")).map_err(bad)?;
         let shot = self.crowd.shot();
-        let groups =
-            crate::scene::passes::LightGroups::new(&self.crowd.lights(), self.crowd.library()).map_err(refusal)?;
+        let groups = self.crowd.light_groups().map_err(refusal)?;
         if let Some(g) = gains.keys().find(|g| !groups.names.contains(g)) {
             return Err(not_found(format!("`{g}` is no light group of the shot ({})", groups.names.join(", "))));
         }
-        let text =
-            std::fs::read_to_string(&shot.path).map_err(|e| Refusal(500, format!("cannot read the shot: {e}")))?;
+        let shown = shot.path.display();
+        let text = std::fs::read_to_string(&shot.path)
+            .map_err(|e| Refusal(500, format!("cannot read the shot {shown}: {e}")))?;
+        // The mix regrades renders of the shot as this review read it; gains
+        // edited on disk since would be silently replaced or multiplied.
+        let on_disk = crate::shot::Shot::parse(&text, &shot.path)
+            .map_err(|e| Refusal(409, format!("the shot on disk no longer reads ({e}); fix it, then save")))?;
+        if on_disk.lights.gains != shot.lights.gains {
+            return Err(Refusal(
+                409,
+                format!(
+                    "{shown}'s [lights.gains] changed since this review read it: restart the review to mix from them"
+                ),
+            ));
+        }
         let text = mixer::with_gains(&text, &shot.lights.gains, &gains).map_err(|m| Refusal(409, m))?;
         let dir = &self.shot_root.dir;
+        // Saved only if it reads back carrying exactly the page's gains.
+        let reread = crate::shot::Shot::parse(&text, &dir.join(&name));
+        if !reread.is_ok_and(|s| s.lights.gains == mixer::merged(&shot.lights.gains, &gains)) {
+            return Err(Refusal(
+                409,
+                format!("{shown} spells its gains in a way the mixer cannot rewrite: edit them by hand"),
+            ));
+        }
         let path = mixer::write_new(dir, &name, &text).map_err(|(status, m)| Refusal(status, m))?;
         let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("look").replace(' ', "_");
         let out = match &self.renders {

@@ -26,11 +26,7 @@ fn display(space: Colourspace, c: [f32; 3]) -> [u8; 3] {
 
 /// Linear light (working space) as RGB8 display pixels, exposed by
 /// `exposure` stops.
-pub(crate) fn light_pixels<'a>(
-    space: Colourspace,
-    light: impl Iterator<Item = &'a [f32; 3]>,
-    exposure: f32,
-) -> Vec<u8> {
+pub(crate) fn light_pixels(space: Colourspace, light: impl Iterator<Item = [f32; 3]>, exposure: f32) -> Vec<u8> {
     let gain = exposure.exp2();
     light.flat_map(|p| display(space, p.map(|c| c * gain))).collect()
 }
@@ -38,9 +34,8 @@ pub(crate) fn light_pixels<'a>(
 /// A view of `film` as RGB8 pixels (row-major), or why not. `exposure` is
 /// in stops and applies to light (beauty and light passes).
 pub(crate) fn view_pixels(film: &Film, space: Colourspace, view: &str, exposure: f32) -> Result<Vec<u8>, String> {
-    let gain = exposure.exp2();
     let px: Vec<[u8; 3]> = match view {
-        "beauty" => film.rgba.iter().map(|p| display(space, [p[0] * gain, p[1] * gain, p[2] * gain])).collect(),
+        "beauty" => return Ok(light_pixels(space, film.rgba.iter().map(|p| [p[0], p[1], p[2]]), exposure)),
         "alpha" => film.rgba.iter().map(|p| [srgb_encode(p[3]); 3]).collect(),
         "albedo" => film.albedo.iter().map(|&a| display(space, a)).collect(),
         "normal" => film
@@ -71,7 +66,7 @@ pub(crate) fn view_pixels(film: &Film, space: Colourspace, view: &str, exposure:
                 // World position: each metre a colour ramp.
                 pass.data.iter().map(|p| p.map(|c| (c.rem_euclid(1.0) * 255.0) as u8)).collect()
             } else {
-                pass.data.iter().map(|p| display(space, p.map(|c| c * gain))).collect()
+                return Ok(light_pixels(space, pass.data.iter().copied(), exposure));
             }
         }
     };
